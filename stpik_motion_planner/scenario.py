@@ -1,0 +1,335 @@
+"""Scenario files: the one loader of shelf, bottles, weights, target, slots and marker (config/scenarios/*.yaml).
+
+Every part of the system (task planner, motion planner, simulator, perception) reads a scene through
+`load_scenario`. Frames: everything is in the robot base frame (x forward to the shelf, z up, metres).
+The format is documented in docs/scenarios.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+# Distinct colours for the bottles (the paper's bottles were coloured; perception identifies them by
+# colour). The target is green, as in the paper's experiment. RGB in [0, 1].
+PALETTE: dict[str, tuple[float, float, float]] = {
+    "red": (0.85, 0.10, 0.10),
+    "blue": (0.10, 0.25, 0.90),
+    "yellow": (0.95, 0.85, 0.10),
+    "magenta": (0.85, 0.10, 0.80),
+    "cyan": (0.10, 0.80, 0.85),
+    "orange": (0.95, 0.50, 0.05),
+    "purple": (0.45, 0.15, 0.70),
+    "white": (0.92, 0.92, 0.92),
+    "black": (0.08, 0.08, 0.08),
+    "brown": (0.50, 0.30, 0.12),
+    "pink": (0.98, 0.60, 0.75),
+    "navy": (0.05, 0.05, 0.40),
+    "olive": (0.50, 0.50, 0.05),
+    "teal": (0.02, 0.45, 0.45),
+    "maroon": (0.45, 0.02, 0.05),
+    "gray": (0.50, 0.50, 0.50),
+}
+TARGET_COLOR = "green"
+TARGET_RGB = (0.10, 0.75, 0.15)
+
+
+class ScenarioError(ValueError):
+    """A scenario file or dict that cannot be used; the message says what to fix."""
+
+
+class UnknownObjectError(KeyError):
+    """An object id that is not in the scenario."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else "unknown object"
+
+
+@dataclass(frozen=True)
+class Bottle:
+    """A bottle (cylinder) standing on the top shelf: (x, y) of its axis, base on the shelf surface."""
+
+    id: str
+    label: str
+    rgb: tuple[float, float, float]
+    weight: float
+    x: float
+    y: float
+    radius: float
+    height: float
+    is_target: bool = False
+
+
+@dataclass(frozen=True)
+class Shelf:
+    """Shelf unit open towards the robot (-x side). Heights are board top surfaces; ceiling is an underside."""
+
+    x_front: float
+    depth: float
+    width: float
+    y_center: float
+    board_thickness: float
+    top_z: float
+    ceiling_z: float
+    bottom_z: float
+
+    @property
+    def x_back(self) -> float:
+        return self.x_front + self.depth
+
+    @property
+    def y_min(self) -> float:
+        return self.y_center - self.width / 2
+
+    @property
+    def y_max(self) -> float:
+        return self.y_center + self.width / 2
+
+
+@dataclass(frozen=True)
+class Marker:
+    """ArUco marker on the shelf: OpenCV convention (z out of the face, x right, y up as seen from the front)."""
+
+    id: int
+    dictionary: str
+    size: float
+    position: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    shelf: Shelf
+    objects: tuple[Bottle, ...]
+    target_id: str
+    slots: tuple[tuple[float, float], ...]
+    marker: Marker
+    blocking: Mapping[str, frozenset[str]] | None = None
+    source: str = "<dict>"
+    _by_id: dict[str, Bottle] = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self._by_id.update({o.id: o for o in self.objects})
+
+    @property
+    def ids(self) -> tuple[str, ...]:
+        return tuple(o.id for o in self.objects)
+
+    @property
+    def obstacle_ids(self) -> tuple[str, ...]:
+        return tuple(o.id for o in self.objects if not o.is_target)
+
+    @property
+    def weights(self) -> dict[str, float]:
+        """phi_i of every obstacle (Eq. 8, 13). The target's weight does not enter the reward."""
+        return {o.id: o.weight for o in self.objects if not o.is_target}
+
+    def object(self, object_id: str) -> Bottle:
+        try:
+            return self._by_id[object_id]
+        except KeyError:
+            raise UnknownObjectError(
+                f"unknown object id {object_id!r} in scenario {self.name!r}; known ids: {', '.join(self.ids)}"
+            ) from None
+
+    def check_ids(self, ids) -> frozenset[str]:
+        """Return ids as a frozenset, raising UnknownObjectError naming the first id not in the scenario."""
+        ids = frozenset(ids)
+        for i in sorted(ids):
+            self.object(i)
+        return ids
+
+    def slot(self, n_relocated: int) -> tuple[float, float]:
+        """Destination on the bottom shelf of the object relocated after n_relocated others (fills in order)."""
+        if not 0 <= n_relocated < len(self.slots):
+            raise ValueError(f"no slot {n_relocated}: the scenario has {len(self.slots)} slots")
+        return self.slots[n_relocated]
+
+
+def _num(d: Mapping[str, Any], key: str, where: str, default: float | None = None) -> float:
+    if key not in d:
+        if default is None:
+            raise ScenarioError(f"{where}: missing required key {key!r}")
+        return float(default)
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ScenarioError(f"{where}: {key} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default=None) -> tuple[float, ...]:
+    v = d.get(key, default)
+    if v is None:
+        raise ScenarioError(f"{where}: missing required key {key!r}")
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        raise ScenarioError(f"{where}: {key} must be a list of {n} numbers, got {v!r}")
+    return tuple(_num({key: x}, key, where) for x in v)
+
+
+def _shelf(d: Any) -> Shelf:
+    if not isinstance(d, Mapping):
+        raise ScenarioError("shelf: must be a mapping")
+    s = Shelf(
+        x_front=_num(d, "x_front", "shelf"),
+        depth=_num(d, "depth", "shelf"),
+        width=_num(d, "width", "shelf"),
+        y_center=_num(d, "y_center", "shelf", 0.0),
+        board_thickness=_num(d, "board_thickness", "shelf", 0.02),
+        top_z=_num(d, "top_z", "shelf"),
+        ceiling_z=_num(d, "ceiling_z", "shelf"),
+        bottom_z=_num(d, "bottom_z", "shelf"),
+    )
+    if s.depth <= 0 or s.width <= 0 or s.board_thickness <= 0:
+        raise ScenarioError("shelf: depth, width and board_thickness must be positive")
+    if not s.bottom_z + s.board_thickness < s.top_z - s.board_thickness < s.top_z < s.ceiling_z:
+        raise ScenarioError("shelf: need bottom_z < top_z < ceiling_z with room for the boards")
+    return s
+
+
+def _default_slots(shelf: Shelf, n: int) -> tuple[tuple[float, float], ...]:
+    """Two rows on the bottom shelf, back row first so that a placement never reaches past a placed bottle."""
+    per_row = max(1, math.ceil(n / 2))
+    ys = [shelf.y_min + shelf.width * (k + 0.5) / per_row for k in range(per_row)]
+    back, front = shelf.x_front + 0.72 * shelf.depth, shelf.x_front + 0.35 * shelf.depth
+    return tuple((x, y) for x in (back, front) for y in ys)[:n]
+
+
+def parse_scenario(data: Any, source: str = "<dict>") -> Scenario:
+    """Validate a scenario mapping (as read from YAML) and build a Scenario; ScenarioError on any problem."""
+    if not isinstance(data, Mapping):
+        raise ScenarioError(f"{source}: a scenario must be a YAML mapping, got {type(data).__name__}")
+    try:
+        return _parse(data, source)
+    except ScenarioError as e:
+        raise ScenarioError(f"{source}: {e}") from None
+
+
+def _parse(data: Mapping[str, Any], source: str) -> Scenario:
+    shelf = _shelf(data.get("shelf"))
+    defaults = data.get("defaults", {}) or {}
+    if not isinstance(defaults, Mapping):
+        raise ScenarioError("defaults: must be a mapping")
+    raw = data.get("objects")
+    if not isinstance(raw, list) or not raw:
+        raise ScenarioError("objects: must be a non-empty list")
+    target_id = data.get("target")
+    if not isinstance(target_id, str) or not target_id:
+        raise ScenarioError("target: missing; name the id of the object to retrieve")
+    palette = iter(PALETTE.items())
+    objects: list[Bottle] = []
+    seen: set[str] = set()
+    for k, o in enumerate(raw):
+        where = f"objects[{k}]"
+        if not isinstance(o, Mapping):
+            raise ScenarioError(f"{where}: must be a mapping")
+        oid = o.get("id")
+        if not isinstance(oid, str) or not oid.strip():
+            raise ScenarioError(f"{where}: id must be a non-empty string, got {oid!r}")
+        if oid in seen:
+            raise ScenarioError(f"{where}: duplicate id {oid!r}")
+        seen.add(oid)
+        is_target = oid == target_id
+        weight = _num(o, "weight", f"{where} ({oid})", 1.0 if is_target else None)
+        if not 0.0 < weight <= 1.0:
+            raise ScenarioError(f"{where} ({oid}): weight must be in (0, 1], got {weight}")
+        x, y = _vec(o, "xy", 2, f"{where} ({oid})")
+        radius = _num(o, "radius", where, defaults.get("radius", 0.033))
+        height = _num(o, "height", where, defaults.get("height", 0.16))
+        if radius <= 0 or height <= 0:
+            raise ScenarioError(f"{where} ({oid}): radius and height must be positive")
+        if is_target:
+            label, rgb = TARGET_COLOR, TARGET_RGB
+        elif "color" in o:
+            label = str(o["color"])
+            if label not in PALETTE:
+                raise ScenarioError(f"{where} ({oid}): unknown color {label!r}; use one of {', '.join(PALETTE)}")
+            rgb = PALETTE[label]
+        else:
+            try:
+                label, rgb = next(palette)
+            except StopIteration:
+                raise ScenarioError(f"more than {len(PALETTE)} obstacles: give each a color") from None
+        if not (shelf.x_front + radius <= x <= shelf.x_back - radius
+                and shelf.y_min + radius <= y <= shelf.y_max - radius):
+            raise ScenarioError(f"{where} ({oid}): xy {x, y} is not on the top shelf")
+        if height >= shelf.ceiling_z - shelf.top_z:
+            raise ScenarioError(f"{where} ({oid}): height {height} does not fit under the ceiling board")
+        objects.append(Bottle(oid, label, rgb, weight, x, y, radius, height, is_target))
+    if target_id not in seen:
+        raise ScenarioError(f"target: {target_id!r} is not among the objects ({', '.join(seen)})")
+    labels = [o.label for o in objects]
+    if len(set(labels)) != len(labels):
+        raise ScenarioError("objects: two objects share a color; perception identifies bottles by color")
+    for i, a in enumerate(objects):
+        for b in objects[i + 1:]:
+            if math.hypot(a.x - b.x, a.y - b.y) < a.radius + b.radius:
+                raise ScenarioError(f"objects {a.id!r} and {b.id!r} overlap")
+
+    slots_raw = data.get("slots", "auto")
+    if slots_raw == "auto":
+        slots = _default_slots(shelf, len(objects))
+    elif isinstance(slots_raw, list) and len(slots_raw) >= len(objects):
+        slots = tuple(_vec({"xy": s}, "xy", 2, f"slots[{k}]") for k, s in enumerate(slots_raw))
+    else:
+        raise ScenarioError(f"slots: 'auto' or a list of at least {len(objects)} [x, y] positions")
+
+    m = data.get("marker")
+    if not isinstance(m, Mapping):
+        raise ScenarioError("marker: missing; give id, dictionary, size, position, rpy of the ArUco marker")
+    marker = Marker(
+        id=int(_num(m, "id", "marker")),
+        dictionary=str(m.get("dictionary", "DICT_4X4_50")),
+        size=_num(m, "size", "marker"),
+        position=_vec(m, "position", 3, "marker"),
+        rpy=_vec(m, "rpy", 3, "marker"),
+    )
+
+    blocking = None
+    if "blocking" in data:
+        b = data["blocking"]
+        if not isinstance(b, Mapping):
+            raise ScenarioError("blocking: must map an id to the list of ids that must be removed first")
+        blocking = {}
+        for oid, needs in b.items():
+            if oid not in seen:
+                raise ScenarioError(f"blocking: unknown id {oid!r}")
+            if not isinstance(needs, list) or any(n not in seen for n in needs):
+                raise ScenarioError(f"blocking[{oid}]: must be a list of known ids, got {needs!r}")
+            blocking[oid] = frozenset(needs)
+
+    return Scenario(
+        name=str(data.get("name", Path(source).stem)),
+        description=str(data.get("description", "")),
+        shelf=shelf,
+        objects=tuple(objects),
+        target_id=target_id,
+        slots=slots,
+        marker=marker,
+        blocking=blocking,
+        source=source,
+    )
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file. Raises ScenarioError with a one-line reason."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise ScenarioError(f"{path}: cannot read scenario file ({e.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise ScenarioError(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
+    return parse_scenario(data, str(path))
+
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
+DEFAULT_SCENARIO = CONFIG_DIR / "scenarios" / "paper_experiment_10.yaml"
