@@ -144,6 +144,20 @@ class Scenario:
             self.object(i)
         return ids
 
+    def with_objects(self, bottles) -> "Scenario":
+        """The same shelf, slots and marker with another set of bottles (e.g. as perceived); validated."""
+        bottles = tuple(bottles)
+        targets = [b.id for b in bottles if b.is_target]
+        if len(targets) != 1:
+            raise ScenarioError(f"{self.name}: a scene needs exactly one target, got {len(targets)}")
+        ids = [b.id for b in bottles]
+        if len(set(ids)) != len(ids):
+            raise ScenarioError(f"{self.name}: duplicate object ids")
+        if len(bottles) > len(self.slots):
+            raise ScenarioError(f"{self.name}: {len(bottles)} objects but only {len(self.slots)} slots")
+        return Scenario(self.name, self.description, self.shelf, bottles, targets[0], self.slots,
+                        self.marker, None, self.source)
+
     def slot(self, n_relocated: int) -> tuple[float, float]:
         """Destination on the bottom shelf of the object relocated after n_relocated others (fills in order)."""
         if not 0 <= n_relocated < len(self.slots):
@@ -220,6 +234,9 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
     target_id = data.get("target")
     if not isinstance(target_id, str) or not target_id:
         raise ScenarioError("target: missing; name the id of the object to retrieve")
+    raw_ids = [o.get("id") for o in raw if isinstance(o, Mapping)]
+    if target_id not in raw_ids:
+        raise ScenarioError(f"target: {target_id!r} is not among the objects ({', '.join(map(str, raw_ids))})")
     palette = iter(PALETTE.items())
     objects: list[Bottle] = []
     seen: set[str] = set()
@@ -260,8 +277,6 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         if height >= shelf.ceiling_z - shelf.top_z:
             raise ScenarioError(f"{where} ({oid}): height {height} does not fit under the ceiling board")
         objects.append(Bottle(oid, label, rgb, weight, x, y, radius, height, is_target))
-    if target_id not in seen:
-        raise ScenarioError(f"target: {target_id!r} is not among the objects ({', '.join(seen)})")
     labels = [o.label for o in objects]
     if len(set(labels)) != len(labels):
         raise ScenarioError("objects: two objects share a color; perception identifies bottles by color")

@@ -1,0 +1,58 @@
+"""Conversions between scenario bottles and qtree_relocation_msgs/ObjectArray, shared by every node.
+
+Imports message types only (no rclpy): the node shells call these; the cores never see messages.
+"""
+from __future__ import annotations
+
+import math
+
+from geometry_msgs.msg import Pose
+from qtree_relocation_msgs.msg import ObjectArray, ObjectState
+
+from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle, ScenarioError
+
+BASE_FRAME = "j2s7s300_link_base"
+
+
+def bottle_to_msg(b: Bottle, z: float = 0.0) -> ObjectState:
+    """A bottle standing upright; `z` is the height of its base (the shelf surface)."""
+    m = ObjectState(id=b.id, label=b.label, weight=float(b.weight), is_target=b.is_target,
+                    radius=float(b.radius), height=float(b.height))
+    m.pose = Pose()
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = float(b.x), float(b.y), float(z)
+    m.pose.orientation.w = 1.0
+    return m
+
+
+def bottles_to_msg(bottles, z: float, stamp=None, frame_id: str = BASE_FRAME) -> ObjectArray:
+    msg = ObjectArray()
+    msg.header.frame_id = frame_id
+    if stamp is not None:
+        msg.header.stamp = stamp
+    msg.objects = [bottle_to_msg(b, z) for b in bottles]
+    return msg
+
+
+def msg_to_bottles(msg: ObjectArray) -> tuple[Bottle, ...]:
+    """Bottles from a message; ScenarioError on NaN/Inf, empty or duplicate ids, or a bad weight."""
+    out, seen = [], set()
+    for k, o in enumerate(msg.objects):
+        if not o.id:
+            raise ScenarioError(f"objects[{k}]: empty id")
+        if o.id in seen:
+            raise ScenarioError(f"objects[{k}]: duplicate id {o.id!r}")
+        seen.add(o.id)
+        p = o.pose.position
+        vals = (p.x, p.y, p.z, o.radius, o.height, o.weight)
+        if not all(math.isfinite(v) for v in vals):
+            raise ScenarioError(f"object {o.id!r}: non-finite pose or size")
+        if o.radius <= 0 or o.height <= 0:
+            raise ScenarioError(f"object {o.id!r}: radius and height must be positive")
+        if not o.is_target and not 0.0 < o.weight <= 1.0:
+            raise ScenarioError(f"object {o.id!r}: weight must be in (0, 1], got {o.weight}")
+        rgb = TARGET_RGB if o.label == TARGET_COLOR else PALETTE.get(o.label, (0.5, 0.5, 0.5))
+        out.append(Bottle(o.id, o.label, rgb, o.weight if not o.is_target else 1.0,
+                          p.x, p.y, o.radius, o.height, o.is_target))
+    if sum(b.is_target for b in out) != 1:
+        raise ScenarioError("the scene must contain exactly one target")
+    return tuple(out)
