@@ -1,0 +1,38 @@
+"""Launch the retrieval graph on a machine with a full ROS 2 Jazzy install (launch_ros available).
+
+    ros2 launch qtree_relocation retrieval.launch.py scenario:=/path/to/scenario.yaml scene_source:=perception
+
+This machine's PyPI-only ROS has no launch/launch_ros wheels, so this file cannot be exercised here: the
+equivalent process harness is `qtree bringup` (qtree_task_planner/bringup.py), which tests start for real.
+Set use_sim:=false and remap the driver topics to run against Kinova's kinova_driver instead of the simulator.
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    share = get_package_share_directory("qtree_relocation")
+    cfg = os.path.join(share, "config")
+    scenario = LaunchConfiguration("scenario")
+    common = {"scenario": scenario}
+    return LaunchDescription([
+        DeclareLaunchArgument("scenario", default_value=os.path.join(cfg, "scenarios", "paper_experiment_10.yaml")),
+        DeclareLaunchArgument("scene_source", default_value="perception"),
+        DeclareLaunchArgument("use_sim", default_value="true"),
+        Node(package="qtree_relocation", executable="jaco2_sim_driver", name="jaco2_sim_driver",
+             parameters=[os.path.join(cfg, "jaco2_sim_driver.yaml"), common],
+             condition=IfCondition(LaunchConfiguration("use_sim"))),
+        Node(package="qtree_relocation", executable="perception", name="perception",
+             parameters=[os.path.join(cfg, "perception.yaml"), common]),
+        Node(package="qtree_relocation", executable="motion_planner", name="motion_planner",
+             parameters=[os.path.join(cfg, "motion_planner.yaml"), common]),
+        Node(package="qtree_relocation", executable="task_planner", name="task_planner",
+             parameters=[os.path.join(cfg, "task_planner.yaml"), common,
+                         {"scene_source": LaunchConfiguration("scene_source")}]),
+    ])
