@@ -33,3 +33,76 @@ class FeasibilityOracle(Protocol):
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
         """Answer for `object_id` with the objects in `removed` gone (robot starting from home)."""
         ...
+
+
+class CachedOracle:
+    """Set-keyed cache in front of any oracle (design sketch: feasibility depends only on the removed set).
+
+    Answers repeated questions (object, frozenset(removed)) without asking the wrapped oracle again and counts
+    the real calls in `calls`; `queries` counts every question asked of the cache. Share one instance across
+    trainings to reuse a feasibility table (evaluation sweeps); read `calls` before and after to get the real
+    calls of one run.
+    """
+
+    __slots__ = ("oracle", "table", "calls", "queries")
+
+    def __init__(self, oracle: FeasibilityOracle) -> None:
+        self.oracle = oracle
+        self.table: dict[tuple[str, frozenset[str]], FeasibilityAnswer] = {}
+        self.calls = 0
+        self.queries = 0
+
+    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        self.queries += 1
+        key = (object_id, frozenset(removed))
+        answer = self.table.get(key)
+        if answer is None:
+            answer = self.oracle.feasibility(object_id, key[1])
+            self.calls += 1
+            self.table[key] = answer
+        return answer
+
+
+class BlockingOracle:
+    """TEST DOUBLE for the motion planner: a declared blocking relation ("object i becomes reachable once all
+    of these are removed"), as in a scenario's `blocking:` section. Never a stand-in for the planner in the
+    product. Objects not listed are reachable from the start; the target answers TARGET (g_T), an obstacle
+    OBSTACLE (g_O), a blocked object UNFEASIBLE (g_U).
+    """
+
+    def __init__(self, scenario) -> None:
+        """`scenario`: a stpik_motion_planner.scenario.Scenario with a `blocking` section."""
+        if getattr(scenario, "blocking", None) is None:
+            from stpik_motion_planner.scenario import ScenarioError
+
+            raise ScenarioError(
+                f"{getattr(scenario, 'source', 'scenario')}: no 'blocking:' section, so the blocking oracle "
+                "has nothing to answer from (it is a test double; use a scenario that declares one)")
+        self._init(scenario.blocking, scenario.target_id, scenario.ids)
+
+    @classmethod
+    def from_relation(cls, blocking, target_id: str, ids=None) -> "BlockingOracle":
+        """From a plain mapping id -> iterable of blocker ids (ids defaults to every id mentioned)."""
+        self = cls.__new__(cls)
+        if ids is None:
+            ids = set(blocking) | {b for v in blocking.values() for b in v} | {target_id}
+        self._init(blocking, target_id, ids)
+        return self
+
+    def _init(self, blocking, target_id, ids) -> None:
+        self.ids = frozenset(ids)
+        self.target_id = target_id
+        self.blocking = {k: frozenset(v) for k, v in blocking.items()}
+        for k, v in self.blocking.items():
+            unknown = (v | {k}) - self.ids
+            if unknown:
+                raise ValueError(f"blocking relation names unknown ids: {', '.join(sorted(unknown))}")
+
+    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        if object_id not in self.ids:
+            raise KeyError(f"unknown object id {object_id!r}")
+        if object_id in removed:
+            raise ValueError(f"object {object_id!r} is already removed")
+        if not self.blocking.get(object_id, frozenset()) <= removed:
+            return FeasibilityAnswer(Label.UNFEASIBLE, message="blocked")
+        return FeasibilityAnswer(Label.TARGET if object_id == self.target_id else Label.OBSTACLE)

@@ -1,0 +1,152 @@
+"""`qtree` command line: train the Q-Tree on a scenario, or solve it exactly.
+
+    qtree train --scenario FILE [--policy h-eg --search depth --alpha ... --seed ...] [--json OUT] [--tree-dot F]
+    qtree solve --scenario FILE [--json OUT]
+
+Defaults come from config/task_planner.yaml (or --params FILE). Bad input: one line on stderr, exit 2.
+Feasibility oracles are built by ORACLES[name](scenario, args); today only `blocking` (the scenario's declared
+relation, a test double). The motion planner adds `planner` there with one function.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Callable
+
+from .exact import solve
+from .feasibility import BlockingOracle, CachedOracle
+from .params import DEFAULT_PARAMS_FILE, POLICIES, SEARCHES, ParameterError, TrainingParams
+from .problem import ProblemError, RelocationProblem
+from .training import train
+
+
+class CliError(Exception):
+    """A one-line user error."""
+
+
+def _blocking_oracle(scenario, args):
+    return BlockingOracle(scenario)
+
+
+# name -> factory(scenario, args) -> oracle with feasibility(object_id, removed)
+ORACLES: dict[str, Callable] = {"blocking": _blocking_oracle}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, no usage block
+        raise CliError(f"{message} (see {self.prog} --help)")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="qtree", description="Q-Tree task planner: train, or solve exactly.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    def common(sp):
+        sp.add_argument("--scenario", required=True, help="scenario YAML (config/scenarios/*.yaml)")
+        sp.add_argument("--oracle", choices=sorted(ORACLES), default="blocking",
+                        help="feasibility oracle (blocking: the scenario's declared relation, a test double)")
+        sp.add_argument("--json", metavar="OUT", help="write the JSON result here instead of stdout")
+
+    t = sub.add_parser("train", help="train the Q-Tree")
+    common(t)
+    t.add_argument("--params", default=str(DEFAULT_PARAMS_FILE), help="ROS params file with the defaults")
+    t.add_argument("--policy", choices=POLICIES)
+    t.add_argument("--search", choices=SEARCHES)
+    for name, typ in (("alpha", float), ("gamma", float), ("epsilon0", float), ("epsilon-min", float),
+                      ("max-episodes", int), ("max-steps", int), ("beta", float), ("quiet-episodes", int),
+                      ("seed", int)):
+        t.add_argument(f"--{name}", type=typ)
+    t.add_argument("--tree-dot", metavar="FILE", help="write the tree in Graphviz form (paper Fig. 3)")
+    t.add_argument("--solve-first", action="store_true",
+                   help="run the exact solver first (own oracle) to report E_1st")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    s = sub.add_parser("solve", help="the exact minimum-weight sequence (lazy uniform-cost search)")
+    common(s)
+    return p
+
+
+def _load(args):
+    from stpik_motion_planner.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    problem = RelocationProblem.from_scenario(scenario)
+    oracle = ORACLES[args.oracle](scenario, args)
+    return scenario, problem, oracle
+
+
+def _emit(data: dict, out: str | None) -> None:
+    text = json.dumps(data, indent=2)
+    if out:
+        try:
+            Path(out).write_text(text + "\n")
+        except OSError as e:
+            raise CliError(f"cannot write {out}: {e.strerror}") from None
+    else:
+        print(text)
+
+
+def _train(args) -> int:
+    base = TrainingParams.from_yaml(args.params)
+    params = base.replace(policy=args.policy, search=args.search, alpha=args.alpha, gamma=args.gamma,
+                          epsilon0=args.epsilon0, epsilon_min=args.epsilon_min, max_episodes=args.max_episodes,
+                          max_steps=args.max_steps, beta=args.beta, quiet_episodes=args.quiet_episodes,
+                          seed=args.seed)
+    scenario, problem, oracle = _load(args)
+    optimum = None
+    exact = None
+    if args.solve_first:
+        exact = solve(problem, oracle)
+        optimum = exact.total_weight
+    callback, bar = None, None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=params.max_episodes, desc="episodes", unit="ep", file=sys.stderr, leave=False)
+
+        def callback(st):
+            bar.update(1)
+            if st.episode % 50 == 0:
+                bar.set_postfix(q_sum=f"{st.q_sum:.1f}", nodes=st.tree_nodes, mp_q=st.mp_q)
+
+    try:
+        result = train(problem, CachedOracle(oracle), params, optimal_weight=optimum, callback=callback)
+    finally:
+        if bar is not None:
+            bar.close()
+    if args.tree_dot:
+        try:
+            Path(args.tree_dot).write_text(result.tree.to_dot(name=scenario.name.replace("-", "_")))
+        except OSError as e:
+            raise CliError(f"cannot write {args.tree_dot}: {e.strerror}") from None
+    data = {"scenario": scenario.name, "oracle": args.oracle, **result.to_dict()}
+    if exact is not None:
+        data["exact"] = exact.to_dict()
+    _emit(data, args.json)
+    return 0
+
+
+def _solve(args) -> int:
+    scenario, problem, oracle = _load(args)
+    _emit({"scenario": scenario.name, "oracle": args.oracle, **solve(problem, oracle).to_dict()}, args.json)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    from stpik_motion_planner.scenario import ScenarioError, UnknownObjectError
+
+    try:
+        args = _parser().parse_args(argv)
+        return _train(args) if args.command == "train" else _solve(args)
+    except (CliError, ScenarioError, UnknownObjectError, ParameterError, ProblemError) as e:
+        msg = " ".join(str(e).split())  # one line
+        print(f"qtree: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("qtree: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,104 @@
+"""The exact minimum-weight answer: the relocation sequence of least total weight (Eq. 8) that frees the target.
+
+Feasibility depends only on the set of removed objects, so the search runs over removed sets. `solve` is a
+uniform-cost search (Dijkstra; weights phi_i > 0) with lazy edge evaluation in the spirit of Lazy Shortest
+Path: an edge "remove object o from set S" enters the queue with its cost g(S) + phi_o unchecked, and the oracle
+is asked only when that entry is popped and its head set S + {o} is not settled yet. "Relocate the target from
+S" enters at cost g(S) and is checked when popped; the first feasible one popped is optimal, since every entry
+still queued costs at least as much and costs never decrease along a path.
+
+`brute_force` enumerates every set reachable by feasible single removals (asking everything) for tests.
+"""
+from __future__ import annotations
+
+import heapq
+import itertools
+from dataclasses import dataclass
+
+from .feasibility import CachedOracle, Label
+from .problem import RelocationProblem
+
+
+@dataclass(frozen=True)
+class ExactResult:
+    sequence: tuple[str, ...] | None  # obstacles in order, then the target; None if the target cannot be freed
+    total_weight: float | None  # Eq. 8
+    oracle_calls: int  # distinct (object, removed set) questions asked
+    sets_settled: int
+
+    @property
+    def found(self) -> bool:
+        return self.sequence is not None
+
+    def to_dict(self) -> dict:
+        return {"found": self.found, "sequence": list(self.sequence) if self.found else None,
+                "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
+                "sets_settled": self.sets_settled}
+
+
+def _problem(problem) -> RelocationProblem:
+    return problem if isinstance(problem, RelocationProblem) else RelocationProblem.from_scenario(problem)
+
+
+def solve(problem, oracle) -> ExactResult:
+    """Minimum-weight feasible relocation sequence by lazy uniform-cost search over removed sets.
+
+    oracle: feasibility(object_id, removed: frozenset) -> FeasibilityAnswer. oracle_calls counts the questions
+    this search asks (each (object, set) at most once, so a CachedOracle in front changes nothing here)."""
+    problem = _problem(problem)
+    obstacles, target, phi = problem.obstacles, problem.target, problem.weights
+    calls = 0
+    settled: dict[frozenset[str], tuple[float, tuple[str, ...]]] = {}
+    tie = itertools.count()
+    # entries: (cost, tie, parent set, parent sequence, object)
+    queue: list = [(0.0, next(tie), None, (), None)]
+    while queue:
+        cost, _, parent, seq, obj = heapq.heappop(queue)
+        if obj is None:  # the start: the empty set, feasible by definition
+            state, new_seq = frozenset(), ()
+        else:
+            state = parent if obj == target else parent | {obj}
+            if obj != target and state in settled:
+                continue
+            calls += 1
+            label = Label(oracle.feasibility(obj, parent).label)
+            if label == Label.UNFEASIBLE:
+                continue
+            if obj == target:
+                return ExactResult(seq + (target,), problem.weight(seq), calls, len(settled))
+            new_seq = seq + (obj,)
+        settled[state] = (cost, new_seq)
+        heapq.heappush(queue, (cost, next(tie), state, new_seq, target))
+        for o in obstacles:
+            if o not in state and (state | {o}) not in settled:
+                heapq.heappush(queue, (cost + phi[o], next(tie), state, new_seq, o))
+    return ExactResult(None, None, calls, len(settled))
+
+
+def brute_force(problem, oracle) -> ExactResult:
+    """Test reference: every removed set reachable by feasible single removals, asking the oracle about every
+    (object, reachable set) pair, then the lightest set from which the target is feasible."""
+    problem = _problem(problem)
+    cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
+    calls0 = cache.calls
+    reachable: dict[frozenset[str], tuple[str, ...]] = {frozenset(): ()}
+    frontier = [frozenset()]
+    while frontier:
+        nxt = []
+        for s in frontier:
+            for o in problem.obstacles:
+                if o not in s and s | {o} not in reachable:
+                    if cache.feasibility(o, s).label != Label.UNFEASIBLE:
+                        reachable[s | {o}] = reachable[s] + (o,)
+                        nxt.append(s | {o})
+        frontier = nxt
+    best = None
+    for s, seq in reachable.items():
+        if cache.feasibility(problem.target, s).label == Label.TARGET:
+            w = problem.weight(seq)
+            if best is None or w < best[0]:
+                best = (w, seq + (problem.target,))
+    calls = cache.calls - calls0
+    if best is None:
+        return ExactResult(None, None, calls, len(reachable))
+    return ExactResult(best[1], best[0], calls, len(reachable))

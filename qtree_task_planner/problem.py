@@ -1,0 +1,54 @@
+"""The relocation problem the task planner solves: obstacles with weights phi_i in (0, 1] and one target.
+
+A light, ROS-free view of a scenario (stpik_motion_planner.scenario.Scenario) that the Q-Tree, the exact
+solver and the evaluation share. Objects are indexed 0..N-1 (obstacles, in scenario order) and N (target).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping
+
+
+class ProblemError(ValueError):
+    """A problem that cannot be solved as stated (duplicate ids, bad weight, no target)."""
+
+
+@dataclass(frozen=True)
+class RelocationProblem:
+    obstacles: tuple[str, ...]
+    weights: Mapping[str, float]  # phi_i of every obstacle (Eq. 8, 13)
+    target: str
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "obstacles", tuple(self.obstacles))
+        object.__setattr__(self, "weights", dict(self.weights))
+        if not isinstance(self.target, str) or not self.target:
+            raise ProblemError("no target: name the object to retrieve")
+        if len(set(self.obstacles)) != len(self.obstacles):
+            raise ProblemError("duplicate obstacle ids")
+        if self.target in self.obstacles:
+            raise ProblemError(f"target {self.target!r} is also listed as an obstacle")
+        if set(self.weights) != set(self.obstacles):
+            raise ProblemError("weights must give phi_i for exactly the obstacles")
+        for o, w in self.weights.items():
+            if isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w) or not 0 < w <= 1:
+                raise ProblemError(f"weight of {o!r} must be in (0, 1], got {w!r}")
+
+    @classmethod
+    def from_scenario(cls, scenario) -> "RelocationProblem":
+        """From a stpik_motion_planner.scenario.Scenario (already validated by its loader)."""
+        return cls(scenario.obstacle_ids, scenario.weights, scenario.target_id)
+
+    @property
+    def ids(self) -> tuple[str, ...]:
+        """Obstacles then the target: index -> id."""
+        return self.obstacles + (self.target,)
+
+    @property
+    def n(self) -> int:
+        return len(self.obstacles)
+
+    def weight(self, sequence) -> float:
+        """Eq. 8: total weight sum phi_i of the obstacles in a sequence (the target's weight does not count)."""
+        return float(sum(self.weights[o] for o in sequence if o != self.target))

@@ -1,0 +1,179 @@
+"""The Q-Tree of the paper (Sect. 4.2): a tree whose nodes are states and whose edges carry Q-values.
+
+A node is the sequence of objects relocated so far; the root s_H is the initial scene. A node is allocated the
+first time an action leads to it; the value of the edge (s_k, a_k) is Q(s_k, a_k). Creating an edge asks the
+feasibility oracle once (the paper's MP_q accounting); afterwards the edge remembers its label (Eq. 11).
+
+- Eq. 7:  Q(s_k, a_k) <- Q + alpha * (r_k + gamma * max_a' Q(s_{k+1}, a') - Q), the max over the next node's
+  known feasible edges, 0 when it has none. A target edge and an unfeasible edge have no next node (terminal),
+  so their max term is 0.
+- Eq. 13: r = -phi_i when obstacle i is relocated, -10 when the chosen action is unfeasible, +100 when the target
+  is relocated.
+- Pruning: an action found unfeasible at a node is never offered at that node again.
+- Eq. 15: Q_sum = sum over all edges of |Q(s, a)|, kept up to date incrementally.
+"""
+from __future__ import annotations
+
+from typing import Iterable
+
+from .feasibility import Label
+from .problem import RelocationProblem
+
+R_UNFEASIBLE = -10.0  # Eq. 13
+R_TARGET = 100.0  # Eq. 13
+
+
+def reward(label: Label, phi: float) -> float:
+    """Eq. 13 for the label of the chosen action and the weight phi_i of its object."""
+    if label == Label.OBSTACLE:
+        return -phi
+    if label == Label.TARGET:
+        return R_TARGET
+    return R_UNFEASIBLE
+
+
+class Node:
+    """A state s_k: the sequence of relocated objects (indices) and its bitmask. Edges by action index:
+    `q` feasible edges (offered, used by max and greedy), `q_pruned` unfeasible edges (never offered again),
+    `label` of every known edge, `child` node of every obstacle edge."""
+
+    __slots__ = ("id", "seq", "mask", "q", "q_pruned", "label", "child", "pruned")
+
+    def __init__(self, node_id: int, seq: tuple[int, ...], mask: int) -> None:
+        self.id = node_id
+        self.seq = seq
+        self.mask = mask
+        self.q: dict[int, float] = {}
+        self.q_pruned: dict[int, float] = {}
+        self.label: dict[int, Label] = {}
+        self.child: dict[int, Node] = {}
+        self.pruned = 0  # bitmask of unfeasible actions at this node
+
+    def max_q(self) -> float:
+        """max_a' Q(s, a') over the known feasible edges; 0 where there is none (Eq. 7)."""
+        return max(self.q.values()) if self.q else 0.0
+
+    def offered(self, n_objects: int) -> list[int]:
+        """Actions offered at this node: not relocated yet in this sequence and not pruned here."""
+        blocked = self.mask | self.pruned
+        return [a for a in range(n_objects) if not (blocked >> a) & 1]
+
+
+class QTree:
+    """The tree, its updates (Eq. 7) and its read-outs (best sequence, Eq. 15, Graphviz)."""
+
+    def __init__(self, problem: RelocationProblem, oracle, alpha: float, gamma: float) -> None:
+        """`oracle`: any object with feasibility(object_id, removed: frozenset) -> FeasibilityAnswer."""
+        self.problem = problem
+        self.oracle = oracle
+        self.alpha = alpha
+        self.gamma = gamma
+        self.ids = problem.ids
+        self.n_objects = len(self.ids)
+        self.target = problem.n
+        self.phi = [problem.weights[o] for o in problem.obstacles] + [0.0]
+        self.root = Node(0, (), 0)
+        self.nodes = [self.root]
+        self.mp_q = 0  # new edges = motion-planner queries as the paper counts them
+        self.q_sum = 0.0  # Eq. 15, incremental
+
+    # -- edges -------------------------------------------------------------------------------------
+    def edge_label(self, node: Node, a: int) -> Label:
+        """The label of edge (node, a), asking the oracle the first time (one MP_q query)."""
+        label = node.label.get(a)
+        if label is None:
+            removed = frozenset(self.ids[i] for i in node.seq)
+            label = Label(self.oracle.feasibility(self.ids[a], removed).label)
+            if (label == Label.TARGET) != (a == self.target) and label != Label.UNFEASIBLE:
+                raise ValueError(f"oracle answered {label.name} for {self.ids[a]!r}: TARGET is for the target only")
+            node.label[a] = label
+            self.mp_q += 1
+            if label == Label.UNFEASIBLE:
+                node.q_pruned[a] = 0.0
+                node.pruned |= 1 << a
+            else:
+                node.q[a] = 0.0
+        return label
+
+    def child(self, node: Node, a: int) -> Node:
+        """The node reached by relocating obstacle a, allocated on first use."""
+        c = node.child.get(a)
+        if c is None:
+            c = Node(len(self.nodes), node.seq + (a,), node.mask | (1 << a))
+            self.nodes.append(c)
+            node.child[a] = c
+        return c
+
+    def update(self, node: Node, a: int, r: float, next_node: Node | None) -> float:
+        """Eq. 7 on edge (node, a); next_node None means terminal (target relocated or action unfeasible)."""
+        table = node.q if a in node.q else node.q_pruned
+        old = table[a]
+        target = r if next_node is None else r + self.gamma * next_node.max_q()
+        new = old + self.alpha * (target - old)
+        table[a] = new
+        self.q_sum += abs(new) - abs(old)
+        return new
+
+    def step(self, node: Node, a: int) -> tuple[Label, Node | None]:
+        """Take action a at node: label it, reward it (Eq. 13), update (Eq. 7). Returns the label and the next
+        node (None when the episode's sequence cannot continue through this edge: target or unfeasible)."""
+        label = self.edge_label(node, a)
+        if label == Label.OBSTACLE:
+            nxt = self.child(node, a)
+            self.update(node, a, -self.phi[a], nxt)
+            return label, nxt
+        self.update(node, a, R_TARGET if label == Label.TARGET else R_UNFEASIBLE, None)
+        return label, None
+
+    # -- read-outs ---------------------------------------------------------------------------------
+    def q_abs_sum(self) -> float:
+        """Eq. 15 recomputed from scratch (q_sum is the incremental copy)."""
+        return float(sum(abs(v) for n in self.nodes for v in (*n.q.values(), *n.q_pruned.values())))
+
+    @property
+    def n_edges(self) -> int:
+        return sum(len(n.label) for n in self.nodes)
+
+    def best_path(self) -> list[tuple[Node, int]] | None:
+        """Follow the highest feasible edge value from the root (ties: lowest index) to the target edge."""
+        node, path = self.root, []
+        for _ in range(self.n_objects):
+            if not node.q:
+                return None
+            a = max(node.q, key=lambda k: (node.q[k], -k))
+            path.append((node, a))
+            if a == self.target:
+                return path
+            node = node.child.get(a)
+            if node is None:
+                return None
+        return None
+
+    def best_sequence(self) -> tuple[str, ...] | None:
+        """The learned sequence: obstacles in order, then the target; None if the greedy path misses it."""
+        path = self.best_path()
+        return None if path is None else tuple(self.ids[a] for _, a in path)
+
+    def to_dot(self, name: str = "q_tree", highlight: Iterable[tuple[Node, int]] | None = None) -> str:
+        """Graphviz text of the tree (paper Fig. 3): edges labelled with the object and Q, unfeasible edges red
+        dashed, target edges green, the best sequence in bold."""
+        best = {(n.id, a) for n, a in (highlight if highlight is not None else (self.best_path() or []))}
+        lines = [f"digraph {name} {{", "  rankdir=TB;", '  node [shape=circle, fontsize=10];']
+        for n in self.nodes:
+            text = "s_H" if not n.seq else ",".join(self.ids[i] for i in n.seq)
+            lines.append(f'  n{n.id} [label="{text}"];')
+        for n in self.nodes:
+            for a, label in n.label.items():
+                q = n.q[a] if a in n.q else n.q_pruned[a]
+                style = ", style=bold, penwidth=3" if (n.id, a) in best else ""
+                text = f'label="{self.ids[a]}\\nQ={q:.3g}"'
+                if label == Label.OBSTACLE:
+                    lines.append(f"  n{n.id} -> n{n.child[a].id} [{text}{style}];")
+                elif label == Label.TARGET:
+                    lines.append(f'  t{n.id} [label="{self.ids[a]}", shape=doublecircle, color=green];')
+                    lines.append(f"  n{n.id} -> t{n.id} [{text}, color=green{style}];")
+                else:
+                    lines.append(f'  u{n.id}_{a} [label="", shape=point, color=red];')
+                    lines.append(f"  n{n.id} -> u{n.id}_{a} [{text}, color=red, style=dashed];")
+        lines.append("}")
+        return "\n".join(lines) + "\n"

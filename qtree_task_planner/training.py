@@ -1,0 +1,168 @@
+"""Q-Tree training (paper Sect. 4.2): episodes of breadth or depth search, Eq. 14 exploration, Eq. 16 stop.
+
+An episode starts at the root s_H and ends when the target is relocated, after I_max actions, when no action is
+offered, or (breadth search only) at the first unfeasible action. In depth search the agent goes on choosing
+another action from the same node (the unfeasible one is pruned there). Training stops after E_max episodes, or
+when Eq. 16 holds, |Q_sum(e) - Q_sum(e-1)| <= beta, for `quiet_episodes` consecutive episodes.
+
+`train` is the one entry point: the CLI, the task_planner node (with a ROS service-client oracle) and the
+evaluation sweeps (with a shared CachedOracle) call it.
+"""
+from __future__ import annotations
+
+import random
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from .feasibility import CachedOracle, Label
+from .params import TrainingParams
+from .policies import POLICY_FUNCTIONS, epsilon_schedule
+from .problem import RelocationProblem
+from .q_tree import QTree
+
+WEIGHT_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class EpisodeStats:
+    """What the per-episode callback receives (progress bars, ROS feedback)."""
+
+    episode: int  # 1-based
+    max_episodes: int
+    q_sum: float  # Eq. 15
+    q_sum_delta: float
+    tree_nodes: int
+    mp_q: int
+    planner_calls: int
+    epsilon: float
+    steps: int
+    reached_target: bool
+
+
+@dataclass
+class TrainingResult:
+    sequence: tuple[str, ...] | None  # obstacles in order, then the target; None if the greedy path misses it
+    total_weight: float | None  # Eq. 8 of `sequence`
+    episodes: int  # episodes run
+    converged: bool  # Eq. 16 met
+    e_ss: int  # episodes to steady state: the episode where training stopped (Eq. 16, else E_max / cancel)
+    mp_q: int  # new tree edges = motion-planner queries as the paper counts them
+    planner_calls: int  # real oracle calls after the set-keyed cache
+    e_1st: int | None  # first episode whose greedy best sequence has the optimal weight (needs the optimum)
+    optimal_weight: float | None
+    cancelled: bool
+    tree_nodes: int
+    tree_edges: int
+    q_sum_history: list[float]  # Eq. 15 after each episode (paper Fig. 4)
+    params: TrainingParams
+    elapsed_s: float = field(default=0.0, compare=False)
+    tree: QTree | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def found(self) -> bool:
+        return self.sequence is not None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "found": self.found,
+            "sequence": list(self.sequence) if self.sequence is not None else None,
+            "total_weight": self.total_weight,
+            "episodes": self.episodes,
+            "converged": self.converged,
+            "E_ss": self.e_ss,
+            "MP_q": self.mp_q,
+            "planner_calls": self.planner_calls,
+            "E_1st": self.e_1st,
+            "optimal_weight": self.optimal_weight,
+            "cancelled": self.cancelled,
+            "tree_nodes": self.tree_nodes,
+            "tree_edges": self.tree_edges,
+            "elapsed_s": self.elapsed_s,
+            "params": self.params.to_dict(),
+            "q_sum_history": self.q_sum_history,
+        }
+
+
+def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | None = None,
+          callback: Callable[[EpisodeStats], bool | None] | None = None) -> TrainingResult:
+    """Train a Q-Tree on `problem` (a RelocationProblem or a Scenario) asking `oracle`.
+
+    oracle: any object with feasibility(object_id, removed: frozenset) -> FeasibilityAnswer; wrapped in a
+        CachedOracle unless it is one already (pass a shared CachedOracle to reuse answers across runs;
+        planner_calls counts only the calls made during this run).
+    optimal_weight: the minimum total weight (exact.solve) to report E_1st; None leaves E_1st None.
+    callback: called after every episode; returning False stops training (cancelled=True).
+    """
+    if not isinstance(problem, RelocationProblem):
+        problem = RelocationProblem.from_scenario(problem)
+    cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
+    calls0 = cache.calls
+    t0 = time.perf_counter()
+    tree = QTree(problem, cache, params.alpha, params.gamma)
+    rng = random.Random(params.seed)
+    policy = POLICY_FUNCTIONS[params.policy]
+    depth = params.search == "depth"
+    n_obj, target, root = tree.n_objects, tree.target, tree.root
+    e_max, i_max = params.max_episodes, params.max_steps
+    eps0, eps_min, beta, quiet_needed = params.epsilon0, params.epsilon_min, params.beta, params.quiet_episodes
+    step = tree.step
+    history: list[float] = []
+    prev_sum, quiet, converged, cancelled, e_1st = 0.0, 0, False, False, None
+    episode = 0
+    while episode < e_max:
+        epsilon = epsilon_schedule(episode, e_max, eps0, eps_min)
+        episode += 1
+        node, steps, reached = root, 0, False
+        while steps < i_max:
+            offered = node.offered(n_obj)
+            if not offered:
+                break
+            a = policy(node, offered, target, rng, epsilon)
+            steps += 1
+            label, nxt = step(node, a)
+            if label == Label.TARGET:
+                reached = True
+                break
+            if label == Label.UNFEASIBLE:
+                if depth:
+                    continue
+                break
+            node = nxt
+        q_sum = tree.q_sum
+        history.append(q_sum)
+        delta = q_sum - prev_sum
+        prev_sum = q_sum
+        quiet = quiet + 1 if abs(delta) <= beta else 0
+        if optimal_weight is not None and e_1st is None:
+            seq = tree.best_sequence()
+            if seq is not None and problem.weight(seq) <= optimal_weight + WEIGHT_TOL:
+                e_1st = episode
+        if callback is not None:
+            stats = EpisodeStats(episode, e_max, q_sum, delta, len(tree.nodes), tree.mp_q,
+                                 cache.calls - calls0, epsilon, steps, reached)
+            if callback(stats) is False:
+                cancelled = True
+                break
+        if quiet >= quiet_needed:
+            converged = True
+            break
+    seq = tree.best_sequence()
+    return TrainingResult(
+        sequence=seq,
+        total_weight=problem.weight(seq) if seq is not None else None,
+        episodes=episode,
+        converged=converged,
+        e_ss=episode,
+        mp_q=tree.mp_q,
+        planner_calls=cache.calls - calls0,
+        e_1st=e_1st,
+        optimal_weight=optimal_weight,
+        cancelled=cancelled,
+        tree_nodes=len(tree.nodes),
+        tree_edges=tree.n_edges,
+        q_sum_history=history,
+        params=params,
+        elapsed_s=time.perf_counter() - t0,
+        tree=tree,
+    )
