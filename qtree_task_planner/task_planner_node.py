@@ -9,13 +9,13 @@ publishes ~/markers (visualization_msgs/MarkerArray: the scene, the learned orde
 """
 from __future__ import annotations
 
+import copy
 import threading
 import time
 
 import rclpy
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from visualization_msgs.msg import Marker, MarkerArray
@@ -23,13 +23,14 @@ from visualization_msgs.msg import Marker, MarkerArray
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
-from stpik_motion_planner.scenario import ScenarioError
+from stpik_motion_planner.scenario import PALETTE, TARGET_RGB, ScenarioError
 from stpik_motion_planner.scene_msgs import msg_to_bottles
 
 from . import exact
 from .feasibility import CachedOracle, FeasibilityAnswer, Label
 from .params import ParameterError, TrainingParams
 from .problem import RelocationProblem
+from .spin import run_node
 from .training import train
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -110,7 +111,7 @@ class TaskPlannerNode(Node):
         bottles = msg_to_bottles(msg)
         obstacles = [b for b in bottles if not b.is_target]
         target = next(b.id for b in bottles if b.is_target)
-        return RelocationProblem(tuple(b.id for b in obstacles), {b.id: b.weight for b in obstacles}, target), bottles
+        return RelocationProblem(tuple(b.id for b in obstacles), {b.id: b.weight for b in obstacles}, target), msg
 
     def _params(self, goal) -> TrainingParams:
         node = TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
@@ -153,13 +154,13 @@ class TaskPlannerNode(Node):
 
     def _train_and_execute(self, goal_handle, result) -> None:
         params = self._params(goal_handle.request)
-        problem, bottles = self._problem()
-        self._publish_scene(bottles, ())
+        problem, scene = self._problem()
+        self._publish_scene(scene, ())
         oracle = CachedOracle(ServiceOracle(self._feas, self.p("feasibility_timeout"), self.p("planner_wait")))
         optimum = exact.solve(problem, oracle)
         result.optimal_sequence = list(optimum.sequence or ())
-        result.optimal_weight = float(optimum.weight if optimum.weight is not None else -1.0)
-        self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.weight} "
+        result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
+        self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
                                f"({oracle.calls} planner calls)")
         fb = TrainPlanner.Feedback(phase="training")
 
@@ -167,9 +168,9 @@ class TaskPlannerNode(Node):
             fb.episode, fb.q_sum, fb.tree_nodes = stats.episode, stats.q_sum, stats.tree_nodes
             fb.mp_queries, fb.planner_calls = stats.mp_q, oracle.calls
             goal_handle.publish_feedback(fb)
-            return not goal_handle.is_cancel_requested
+            return rclpy.ok() and not goal_handle.is_cancel_requested
 
-        r = train(problem, oracle, params, optimal_weight=optimum.weight, callback=on_episode)
+        r = train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode)
         result.sequence = list(r.sequence or ())
         result.total_weight = float(r.total_weight if r.total_weight is not None else -1.0)
         result.e_ss, result.mp_q, result.e_first = r.e_ss, r.mp_q, r.e_1st if r.e_1st is not None else -1
@@ -180,7 +181,7 @@ class TaskPlannerNode(Node):
             result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target"
             return
         self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes")
-        self._publish_scene(bottles, r.sequence)
+        self._publish_scene(scene, r.sequence)
         if not goal_handle.request.execute:
             result.success, result.message = True, "trained (not executed)"
             return
@@ -227,45 +228,29 @@ class TaskPlannerNode(Node):
         return res.success, res.message
 
     # -- visualisation --------------------------------------------------------------------------------------
-    def _publish_scene(self, bottles, sequence) -> None:
+    def _publish_scene(self, scene: ObjectArray, sequence) -> None:
+        """The scene's bottles as cylinders in their colour, each labelled with its place in the learned order."""
         arr = MarkerArray()
         order = {o: k + 1 for k, o in enumerate(sequence)}
-        for k, b in enumerate(bottles):
-            m = Marker(ns="scene", id=k, type=Marker.CYLINDER, action=Marker.ADD)
-            m.header.frame_id = "j2s7s300_link_base"
-            m.pose.position.x, m.pose.position.y = b.x, b.y
-            m.pose.orientation.w = 1.0
-            m.scale.x = m.scale.y = 2 * b.radius
-            m.scale.z = b.height
-            m.color.r, m.color.g, m.color.b, m.color.a = (*b.rgb, 1.0)
-            arr.markers.append(m)
-            t = Marker(ns="order", id=k, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD)
-            t.header.frame_id = m.header.frame_id
-            t.pose.position.x, t.pose.position.y, t.pose.position.z = b.x, b.y, b.height + 0.05
-            t.pose.orientation.w = 1.0
+        for k, o in enumerate(scene.objects):
+            m = Marker(ns="scene", id=k, type=Marker.CYLINDER, action=Marker.ADD, header=scene.header)
+            m.pose = copy.deepcopy(o.pose)
+            m.pose.position.z += o.height / 2
+            m.scale.x = m.scale.y = 2 * o.radius
+            m.scale.z = o.height
+            m.color.r, m.color.g, m.color.b, m.color.a = (*PALETTE.get(o.label, TARGET_RGB), 1.0)
+            t = Marker(ns="order", id=k, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD, header=scene.header)
+            t.pose = copy.deepcopy(o.pose)
+            t.pose.position.z += o.height + 0.04
             t.scale.z = 0.03
             t.color.r = t.color.g = t.color.b = t.color.a = 1.0
-            t.text = f"{b.id} ({order[b.id]})" if b.id in order else b.id
-            arr.markers.append(t)
+            t.text = f"{o.id} ({order[o.id]})" if o.id in order else o.id
+            arr.markers += [m, t]
         self._markers.publish(arr)
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = TaskPlannerNode()
-    executor = MultiThreadedExecutor(num_threads=4)
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except KeyboardInterrupt:
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(TaskPlannerNode, args)
 
 
 if __name__ == "__main__":
