@@ -119,7 +119,7 @@ class TaskPlannerNode(Node):
         for f in ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
                   "quiet_episodes", "seed"):
             v = getattr(goal, f)
-            if v >= 0:
+            if not v < 0:  # negative: the node's parameter; NaN goes on to validation and is refused
                 changes[f] = v
         return node.replace(**changes)
 

@@ -1,0 +1,118 @@
+"""The task_planner node shell, in its own process over real DDS, against a feasibility service played by
+this test (a BlockingOracle behind PlanFeasibility: a fake of the motion planner inside this one layer's
+test). Checks the node's answer equals the core's for the same seed, and that bad goals are refused."""
+import os
+import threading
+import time
+
+import pytest
+
+pytestmark = pytest.mark.graph
+
+from qtree_task_planner import exact  # noqa: E402
+from qtree_task_planner.bringup import ROOT, Graph  # noqa: E402
+from qtree_task_planner.feasibility import BlockingOracle  # noqa: E402
+from qtree_task_planner.params import TrainingParams  # noqa: E402
+from qtree_task_planner.training import train  # noqa: E402
+from stpik_motion_planner.scenario import load_scenario  # noqa: E402
+
+SCENARIO = ROOT / "config" / "scenarios" / "blocking_5.yaml"
+
+
+@pytest.fixture(scope="module")
+def graph(tmp_path_factory):
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    from qtree_relocation_msgs.msg import ObjectArray
+    from qtree_relocation_msgs.srv import PlanFeasibility
+    from stpik_motion_planner.scene_msgs import bottles_to_msg
+
+    scenario = load_scenario(SCENARIO)
+    oracle = BlockingOracle(scenario)
+    g = Graph(tmp_path_factory.mktemp("tp"))
+    g.start("task_planner", {"scene_topic": "/test/objects", "planner_wait": 2.0})
+    os.environ.update({k: g.env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+    rclpy.init()
+    node = rclpy.create_node("fake_motion_planner")
+    calls = []
+
+    def feasibility(req, resp):
+        calls.append((req.object_id, tuple(req.removed_ids)))
+        if req.object_id not in scenario.ids:
+            resp.ok, resp.message = False, f"unknown object id {req.object_id!r}"
+            return resp
+        a = oracle.feasibility(req.object_id, frozenset(req.removed_ids))
+        resp.ok, resp.label = True, int(a.label)
+        return resp
+
+    node.create_service(PlanFeasibility, "/motion_planner/plan_feasibility", feasibility)
+    pub = node.create_publisher(ObjectArray, "/test/objects",
+                                QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    pub.publish(bottles_to_msg(scenario.objects, scenario.shelf.top_z))
+    ex = MultiThreadedExecutor(2)
+    ex.add_node(node)
+    t = threading.Thread(target=ex.spin, daemon=True)
+    t.start()
+    yield g, node, scenario, calls, pub
+    node.destroy_node()
+    rclpy.try_shutdown()
+    t.join(5)
+    g.stop_all()
+
+
+def _train_goal(node, g, **fields):
+    from rclpy.action import ActionClient
+
+    from qtree_relocation_msgs.action import TrainPlanner
+    client = ActionClient(node, TrainPlanner, "/task_planner/train")
+    deadline = time.monotonic() + 30
+    while not client.wait_for_server(timeout_sec=0.5):
+        g.check_alive()
+        assert time.monotonic() < deadline, "train action never appeared"
+    goal = TrainPlanner.Goal(policy="h-eg", search="depth", seed=3, execute=False)
+    for f in ("alpha", "gamma", "epsilon0", "epsilon_min", "beta"):
+        setattr(goal, f, -1.0)
+    goal.max_episodes = goal.max_steps = goal.quiet_episodes = -1
+    for k, v in fields.items():
+        setattr(goal, k, v)
+    feedback = []
+    handle = _done(client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)))
+    if not handle.accepted:
+        return None, feedback
+    return _done(handle.get_result_async(), 120).result, feedback
+
+
+def _done(fut, timeout=30):
+    deadline = time.monotonic() + timeout
+    while not fut.done():
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    return fut.result()
+
+
+def test_node_trains_like_the_core(graph):
+    g, node, scenario, calls, _ = graph
+    res, feedback = _train_goal(node, g, max_episodes=300)
+    assert res is not None and res.success, res
+    params = TrainingParams.defaults().replace(policy="h-eg", search="depth", seed=3, max_episodes=300)
+    core = train(scenario, BlockingOracle(scenario), params)
+    assert tuple(res.sequence) == core.sequence
+    assert res.total_weight == pytest.approx(core.total_weight)
+    assert (res.e_ss, res.mp_q, res.episodes) == (core.e_ss, core.mp_q, core.episodes)
+    assert res.q_sum_history == pytest.approx(core.q_sum_history)
+    best = exact.solve(scenario, BlockingOracle(scenario))
+    assert tuple(res.optimal_sequence) == best.sequence
+    assert res.planner_calls == len(set(calls)) and res.planner_calls <= res.mp_q + best.oracle_calls
+    assert feedback and feedback[-1].episode == res.episodes
+
+
+@pytest.mark.parametrize("fields", [{"alpha": 1.5}, {"policy": "greedy"}, {"gamma": float("nan")}])
+def test_bad_goals_are_rejected_and_the_node_keeps_serving(graph, fields):
+    g, node, *_ = graph
+    res, _ = _train_goal(node, g, **fields)
+    assert res is None
+    res, _ = _train_goal(node, g, max_episodes=20)
+    assert res is not None and res.episodes <= 20
+    g.check_alive()
