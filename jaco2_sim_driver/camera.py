@@ -1,0 +1,113 @@
+"""Offscreen RGB-D camera of the scene (no ROS): images, pinhole intrinsics and the camera pose in the base frame.
+
+Rendering is headless with MUJOCO_GL=egl (set by jaco2_sim_driver.scene before mujoco is imported). An OpenGL
+context belongs to the thread that made it: create a CameraRenderer in the thread that renders.
+Depth is the planar (z) distance in metres along the optical axis, as a RealSense publishes it; pixels with no
+surface within the far plane are 0 (invalid).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from . import scene  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME  # noqa: E402
+from stpik_motion_planner.scenario import Scenario  # noqa: E402
+
+from .scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402
+
+# MuJoCo camera frame (x right, y up, looking along -z) -> OpenCV optical frame (x right, y down, z forward)
+MJ_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One RGB-D frame. rgb: HxWx3 uint8; depth: HxW float32 metres (0 = no return); K: 3x3 pinhole matrix;
+    T_base_camera: 4x4 pose of the optical frame (OpenCV: z forward, x right, y down) in the base frame;
+    stamp: simulated time (s)."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    K: np.ndarray
+    T_base_camera: np.ndarray
+    stamp: float = 0.0
+
+    @property
+    def width(self) -> int:
+        return int(self.rgb.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.rgb.shape[0])
+
+    @property
+    def fx(self) -> float:
+        return float(self.K[0, 0])
+
+    @property
+    def fy(self) -> float:
+        return float(self.K[1, 1])
+
+    @property
+    def cx(self) -> float:
+        return float(self.K[0, 2])
+
+    @property
+    def cy(self) -> float:
+        return float(self.K[1, 2])
+
+
+def intrinsics(fovy_deg: float, width: int, height: int) -> np.ndarray:
+    """Pinhole matrix of a MuJoCo camera: square pixels, fy = (h/2) / tan(fovy/2), principal point at the image
+    centre in OpenCV pixel coordinates (pixel centres at integers)."""
+    f = 0.5 * height / math.tan(math.radians(fovy_deg) / 2)
+    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+class CameraRenderer:
+    """Renders the named camera of a model from an MjData (its own GL context; use from one thread)."""
+
+    def __init__(self, model: mujoco.MjModel, width: int, height: int, camera: str = CAMERA_NAME):
+        self.model, self.camera = model, camera
+        self._cam = model.camera(camera).id
+        self._renderer = mujoco.Renderer(model, height, width)
+        self.K = intrinsics(float(model.cam_fovy[self._cam]), width, height)
+        self.zfar = float(model.vis.map.zfar * model.stat.extent)
+
+    def camera_pose(self, data: mujoco.MjData) -> np.ndarray:
+        t = np.eye(4)
+        t[:3, :3] = data.cam_xmat[self._cam].reshape(3, 3) @ MJ_TO_OPTICAL
+        t[:3, 3] = data.cam_xpos[self._cam]
+        return t
+
+    def render(self, data: mujoco.MjData) -> Frame:
+        r = self._renderer
+        r.update_scene(data, camera=self.camera)
+        rgb = r.render().copy()
+        r.enable_depth_rendering()
+        try:
+            depth = r.render().astype(np.float32)
+        finally:
+            r.disable_depth_rendering()
+        depth[depth >= 0.999 * self.zfar] = 0.0
+        return Frame(rgb, depth, self.K.copy(), self.camera_pose(data), float(data.time))
+
+    def close(self) -> None:
+        self._renderer.close()
+
+
+def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec = CameraSpec()) -> Frame:
+    """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception."""
+    model = build_model(scenario, camera)
+    data = mujoco.MjData(model)
+    for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
+        data.qpos[model.joint(j).qposadr[0]] = qj
+    mujoco.mj_forward(model, data)
+    r = CameraRenderer(model, camera.width, camera.height)
+    try:
+        return r.render(data)
+    finally:
+        r.close()

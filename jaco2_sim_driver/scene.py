@@ -1,0 +1,217 @@
+"""MuJoCo scene of the experiment: the Jaco2 arm (from the one robot description), the shelf unit, the bottles of
+a scenario as free bodies, the ArUco marker as a texture, the camera and lights. No ROS here.
+
+Frames: the MuJoCo world frame is the robot base frame of the scenario (x towards the shelf, z up, metres).
+Everything is generated from `stpik_motion_planner.robot_description` and `stpik_motion_planner.scenario`, so
+the simulated world is the world the planners reason about (Sect. 5 of the paper: top shelf with the
+obstacles and the target, bottom shelf where relocated objects go, board above the top shelf).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # headless offscreen rendering; must precede `import mujoco`
+
+import cv2  # noqa: E402
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from stpik_motion_planner.robot_description import (  # noqa: E402
+    D67, FINGER_JOINT_NAMES, LINK_NAMES, PREFIX, mjcf_arm_body)
+from stpik_motion_planner.scenario import Marker, Scenario  # noqa: E402
+
+CAMERA_NAME = "camera_color"
+HAND_BODY = LINK_NAMES[-1]
+FINGER_BODY_NAMES = tuple(f"{PREFIX}_link_finger_{i}" for i in range(1, 4))
+# Static finger capsules of the description (the planner's conservative envelope of the open hand): the simulator
+# replaces them with moving finger bodies and switches them off (see Jaco2Sim).
+DESCRIPTION_FINGER_GEOMS = ("finger_1", "finger_2", "finger_3")
+FINGER_RADIUS = 0.009      # thinner than the planner's 12 mm capsules: the planner's envelope stays conservative
+FINGER_LENGTH = 0.10
+FINGER_CLOSED = 0.5        # rad: tips of opposing fingers meet
+MARKER_BORDER = 0.25       # white margin around the marker, as a fraction of the marker side
+FLOOR_DROP = 0.30          # floor this far below the bottom shelf board
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """Pinhole camera of the scene (RealSense-like): position in the base frame, point it looks at, vertical FOV."""
+
+    position: tuple[float, float, float] = (0.0, -0.35, 0.55)
+    look_at: tuple[float, float, float] = (0.62, 0.0, 0.26)
+    fovy_deg: float = 58.0
+    width: int = 640
+    height: int = 480
+
+
+def _f(v) -> str:
+    return " ".join(f"{float(x):.6g}" for x in v)
+
+
+def rpy_matrix(rpy) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll) (URDF / ROS fixed-axis roll-pitch-yaw)."""
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def quat_wxyz(rot: np.ndarray) -> np.ndarray:
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.asarray(rot, float).reshape(9))
+    return q
+
+
+def marker_image(marker: Marker, pixels_per_bit: int = 20) -> np.ndarray:
+    """Grayscale image of the ArUco marker (cv2.aruco.generateImageMarker) with a white margin around it."""
+    try:
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, marker.dictionary))
+    except AttributeError:
+        raise ValueError(f"unknown ArUco dictionary {marker.dictionary!r}") from None
+    bits = dictionary.markerSize + 2
+    side = bits * pixels_per_bit
+    img = cv2.aruco.generateImageMarker(dictionary, marker.id, side, borderBits=1)
+    pad = int(round(MARKER_BORDER * side))
+    return cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
+
+
+def _hand_xml() -> str:
+    """Three fingers on the last link (its frame: z = approach, x = closing direction, grasp centre at z = D67).
+
+    Finger 1 opposes fingers 2 and 3 across x, as on the j2s7s300. Each finger is a hinge at the palm; the open
+    fingers lie on the description's finger capsules. Closing rotates the tips towards the grasp centre.
+    """
+    base_z, out = D67 - 0.07, []
+    for k, (x, y, sign) in enumerate([(0.045, 0.0, -1), (-0.045, 0.022, 1), (-0.045, -0.022, 1)]):
+        tip = (0.005 if x > 0 else -0.005, 0.0, FINGER_LENGTH)
+        out.append(
+            f'<body name="{FINGER_BODY_NAMES[k]}" pos="{x} {y} {base_z}" gravcomp="1">'
+            f'<joint name="{FINGER_JOINT_NAMES[k]}" type="hinge" axis="0 {sign} 0" range="0 {FINGER_CLOSED}" '
+            f'limited="true" damping="0.05" armature="0.001"/>'
+            f'<geom name="finger_sim_{k + 1}" type="capsule" fromto="0 0 0 {_f(tip)}" size="{FINGER_RADIUS}" '
+            f'mass="0.03" class="finger"/></body>')
+    return "".join(out)
+
+
+def _box(name: str, lo, hi, cls: str = "shelf") -> str:
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return f'<geom name="{name}" type="box" pos="{_f((lo + hi) / 2)}" size="{_f((hi - lo) / 2)}" class="{cls}"/>'
+
+
+def _shelf_xml(s) -> str:
+    t, x0, x1, y0, y1 = s.board_thickness, s.x_front, s.x_back, s.y_min, s.y_max
+    floor = s.bottom_z - FLOOR_DROP
+    return "".join([
+        _box("shelf_top_board", (x0, y0, s.top_z - t), (x1, y1, s.top_z)),
+        _box("shelf_ceiling_board", (x0, y0, s.ceiling_z), (x1, y1, s.ceiling_z + t)),
+        _box("shelf_bottom_board", (x0, y0, s.bottom_z - t), (x1, y1, s.bottom_z)),
+        _box("shelf_side_left", (x0, y1, floor), (x1, y1 + t, s.ceiling_z + t)),
+        _box("shelf_side_right", (x0, y0 - t, floor), (x1, y0, s.ceiling_z + t)),
+        _box("shelf_back_panel", (x1, y0 - t, floor), (x1 + t, y1 + t, s.ceiling_z + t)),
+    ])
+
+
+def _marker_xml(m: Marker) -> str:
+    """A thin plate whose front face (+z of the marker frame, OpenCV convention) carries the marker texture."""
+    rot = rpy_matrix(m.rpy)
+    half = m.size * (1 + 2 * MARKER_BORDER) / 2
+    thick = 0.002
+    centre = np.asarray(m.position) - rot[:, 2] * thick
+    return (f'<body name="aruco_marker" pos="{_f(centre)}" quat="{_f(quat_wxyz(rot))}">'
+            f'<geom name="aruco_plate" type="box" size="{half:.6g} {half:.6g} {thick}" material="aruco" '
+            f'contype="0" conaffinity="0"/></body>')
+
+
+def _bottle_xml(b, z: float) -> str:
+    """A bottle: free body whose frame is the centre of its base circle (as ObjectState.pose), mass = weight (kg)."""
+    return (f'<body name="{b.id}" pos="{b.x:.6g} {b.y:.6g} {z:.6g}"><freejoint name="{b.id}_free"/>'
+            f'<geom name="{b.id}_geom" type="cylinder" pos="0 0 {b.height / 2:.6g}" '
+            f'size="{b.radius:.6g} {b.height / 2:.6g}" mass="{b.weight:.6g}" rgba="{_f(b.rgb)} 1" class="bottle"/>'
+            f'</body>')
+
+
+def _camera_xml(c: CameraSpec) -> str:
+    """MuJoCo camera looking from `position` to `look_at` (MuJoCo cameras look along -z with y up)."""
+    p, t = np.asarray(c.position, float), np.asarray(c.look_at, float)
+    fwd = (t - p) / np.linalg.norm(t - p)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    return (f'<camera name="{CAMERA_NAME}" pos="{_f(p)}" xyaxes="{_f(right)} {_f(up)}" fovy="{c.fovy_deg:.6g}" '
+            f'resolution="{c.width} {c.height}"/>')
+
+
+def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> str:
+    """MJCF of the whole scene. Physics at 1 kHz (timestep 0.001). The marker texture is the asset 'aruco.png'
+    (see `scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm."""
+    s = scenario.shelf
+    floor = s.bottom_z - FLOOR_DROP
+    bottles = "".join(_bottle_xml(b, s.top_z) for b in scenario.objects)
+    welds = "".join(f'<weld name="grasp_{b.id}" body1="{HAND_BODY}" body2="{b.id}" active="false" '
+                    f'solref="0.01 1"/>' for b in scenario.objects)
+    return f"""<mujoco model="jaco2_shelf_{scenario.name}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="0.001" integrator="implicitfast" cone="elliptic" impratio="5">
+    <flag multiccd="enable" sleep="enable"/>
+  </option>
+  <size memory="64M"/>
+  <visual><global offwidth="{max(camera.width, 640)}" offheight="{max(camera.height, 480)}"/>
+    <quality shadowsize="1024"/><map znear="0.01" zfar="20"/></visual>
+  <default>
+    <default class="arm_collision"><geom contype="2" conaffinity="1" rgba="0.15 0.15 0.17 1" group="1"/></default>
+    <default class="finger"><geom contype="2" conaffinity="1" rgba="0.2 0.2 0.22 1" friction="1.2 0.01 0.001"
+      group="1"/></default>
+    <default class="shelf"><geom contype="1" conaffinity="3" rgba="0.72 0.58 0.40 1" friction="0.8 0.01 0.001"/>
+    </default>
+    <default class="bottle"><geom contype="1" conaffinity="3" friction="0.8 0.01 0.001" condim="4"
+      solref="0.004 1"/></default>
+  </default>
+  <asset>
+    <texture name="aruco" type="2d" file="aruco.png"/>
+    <material name="aruco" texture="aruco" texrepeat="1 1" texuniform="false" specular="0" shininess="0"/>
+    <texture name="grid" type="2d" builtin="checker" rgb1="0.55 0.55 0.55" rgb2="0.45 0.45 0.45" width="256"
+      height="256"/>
+    <material name="floor" texture="grid" texrepeat="8 8"/>
+  </asset>
+  <worldbody>
+    <light name="key" pos="0.0 -0.6 1.6" dir="0.35 0.35 -1" diffuse="0.7 0.7 0.7" castshadow="false"/>
+    <light name="fill" pos="-0.3 0.5 1.2" dir="0.5 -0.3 -1" diffuse="0.4 0.4 0.4" castshadow="false"/>
+    <light name="shelf_light" pos="0.2 0 0.44" dir="1 0 -0.4" diffuse="0.35 0.35 0.35" castshadow="false"/>
+    <geom name="floor" type="plane" pos="0 0 {floor:.6g}" size="3 3 0.1" material="floor" contype="1"
+      conaffinity="3"/>
+    <geom name="pedestal" type="box" pos="-0.02 0 {floor / 2:.6g}" size="0.09 0.09 {-floor / 2:.6g}"
+      rgba="0.3 0.3 0.3 1" contype="1" conaffinity="1"/>
+    {_shelf_xml(s)}
+    {_marker_xml(scenario.marker)}
+    {_camera_xml(camera)}
+    {mjcf_arm_body(_hand_xml())}
+    {bottles}
+  </worldbody>
+  <equality>{welds}</equality>
+  {_actuators_xml()}
+</mujoco>"""
+
+
+def _actuators_xml(kv: float = 200.0) -> str:
+    """Velocity actuators (gain kv, gravity compensated bodies, STACK-NOTES) for the arm; position actuators with a
+    bounded force for the fingers."""
+    from stpik_motion_planner.robot_description import JOINT_NAMES
+    arm = "".join(f'<velocity name="v_{j}" joint="{j}" kv="{kv:g}" forcerange="-200 200"/>' for j in JOINT_NAMES)
+    fingers = "".join(f'<position name="p_{j}" joint="{j}" kp="2" dampratio="1" forcerange="-3 3" '
+                      f'ctrlrange="0 {FINGER_CLOSED}"/>' for j in FINGER_JOINT_NAMES)
+    return f"<actuator>{arm}{fingers}</actuator>"
+
+
+def scene_assets(scenario: Scenario) -> dict[str, bytes]:
+    ok, png = cv2.imencode(".png", marker_image(scenario.marker))
+    if not ok:
+        raise RuntimeError("could not encode the ArUco marker image")
+    return {"aruco.png": png.tobytes()}
+
+
+def build_model(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> mujoco.MjModel:
+    """Compile the scene of a scenario (marker texture built in memory)."""
+    return mujoco.MjModel.from_xml_string(scene_xml(scenario, camera), scene_assets(scenario))

@@ -1,0 +1,263 @@
+"""The simulated Jaco2 (no ROS): joint-velocity control with Kinova's safety behaviour, the gripper, ground truth.
+
+Control law: each arm joint has a MuJoCo velocity actuator tau_i = kv (qdot_cmd_i - qdot_i) on gravity-compensated
+links (STACK-NOTES: kv about 200 tracks). The command qdot_cmd is what the motion planner streams (the joint
+velocities of its STPIK solution, Eq. 16-17 of the paper) and is
+
+- rejected whole if it has the wrong length or a NaN/Inf entry (BadCommandError; the previous state is kept),
+- clamped to the velocity limits of Table 7 (`QDOT_MAX`),
+- slowed towards a joint limit of Table 6 so that the joint stops on it (joint-limit stop),
+- zeroed by the watchdog when no command came for `watchdog_timeout` of simulated time (Kinova: 50 ms).
+
+Grasp: a weld constraint (see `gripper_close`). Physics at 1 kHz (model timestep 0.001).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from stpik_motion_planner.robot_description import (
+    CONTINUOUS, FINGER_JOINT_NAMES, JOINT_NAMES, N_JOINTS, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX)
+from stpik_motion_planner.scenario import Scenario
+
+from .scene import (CAMERA_NAME, DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model)
+
+LIMIT_BRAKE_TIME = 0.02     # s: near a limit the allowed speed towards it is distance / LIMIT_BRAKE_TIME
+GRASP_RADIAL_TOL = 0.025    # m: bottle axis to grasp centre, across the hand (fingers open to about +-36 mm)
+GRASP_TILT_COS = math.cos(math.radians(30))  # hand y axis (finger spread) vs bottle axis
+
+
+class BadCommandError(ValueError):
+    """A joint-velocity command that cannot be executed (wrong length, NaN, Inf)."""
+
+
+@dataclass(frozen=True)
+class ObjectPose:
+    """Ground truth of one bottle: centre of its base circle and orientation (w, x, y, z) in the base frame."""
+
+    id: str
+    position: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+
+
+def check_velocity_command(qdot, n: int = N_JOINTS) -> np.ndarray:
+    """Validate a joint-velocity command (rad/s); BadCommandError with the reason otherwise."""
+    try:
+        v = np.asarray(qdot, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise BadCommandError(f"joint velocity command is not a list of numbers: {qdot!r}") from None
+    if v.size != n:
+        raise BadCommandError(f"joint velocity command has {v.size} values, expected {n}")
+    if not np.all(np.isfinite(v)):
+        raise BadCommandError(f"joint velocity command has NaN or Inf: {v.tolist()}")
+    return v
+
+
+class Jaco2Sim:
+    """Scenario scene + arm; not thread-safe (the node serialises access with a lock)."""
+
+    def __init__(self, scenario: Scenario, *, camera: CameraSpec = CameraSpec(), qdot_max=QDOT_MAX,
+                 watchdog_timeout: float = 0.05, q_home=Q_HOME):
+        self.scenario = scenario
+        self.camera = camera
+        self.model = build_model(scenario, camera)
+        self.data = mujoco.MjData(self.model)
+        self.qdot_max = np.asarray(qdot_max, float)
+        if self.qdot_max.shape != (N_JOINTS,) or np.any(self.qdot_max <= 0):
+            raise ValueError(f"qdot_max must be {N_JOINTS} positive numbers, got {qdot_max!r}")
+        if watchdog_timeout <= 0:
+            raise ValueError(f"watchdog_timeout must be positive, got {watchdog_timeout}")
+        self.watchdog_timeout = float(watchdog_timeout)
+        self.q_home = np.asarray(q_home, float)
+        m = self.model
+        self._qadr = np.array([m.joint(j).qposadr[0] for j in JOINT_NAMES])
+        self._vadr = np.array([m.joint(j).dofadr[0] for j in JOINT_NAMES])
+        self._fqadr = np.array([m.joint(j).qposadr[0] for j in FINGER_JOINT_NAMES])
+        self._fvadr = np.array([m.joint(j).dofadr[0] for j in FINGER_JOINT_NAMES])
+        self._act = np.array([m.actuator(f"v_{j}").id for j in JOINT_NAMES])
+        self._fact = np.array([m.actuator(f"p_{j}").id for j in FINGER_JOINT_NAMES])
+        self._limited = ~np.asarray(CONTINUOUS)
+        self._hand = m.body(HAND_BODY).id
+        self._site = m.site("end_effector").id
+        self._bodies = {b.id: m.body(b.id).id for b in scenario.objects}
+        self._welds = {b.id: m.equality(f"grasp_{b.id}").id for b in scenario.objects}
+        for g in DESCRIPTION_FINGER_GEOMS:  # the moving finger bodies replace the description's static capsules
+            gid = m.geom(g).id
+            m.geom_contype[gid] = m.geom_conaffinity[gid] = 0
+            m.geom_rgba[gid, 3] = 0.0
+        self.grasped: str | None = None
+        self.reset()
+
+    # ---------------------------------------------------------------- state
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    @property
+    def q(self) -> np.ndarray:
+        """Joint angles in Kinova's physical convention Q (rad)."""
+        return self.data.qpos[self._qadr].copy()
+
+    @property
+    def qdot(self) -> np.ndarray:
+        return self.data.qvel[self._vadr].copy()
+
+    @property
+    def effort(self) -> np.ndarray:
+        return self.data.actuator_force[self._act].copy()
+
+    @property
+    def finger_q(self) -> np.ndarray:
+        """Finger hinge angles (rad): 0 open, FINGER_CLOSED when the tips meet."""
+        return self.data.qpos[self._fqadr].copy()
+
+    @property
+    def finger_qdot(self) -> np.ndarray:
+        return self.data.qvel[self._fvadr].copy()
+
+    @property
+    def command(self) -> np.ndarray:
+        """The velocity command currently applied (after clamping, limit stop and watchdog)."""
+        return self.data.ctrl[self._act].copy()
+
+    @property
+    def watchdog_tripped(self) -> bool:
+        return self.time - self._cmd_time > self.watchdog_timeout
+
+    def ee_pose(self) -> np.ndarray:
+        """4x4 pose of the tool frame (site end_effector: z approach, x closing, origin grasp centre)."""
+        t = np.eye(4)
+        t[:3, :3] = self.data.site_xmat[self._site].reshape(3, 3)
+        t[:3, 3] = self.data.site_xpos[self._site]
+        return t
+
+    def object_poses(self) -> list[ObjectPose]:
+        """Ground-truth bottle poses in scenario order."""
+        return [ObjectPose(oid, tuple(self.data.xpos[b]), tuple(self.data.xquat[b]))
+                for oid, b in self._bodies.items()]
+
+    # ---------------------------------------------------------------- commands
+    def set_velocity(self, qdot) -> np.ndarray:
+        """Command joint velocities (rad/s, order JOINT_NAMES); returns the clamped command. Feeds the watchdog.
+        A bad command raises BadCommandError and changes nothing."""
+        v = np.clip(check_velocity_command(qdot), -self.qdot_max, self.qdot_max)
+        self._cmd = v
+        self._cmd_time = self.time
+        self._apply()
+        return v.copy()
+
+    def stop(self) -> None:
+        self._cmd = np.zeros(N_JOINTS)
+        self._apply()
+
+    def _apply(self) -> None:
+        v = self._cmd if not self.watchdog_tripped else np.zeros(N_JOINTS)
+        q = self.data.qpos[self._qadr]
+        lim = self._limited
+        # joint-limit stop: the speed towards a limit shrinks with the distance to it
+        up = np.maximum(Q_UPPER - q, 0.0) / LIMIT_BRAKE_TIME
+        lo = np.maximum(q - Q_LOWER, 0.0) / LIMIT_BRAKE_TIME
+        v = np.where(lim & (v > 0), np.minimum(v, up), v)
+        v = np.where(lim & (v < 0), np.maximum(v, -lo), v)
+        self.data.ctrl[self._act] = v
+
+    def step(self, n: int = 1) -> None:
+        """Advance n physics steps of 1 ms, re-applying watchdog and limit stop before each."""
+        for _ in range(n):
+            self._apply()
+            mujoco.mj_step(self.model, self.data)
+
+    # ---------------------------------------------------------------- scene
+    def reset(self) -> None:
+        """Scenario state: bottles where the scenario puts them, arm at home, gripper open, no grasp."""
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.eq_active[:] = 0
+        for b in self._bodies.values():
+            self.model.body_gravcomp[b] = 0.0
+        self.grasped = None
+        self.data.ctrl[self._fact] = 0.0
+        self.home()
+
+    def home(self) -> None:
+        """Put the arm at q_home at rest (a teleport, not a motion) and stop it."""
+        self.data.qpos[self._qadr] = self.q_home
+        self.data.qvel[self._vadr] = 0.0
+        self._cmd = np.zeros(N_JOINTS)
+        self._cmd_time = -math.inf
+        self.data.ctrl[self._act] = 0.0
+        if self.grasped is not None:  # a carried bottle comes along, at its grasp offset
+            mujoco.mj_kinematics(self.model, self.data)
+            self._place_grasped()
+        mujoco.mj_forward(self.model, self.data)
+
+    def bottle_between_fingers(self) -> str | None:
+        """Id of the bottle whose axis passes through the grasp centre (within GRASP_RADIAL_TOL across it, the
+        grasp centre within its height) with the hand's finger-spread axis along the bottle axis, or None."""
+        c, r = self.data.site_xpos[self._site], self.data.site_xmat[self._site].reshape(3, 3)
+        best, best_d = None, GRASP_RADIAL_TOL
+        for oid, b in self._bodies.items():
+            obj = self.scenario.object(oid)
+            axis = self.data.xmat[b].reshape(3, 3)[:, 2]
+            if abs(float(axis @ r[:, 1])) < GRASP_TILT_COS:
+                continue
+            d = c - self.data.xpos[b]
+            s = float(d @ axis)
+            if not 0.2 * obj.height <= s <= 0.9 * obj.height:
+                continue
+            radial = float(np.linalg.norm(d - s * axis))
+            if radial < best_d:
+                best, best_d = oid, radial
+        return best
+
+    def gripper_close(self) -> str | None:
+        """Close the three fingers. If a bottle is between them it is grasped: a weld constraint fixes it to the
+        hand at its current relative pose and its weight is compensated while carried. Returns its id or None."""
+        self.data.ctrl[self._fact] = FINGER_CLOSED
+        if self.grasped is not None:
+            return self.grasped
+        oid = self.bottle_between_fingers()
+        if oid is None:
+            return None
+        b, eq = self._bodies[oid], self._welds[oid]
+        # relpose of the weld = pose of the bottle in the hand frame now (so that nothing jumps)
+        hp, hq = self.data.xpos[self._hand], self.data.xquat[self._hand]
+        hq_inv, rel_p, rel_q = np.zeros(4), np.zeros(3), np.zeros(4)
+        mujoco.mju_negQuat(hq_inv, hq)
+        mujoco.mju_rotVecQuat(rel_p, self.data.xpos[b] - hp, hq_inv)
+        mujoco.mju_mulQuat(rel_q, hq_inv, self.data.xquat[b])
+        self.model.eq_data[eq, 0:3] = 0.0
+        self.model.eq_data[eq, 3:6] = rel_p
+        self.model.eq_data[eq, 6:10] = rel_q
+        self.model.eq_data[eq, 10] = 1.0
+        self.model.body_gravcomp[b] = 1.0
+        self.data.eq_active[eq] = 1
+        self.grasped = oid
+        return oid
+
+    def gripper_open(self) -> str | None:
+        """Open the fingers and release the grasped bottle (weld off, weight back); returns its id or None."""
+        self.data.ctrl[self._fact] = 0.0
+        oid, self.grasped = self.grasped, None
+        if oid is not None:
+            self.data.eq_active[self._welds[oid]] = 0
+            self.model.body_gravcomp[self._bodies[oid]] = 0.0
+        return oid
+
+    def _place_grasped(self) -> None:
+        eq, b = self._welds[self.grasped], self._bodies[self.grasped]
+        hp, hq = self.data.xpos[self._hand], self.data.xquat[self._hand]
+        p, q = np.zeros(3), np.zeros(4)
+        mujoco.mju_rotVecQuat(p, self.model.eq_data[eq, 3:6], hq)
+        mujoco.mju_mulQuat(q, hq, self.model.eq_data[eq, 6:10])
+        adr = self.model.jnt_qposadr[self.model.body_jntadr[b]]
+        vadr = self.model.jnt_dofadr[self.model.body_jntadr[b]]
+        self.data.qpos[adr:adr + 3] = hp + p
+        self.data.qpos[adr + 3:adr + 7] = q
+        self.data.qvel[vadr:vadr + 6] = 0.0
+
+    @property
+    def camera_name(self) -> str:
+        return CAMERA_NAME
