@@ -199,7 +199,7 @@ def _actuators_xml(kv: float = 200.0) -> str:
     """Velocity actuators (gain kv, gravity compensated bodies, STACK-NOTES) for the arm; position actuators with a
     bounded force for the fingers."""
     from stpik_motion_planner.robot_description import JOINT_NAMES
-    arm = "".join(f'<velocity name="v_{j}" joint="{j}" kv="{kv:g}" forcerange="-200 200"/>' for j in JOINT_NAMES)
+    arm = "".join(f'<velocity name="v_{j}" joint="{j}" kv="{kv:g}"/>' for j in JOINT_NAMES)
     fingers = "".join(f'<position name="p_{j}" joint="{j}" kp="2" dampratio="1" forcerange="-3 3" '
                       f'ctrlrange="0 {FINGER_CLOSED}"/>' for j in FINGER_JOINT_NAMES)
     return f"<actuator>{arm}{fingers}</actuator>"
