@@ -1,0 +1,117 @@
+"""Bottle segmentation by colour class with depth (stands in for the paper's YOLO segmentation, Sect. 5: its
+weights cannot be downloaded here; the paper's bottles were told apart by colour, as ours are).
+
+1. Every pixel with a depth return is back-projected into the robot base frame (camera pose from the marker).
+2. Workspace gate: only points inside a shelf compartment (above a board, inside the side and back panels,
+   under the board above, off the marker plate) can belong to a bottle; boards, arm, floor, marker drop out.
+3. Colour class: a pixel p (RGB, 0..255) belongs to the class c whose reference colour a_c explains it best under
+   a shading gain s in [gain_min, gain_max]:  residual_c(p) = || p - s* a_c ||,  s* = clip(p.a_c / |a_c|^2).
+   Colours that are not scalar multiples of each other (orange / brown, yellow / olive) are told apart by their
+   chromaticity; scalar multiples (black / white / gray) by their brightness range. Pixels with no class within
+   `max_residual` are left unassigned.
+No rclpy here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from stpik_motion_planner.scenario import Scenario
+
+from .aruco import ImageFormatError, marker_in_base
+
+UNASSIGNED = -1
+
+
+@dataclass(frozen=True)
+class SegmentationParams:
+    gain_min: float = 0.3        # darkest shading of a bottle's colour (self-shadowed side)
+    gain_max: float = 1.2        # brightest (lit side, before saturation)
+    max_residual: float = 40.0   # RGB units (0..255): farther from every class -> unassigned
+    wall_margin: float = 0.004   # m kept off the boards and panels by the workspace gate
+    marker_margin: float = 0.01  # m around the marker plate excluded from the gate
+    erode_px: int = 1            # erosion of each class mask (drops anti-aliased silhouette pixels)
+
+
+def check_images(rgb, depth) -> tuple[np.ndarray, np.ndarray]:
+    """Colour HxWx3 uint8 and depth HxW (float metres) of the same size; ImageFormatError otherwise."""
+    rgb, depth = np.asarray(rgb), np.asarray(depth)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+        raise ImageFormatError(f"colour image must be HxWx3 uint8 (rgb8), got shape {rgb.shape} {rgb.dtype}")
+    if depth.ndim != 2 or not np.issubdtype(depth.dtype, np.floating):
+        raise ImageFormatError(f"depth image must be HxW float metres, got shape {depth.shape} {depth.dtype}")
+    if rgb.shape[:2] != depth.shape:
+        raise ImageFormatError(f"colour {rgb.shape[1]}x{rgb.shape[0]} and depth {depth.shape[1]}x{depth.shape[0]} "
+                               "differ in size (the depth must be registered to the colour image)")
+    return rgb, depth
+
+
+def backproject_image(depth: np.ndarray, K: np.ndarray, T_base_camera: np.ndarray) -> np.ndarray:
+    """HxWx3 points in the base frame (NaN where depth is 0 or not finite). Depth is planar z (RealSense)."""
+    h, w = depth.shape
+    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    z = depth.astype(np.float32)
+    z = np.where(np.isfinite(z) & (z > 0), z, np.nan)
+    cam = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=-1)
+    r, t = T_base_camera[:3, :3].astype(np.float32), T_base_camera[:3, 3].astype(np.float32)
+    return cam @ r.T + t
+
+
+def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker_margin: float) -> np.ndarray:
+    """HxW bool: the point is inside the top or bottom shelf compartment and not on the marker plate."""
+    s = scenario.shelf
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    with np.errstate(invalid="ignore"):
+        inside = (x > s.x_front - 0.02) & (x < s.x_back - margin) & (y > s.y_min + margin) & (y < s.y_max - margin)
+        top = (z > s.top_z + margin) & (z < s.ceiling_z - margin)
+        bottom = (z > s.bottom_z + margin) & (z < s.top_z - s.board_thickness - margin)
+        mask = inside & (top | bottom)
+        m = scenario.marker
+        local = (points - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
+        half = m.size * 0.75 + marker_margin  # the plate carries a white margin of a quarter side
+        on_marker = (np.abs(local[..., 0]) < half) & (np.abs(local[..., 1]) < half) & (np.abs(local[..., 2]) < 0.02)
+    return mask & ~on_marker
+
+
+def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams) -> np.ndarray:
+    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits."""
+    p = rgb_pixels.astype(np.float32)
+    a = refs.astype(np.float32)
+    s = np.clip(p @ a.T / np.sum(a * a, axis=1), params.gain_min, params.gain_max)       # N x C
+    res = np.linalg.norm(p[:, None, :] - s[..., None] * a[None, :, :], axis=2)             # N x C
+    best = np.argmin(res, axis=1)
+    best[res[np.arange(len(p)), best] > params.max_residual] = UNASSIGNED
+    return best
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """labels: HxW int, index into `classes` (scenario object ids) or UNASSIGNED; points: HxWx3 base frame."""
+
+    labels: np.ndarray
+    points: np.ndarray
+    classes: tuple[str, ...]
+
+    def mask(self, object_id: str) -> np.ndarray:
+        return self.labels == self.classes.index(object_id)
+
+
+def segment(rgb, depth, K, T_base_camera, scenario: Scenario,
+            params: SegmentationParams = SegmentationParams()) -> Segmentation:
+    """Per-pixel bottle class of a registered RGB-D frame (see the module docstring)."""
+    rgb, depth = check_images(rgb, depth)
+    points = backproject_image(depth, np.asarray(K, float), np.asarray(T_base_camera, float))
+    gate = workspace_mask(points, scenario, params.wall_margin, params.marker_margin)
+    classes = tuple(b.id for b in scenario.objects)
+    refs = np.array([b.rgb for b in scenario.objects]) * 255.0
+    labels = np.full(depth.shape, UNASSIGNED, np.int32)
+    labels[gate] = classify_colours(rgb[gate], refs, params)
+    if params.erode_px > 0:
+        kernel = np.ones((2 * params.erode_px + 1,) * 2, np.uint8)
+        for k in range(len(classes)):
+            m = (labels == k).astype(np.uint8)
+            if m.any():
+                labels[(m > 0) & (cv2.erode(m, kernel) == 0)] = UNASSIGNED
+    return Segmentation(labels, points, classes)
