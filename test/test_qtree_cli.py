@@ -1,0 +1,107 @@
+"""`qtree` command line (subprocess): train/solve outputs, and one clear line + non-zero exit on bad input."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+SC5 = ROOT / "config" / "scenarios" / "blocking_5.yaml"
+
+
+def qtree(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "qtree_task_planner.cli", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_train_writes_json_and_dot(tmp_path):
+    out, dot = tmp_path / "r.json", tmp_path / "tree.dot"
+    p = qtree("train", "--scenario", SC5, "--policy", "h-eg", "--search", "breadth", "--max-episodes", 300,
+              "--seed", 3, "--solve-first", "--json", out, "--tree-dot", dot)
+    assert p.returncode == 0, p.stderr
+    r = json.loads(out.read_text())
+    assert r["sequence"] == ["o1", "o4", "T"] and r["total_weight"] == pytest.approx(0.76)
+    assert r["params"]["seed"] == 3 and r["params"]["search"] == "breadth"
+    assert r["exact"]["total_weight"] == pytest.approx(0.76) and r["E_1st"] >= 1
+    assert len(r["q_sum_history"]) == r["episodes"] and r["MP_q"] >= r["planner_calls"] > 0
+    text = dot.read_text()
+    assert text.startswith("digraph blocking_5 {") and text.count(" -> ") == r["tree_edges"]
+
+
+def test_train_to_stdout_with_progress_on_stderr():
+    p = qtree("train", "--scenario", SC5, "--max-episodes", 50, "--beta", 0)
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["episodes"] == 50 and "Traceback" not in p.stderr
+
+
+def test_solve():
+    p = qtree("solve", "--scenario", SC5)
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    assert r["sequence"] == ["o1", "o4", "T"] and r["oracle_calls"] > 0
+
+
+def write_scenario(tmp_path, mutate):
+    data = yaml.safe_load(SC5.read_text())
+    mutate(data)
+    f = tmp_path / "bad.yaml"
+    f.write_text(yaml.safe_dump(data))
+    return f
+
+
+def _dup(d):
+    d["objects"][1]["id"] = "o1"
+
+
+def _unknown(d):
+    d["blocking"]["T"] = ["o99"]
+
+
+def _weight(d):
+    d["objects"][0]["weight"] = 1.5
+
+
+def _no_target(d):
+    del d["target"]
+
+
+def _no_blocking(d):
+    del d["blocking"]
+
+
+@pytest.mark.parametrize("mutate, expect", [
+    (_dup, "duplicate id"), (_unknown, "blocking[T]"), (_weight, "weight must be in (0, 1]"),
+    (_no_target, "target: missing"), (_no_blocking, "no 'blocking:' section")])
+def test_bad_scenarios_get_one_line(tmp_path, mutate, expect):
+    p = qtree("train", "--scenario", write_scenario(tmp_path, mutate), "--no-progress")
+    assert p.returncode == 2 and p.stdout == ""
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("qtree: error:") and expect in lines[0], p.stderr
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["--alpha", "1.5"], "alpha must be in [0.0, 1.0]"),
+    (["--gamma", "-0.2"], "gamma must be in [0.0, 1.0]"),
+    (["--max-episodes", "-5"], "max_episodes must be >= 1"),
+    (["--max-steps", "-1"], "max_steps must be >= 1"),
+    (["--beta", "-1"], "beta must be in"),
+    (["--policy", "greedy"], "invalid choice"),
+    (["--alpha", "abc"], "invalid float value"),
+    (["--params", "/nonexistent.yaml"], "cannot read parameters file"),
+])
+def test_bad_arguments_get_one_line(args, expect):
+    p = qtree("train", "--scenario", SC5, *args)
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("qtree: error:")
+    assert expect in lines[0], p.stderr
+
+
+def test_malformed_yaml_and_missing_file(tmp_path):
+    f = tmp_path / "m.yaml"
+    f.write_text("objects: [\n  - {id: a\n")
+    for path, expect in ((f, "malformed YAML"), (tmp_path / "none.yaml", "cannot read scenario file")):
+        p = qtree("solve", "--scenario", path)
+        lines = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(lines) == 1 and expect in lines[0], p.stderr
