@@ -151,7 +151,7 @@ class MarkerLocalizer:
             return None
         pts = _backproject(K, np.stack([u, v], 1).astype(float), depth[v, u].astype(float))
         c = pts.mean(0)
-        n = np.linalg.svd(pts - c)[2][2]
+        n = np.linalg.eigh(np.cov((pts - c).T))[1][:, 0]  # normal: direction of least spread
         rays = np.c_[(corners[:, 0] - K[0, 2]) / K[0, 0], (corners[:, 1] - K[1, 2]) / K[1, 1], np.ones(4)]
         denom = rays @ n
         if np.any(np.abs(denom) < 1e-6):

@@ -85,9 +85,13 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     if n < params.min_pixels:
         raise FitError(f"{n} pixels of colour {bottle.label!r} (need {params.min_pixels})")
     # keep the largest connected blob's neighbourhood: stray pixels elsewhere (highlights) are dropped
-    count, comp, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    r0, c0 = rows[0], cols[0]
+    crop = mask[r0:rows[-1] + 1, c0:cols[-1] + 1].astype(np.uint8)
+    _, comp, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
     big = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     v, u = np.nonzero(comp == big)
+    v, u = v + r0, u + c0
     p = points[v, u]
     s = scenario.shelf
     base = s.top_z if np.median(p[:, 2]) > s.top_z - s.board_thickness / 2 else s.bottom_z

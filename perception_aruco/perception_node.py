@@ -1,0 +1,205 @@
+"""perception node: RealSense-named camera topics -> /scene/objects (ObjectArray, transient local) + debug image.
+
+Thin shell over perception_aruco.pipeline. Colour and depth are paired by stamp (closest within `sync_slop`);
+the newest pair is processed at most `process_rate` times a second. Objects hidden in the current frame are kept
+at their last perceived pose for `hold_frames` processed frames, then dropped; a scene without the target is never
+published (docs/perception.md). The last scene is republished every `republish_period` s while it is younger than
+`max_scene_age` (the task planner refuses stale scenes). Bad input is logged, never fatal.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+
+from qtree_relocation_msgs.msg import ObjectArray
+from qtree_task_planner.spin import run_node
+from stpik_motion_planner.scenario import CONFIG_DIR, DEFAULT_SCENARIO, load_scenario
+from stpik_motion_planner.scene_msgs import BASE_FRAME, bottles_to_msg
+
+from .aruco import PerceptionError
+from .images import decode_color, decode_depth, encode_color
+from .localize import LocalizeParams
+from .pipeline import Perception
+from .segmentation import SegmentationParams
+
+
+def scenario_path(p: str) -> Path:
+    """A relative scenario path is tried from the working directory, then from the repository root."""
+    path = Path(p)
+    if not path.is_absolute() and not path.exists() and (CONFIG_DIR.parent / path).exists():
+        return CONFIG_DIR.parent / path
+    return path
+
+
+def _stamp_s(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+class PerceptionNode(Node):
+    def __init__(self):
+        super().__init__("perception")
+        d = self.declare_parameter
+        d("scenario", str(DEFAULT_SCENARIO))
+        d("color_topic", "/camera/color/image_raw")
+        d("depth_topic", "/camera/depth/image_rect_raw")
+        d("camera_info_topic", "/camera/color/camera_info")
+        d("objects_topic", "/scene/objects")
+        d("debug_topic", "/perception/debug_image")
+        d("frame_id", BASE_FRAME)
+        d("sync_slop", 0.05)          # s: max stamp difference of a colour/depth pair
+        d("process_rate", 5.0)        # Hz: frames processed at most this often
+        d("republish_period", 0.5)    # s
+        d("max_scene_age", 5.0)       # s: stop republishing a scene perceived longer ago than this
+        d("hold_frames", 10)          # processed frames an unseen object keeps its last pose
+        d("refine_with_depth", True)  # marker pose refined by a plane fit on the depth image
+        d("gain_min", 0.3)
+        d("gain_max", 1.2)
+        d("max_residual", 40.0)
+        d("min_pixels", 60)
+        d("inlier_tol", 0.004)
+        g = lambda n: self.get_parameter(n).value  # noqa: E731
+        self.p = g
+        self.scenario = load_scenario(scenario_path(g("scenario")))
+        self.perception = Perception(
+            self.scenario,
+            SegmentationParams(gain_min=g("gain_min"), gain_max=g("gain_max"), max_residual=g("max_residual")),
+            LocalizeParams(min_pixels=g("min_pixels"), inlier_tol=g("inlier_tol")),
+            refine_with_depth=g("refine_with_depth"))
+        self._lock = threading.Lock()
+        self._colors: deque = deque(maxlen=6)
+        self._depths: deque = deque(maxlen=6)
+        self._info = None
+        self._last_pair = None                     # stamp of the last processed pair
+        self._frame = 0
+        self._last_seen: dict[str, tuple] = {}     # id -> (Detection, frame index)
+        self._scene: ObjectArray | None = None
+        self._scene_time = 0.0
+
+        sensors = ReentrantCallbackGroup()
+        self.create_subscription(Image, g("color_topic"), self._on_color, qos_profile_sensor_data,
+                                 callback_group=sensors)
+        self.create_subscription(Image, g("depth_topic"), self._on_depth, qos_profile_sensor_data,
+                                 callback_group=sensors)
+        self.create_subscription(CameraInfo, g("camera_info_topic"), self._on_info, qos_profile_sensor_data,
+                                 callback_group=sensors)
+        self.pub = self.create_publisher(ObjectArray, g("objects_topic"),
+                                         QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.debug_pub = self.create_publisher(Image, g("debug_topic"), 1)
+        self.create_timer(1.0 / g("process_rate"), self._process, MutuallyExclusiveCallbackGroup())
+        self.create_timer(g("republish_period"), self._republish, MutuallyExclusiveCallbackGroup())
+        self.get_logger().info(f"perception on scenario {self.scenario.name!r} ({len(self.scenario.objects)} "
+                               f"objects, marker id {self.scenario.marker.id}); publishing {g('objects_topic')}")
+
+    # ---- inputs
+    def _on_color(self, msg: Image) -> None:
+        with self._lock:
+            self._colors.append(msg)
+
+    def _on_depth(self, msg: Image) -> None:
+        with self._lock:
+            self._depths.append(msg)
+
+    def _on_info(self, msg: CameraInfo) -> None:
+        self._info = msg
+
+    def _newest_pair(self):
+        """Newest (colour, depth) whose stamps differ by at most sync_slop, or None."""
+        with self._lock:
+            best = None
+            for c in self._colors:
+                for dpt in self._depths:
+                    dt = abs(_stamp_s(c) - _stamp_s(dpt))
+                    if dt <= self.p("sync_slop") and (best is None or _stamp_s(c) > _stamp_s(best[0])):
+                        best = (c, dpt)
+            return best
+
+    # ---- processing
+    def _process(self) -> None:
+        pair = self._newest_pair()
+        log = self.get_logger()
+        if pair is None:
+            if self._colors and self._depths:
+                log.warning("no colour/depth pair within sync_slop "
+                            f"({self.p('sync_slop')} s) of each other", throttle_duration_sec=5.0)
+            return
+        color, depth = pair
+        if self._last_pair == _stamp_s(color):
+            return
+        self._last_pair = _stamp_s(color)
+        if self._info is None:
+            log.warning("no camera_info received yet: cannot use the images", throttle_duration_sec=5.0)
+            return
+        rgb = None
+        try:
+            rgb = decode_color(color.encoding, color.height, color.width, color.step, color.data,
+                               bool(color.is_bigendian))
+            dep = decode_depth(depth.encoding, depth.height, depth.width, depth.step, depth.data,
+                               bool(depth.is_bigendian))
+            K = np.asarray(self._info.k, float).reshape(3, 3)
+            if (self._info.width, self._info.height) != (rgb.shape[1], rgb.shape[0]):
+                raise PerceptionError(f"camera_info is for {self._info.width}x{self._info.height}, colour image "
+                                      f"is {rgb.shape[1]}x{rgb.shape[0]}")
+            result = self.perception.process(rgb, dep, K)
+        except PerceptionError as e:
+            log.error(f"frame dropped: {e}", throttle_duration_sec=2.0)
+            if rgb is not None:
+                self._publish_debug(color, self.perception.annotate(rgb, None, note=str(e)))
+            return
+        self._frame += 1
+        for d in result.detections.values():
+            self._last_seen[d.id] = (d, self._frame)
+        self._publish_debug(color, self.perception.annotate(rgb, result, K))
+        self._publish_scene(color, result)
+
+    def _publish_scene(self, color: Image, result) -> None:
+        log = self.get_logger()
+        keep = [(d, f) for d, f in self._last_seen.values() if self._frame - f <= self.p("hold_frames")]
+        held = sorted(d.id for d, f in keep if f != self._frame)
+        kept_ids = {d.id for d, _ in keep}
+        lost = [i for i in self.scenario.ids if i not in kept_ids]
+        if held:
+            log.warning(f"not seen in this frame, kept at last pose: {', '.join(held)}", throttle_duration_sec=5.0)
+        if lost:
+            why = "; ".join(f"{i}: {result.missing.get(i, 'not seen')}" for i in lost)
+            log.warning(f"missing from the scene (hidden or out of view): {why}", throttle_duration_sec=5.0)
+        if self.scenario.target_id not in kept_ids:
+            log.error(f"target {self.scenario.target_id!r} not seen: no scene published", throttle_duration_sec=2.0)
+            return
+        order = {i: k for k, i in enumerate(self.scenario.ids)}
+        dets = sorted((d for d, _ in keep), key=lambda d: order[d.id])
+        msg = bottles_to_msg(self.perception.bottles(dets), self.scenario.shelf.top_z, color.header.stamp,
+                             self.p("frame_id"))
+        for m, d in zip(msg.objects, dets):
+            m.pose.position.z = d.z
+        self._scene, self._scene_time = msg, time.monotonic()
+        self.pub.publish(msg)
+
+    def _republish(self) -> None:
+        if self._scene is None:
+            return
+        age = time.monotonic() - self._scene_time
+        if age > self.p("max_scene_age"):
+            self.get_logger().warning(f"no scene perceived for {age:.0f} s: not republishing the old one",
+                                      throttle_duration_sec=10.0)
+            return
+        self.pub.publish(self._scene)
+
+    def _publish_debug(self, color: Image, img: np.ndarray) -> None:
+        enc, h, w, step, data = encode_color(img)
+        self.debug_pub.publish(Image(header=color.header, encoding=enc, height=h, width=w, step=step, data=data))
+
+
+def main(args=None) -> None:
+    run_node(PerceptionNode, args)
+
+
+if __name__ == "__main__":
+    main()
