@@ -44,8 +44,9 @@ CONTINUOUS = (True, False, True, False, True, False, True)
 # Table 7 (rad/s). Kinova's own files use 0.628 and 0.838: configurable in config/robot.yaml.
 QDOT_MAX = np.array([0.81, 0.81, 0.81, 0.81, 1.11, 1.11, 1.11])
 
-# Home: hand horizontal, pointing at the shelf (+x), in front of the base above the shelf top, elbow back.
-Q_HOME = np.array([PI, 2.5868, 0.0, 5.5074, PI, 2.9014, 0.0])  # tool at (0.35, 0.01, 0.55)
+# Home: hand horizontal (tool y up), pointing at the shelf (+x), in front of the shelf above its ceiling board,
+# elbow up and back with joint 4 0.33 rad inside its limit (the motion planner tracks paths from here).
+Q_HOME = np.array([3.1703, 3.45079, -0.00676, 5.42905, 3.1005, 2.1153, -0.02335])  # tool at (0.55, 0.0, 0.40)
 Q_UPRIGHT = np.full(N_JOINTS, PI)
 
 # Masses (kg) after Kinova's j2s7s300 URDF, for the simulation's dynamics.

@@ -1,0 +1,259 @@
+"""Collision scene with python-fcl: arm capsules vs shelf boards vs bottles (the clearance tasks of Eq. 10).
+
+Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel) and the
+bottles of the scenario as cylinders; bottles already relocated may stand on the bottom shelf (`placed`).
+The set of removed bottles is a parameter of every query (`CollisionScene.obstacles(removed)`).
+A numpy AABB broad phase keeps only the capsule/obstacle pairs closer than an activation distance; fcl
+computes their exact distances and witness points (in the base frame). fcl returns -1 on penetration.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import fcl
+import numpy as np
+
+from . import robot_description as rd
+from .scenario import Scenario
+
+PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
+
+
+@dataclass
+class Obstacle:
+    name: str
+    object_id: str | None  # bottle id, None for a board
+    obj: fcl.CollisionObject
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+@dataclass
+class ObstacleSet:
+    """The obstacles present in one query (boards + bottles not removed)."""
+
+    items: list[Obstacle]
+    lo: np.ndarray = field(init=False)
+    hi: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.lo = np.array([o.lo for o in self.items]).reshape(-1, 3)
+        self.hi = np.array([o.hi for o in self.items]).reshape(-1, 3)
+
+
+def _box(name: str, lo, hi) -> Obstacle:
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(np.eye(3), (lo + hi) / 2))
+    return Obstacle(name, None, obj, lo, hi)
+
+
+def cylinder(name: str, object_id: str | None, x: float, y: float, z0: float, radius: float,
+             height: float) -> Obstacle:
+    """A vertical cylinder (bottle) standing at z0."""
+    obj = fcl.CollisionObject(fcl.Cylinder(radius, height), fcl.Transform(np.eye(3), np.array([x, y, z0 + height / 2])))
+    return Obstacle(name, object_id, obj, np.array([x - radius, y - radius, z0]),
+                    np.array([x + radius, y + radius, z0 + height]))
+
+
+def shelf_boards(scenario: Scenario) -> list[Obstacle]:
+    s = scenario.shelf
+    t = s.board_thickness
+    x0, x1, y0, y1 = s.x_front, s.x_back, s.y_min, s.y_max
+    return [
+        _box("board:top_shelf", (x0, y0, s.top_z - t), (x1, y1, s.top_z)),
+        _box("board:ceiling", (x0, y0, s.ceiling_z), (x1, y1, s.ceiling_z + t)),
+        _box("board:bottom_shelf", (x0, y0, s.bottom_z - t), (x1, y1, s.bottom_z)),
+        _box("board:side_right", (x0, y0 - t, s.bottom_z - t), (x1, y0, s.ceiling_z + t)),
+        _box("board:side_left", (x0, y1, s.bottom_z - t), (x1, y1 + t, s.ceiling_z + t)),
+        _box("board:back", (x1, y0 - t, s.bottom_z - t), (x1 + t, y1 + t, s.ceiling_z + t)),
+    ]
+
+
+class CollisionScene:
+    """Boards and bottles of a scenario. `placed`: (id, (x, y)) of bottles standing on the bottom shelf."""
+
+    def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = ()) -> None:
+        self.scenario = scenario
+        self.boards = shelf_boards(scenario)
+        z0 = scenario.shelf.top_z
+        self.bottles = {b.id: cylinder(f"bottle:{b.id}", b.id, b.x, b.y, z0, b.radius, b.height)
+                        for b in scenario.objects}
+        zb = scenario.shelf.bottom_z
+        self.placed = []
+        for oid, (x, y) in placed:
+            b = scenario.object(oid)
+            self.placed.append(cylinder(f"placed:{oid}", f"placed:{oid}", x, y, zb, b.radius, b.height))
+        self._cache: dict[tuple[frozenset, frozenset], ObstacleSet] = {}
+
+    def obstacles(self, removed: Iterable[str] = frozenset(), exclude: Iterable[str] = frozenset()) -> ObstacleSet:
+        """Boards, placed bottles and the top-shelf bottles that are neither removed nor excluded."""
+        key = (frozenset(removed), frozenset(exclude))
+        got = self._cache.get(key)
+        if got is None:
+            gone = key[0] | key[1]
+            got = ObstacleSet(self.boards + self.placed + [o for i, o in self.bottles.items() if i not in gone])
+            self._cache[key] = got
+        return got
+
+
+@dataclass(frozen=True)
+class CapsuleSpec:
+    name: str
+    link: str
+    p0: np.ndarray
+    p1: np.ndarray
+    radius: float
+    rot: np.ndarray  # fcl capsule frame (z along p0->p1) in the link frame
+    centre: np.ndarray
+    length: float
+    cylinder: bool = False  # a cylinder between p0 and p1 instead of a capsule (for obstacles)
+
+
+def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = False) -> CapsuleSpec:
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    axis = p1 - p0
+    length = float(np.linalg.norm(axis))
+    z = axis / length
+    x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return CapsuleSpec(name, link, p0, p1, radius, np.column_stack([x, np.cross(z, x), z]), (p0 + p1) / 2, length,
+                       cylinder)
+
+
+def carried_bottle(radius: float, height: float, trim: float) -> CapsuleSpec:
+    """The grasped bottle as a cylinder on link 7 (tool y is vertical, the tool origin is the bottle centre),
+    shortened by `trim` at both ends so that a bottle standing on a board keeps `trim` of clearance to it."""
+    half = max(height / 2 - trim, 0.01)
+    return capsule_spec("carried", rd.LINK_NAMES[6], (0, -half, rd.D67), (0, half, rd.D67), radius, cylinder=True)
+
+
+def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0):
+    if s.cylinder:
+        return fcl.Cylinder(s.radius + inflate, s.length + 2 * inflate)
+    return fcl.Capsule(s.radius + inflate, s.length)
+
+
+HAND_PARTS = ("palm", "finger_1", "finger_2", "finger_3")
+
+
+class ArmGeometry:
+    """The arm's capsules (plus attached ones, e.g. a carried bottle), posed from a Kinematics update."""
+
+    def __init__(self, kin, attached: Sequence[CapsuleSpec] = ()) -> None:
+        self.kin = kin
+        self.specs = [capsule_spec(c.name, c.link, c.p0, c.p1, c.radius) for c in rd.CAPSULES] + list(attached)
+        self.n = len(self.specs)
+        self.fids = [kin.fid[s.link] for s in self.specs]
+        self.radius = np.array([s.radius for s in self.specs])
+        self.objs = [fcl.CollisionObject(_fcl_shape(s), fcl.Transform()) for s in self.specs]
+        names = [s.name for s in self.specs]
+        self.index = {n: i for i, n in enumerate(names)}
+        # base and shoulder never leave the robot's pedestal: not checked against the shelf
+        self.moving = np.array([i for i, s in enumerate(self.specs) if s.name not in ("base", "shoulder")])
+        hand = set(HAND_PARTS) | {"wrist", "carried"}
+        # forearm-palm: the wrist capsule lies between them; within joint 6's limits (Table 6) they stay more
+        # than 0.02 m apart, so the pair is left out like the adjacent ones.
+        adjacent = set(rd.ADJACENT) | {frozenset(("carried", h)) for h in hand} | {frozenset(("forearm", "palm"))}
+        self.self_pairs = [(i, j) for i in range(self.n) for j in range(i + 1, self.n)
+                           if frozenset((names[i], names[j])) not in adjacent]
+        self.p0 = np.zeros((self.n, 3))
+        self.p1 = np.zeros((self.n, 3))
+
+    def pose(self) -> None:
+        """Place every capsule from the current Kinematics data (call after kin.update)."""
+        for i, (s, fid) in enumerate(zip(self.specs, self.fids)):
+            r, p = self.kin.placement(fid)
+            self.p0[i] = r @ s.p0 + p
+            self.p1[i] = r @ s.p1 + p
+            self.objs[i].setTransform(fcl.Transform(r @ s.rot, r @ s.centre + p))
+
+    def near_pairs(self, obs: ObstacleSet, d_act: float) -> tuple[np.ndarray, np.ndarray]:
+        """Broad phase: (capsule, obstacle) index pairs whose AABBs are closer than d_act."""
+        idx = self.moving
+        r = self.radius[idx, None]
+        lo = np.minimum(self.p0[idx], self.p1[idx]) - r
+        hi = np.maximum(self.p0[idx], self.p1[idx]) + r
+        gap = np.maximum(np.maximum(obs.lo[None] - hi[:, None], lo[:, None] - obs.hi[None]), 0.0)
+        ci, oi = np.nonzero(np.einsum("ijk,ijk->ij", gap, gap) < d_act * d_act)
+        return idx[ci], oi
+
+    def obstacle_distances(self, obs: ObstacleSet, d_act: float, skip: dict[str, frozenset] | None = None):
+        """[(capsule index, obstacle, distance, point on capsule, point on obstacle)] for pairs nearer than d_act
+        (by AABB). Distance PENETRATION (-1) means intersecting. `skip`: capsule name -> object ids to ignore."""
+        out = []
+        req = fcl.DistanceRequest(enable_nearest_points=True)
+        for ci, oi in zip(*self.near_pairs(obs, d_act)):
+            o = obs.items[oi]
+            if skip and o.object_id is not None and o.object_id in skip.get(self.specs[ci].name, ()):
+                continue
+            res = fcl.DistanceResult()
+            d = fcl.distance(self.objs[ci], o.obj, req, res)
+            out.append((int(ci), o, float(d), res.nearest_points[0], res.nearest_points[1]))
+        return out
+
+    def self_distances(self, d_act: float):
+        """[(i, j, distance, point on i, point on j)] of non-adjacent capsule pairs nearer than d_act."""
+        out = []
+        for i, j in self.self_pairs:
+            d, pi, pj = segment_distance(self.p0[i], self.p1[i], self.p0[j], self.p1[j])
+            d -= self.radius[i] + self.radius[j]
+            if d < d_act:
+                out.append((i, j, d, pi, pj))
+        return out
+
+
+def segment_distance(a0, a1, b0, b1) -> tuple[float, np.ndarray, np.ndarray]:
+    """Closest points of segments a0-a1 and b0-b1 (Ericson, Real-Time Collision Detection 5.1.9)."""
+    d1, d2, r = a1 - a0, b1 - b0, a0 - b0
+    a, e, f = d1 @ d1, d2 @ d2, d2 @ r
+    c, b = d1 @ r, d1 @ d2
+    den = a * e - b * b
+    s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 1e-12 else 0.0
+    t = (b * s + f) / e
+    if t < 0.0:
+        t, s = 0.0, min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
+    pa, pb = a0 + d1 * s, b0 + d2 * t
+    return float(np.linalg.norm(pa - pb)), pa, pb
+
+
+class HandProxy:
+    """The hand (wrist, palm, fingers), an optional carried bottle and a stub of the forearm, rigidly placed at
+    a tool pose, inflated by `margin`: the validity check of the Cartesian RRT-Connect (no IK needed)."""
+
+    FOREARM_STUB = 0.12
+
+    def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = ()) -> None:
+        by = {c.name: c for c in rd.CAPSULES}
+        specs = [capsule_spec(n, by[n].link, by[n].p0, by[n].p1, by[n].radius) for n in ("wrist",) + HAND_PARTS]
+        specs.append(capsule_spec("forearm_stub", rd.LINK_NAMES[6], (0, 0, 0), (0, 0, -self.FOREARM_STUB), 0.04))
+        self.specs = specs + list(attached)
+        self.objs = [fcl.CollisionObject(_fcl_shape(s, margin), fcl.Transform()) for s in self.specs]
+        self.reach = np.array([s.radius + margin for s in self.specs])
+        self.p0 = np.array([s.p0 for s in self.specs])
+        self.p1 = np.array([s.p1 for s in self.specs])
+        self.req = fcl.CollisionRequest()
+
+    def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
+                 skip: dict[str, frozenset] | None = None) -> bool:
+        p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
+        a = self.p0 @ r_tool.T + p7
+        b = self.p1 @ r_tool.T + p7
+        lo = np.minimum(a, b) - self.reach[:, None]
+        hi = np.maximum(a, b) + self.reach[:, None]
+        near = np.all((obs.lo[None] <= hi[:, None]) & (obs.hi[None] >= lo[:, None]), axis=2)
+        ci, oi = np.nonzero(near)
+        posed = set()
+        for c, k in zip(ci, oi):
+            o = obs.items[k]
+            s = self.specs[c]
+            if skip and o.object_id is not None and o.object_id in skip.get(s.name, ()):
+                continue
+            if c not in posed:
+                self.objs[c].setTransform(fcl.Transform(r_tool @ s.rot, r_tool @ s.centre + p7))
+                posed.add(c)
+            if fcl.collide(self.objs[c], o.obj, self.req, fcl.CollisionResult()):
+                return True
+        return False

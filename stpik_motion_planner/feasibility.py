@@ -1,0 +1,397 @@
+"""The feasibility question of the Q-Tree answered by the motion planner (paper Sect. 4.1 and Eq. 11).
+
+feasibility(i, removed): 1) action to pose: side grasp and pre-grasp of object i for a few approach yaws;
+2) RRT-Connect (OMPL) in Cartesian space for the tool from its home pose to the pre-grasp, keeping the hand clear
+of the bottles still there; then the straight approach to the grasp; 3) STPIK check (Eq. 9-10) tracking that path;
+a rejected path is re-sampled until the timeout or max_attempts. 4) label g_U / g_O / g_T, planning time,
+attempts and the joint trajectory (100 Hz, Q convention, within Table 7).
+plan_pick / plan_carry / plan_home give the executor the whole relocation: grasp, lift, out of the shelf, down to
+the slot on the bottom shelf, release, retreat, home.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+import yaml
+
+from qtree_task_planner.feasibility import FeasibilityAnswer, Label
+
+from . import robot_description as rd
+from .collision import HAND_PARTS, PENETRATION, ArmGeometry, CollisionScene, HandProxy, ObstacleSet, carried_bottle
+from .grasp import Grasp, WorkspaceError, check_pose, grasp_yaws, home_pose, lift_pose, place_poses, side_grasp
+from .kinematics import Kinematics
+from .rrt import CartesianRRT, JointRRT, seed_ompl
+from .scenario import Scenario, UnknownObjectError
+from .stpik import Stpik, StpikParams, StpikResult
+from .trajectory import Trajectory
+
+CONFIG = Path(__file__).resolve().parent.parent / "config" / "motion_planner.yaml"
+
+
+class PlanningError(RuntimeError):
+    """A pick, carry or home motion that could not be planned (the message says which stage failed)."""
+
+
+@dataclass
+class PlannerParams:
+    seed: int = 7
+    timeout: float = 0.5  # s per feasibility query (default; the service may pass its own)
+    rrt_timeout: float = 0.08  # s per RRT-Connect attempt
+    max_attempts: int = 6  # sampled paths per query before answering g_U
+    n_yaws: int = 3  # approach yaws tried: 0, +max_yaw, -max_yaw, ...
+    max_yaw: float = 0.35  # rad
+    pre_grasp_distance: float = 0.11  # m back along the approach
+    hand_margin: float = 0.012  # m: inflation of the hand proxy in the Cartesian planner
+    resolution: float = 0.01  # m: motion checking resolution of the Cartesian planner
+    joint_resolution: float = 0.01  # rad: of the joint-space planner
+    simplify_time: float = 0.005  # s of OMPL path simplification
+    lift: float = 0.03  # m, after the grasp
+    drop: float = 0.004  # m, bottle base above the bottom shelf at release
+    stage_distance: float = 0.30  # m, staging pose in front of the slot
+    carry_timeout: float = 2.0  # s for plan_pick / plan_carry / plan_home
+    workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
+    workspace_hi: tuple = (0.85, 0.55, 0.65, 0.9)
+    stpik: StpikParams = field(default_factory=StpikParams)
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any]) -> "PlannerParams":
+        """From a flat mapping (ROS parameters); stpik.* keys go to StpikParams. Unknown keys are an error."""
+        own = {f.name for f in fields(cls)} - {"stpik"}
+        sp = {f.name for f in fields(StpikParams)}
+        kw, skw = {}, {}
+        for k, v in data.items():
+            if k.startswith("stpik.") and k[6:] in sp:
+                skw[k[6:]] = np.array(v, float) if k[6:] == "qdot_max" else float(v)
+            elif k in own:
+                kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
+            else:
+                raise ValueError(f"motion planner parameter {k!r} is unknown; known: {sorted(own)} and stpik.*")
+        for k in ("max_attempts", "n_yaws", "seed"):
+            if k in kw:
+                kw[k] = int(kw[k])
+        return cls(**kw, stpik=StpikParams(**skw))
+
+    @classmethod
+    def load(cls, path: str | Path = CONFIG) -> "PlannerParams":
+        data = yaml.safe_load(Path(path).read_text())
+        try:
+            return cls.from_mapping(data["motion_planner"]["ros__parameters"])
+        except (KeyError, TypeError):
+            raise ValueError(f"{path}: expected motion_planner: ros__parameters: {{...}}") from None
+
+
+@dataclass
+class Segment:
+    """One continuous motion of a relocation and the gripper action after it ('close', 'open' or None)."""
+
+    name: str
+    trajectory: Trajectory
+    gripper_after: str | None = None
+
+
+@dataclass
+class QueryStats:
+    rrt_time: float = 0.0
+    stpik_time: float = 0.0
+    rrt_calls: int = 0
+    direct_paths: int = 0
+    stpik_reject: list = field(default_factory=list)
+
+
+class MotionPlanner:
+    """Answers the feasibility oracle of qtree_task_planner (Eq. 11) and plans the relocation motions."""
+
+    def __init__(self, scenario: Scenario, params: PlannerParams | None = None) -> None:
+        self.scenario = scenario
+        self.params = params or PlannerParams()
+        seed_ompl(self.params.seed)
+        self.kin = Kinematics()
+        self.scene = CollisionScene(scenario)
+        self.arm = ArmGeometry(self.kin)
+        p = self.params
+        self.stpik = Stpik(self.kin, self.arm, p.stpik)
+        self.hand = HandProxy(p.hand_margin)
+        self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_time)
+        self.home = np.array(home_pose())
+        self.last_stats = QueryStats()
+        self._pick_end: dict[tuple[str, frozenset], np.ndarray] = {}
+
+    # ---------------------------------------------------------------- input checks
+    def _check(self, object_id: str, removed: Iterable[str]) -> frozenset[str]:
+        if not isinstance(object_id, str):
+            raise UnknownObjectError(f"object id must be a string, got {object_id!r}")
+        self.scenario.object(object_id)
+        if isinstance(removed, str):
+            raise TypeError("removed must be a collection of ids, not a string")
+        removed = self.scenario.check_ids(removed)
+        if object_id in removed:
+            raise ValueError(f"object {object_id!r} is in the removed set: it is no longer on the shelf")
+        return removed
+
+    # ---------------------------------------------------------------- Cartesian validity
+    def _path_clear(self, poses, obs: ObstacleSet, hand: HandProxy, skip=None) -> bool:
+        """The hand proxy is clear at every pose along the polyline, sampled at the planner's resolution."""
+        res = self.params.resolution
+        for a, b in zip(poses[:-1], poses[1:]):
+            a, b = np.asarray(a, float), np.asarray(b, float)
+            n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / res)))
+            for k in range(n + 1):
+                if hand.collides(*_mat(a + (b - a) * k / n), obs, skip):
+                    return False
+        return True
+
+    def _candidates(self, object_id: str, obs: ObstacleSet) -> list[Grasp]:
+        """Grasps whose pre-grasp and straight approach are clear for the hand (the target excluded for the
+        palm and fingers on the approach only)."""
+        p = self.params
+        skip = {n: frozenset([object_id]) for n in HAND_PARTS}
+        out = []
+        for yaw in grasp_yaws(p.n_yaws, p.max_yaw):
+            try:
+                g = side_grasp(self.scenario, object_id, yaw, p.pre_grasp_distance)
+            except WorkspaceError:
+                if yaw == 0.0:
+                    raise
+                continue
+            if not self.rrt.contains(g.pre_grasp):
+                continue
+            if self.hand.collides(*_mat(g.pre_grasp), obs):
+                continue
+            if self._path_clear([g.pre_grasp, g.grasp], obs, self.hand, skip):
+                out.append(g)
+        return out
+
+    def _stage(self, pose) -> np.ndarray:
+        """In front of the shelf at the height and lateral position of `pose` (the start of a direct entry)."""
+        x = min(pose[0], self.scenario.shelf.x_front - 0.06)
+        return np.array([x, pose[1] - (pose[0] - x) * math.tan(pose[3]), pose[2], pose[3]])
+
+    def _cartesian_path(self, start, goal, obs: ObstacleSet, hand: HandProxy, timeout: float,
+                        stats: QueryStats, first: bool) -> list[np.ndarray] | None:
+        """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on
+        later attempts RRT-Connect."""
+        if first:
+            direct = [np.asarray(start, float), self._stage(goal), np.asarray(goal, float)]
+            if self._path_clear(direct, obs, hand):
+                stats.direct_paths += 1
+                return direct
+        t = time.perf_counter()
+        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), timeout)
+        stats.rrt_time += time.perf_counter() - t
+        stats.rrt_calls += 1
+        return path
+
+    def _track(self, q0, path, obs, deadline, stats, skip=None, arm: ArmGeometry | None = None) -> StpikResult:
+        t = time.perf_counter()
+        stpik = self.stpik if arm is None else Stpik(self.kin, arm, self.params.stpik)
+        r = stpik.track(q0, path, obs, deadline, skip)
+        stats.stpik_time += time.perf_counter() - t
+        if not r.ok:
+            stats.stpik_reject.append(r.reason)
+        return r
+
+    # ---------------------------------------------------------------- feasibility (Eq. 11)
+    def feasibility(self, object_id: str, removed: Iterable[str] = frozenset(),
+                    timeout: float | None = None) -> FeasibilityAnswer:
+        """g_T / g_O with the home -> pre-grasp -> grasp trajectory (100 Hz) if a path passes the STPIK check,
+        g_U otherwise. Raises UnknownObjectError / ValueError / WorkspaceError on bad input."""
+        t0 = time.perf_counter()
+        removed = self._check(object_id, removed)
+        if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout)):
+            raise ValueError(f"timeout must be a finite number of seconds, got {timeout!r}")
+        budget = self.params.timeout if timeout is None or timeout <= 0 else float(timeout)
+        deadline = t0 + budget
+        stats = QueryStats()
+        self.last_stats = stats
+        ok_label = Label.TARGET if object_id == self.scenario.target_id else Label.OBSTACLE
+        traj, attempts, msg = self._pick(object_id, removed, deadline, stats)
+        dt = time.perf_counter() - t0
+        if traj is None:
+            return FeasibilityAnswer(Label.UNFEASIBLE, dt, attempts, msg)
+        return FeasibilityAnswer(ok_label, dt, attempts, msg, traj)
+
+    def _pick(self, object_id, removed, deadline, stats) -> tuple[Trajectory | None, int, str]:
+        p = self.params
+        obs = self.scene.obstacles(removed)
+        cands = self._candidates(object_id, obs)
+        if not cands:
+            return None, 0, "no collision-free pre-grasp and approach for any yaw"
+        skip = {n: frozenset([object_id]) for n in HAND_PARTS}
+        attempts, last = 0, ""
+        while attempts < p.max_attempts:
+            g = cands[attempts % len(cands)]
+            first = attempts < len(cands)
+            attempts += 1
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                return None, attempts - 1, f"timeout after {attempts - 1} attempts ({last})"
+            path = self._cartesian_path(self.home, g.pre_grasp, obs, self.hand, min(p.rrt_timeout, left), stats,
+                                        first)
+            if path is None:
+                last = f"no Cartesian path to the pre-grasp (yaw {g.yaw:+.2f})"
+                continue
+            r1 = self._track(rd.Q_HOME, path, obs, deadline, stats)
+            if not r1.ok:
+                last = f"STPIK rejected the path to the pre-grasp: {r1.reason}"
+                continue
+            r2 = self._track(r1.q[-1], [np.array(g.pre_grasp), np.array(g.grasp)], obs, deadline, stats, skip)
+            if not r2.ok:
+                last = f"STPIK rejected the approach: {r2.reason}"
+                continue
+            traj = Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_grasp").then(
+                Trajectory.from_steps(r2.q, r2.qdot, r2.dt, "approach")).resample()
+            self._pick_end[(object_id, removed)] = r2.q[-1]
+            return traj, attempts, f"yaw {g.yaw:+.2f}, {len(path)} waypoints"
+        return None, attempts, f"{attempts} attempts failed; last: {last}"
+
+    # ---------------------------------------------------------------- execution: pick, carry, home
+    def plan_pick(self, object_id: str, removed: Iterable[str] = frozenset()) -> list[Segment]:
+        """Home -> pre-grasp -> grasp, then close the gripper. Raises PlanningError if unfeasible."""
+        removed = self._check(object_id, removed)
+        traj, _, msg = self._pick(object_id, removed, time.perf_counter() + self.params.carry_timeout, QueryStats())
+        if traj is None:
+            raise PlanningError(f"pick of {object_id!r}: {msg}")
+        return [Segment("pick", traj, "close")]
+
+    def placed_default(self, removed: frozenset[str], slot_index: int) -> list[tuple[str, tuple[float, float]]]:
+        """Bottles assumed on the bottom shelf: the removed ones, in sorted order, in the slots other than
+        slot_index."""
+        slots = [k for k in range(len(self.scenario.slots)) if k != slot_index]
+        return [(oid, self.scenario.slot(k)) for oid, k in zip(sorted(removed), slots)]
+
+    def plan_carry(self, object_id: str, removed: Iterable[str], slot_index: int, q_start=None,
+                   placed: list[tuple[str, tuple[float, float]]] | None = None) -> list[Segment]:
+        """From the grasp (q_start, default: the end of the last plan_pick/feasibility of this object and set):
+        lift, out of the shelf, down to the slot on the bottom shelf (`scenario.slot(slot_index)`), release
+        ('open'), and retreat to the front of the bottom shelf."""
+        removed = self._check(object_id, removed)
+        slot = self.scenario.slot(slot_index)
+        if q_start is None:
+            q_start = self._pick_end.get((object_id, removed))
+            if q_start is None:
+                q_start = self.plan_pick(object_id, removed) and self._pick_end[(object_id, removed)]
+        q_start = _check_q(q_start)
+        p = self.params
+        deadline = time.perf_counter() + p.carry_timeout
+        stats = QueryStats()
+        b = self.scenario.object(object_id)
+        placed = self.placed_default(removed, slot_index) if placed is None else list(placed)
+        scene = CollisionScene(self.scenario, placed)
+        gone = removed | {object_id}
+        obs = scene.obstacles(gone)
+        trim = p.stpik.clearance + p.drop + 0.002
+        carried = carried_bottle(b.radius, b.height, trim)
+        arm_c = ArmGeometry(self.kin, [carried])
+        hand_c = HandProxy(p.hand_margin, [carried])
+        self.kin.update(q_start, jacobians=False)
+        rot, pos = self.kin.tool_pose()
+        start = np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
+        lifted = np.array(lift_pose(Grasp(object_id, start[3], tuple(start), tuple(start)), p.lift))
+        stage, place = (np.array(x) for x in place_poses(self.scenario, object_id, slot, p.drop, p.stage_distance))
+        carry = None
+        for attempt in range(p.max_attempts):
+            mid = self._cartesian_path(lifted, stage, obs, hand_c, max(1e-3, min(0.3, deadline - time.perf_counter())),
+                                       stats, attempt == 0)
+            if mid is None:
+                continue
+            r = self._track(q_start, [start] + mid + [place], obs, deadline, stats, arm=arm_c)
+            if r.ok:
+                carry = r
+                break
+        if carry is None:
+            raise PlanningError(f"carry of {object_id!r} to slot {slot_index}: "
+                                f"{stats.stpik_reject[-1] if stats.stpik_reject else 'no Cartesian path'}")
+        scene2 = CollisionScene(self.scenario, placed + [(object_id, slot)])
+        obs2 = scene2.obstacles(removed | {object_id})
+        skip = {n: frozenset([f"placed:{object_id}"]) for n in HAND_PARTS}
+        back = self._track(carry.q[-1], [place, stage], obs2, time.perf_counter() + p.carry_timeout, stats,
+                           skip=skip)
+        if not back.ok:
+            raise PlanningError(f"retreat after placing {object_id!r}: {back.reason}")
+        return [Segment("carry", Trajectory.from_steps(carry.q, carry.qdot, carry.dt, "carry").resample(), "open"),
+                Segment("retreat", Trajectory.from_steps(back.q, back.qdot, back.dt, "retreat").resample(), None)]
+
+    def joint_valid(self, q, obs: ObstacleSet, arm: ArmGeometry | None = None, margin: float = 0.0) -> bool:
+        """Joint-space validity with the same collision checker: limits, self-collision, clearance."""
+        arm = arm or self.arm
+        p = self.params.stpik
+        if np.any(q < rd.Q_LOWER + p.joint_margin) or np.any(q > rd.Q_UPPER - p.joint_margin):
+            return False
+        self.kin.update(q, jacobians=False)
+        arm.pose()
+        if arm.self_distances(p.self_clearance + margin):
+            return False
+        for _, _, d, _, _ in arm.obstacle_distances(obs, p.clearance + margin):
+            if d == PENETRATION or d < p.clearance + margin:
+                return False
+        return True
+
+    def plan_joint(self, q_from, q_to, obs: ObstacleSet, timeout: float) -> Trajectory | None:
+        """RRT-Connect in joint space (same collision checker), timed within Table 7 at 90 %."""
+        q_from, q_to = _check_q(q_from), _check_q(q_to)
+        lo = np.maximum(rd.Q_LOWER, np.minimum(q_from, q_to) - math.pi)
+        hi = np.minimum(rd.Q_UPPER, np.maximum(q_from, q_to) + math.pi)
+        rrt = JointRRT(lo, hi, self.params.joint_resolution, self.params.simplify_time)
+        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=0.005), timeout)
+        if path is None:
+            return None
+        return _time_joint_path(path, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt)
+
+    def plan_home(self, q_from, removed: Iterable[str] = frozenset(),
+                  placed: list[tuple[str, tuple[float, float]]] | None = None) -> Trajectory:
+        """From q_from back to Q_HOME (joint-space RRT-Connect with the scene's clearance)."""
+        removed = self.scenario.check_ids(removed)
+        placed = self.placed_default(removed, -1) if placed is None else list(placed)
+        obs = CollisionScene(self.scenario, placed).obstacles(removed)
+        traj = self.plan_joint(q_from, rd.Q_HOME, obs, self.params.carry_timeout)
+        if traj is None:
+            raise PlanningError("no collision-free joint path back to the home configuration")
+        return traj.resample()
+
+    def update_object(self, object_id: str, x: float, y: float) -> None:
+        """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
+        import dataclasses
+
+        from .scenario import ScenarioError
+        b = self.scenario.object(object_id)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise WorkspaceError(f"position of {object_id!r} must be finite, got {(x, y)}")
+        s = self.scenario.shelf
+        if not (s.x_front + b.radius <= x <= s.x_back - b.radius and s.y_min + b.radius <= y <= s.y_max - b.radius):
+            raise WorkspaceError(f"{object_id!r} at {(x, y)} is not on the top shelf")
+        objs = tuple(dataclasses.replace(o, x=x, y=y) if o.id == object_id else o for o in self.scenario.objects)
+        try:
+            self.scenario = dataclasses.replace(self.scenario, objects=objs, _by_id={})
+        except ScenarioError:
+            raise
+        self.scene = CollisionScene(self.scenario)
+        self._pick_end.clear()
+
+
+def _mat(pose):
+    from .grasp import pose_matrix
+    return pose_matrix(pose)
+
+
+def _check_q(q) -> np.ndarray:
+    q = np.asarray(q, dtype=float)
+    if q.shape != (rd.N_JOINTS,) or not np.all(np.isfinite(q)):
+        raise ValueError(f"a configuration must be {rd.N_JOINTS} finite joint angles (Q convention), got {q!r}")
+    return q
+
+
+def _time_joint_path(path: list[np.ndarray], vmax: np.ndarray, dt: float) -> Trajectory:
+    """Straight joint segments at constant velocity, each scaled so every joint stays within vmax; steps of dt."""
+    qs, qdots = [np.asarray(path[0], float)], []
+    for a, b in zip(path[:-1], path[1:]):
+        d = np.asarray(b) - np.asarray(a)
+        n = max(1, int(math.ceil(float(np.max(np.abs(d) / vmax)) / dt)))
+        for _ in range(n):
+            qdots.append(d / (n * dt))
+            qs.append(qs[-1] + d / n)
+    return Trajectory.from_steps(np.array(qs), np.array(qdots), dt, "joint")

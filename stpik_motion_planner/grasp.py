@@ -1,0 +1,102 @@
+"""Action to pose (paper Sect. 4.1, step 1): the side grasp of a bottle, its pre-grasp, and the carry poses.
+
+Tool frame (DH frame 7): z is the approach direction, x the closing direction of the fingers, origin the grasp
+centre. A side grasp keeps the hand horizontal: tool z = (cos yaw, sin yaw, 0) points into the shelf from its
+open side (-x), tool y = world z (vertical), tool x = y x z (horizontal). The tool origin is on the bottle axis at
+mid-height. A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction.
+The robot's home pose (Q_HOME) is such a pose with yaw 0.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import robot_description as rd
+from .scenario import Scenario
+
+
+class WorkspaceError(ValueError):
+    """A pose that is not a finite pose inside the arm's reach."""
+
+
+def side_rotation(yaw: float) -> np.ndarray:
+    """Rotation of a horizontal side grasp whose approach direction has the given yaw (rad)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[-s, 0.0, c], [c, 0.0, s], [0.0, 1.0, 0.0]])
+
+
+def pose_matrix(pose4) -> tuple[np.ndarray, np.ndarray]:
+    x, y, z, yaw = pose4
+    return side_rotation(yaw), np.array([x, y, z], dtype=float)
+
+
+def check_pose(pose4, where: str = "pose") -> np.ndarray:
+    """Raise WorkspaceError unless pose4 is finite and the wrist centre is within the arm's reach."""
+    p = np.asarray(pose4, dtype=float)
+    if p.shape != (4,) or not np.all(np.isfinite(p)):
+        raise WorkspaceError(f"{where}: need 4 finite numbers (x, y, z, yaw), got {pose4!r}")
+    r, t = pose_matrix(p)
+    wrist = t - r[:, 2] * rd.D67
+    reach = float(np.linalg.norm(wrist - np.array([0.0, 0.0, rd.D1])))
+    if reach > rd.D23 + rd.D45 - 0.02 or reach < 0.15:
+        raise WorkspaceError(f"{where}: {np.round(p, 3).tolist()} is outside the arm's workspace "
+                             f"(wrist {reach:.3f} m from the shoulder, reachable 0.15-{rd.D23 + rd.D45 - 0.02:.2f})")
+    return p
+
+
+@dataclass(frozen=True)
+class Grasp:
+    object_id: str
+    yaw: float
+    grasp: tuple[float, float, float, float]
+    pre_grasp: tuple[float, float, float, float]
+
+
+def grasp_yaws(n: int, max_yaw: float) -> list[float]:
+    """Approach yaws to try, straight in first: 0, +d, -d, +2d, -2d, ... up to max_yaw (n values)."""
+    if n <= 1:
+        return [0.0]
+    step = max_yaw / ((n - 1 + 1) // 2)
+    out = [0.0]
+    k = 1
+    while len(out) < n:
+        out.append(k * step)
+        if len(out) < n:
+            out.append(-k * step)
+        k += 1
+    return out
+
+
+def side_grasp(scenario: Scenario, object_id: str, yaw: float, pre_grasp_distance: float) -> Grasp:
+    """Grasp and pre-grasp poses of a bottle on the top shelf for one approach yaw."""
+    b = scenario.object(object_id)
+    z = scenario.shelf.top_z + b.height / 2
+    g = (b.x, b.y, z, yaw)
+    pre = (b.x - pre_grasp_distance * math.cos(yaw), b.y - pre_grasp_distance * math.sin(yaw), z, yaw)
+    check_pose(g, f"grasp of {object_id}")
+    return Grasp(object_id, yaw, g, pre)
+
+
+def home_pose() -> tuple[float, float, float, float]:
+    """(x, y, z, yaw) of the tool at Q_HOME (hand horizontal, pointing at the shelf)."""
+    t = rd.dh_fk(rd.Q_HOME)[-1]
+    return (float(t[0, 3]), float(t[1, 3]), float(t[2, 3]), float(math.atan2(t[1, 2], t[0, 2])))
+
+
+def lift_pose(grasp: Grasp, lift: float) -> tuple[float, float, float, float]:
+    x, y, z, yaw = grasp.grasp
+    return (x, y, z + lift, yaw)
+
+
+def place_poses(scenario: Scenario, object_id: str, slot_xy: tuple[float, float], drop: float,
+                stage_distance: float) -> tuple[tuple, tuple]:
+    """(staging pose in front of the bottom shelf, place pose at the slot), approach straight in (yaw 0).
+    The tool is at the bottle's mid-height with the bottle's base `drop` above the bottom shelf."""
+    b = scenario.object(object_id)
+    z = scenario.shelf.bottom_z + drop + b.height / 2
+    place = (slot_xy[0], slot_xy[1], z, 0.0)
+    stage = (min(slot_xy[0] - stage_distance, scenario.shelf.x_front - 0.07), slot_xy[1], z, 0.0)
+    check_pose(place, f"place of {object_id} at slot {slot_xy}")
+    return stage, place
