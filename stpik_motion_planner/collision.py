@@ -157,16 +157,34 @@ class ArmGeometry:
         adjacent = set(rd.ADJACENT) | {frozenset(("carried", h)) for h in hand} | {frozenset(("forearm", "palm"))}
         self.self_pairs = [(i, j) for i in range(self.n) for j in range(i + 1, self.n)
                            if frozenset((names[i], names[j])) not in adjacent]
+        self._si = np.array([i for i, _ in self.self_pairs])
+        self._sj = np.array([j for _, j in self.self_pairs])
+        self._l0 = np.array([s.p0 for s in self.specs])
+        self._l1 = np.array([s.p1 for s in self.specs])
+        links = sorted(set(self.fids))
+        self._by_link = [(f, np.array([i for i in range(self.n) if self.fids[i] == f])) for f in links]
+        self._link_pose: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._dirty = np.ones(self.n, bool)
         self.p0 = np.zeros((self.n, 3))
         self.p1 = np.zeros((self.n, 3))
 
     def pose(self) -> None:
         """Place every capsule from the current Kinematics data (call after kin.update)."""
-        for i, (s, fid) in enumerate(zip(self.specs, self.fids)):
+        for fid, idx in self._by_link:
             r, p = self.kin.placement(fid)
-            self.p0[i] = r @ s.p0 + p
-            self.p1[i] = r @ s.p1 + p
+            self.p0[idx] = self._l0[idx] @ r.T + p
+            self.p1[idx] = self._l1[idx] @ r.T + p
+            self._link_pose[fid] = (r, p)
+        self._dirty[:] = True
+
+    def _fcl(self, i: int):
+        """The fcl object of capsule i at its current pose (transforms are set lazily)."""
+        if self._dirty[i]:
+            r, p = self._link_pose[self.fids[i]]
+            s = self.specs[i]
             self.objs[i].setTransform(fcl.Transform(r @ s.rot, r @ s.centre + p))
+            self._dirty[i] = False
+        return self.objs[i]
 
     def near_pairs(self, obs: ObstacleSet, d_act: float) -> tuple[np.ndarray, np.ndarray]:
         """Broad phase: (capsule, obstacle) index pairs whose AABBs are closer than d_act."""
@@ -188,14 +206,19 @@ class ArmGeometry:
             if skip and o.object_id is not None and o.object_id in skip.get(self.specs[ci].name, ()):
                 continue
             res = fcl.DistanceResult()
-            d = fcl.distance(self.objs[ci], o.obj, req, res)
+            d = fcl.distance(self._fcl(ci), o.obj, req, res)
             out.append((int(ci), o, float(d), res.nearest_points[0], res.nearest_points[1]))
         return out
 
     def self_distances(self, d_act: float):
         """[(i, j, distance, point on i, point on j)] of non-adjacent capsule pairs nearer than d_act."""
         out = []
-        for i, j in self.self_pairs:
+        r = self.radius[:, None]
+        lo = np.minimum(self.p0, self.p1) - r
+        hi = np.maximum(self.p0, self.p1) + r
+        gap = np.maximum(np.maximum(lo[self._si] - hi[self._sj], lo[self._sj] - hi[self._si]), 0.0)
+        for k in np.nonzero(np.einsum("ij,ij->i", gap, gap) < d_act * d_act)[0]:
+            i, j = self.self_pairs[k]
             d, pi, pj = segment_distance(self.p0[i], self.p1[i], self.p0[j], self.p1[j])
             d -= self.radius[i] + self.radius[j]
             if d < d_act:

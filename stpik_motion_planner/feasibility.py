@@ -67,6 +67,8 @@ class PlannerParams:
         for k, v in data.items():
             if k.startswith("stpik.") and k[6:] in sp:
                 skw[k[6:]] = np.array(v, float) if k[6:] == "qdot_max" else float(v)
+            elif k == "scenario":  # the node's own parameter
+                continue
             elif k in own:
                 kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
             else:

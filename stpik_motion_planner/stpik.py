@@ -65,10 +65,13 @@ class StpikResult:
 
 
 def hierarchy(levels, n: int, damping: float) -> np.ndarray:
-    """Recursive null-space projection: qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1})."""
+    """Recursive null-space projection: qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
+    damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last)."""
     qdot = np.zeros(n)
     proj = np.eye(n)
     for jac, xd in levels:
+        if jac is None:  # identity task (posture): its projection needs no decomposition
+            return qdot + proj @ (xd - qdot)
         jt = jac @ proj
         u, s, vt = np.linalg.svd(jt, full_matrices=False)
         keep = s > 1e-6
@@ -180,7 +183,7 @@ class Stpik:
             # Eq. 9 references of the equality tasks
             w_d = np.array([0.0, 0.0, vel[3]])
             eq_levels = [(jt[:3], vel[:3] + p.k_pos * e_p), (jt[3:], w_d + p.k_ori * e_o),
-                         (self.eye, p.k_posture * (posture - q))]
+                         (None, p.k_posture * (posture - q))]
             active = [False] * len(cands)
             for _ in range(6):
                 levels = []
