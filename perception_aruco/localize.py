@@ -5,7 +5,8 @@ part of its side: points p_i (base frame) at horizontal distance r from the axis
 least-squares solution of  min_c sum_i (|p_i,xy - c| - r)^2  (Gauss-Newton), started one radius behind the
 visible surface along the horizontal viewing ray, with points farther than `inlier_tol` from the circle dropped
 and the fit repeated (stray pixels of another class, specular highlights). The cap (top face) is excluded from
-the fit: its points lie inside the circle. The base height z is the board the bottle stands on (top or bottom
+the fit (its points lie inside the circle) except its rim: blob boundary pixels on the cap that are not occlusion
+edges lie on the circle too, which places a bottle of which only the top is visible (behind others or the arm). The base height z is the board the bottle stands on (top or bottom
 shelf), decided by the points' heights.
 """
 from __future__ import annotations
@@ -26,10 +27,13 @@ class FitError(PerceptionError):
 
 @dataclass(frozen=True)
 class LocalizeParams:
-    min_pixels: int = 60          # fewer pixels of a class: the bottle counts as not visible (hidden)
+    min_pixels: int = 40          # fewer pixels of a class: the bottle counts as not visible (hidden)
     inlier_tol: float = 0.004     # m, |distance to axis - r| of an inlier
     cap_margin: float = 0.006     # m below the top of the bottle: points above are the cap, not the side
-    min_inliers: int = 40
+    min_inliers: int = 25
+    min_inlier_fraction: float = 0.6  # of the side and rim points: less is not a cylinder of this radius
+    above_top: float = 0.01       # m: pixels of a colour this far above its bottle's top are not that bottle
+    occluder_gap: float = 0.01    # m: a neighbour this much nearer to the camera makes a blob edge an occlusion edge
     iterations: int = 12
 
 
@@ -73,8 +77,9 @@ def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray, params: Local
         if np.array_equal(new_keep, keep):
             break
         keep = new_keep
-    if keep.sum() < params.min_inliers:
-        raise FitError(f"only {int(keep.sum())} points within {params.inlier_tol * 1000:.0f} mm of the fitted circle")
+    if keep.sum() < max(params.min_inliers, params.min_inlier_fraction * len(xy)):
+        raise FitError(f"only {int(keep.sum())} of {len(xy)} points within {params.inlier_tol * 1000:.0f} mm of the "
+                       "fitted circle")
     return centre, keep
 
 
@@ -84,21 +89,38 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     n = int(mask.sum())
     if n < params.min_pixels:
         raise FitError(f"{n} pixels of colour {bottle.label!r} (need {params.min_pixels})")
+    # nothing of a bottle lies above its top: drop such pixels of its colour (e.g. the dark arm for 'black')
+    s = scenario.shelf
+    z = points[..., 2]
+    with np.errstate(invalid="ignore"):
+        mask = mask & (z < np.where(z > s.top_z - s.board_thickness / 2, s.top_z, s.bottom_z) + bottle.height
+                       + params.above_top)
+    if mask.sum() < params.min_pixels:
+        raise FitError(f"{int(mask.sum())} pixels of colour {bottle.label!r} (need {params.min_pixels})")
     # keep the largest connected blob's neighbourhood: stray pixels elsewhere (highlights) are dropped
     rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
-    r0, c0 = rows[0], cols[0]
-    crop = mask[r0:rows[-1] + 1, c0:cols[-1] + 1].astype(np.uint8)
+    r0, r1, c0, c1 = max(rows[0] - 3, 0), rows[-1] + 4, max(cols[0] - 3, 0), cols[-1] + 4
+    crop = mask[r0:r1, c0:c1].astype(np.uint8)
     _, comp, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
-    big = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    v, u = np.nonzero(comp == big)
-    v, u = v + r0, u + c0
-    p = points[v, u]
-    s = scenario.shelf
+    big = (comp == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+    v, u = np.nonzero(big)
+    pts = points[r0:r1, c0:c1]
+    p = pts[v, u]
     base = s.top_z if np.median(p[:, 2]) > s.top_z - s.board_thickness / 2 else s.bottom_z
-    side = p[:, 2] < base + bottle.height - params.cap_margin
-    if side.sum() < params.min_inliers:
-        raise FitError(f"only the cap of {bottle.id!r} is visible")
-    centre, keep = fit_axis(p[side, :2].astype(float), bottle.radius, camera_position, params)
-    rms = float(np.sqrt(np.mean((np.linalg.norm(p[side][keep, :2] - centre, axis=1) - bottle.radius) ** 2)))
+    top = base + bottle.height - params.cap_margin
+    side = p[:, 2] < top
+    # rim of the cap: blob boundary pixels on the cap that are not an occlusion edge (nothing nearer next to them)
+    dist = np.linalg.norm(pts - camera_position.astype(np.float32), axis=2)
+    dist = np.where(np.isfinite(dist), dist, np.inf).astype(np.float32)
+    nearest = cv2.erode(dist, np.ones((5, 5), np.uint8))  # min over a 5x5 neighbourhood
+    rim = (big > 0) & (cv2.erode(big, np.ones((3, 3), np.uint8)) == 0) & (nearest > dist - params.occluder_gap)
+    rim &= pts[..., 2] >= top
+    use = np.concatenate([p[side, :2], pts[rim][:, :2]]).astype(float)
+    if len(use) < params.min_inliers:
+        raise FitError(f"too little of {bottle.id!r} visible: {int(side.sum())} side and {int(rim.sum())} rim "
+                       f"points (need {params.min_inliers})")
+    v, u = v + r0, u + c0
+    centre, keep = fit_axis(use, bottle.radius, camera_position, params)
+    rms = float(np.sqrt(np.mean((np.linalg.norm(use[keep] - centre, axis=1) - bottle.radius) ** 2)))
     return Detection(bottle.id, float(centre[0]), float(centre[1]), float(base), int(keep.sum()), rms,
                      (int(np.median(u)), int(np.median(v))))

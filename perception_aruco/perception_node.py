@@ -63,7 +63,7 @@ class PerceptionNode(Node):
         d("gain_min", 0.3)
         d("gain_max", 1.2)
         d("max_residual", 40.0)
-        d("min_pixels", 60)
+        d("min_pixels", 40)
         d("inlier_tol", 0.004)
         g = lambda n: self.get_parameter(n).value  # noqa: E731
         self.p = g

@@ -1,0 +1,143 @@
+"""Perception core on frames rendered by the MuJoCo scene (jaco2_sim_driver.camera.render_frame): ids, positions
+against the scenario's ground truth, marker pose error against the simulator's camera pose, bad inputs.
+
+Ground-truth visibility of each bottle comes from MuJoCo's segmentation rendering of the same camera."""
+import math
+
+import numpy as np
+import pytest
+
+from jaco2_sim_driver.camera import render_frame
+from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model
+from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError, pose_error
+from perception_aruco.images import decode_color, decode_depth, encode_color, encode_depth
+from perception_aruco.pipeline import Perception
+from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME
+from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario, parse_scenario
+
+SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15"]
+VISIBLE_PIXELS = 300  # a bottle with this many pixels in view (~10 % of an unoccluded one) must be found
+
+
+def visible_pixels(scenario, camera=CameraSpec()) -> dict[str, int]:
+    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene)."""
+    import mujoco
+    model = build_model(scenario, camera)
+    data = mujoco.MjData(model)
+    for j, qj in zip(JOINT_NAMES, Q_HOME):
+        data.qpos[model.joint(j).qposadr[0]] = qj
+    mujoco.mj_forward(model, data)
+    r = mujoco.Renderer(model, camera.height, camera.width)
+    try:
+        r.enable_segmentation_rendering()
+        r.update_scene(data, camera=CAMERA_NAME)
+        seg = r.render()
+    finally:
+        r.close()
+    geoms = seg[:, :, 0][seg[:, :, 1] == int(mujoco.mjtObj.mjOBJ_GEOM)]
+    return {b.id: int(np.sum(geoms == model.geom(f"{b.id}_geom").id)) for b in scenario.objects}
+
+
+@pytest.fixture(scope="module")
+def frames():
+    out = {}
+    for name in SCENES:
+        s = load_scenario(CONFIG_DIR / "scenarios" / f"{name}.yaml")
+        out[name] = (s, render_frame(s), visible_pixels(s))
+    return out
+
+
+def _errors(scenario, result):
+    return {i: math.hypot(d.x - scenario.object(i).x, d.y - scenario.object(i).y)
+            for i, d in result.detections.items()}
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_every_visible_bottle_found_with_its_id(frames, name):
+    s, f, vis = frames[name]
+    r = Perception(s).process(f.rgb, f.depth, f.K)
+    err = _errors(s, r)
+    dt, dr = pose_error(r.T_base_camera, f.T_base_camera)
+    print(f"\n{name}: marker pose error {dt * 1000:.1f} mm, {math.degrees(dr):.2f} deg (refined={r.marker.refined}); "
+          f"position error median {np.median(list(err.values())) * 1000:.2f} mm, "
+          f"max {max(err.values()) * 1000:.2f} mm over {len(err)} bottles")
+    assert dt < 0.01 and dr < math.radians(1.0)
+    must = {i for i, n in vis.items() if n >= VISIBLE_PIXELS}
+    assert must <= set(r.detections), f"visible but not found: {must - set(r.detections)} ({r.missing})"
+    # right id: each detection is at its own bottle (ids are 7+ cm apart, so a swapped id is far off)
+    assert all(e < 0.02 for e in err.values()), err
+    assert np.median(list(err.values())) <= 0.01
+    assert all(d.z == s.shelf.top_z for d in r.detections.values())
+    assert set(r.detections) | set(r.missing) == set(s.ids) and not set(r.detections) & set(r.missing)
+
+
+def test_marker_pose_from_pnp_alone_is_bounded(frames):
+    s, f, _ = frames["paper_experiment_10"]
+    r = Perception(s, refine_with_depth=False).process(f.rgb, f.depth, f.K)
+    dt, dr = pose_error(r.T_base_camera, f.T_base_camera)
+    print(f"\nIPPE_SQUARE only: marker pose error {dt * 1000:.1f} mm, {math.degrees(dr):.2f} deg")
+    assert not r.marker.refined and dt < 0.02 and dr < math.radians(2.0)
+    assert np.median(list(_errors(s, r).values())) <= 0.01
+
+
+def test_depth_in_millimetres_16uc1(frames):
+    s, f, _ = frames["paper_experiment_10"]
+    depth = decode_depth(*encode_depth(f.depth, "16UC1"))
+    assert depth.dtype == np.float32 and np.max(np.abs(depth - f.depth)) <= 0.0005 + 1e-6
+    r = Perception(s).process(f.rgb, depth, f.K)
+    err = _errors(s, r)
+    assert set(err) == set(s.ids) and np.median(list(err.values())) <= 0.01
+
+
+def test_bgr8_and_rgb8_decode_to_the_same_image(frames):
+    _, f, _ = frames["blocking_5"]
+    enc, h, w, step, data = encode_color(f.rgb)
+    assert np.array_equal(decode_color(enc, h, w, step, data), f.rgb)
+    bgr = np.ascontiguousarray(f.rgb[:, :, ::-1]).tobytes()
+    assert np.array_equal(decode_color("bgr8", h, w, step, bgr), f.rgb)
+
+
+def test_no_marker_in_view_raises(frames):
+    s, f, _ = frames["paper_experiment_10"]
+    p = Perception(s)
+    corners = p.localizer.detect(f.rgb)
+    rgb = f.rgb.copy()
+    (u0, v0), (u1, v1) = corners.min(0).astype(int) - 12, corners.max(0).astype(int) + 12
+    rgb[v0:v1, u0:u1] = (150, 120, 80)  # marker painted over
+    with pytest.raises(MarkerNotFoundError, match="marker id 7"):
+        p.process(rgb, f.depth, f.K)
+
+
+def test_size_mismatch_and_bad_images_raise(frames):
+    s, f, _ = frames["blocking_5"]
+    p = Perception(s)
+    with pytest.raises(ImageFormatError, match="differ in size"):
+        p.process(f.rgb, f.depth[:-10], f.K)
+    with pytest.raises(ImageFormatError, match="uint8"):
+        p.process(f.rgb.astype(np.float32), f.depth, f.K)
+    with pytest.raises(ImageFormatError, match="mono8"):
+        decode_color("mono8", 4, 4, 4, bytes(16))
+    with pytest.raises(ImageFormatError, match="8UC1"):
+        decode_depth("8UC1", 4, 4, 4, bytes(16))
+    with pytest.raises(ImageFormatError, match="data bytes"):
+        decode_color("rgb8", 4, 4, 12, bytes(40))
+
+
+def test_hidden_bottle_reported_missing_not_made_up():
+    """A short bottle right behind a tall one (along the camera ray): invisible, so it must be missing."""
+    import yaml
+    data = yaml.safe_load((CONFIG_DIR / "scenarios" / "blocking_5.yaml").read_text())
+    data["objects"] = [
+        {"id": "front", "weight": 0.3, "xy": [0.52, -0.07], "color": "red"},
+        {"id": "hidden", "weight": 0.3, "xy": [0.59, -0.032], "color": "blue", "height": 0.05, "radius": 0.025},
+        {"id": "T", "xy": [0.70, 0.12]},
+    ]
+    data["target"] = "T"
+    data.pop("blocking", None)
+    s = parse_scenario(data)
+    assert visible_pixels(s)["hidden"] == 0
+    f = render_frame(s)
+    r = Perception(s).process(f.rgb, f.depth, f.K)
+    assert "hidden" in r.missing and "hidden" not in r.detections
+    assert set(r.detections) == {"front", "T"}
+    assert all(e < 0.01 for e in _errors(s, r).values())
