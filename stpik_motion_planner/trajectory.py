@@ -39,7 +39,7 @@ class Trajectory:
         return cls(np.arange(n) * dt, np.array(q, float), vel, phases=[(phase, 0.0)] if phase else [])
 
     def resample(self, rate: float = STREAM_RATE) -> "Trajectory":
-        """Samples at 1/rate: positions interpolated linearly, velocities those of the containing segment."""
+        """Samples at 1/rate: positions interpolated linearly, velocities the mean over each sample interval."""
         if len(self.times) < 2:
             return Trajectory(self.times.copy(), self.positions.copy(), self.velocities.copy(), self.joint_names,
                               list(self.phases))
@@ -48,9 +48,11 @@ class Trajectory:
             t = np.append(t, self.duration)
         k = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
         pos = self.positions[k] + self.velocities[k] * (t - self.times[k])[:, None]
-        vel = self.velocities[k].copy()
-        vel[-1] = 0.0
         pos[-1] = self.positions[-1]
+        # the mean velocity over each sample interval: streaming it reproduces pos exactly, and as a mean of
+        # velocities within the box of Table 7 it stays within that box
+        vel = np.zeros_like(pos)
+        vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
         return Trajectory(t, pos, vel, self.joint_names, list(self.phases))
 
     def then(self, other: "Trajectory") -> "Trajectory":

@@ -1,0 +1,175 @@
+"""Feasibility queries (Eq. 11) on small scenes, with every trajectory verified independently of the planner:
+joint limits (Table 6), velocity limits (Table 7) and clearance measured with coal (not python-fcl) on shapes
+built here from the scenario and the robot description."""
+import math
+import time
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from qtree_task_planner.feasibility import Label
+from stpik_motion_planner import robot_description as rd
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
+from stpik_motion_planner.grasp import WorkspaceError
+from stpik_motion_planner.scenario import UnknownObjectError, parse_scenario
+
+SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
+         "ceiling_z": 0.28, "bottom_z": -0.18}
+MARKER = {"id": 7, "size": 0.07, "position": [0.625, -0.345, 0.09], "rpy": [1.5708, 0, -1.5708]}
+
+
+def scene(objects, target, **shelf):
+    return parse_scenario({"shelf": {**SHELF, **shelf}, "objects": objects, "target": target, "marker": MARKER,
+                           "slots": [[0.76, -0.06 + 0.12 * k] for k in range(3)]})
+
+
+# front: F in the open, B directly behind A; target B
+SMALL = scene([{"id": "A", "weight": 0.3, "xy": [0.69, 0.0]}, {"id": "B", "xy": [0.80, 0.0]},
+               {"id": "C", "weight": 0.5, "xy": [0.69, 0.25]}], "B")
+
+
+@pytest.fixture(scope="module")
+def planner():
+    return MotionPlanner(SMALL, PlannerParams.load())
+
+
+# ------------------------------------------------------------------ independent verification
+def world_shapes(scenario, removed):
+    """Boards and bottles as coal shapes with their transforms, built from the scenario alone."""
+    s, t = scenario.shelf, scenario.shelf.board_thickness
+    boxes = [((s.x_front, s.y_min, s.top_z - t), (s.x_back, s.y_max, s.top_z)),
+             ((s.x_front, s.y_min, s.ceiling_z), (s.x_back, s.y_max, s.ceiling_z + t)),
+             ((s.x_front, s.y_min, s.bottom_z - t), (s.x_back, s.y_max, s.bottom_z)),
+             ((s.x_front, s.y_min - t, s.bottom_z - t), (s.x_back, s.y_min, s.ceiling_z + t)),
+             ((s.x_front, s.y_max, s.bottom_z - t), (s.x_back, s.y_max + t, s.ceiling_z + t)),
+             ((s.x_back, s.y_min - t, s.bottom_z - t), (s.x_back + t, s.y_max + t, s.ceiling_z + t))]
+    out = [(None, coal.Box(*(np.subtract(hi, lo))), coal.Transform3s(np.eye(3), (np.add(lo, hi)) / 2))
+           for lo, hi in boxes]
+    for b in scenario.objects:
+        if b.id not in removed:
+            out.append((b.id, coal.Cylinder(b.radius, b.height),
+                        coal.Transform3s(np.eye(3), np.array([b.x, b.y, s.top_z + b.height / 2]))))
+    return out
+
+
+def arm_capsules(model, data, q):
+    pin.framesForwardKinematics(model, data, q)
+    for c in rd.CAPSULES:
+        if c.name in ("base", "shoulder"):
+            continue
+        m = data.oMf[model.getFrameId(c.link)]
+        a, b = m.act(np.array(c.p0, float)), m.act(np.array(c.p1, float))
+        z = (b - a) / np.linalg.norm(b - a)
+        x = np.cross(z, [1.0, 0, 0]) if abs(z[0]) < 0.9 else np.cross(z, [0, 1.0, 0])
+        x /= np.linalg.norm(x)
+        r = np.column_stack([x, np.cross(z, x), z])
+        yield c.name, coal.Capsule(c.radius, float(np.linalg.norm(b - a))), coal.Transform3s(r, (a + b) / 2)
+
+
+def verify(traj, scenario, removed, grasped=None, approach_from=math.inf, clearance=None):
+    """Limits, velocity limits, 100 Hz sampling, velocity integration and clearance (coal) along traj."""
+    p = PlannerParams.load().stpik
+    clearance = p.clearance if clearance is None else clearance
+    assert np.allclose(np.diff(traj.times), 0.01, atol=1e-9) or np.all(np.diff(traj.times)[:-1] == pytest.approx(0.01))
+    assert np.all(traj.positions >= rd.Q_LOWER - 1e-9) and np.all(traj.positions <= rd.Q_UPPER + 1e-9)
+    assert np.all(np.abs(traj.velocities) <= rd.QDOT_MAX + 1e-9)
+    integrated = traj.positions[0] + np.vstack([np.zeros(7), np.cumsum(
+        traj.velocities[:-1] * np.diff(traj.times)[:, None], axis=0)])
+    np.testing.assert_allclose(integrated, traj.positions, atol=1e-6)
+    model = pin.buildModelFromXML(rd.urdf())
+    data = model.createData()
+    world = world_shapes(scenario, removed)
+    worst = math.inf
+    for t, q in zip(traj.times, traj.positions):
+        for name, cap, tf in arm_capsules(model, data, q):
+            for oid, shape, tfo in world:
+                if oid is not None and oid == grasped and t >= approach_from and name in (
+                        "palm", "finger_1", "finger_2", "finger_3"):
+                    continue
+                d = coal.distance(cap, tf, shape, tfo, coal.DistanceRequest(), coal.DistanceResult())
+                worst = min(worst, d)
+    assert worst >= clearance - 2e-3, f"clearance {worst:.4f} below the bound {clearance}"
+    return worst
+
+
+def approach_start(traj):
+    return dict(traj.phases)["approach"]
+
+
+# ------------------------------------------------------------------ feasibility
+def test_bottle_in_the_open_is_feasible_obstacle(planner):
+    ans = planner.feasibility("C", frozenset())
+    assert ans.label == Label.OBSTACLE, ans.message
+    assert ans.attempts >= 1 and ans.planning_time > 0
+    verify(ans.trajectory, SMALL, set(), "C", approach_start(ans.trajectory))
+    np.testing.assert_allclose(ans.trajectory.positions[0], rd.Q_HOME)
+    # the trajectory ends at the grasp: tool on the bottle axis at mid-height, hand horizontal
+    t = rd.dh_fk(ans.trajectory.positions[-1])[-1]
+    np.testing.assert_allclose(t[:3, 3], [0.69, 0.25, SHELF["top_z"] + 0.08], atol=5e-3)
+    assert abs(t[2, 1] - 1.0) < 0.01 and abs(t[2, 2]) < 0.02  # tool y up, tool z horizontal
+
+
+def test_bottle_behind_another_is_unfeasible_until_the_front_one_is_removed(planner):
+    assert planner.feasibility("B", frozenset()).label == Label.UNFEASIBLE
+    assert planner.feasibility("B", frozenset({"C"})).label == Label.UNFEASIBLE
+    ans = planner.feasibility("B", frozenset({"A"}))
+    assert ans.label == Label.TARGET, ans.message  # the target is g_T, not g_O
+    verify(ans.trajectory, SMALL, {"A"}, "B", approach_start(ans.trajectory))
+    assert planner.feasibility("A", frozenset()).label == Label.OBSTACLE
+
+
+def test_timeout_is_honoured(planner):
+    t = time.perf_counter()
+    ans = planner.feasibility("A", frozenset(), timeout=0.005)
+    wall = time.perf_counter() - t
+    assert ans.label in (Label.UNFEASIBLE, Label.OBSTACLE)
+    if ans.label == Label.UNFEASIBLE:
+        assert "timeout" in ans.message
+    assert wall < 0.005 + 0.25  # one IK step or validity check past the deadline at most, with slack
+
+
+def test_bad_input_gets_a_clear_error(planner):
+    with pytest.raises(UnknownObjectError, match="nope"):
+        planner.feasibility("nope", frozenset())
+    with pytest.raises(UnknownObjectError, match="ghost"):
+        planner.feasibility("A", frozenset({"ghost"}))
+    with pytest.raises(ValueError, match="removed"):
+        planner.feasibility("A", frozenset({"A"}))
+    with pytest.raises(ValueError, match="timeout"):
+        planner.feasibility("A", frozenset(), timeout=float("nan"))
+    with pytest.raises(WorkspaceError, match="finite"):
+        planner.update_object("A", float("nan"), 0.0)
+    with pytest.raises(ValueError, match="finite"):
+        planner.plan_home([math.nan] * 7)
+    far = MotionPlanner(scene([{"id": "X", "xy": [1.30, 0.0]}], "X", x_front=1.2, depth=0.3))
+    with pytest.raises(WorkspaceError, match="workspace"):
+        far.feasibility("X", frozenset())
+
+
+def test_trajectory_resampling_keeps_the_stream_consistent(planner):
+    traj = planner.feasibility("C", frozenset()).trajectory
+    again = traj.resample(100.0)
+    np.testing.assert_allclose(again.positions, traj.positions, atol=1e-9)
+    assert traj.joint_names == rd.JOINT_NAMES
+
+
+@pytest.mark.slow
+def test_pick_carry_home_relocate_for_real(planner):
+    pick = planner.plan_pick("C", frozenset())
+    assert pick[0].gripper_after == "close"
+    segs = planner.plan_carry("C", frozenset(), 0)
+    assert [s.gripper_after for s in segs] == ["open", None]
+    carry, retreat = segs[0].trajectory, segs[1].trajectory
+    np.testing.assert_allclose(carry.positions[0], pick[0].trajectory.positions[-1], atol=1e-9)
+    for seg in segs:  # limits, velocities, arm clearance to boards and the bottles left on the top shelf
+        verify(seg.trajectory, SMALL, {"C"})
+    t = rd.dh_fk(carry.positions[-1])[-1]
+    slot = SMALL.slot(0)
+    np.testing.assert_allclose(t[:3, 3], [slot[0], slot[1], SHELF["bottom_z"] + 0.004 + 0.08], atol=5e-3)
+    home = planner.plan_home(retreat.positions[-1], frozenset({"C"}), placed=[("C", slot)])
+    np.testing.assert_allclose(home.positions[-1], rd.Q_HOME, atol=1e-9)
+    verify(home, SMALL, {"C"})
+    with pytest.raises(PlanningError):
+        planner.plan_pick("B", frozenset())
