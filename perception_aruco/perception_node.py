@@ -27,7 +27,7 @@ from stpik_motion_planner.scene_msgs import BASE_FRAME, bottles_to_msg
 from .aruco import PerceptionError
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
-from .pipeline import Perception
+from .pipeline import Perception, SceneMemory
 from .segmentation import SegmentationParams
 
 
@@ -78,8 +78,7 @@ class PerceptionNode(Node):
         self._depths: deque = deque(maxlen=6)
         self._info = None
         self._last_pair = None                     # stamp of the last processed pair
-        self._frame = 0
-        self._last_seen: dict[str, tuple] = {}     # id -> (Detection, frame index)
+        self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")))
         self._scene: ObjectArray | None = None
         self._scene_time = 0.0
 
@@ -153,28 +152,20 @@ class PerceptionNode(Node):
             if rgb is not None:
                 self._publish_debug(color, self.perception.annotate(rgb, None, note=str(e)))
             return
-        self._frame += 1
-        for d in result.detections.values():
-            self._last_seen[d.id] = (d, self._frame)
         self._publish_debug(color, self.perception.annotate(rgb, result, K))
         self._publish_scene(color, result)
 
     def _publish_scene(self, color: Image, result) -> None:
         log = self.get_logger()
-        keep = [(d, f) for d, f in self._last_seen.values() if self._frame - f <= self.p("hold_frames")]
-        held = sorted(d.id for d, f in keep if f != self._frame)
-        kept_ids = {d.id for d, _ in keep}
-        lost = [i for i in self.scenario.ids if i not in kept_ids]
+        dets, held, lost = self.memory.update(result.detections)
         if held:
             log.warning(f"not seen in this frame, kept at last pose: {', '.join(held)}", throttle_duration_sec=5.0)
         if lost:
             why = "; ".join(f"{i}: {result.missing.get(i, 'not seen')}" for i in lost)
             log.warning(f"missing from the scene (hidden or out of view): {why}", throttle_duration_sec=5.0)
-        if self.scenario.target_id not in kept_ids:
+        if self.scenario.target_id not in {d.id for d in dets}:
             log.error(f"target {self.scenario.target_id!r} not seen: no scene published", throttle_duration_sec=2.0)
             return
-        order = {i: k for k, i in enumerate(self.scenario.ids)}
-        dets = sorted((d for d, _ in keep), key=lambda d: order[d.id])
         msg = bottles_to_msg(self.perception.bottles(dets), self.scenario.shelf.top_z, color.header.stamp,
                              self.p("frame_id"))
         for m, d in zip(msg.objects, dets):

@@ -76,3 +76,24 @@ class Perception:
             cv2.putText(img, note[:90], (5, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 64, 64), 1,
                         cv2.LINE_AA)
         return img
+
+
+@dataclass
+class SceneMemory:
+    """The hidden-object policy (docs/perception.md): an object not seen in the current frame keeps its last
+    perceived pose for `hold_frames` processed frames, then is dropped; nothing is ever guessed."""
+
+    ids: tuple[str, ...]
+    hold_frames: int
+    frame: int = 0
+    last_seen: dict = field(default_factory=dict)   # id -> (Detection, frame index)
+
+    def update(self, detections: dict[str, Detection]) -> tuple[list[Detection], list[str], list[str]]:
+        """Record one processed frame; returns (detections to publish in scenario order, held ids, lost ids)."""
+        self.frame += 1
+        for d in detections.values():
+            self.last_seen[d.id] = (d, self.frame)
+        keep = {i: (d, f) for i, (d, f) in self.last_seen.items() if self.frame - f <= self.hold_frames}
+        held = [i for i in self.ids if i in keep and keep[i][1] != self.frame]
+        lost = [i for i in self.ids if i not in keep]
+        return [keep[i][0] for i in self.ids if i in keep], held, lost

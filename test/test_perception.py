@@ -141,3 +141,22 @@ def test_hidden_bottle_reported_missing_not_made_up():
     assert "hidden" in r.missing and "hidden" not in r.detections
     assert set(r.detections) == {"front", "T"}
     assert all(e < 0.01 for e in _errors(s, r).values())
+
+
+def test_scene_memory_holds_unseen_objects_for_hold_frames_then_drops_them():
+    from perception_aruco.localize import Detection
+    from perception_aruco.pipeline import SceneMemory
+
+    def det(i, x):
+        return Detection(i, x, 0.0, 0.2, 100, 0.0, (0, 0))
+    m = SceneMemory(("a", "b", "T"), hold_frames=2)
+    pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)})
+    assert [d.id for d in pub] == ["a", "b", "T"] and not held and not lost
+    for _ in range(2):  # b hidden for two frames: kept at its last pose
+        pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)})
+        assert [d.id for d in pub] == ["a", "b", "T"] and held == ["b"] and not lost
+        assert pub[1].x == 0.6 and pub[0].x == 0.51
+    pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)})  # third frame: dropped
+    assert [d.id for d in pub] == ["a", "T"] and lost == ["b"]
+    pub, held, lost = SceneMemory(("a", "T"), 5).update({"a": det("a", 0.5)})  # never seen: never made up
+    assert [d.id for d in pub] == ["a"] and lost == ["T"]
