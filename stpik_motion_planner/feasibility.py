@@ -54,6 +54,7 @@ class PlannerParams:
     drop: float = 0.004  # m, bottle base above the bottom shelf at release
     stage_distance: float = 0.30  # m, staging pose in front of the slot
     carry_timeout: float = 2.0  # s for plan_pick / plan_carry / plan_home
+    direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple = (0.85, 0.55, 0.65, 0.9)
     stpik: StpikParams = field(default_factory=StpikParams)
@@ -76,6 +77,8 @@ class PlannerParams:
         for k in ("max_attempts", "n_yaws", "seed"):
             if k in kw:
                 kw[k] = int(kw[k])
+        if "direct_first" in kw:
+            kw["direct_first"] = bool(kw["direct_first"])
         return cls(**kw, stpik=StpikParams(**skw))
 
     @classmethod
@@ -177,7 +180,7 @@ class MotionPlanner:
                         stats: QueryStats, first: bool) -> list[np.ndarray] | None:
         """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on
         later attempts RRT-Connect."""
-        if first:
+        if first and self.params.direct_first:
             direct = [np.asarray(start, float), self._stage(goal), np.asarray(goal, float)]
             if self._path_clear(direct, obs, hand):
                 stats.direct_paths += 1
@@ -333,13 +336,13 @@ class MotionPlanner:
                 return False
         return True
 
-    def plan_joint(self, q_from, q_to, obs: ObstacleSet, timeout: float) -> Trajectory | None:
+    def plan_joint(self, q_from, q_to, obs: ObstacleSet, timeout: float, margin: float = 0.005) -> Trajectory | None:
         """RRT-Connect in joint space (same collision checker), timed within Table 7 at 90 %."""
         q_from, q_to = _check_q(q_from), _check_q(q_to)
         lo = np.maximum(rd.Q_LOWER, np.minimum(q_from, q_to) - math.pi)
         hi = np.minimum(rd.Q_UPPER, np.maximum(q_from, q_to) + math.pi)
         rrt = JointRRT(lo, hi, self.params.joint_resolution, self.params.simplify_time)
-        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=0.005), timeout)
+        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), timeout)
         if path is None:
             return None
         return _time_joint_path(path, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt)

@@ -173,3 +173,14 @@ def test_pick_carry_home_relocate_for_real(planner):
     verify(home, SMALL, {"C"})
     with pytest.raises(PlanningError):
         planner.plan_pick("B", frozenset())
+
+
+def test_default_scenario_target_is_blocked_and_freed_by_o2_o3_o6():
+    from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
+    sc = load_scenario(DEFAULT_SCENARIO)
+    mp = MotionPlanner(sc)
+    assert mp.feasibility("T", frozenset()).label == Label.UNFEASIBLE
+    assert mp.feasibility("o6", frozenset({"o2"})).label == Label.UNFEASIBLE
+    ans = mp.feasibility("T", frozenset({"o2", "o3", "o6"}))
+    assert ans.label == Label.TARGET, ans.message
+    verify(ans.trajectory, sc, {"o2", "o3", "o6"}, "T", approach_start(ans.trajectory))

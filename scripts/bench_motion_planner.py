@@ -1,0 +1,138 @@
+#!/usr/bin/env python3
+"""Benchmark of the feasibility query (paper Sect. 4.1) on a 15-bottle shelf: latency p50/p95, answers,
+time split into candidate screening, Cartesian RRT-Connect and the STPIK check, plus joint-space RRT-Connect with
+the same collision checker for comparison, and a profile of where the time goes.
+
+Usage: .venv/bin/python scripts/bench_motion_planner.py [--queries 150] [--seed 1] [--scenario PATH] [--profile]
+Workload: random (object, removed set) pairs as the Q-Tree's training asks them (removed sets of 0-6 obstacles).
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import pstats
+import random
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from qtree_task_planner.feasibility import Label  # noqa: E402
+from stpik_motion_planner import robot_description as rd  # noqa: E402
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
+from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario  # noqa: E402
+
+
+def pct(xs, p):
+    return float(np.percentile(xs, p)) * 1e3 if len(xs) else float("nan")
+
+
+def workload(scenario, n, seed):
+    rng = random.Random(seed)
+    obst = list(scenario.obstacle_ids)
+    out = []
+    for _ in range(n):
+        removed = frozenset(rng.sample(obst, rng.randint(0, 6)))
+        choices = [i for i in scenario.ids if i not in removed]
+        out.append((rng.choice(choices), removed))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--queries", type=int, default=150)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--scenario", default=str(CONFIG_DIR / "scenarios" / "scenario3_15.yaml"))
+    ap.add_argument("--profile", action="store_true")
+    a = ap.parse_args()
+    sc = load_scenario(a.scenario)
+    params = PlannerParams.load()
+    mp = MotionPlanner(sc, params)
+    queries = workload(sc, a.queries, a.seed)
+    mp.feasibility(sc.ids[0], frozenset())  # warm-up (imports, caches)
+
+    rows = []
+    prof = cProfile.Profile() if a.profile else None
+    for oid, removed in queries:
+        if prof:
+            prof.enable()
+        t = time.perf_counter()
+        ans = mp.feasibility(oid, removed)
+        wall = time.perf_counter() - t
+        if prof:
+            prof.disable()
+        s = mp.last_stats
+        rows.append(dict(oid=oid, removed=removed, label=ans.label, wall=wall, rrt=s.rrt_time, stpik=s.stpik_time,
+                         rrt_calls=s.rrt_calls, direct=s.direct_paths, attempts=ans.attempts,
+                         timeout="timeout" in ans.message, traj=ans.trajectory,
+                         screened=ans.attempts == 0))
+    walls = [r["wall"] for r in rows]
+    feas = [r for r in rows if r["label"] != Label.UNFEASIBLE]
+    unf = [r for r in rows if r["label"] == Label.UNFEASIBLE]
+    print(f"scenario {sc.name}: {len(sc.obstacle_ids)} obstacles; {len(rows)} queries; timeout {params.timeout} s; "
+          f"seed {a.seed}")
+    print(f"feasibility latency  p50 {pct(walls, 50):7.2f} ms   p95 {pct(walls, 95):7.2f} ms   "
+          f"max {max(walls) * 1e3:7.2f} ms   mean {np.mean(walls) * 1e3:6.2f} ms")
+    print(f"answers: feasible {len(feas)}  unfeasible {len(unf)} (screened by grasp/approach check "
+          f"{sum(r['screened'] for r in unf)}, after sampling {sum(not r['screened'] for r in unf)}, "
+          f"of which timeouts {sum(r['timeout'] for r in unf)})")
+    print(f"success rate (definitive answer before the timeout): {1 - sum(r['timeout'] for r in rows) / len(rows):.3f}")
+    for name, sub in (("feasible", feas), ("unfeasible", unf)):
+        if sub:
+            w = [r["wall"] for r in sub]
+            print(f"  {name:10s} p50 {pct(w, 50):7.2f} ms  p95 {pct(w, 95):7.2f} ms   "
+                  f"rrt p50 {pct([r['rrt'] for r in sub], 50):6.2f} ms  stpik p50 {pct([r['stpik'] for r in sub], 50):6.2f} ms"
+                  f"   mean attempts {np.mean([r['attempts'] for r in sub]):.2f}")
+    tot = sum(walls)
+    rrt_t = sum(r["rrt"] for r in rows)
+    st_t = sum(r["stpik"] for r in rows)
+    print(f"time split over all queries: Cartesian RRT-Connect {rrt_t / tot:.1%}, STPIK {st_t / tot:.1%}, "
+          f"screening/direct-path checks/other {(tot - rrt_t - st_t) / tot:.1%}")
+    print(f"RRT-Connect calls {sum(r['rrt_calls'] for r in rows)}, direct paths accepted "
+          f"{sum(r['direct'] for r in rows)}")
+    if feas:
+        durs = [r["traj"].duration for r in feas]
+        vmax = max(float(np.max(np.abs(r["traj"].velocities) / rd.QDOT_MAX)) for r in feas)
+        print(f"trajectories: duration p50 {np.median(durs):.2f} s, max |qdot|/limit {vmax:.3f}")
+
+    # the same feasible queries with RRT-Connect always (no direct path first)
+    mp.params.direct_first = False
+    walls2, rrt2, st2, ok2 = [], [], [], 0
+    for r in feas:
+        t = time.perf_counter()
+        ans = mp.feasibility(r["oid"], r["removed"])
+        walls2.append(time.perf_counter() - t)
+        rrt2.append(mp.last_stats.rrt_time)
+        st2.append(mp.last_stats.stpik_time)
+        ok2 += ans.label != Label.UNFEASIBLE
+    mp.params.direct_first = True
+    if walls2:
+        print(f"feasible queries, RRT-Connect always: p50 {pct(walls2, 50):7.2f} ms  p95 {pct(walls2, 95):7.2f} ms  "
+              f"rrt p50 {pct(rrt2, 50):6.2f} ms  stpik p50 {pct(st2, 50):6.2f} ms  still feasible {ok2}/{len(walls2)}")
+
+    # joint-space RRT-Connect, same collision checker, home -> the pre-grasp configuration STPIK found
+    jt, jok = [], 0
+    for r in feas:
+        obs = mp.scene.obstacles(r["removed"])
+        tr = r["traj"]
+        goal = tr.positions[int(np.searchsorted(tr.times, dict(tr.phases)["approach"] - 1e-9))]
+        t = time.perf_counter()
+        traj = mp.plan_joint(rd.Q_HOME, goal, obs, timeout=1.0, margin=0.0)
+        jt.append(time.perf_counter() - t)
+        jok += traj is not None
+    if jt:
+        print(f"joint-space RRT-Connect (same checker, home -> STPIK's pre-grasp configuration): p50 {pct(jt, 50):7.2f} ms  p95 {pct(jt, 95):7.2f} ms  solved {jok}/{len(jt)}")
+    if prof:
+        out = io.StringIO()
+        pstats.Stats(prof, stream=out).sort_stats("tottime").print_stats(12)
+        text = out.getvalue()
+        print("profile (tottime, top 12):")
+        print("\n".join(line for line in text.splitlines()[6:] if line.strip()))
+
+
+if __name__ == "__main__":
+    main()
