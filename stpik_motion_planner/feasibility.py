@@ -362,7 +362,6 @@ class MotionPlanner:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
         import dataclasses
 
-        from .scenario import ScenarioError
         b = self.scenario.object(object_id)
         if not (math.isfinite(x) and math.isfinite(y)):
             raise WorkspaceError(f"position of {object_id!r} must be finite, got {(x, y)}")
@@ -370,10 +369,7 @@ class MotionPlanner:
         if not (s.x_front + b.radius <= x <= s.x_back - b.radius and s.y_min + b.radius <= y <= s.y_max - b.radius):
             raise WorkspaceError(f"{object_id!r} at {(x, y)} is not on the top shelf")
         objs = tuple(dataclasses.replace(o, x=x, y=y) if o.id == object_id else o for o in self.scenario.objects)
-        try:
-            self.scenario = dataclasses.replace(self.scenario, objects=objs, _by_id={})
-        except ScenarioError:
-            raise
+        self.scenario = dataclasses.replace(self.scenario, objects=objs, _by_id={})
         self.scene = CollisionScene(self.scenario)
         self._pick_end.clear()
 

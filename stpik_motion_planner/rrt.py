@@ -23,12 +23,6 @@ import ompl.util as ou
 YAW_SCALE = 0.25  # metres of OMPL distance per radian of yaw
 _seeded: list[int] = []
 
-try:  # nanobind prints reference-leak reports of OMPL's globals at interpreter exit: noise, not our leaks
-    from ompl import _ompl  # noqa: F401
-    import nanobind  # type: ignore  # noqa: F401
-except Exception:  # pragma: no cover
-    pass
-
 
 def seed_ompl(seed: int) -> int:
     """Seed OMPL's process-wide RNG once (before any sampling). Returns the seed in effect."""
