@@ -1,0 +1,253 @@
+"""Run real ROS 2 node processes in tests (no launch_ros here: see STACK-NOTES) and talk to them over DDS.
+
+    with RosGraph(tmp_path) as g:
+        g.start("jaco2_sim_driver.driver_node", params_file="config/jaco2_sim_driver.yaml",
+                params={"real_time_factor": 1.0})
+        states = g.probe.collect("/joint_states", JointState)
+        states.wait(lambda msgs: len(msgs) >= 5, timeout=20)
+        g.probe.call(Trigger, "/j2s7s300_driver/in/home", Trigger.Request())
+
+Isolation: every graph gets its own ROS_DOMAIN_ID (reserved with a lock file, so parallel test runs never share
+one), discovery on loopback only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), and ROS_HOME / ROS_LOG_DIR under the
+test's tmp dir. The test side is a `Probe`: a node in a private rclpy Context spun by a background thread.
+Teardown: SIGINT, wait, then SIGKILL as a fallback; `stop()` returns the exit code so a test can check that a node
+exits cleanly.
+"""
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+REPO = Path(__file__).resolve().parent.parent
+VENV_PYTHON = REPO / ".venv" / "bin" / "python"
+_LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"
+
+
+def reserve_domain_id() -> tuple[int, Path]:
+    """A ROS_DOMAIN_ID in 1..100 not used by another live test process (lock file with the owner's pid)."""
+    _LOCK_DIR.mkdir(exist_ok=True)
+    ids = list(range(1, 101))
+    random.shuffle(ids)
+    for i in ids:
+        lock = _LOCK_DIR / f"{i}.lock"
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                os.kill(int(lock.read_text() or "0"), 0)
+                continue  # owner alive
+            except (ProcessLookupError, ValueError):
+                lock.unlink(missing_ok=True)  # stale: owner gone
+                continue
+            except PermissionError:
+                continue
+        os.write(fd, str(os.getpid()).encode())
+        os.close(fd)
+        return i, lock
+    raise RuntimeError("no free ROS_DOMAIN_ID in 1..100")
+
+
+class NodeProcess:
+    """One node started as `python -m module --ros-args ...`; stdout+stderr go to a log file."""
+
+    def __init__(self, argv: list[str], env: dict[str, str], log_path: Path):
+        self.argv, self.log_path = argv, log_path
+        self._log = open(log_path, "wb")
+        self.popen = subprocess.Popen(argv, env=env, cwd=REPO, stdout=self._log, stderr=subprocess.STDOUT,
+                                      start_new_session=True)
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    def alive(self) -> bool:
+        return self.popen.poll() is None
+
+    def log(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def send_signal(self, sig: int) -> None:
+        if self.alive():
+            self.popen.send_signal(sig)
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
+        """Send `sig` (SIGINT by default), wait up to timeout, then SIGKILL. Returns the exit code."""
+        if self.alive():
+            self.popen.send_signal(sig)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait(5)
+        self._log.close()
+        return self.popen.returncode
+
+
+class Collector:
+    """Messages of one topic received by the probe, with their receive times (time.monotonic())."""
+
+    def __init__(self):
+        self.msgs: list[Any] = []
+        self.times: list[float] = []
+        self._cond = threading.Condition()
+
+    def _on(self, msg) -> None:
+        with self._cond:
+            self.msgs.append(msg)
+            self.times.append(time.monotonic())
+            self._cond.notify_all()
+
+    def wait(self, predicate: Callable[[list], bool] = lambda m: len(m) > 0, timeout: float = 10.0) -> list:
+        """Block until predicate(msgs) holds; return a copy of the messages. TimeoutError otherwise."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while not predicate(self.msgs):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"condition not met within {timeout} s ({len(self.msgs)} messages)")
+                self._cond.wait(left)
+            return list(self.msgs)
+
+    def clear(self) -> None:
+        with self._cond:
+            self.msgs.clear()
+            self.times.clear()
+
+    def latest(self):
+        with self._cond:
+            return self.msgs[-1] if self.msgs else None
+
+
+class Probe:
+    """The test's own node (private Context, background executor thread)."""
+
+    def __init__(self, domain_id: int, name: str = "test_probe"):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        self._rclpy = rclpy
+        self.context = rclpy.Context()
+        from rclpy.signals import SignalHandlerOptions
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except Exception:  # context shut down under us
+            if self.context.ok():
+                raise
+
+    def collect(self, topic: str, msg_type, qos: Any = 10) -> Collector:
+        c = Collector()
+        self.node.create_subscription(msg_type, topic, c._on, qos)
+        return c
+
+    def publisher(self, msg_type, topic: str, qos: Any = 10):
+        return self.node.create_publisher(msg_type, topic, qos)
+
+    def wait_for_subscribers(self, publisher, count: int = 1, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while publisher.get_subscription_count() < count:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no subscriber on {publisher.topic_name} within {timeout} s")
+            time.sleep(0.02)
+
+    def client(self, srv_type, name: str, timeout: float = 10.0):
+        cli = self.node.create_client(srv_type, name)
+        if not cli.wait_for_service(timeout_sec=timeout):
+            raise TimeoutError(f"service {name} not available within {timeout} s")
+        return cli
+
+    def call(self, srv_type, name: str, request=None, timeout: float = 10.0):
+        """Blocking service call (the background thread spins the response in)."""
+        cli = self.client(srv_type, name, timeout)
+        future = cli.call_async(request if request is not None else srv_type.Request())
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            raise TimeoutError(f"service {name} did not answer within {timeout} s")
+        self.node.destroy_client(cli)
+        return future.result()
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        try:
+            self.node.destroy_node()
+        finally:
+            if self.context.ok():
+                self._rclpy.shutdown(context=self.context)
+        self._thread.join(timeout=5)
+
+
+class RosGraph:
+    """Context manager: a private domain, node processes, and a probe node; everything torn down on exit."""
+
+    def __init__(self, tmp_dir: str | Path, python: str | Path | None = None):
+        self.tmp = Path(tmp_dir)
+        self.tmp.mkdir(parents=True, exist_ok=True)
+        self.python = str(python or (VENV_PYTHON if VENV_PYTHON.exists() else sys.executable))
+        self.domain_id, self._lock = reserve_domain_id()
+        self.env = dict(os.environ)
+        self.env.update(ROS_DOMAIN_ID=str(self.domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                        ROS_HOME=str(self.tmp / "ros_home"), ROS_LOG_DIR=str(self.tmp / "ros_log"),
+                        PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
+        self.env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))
+        self.procs: list[NodeProcess] = []
+        self._saved = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_HOME", "ROS_LOG_DIR")}
+        for k in self._saved:  # the probe lives in this process: same discovery settings
+            os.environ[k] = self.env[k]
+        self.probe = Probe(self.domain_id)
+
+    def start(self, module: str, *, params_file: str | Path | None = None, params: dict | None = None,
+              ros_args: tuple[str, ...] = (), name: str | None = None) -> NodeProcess:
+        """Start `python -m module --ros-args [--params-file f] [-p k:=v ...] [ros_args]`."""
+        argv = [self.python, "-m", module, "--ros-args"]
+        if params_file is not None:
+            argv += ["--params-file", str(params_file)]
+        for k, v in (params or {}).items():
+            argv += ["-p", f"{k}:={_param_text(v)}"]
+        argv += list(ros_args)
+        log = self.tmp / f"{name or module.rsplit('.', 1)[-1]}_{len(self.procs)}.log"
+        p = NodeProcess(argv, self.env, log)
+        self.procs.append(p)
+        return p
+
+    def close(self) -> None:
+        try:
+            for p in reversed(self.procs):
+                p.stop()
+        finally:
+            self.probe.close()
+            for k, v in self._saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+            self._lock.unlink(missing_ok=True)
+
+    def __enter__(self) -> "RosGraph":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _param_text(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list, tuple)):
+        return "[" + ",".join(_param_text(x) for x in v) + "]"
+    return str(v)
