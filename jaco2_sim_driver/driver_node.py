@@ -43,7 +43,7 @@ class Jaco2SimDriver(Node):
         p = {
             "scenario": str(DEFAULT_SCENARIO), "real_time_factor": 1.0, "joint_state_rate": 100.0,
             "state_on_command": True, "objects_rate": 10.0, "camera_rate": 2.0, "camera_width": 640,
-            "camera_height": 480, "camera_fovy": 58.0, "watchdog_timeout": 0.05, "qdot_max": QDOT_MAX.tolist(),
+            "camera_height": 480, "camera_fovy": 58.0, "camera_relative_to_shelf": False, "watchdog_timeout": 0.05, "qdot_max": QDOT_MAX.tolist(),
             "driver_prefix": "/j2s7s300_driver",
         }
         for k, v in p.items():
@@ -54,8 +54,8 @@ class Jaco2SimDriver(Node):
         self.obj_period = 1.0 / float(g("objects_rate"))
         self.state_on_command = bool(g("state_on_command"))
         cam_rate = float(g("camera_rate"))
-        camera = CameraSpec(fovy_deg=float(g("camera_fovy")), width=int(g("camera_width")),
-                            height=int(g("camera_height")))
+        cam_kw = dict(fovy_deg=float(g("camera_fovy")), width=int(g("camera_width")), height=int(g("camera_height")))
+        camera = CameraSpec.for_shelf(**cam_kw) if g("camera_relative_to_shelf") else CameraSpec(**cam_kw)
         scenario = load_scenario(resolve_path(g("scenario")))
         self.sim = Jaco2Sim(scenario, camera=camera, qdot_max=np.asarray(g("qdot_max"), float),
                             watchdog_timeout=float(g("watchdog_timeout")))
