@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
 
+import queue
 import threading
 import time
 from pathlib import Path
@@ -17,7 +18,7 @@ import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -34,7 +35,7 @@ from .sim import BadCommandError, Jaco2Sim, check_velocity_command
 
 BASE_FRAME = "j2s7s300_link_base"
 OPTICAL_FRAME = "camera_color_optical_frame"
-MAX_LAG = 0.1  # s of simulated time the loop may fall behind before it stops trying to catch up
+MAX_LAG = 0.5  # s of simulated time the loop may fall behind before it stops trying to catch up
 
 
 class Jaco2SimDriver(Node):
@@ -60,6 +61,7 @@ class Jaco2SimDriver(Node):
         self.sim = Jaco2Sim(scenario, camera=camera, qdot_max=np.asarray(g("qdot_max"), float),
                             watchdog_timeout=float(g("watchdog_timeout")))
         self.lock = threading.Lock()
+        self._commands: queue.SimpleQueue = queue.SimpleQueue()
         self._running = True
         self._commanded = False
         self._pace_reset = True
@@ -105,13 +107,10 @@ class Jaco2SimDriver(Node):
         try:
             v = check_velocity_command(v)
         except BadCommandError as e:
-            with self.lock:
-                self.sim.stop()  # the arm holds still
+            self._commands.put(None)  # the arm holds still
             self.get_logger().error(f"rejected {source} command: {e}", throttle_duration_sec=1.0)
             return
-        with self.lock:
-            self.sim.set_velocity(v)
-            self._commanded = True
+        self._commands.put(v)  # applied by the simulation loop at its next step (no lock wait here)
 
     # ------------------------------------------------------------------ services
     def srv_close(self, req, res):
@@ -150,6 +149,13 @@ class Jaco2SimDriver(Node):
                 if self._pace_reset:
                     wall0, sim0, next_js, next_obj = time.monotonic(), self.sim.time, self.sim.time, self.sim.time
                     self._pace_reset = False
+                while not self._commands.empty():
+                    v = self._commands.get_nowait()
+                    if v is None:
+                        self.sim.stop()
+                    else:
+                        self.sim.set_velocity(v)
+                        self._commanded = True
                 t = self.sim.time
                 if self.rtf > 0:
                     target = sim0 + (time.monotonic() - wall0) * self.rtf
@@ -159,7 +165,7 @@ class Jaco2SimDriver(Node):
                     n = int((target - t) / dt)
                 else:
                     n = 1
-                n = min(n, 5)
+                n = min(n, 20)  # catch up in batches of up to 20 ms (a late thread gets the GIL back late)
                 if n > 0:
                     self.sim.step(n)
                     t = self.sim.time
@@ -286,7 +292,7 @@ def main(args=None) -> int:
     node = None
     try:
         node = Jaco2SimDriver()
-        executor = MultiThreadedExecutor(num_threads=2)
+        executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
