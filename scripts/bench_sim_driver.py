@@ -33,14 +33,17 @@ from stpik_motion_planner.scenario import DEFAULT_SCENARIO, parse_scenario  # no
 
 
 def scenario_15() -> dict:
+    """Fifteen bottles on the top shelf: three rows of five, placed relative to the default scenario's shelf."""
     data = yaml.safe_load(DEFAULT_SCENARIO.read_text())
+    sh = data["shelf"]
     data["name"] = "bench_15"
+    rows = [sh["x_front"] + f * sh["depth"] for f in (0.2, 0.5, 0.8)]
+    cols = [sh.get("y_center", 0.0) + dy for dy in (-0.28, -0.14, 0.0, 0.14, 0.28)]
     objs = [{"id": f"o{k + 1}", "weight": 0.5, "xy": [x, y]}
-            for k, (x, y) in enumerate((x, y) for x in (0.52, 0.63, 0.74) for y in (-0.28, -0.14, 0.0, 0.14, 0.28))]
-    objs[7]["id"] = "T"  # centre of the middle row
-    del objs[7]["weight"]
+            for k, (x, y) in enumerate((x, y) for x in rows for y in cols)]
+    objs[7] = {"id": "T", "xy": objs[7]["xy"]}  # centre of the middle row
     data.pop("blocking", None)
-    data["objects"], data["target"] = objs, "T"
+    data["objects"], data["target"], data["slots"] = objs, "T", "auto"
     return data
 
 
