@@ -177,3 +177,82 @@ class QTree:
                     lines.append(f"  n{n.id} -> u{n.id}_{a} [{text}, color=red, style=dashed];")
         lines.append("}")
         return "\n".join(lines) + "\n"
+
+    # -- checkpoint state (qtree_task_planner.checkpoint) ------------------------------------------
+    def to_state(self) -> dict:
+        """Plain data of the whole tree: nodes in allocation order (node id = index), each with its sequence of
+        action indices and its edges in creation order as [action, label (Eq. 11), Q]; plus MP_q and the
+        incremental Eq. 15 sum, so that a restored tree continues bit for bit."""
+        nodes = []
+        for n in self.nodes:
+            edges = [[a, int(lab), n.q[a] if a in n.q else n.q_pruned[a]] for a, lab in n.label.items()]
+            nodes.append({"seq": list(n.seq), "edges": edges})
+        return {"nodes": nodes, "mp_q": self.mp_q, "q_sum": self.q_sum}
+
+    def load_state(self, state: dict) -> None:
+        """Replace the contents of this tree by `state` (from to_state). ValueError when it does not describe a
+        Q-Tree of this problem (bad action index, label, Q, missing parent or child)."""
+        n_obj, target = self.n_objects, self.target
+        raw = state["nodes"]
+        if not raw or list(raw[0]["seq"]):
+            raise ValueError("the first node must be the root s_H (empty sequence)")
+        nodes: list[Node] = []
+        by_seq: dict[tuple[int, ...], Node] = {}
+        for k, item in enumerate(raw):
+            seq = tuple(item["seq"])
+            if any(not isinstance(a, int) or not 0 <= a < target for a in seq) or len(set(seq)) != len(seq):
+                raise ValueError(f"node {k}: sequence {list(seq)} is not a sequence of distinct obstacle indices")
+            if seq in by_seq:
+                raise ValueError(f"node {k}: sequence {list(seq)} appears twice")
+            mask = 0
+            for a in seq:
+                mask |= 1 << a
+            node = Node(k, seq, mask)
+            for edge in item["edges"]:
+                a, lab, q = edge
+                if not isinstance(a, int) or not 0 <= a < n_obj or (mask >> a) & 1 or a in node.label:
+                    raise ValueError(f"node {k}: bad or repeated action {a!r}")
+                label = Label(lab)
+                if not isinstance(q, (int, float)) or isinstance(q, bool) or q != q or abs(q) == float("inf"):
+                    raise ValueError(f"node {k}: Q of action {a} is not a finite number: {q!r}")
+                if label == Label.TARGET and a != target or label == Label.OBSTACLE and a == target:
+                    raise ValueError(f"node {k}: label {label.name} does not fit action {a}")
+                node.label[a] = label
+                if label == Label.UNFEASIBLE:
+                    node.q_pruned[a] = float(q)
+                    node.pruned |= 1 << a
+                else:
+                    node.q[a] = float(q)
+            if seq:
+                parent = by_seq.get(seq[:-1])
+                if parent is None or parent.label.get(seq[-1]) != Label.OBSTACLE:
+                    raise ValueError(f"node {k}: no parent with a feasible edge {seq[-1]} before it")
+                parent.child[seq[-1]] = node
+            by_seq[seq] = node
+            nodes.append(node)
+        for node in nodes:
+            for a, label in node.label.items():
+                if label == Label.OBSTACLE and a not in node.child:
+                    raise ValueError(f"node {node.id}: feasible obstacle edge {a} has no child node")
+        self.root, self.nodes = nodes[0], nodes
+        self.mp_q = int(state["mp_q"])
+        self.q_sum = float(state["q_sum"])
+        if self.mp_q != self.n_edges or abs(self.q_sum - self.q_abs_sum()) > 1e-6 * max(1.0, self.q_sum):
+            raise ValueError("MP_q or the Eq. 15 sum does not match the edges")
+
+    def rollback(self, journal: list, n_nodes: int, mp_q: int, q_sum: float) -> None:
+        """Undo the steps recorded in `journal` (entries (node, action, old Q or None for a new edge), oldest
+        first) and restore the counters: used when an episode is interrupted half-way (planner gone)."""
+        for node, a, old in reversed(journal):
+            if old is None:
+                node.label.pop(a, None)
+                node.q.pop(a, None)
+                node.q_pruned.pop(a, None)
+                node.pruned &= ~(1 << a)
+                node.child.pop(a, None)
+            elif a in node.q:
+                node.q[a] = old
+            else:
+                node.q_pruned[a] = old
+        del self.nodes[n_nodes:]
+        self.mp_q, self.q_sum = mp_q, q_sum

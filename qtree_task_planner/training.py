@@ -15,6 +15,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from .checkpoint import Checkpoint, problem_hash
 from .feasibility import CachedOracle, Label
 from .params import TrainingParams
 from .policies import POLICY_FUNCTIONS, epsilon_schedule
@@ -85,7 +86,9 @@ class TrainingResult:
 
 
 def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | None = None,
-          callback: Callable[[EpisodeStats], bool | None] | None = None) -> TrainingResult:
+          callback: Callable[[EpisodeStats], bool | None] | None = None,
+          resume: Checkpoint | None = None, checkpoint_every: int = 0,
+          on_checkpoint: Callable[[Checkpoint], None] | None = None) -> TrainingResult:
     """Train a Q-Tree on `problem` (a RelocationProblem or a Scenario) asking `oracle`.
 
     oracle: any object with feasibility(object_id, removed: frozenset) -> FeasibilityAnswer; wrapped in a
@@ -93,6 +96,12 @@ def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | No
         planner_calls counts only the calls made during this run).
     optimal_weight: the minimum total weight (exact.solve) to report E_1st; None leaves E_1st None.
     callback: called after every episode; returning False stops training (cancelled=True).
+    resume: a Checkpoint (qtree_task_planner.checkpoint) of this problem and these params: training goes on from
+        it exactly as the uninterrupted run would (same tree, RNG state, counters); CheckpointError otherwise.
+    checkpoint_every, on_checkpoint: on_checkpoint(Checkpoint) after every `checkpoint_every` episodes (0: never)
+        and when training stops (converged, E_max, cancelled). If the oracle raises in the middle of an episode
+        (planner gone), that episode is rolled back, on_checkpoint receives the state at its start (with every
+        feasibility answer gathered so far, so nothing the planner computed is lost) and the error propagates.
     """
     if not isinstance(problem, RelocationProblem):
         problem = RelocationProblem.from_scenario(problem)
@@ -109,26 +118,58 @@ def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | No
     step = tree.step
     history: list[float] = []
     prev_sum, quiet, converged, cancelled, e_1st = 0.0, 0, False, False, None
-    episode = 0
-    while episode < e_max:
-        epsilon = epsilon_schedule(episode, e_max, eps0, eps_min)
+    episode, epsilon, calls_before, elapsed_before = 0, eps0, 0, 0.0
+    if resume is not None:
+        resume.check_matches(problem, params)
+        resume.fill_cache(cache)
+        calls0 = cache.calls
+        resume.restore_tree(tree)
+        root = tree.root
+        rng.setstate(resume.rng_state)
+        history = list(resume.q_sum_history)
+        prev_sum, quiet, converged, cancelled = resume.prev_sum, resume.quiet, resume.converged, False
+        e_1st, episode, epsilon = resume.e_1st, resume.episode, resume.epsilon
+        calls_before, elapsed_before = resume.planner_calls, resume.elapsed_s
+
+    def snapshot(reason: str) -> Checkpoint:
+        return Checkpoint(params, problem_hash(problem), episode, list(history), prev_sum, quiet, e_1st,
+                          rng.getstate(), epsilon, calls_before + cache.calls - calls0, converged, cancelled,
+                          tree.to_state(), Checkpoint.table_of(cache), elapsed_before + time.perf_counter() - t0,
+                          reason)
+
+    journal: list = []
+    while episode < e_max and not converged:
+        episode_start = (rng.getstate(), len(tree.nodes), tree.mp_q, tree.q_sum)
+        journal.clear()
+        epsilon_prev, epsilon = epsilon, epsilon_schedule(episode, e_max, eps0, eps_min)
         episode += 1
         node, steps, reached = root, 0, False
-        while steps < i_max:
-            offered = node.offered(n_obj)
-            if not offered:
-                break
-            a = policy(node, offered, target, rng, epsilon)
-            steps += 1
-            label, nxt = step(node, a)
-            if label == Label.TARGET:
-                reached = True
-                break
-            if label == Label.UNFEASIBLE:
-                if depth:
-                    continue
-                break
-            node = nxt
+        try:
+            while steps < i_max:
+                offered = node.offered(n_obj)
+                if not offered:
+                    break
+                a = policy(node, offered, target, rng, epsilon)
+                steps += 1
+                if on_checkpoint is not None:  # undo log, only needed to checkpoint an interrupted episode
+                    journal.append((node, a, (node.q.get(a, node.q_pruned.get(a)) if a in node.label else None)))
+                label, nxt = step(node, a)
+                if label == Label.TARGET:
+                    reached = True
+                    break
+                if label == Label.UNFEASIBLE:
+                    if depth:
+                        continue
+                    break
+                node = nxt
+        except Exception as e:
+            if on_checkpoint is not None:
+                rng_state, n_nodes, mp_q0, q_sum0 = episode_start
+                tree.rollback(journal, n_nodes, mp_q0, q_sum0)
+                rng.setstate(rng_state)
+                episode, epsilon = episode - 1, epsilon_prev
+                on_checkpoint(snapshot(f"interrupted: {type(e).__name__}: {e}"))
+            raise
         q_sum = tree.q_sum
         history.append(q_sum)
         delta = q_sum - prev_sum
@@ -140,12 +181,16 @@ def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | No
                 e_1st = episode
         if callback is not None:
             stats = EpisodeStats(episode, e_max, q_sum, delta, len(tree.nodes), tree.mp_q,
-                                 cache.calls - calls0, epsilon, steps, reached)
+                                 calls_before + cache.calls - calls0, epsilon, steps, reached)
             if callback(stats) is False:
                 cancelled = True
-                break
-        if quiet >= quiet_needed:
+        if quiet >= quiet_needed and not cancelled:
             converged = True
+        if on_checkpoint is not None:
+            stop = cancelled or converged or episode >= e_max
+            if stop or (checkpoint_every > 0 and episode % checkpoint_every == 0):
+                on_checkpoint(snapshot("cancelled" if cancelled else "final" if stop else "periodic"))
+        if cancelled:
             break
     seq = tree.best_sequence()
     return TrainingResult(
@@ -155,7 +200,7 @@ def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | No
         converged=converged,
         e_ss=episode,
         mp_q=tree.mp_q,
-        planner_calls=cache.calls - calls0,
+        planner_calls=calls_before + cache.calls - calls0,
         e_1st=e_1st,
         optimal_weight=optimal_weight,
         cancelled=cancelled,
@@ -163,6 +208,6 @@ def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | No
         tree_edges=tree.n_edges,
         q_sum_history=history,
         params=params,
-        elapsed_s=time.perf_counter() - t0,
+        elapsed_s=elapsed_before + time.perf_counter() - t0,
         tree=tree,
     )
