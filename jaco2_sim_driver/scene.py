@@ -176,7 +176,7 @@ def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> str:
     floor = s.bottom_z - FLOOR_DROP
     bottles = "".join(_bottle_xml(b, s.top_z) for b in scenario.objects)
     welds = "".join(f'<weld name="grasp_{b.id}" body1="{HAND_BODY}" body2="{b.id}" active="false" '
-                    f'solref="0.01 1"/>' for b in scenario.objects)
+                    f'solref="0.004 1"/>' for b in scenario.objects)
     return f"""<mujoco model="jaco2_shelf_{scenario.name}">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="0.001" integrator="implicitfast" cone="elliptic" impratio="5">

@@ -121,11 +121,13 @@ def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = F
                        cylinder)
 
 
-def carried_bottle(radius: float, height: float, trim: float) -> CapsuleSpec:
-    """The grasped bottle as a cylinder on link 7 (tool y is vertical, the tool origin is the bottle centre),
-    shortened by `trim` at both ends so that a bottle standing on a board keeps `trim` of clearance to it."""
+def carried_bottle(radius: float, height: float, trim: float, standoff: float = 0.0) -> CapsuleSpec:
+    """The grasped bottle as a cylinder on link 7 (tool y is vertical, the bottle's centre `standoff` beyond the
+    tool origin along tool z), shortened by `trim` at both ends so that a bottle standing on a board keeps `trim`
+    of clearance to it."""
     half = max(height / 2 - trim, 0.01)
-    return capsule_spec("carried", rd.LINK_NAMES[6], (0, -half, rd.D67), (0, half, rd.D67), radius, cylinder=True)
+    z = rd.D67 + standoff
+    return capsule_spec("carried", rd.LINK_NAMES[6], (0, -half, z), (0, half, z), radius, cylinder=True)
 
 
 def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0):

@@ -23,7 +23,8 @@ from qtree_task_planner.feasibility import FeasibilityAnswer, Label
 
 from . import robot_description as rd
 from .collision import HAND_PARTS, PENETRATION, ArmGeometry, CollisionScene, HandProxy, ObstacleSet, carried_bottle
-from .grasp import Grasp, WorkspaceError, check_pose, grasp_yaws, home_pose, lift_pose, place_poses, side_grasp
+from .grasp import (Grasp, WorkspaceError, check_pose, grasp_standoff, grasp_yaws, home_pose, lift_pose, place_poses,
+                    side_grasp)
 from .kinematics import Kinematics
 from .rrt import CartesianRRT, JointRRT, seed_ompl
 from .scenario import Scenario, UnknownObjectError
@@ -31,6 +32,11 @@ from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory
 
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "motion_planner.yaml"
+
+
+# Parameters of the motion_planner node that are not planner settings (config/motion_planner.yaml holds both)
+NODE_KEYS = frozenset({"scenario", "scene_topic", "driver_prefix", "stream_rate", "state_timeout", "home_tol",
+                       "gripper_timeout"})
 
 
 class PlanningError(RuntimeError):
@@ -56,7 +62,7 @@ class PlannerParams:
     carry_timeout: float = 2.0  # s for plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
-    workspace_hi: tuple = (0.85, 0.55, 0.65, 0.9)
+    workspace_hi: tuple = (1.0, 0.55, 0.65, 0.9)
     stpik: StpikParams = field(default_factory=StpikParams)
 
     @classmethod
@@ -68,7 +74,7 @@ class PlannerParams:
         for k, v in data.items():
             if k.startswith("stpik.") and k[6:] in sp:
                 skw[k[6:]] = np.array(v, float) if k[6:] == "qdot_max" else float(v)
-            elif k == "scenario":  # the node's own parameter
+            elif k in NODE_KEYS or k.startswith("follower."):  # the motion_planner node's own parameters
                 continue
             elif k in own:
                 kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
@@ -191,10 +197,11 @@ class MotionPlanner:
         stats.rrt_calls += 1
         return path
 
-    def _track(self, q0, path, obs, deadline, stats, skip=None, arm: ArmGeometry | None = None) -> StpikResult:
+    def _track(self, q0, path, obs, deadline, stats, skip=None, arm: ArmGeometry | None = None,
+               speed: float | None = None) -> StpikResult:
         t = time.perf_counter()
         stpik = self.stpik if arm is None else Stpik(self.kin, arm, self.params.stpik)
-        r = stpik.track(q0, path, obs, deadline, skip)
+        r = stpik.track(q0, path, obs, deadline, skip, speed=speed)
         stats.stpik_time += time.perf_counter() - t
         if not r.ok:
             stats.stpik_reject.append(r.reason)
@@ -244,7 +251,8 @@ class MotionPlanner:
             if not r1.ok:
                 last = f"STPIK rejected the path to the pre-grasp: {r1.reason}"
                 continue
-            r2 = self._track(r1.q[-1], [np.array(g.pre_grasp), np.array(g.grasp)], obs, deadline, stats, skip)
+            r2 = self._track(r1.q[-1], [np.array(g.pre_grasp), np.array(g.grasp)], obs, deadline, stats, skip,
+                             speed=p.stpik.approach_speed)
             if not r2.ok:
                 last = f"STPIK rejected the approach: {r2.reason}"
                 continue
@@ -290,7 +298,7 @@ class MotionPlanner:
         gone = removed | {object_id}
         obs = scene.obstacles(gone)
         trim = p.stpik.clearance + p.drop + 0.002
-        carried = carried_bottle(b.radius, b.height, trim)
+        carried = carried_bottle(b.radius, b.height, trim, grasp_standoff(b.radius))
         arm_c = ArmGeometry(self.kin, [carried])
         hand_c = HandProxy(p.hand_margin, [carried])
         self.kin.update(q_start, jacobians=False)
@@ -358,6 +366,12 @@ class MotionPlanner:
             raise PlanningError("no collision-free joint path back to the home configuration")
         return traj.resample()
 
+    def set_scenario(self, scenario: Scenario) -> None:
+        """Replace the scene (same shelf; e.g. bottles as perceived). Cached grasp ends are dropped."""
+        self.scenario = scenario
+        self.scene = CollisionScene(scenario)
+        self._pick_end.clear()
+
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
         import dataclasses
@@ -369,9 +383,7 @@ class MotionPlanner:
         if not (s.x_front + b.radius <= x <= s.x_back - b.radius and s.y_min + b.radius <= y <= s.y_max - b.radius):
             raise WorkspaceError(f"{object_id!r} at {(x, y)} is not on the top shelf")
         objs = tuple(dataclasses.replace(o, x=x, y=y) if o.id == object_id else o for o in self.scenario.objects)
-        self.scenario = dataclasses.replace(self.scenario, objects=objs, _by_id={})
-        self.scene = CollisionScene(self.scenario)
-        self._pick_end.clear()
+        self.set_scenario(dataclasses.replace(self.scenario, objects=objs, _by_id={}))
 
 
 def _mat(pose):

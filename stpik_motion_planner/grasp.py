@@ -2,8 +2,9 @@
 
 Tool frame (DH frame 7): z is the approach direction, x the closing direction of the fingers, origin the grasp
 centre. A side grasp keeps the hand horizontal: tool z = (cos yaw, sin yaw, 0) points into the shelf from its
-open side (-x), tool y = world z (vertical), tool x = y x z (horizontal). The tool origin is on the bottle axis at
-mid-height. A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction.
+open side (-x), tool y = world z (vertical), tool x = y x z (horizontal). The tool origin is at the bottle's
+mid-height, `grasp_standoff(radius)` short of its axis along the approach, so that the palm stops PALM_GAP from
+the bottle (the palm's front is PALM_REACH behind the grasp centre; the open fingers still surround the bottle). A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction.
 The robot's home pose (Q_HOME) is such a pose with yaw 0.
 """
 from __future__ import annotations
@@ -15,6 +16,16 @@ import numpy as np
 
 from . import robot_description as rd
 from .scenario import Scenario
+
+
+_PALM = next(c for c in rd.CAPSULES if c.name == "palm")
+PALM_REACH = rd.D67 - _PALM.p1[2] - _PALM.radius  # m from the grasp centre back to the palm's front (0.025)
+PALM_GAP = 0.008  # m between the palm and a grasped bottle: 4 mm plus the 4 mm final tolerance of STPIK
+
+
+def grasp_standoff(radius: float) -> float:
+    """Distance of the grasp centre short of the bottle axis along the approach: the palm stays PALM_GAP away."""
+    return max(0.0, radius + PALM_GAP - PALM_REACH)
 
 
 class WorkspaceError(ValueError):
@@ -73,8 +84,10 @@ def side_grasp(scenario: Scenario, object_id: str, yaw: float, pre_grasp_distanc
     """Grasp and pre-grasp poses of a bottle on the top shelf for one approach yaw."""
     b = scenario.object(object_id)
     z = scenario.shelf.top_z + b.height / 2
-    g = (b.x, b.y, z, yaw)
-    pre = (b.x - pre_grasp_distance * math.cos(yaw), b.y - pre_grasp_distance * math.sin(yaw), z, yaw)
+    s = grasp_standoff(b.radius)
+    g = (b.x - s * math.cos(yaw), b.y - s * math.sin(yaw), z, yaw)
+    d = s + pre_grasp_distance
+    pre = (b.x - d * math.cos(yaw), b.y - d * math.sin(yaw), z, yaw)
     check_pose(g, f"grasp of {object_id}")
     return Grasp(object_id, yaw, g, pre)
 
@@ -96,7 +109,7 @@ def place_poses(scenario: Scenario, object_id: str, slot_xy: tuple[float, float]
     The tool is at the bottle's mid-height with the bottle's base `drop` above the bottom shelf."""
     b = scenario.object(object_id)
     z = scenario.shelf.bottom_z + drop + b.height / 2
-    place = (slot_xy[0], slot_xy[1], z, 0.0)
+    place = (slot_xy[0] - grasp_standoff(b.radius), slot_xy[1], z, 0.0)
     stage = (min(slot_xy[0] - stage_distance, scenario.shelf.x_front - 0.07), slot_xy[1], z, 0.0)
     check_pose(place, f"place of {object_id} at slot {slot_xy}")
     return stage, place

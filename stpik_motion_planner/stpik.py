@@ -31,6 +31,7 @@ from .grasp import side_rotation
 class StpikParams:
     dt: float = 0.04  # IK step (s); the output is resampled to 100 Hz
     ee_speed: float = 0.25  # m/s along the reference path
+    approach_speed: float = 0.08  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
     yaw_speed: float = 0.8  # rad/s
     k_pos: float = 8.0  # Eq. 9 gain K, position
     k_ori: float = 8.0  # orientation
@@ -95,21 +96,22 @@ class Stpik:
         self.upper = rd.Q_UPPER - params.joint_margin
         self.eye = np.eye(rd.N_JOINTS)
 
-    def _reference(self, path: list[np.ndarray]):
-        """Piecewise-linear reference: cumulative times of the waypoints."""
+    def _reference(self, path: list[np.ndarray], speed: float | None = None):
+        """Piecewise-linear reference: cumulative times of the waypoints (at `speed`, default ee_speed)."""
         p = self.p
+        speed = speed or p.ee_speed
         times = [0.0]
         for a, b in zip(path[:-1], path[1:]):
-            dur = max(np.linalg.norm(b[:3] - a[:3]) / p.ee_speed, abs(b[3] - a[3]) / p.yaw_speed, 1e-6)
+            dur = max(np.linalg.norm(b[:3] - a[:3]) / speed, abs(b[3] - a[3]) / p.yaw_speed, 1e-6)
             times.append(times[-1] + dur)
         return np.array(times)
 
     def track(self, q0, path: list[np.ndarray], obs: ObstacleSet, deadline: float,
-              skip: dict[str, frozenset] | None = None, posture=None) -> StpikResult:
+              skip: dict[str, frozenset] | None = None, posture=None, speed: float | None = None) -> StpikResult:
         p = self.p
         kin, arm = self.kin, self.arm
         path = [np.asarray(w, float) for w in path]
-        times = self._reference(path)
+        times = self._reference(path, speed)
         t_end = times[-1]
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
         q = np.array(q0, float)

@@ -9,10 +9,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from jaco2_sim_driver.sim import GRASP_RADIAL_TOL
+
 from qtree_task_planner.feasibility import Label
 from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
-from stpik_motion_planner.grasp import WorkspaceError
+from stpik_motion_planner.grasp import PALM_GAP, PALM_REACH, WorkspaceError
 from stpik_motion_planner.scenario import UnknownObjectError, parse_scenario
 
 SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
@@ -105,9 +107,12 @@ def test_bottle_in_the_open_is_feasible_obstacle(planner):
     assert ans.attempts >= 1 and ans.planning_time > 0
     verify(ans.trajectory, SMALL, set(), "C", approach_start(ans.trajectory))
     np.testing.assert_allclose(ans.trajectory.positions[0], rd.Q_HOME)
-    # the trajectory ends at the grasp: tool on the bottle axis at mid-height, hand horizontal
+    # the trajectory ends at the grasp: tool at mid-height, short of the bottle axis by the palm standoff (the
+    # palm stays PALM_GAP from the bottle), hand horizontal
     t = rd.dh_fk(ans.trajectory.positions[-1])[-1]
-    np.testing.assert_allclose(t[:3, 3], [0.69, 0.25, SHELF["top_z"] + 0.08], atol=5e-3)
+    standoff = 0.033 + PALM_GAP - PALM_REACH
+    assert 0.01 < standoff < GRASP_RADIAL_TOL  # the bottle is still between the fingers for the driver
+    np.testing.assert_allclose(t[:3, 3], [0.69 - standoff, 0.25, SHELF["top_z"] + 0.08], atol=5e-3)
     assert abs(t[2, 1] - 1.0) < 0.01 and abs(t[2, 2]) < 0.02  # tool y up, tool z horizontal
 
 
@@ -167,7 +172,9 @@ def test_pick_carry_home_relocate_for_real(planner):
         verify(seg.trajectory, SMALL, {"C"})
     t = rd.dh_fk(carry.positions[-1])[-1]
     slot = SMALL.slot(0)
-    np.testing.assert_allclose(t[:3, 3], [slot[0], slot[1], SHELF["bottom_z"] + 0.004 + 0.08], atol=5e-3)
+    standoff = 0.033 + PALM_GAP - PALM_REACH  # the bottle axis is this far beyond the tool: on the slot
+    np.testing.assert_allclose(t[:3, 3], [slot[0] - standoff, slot[1], SHELF["bottom_z"] + planner.params.drop + 0.08],
+                               atol=5e-3)
     home = planner.plan_home(retreat.positions[-1], frozenset({"C"}), placed=[("C", slot)])
     np.testing.assert_allclose(home.positions[-1], rd.Q_HOME, atol=1e-9)
     verify(home, SMALL, {"C"})

@@ -1,0 +1,321 @@
+"""motion_planner node: a thin ROS 2 shell over stpik_motion_planner.feasibility.MotionPlanner (paper Sect. 4.1).
+
+- service `~/plan_feasibility` (PlanFeasibility): Eq. 11's answer g_U / g_O / g_T for (object, removed set),
+  with the home -> grasp trajectory; a bad request answers ok=false with the reason, the node keeps serving.
+- action `~/relocate` (RelocateObject): plan the pick, stream joint velocities (deg/s, kinova_msgs) at 100 Hz to
+  `<driver_prefix>/in/joint_velocity` with feedback from `<driver_prefix>/out/joint_state`, close the gripper,
+  plan and stream the carry to the next slot of the bottom shelf, release, retreat, plan and stream the way
+  home. Feedback by phase; cancel stops the arm; a silent driver aborts the goal with the reason.
+- the scene: the scenario file (shelf, slots, initial bottles), updated from `scene_topic` (ObjectArray,
+  transient local). Bottles no longer on the top shelf are ignored; bottles not seen keep their last pose.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Duration
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from qtree_relocation_msgs.action import RelocateObject
+from qtree_relocation_msgs.msg import JointVelocity, ObjectArray
+from qtree_relocation_msgs.srv import PlanFeasibility
+from qtree_task_planner.spin import run_node
+
+from . import robot_description as rd
+from .execution import FollowerParams, TrajectoryFollower
+from .feasibility import MotionPlanner, PlannerParams, PlanningError
+from .scenario import DEFAULT_SCENARIO, ScenarioError, UnknownObjectError, load_scenario
+from .scene_msgs import msg_to_bottles
+from .stpik import StpikParams
+from .trajectory import Trajectory
+
+SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+REPO = Path(__file__).resolve().parent.parent
+MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
+
+# progress (0..1) of the whole relocation at the start of each phase
+PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, "carry": 0.45, "release": 0.7,
+          "retreat": 0.72, "plan_home": 0.8, "home": 0.82, "done": 1.0}
+
+
+def _planner_defaults() -> dict:
+    """Flat ROS parameter defaults of PlannerParams (stpik.* for the STPIK settings)."""
+    out = {}
+    for f in fields(PlannerParams):
+        if f.name == "stpik":
+            continue
+        v = getattr(PlannerParams(), f.name)
+        out[f.name] = [float(x) for x in v] if isinstance(v, tuple) else v
+    for f in fields(StpikParams):
+        v = getattr(StpikParams(), f.name)
+        out[f"stpik.{f.name}"] = [float(x) for x in v] if isinstance(v, np.ndarray) else float(v)
+    return out
+
+
+def trajectory_to_msg(traj: Trajectory | None) -> JointTrajectory:
+    msg = JointTrajectory()
+    if traj is None:
+        return msg
+    msg.joint_names = list(traj.joint_names)
+    for t, q, v in zip(traj.times, traj.positions, traj.velocities):
+        sec = int(t)
+        msg.points.append(JointTrajectoryPoint(positions=q.tolist(), velocities=v.tolist(),
+                                               time_from_start=Duration(sec=sec, nanosec=int(round((t - sec) * 1e9)))))
+    return msg
+
+
+class _Aborted(Exception):
+    """A relocation that cannot go on (the message is the reason sent back in the result)."""
+
+
+class _Cancelled(Exception):
+    pass
+
+
+class MotionPlannerNode(Node):
+    def __init__(self) -> None:
+        super().__init__("motion_planner")
+        node_defaults = {"scenario": "", "scene_topic": "/scene/objects", "driver_prefix": "/j2s7s300_driver",
+                         "stream_rate": 100.0, "state_timeout": 0.5, "home_tol": 0.05, "gripper_timeout": 5.0}
+        follower = {f"follower.{f.name}": getattr(FollowerParams(), f.name) for f in fields(FollowerParams)}
+        for name, value in {**node_defaults, **follower, **_planner_defaults()}.items():
+            self.declare_parameter(name, value)
+        planner_params = PlannerParams.from_mapping({k: self.p(k) for k in _planner_defaults()})
+        self.follower_params = FollowerParams(**{k.split(".", 1)[1]: float(self.p(k)) for k in follower})
+        path = self.p("scenario") or str(DEFAULT_SCENARIO)
+        if not Path(path).is_absolute() and not Path(path).exists():
+            path = str(REPO / path)
+        self.base = load_scenario(path)
+        self.planner = MotionPlanner(self.base, planner_params)
+        self.qdot_max = planner_params.stpik.qdot_max
+        self._plan_lock = threading.Lock()  # MotionPlanner is not thread-safe
+        self._bottles = {b.id: b for b in self.base.objects}
+        self._q: tuple[np.ndarray, float] | None = None
+        self._relocating = threading.Lock()
+
+        pre = str(self.p("driver_prefix")).rstrip("/")
+        self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
+        self.create_subscription(JointState, f"{pre}/out/joint_state", self._on_joint_state, 10,
+                                 callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS,
+                                 callback_group=MutuallyExclusiveCallbackGroup())
+        clients = ReentrantCallbackGroup()
+        self._gripper = {a: self.create_client(Trigger, f"{pre}/in/gripper_{a}", callback_group=clients)
+                         for a in ("close", "open")}
+        self.create_service(PlanFeasibility, "~/plan_feasibility", self._on_feasibility,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+        self._server = ActionServer(self, RelocateObject, "~/relocate", execute_callback=self._execute,
+                                    goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                    callback_group=ReentrantCallbackGroup())
+        self.get_logger().info(f"ready: scenario {self.base.name} ({len(self.base.objects)} bottles), service "
+                               f"{self.resolve_service_name('~/plan_feasibility')}, scene from "
+                               f"{self.p('scene_topic')}, driver {pre}")
+
+    def p(self, name: str):
+        return self.get_parameter(name).value
+
+    # -- inputs ---------------------------------------------------------------------------------------------
+    def _on_joint_state(self, msg: JointState) -> None:
+        try:
+            idx = [msg.name.index(n) for n in rd.JOINT_NAMES]
+            q = np.array([msg.position[i] for i in idx], float)
+        except (ValueError, IndexError):
+            self.get_logger().error("joint state without the 7 Kinova arm joints", throttle_duration_sec=5.0)
+            return
+        if np.all(np.isfinite(q)):
+            self._q = (q, time.monotonic())
+
+    def _on_scene(self, msg: ObjectArray) -> None:
+        """Bottles standing on the top shelf replace the planner's; the rest of the scene stays."""
+        try:
+            bottles = msg_to_bottles(msg)
+        except ScenarioError as e:
+            self.get_logger().error(f"scene ignored: {e}", throttle_duration_sec=5.0)
+            return
+        top_z = self.base.shelf.top_z
+        on_top = {b.id: b for b, o in zip(bottles, msg.objects) if abs(o.pose.position.z - top_z) < 0.03}
+        changed = [i for i, b in on_top.items() if i not in self._bottles
+                   or math.hypot(b.x - self._bottles[i].x, b.y - self._bottles[i].y) > MOVED]
+        if not changed:
+            return
+        merged = {**self._bottles, **{i: on_top[i] for i in changed}}
+        try:
+            scenario = self.base.with_objects(merged.values())
+        except ScenarioError as e:
+            self.get_logger().error(f"scene ignored: {e}", throttle_duration_sec=5.0)
+            return
+        with self._plan_lock:
+            self.planner.set_scenario(scenario)
+            self._bottles = merged
+        self.get_logger().info(f"scene updated from {self.p('scene_topic')}: {sorted(changed)}")
+
+    # -- feasibility (Eq. 11) -------------------------------------------------------------------------------
+    def _on_feasibility(self, req, res):
+        res.ok = False
+        try:
+            timeout = float(req.timeout) if req.timeout > 0 else None
+            with self._plan_lock:
+                ans = self.planner.feasibility(req.object_id, list(req.removed_ids), timeout)
+        except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
+            res.message = str(e)
+            self.get_logger().warning(f"feasibility request refused: {e}")
+            return res
+        except Exception as e:  # a planner bug must not take the node down
+            res.message = f"internal planner error: {type(e).__name__}: {e}"
+            self.get_logger().error(res.message)
+            return res
+        res.ok, res.label, res.planning_time = True, int(ans.label), float(ans.planning_time)
+        res.attempts, res.message = int(ans.attempts), ans.message
+        res.trajectory = trajectory_to_msg(ans.trajectory)
+        return res
+
+    # -- relocation -----------------------------------------------------------------------------------------
+    def _on_goal(self, goal) -> GoalResponse:
+        try:
+            self.planner.scenario.object(goal.object_id)
+            removed = self.planner.scenario.check_ids(list(goal.removed_ids))
+            if goal.object_id in removed:
+                raise ValueError(f"{goal.object_id!r} is in its own removed set")
+            if len(goal.removed_ids) >= len(self.base.slots):
+                raise ValueError(f"no free slot: {len(goal.removed_ids)} objects already relocated")
+        except (UnknownObjectError, ScenarioError, ValueError) as e:
+            self.get_logger().error(f"relocation goal rejected: {e}")
+            return GoalResponse.REJECT
+        if self._relocating.locked():
+            self.get_logger().error("relocation goal rejected: a relocation is already running")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _execute(self, goal_handle):
+        result = RelocateObject.Result()
+        with self._relocating:
+            try:
+                self._relocate(goal_handle)
+                result.success, result.message = True, f"relocated {goal_handle.request.object_id}"
+                goal_handle.succeed()
+            except _Cancelled:
+                self._stop()
+                result.message = "cancelled: arm stopped"
+                goal_handle.canceled()
+            except (_Aborted, PlanningError) as e:
+                self._stop()
+                result.message = str(e)
+                self.get_logger().error(f"relocation of {goal_handle.request.object_id} aborted: {e}")
+                goal_handle.abort()
+        return result
+
+    def _relocate(self, gh) -> None:
+        oid, removed = gh.request.object_id, list(gh.request.removed_ids)
+        slot = len(removed)
+        placed = [(r, self.base.slot(k)) for k, r in enumerate(removed)]
+        deadline = time.monotonic() + 5.0  # right after start-up, discovery of the driver can take a moment
+        while self._q is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        q = self._measured()
+        if float(np.max(np.abs(q - rd.Q_HOME))) > self.p("home_tol"):
+            self._feedback(gh, "plan_home")
+            self._follow(gh, self._plan(lambda: self.planner.plan_home(q, removed, placed)), "home")
+        self._feedback(gh, "plan_pick")
+        (pick,) = self._plan(lambda: self.planner.plan_pick(oid, removed))
+        self._follow(gh, pick.trajectory, "approach")
+        self._gripper_call(gh, "close", "grasp")
+        self._feedback(gh, "plan_carry")
+        q = self._measured()
+        carry, retreat = self._plan(lambda: self.planner.plan_carry(oid, removed, slot, q_start=q, placed=placed))
+        self._follow(gh, carry.trajectory, "carry")
+        self._gripper_call(gh, "open", "release")
+        self._follow(gh, retreat.trajectory, "retreat")
+        self._feedback(gh, "plan_home")
+        q = self._measured()
+        home = self._plan(lambda: self.planner.plan_home(q, removed + [oid], placed + [(oid, self.base.slot(slot))]))
+        self._follow(gh, home, "home")
+        self._feedback(gh, "done")
+
+    def _plan(self, fn):
+        with self._plan_lock:
+            return fn()
+
+    def _measured(self) -> np.ndarray:
+        st = self._q
+        age = math.inf if st is None else time.monotonic() - st[1]
+        if age > self.p("state_timeout"):
+            raise _Aborted(f"no joint state from the driver for {age:.1f} s (> state_timeout): "
+                           f"is jaco2_sim_driver (or the Kinova driver) running?")
+        return st[0].copy()
+
+    def _feedback(self, gh, phase: str, within: float = 0.0) -> None:
+        names = list(PHASES)
+        k = names.index(phase)
+        lo, hi = PHASES[phase], PHASES[names[min(k + 1, len(names) - 1)]]
+        gh.publish_feedback(RelocateObject.Feedback(phase=phase, progress=float(lo + (hi - lo) * within)))
+
+    def _follow(self, gh, traj: Trajectory, phase: str) -> None:
+        """Stream the trajectory at stream_rate with position feedback until it settles (execution.py)."""
+        follower = TrajectoryFollower(traj, self.qdot_max, self.follower_params)
+        period = 1.0 / float(self.p("stream_rate"))
+        t0 = next_tick = time.monotonic()
+        tick = 0
+        while True:
+            if gh.is_cancel_requested:
+                raise _Cancelled()
+            if not rclpy.ok():
+                raise _Aborted("node shutting down")
+            q = self._measured()
+            t = time.monotonic() - t0
+            status = follower.status(t, q)
+            if status == follower.SETTLED:
+                self._stop()
+                return
+            if status == follower.FAILED:
+                raise _Aborted(f"{phase}: {follower.reason}")
+            self._send(follower.command(t, q))
+            if tick % 10 == 0:
+                self._feedback(gh, phase, min(1.0, t / max(follower.duration, 1e-6)))
+            tick += 1
+            next_tick += period
+            time.sleep(max(0.0, next_tick - time.monotonic()))
+
+    def _send(self, v: np.ndarray) -> None:
+        d = np.degrees(v)
+        self._cmd.publish(JointVelocity(**{f"joint{i + 1}": float(d[i]) for i in range(rd.N_JOINTS)}))
+
+    def _stop(self) -> None:
+        if rclpy.ok():
+            for _ in range(3):
+                self._send(np.zeros(rd.N_JOINTS))
+
+    def _gripper_call(self, gh, action: str, phase: str) -> None:
+        self._feedback(gh, phase)
+        client = self._gripper[action]
+        timeout = float(self.p("gripper_timeout"))
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise _Aborted(f"gripper service {client.srv_name} not available after {timeout:.0f} s")
+        done = threading.Event()
+        fut = client.call_async(Trigger.Request())
+        fut.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            raise _Aborted(f"gripper {action}: no answer within {timeout:.0f} s")
+        res = fut.result()
+        if not res.success:
+            raise _Aborted(f"gripper {action} failed: {res.message}")
+        self.get_logger().info(f"gripper {action}: {res.message}")
+
+
+def main(args=None) -> None:
+    run_node(MotionPlannerNode, args, threads=6)
+
+
+if __name__ == "__main__":
+    main()
