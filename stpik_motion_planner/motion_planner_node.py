@@ -44,6 +44,7 @@ from .trajectory import Trajectory
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 REPO = Path(__file__).resolve().parent.parent
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
+ON_SHELF = 0.01  # m: a bottle whose base is farther from the top shelf's surface is lifted or elsewhere
 
 # progress (0..1) of the whole relocation at the start of each phase
 PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, "carry": 0.45, "release": 0.7,
@@ -104,6 +105,7 @@ class MotionPlannerNode(Node):
         self._bottles = {b.id: b for b in self.base.objects}
         self._q: tuple[np.ndarray, float] | None = None
         self._relocating = threading.Lock()
+        self._held: str | None = None  # the object of the running relocation: its perceived pose is ignored
 
         pre = str(self.p("driver_prefix")).rstrip("/")
         self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
@@ -144,8 +146,10 @@ class MotionPlannerNode(Node):
         except ScenarioError as e:
             self.get_logger().error(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return
-        top_z = self.base.shelf.top_z
-        on_top = {b.id: b for b, o in zip(bottles, msg.objects) if abs(o.pose.position.z - top_z) < 0.03}
+        sh, held = self.base.shelf, self._held
+        on_top = {b.id: b for b, o in zip(bottles, msg.objects)
+                  if abs(o.pose.position.z - sh.top_z) < ON_SHELF and b.id != held
+                  and sh.x_front < b.x < sh.x_back and sh.y_min < b.y < sh.y_max}
         changed = [i for i, b in on_top.items() if i not in self._bottles
                    or math.hypot(b.x - self._bottles[i].x, b.y - self._bottles[i].y) > MOVED]
         if not changed:
@@ -201,6 +205,7 @@ class MotionPlannerNode(Node):
     def _execute(self, goal_handle):
         result = RelocateObject.Result()
         with self._relocating:
+            self._held = goal_handle.request.object_id
             try:
                 self._relocate(goal_handle)
                 result.success, result.message = True, f"relocated {goal_handle.request.object_id}"
@@ -214,6 +219,8 @@ class MotionPlannerNode(Node):
                 result.message = str(e)
                 self.get_logger().error(f"relocation of {goal_handle.request.object_id} aborted: {e}")
                 goal_handle.abort()
+            finally:
+                self._held = None
         return result
 
     def _relocate(self, gh) -> None:
@@ -265,7 +272,7 @@ class MotionPlannerNode(Node):
         """Stream the trajectory at stream_rate with position feedback until it settles (execution.py)."""
         follower = TrajectoryFollower(traj, self.qdot_max, self.follower_params)
         period = 1.0 / float(self.p("stream_rate"))
-        t0 = next_tick = time.monotonic()
+        last = next_tick = time.monotonic()
         tick = 0
         while True:
             if gh.is_cancel_requested:
@@ -273,18 +280,19 @@ class MotionPlannerNode(Node):
             if not rclpy.ok():
                 raise _Aborted("node shutting down")
             q = self._measured()
-            t = time.monotonic() - t0
-            status = follower.status(t, q)
+            now = time.monotonic()
+            status = follower.update(q, now - last)
+            last = now
             if status == follower.SETTLED:
                 self._stop()
                 return
             if status == follower.FAILED:
                 raise _Aborted(f"{phase}: {follower.reason}")
-            self._send(follower.command(t, q))
+            self._send(follower.command(q))
             if tick % 10 == 0:
-                self._feedback(gh, phase, min(1.0, t / max(follower.duration, 1e-6)))
+                self._feedback(gh, phase, follower.progress)
             tick += 1
-            next_tick += period
+            next_tick = max(next_tick + period, now)
             time.sleep(max(0.0, next_tick - time.monotonic()))
 
     def _send(self, v: np.ndarray) -> None:
