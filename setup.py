@@ -8,7 +8,7 @@ PACKAGE = "qtree_relocation"
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=["qtree_task_planner", "stpik_motion_planner", "jaco2_sim_driver", "perception_aruco"],
+    packages=["qtree_task_planner", "qtree_task_planner.evaluation", "stpik_motion_planner", "jaco2_sim_driver", "perception_aruco"],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -1,0 +1,114 @@
+"""`./run evaluate [fill|sweep|report|scenes|all] [--runs N] [--quick] ...`: the paper's evaluation (docs/evaluation.md).
+
+all (default): fill the missing feasibility answers with the real planner (none when data/feasibility/ is
+complete), run the missing sweep cells, regenerate docs/evaluation.md and docs/figures/.
+--quick: 3 runs per cell, two (alpha, gamma) pairs, two random scenes, output under out/evaluation-quick/.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+SCEN_DIR = ROOT / "config" / "scenarios"
+MAIN = ("scenario1_5", "scenario2_10", "scenario3_15")
+COMPLEX = ("scenario2_10", "scenario3_15")
+EXPERIMENT = "paper_experiment_10"
+EVAL_TIMEOUT = 3.0  # s per planner query when filling the cache (docs/evaluation.md: load-independent answers)
+QUICK_GRID = ((1.0, 0.1), (0.3, 0.9))
+
+
+def planner_params():
+    from stpik_motion_planner.feasibility import PlannerParams
+    p = PlannerParams.load()
+    p.timeout = EVAL_TIMEOUT
+    return p
+
+
+def scene_paths(quick: bool = False) -> tuple[list[Path], list[Path]]:
+    main = [SCEN_DIR / f"{n}.yaml" for n in MAIN]
+    rnd = sorted((SCEN_DIR / "random5").glob("*.yaml"))
+    return main, (rnd[:2] if quick else rnd)
+
+
+def scenes(paths, params, data_dir, grid=None):
+    from stpik_motion_planner.scenario import load_scenario
+
+    from .feasibility_cache import cache_key, cache_path
+    from .sweep import GRID, Scene
+    out = []
+    for p in paths:
+        sc = load_scenario(p)
+        out.append(Scene(sc.name, str(p), str(cache_path(sc, params, data_dir)), cache_key(sc, params),
+                         tuple(grid or GRID)))
+    return out
+
+
+def cmd_fill(paths, params, data_dir, workers) -> dict:
+    from stpik_motion_planner.scenario import load_scenario
+
+    from .feasibility_cache import fill_reachable, open_table
+    stats = {}
+    for p in paths:
+        sc = load_scenario(p)
+        table, path = open_table(sc, params, data_dir)
+        st = fill_reachable(sc, params, table, workers=workers, progress=True, save_to=path)
+        stats[sc.name] = st | {"entries": len(table), "planner_seconds": round(table.planner_seconds, 1)}
+        print(f"{sc.name}: {len(table)} answers in {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path} "
+              f"({st['real_calls']} new planner calls)", flush=True)
+    return stats
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="evaluate", description=__doc__.splitlines()[0])
+    ap.add_argument("command", nargs="?", default="all", choices=("all", "fill", "sweep", "report", "scenes"))
+    ap.add_argument("--runs", type=int, default=50, help="trainings per cell (default 50)")
+    ap.add_argument("--quick", action="store_true", help="small version: 3 runs, 2 (alpha, gamma), 2 random scenes")
+    ap.add_argument("--out", default=None, help="sweep results directory (default out/evaluation[-quick])")
+    ap.add_argument("--docs", default=None, help="where evaluation.md and figures/ go (default docs/, quick: OUT/docs)")
+    ap.add_argument("--data", default=str(ROOT / "data" / "feasibility"), help="feasibility cache directory")
+    ap.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    ap.add_argument("--no-random", action="store_true", help="skip the random 5-obstacle scenes (Table 4)")
+    ap.add_argument("--no-progress", action="store_true")
+    a = ap.parse_args(argv)
+    if a.runs < 1:
+        ap.error("--runs must be >= 1")
+    runs = 3 if a.quick and a.runs == 50 else a.runs
+    out = Path(a.out or ROOT / "out" / ("evaluation-quick" if a.quick else "evaluation"))
+    docs = Path(a.docs or (out / "docs" if a.quick else ROOT / "docs"))
+    params = planner_params()
+    main_p, rnd_p = scene_paths(a.quick)
+    if a.no_random:
+        rnd_p = []
+    if a.command == "scenes":
+        from .make_scenes import make_all
+        make_all(params, a.data)
+        return 0
+    import os
+    workers = a.workers or os.cpu_count() or 1
+    if a.command in ("all", "fill"):
+        cmd_fill(main_p + rnd_p + [SCEN_DIR / f"{EXPERIMENT}.yaml"], params, a.data, workers)
+    if a.command in ("all", "sweep"):
+        from .sweep import sweep
+        grid = QUICK_GRID if a.quick else None
+        sc = scenes(main_p + rnd_p, params, a.data, grid)
+        t = time.perf_counter()
+        res = sweep(sc, runs, out / "sweep.jsonl", workers=workers, progress=not a.no_progress)
+        res["wall_s"] = round(time.perf_counter() - t, 1)
+        res |= {"runs": runs, "workers": workers, "cells": len(sc) * len(sc[0].grid) * 6, "time": time.time()}
+        with (out / "timing.jsonl").open("a") as f:
+            f.write(json.dumps(res) + "\n")
+        print(f"sweep: {res['cells_run']} cells run in {res['wall_s']} s on {workers} workers", flush=True)
+    if a.command in ("all", "report"):
+        from .report import write_report
+        path = write_report(out, docs, params, a.data, [p.stem for p in main_p], [p.stem for p in rnd_p],
+                            quick=a.quick)
+        print(f"report: {path}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

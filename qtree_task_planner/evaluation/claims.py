@@ -1,0 +1,115 @@
+"""The paper's findings, each checked on the sweep's numbers: (verdict, deciding numbers).
+
+Rankings use the mean over the (alpha, gamma) grid of each cell's mean; for E_1st a run that never reached the
+optimum counts with all its episodes (E_1st_pen), so an algorithm cannot win by rarely finding the optimum.
+"""
+from __future__ import annotations
+
+import statistics
+
+from .tables import algorithms_order
+
+RANK_METRICS = {"E_ss": "E_ss", "MP_q": "MP_q", "E_1st": "E_1st_pen"}
+
+
+def means(cells: dict, metric: str) -> dict[str, float]:
+    key = RANK_METRICS.get(metric, metric)
+    out = {}
+    for alg in algorithms_order():
+        v = [st[key] for (al, _, _), st in cells.items() if al == alg and st.get(key) is not None]
+        if v:
+            out[alg] = statistics.fmean(v)
+    return out
+
+
+def rank(cells: dict, metric: str, alg: str) -> int:
+    m = means(cells, metric)
+    return 1 + sum(1 for v in m.values() if v < m[alg] - 1e-9)
+
+
+def _fmt(m: dict) -> str:
+    return ", ".join(f"{k} {v:.0f}" if v >= 100 else f"{k} {v:.1f}" for k, v in sorted(m.items(), key=lambda x: x[1]))
+
+
+def check(idx: dict, main: list[str], complex_: list[str], random: list[str]) -> list[tuple[str, str, str]]:
+    """[(claim, 'reproduced' | 'not reproduced' | 'partly', evidence)]"""
+    out = []
+    # 1 H-eG_d optimal or near on all metrics (rank <= 2 of 6)
+    ev, ok = [], []
+    for s in main:
+        rk = {m: rank(idx[s], m, "H-eG_d") for m in RANK_METRICS}
+        opt = sum(st["optimal"] for (al, _, _), st in idx[s].items() if al == "H-eG_d")
+        runs = sum(st["runs"] for (al, _, _), st in idx[s].items() if al == "H-eG_d")
+        ok.append(all(r <= 2 for r in rk.values()))
+        ev.append(f"{s}: ranks E_ss {rk['E_ss']}, MP_q {rk['MP_q']}, E_1st {rk['E_1st']}; optimum in {opt}/{runs} runs")
+    out.append(("H-eG_d is optimal or near-optimal on all metrics (rank <= 2 of 6 on E_ss, MP_q, E_1st)",
+                _verdict(ok), "; ".join(ev)))
+    # 2 H-eG_d best E_ss in complex scenes
+    ev, ok = [], []
+    for s in complex_:
+        m = means(idx[s], "E_ss")
+        ok.append(rank(idx[s], "E_ss", "H-eG_d") == 1)
+        ev.append(f"{s}: mean E_ss {_fmt(m)}")
+    out.append(("H-eG_d has the best E_ss in the complex scenes", _verdict(ok), "; ".join(ev)))
+    # 3 H-eG_b fewest MP_q
+    ev, ok = [], []
+    for s in main:
+        m = means(idx[s], "MP_q")
+        ok.append(rank(idx[s], "MP_q", "H-eG_b") == 1)
+        ev.append(f"{s}: mean MP_q {_fmt(m)}")
+    out.append(("H-eG_b needs the fewest motion-planner queries MP_q", _verdict(ok), "; ".join(ev)))
+    # 4 depth far better than breadth on E_1st (depth <= half of breadth)
+    ev, ok = [], []
+    for s in main:
+        m = means(idx[s], "E_1st")
+        parts = []
+        for p in ("LRND", "H-LRND", "H-eG"):
+            b, d = m.get(p + "_b"), m.get(p + "_d")
+            if b and d:
+                ok.append(d <= 0.5 * b)
+                parts.append(f"{p} {b:.0f} -> {d:.0f}")
+        ev.append(f"{s}: E_1st breadth -> depth " + ", ".join(parts))
+    out.append(("Depth search is far better than breadth on E_1st (depth <= half of breadth, per policy)",
+                _verdict(ok), "; ".join(ev)))
+    # 5 higher alpha and lower gamma better (E_ss and E_1st, all algorithms pooled)
+    ev, ok = [], []
+    for s in main:
+        for metric in ("E_ss", "E_1st"):
+            key = RANK_METRICS[metric]
+            by_a = {a: statistics.fmean(st[key] for (_, aa, _), st in idx[s].items() if aa == a)
+                    for a in sorted({k[1] for k in idx[s]})}
+            by_g = {g: statistics.fmean(st[key] for (_, _, gg), st in idx[s].items() if gg == g)
+                    for g in sorted({k[2] for k in idx[s]})}
+            a_ok = by_a[max(by_a)] < by_a[min(by_a)]
+            g_ok = by_g[min(by_g)] < by_g[max(by_g)]
+            ok.append(a_ok and g_ok)
+            ev.append(f"{s} {metric}: by alpha " + ", ".join(f"{a:g}: {v:.0f}" for a, v in by_a.items())
+                      + "; by gamma " + ", ".join(f"{g:g}: {v:.0f}" for g, v in by_g.items()))
+    out.append(("Higher alpha and lower gamma are better (mean E_ss and E_1st over algorithms)", _verdict(ok),
+                "; ".join(ev)))
+    # 6 random scenes agree: H-eG_d rank on E_1st and E_ss, H-eG_b on MP_q, depth < breadth on E_1st
+    if random:
+        pooled: dict = {}
+        for s in random:
+            for k, st in idx.get(s, {}).items():
+                pooled.setdefault(k, []).append(st)
+        cells = {k: {m: statistics.fmean(x[m] for x in v) for m in ("E_ss", "MP_q", "E_1st_pen")}
+                 for k, v in pooled.items()}
+        if cells:
+            r1 = {m: rank(cells, m, "H-eG_d") for m in RANK_METRICS}
+            r3 = rank(cells, "MP_q", "H-eG_b")
+            m1 = means(cells, "E_1st")
+            depth_better = all(m1[p + "_d"] < m1[p + "_b"] for p in ("LRND", "H-LRND", "H-eG"))
+            ok = [all(r <= 2 for r in r1.values()), r3 == 1, depth_better]
+            out.append(("The random 5-obstacle scenes agree (H-eG_d rank <= 2 on all metrics; H-eG_b fewest MP_q; "
+                        "depth better than breadth on E_1st)", _verdict(ok),
+                        f"{len(random)} scenes: H-eG_d ranks {r1}; H-eG_b MP_q rank {r3}; E_1st {_fmt(m1)}"))
+    return out
+
+
+def _verdict(ok: list[bool]) -> str:
+    if ok and all(ok):
+        return "reproduced"
+    if any(ok):
+        return f"partly ({sum(ok)}/{len(ok)})"
+    return "not reproduced"

@@ -1,0 +1,143 @@
+"""Figures like the paper's Figs. 3-10 (matplotlib, Agg backend), written as PNG into docs/figures/."""
+from __future__ import annotations
+
+import statistics
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from .tables import algorithms_order, grid_of  # noqa: E402
+
+COLORS = dict(zip(algorithms_order(), ["#bbbbbb", "#777777", "#9ecae1", "#3182bd", "#fdae6b", "#e6550d"]))
+
+
+def qsum_curves(records: list[dict], scenario: str, alpha: float, gamma: float, path: Path) -> Path:
+    """Fig. 4-like: normalised Q_sum (Eq. 15) per episode, mean over the runs, one line per algorithm."""
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    for rec in records:
+        if rec["scenario"] == scenario and rec["alpha"] == alpha and rec["gamma"] == gamma:
+            xs, ys = zip(*rec["curve"])
+            ax.plot(xs, ys, label=rec["algorithm"], color=COLORS[rec["algorithm"]])
+    ax.set_xscale("log")
+    ax.set_xlabel("episode")
+    ax.set_ylabel("Q_sum / max Q_sum (mean of runs)")
+    ax.set_title(f"{scenario}: normalised sum of values, alpha={alpha:g} gamma={gamma:g}")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def bars(cells: dict, scenario: str, path: Path) -> Path:
+    """Figs. 5-7-like: E_ss, MP_q, E_1st per (alpha, gamma), one bar per algorithm."""
+    grid = grid_of(cells)
+    algs = [a for a in algorithms_order() if any(k[0] == a for k in cells)]
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    w = 0.8 / max(1, len(algs))
+    for ax, metric in zip(axes, ("E_ss", "MP_q", "E_1st")):
+        for k, alg in enumerate(algs):
+            ys = [(cells.get((alg, a, g)) or {}).get(metric) or 0 for a, g in grid]
+            ax.bar([i + (k - len(algs) / 2 + 0.5) * w for i in range(len(grid))], ys, w, label=alg,
+                   color=COLORS[alg])
+        ax.set_ylabel(metric)
+        ax.set_yscale("log")
+    axes[-1].set_xticks(range(len(grid)), [f"a={a:g}\ng={g:g}" for a, g in grid], fontsize=8)
+    axes[0].legend(ncol=6, fontsize=7)
+    axes[0].set_title(f"{scenario}: means over the runs per (alpha, gamma)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def breadth_depth(idx: dict, scenarios: list[str], path: Path) -> Path:
+    """Fig. 8-9-like: breadth vs depth per policy (means over the grid) for E_1st and E_ss."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    pols = ["LRND", "H-LRND", "H-eG"]
+    for ax, metric in zip(axes, ("E_1st", "E_ss")):
+        labels, bvals, dvals = [], [], []
+        for s in scenarios:
+            for p in pols:
+                def m(alg):
+                    v = [st[metric] for (al, _, _), st in idx.get(s, {}).items() if al == alg and st[metric] is not None]
+                    return statistics.fmean(v) if v else 0
+                labels.append(f"{s.split('_')[0][-1] if s.startswith('scenario') else s}\n{p}")
+                bvals.append(m(p + "_b"))
+                dvals.append(m(p + "_d"))
+        xs = range(len(labels))
+        ax.bar([x - 0.2 for x in xs], bvals, 0.4, label="breadth", color="#9ecae1")
+        ax.bar([x + 0.2 for x in xs], dvals, 0.4, label="depth", color="#e6550d")
+        ax.set_xticks(list(xs), labels, fontsize=7)
+        ax.set_yscale("log")
+        ax.set_title(f"{metric}: breadth vs depth (scenario / policy)")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def e1st_spread(records: list[dict], scenarios: list[str], path: Path) -> Path:
+    """Fig. 10-like: min / mean / max of E_1st over the runs, per algorithm (all (alpha, gamma) pooled)."""
+    fig, axes = plt.subplots(1, len(scenarios), figsize=(4 * len(scenarios), 3.6), squeeze=False)
+    for ax, s in zip(axes[0], scenarios):
+        for k, alg in enumerate(algorithms_order()):
+            e1 = [r["E_1st"] for rec in records if rec["scenario"] == s and rec["algorithm"] == alg
+                  for r in rec["runs_data"] if r["E_1st"] is not None]
+            if not e1:
+                continue
+            mean = statistics.fmean(e1)
+            ax.errorbar([k], [mean], yerr=[[mean - min(e1)], [max(e1) - mean]], fmt="o", capsize=4,
+                        color=COLORS[alg])
+        ax.set_xticks(range(6), algorithms_order(), rotation=45, fontsize=7)
+        ax.set_yscale("log")
+        ax.set_title(f"{s}: E_1st min/mean/max", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def tree_figure(tree, path: Path, title: str) -> Path:
+    """Fig. 3-like drawing of a trained Q-Tree: nodes by depth, edges labelled object and Q; unfeasible red
+    dashed, target green, the best sequence bold."""
+    from qtree_task_planner.feasibility import Label
+
+    best = {(n.id, a) for n, a in (tree.best_path() or [])}
+    by_depth: dict[int, list] = {}
+    for n in tree.nodes:
+        by_depth.setdefault(len(n.seq), []).append(n)
+    pos = {}
+    for d, ns in by_depth.items():
+        for i, n in enumerate(ns):
+            pos[n.id] = ((i + 1) / (len(ns) + 1), -d)
+    fig, ax = plt.subplots(figsize=(max(8, 0.5 * max(len(v) for v in by_depth.values())), 2 + 1.6 * len(by_depth)))
+    for n in tree.nodes:
+        x0, y0 = pos[n.id]
+        for a, label in n.label.items():
+            q = n.q.get(a, n.q_pruned.get(a, 0.0))
+            bold = (n.id, a) in best
+            if label == Label.OBSTACLE:
+                x1, y1 = pos[n.child[a].id]
+                color, ls = "black", "-"
+            else:
+                x1, y1 = x0 + 0.02 * (a - tree.n_objects / 2), y0 - 0.45
+                color, ls = ("green", "-") if label == Label.TARGET else ("red", "--")
+                ax.plot([x1], [y1], "o", color=color, ms=3)
+            ax.plot([x0, x1], [y0, y1], ls, color=color, lw=2.5 if bold else 0.6, alpha=1 if bold else 0.6)
+            if bold or label != Label.UNFEASIBLE and len(tree.nodes) < 40:
+                ax.text((x0 + x1) / 2, (y0 + y1) / 2, f"{tree.ids[a]}\n{q:.1f}", fontsize=6, ha="center")
+    for n in tree.nodes:
+        x, y = pos[n.id]
+        ax.plot([x], [y], "o", color="#3182bd", ms=5)
+    ax.text(pos[0][0], 0.15, "s_H", ha="center", fontsize=8)
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
