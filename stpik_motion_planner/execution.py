@@ -93,21 +93,23 @@ class TrajectoryFollower:
         if err > self.p.max_error:
             self.reason = f"tracking error {err:.3f} rad > max_error {self.p.max_error} rad at tau={self.tau:.2f} s"
             return self.FAILED
-        if self.tau >= self.duration:
-            if err <= self.p.settle_tol:
-                return self.SETTLED
-            self.after_end += dt
-            if self.after_end > self.p.settle_timeout:
-                self.reason = (f"did not settle within {self.p.settle_timeout} s: error {err:.4f} rad "
-                               f"> settle_tol {self.p.settle_tol} rad")
-                return self.FAILED
-        else:
+        if self.tau < self.duration:
             self.rate = min(1.0, max(0.0, (2.0 * self.p.lag_tol - err) / self.p.lag_tol))
             self.tau = min(self.tau + self.rate * dt, self.duration)
-            self.waited = 0.0 if self.rate > 0.0 else self.waited + dt
+            self.waited = 0.0 if self.rate >= 0.1 else self.waited + dt
             if self.waited > self.p.stall_timeout:
                 self.reason = (f"stalled at tau={self.tau:.2f} s: error {err:.3f} rad > 2 lag_tol for "
                                f"{self.p.stall_timeout} s (is the arm blocked?)")
+                return self.FAILED
+        else:
+            self.after_end += dt
+        if self.tau >= self.duration:
+            err = self._error(q)
+            if err <= self.p.settle_tol:
+                return self.SETTLED
+            if self.after_end > self.p.settle_timeout:
+                self.reason = (f"did not settle within {self.p.settle_timeout} s: error {err:.4f} rad "
+                               f"> settle_tol {self.p.settle_tol} rad")
                 return self.FAILED
         return self.RUNNING
 

@@ -169,6 +169,8 @@ class MotionPlannerNode(Node):
     def _on_feasibility(self, req, res):
         res.ok = False
         try:
+            if not math.isfinite(req.timeout):
+                raise ValueError(f"timeout must be a finite number of seconds (<= 0: the default), got {req.timeout}")
             timeout = float(req.timeout) if req.timeout > 0 else None
             with self._plan_lock:
                 ans = self.planner.feasibility(req.object_id, list(req.removed_ids), timeout)

@@ -1,0 +1,116 @@
+"""Executing planned motions (ROS-free): the time-scaled follower, and pick-carry-release in the MuJoCo Jaco2."""
+import mujoco
+import numpy as np
+import pytest
+
+from jaco2_sim_driver.sim import Jaco2Sim
+from stpik_motion_planner import robot_description as rd
+from stpik_motion_planner.execution import FollowerParams, TrajectoryFollower
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
+from stpik_motion_planner.trajectory import Trajectory
+
+DT = 0.01
+
+
+def _line(duration=1.0, speed=0.5):
+    t = np.arange(0, duration + 1e-9, DT)
+    v = np.zeros((len(t), 7))
+    v[:-1, 1] = speed
+    pos = rd.Q_HOME + np.outer(t, [0, speed, 0, 0, 0, 0, 0])
+    return Trajectory(t, pos, v)
+
+
+def test_follower_on_track_sends_the_planned_velocity_and_settles():
+    traj = _line()
+    f = TrajectoryFollower(traj)
+    for k in range(len(traj) - 1):  # the arm is exactly on the path at each tick
+        q = traj.positions[k].copy()
+        assert f.update(q, DT if k else 0.0) == f.RUNNING
+        np.testing.assert_allclose(f.command(q), traj.velocities[k], atol=1e-9)  # pure feed-forward
+    assert f.update(traj.positions[-1], DT) == f.SETTLED
+
+
+def test_follower_waits_for_a_lagging_arm_instead_of_cutting_corners():
+    traj = _line(speed=0.8)
+    p = FollowerParams()
+    f = TrajectoryFollower(traj, params=p)
+    q = traj.positions[0].copy()
+    for _ in range(30):  # the arm does not move for 0.3 s (late driver)
+        f.update(q, DT)
+    assert p.lag_tol / 0.8 < f.tau <= 2 * p.lag_tol / 0.8  # the reference stopped about 2 lag_tol ahead
+    assert f.rate < 0.1  # ... and the feed-forward with it: the command is (almost) the correction alone
+    assert f.command(q)[1] == pytest.approx(p.k_track * 0.8 * f.tau, abs=0.1 * 0.8)
+    # then the arm follows the commands exactly: it catches up and the motion completes
+    for _ in range(1000):
+        status = f.update(q, DT)
+        if status != f.RUNNING:
+            break
+        q = q + f.command(q) * DT
+    assert status == f.SETTLED
+    np.testing.assert_allclose(q, traj.positions[-1], atol=p.settle_tol)
+
+
+def test_follower_reports_a_blocked_arm_and_a_bad_start():
+    traj = _line(speed=0.8)
+    f = TrajectoryFollower(traj, params=FollowerParams(stall_timeout=0.5))
+    q = traj.positions[0].copy()
+    statuses = [f.update(q, DT) for _ in range(100)]
+    assert statuses[-1] == f.FAILED and "stalled" in f.reason
+    far = traj.positions[0] + 0.5
+    g = TrajectoryFollower(traj)
+    assert g.update(far, DT) == g.FAILED and "max_error" in g.reason
+    with pytest.raises(ValueError, match="finite"):
+        g.command(np.full(7, np.nan))
+    with pytest.raises(ValueError, match="empty"):
+        TrajectoryFollower(Trajectory.empty())
+    with pytest.raises(ValueError, match="positive"):
+        FollowerParams(k_track=float("nan"))
+
+
+def _follow(sim, traj):
+    f = TrajectoryFollower(traj)
+    while (status := f.update(sim.q, DT)) == f.RUNNING:
+        sim.set_velocity(f.command(sim.q))
+        sim.step(10)
+    sim.stop()
+    sim.step(20)
+    assert status == f.SETTLED, f.reason
+
+
+def _upright(sim, oid) -> float:
+    p = {p.id: p for p in sim.object_poses()}[oid]
+    m = np.zeros(9)
+    mujoco.mju_quat2Mat(m, np.array(p.quat_wxyz))
+    return m[8]
+
+
+@pytest.mark.slow
+def test_planned_relocations_move_bottles_to_their_slots_in_mujoco():
+    """What the motion_planner node does, without ROS: pick, close, carry, open, retreat, home, twice."""
+    scenario = load_scenario(DEFAULT_SCENARIO)
+    planner, sim = MotionPlanner(scenario, PlannerParams.load()), Jaco2Sim(scenario)
+    start = {p.id: np.array(p.position) for p in sim.object_poses()}
+    removed = []
+    for oid in ("o2", "o3"):  # front row: feasible at once, and o3 after o2
+        placed = [(r, scenario.slot(k)) for k, r in enumerate(removed)]
+        (pick,) = planner.plan_pick(oid, removed)
+        _follow(sim, pick.trajectory)
+        assert sim.gripper_close() == oid
+        sim.step(200)
+        carry, retreat = planner.plan_carry(oid, removed, len(removed), q_start=sim.q, placed=placed)
+        _follow(sim, carry.trajectory)
+        assert sim.gripper_open() == oid
+        sim.step(300)
+        _follow(sim, retreat.trajectory)
+        slot = scenario.slot(len(removed))
+        _follow(sim, planner.plan_home(sim.q, removed + [oid], placed + [(oid, slot)]))
+        sim.step(500)
+        removed.append(oid)
+        pos = {p.id: np.array(p.position) for p in sim.object_poses()}
+        np.testing.assert_allclose(pos[oid], (slot[0], slot[1], scenario.shelf.bottom_z), atol=0.01)
+        assert _upright(sim, oid) > 0.995
+        for other in scenario.ids:  # nothing else was disturbed
+            if other not in removed:
+                assert np.linalg.norm(pos[other] - start[other]) < 0.005, other
+    np.testing.assert_allclose(sim.q, rd.Q_HOME, atol=0.01)

@@ -1,0 +1,165 @@
+"""motion_planner node as a real process with the MuJoCo driver over DDS: feasibility service, relocation action."""
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from ros_procs import REPO, RosGraph
+
+pytestmark = pytest.mark.graph
+
+rclpy = pytest.importorskip("rclpy")
+from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
+from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
+from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
+from rclpy.action import ActionClient  # noqa: E402
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from qtree_task_planner.feasibility import Label  # noqa: E402
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
+from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
+
+SRV = "/motion_planner/plan_feasibility"
+LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+SCENARIO = load_scenario(DEFAULT_SCENARIO)
+
+
+@pytest.fixture(scope="module")
+def graph(tmp_path_factory):
+    g = RosGraph(tmp_path_factory.mktemp("motion_planner"))
+    try:
+        g.driver = g.start("jaco2_sim_driver.driver_node", params_file=REPO / "config" / "jaco2_sim_driver.yaml",
+                           params={"camera_rate": 0.0})
+        g.planner = g.start("stpik_motion_planner.motion_planner_node",
+                            params_file=REPO / "config" / "motion_planner.yaml", params={"scene_topic": "/sim/objects"})
+        g.objects = g.probe.collect("/sim/objects", ObjectArray, LATCHED)
+        g.states = g.probe.collect("/j2s7s300_driver/out/joint_state", JointState, 50)
+        g.action = ActionClient(g.probe.node, RelocateObject, "/motion_planner/relocate")
+        deadline = time.monotonic() + 60
+        while not g.action.wait_for_server(timeout_sec=0.5):
+            assert g.planner.alive and g.driver.alive, g.planner.log()[-2000:] + g.driver.log()[-2000:]
+            assert time.monotonic() < deadline, "relocate action never appeared"
+        g.objects.wait(timeout=30)
+        g.states.wait(timeout=30)
+        yield g
+    finally:
+        g.close()
+
+
+def _ask(g, object_id, removed=(), timeout=0.0):
+    return g.probe.call(PlanFeasibility, SRV, PlanFeasibility.Request(object_id=object_id, removed_ids=list(removed),
+                                                                       timeout=timeout), timeout=30)
+
+
+def _positions(g) -> dict[str, np.ndarray]:
+    g.objects.clear()
+    msg = g.objects.wait(timeout=5)[-1]
+    return {o.id: np.array([o.pose.position.x, o.pose.position.y, o.pose.position.z]) for o in msg.objects}
+
+
+def _send(g, object_id, removed=()):
+    """Send a goal; returns (handle or None if rejected, feedback list)."""
+    feedback = []
+    fut = g.action.send_goal_async(RelocateObject.Goal(object_id=object_id, removed_ids=list(removed)),
+                                   feedback_callback=lambda f: feedback.append(f.feedback))
+    done = threading.Event()
+    fut.add_done_callback(lambda _: done.set())
+    assert done.wait(30), "goal response never came"
+    handle = fut.result()
+    return (handle if handle.accepted else None), feedback
+
+
+def _result(handle, timeout=120.0):
+    fut = handle.get_result_async()
+    done = threading.Event()
+    fut.add_done_callback(lambda _: done.set())
+    assert done.wait(timeout), "no result"
+    return fut.result()
+
+
+def test_feasibility_service_answers_as_the_core(graph):
+    core = MotionPlanner(SCENARIO, PlannerParams.load())
+    for object_id, removed in [("o2", ()), ("T", ()), ("o6", ("o2", "o3")), ("o6", ("o2",))]:
+        res = _ask(graph, object_id, removed)
+        ans = core.feasibility(object_id, frozenset(removed))
+        assert res.ok and Label(res.label) == ans.label, (object_id, removed, res.message, ans.message)
+        if ans.label != Label.UNFEASIBLE:
+            pts = res.trajectory.points
+            assert len(pts) > 10 and list(res.trajectory.joint_names)[0] == "j2s7s300_joint_1"
+            dt = pts[1].time_from_start.nanosec * 1e-9 + pts[1].time_from_start.sec
+            assert dt == pytest.approx(0.01, abs=1e-6)  # 100 Hz, ready to stream
+        else:
+            assert not res.trajectory.points
+
+
+@pytest.mark.parametrize("object_id, removed, timeout, fragment", [
+    ("ghost", (), 0.0, "unknown object id 'ghost'"),
+    ("o2", ("o2",), 0.0, "is in the removed set"),
+    ("o2", ("nobody",), 0.0, "nobody"),
+    ("", (), 0.0, "unknown object id"),
+    ("o2", (), math.nan, "timeout"),
+])
+def test_bad_feasibility_requests_are_refused_and_the_node_keeps_serving(graph, object_id, removed, timeout,
+                                                                          fragment):
+    res = _ask(graph, object_id, removed, timeout)
+    assert not res.ok and fragment in res.message, res.message
+    assert _ask(graph, "o2").ok and graph.planner.alive
+
+
+def test_relocation_moves_the_bottle_to_its_slot_and_leaves_the_others(graph):
+    before = _positions(graph)
+    handle, feedback = _send(graph, "o2")
+    assert handle is not None
+    res = _result(handle)
+    assert res.result.success, res.result.message
+    phases = [f.phase for f in feedback]
+    order = ["plan_pick", "approach", "grasp", "plan_carry", "carry", "release", "retreat", "plan_home", "home"]
+    seen = [p for p in dict.fromkeys(phases) if p in order]
+    assert seen == order, phases
+    progress = [f.progress for f in feedback]
+    assert progress == sorted(progress) and progress[-1] == pytest.approx(1.0)
+    time.sleep(0.5)
+    after = _positions(graph)
+    slot = SCENARIO.slot(0)
+    np.testing.assert_allclose(after["o2"], (slot[0], slot[1], SCENARIO.shelf.bottom_z), atol=0.01)
+    for oid in SCENARIO.ids:
+        if oid != "o2":
+            assert np.linalg.norm(after[oid] - before[oid]) < 0.01, oid
+    # bad goals are rejected, the node keeps serving
+    assert _send(graph, "ghost")[0] is None
+    assert _send(graph, "o3", ["o3"])[0] is None
+    assert _ask(graph, "o3", ["o2"]).ok
+
+
+def _joint_speed(g) -> float:
+    g.states.clear()
+    msgs = g.states.wait(lambda m: len(m) >= 5, timeout=5)
+    return max(float(np.max(np.abs(m.velocity[:7]))) for m in msgs[-3:])
+
+
+def test_cancel_stops_the_arm_and_a_dead_driver_aborts_the_relocation(graph):
+    handle, feedback = _send(graph, "o3", ["o2"])
+    deadline = time.monotonic() + 60
+    while not any(f.phase == "approach" and f.progress > 0.2 for f in feedback):
+        assert time.monotonic() < deadline, [f.phase for f in feedback]
+        time.sleep(0.02)
+    assert _joint_speed(graph) > 0.05  # moving
+    handle.cancel_goal_async()
+    res = _result(handle, 10)
+    assert res.status == 5 and "cancelled" in res.result.message  # GoalStatus.STATUS_CANCELED
+    time.sleep(0.2)
+    assert _joint_speed(graph) < 0.01
+    # again, from where the arm stopped (the node plans the way home first); kill the driver on the way
+    handle, feedback = _send(graph, "o3", ["o2"])
+    while not any(f.phase in ("home", "approach") for f in feedback):
+        assert time.monotonic() < deadline + 60
+        time.sleep(0.02)
+    graph.driver.stop(timeout=5)
+    t0 = time.monotonic()
+    res = _result(handle, 10)
+    assert res.status == 6 and "no joint state" in res.result.message, res.result.message  # ABORTED
+    assert time.monotonic() - t0 < 5.0
+    assert _ask(graph, "o3", ["o2"]).ok and graph.planner.alive
