@@ -50,6 +50,13 @@ class Jaco2SimDriver(Node):
         for k, v in p.items():
             self.declare_parameter(k, v)
         g = lambda k: self.get_parameter(k).value  # noqa: E731
+        for k, lo in (("joint_state_rate", 0.0), ("objects_rate", 0.0), ("watchdog_timeout", 0.0),
+                      ("camera_width", 0), ("camera_height", 0), ("camera_fovy", 0.0)):
+            if not g(k) > lo:  # also NaN
+                raise ValueError(f"parameter {k} must be > {lo}, got {g(k)!r}")
+        if not (g("camera_rate") >= 0 and g("camera_fovy") < 180):
+            raise ValueError(f"camera_rate must be >= 0 and camera_fovy < 180, got {g('camera_rate')!r}, "
+                             f"{g('camera_fovy')!r}")
         self.rtf = float(g("real_time_factor"))
         self.js_period = 1.0 / float(g("joint_state_rate"))
         self.obj_period = 1.0 / float(g("objects_rate"))
@@ -288,10 +295,25 @@ def resolve_path(path: str) -> Path:
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
+    import sys
+
+    from rclpy.exceptions import ParameterException
+
+    from qtree_task_planner.params import ParameterError, check_params_files
+    from stpik_motion_planner.scenario import ScenarioError
+    try:  # bad parameters or scenario: one line on stderr, exit status 2 (issue 8)
+        check_params_files(sys.argv if args is None else args)
+        rclpy.init(args=args)
+    except ParameterError as e:
+        print(f"jaco2_sim_driver: {e}", file=sys.stderr)
+        return 2
     node = None
     try:
-        node = Jaco2SimDriver()
+        try:
+            node = Jaco2SimDriver()
+        except (ScenarioError, ParameterException, ValueError) as e:
+            print(f"jaco2_sim_driver: {type(e).__name__}: {e}", file=sys.stderr)
+            return 2
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()

@@ -67,6 +67,9 @@ class PerceptionNode(Node):
         d("inlier_tol", 0.004)
         g = lambda n: self.get_parameter(n).value  # noqa: E731
         self.p = g
+        for k in ("process_rate", "republish_period", "sync_slop", "max_scene_age"):
+            if not g(k) > 0:  # also NaN
+                raise ValueError(f"parameter {k} must be > 0, got {g(k)!r}")
         self.scenario = load_scenario(scenario_path(g("scenario")))
         self.perception = Perception(
             self.scenario,
@@ -189,7 +192,19 @@ class PerceptionNode(Node):
 
 
 def main(args=None) -> None:
-    run_node(PerceptionNode, args)
+    """Bad parameters or scenario: one line on stderr, exit status 2 (issue 8)."""
+    import sys
+
+    from rclpy.exceptions import ParameterException
+
+    from qtree_task_planner.params import ParameterError, check_params_files
+    from stpik_motion_planner.scenario import ScenarioError
+    try:
+        check_params_files(sys.argv if args is None else args)
+        run_node(PerceptionNode, args)
+    except (ParameterError, ScenarioError, ParameterException, ValueError) as e:
+        print(f"perception: {type(e).__name__}: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 if __name__ == "__main__":

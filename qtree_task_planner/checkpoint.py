@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import random
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -68,6 +69,15 @@ class Checkpoint:
     feasibility: list = field(default_factory=list)  # [[object_id, [removed ids], label], ...]
     elapsed_s: float = 0.0
     reason: str = "periodic"  # periodic | final | cancelled | interrupted: <why>
+
+    @classmethod
+    def initial(cls, problem: RelocationProblem, params: TrainingParams, cache: CachedOracle | None = None,
+                reason: str = "initial") -> "Checkpoint":
+        """The state before the first episode (empty tree s_H, RNG seeded), with the answers already in `cache`:
+        resuming from it is the same as starting the training."""
+        return cls(params, problem_hash(problem), 0, [], 0.0, 0, None, random.Random(params.seed).getstate(),
+                   params.epsilon0, 0, False, False, {"nodes": [{"seq": [], "edges": []}], "mp_q": 0, "q_sum": 0.0},
+                   cls.table_of(cache) if cache is not None else [], 0.0, reason)
 
     # -- matching ------------------------------------------------------------------------------------
     def check_matches(self, problem: RelocationProblem, params: TrainingParams, source: str = "checkpoint") -> None:

@@ -16,6 +16,10 @@ DEFAULT_PARAMS_FILE = Path(__file__).resolve().parent.parent / "config" / "task_
 NODE_NAME = "task_planner"
 POLICIES = ("lrnd", "h-lrnd", "h-eg")
 SEARCHES = ("breadth", "depth")
+# The task_planner node's own (non-training) parameters: they share config/task_planner.yaml and from_yaml skips
+# them; the node validates them (qtree_task_planner.task_planner_node).
+NODE_PARAMETERS = ("scene_topic", "scene_max_age", "feasibility_service", "relocate_action", "feasibility_timeout",
+                   "feasibility_margin", "planner_wait", "relocate_timeout", "checkpoint_path", "checkpoint_every")
 
 
 class ParameterError(ValueError):
@@ -108,6 +112,8 @@ class TrainingParams:
             raise ParameterError(f"{path}: {node}.ros__parameters must be a mapping")
         if ignore_unknown:
             section = {k: v for k, v in section.items() if k in cls.fields()}
+        elif node == NODE_NAME:
+            section = {k: v for k, v in section.items() if k not in NODE_PARAMETERS}
         try:
             return cls.from_dict(section)
         except ParameterError as e:
@@ -123,3 +129,23 @@ class TrainingParams:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+
+def check_params_files(argv) -> None:
+    """ParameterError (one line) for a `--params-file` in a ROS command line that is unreadable, not YAML, or not a
+    mapping of node sections. Called by the nodes' main() before rclpy.init, whose own error is a traceback."""
+    argv = list(argv)
+    for flag, path in zip(argv, argv[1:]):
+        if flag != "--params-file":
+            continue
+        try:
+            data = yaml.safe_load(Path(path).read_text())
+        except OSError as e:
+            raise ParameterError(f"{path}: cannot read parameters file ({e.strerror})") from None
+        except yaml.YAMLError as e:
+            mark = getattr(e, "problem_mark", None)
+            where = f" at line {mark.line + 1}" if mark is not None else ""
+            raise ParameterError(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
+        if not isinstance(data, Mapping) or not all(isinstance(v, Mapping) and "ros__parameters" in v
+                                                    for v in data.values()):
+            raise ParameterError(f"{path}: expected '<node>: ros__parameters: {{...}}' sections")

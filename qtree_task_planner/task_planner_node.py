@@ -6,18 +6,36 @@ relocates the learned sequence with the motion planner's RelocateObject action.
 
 Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local);
 publishes ~/markers (visualization_msgs/MarkerArray: the scene, the learned order).
+
+Reliability (docs/reliability.md):
+- Checkpoints: with `checkpoint_path` set, the Q-Tree and the training counters are written there atomically every
+  `checkpoint_every` episodes, when training stops, and when the planner is lost; a goal whose scene and
+  parameters match an existing checkpoint resumes from it; a corrupt or mismatched checkpoint aborts the goal
+  with the reason (never a silent restart from scratch).
+- Dead planner: a query unanswered within feasibility_timeout + feasibility_margin (or a service that vanished)
+  rolls the current episode back, keeps every answer, and waits up to `planner_wait` s for the service to come
+  back, then resumes; after that the goal aborts saying what to do.
+- Stale or empty scene: the goal aborts with the reason before training starts (scene_max_age, by receive time
+  and by header stamp).
+- Bad parameters at start: one line on stderr, exit status 2.
 """
 from __future__ import annotations
 
 import copy
+import dataclasses
+import math
+import sys
 import threading
 import time
+from pathlib import Path
 
 import rclpy
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
+from rclpy.exceptions import ParameterException
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.time import Time
 from visualization_msgs.msg import Marker, MarkerArray
 
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
@@ -27,8 +45,9 @@ from stpik_motion_planner.scenario import PALETTE, TARGET_RGB, ScenarioError
 from stpik_motion_planner.scene_msgs import msg_to_bottles
 
 from . import exact
+from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from .feasibility import CachedOracle, FeasibilityAnswer, Label
-from .params import ParameterError, TrainingParams
+from .params import ParameterError, TrainingParams, check_params_files
 from .problem import RelocationProblem
 from .spin import run_node
 from .training import train
@@ -40,25 +59,41 @@ class PlannerUnavailable(RuntimeError):
     """The feasibility service did not answer in time (planner dead or overloaded)."""
 
 
-class ServiceOracle:
-    """FeasibilityOracle over the PlanFeasibility service (blocking call from a worker thread)."""
+class PlannerGone(PlannerUnavailable):
+    """The planner stayed unavailable for longer than planner_wait: the goal is aborted."""
 
-    def __init__(self, client, timeout: float, wait: float) -> None:
-        self.client, self.timeout, self.wait = client, timeout, wait
+
+class ServiceOracle:
+    """FeasibilityOracle over the PlanFeasibility service (blocking call from a worker thread).
+
+    Raises PlannerUnavailable as soon as the service is missing (after `connect_wait` s), when it disappears from
+    the graph while a query is pending (a clean shutdown), or when no answer came within timeout + margin (a
+    killed or wedged planner). `last_ok` is the monotonic time of the last answer."""
+
+    def __init__(self, client, timeout: float, margin: float, connect_wait: float = 1.0) -> None:
+        self.client, self.timeout, self.margin, self.connect_wait = client, timeout, margin, connect_wait
+        self.last_ok = time.monotonic()
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
-        if not self.client.wait_for_service(timeout_sec=self.wait):
-            raise PlannerUnavailable(f"feasibility service {self.client.srv_name} not available "
-                                     f"after {self.wait:.1f} s: is the motion_planner node running?")
+        srv = self.client.srv_name
+        if not self.client.service_is_ready() and not self.client.wait_for_service(timeout_sec=self.connect_wait):
+            raise PlannerUnavailable(f"feasibility service {srv} is not available")
         req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout)
         done = threading.Event()
         fut = self.client.call_async(req)
         fut.add_done_callback(lambda _: done.set())
-        if not done.wait(self.timeout + self.wait):
-            self.client.remove_pending_request(fut)
-            raise PlannerUnavailable(f"no feasibility answer for {object_id!r} within "
-                                     f"{self.timeout + self.wait:.1f} s")
+        limit = self.timeout + self.margin
+        deadline = time.monotonic() + limit
+        while not done.wait(0.05):
+            gone = not self.client.service_is_ready()
+            if gone or time.monotonic() > deadline:
+                self.client.remove_pending_request(fut)
+                raise PlannerUnavailable(
+                    f"feasibility service {srv} went away while answering {object_id!r}" if gone else
+                    f"no feasibility answer for {object_id!r} within {limit:.1f} s "
+                    "(feasibility_timeout + feasibility_margin)")
         resp = fut.result()
+        self.last_ok = time.monotonic()
         if not resp.ok:
             raise ValueError(f"motion planner refused the query for {object_id!r}: {resp.message}")
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message)
@@ -76,10 +111,15 @@ class TaskPlannerNode(Node):
         self.declare_parameter("feasibility_service", "/motion_planner/plan_feasibility")
         self.declare_parameter("relocate_action", "/motion_planner/relocate")
         self.declare_parameter("feasibility_timeout", 5.0)  # s per query, passed to the planner
-        self.declare_parameter("planner_wait", 10.0)  # s to wait for a missing planner before giving up
+        self.declare_parameter("feasibility_margin", 2.0)  # s on top of it before the planner counts as lost
+        self.declare_parameter("planner_wait", 30.0)  # s to wait for a lost planner to come back before aborting
         self.declare_parameter("relocate_timeout", 180.0)  # s per relocation
+        self.declare_parameter("checkpoint_path", "")  # Q-Tree checkpoint file; "" = in memory only
+        self.declare_parameter("checkpoint_every", 50)  # episodes between checkpoints
+        self._check_parameters()
 
         self._scene: tuple[ObjectArray, float] | None = None
+        self._memory_ckpt: Checkpoint | None = None  # the last checkpoint, also when checkpoint_path is empty
         self._busy = threading.Lock()
         reentrant = ReentrantCallbackGroup()
         self._feas = self.create_client(PlanFeasibility, self.p("feasibility_service"),
@@ -96,18 +136,51 @@ class TaskPlannerNode(Node):
     def p(self, name: str):
         return self.get_parameter(name).value
 
+    def _check_parameters(self) -> None:
+        """ParameterError naming the first unusable parameter (main() prints it as one line and exits 2)."""
+        unknown = sorted(set(self._parameter_overrides) - set(self._parameters))
+        if unknown:
+            raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; known: "
+                                 f"{', '.join(sorted(self._parameters))}")
+        TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
+        for name, lo in (("scene_max_age", 0.0), ("feasibility_timeout", 1e-3), ("feasibility_margin", 0.0),
+                         ("planner_wait", 0.0), ("relocate_timeout", 1e-3)):
+            v = self.p(name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
+                raise ParameterError(f"{name} must be a finite number >= {lo:g}, got {v!r}")
+        every = self.p("checkpoint_every")
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
+        path = self.p("checkpoint_path")
+        if path and Path(path).is_dir():
+            raise ParameterError(f"checkpoint_path {path!r} is a directory: give a file name")
+
     # -- inputs ---------------------------------------------------------------------------------------------
     def _on_scene(self, msg: ObjectArray) -> None:
         self._scene = (msg, time.monotonic())
 
     def _problem(self) -> tuple[RelocationProblem, tuple]:
-        """The scene as a problem; raises ScenarioError when it is missing, stale, empty or invalid."""
+        """The scene as a problem; raises ScenarioError when it is missing, stale, empty or invalid.
+
+        Stale: received longer than scene_max_age ago, or (a stamped message) stamped longer ago than that, which
+        catches an old scene handed over by transient-local durability from a perception that stopped."""
+        topic, max_age = self.p("scene_topic"), self.p("scene_max_age")
         if self._scene is None:
-            raise ScenarioError(f"no scene received on {self.p('scene_topic')}: is perception (or the driver) up?")
+            raise ScenarioError(f"no scene received on {topic}: is perception (or the driver) up?")
         msg, t = self._scene
         age = time.monotonic() - t
-        if self.p("scene_max_age") > 0 and age > self.p("scene_max_age"):
-            raise ScenarioError(f"the scene is stale ({age:.1f} s old > scene_max_age)")
+        if max_age > 0 and age > max_age:
+            raise ScenarioError(f"the scene on {topic} is stale: received {age:.1f} s ago > scene_max_age "
+                                f"{max_age:g} s; is perception still running?")
+        stamp = Time.from_msg(msg.header.stamp)
+        if max_age > 0 and stamp.nanoseconds > 0:
+            stamp_age = (self.get_clock().now() - stamp).nanoseconds * 1e-9
+            if stamp_age > max_age:
+                raise ScenarioError(f"the scene on {topic} is stale: stamped {stamp_age:.1f} s ago > scene_max_age "
+                                    f"{max_age:g} s; is perception still running?")
+        if not msg.objects:
+            raise ScenarioError(f"the scene on {topic} is empty: perception sees no objects (camera, marker, "
+                                "lighting?)")
         bottles = msg_to_bottles(msg)
         obstacles = [b for b in bottles if not b.is_target]
         target = next(b.id for b in bottles if b.is_target)
@@ -124,10 +197,11 @@ class TaskPlannerNode(Node):
         return node.replace(**changes)
 
     def _on_goal(self, goal) -> GoalResponse:
+        """Bad training parameters: rejected here. The scene is checked when the goal starts (abort with the
+        reason in the result, which a rejection cannot carry)."""
         try:
             self._params(goal)
-            self._problem()
-        except (ParameterError, ScenarioError, ValueError) as e:
+        except (ParameterError, ValueError) as e:
             self.get_logger().error(f"training goal rejected: {e}")
             return GoalResponse.REJECT
         if self._busy.locked():
@@ -141,7 +215,8 @@ class TaskPlannerNode(Node):
             result = TrainPlanner.Result()
             try:
                 self._train_and_execute(goal_handle, result)
-            except (PlannerUnavailable, ParameterError, ScenarioError, ValueError, KeyError) as e:
+            except (PlannerUnavailable, CheckpointError, ParameterError, ScenarioError, ValueError, KeyError,
+                    OSError) as e:
                 result.success, result.message = False, str(e)
                 self.get_logger().error(f"training aborted: {e}")
             if goal_handle.is_cancel_requested:
@@ -152,29 +227,120 @@ class TaskPlannerNode(Node):
                 goal_handle.abort()
             return result
 
+    # -- checkpoints and a lost planner ---------------------------------------------------------------------
+    def _resume_point(self, problem, params, cache) -> Checkpoint | None:
+        """The checkpoint this goal resumes from: the file at checkpoint_path when it exists (CheckpointError if
+        it is corrupt or for another scene/params), else an unfinished in-memory one of the same goal."""
+        path = self.p("checkpoint_path")
+        if path and Path(path).exists():
+            ck = load_checkpoint(path)
+            ck.check_matches(problem, params, f"checkpoint {path}")
+        elif not path and self._memory_ckpt is not None and self._memory_ckpt.reason.startswith("interrupted"):
+            ck = self._memory_ckpt
+            try:
+                ck.check_matches(problem, params)
+            except CheckpointError:
+                return None
+        else:
+            return None
+        ck.fill_cache(cache)
+        self.get_logger().info(f"resuming from checkpoint {path or '(in memory)'}: episode {ck.episode}, "
+                               f"{len(ck.tree['nodes'])} tree nodes, {len(ck.feasibility)} feasibility answers")
+        return ck
+
+    def _keep(self, ck: Checkpoint) -> None:
+        self._memory_ckpt = ck
+        path = self.p("checkpoint_path")
+        if path:
+            try:
+                save_checkpoint(ck, path)
+            except OSError as e:  # training goes on; the in-memory copy still holds it
+                self.get_logger().error(f"cannot write checkpoint {path}: {e}", throttle_duration_sec=10.0)
+
+    def _kept_where(self) -> str:
+        ck, path = self._memory_ckpt, self.p("checkpoint_path")
+        at = f" at episode {ck.episode}" if ck is not None else ""
+        if path:
+            return f"checkpoint {path}{at}"
+        return f"in memory{at} only (set checkpoint_path to keep it across restarts)"
+
+    def _until_planner(self, fn, goal_handle, oracle: ServiceOracle, fb):
+        """fn() again and again while the planner is unavailable, waiting up to planner_wait s for it."""
+        wait, outage_since = self.p("planner_wait"), None
+        srv = self._feas.srv_name
+        while True:
+            try:
+                return fn()
+            except PlannerGone:
+                raise
+            except PlannerUnavailable as e:
+                if outage_since is None or oracle.last_ok > outage_since:
+                    outage_since = time.monotonic()
+                self.get_logger().warning(f"motion planner lost: {e}; learned so far kept ({self._kept_where()}); "
+                                          f"waiting up to {wait:g} s for {srv}")
+                phase, fb.phase = fb.phase, "waiting for planner"
+                goal_handle.publish_feedback(fb)
+                while not self._feas.wait_for_service(timeout_sec=0.2):
+                    if goal_handle.is_cancel_requested or not rclpy.ok():
+                        raise PlannerGone(f"cancelled while waiting for the motion planner; learned so far kept "
+                                          f"({self._kept_where()})") from None
+                    if time.monotonic() - outage_since > wait:
+                        raise PlannerGone(
+                            f"motion planner unavailable for {wait:g} s (planner_wait): {e}. What was learned is kept "
+                            f"({self._kept_where()}). Start (or restart) the motion_planner node (service {srv}) and "
+                            "send the same goal again to resume.") from None
+                if time.monotonic() - outage_since > wait:  # it is there but does not answer (wedged)
+                    raise PlannerGone(f"motion planner not answering for {wait:g} s (planner_wait): {e}. What was "
+                                      f"learned is kept ({self._kept_where()}). Start (or restart) the "
+                                      f"motion_planner node (service {srv}) and send the same goal again to "
+                                      "resume.") from None
+                fb.phase = phase
+                self.get_logger().info(f"motion planner {srv} is back: resuming")
+
     def _train_and_execute(self, goal_handle, result) -> None:
         params = self._params(goal_handle.request)
         problem, scene = self._problem()
         self._publish_scene(scene, ())
-        oracle = CachedOracle(ServiceOracle(self._feas, self.p("feasibility_timeout"), self.p("planner_wait")))
-        optimum = exact.solve(problem, oracle)
+        service = ServiceOracle(self._feas, self.p("feasibility_timeout"), self.p("feasibility_margin"))
+        oracle = CachedOracle(service)
+        state = {"ck": self._resume_point(problem, params, oracle)}
+        self._memory_ckpt = state["ck"]
+        fb = TrainPlanner.Feedback(phase="training")
+
+        def solve():
+            try:
+                return exact.solve(problem, oracle)
+            except PlannerUnavailable as e:  # keep the answers gathered so far
+                ck = state["ck"] or Checkpoint.initial(problem, params)
+                state["ck"] = dataclasses.replace(ck, feasibility=Checkpoint.table_of(oracle), reason=f"interrupted: {e}")
+                self._keep(state["ck"])
+                raise
+
+        optimum = self._until_planner(solve, goal_handle, service, fb)
         result.optimal_sequence = list(optimum.sequence or ())
         result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
         self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
                                f"({oracle.calls} planner calls)")
-        fb = TrainPlanner.Feedback(phase="training")
 
         def on_episode(stats) -> bool:
             fb.episode, fb.q_sum, fb.tree_nodes = stats.episode, stats.q_sum, stats.tree_nodes
-            fb.mp_queries, fb.planner_calls = stats.mp_q, oracle.calls
+            fb.mp_queries, fb.planner_calls = stats.mp_q, len(oracle.table)
             goal_handle.publish_feedback(fb)
             return rclpy.ok() and not goal_handle.is_cancel_requested
 
-        r = train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode)
+        def on_checkpoint(ck: Checkpoint) -> None:
+            state["ck"] = ck
+            self._keep(ck)
+
+        def run():
+            return train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode,
+                         resume=state["ck"], checkpoint_every=self.p("checkpoint_every"), on_checkpoint=on_checkpoint)
+
+        r = self._until_planner(run, goal_handle, service, fb)
         result.sequence = list(r.sequence or ())
         result.total_weight = float(r.total_weight if r.total_weight is not None else -1.0)
         result.e_ss, result.mp_q, result.e_first = r.e_ss, r.mp_q, r.e_1st if r.e_1st is not None else -1
-        result.planner_calls, result.episodes = oracle.calls, r.episodes
+        result.planner_calls, result.episodes = len(oracle.table), r.episodes
         result.q_sum_history = [float(x) for x in r.q_sum_history]
         if r.cancelled or not r.found:
             result.success = False
@@ -249,8 +415,17 @@ class TaskPlannerNode(Node):
         self._markers.publish(arr)
 
 
+STARTUP_ERRORS = (ParameterError, ParameterException, ScenarioError, CheckpointError)
+
+
 def main(args=None) -> None:
-    run_node(TaskPlannerNode, args)
+    """Run the node; unusable parameters: one line on stderr and exit status 2 (no traceback)."""
+    try:
+        check_params_files(sys.argv if args is None else args)
+        run_node(TaskPlannerNode, args)
+    except STARTUP_ERRORS as e:
+        print(f"task_planner: {type(e).__name__}: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 if __name__ == "__main__":

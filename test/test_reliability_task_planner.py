@@ -1,0 +1,352 @@
+"""Task planner reliability over real DDS (issue 8): a feasibility service that dies mid-training (the task planner
+notices, keeps what it learned, waits, resumes; or aborts saying what to do and a restarted task planner resumes
+from the checkpoint on disk), corrupt or mismatched checkpoints, stale or empty or bad scenes, bad goals.
+
+The motion planner is played by a fake PlanFeasibility service in its own process (this file run as a script:
+a BlockingOracle behind the service, optionally SIGKILLing itself when a given request arrives). Results are
+compared with the core's uninterrupted training with the same seed."""
+import argparse
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ros_procs import REPO, NodeProcess, RosGraph  # noqa: E402
+
+from qtree_task_planner import exact  # noqa: E402
+from qtree_task_planner.feasibility import BlockingOracle, CachedOracle  # noqa: E402
+from qtree_task_planner.params import TrainingParams  # noqa: E402
+from qtree_task_planner.training import train  # noqa: E402
+from stpik_motion_planner.scenario import load_scenario  # noqa: E402
+
+SCENARIO = REPO / "config" / "scenarios" / "blocking_10.yaml"
+PARAMS_FILE = REPO / "config" / "task_planner.yaml"
+MODULE = "qtree_task_planner.task_planner_node"
+SEED = 4
+SCENE_TOPIC = "/test/objects"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the fake motion planner (this file run as a script)
+def _serve(scenario: str, die_after: int) -> None:
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    from qtree_relocation_msgs.srv import PlanFeasibility
+
+    sc = load_scenario(scenario)
+    oracle = BlockingOracle(sc)
+    rclpy.init()
+    node = rclpy.create_node("fake_motion_planner")
+    answered = [0]
+
+    def feasibility(req, resp):
+        if 0 <= die_after <= answered[0]:
+            print(f"dying with request {req.object_id} unanswered", flush=True)
+            os.kill(os.getpid(), signal.SIGKILL)
+        answered[0] += 1
+        print(f"Q {req.object_id} {','.join(req.removed_ids)}", flush=True)
+        if req.object_id not in sc.ids:
+            resp.ok, resp.message = False, f"unknown object id {req.object_id!r}"
+            return resp
+        resp.ok, resp.label = True, int(oracle.feasibility(req.object_id, frozenset(req.removed_ids)).label)
+        return resp
+
+    node.create_service(PlanFeasibility, "/motion_planner/plan_feasibility", feasibility)
+    print("ready", flush=True)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenario", default=str(SCENARIO))
+    ap.add_argument("--die-after", type=int, default=-1)
+    a = ap.parse_args()
+    _serve(a.scenario, a.die_after)
+    raise SystemExit(0)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+pytestmark = pytest.mark.graph
+rclpy = pytest.importorskip("rclpy")
+from rclpy.action import ActionClient  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
+
+from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402
+from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
+from stpik_motion_planner.scene_msgs import bottles_to_msg  # noqa: E402
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+SC10 = load_scenario(SCENARIO)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """The core's uninterrupted run: exact optimum then training, one shared cache (as the node does)."""
+    params = TrainingParams.defaults().replace(seed=SEED)
+    cache = CachedOracle(BlockingOracle(SC10))
+    best = exact.solve(SC10, cache)
+    r = train(SC10, cache, params, optimal_weight=best.total_weight)
+    assert r.found and cache.calls > 300
+    return r, best, len(cache.table)
+
+
+class Env:
+    def __init__(self, g: RosGraph):
+        self.g, self.fakes = g, []
+        self.scene_pub = g.probe.publisher(ObjectArray, SCENE_TOPIC, LATCHED)
+        self.client = ActionClient(g.probe.node, TrainPlanner, "/task_planner/train")
+
+    def task_planner(self, **params):
+        base = {"scene_topic": SCENE_TOPIC, "feasibility_timeout": 1.0, "feasibility_margin": 0.5,
+                "checkpoint_every": 25}
+        return self.g.start(MODULE, params_file=PARAMS_FILE, params={**base, **params}, name="task_planner")
+
+    def fake(self, die_after=-1) -> NodeProcess:
+        log = self.g.tmp / f"fake_{len(self.fakes)}.log"
+        p = NodeProcess([self.g.python, __file__, "--die-after", str(die_after)], self.g.env, log)
+        self.g.procs.append(p)
+        self.fakes.append(p)
+        _wait(lambda: "ready" in p.log(), 30, "fake planner never ready", p)
+        return p
+
+    def scene(self, msg=None):
+        try:  # transient local reaches late joiners too; publishing after the match is just quicker to arrive
+            self.g.probe.wait_for_subscribers(self.scene_pub, 1, timeout=10.0)
+        except TimeoutError:
+            pass
+        self.scene_pub.publish(msg if msg is not None else bottles_to_msg(SC10.objects, SC10.shelf.top_z))
+
+    def goal(self, node: NodeProcess, timeout=120.0, **fields):
+        """Send a TrainPlanner goal; returns (result or None if rejected, feedback list)."""
+        _wait(lambda: self.client.wait_for_server(timeout_sec=0.2), 30, "train action never appeared", node)
+        goal = TrainPlanner.Goal(seed=SEED, execute=False)
+        for f in ("alpha", "gamma", "epsilon0", "epsilon_min", "beta"):
+            setattr(goal, f, -1.0)
+        goal.max_episodes = goal.max_steps = goal.quiet_episodes = -1
+        for k, v in fields.items():
+            setattr(goal, k, v)
+        feedback = []
+        handle = _result(self.client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
+                         30, node)
+        if not handle.accepted:
+            return None, feedback
+        return _result(handle.get_result_async(), timeout, node).result, feedback
+
+    def queries(self) -> list[str]:
+        return [ln for p in self.fakes for ln in p.log().splitlines() if ln.startswith("Q ")]
+
+
+def _wait(pred, timeout, what, proc=None):
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if proc is not None and not proc.alive() and not pred():
+            raise AssertionError(f"{what}: process exited {proc.popen.returncode}\n{proc.log()[-3000:]}")
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what} within {timeout} s" + (f"\n{proc.log()[-3000:]}" if proc else ""))
+        time.sleep(0.05)
+
+
+def _result(fut, timeout, proc):
+    done = threading.Event()
+    fut.add_done_callback(lambda _: done.set())
+    _wait(done.is_set, timeout, "no answer from the task planner", proc)
+    return fut.result()
+
+
+def _payload(path) -> dict:
+    try:
+        return json.loads(Path(path).read_text())["payload"]
+    except (OSError, ValueError, KeyError):
+        return {}
+
+
+def _same_as_reference(res, reference):
+    r, best, distinct = reference
+    assert res.success, res.message
+    assert tuple(res.sequence) == r.sequence and res.total_weight == pytest.approx(r.total_weight)
+    assert (res.episodes, res.e_ss, res.mp_q, res.e_first) == (r.episodes, r.e_ss, r.mp_q, r.e_1st)
+    assert list(res.q_sum_history) == r.q_sum_history  # bit for bit: the same training
+    assert tuple(res.optimal_sequence) == best.sequence
+    assert res.planner_calls == distinct
+
+
+@pytest.fixture
+def env(tmp_path):
+    with RosGraph(tmp_path) as g:
+        yield Env(g)
+
+
+def test_planner_killed_mid_training_then_back_resumes_exactly(env, reference, tmp_path):
+    ck = tmp_path / "qtree.ckpt"
+    tp = env.task_planner(checkpoint_path=str(ck), planner_wait=60.0)
+    env.scene()
+    first = env.fake(die_after=200)  # answers 200 questions (82 for the exact optimum), then is SIGKILLed
+    box = {}
+
+    def run():
+        try:
+            box["res"], box["fb"] = env.goal(tp)
+        except BaseException as e:  # reported by the main thread
+            box["error"] = e
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    _wait(lambda: not first.alive(), 60, "fake planner did not die", tp)
+    assert first.popen.returncode == -signal.SIGKILL
+    # noticed within feasibility_timeout + margin (1.5 s): the interrupted episode's checkpoint holds all 200 answers
+    _wait(lambda: len(_payload(ck).get("feasibility", ())) == 200, 30, "no checkpoint after the planner died", tp)
+    saved = _payload(ck)
+    assert saved["reason"].startswith("interrupted") and saved["episode"] > 0
+    assert "motion planner lost" in tp.log()
+    time.sleep(0.5)
+    assert t.is_alive() and tp.alive()  # waiting, not aborted
+    env.fake()
+    t.join(120)
+    assert "error" not in box, box["error"]
+    res, fb = box["res"], box["fb"]
+    _same_as_reference(res, reference)
+    assert "waiting for planner" in {f.phase for f in fb}
+    assert len(env.queries()) == reference[2]  # every question asked once: nothing learned was lost
+    assert "is back: resuming" in tp.log()
+    assert json.loads(ck.read_text())["payload"]["reason"] == "final"
+
+
+def test_planner_gone_aborts_with_advice_and_a_restarted_task_planner_resumes(env, reference, tmp_path):
+    ck = tmp_path / "qtree.ckpt"
+    tp = env.task_planner(checkpoint_path=str(ck), planner_wait=2.0)
+    env.scene()
+    env.fake(die_after=300)
+    res, _ = env.goal(tp)
+    assert not res.success
+    for words in ("planner_wait", str(ck), "Start (or restart) the motion_planner node", "send the same goal again"):
+        assert words in res.message, res.message
+    assert tp.alive()
+    saved = _payload(ck)
+    assert saved["reason"].startswith("interrupted") and len(saved["feasibility"]) == 300 and saved["episode"] > 0
+    assert tp.stop(signal.SIGINT) == 0
+    # a new task planner process, the planner back: the same goal resumes from the file
+    tp2 = env.task_planner(checkpoint_path=str(ck), planner_wait=2.0)
+    env.fake()
+    res, _ = env.goal(tp2)
+    _same_as_reference(res, reference)
+    assert f"resuming from checkpoint {ck}: episode {saved['episode']}" in tp2.log()
+    assert len(env.queries()) == reference[2]
+    # another goal (other seed) meets the finished checkpoint: refused with the reason, the node keeps serving
+    res, _ = env.goal(tp2, seed=SEED + 1)
+    assert not res.success and "other training parameters" in res.message and "seed" in res.message
+    # a corrupt checkpoint: refused, never silently reset
+    ck.write_bytes(ck.read_bytes()[:-40])
+    res, _ = env.goal(tp2)
+    assert not res.success and "corrupt" in res.message and str(ck) in res.message
+    assert ck.exists() and tp2.alive()
+
+
+def test_no_planner_at_all_aborts_after_planner_wait(env):
+    tp = env.task_planner(planner_wait=1.0)
+    env.scene()
+    res, _ = env.goal(tp)
+    assert not res.success and "planner_wait" in res.message and "in memory" in res.message
+    assert tp.alive()
+
+
+# -- scene refusals ----------------------------------------------------------------------------------------------
+def _scene(mutate=None, stamp=None):
+    msg = bottles_to_msg(SC10.objects, SC10.shelf.top_z, stamp=stamp)
+    if mutate:
+        mutate(msg)
+    return msg
+
+
+def _stamp_ago(seconds):
+    from builtin_interfaces.msg import Time
+    t = time.time() - seconds
+    return Time(sec=int(t), nanosec=int((t % 1) * 1e9))
+
+
+def test_stale_empty_or_bad_scenes_are_refused_and_the_node_keeps_serving(env):
+    tp = env.task_planner(scene_max_age=1.0, planner_wait=1.0)
+    cases = [
+        (None, "no scene received"),
+        (ObjectArray(), "empty"),
+        (_scene(stamp=_stamp_ago(60.0)), "stale: stamped"),
+        (_scene(lambda m: setattr(m.objects[1], "id", m.objects[0].id)), "duplicate id"),
+        (_scene(lambda m: setattr(m.objects[2], "id", "")), "empty id"),
+        (_scene(lambda m: setattr(m.objects[0].pose.position, "x", float("nan"))), "non-finite"),
+        (_scene(lambda m: setattr(m.objects[0], "weight", float("inf"))), "non-finite"),
+        (_scene(lambda m: [setattr(o, "is_target", False) for o in m.objects]), "exactly one target"),
+    ]
+    for msg, words in cases:
+        if msg is not None:
+            env.scene(msg)
+            time.sleep(0.3)  # let it arrive (transient local, depth 1: the newest replaces the last)
+        res, _ = env.goal(tp)
+        assert res is not None and not res.success and words in res.message, (words, res and res.message)
+    env.scene()
+    time.sleep(1.3)  # older than scene_max_age by receive time
+    res, _ = env.goal(tp)
+    assert not res.success and "stale: received" in res.message, res.message
+    assert env.queries() == []  # nothing reached a planner
+    env.fake()
+    env.scene(_scene(stamp=_stamp_ago(0.0)))
+    time.sleep(0.3)
+    res, _ = env.goal(tp, max_episodes=30)
+    assert res.success or "did not find" in res.message, res.message
+    assert res.episodes == 30 and tp.alive()
+
+
+# -- bad goals and bad parameters ----------------------------------------------------------------------------------
+BAD_GOALS = [{"alpha": 1.01}, {"gamma": 2.0}, {"gamma": float("inf")}, {"epsilon0": 0.0},
+             {"epsilon_min": 0.9, "epsilon0": 0.5}, {"max_episodes": 0}, {"max_steps": 0}, {"quiet_episodes": 0},
+             {"beta": float("nan")}, {"search": "sideways"}]
+
+
+def test_out_of_range_goals_are_rejected_and_the_node_keeps_serving(env):
+    tp = env.task_planner()
+    env.scene()
+    for fields in BAD_GOALS:
+        res, _ = env.goal(tp, **fields)
+        assert res is None, fields
+    assert "training goal rejected" in tp.log() and tp.alive()
+    env.fake()
+    res, _ = env.goal(tp, max_episodes=5)
+    assert res is not None and res.episodes == 5
+
+
+BAD_STARTS = [
+    (["-p", "alpha:=1.5"], "alpha must be in [0.0, 1.0]"),
+    (["-p", "gamma:=abc"], "gamma"),
+    (["-p", "max_episodes:=0"], "max_episodes must be >= 1"),
+    (["-p", "checkpoint_every:=0"], "checkpoint_every"),
+    (["-p", "planner_wait:=-1.0"], "planner_wait"),
+    (["-p", "alhpa:=0.5"], "unknown parameter(s) alhpa"),
+    (["--params-file", "MALFORMED"], "malformed YAML"),
+    (["--params-file", "PARTIAL"], "expected '<node>: ros__parameters"),
+    (["--params-file", "/nonexistent/task_planner.yaml"], "cannot read"),
+]
+
+
+def test_bad_parameters_exit_2_with_one_line(tmp_path):
+    """All cases started at once (they exit before talking to anyone): status 2 and one line naming the problem."""
+    (tmp_path / "malformed.yaml").write_text("task_planner:\n  ros__parameters:\n    alpha: [0.5\n")
+    (tmp_path / "partial.yaml").write_text("task_planner:\n  alpha: 0.5\n")
+    subst = {"MALFORMED": str(tmp_path / "malformed.yaml"), "PARTIAL": str(tmp_path / "partial.yaml")}
+    with RosGraph(tmp_path) as g:
+        procs = [g.start(MODULE, params_file=PARAMS_FILE, ros_args=tuple(subst.get(a, a) for a in args),
+                         name=f"bad{k}") for k, (args, _) in enumerate(BAD_STARTS)]
+        for p, (args, words) in zip(procs, BAD_STARTS):
+            p.popen.wait(60)
+            lines = [ln for ln in p.log().splitlines() if ln.strip()]
+            assert p.popen.returncode == 2, (args, p.log())
+            assert len(lines) == 1 and lines[0].startswith("task_planner: ") and words in lines[0], (args, lines)
