@@ -168,6 +168,10 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
     workers = workers or os.cpu_count() or 1
     for s in scenes:
         GRID_IN_USE[s.name] = s.grid
+    if out.exists():  # drop a line torn by an interruption, so that appending starts on a fresh line
+        text = out.read_text()
+        if text and not text.endswith("\n"):
+            out.write_text(text[:text.rfind("\n") + 1])
     records = read_results(out)
     done = {_ident(r) for r in records}
     t0 = time.perf_counter()
