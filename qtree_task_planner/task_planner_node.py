@@ -108,6 +108,7 @@ class TaskPlannerNode(Node):
         self.declare_parameter("scenario", "")  # accepted for a uniform command line; the scene comes from the topic
         self.declare_parameter("scene_topic", "/scene/objects")
         self.declare_parameter("scene_max_age", 10.0)  # s; older scenes are refused (stale perception)
+        self.declare_parameter("scene_wait", 3.0)  # s a goal waits for a first scene (discovery after start-up)
         self.declare_parameter("feasibility_service", "/motion_planner/plan_feasibility")
         self.declare_parameter("relocate_action", "/motion_planner/relocate")
         self.declare_parameter("feasibility_timeout", 5.0)  # s per query, passed to the planner
@@ -143,8 +144,8 @@ class TaskPlannerNode(Node):
             raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; known: "
                                  f"{', '.join(sorted(self._parameters))}")
         TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
-        for name, lo in (("scene_max_age", 0.0), ("feasibility_timeout", 1e-3), ("feasibility_margin", 0.0),
-                         ("planner_wait", 0.0), ("relocate_timeout", 1e-3)):
+        for name, lo in (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_timeout", 1e-3),
+                         ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3)):
             v = self.p(name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
                 raise ParameterError(f"{name} must be a finite number >= {lo:g}, got {v!r}")
@@ -165,6 +166,9 @@ class TaskPlannerNode(Node):
         Stale: received longer than scene_max_age ago, or (a stamped message) stamped longer ago than that, which
         catches an old scene handed over by transient-local durability from a perception that stopped."""
         topic, max_age = self.p("scene_topic"), self.p("scene_max_age")
+        deadline = time.monotonic() + self.p("scene_wait")
+        while self._scene is None and time.monotonic() < deadline:  # just started: discovery may still be going on
+            time.sleep(0.05)
         if self._scene is None:
             raise ScenarioError(f"no scene received on {topic}: is perception (or the driver) up?")
         msg, t = self._scene
@@ -312,7 +316,8 @@ class TaskPlannerNode(Node):
                 return exact.solve(problem, oracle)
             except PlannerUnavailable as e:  # keep the answers gathered so far
                 ck = state["ck"] or Checkpoint.initial(problem, params)
-                state["ck"] = dataclasses.replace(ck, feasibility=Checkpoint.table_of(oracle), reason=f"interrupted: {e}")
+                state["ck"] = dataclasses.replace(ck, feasibility=Checkpoint.table_of(oracle),
+                                                  reason=f"interrupted: {e}")
                 self._keep(state["ck"])
                 raise
 

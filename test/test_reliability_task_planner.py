@@ -276,7 +276,7 @@ def _stamp_ago(seconds):
 
 
 def test_stale_empty_or_bad_scenes_are_refused_and_the_node_keeps_serving(env):
-    tp = env.task_planner(scene_max_age=1.0, planner_wait=1.0)
+    tp = env.task_planner(scene_max_age=1.0, planner_wait=1.0, scene_wait=0.2)
     cases = [
         (None, "no scene received"),
         (ObjectArray(), "empty"),
