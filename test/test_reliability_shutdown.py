@@ -1,0 +1,75 @@
+"""Shutdown (issue 8): every node exits with status 0 within 2 s of SIGINT and of SIGTERM, again and again.
+
+Each round starts the whole graph at once on a private domain with the real parameter files (so the nodes are
+busy: the driver steps and renders, perception processes the driver's frames), waits until every node has finished
+starting (its ready line in the log), then signals the nodes one at a time and times each exit. The default suite
+runs 3 rounds per signal; the `slow` test runs 20 per signal (issue 8's figure; docs/reliability.md)."""
+import signal
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ros_procs import REPO, RosGraph  # noqa: E402
+
+pytestmark = pytest.mark.graph
+
+DEADLINE = 2.0  # s, issue 8
+# node -> (module, params file, extra params, the log line that ends its start-up)
+NODES = {
+    "jaco2_sim_driver": ("jaco2_sim_driver.driver_node", "jaco2_sim_driver.yaml", {}, "real_time_factor"),
+    "perception": ("perception_aruco.perception_node", "perception.yaml", {}, "publishing /scene/objects"),
+    "task_planner": ("qtree_task_planner.task_planner_node", "task_planner.yaml", {}, "ready: action"),
+    "motion_planner": ("stpik_motion_planner.motion_planner_node", "motion_planner.yaml", {}, "ready: "),
+}
+if not (REPO / "stpik_motion_planner" / "motion_planner_node.py").exists():
+    del NODES["motion_planner"]
+
+
+def shutdown_rounds(tmp_path, rounds: int, signals=(signal.SIGINT, signal.SIGTERM)) -> dict:
+    """Run `rounds` rounds per signal; returns {(node, signal name): [exit seconds]}; asserts status 0 in time."""
+    times: dict = {}
+    for r in range(rounds):
+        for sig in signals:
+            with RosGraph(tmp_path / f"r{r}_{sig.name}") as g:
+                procs = {name: g.start(mod, params_file=REPO / "config" / cfg, params=extra, name=name)
+                         for name, (mod, cfg, extra, _) in NODES.items()}
+                deadline = time.monotonic() + 90
+                for name, p in procs.items():
+                    ready = NODES[name][3]
+                    while ready not in p.log():
+                        assert p.alive(), f"{name} died while starting:\n{p.log()[-2000:]}"
+                        assert time.monotonic() < deadline, f"{name} not ready:\n{p.log()[-2000:]}"
+                        time.sleep(0.05)
+                time.sleep(0.3)  # running, not just constructed
+                for name, p in procs.items():
+                    t0 = time.monotonic()
+                    p.popen.send_signal(sig)
+                    try:
+                        code = p.popen.wait(DEADLINE)
+                    except Exception:
+                        raise AssertionError(f"{name} still running {DEADLINE} s after {sig.name} (round {r}):\n"
+                                             f"{p.log()[-2000:]}") from None
+                    times.setdefault((name, sig.name), []).append(time.monotonic() - t0)
+                    assert code == 0, f"{name} exited {code} on {sig.name} (round {r}):\n{p.log()[-3000:]}"
+    return times
+
+
+def report(times: dict) -> str:
+    return "\n".join(f"{name:17s} {sig:7s} n={len(v):2d} max {max(v) * 1e3:6.0f} ms  median "
+                     f"{sorted(v)[len(v) // 2] * 1e3:6.0f} ms" for (name, sig), v in sorted(times.items()))
+
+
+def test_every_node_exits_0_on_sigint_and_sigterm_3_rounds(tmp_path):
+    times = shutdown_rounds(tmp_path, 3)
+    print("\n" + report(times))
+    assert {n for n, _ in times} == set(NODES) and all(len(v) == 3 for v in times.values())
+
+
+@pytest.mark.slow
+def test_every_node_exits_0_on_sigint_and_sigterm_20_rounds(tmp_path):
+    times = shutdown_rounds(tmp_path, 20)
+    print("\n" + report(times))
+    assert all(len(v) == 20 for v in times.values())
