@@ -70,6 +70,7 @@ class Jaco2SimDriver(Node):
         self.lock = threading.Lock()
         self._commands: queue.SimpleQueue = queue.SimpleQueue()
         self._running = True
+        self._stopping = threading.Event()  # wakes the camera thread at once on shutdown (exit within 2 s)
         self._commanded = False
         self._pace_reset = True
 
@@ -248,7 +249,8 @@ class Jaco2SimDriver(Node):
                 next_t += period
                 delay = next_t - time.monotonic()
                 if delay > 0:
-                    time.sleep(delay)
+                    if self._stopping.wait(delay):
+                        return
                 else:
                     next_t = time.monotonic()
         finally:
@@ -283,6 +285,7 @@ class Jaco2SimDriver(Node):
 
     def shutdown(self) -> None:
         self._running = False
+        self._stopping.set()
         self._sim_thread.join(timeout=2.0)
         if self._cam_thread is not None:
             self._cam_thread.join(timeout=5.0)
