@@ -91,7 +91,7 @@ def _curve(histories: list[list[float]]) -> list[list[float]]:
 def run_cell(cell: Cell) -> dict:
     """All runs of one cell (seeds 0 .. runs-1); returns the JSONL record."""
     sc, problem, oracle, opt = _setting(cell)
-    base = TrainingParams.defaults().replace(policy=cell.policy, search=cell.search, alpha=cell.alpha,
+    base = TrainingParams.from_yaml(ignore_unknown=True).replace(policy=cell.policy, search=cell.search, alpha=cell.alpha,
                                              gamma=cell.gamma, epsilon0=1.0, epsilon_min=1e-3,
                                              max_episodes=cell.e_max)
     t0 = time.perf_counter()
