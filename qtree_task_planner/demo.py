@@ -70,6 +70,9 @@ def _learning_curve(history, path: Path, title: str) -> None:
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.5))
     h = np.asarray(history, float)
+    if h.size == 0:
+        plt.close(fig)
+        return
     ax.plot(np.arange(1, len(h) + 1), h / (np.abs(h).max() or 1.0))
     ax.set_xlabel("episode")
     ax.set_ylabel("normalised sum of edge values (Eq. 15)")
@@ -90,7 +93,11 @@ def run(argv=None) -> int:
     from sensor_msgs.msg import Image
     from tqdm import tqdm
 
+    from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+
     from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
+    from qtree_relocation_msgs.msg import ObjectArray
+    SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
     from qtree_relocation_msgs.srv import PlanFeasibility
 
     t0 = time.monotonic()
@@ -118,6 +125,13 @@ def run(argv=None) -> int:
                                 timeout=120, graph=g)
             rec = _Recorder()
             node.create_subscription(Image, "/camera/color/image_raw", rec, 2)
+            truth = _Latest()
+            node.create_subscription(ObjectArray, "/sim/objects", truth, SCENE_QOS)
+            scene = _Latest()
+            node.create_subscription(ObjectArray, scene_topic, scene, SCENE_QOS)
+            _wait_for(lambda: scene.msg is not None and len(scene.msg.objects) > 0, 90, g,
+                      f"no scene on {scene_topic}")
+            before = truth.positions()
             print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {a.policy}/{a.search} "
                   f"through the feasibility service")
             goal = TrainPlanner.Goal(policy=a.policy, search=a.search, seed=a.seed, execute=not a.no_execute)
@@ -143,6 +157,8 @@ def run(argv=None) -> int:
                 return 1
             res = _wait(handle.get_result_async(), a.timeout, g).result
             bar.close()
+            time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
+            after = truth.positions()
         finally:
             node.destroy_node()
             rclpy.try_shutdown()
@@ -156,15 +172,59 @@ def run(argv=None) -> int:
         "episodes": res.episodes, "E_ss": res.e_ss, "MP_q": res.mp_q, "E_1st": res.e_first,
         "planner_calls": res.planner_calls, "wall_time_s": round(wall, 1),
         "q_sum_history": list(res.q_sum_history),
+        "final_scene": _check_scene(a.scenario, before, after, list(res.sequence) if not a.no_execute else []),
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
     _learning_curve(res.q_sum_history, out / "learning_curve.png", f"{a.policy} / {a.search}")
     _strip(rec.frames, out / "retrieval_strip.png")
+    fs = report["final_scene"]
+    if not a.no_execute:
+        print(f"[demo] target on the bottom shelf: {fs['target_on_bottom_shelf']}; largest displacement of a "
+              f"bottle not relocated: {fs['max_displacement_untouched_m'] * 100:.1f} cm")
     print(f"[demo] learned sequence: {' -> '.join(res.sequence)}  weight {res.total_weight:.2f}")
     print(f"[demo] exact optimum:    {' -> '.join(res.optimal_sequence)}  weight {res.optimal_weight:.2f}")
     print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={res.e_first} real planner calls={res.planner_calls}")
     print(f"[demo] {'SUCCESS' if res.success else 'FAILED'}: {res.message}  ({wall:.0f} s); outputs in {out}/")
-    return 0 if res.success else 1
+    ok = res.success and (a.no_execute or fs["target_on_bottom_shelf"])
+    return 0 if ok else 1
+
+
+class _Latest:
+    """Keeps the last message of a topic."""
+
+    def __init__(self):
+        self.msg = None
+
+    def __call__(self, msg) -> None:
+        self.msg = msg
+
+    def positions(self) -> dict:
+        if self.msg is None:
+            return {}
+        return {o.id: [o.pose.position.x, o.pose.position.y, o.pose.position.z] for o in self.msg.objects}
+
+
+def _check_scene(scenario_path: str, before: dict, after: dict, relocated: list) -> dict:
+    """Where the bottles ended (simulator ground truth): the target on the bottom shelf, the others unmoved."""
+    from stpik_motion_planner.scenario import load_scenario
+    s = load_scenario(scenario_path)
+    z_bottom = s.shelf.bottom_z
+    on_bottom = {i: abs(p[2] - z_bottom) < 0.02 and s.shelf.x_front < p[0] < s.shelf.x_back
+                 for i, p in after.items()}
+    untouched = [i for i in after if i not in relocated and i in before]
+    moved = [float(np.linalg.norm(np.subtract(after[i], before[i]))) for i in untouched]
+    return {"target_on_bottom_shelf": bool(on_bottom.get(s.target_id, False)),
+            "relocated_on_bottom_shelf": {i: bool(on_bottom.get(i, False)) for i in relocated},
+            "max_displacement_untouched_m": max(moved, default=0.0), "positions_after": after}
+
+
+def _wait_for(predicate, timeout: float, graph: Graph, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        graph.check_alive()
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{what} after {timeout:.0f} s")
+        time.sleep(0.05)
 
 
 def _wait(future, timeout: float, graph: Graph):
