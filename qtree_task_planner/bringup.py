@@ -28,7 +28,10 @@ NODES = {
 
 
 def private_domain_id() -> int:
-    """A domain id unlikely to collide with other runs on this machine (0..101 are valid with defaults)."""
+    """QTREE_DOMAIN_ID if set (tests reserve one), else one unlikely to collide with other runs on this machine
+    (0..101 are valid with the default ports)."""
+    if os.environ.get("QTREE_DOMAIN_ID"):
+        return int(os.environ["QTREE_DOMAIN_ID"])
     return 10 + os.getpid() % 90
 
 
