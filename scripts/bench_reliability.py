@@ -156,6 +156,38 @@ def bench(n: int, clients: int, seed: int, answer_timeout: float, run_dir: Path)
     }
 
 
+def bench_checkpoint(scenarios=("blocking_10", "blocking_15", "scenario3_15"), repeats: int = 5) -> list[dict]:
+    """Checkpoint size and save/load time of the final Q-Tree of a default training (BlockingOracle, seed 0)."""
+    from qtree_task_planner.checkpoint import load_checkpoint, save_checkpoint
+    from qtree_task_planner.feasibility import BlockingOracle
+    from qtree_task_planner.params import TrainingParams
+    from qtree_task_planner.training import train
+    from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario
+
+    rows = []
+    for name in scenarios:
+        sc = load_scenario(CONFIG_DIR / "scenarios" / f"{name}.yaml")
+        if sc.blocking is None:
+            continue
+        got = []
+        r = train(sc, BlockingOracle(sc), TrainingParams.defaults(), on_checkpoint=got.append)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "ck.json"
+            t0 = time.perf_counter()
+            for _ in range(repeats):
+                save_checkpoint(got[-1], path)
+            t_save = (time.perf_counter() - t0) / repeats
+            t0 = time.perf_counter()
+            for _ in range(repeats):
+                load_checkpoint(path)
+            t_load = (time.perf_counter() - t0) / repeats
+            size = path.stat().st_size
+        rows.append({"scenario": name, "episodes": r.episodes, "tree_nodes": r.tree_nodes, "edges": r.tree_edges,
+                     "answers": len(got[-1].feasibility), "bytes": size, "save_ms": 1e3 * t_save,
+                     "load_ms": 1e3 * t_load})
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-n", "--requests", type=int, default=1000)
@@ -163,11 +195,20 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--answer-timeout", type=float, default=60.0, help="s a client waits for one answer")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
+    ap.add_argument("--checkpoint-only", action="store_true", help="only the checkpoint size/time table")
     ap.add_argument("--client", type=int, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.client is not None:
         run_client(a.client, a.requests, a.seed, a.answer_timeout)
         return
+    if not a.json:
+        print("Q-Tree checkpoint (final tree of a default training, BlockingOracle; atomic write incl. fsync):")
+        for row in bench_checkpoint():
+            print(f"  {row['scenario']:13s} {row['episodes']:5d} episodes, {row['tree_nodes']:5d} nodes, "
+                  f"{row['edges']:5d} edges, {row['answers']:4d} answers: {row['bytes'] / 1024:7.1f} KiB, "
+                  f"save {row['save_ms']:6.1f} ms, load {row['load_ms']:6.1f} ms")
+        if a.checkpoint_only:
+            return
     with tempfile.TemporaryDirectory(prefix="bench_reliability_") as tmp:
         s = bench(a.requests, a.clients, a.seed, a.answer_timeout, Path(tmp))
     if a.json:

@@ -204,9 +204,11 @@ def test_planner_killed_mid_training_then_back_resumes_exactly(env, reference, t
     t = threading.Thread(target=run, daemon=True)
     t.start()
     _wait(lambda: not first.alive(), 60, "fake planner did not die", tp)
+    t_dead = time.monotonic()
     assert first.popen.returncode == -signal.SIGKILL
     # noticed within feasibility_timeout + margin (1.5 s): the interrupted episode's checkpoint holds all 200 answers
     _wait(lambda: len(_payload(ck).get("feasibility", ())) == 200, 30, "no checkpoint after the planner died", tp)
+    print(f"\nplanner SIGKILLed -> checkpoint of the interrupted episode on disk: {time.monotonic() - t_dead:.2f} s")
     saved = _payload(ck)
     assert saved["reason"].startswith("interrupted") and saved["episode"] > 0
     assert "motion planner lost" in tp.log()
