@@ -6,6 +6,7 @@
   `<driver_prefix>/in/joint_velocity` with feedback from `<driver_prefix>/out/joint_state`, close the gripper,
   plan and stream the carry to the next slot of the bottom shelf, release, retreat, plan and stream the way
   home. Feedback by phase; cancel stops the arm; a silent driver aborts the goal with the reason.
+- `~/path` (visualization_msgs/Marker, latched): the tool path of the motion being executed, as a line strip.
 - the scene: the scenario file (shelf, slots, initial bottles), updated from `scene_topic` (ObjectArray,
   transient local). Bottles no longer on the top shelf are ignored; bottles not seen keep their last pose.
 """
@@ -26,7 +27,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
+from geometry_msgs.msg import Point
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import Marker
 
 from qtree_relocation_msgs.action import RelocateObject
 from qtree_relocation_msgs.msg import JointVelocity, ObjectArray
@@ -37,7 +40,7 @@ from . import robot_description as rd
 from .execution import FollowerParams, TrajectoryFollower
 from .feasibility import MotionPlanner, PlannerParams, PlanningError
 from .scenario import DEFAULT_SCENARIO, ScenarioError, UnknownObjectError, load_scenario
-from .scene_msgs import msg_to_bottles
+from .scene_msgs import BASE_FRAME, msg_to_bottles
 from .stpik import StpikParams
 from .trajectory import Trajectory
 
@@ -77,6 +80,20 @@ def trajectory_to_msg(traj: Trajectory | None) -> JointTrajectory:
     return msg
 
 
+def path_marker(traj: Trajectory, phase: str, every: int = 5) -> Marker:
+    """The tool path of a joint trajectory (forward kinematics of the DH table) as a LINE_STRIP."""
+    m = Marker(ns="tool_path", id=0, type=Marker.LINE_STRIP, action=Marker.ADD, text=phase)
+    m.header.frame_id = BASE_FRAME
+    m.pose.orientation.w = 1.0
+    m.scale.x = 0.006
+    m.color.r, m.color.g, m.color.b, m.color.a = 1.0, 0.55, 0.0, 1.0
+    idx = list(range(0, len(traj), every)) + [len(traj) - 1]
+    for k in idx:
+        x, y, z = rd.dh_fk(traj.positions[k])[-1][:3, 3]
+        m.points.append(Point(x=float(x), y=float(y), z=float(z)))
+    return m
+
+
 class _Aborted(Exception):
     """A relocation that cannot go on (the message is the reason sent back in the result)."""
 
@@ -109,6 +126,7 @@ class MotionPlannerNode(Node):
 
         pre = str(self.p("driver_prefix")).rstrip("/")
         self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
+        self._path = self.create_publisher(Marker, "~/path", SCENE_QOS)
         self.create_subscription(JointState, f"{pre}/out/joint_state", self._on_joint_state, 10,
                                  callback_group=MutuallyExclusiveCallbackGroup())
         self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS,
@@ -273,6 +291,7 @@ class MotionPlannerNode(Node):
     def _follow(self, gh, traj: Trajectory, phase: str) -> None:
         """Stream the trajectory at stream_rate with position feedback until it settles (execution.py)."""
         follower = TrajectoryFollower(traj, self.qdot_max, self.follower_params)
+        self._path.publish(path_marker(traj, phase))
         period = 1.0 / float(self.p("stream_rate"))
         last = next_tick = time.monotonic()
         tick = 0

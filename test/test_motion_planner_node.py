@@ -17,8 +17,10 @@ from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
+from visualization_msgs.msg import Marker  # noqa: E402
 
 from qtree_task_planner.feasibility import Label  # noqa: E402
+from stpik_motion_planner import robot_description as rd  # noqa: E402
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
 from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
 
@@ -37,6 +39,7 @@ def graph(tmp_path_factory):
                             params_file=REPO / "config" / "motion_planner.yaml", params={"scene_topic": "/sim/objects"})
         g.objects = g.probe.collect("/sim/objects", ObjectArray, LATCHED)
         g.states = g.probe.collect("/j2s7s300_driver/out/joint_state", JointState, 50)
+        g.path = g.probe.collect("/motion_planner/path", Marker, LATCHED)
         g.action = ActionClient(g.probe.node, RelocateObject, "/motion_planner/relocate")
         deadline = time.monotonic() + 60
         while not g.action.wait_for_server(timeout_sec=0.5):
@@ -119,6 +122,10 @@ def test_relocation_moves_the_bottle_to_its_slot_and_leaves_the_others(graph):
     order = ["plan_pick", "approach", "grasp", "plan_carry", "carry", "release", "retreat", "plan_home", "home"]
     seen = [p for p in dict.fromkeys(phases) if p in order]
     assert seen == order, phases
+    path = graph.path.wait(timeout=5)[-1]  # the last motion: the way home, ending at the home tool position
+    assert path.text == "home" and len(path.points) > 2
+    home = (path.points[-1].x, path.points[-1].y, path.points[-1].z)
+    np.testing.assert_allclose(home, rd.dh_fk(rd.Q_HOME)[-1][:3, 3], atol=1e-6)
     progress = [f.progress for f in feedback]
     assert progress == sorted(progress) and progress[-1] == pytest.approx(1.0)
     time.sleep(0.5)
