@@ -1,0 +1,33 @@
+"""The Q-Tree drawn as RViz markers, from a real training on a synthetic scene."""
+import pytest
+
+pytest.importorskip("visualization_msgs")
+
+from qtree_task_planner.feasibility import BlockingOracle  # noqa: E402
+from qtree_task_planner.markers import tree_markers  # noqa: E402
+from qtree_task_planner.params import TrainingParams  # noqa: E402
+from qtree_task_planner.problem import RelocationProblem  # noqa: E402
+from qtree_task_planner.training import train  # noqa: E402
+from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
+
+SCENE = load_scenario(DEFAULT_SCENARIO.parent / "blocking_5.yaml")
+
+
+def test_tree_markers_draw_every_feasible_edge_and_the_learned_path():
+    params = TrainingParams.defaults().replace(seed=2, max_episodes=300)
+    r = train(SCENE, BlockingOracle(SCENE), params)
+    state = r.tree.to_state()
+    ids = RelocationProblem.from_scenario(SCENE).ids
+    arr = tree_markers(state, ids, r.sequence, "base")
+    by_id = {m.id: m for m in arr.markers}
+    dots, edges, goals, path = by_id[0], by_id[1], by_id[2], by_id[3]
+    assert len(dots.points) == len(state["nodes"]) == r.tree_nodes
+    feasible = [e for n in state["nodes"] for e in n["edges"] if e[1] != 0]
+    assert len(edges.points) == 2 * len(feasible) and len(edges.colors) == len(edges.points)
+    assert len(goals.points) == sum(1 for e in feasible if e[0] == len(ids) - 1)
+    assert len(path.points) == len(r.sequence) + 1  # root, one node per obstacle, the target edge
+    labels = [m.text for m in arr.markers if m.type == m.TEXT_VIEW_FACING]
+    assert labels == list(r.sequence)
+    # the highest-valued edge is the greenest
+    best_edge = max(range(len(feasible)), key=lambda k: feasible[k][2])
+    assert edges.colors[2 * best_edge].g == pytest.approx(1.0)
