@@ -16,11 +16,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -77,6 +79,7 @@ class Jaco2SimDriver(Node):
         pre = str(g("driver_prefix")).rstrip("/")
         self.create_subscription(JointVelocity, f"{pre}/in/joint_velocity", self.on_kinova_velocity, 10)
         self.create_subscription(Float64MultiArray, "/velocity_controller/commands", self.on_velocity, 10)
+        self.pub_clock = self.create_publisher(Clock, "/clock", 10)  # simulated time, as simulators publish it
         self.pub_js = [self.create_publisher(JointState, f"{pre}/out/joint_state", 10),
                        self.create_publisher(JointState, "/joint_states", 10)]
         latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -191,6 +194,8 @@ class Jaco2SimDriver(Node):
                 if publish_js:
                     for pub in self.pub_js:
                         pub.publish(js)
+                    sec = int(t)
+                    self.pub_clock.publish(Clock(clock=Time(sec=sec, nanosec=int((t - sec) * 1e9))))
                 if objects is not None:
                     self.pub_objects.publish(objects)
             except RCLError:  # the context went away (shutting down)

@@ -14,6 +14,7 @@ pytestmark = pytest.mark.graph
 rclpy = pytest.importorskip("rclpy")
 from qtree_relocation_msgs.msg import JointVelocity, ObjectArray  # noqa: E402
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image, JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
@@ -90,10 +91,17 @@ def test_joint_states_carry_kinova_names_at_home(g):
 
 def test_constant_velocity_for_one_second_moves_each_joint_by_v_t(g):
     v = 0.4 * QDOT_MAX * np.array([1, 1, -1, -1, 1, 1, -1])  # joint 4 away from its upper limit
+    clock = []  # (wall time received, simulated time): under load the simulator runs slower than the wall
+    g.probe.node.create_subscription(Clock, "/clock", lambda m: clock.append(
+        (time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)), 100)
     q0 = _settled_q(g)
     t0, t1 = _stream(g.vel, Float64MultiArray(data=v.tolist()), 1.0)
     q1 = _settled_q(g, 0.3)
-    moved = v * (t1 - t0 + 0.05)  # the last command runs until the 50 ms watchdog stops it
+    wall, sim = np.array(clock).T
+    assert len(wall) > 50 and np.all(np.diff(sim) >= 0)
+    duration = float(np.interp(t1, wall, sim) - np.interp(t0, wall, sim))
+    assert 0.3 < duration <= 1.05  # simulated seconds of the 1 s wall-time command window
+    moved = v * (duration + 0.05)  # the last command runs until the 50 ms watchdog stops it
     # tolerance: 100 Hz publishing jitter and DDS latency (about 10 ms of motion) plus the loop's rise time
     assert np.allclose(q1 - q0, moved, atol=0.02 + 0.03 * np.abs(moved)), (q1 - q0, moved)
 
