@@ -190,9 +190,9 @@ def env(tmp_path):
 
 def test_planner_killed_mid_training_then_back_resumes_exactly(env, reference, tmp_path):
     ck = tmp_path / "qtree.ckpt"
+    first = env.fake(die_after=200)
     tp = env.task_planner(checkpoint_path=str(ck), planner_wait=60.0)
-    env.scene()
-    first = env.fake(die_after=200)  # answers 200 questions (82 for the exact optimum), then is SIGKILLed
+    env.scene()  # answers 200 questions (82 for the exact optimum), then is SIGKILLed
     box = {}
 
     def run():
@@ -227,9 +227,9 @@ def test_planner_killed_mid_training_then_back_resumes_exactly(env, reference, t
 
 def test_planner_gone_aborts_with_advice_and_a_restarted_task_planner_resumes(env, reference, tmp_path):
     ck = tmp_path / "qtree.ckpt"
-    tp = env.task_planner(checkpoint_path=str(ck), planner_wait=2.0)
+    env.fake(die_after=300)  # first, so that discovery has begun when the task planner starts
+    tp = env.task_planner(checkpoint_path=str(ck), planner_wait=4.0)  # covers a slow first discovery too
     env.scene()
-    env.fake(die_after=300)
     res, _ = env.goal(tp)
     assert not res.success
     for words in ("planner_wait", str(ck), "Start (or restart) the motion_planner node", "send the same goal again"):
@@ -239,8 +239,8 @@ def test_planner_gone_aborts_with_advice_and_a_restarted_task_planner_resumes(en
     assert saved["reason"].startswith("interrupted") and len(saved["feasibility"]) == 300 and saved["episode"] > 0
     assert tp.stop(signal.SIGINT) == 0
     # a new task planner process, the planner back: the same goal resumes from the file
-    tp2 = env.task_planner(checkpoint_path=str(ck), planner_wait=2.0)
     env.fake()
+    tp2 = env.task_planner(checkpoint_path=str(ck), planner_wait=4.0)
     res, _ = env.goal(tp2)
     _same_as_reference(res, reference)
     assert f"resuming from checkpoint {ck}: episode {saved['episode']}" in tp2.log()
@@ -278,7 +278,7 @@ def _stamp_ago(seconds):
 
 
 def test_stale_empty_or_bad_scenes_are_refused_and_the_node_keeps_serving(env):
-    tp = env.task_planner(scene_max_age=1.0, planner_wait=1.0, scene_wait=0.2)
+    tp = env.task_planner(scene_max_age=1.0, planner_wait=10.0, scene_wait=0.2)
     cases = [
         (None, "no scene received"),
         (ObjectArray(), "empty"),
@@ -315,13 +315,13 @@ BAD_GOALS = [{"alpha": 1.01}, {"gamma": 2.0}, {"gamma": float("inf")}, {"epsilon
 
 
 def test_out_of_range_goals_are_rejected_and_the_node_keeps_serving(env):
-    tp = env.task_planner()
+    env.fake()
+    tp = env.task_planner(planner_wait=10.0)
     env.scene()
     for fields in BAD_GOALS:
         res, _ = env.goal(tp, **fields)
         assert res is None, fields
     assert "training goal rejected" in tp.log() and tp.alive()
-    env.fake()
     res, _ = env.goal(tp, max_episodes=5)
     assert res is not None and res.episodes == 5
 
