@@ -21,6 +21,7 @@ from .problem import RelocationProblem
 
 R_UNFEASIBLE = -10.0  # Eq. 13
 R_TARGET = 100.0  # Eq. 13
+_LABELS = {int(lab): lab for lab in Label}
 
 
 def reward(label: Label, phi: float) -> float:
@@ -35,9 +36,10 @@ def reward(label: Label, phi: float) -> float:
 class Node:
     """A state s_k: the sequence of relocated objects (indices) and its bitmask. Edges by action index:
     `q` feasible edges (offered, used by max and greedy), `q_pruned` unfeasible edges (never offered again),
-    `label` of every known edge, `child` node of every obstacle edge."""
+    `label` of every known edge, `child` node of every obstacle edge. `offer` caches `offered()` (ascending
+    action indices; kept up to date by QTree when an action is pruned here, None = not computed yet)."""
 
-    __slots__ = ("id", "seq", "mask", "q", "q_pruned", "label", "child", "pruned")
+    __slots__ = ("id", "seq", "mask", "q", "q_pruned", "label", "child", "pruned", "offer", "removed")
 
     def __init__(self, node_id: int, seq: tuple[int, ...], mask: int) -> None:
         self.id = node_id
@@ -48,6 +50,8 @@ class Node:
         self.label: dict[int, Label] = {}
         self.child: dict[int, Node] = {}
         self.pruned = 0  # bitmask of unfeasible actions at this node
+        self.offer: list[int] | None = None  # cache of offered(), see QTree.offered
+        self.removed: frozenset[str] | None = None  # cache of the removed ids, see QTree.edge_label
 
     def max_q(self) -> float:
         """max_a' Q(s, a') over the known feasible edges; 0 where there is none (Eq. 7)."""
@@ -70,6 +74,7 @@ class QTree:
         self.gamma = gamma
         self.ids = problem.ids
         self.n_objects = len(self.ids)
+        self._actions = tuple(range(self.n_objects))
         self.target = problem.n
         self.phi = [problem.weights[o] for o in problem.obstacles] + [0.0]
         self.root = Node(0, (), 0)
@@ -82,24 +87,41 @@ class QTree:
         """The label of edge (node, a), asking the oracle the first time (one MP_q query)."""
         label = node.label.get(a)
         if label is None:
-            removed = frozenset(self.ids[i] for i in node.seq)
-            label = Label(self.oracle.feasibility(self.ids[a], removed).label)
-            if (label == Label.TARGET) != (a == self.target) and label != Label.UNFEASIBLE:
+            removed = node.removed
+            if removed is None:
+                ids = self.ids
+                removed = node.removed = frozenset([ids[i] for i in node.seq])
+            raw = self.oracle.feasibility(self.ids[a], removed).label
+            label = _LABELS.get(raw)
+            if label is None:
+                label = Label(raw)  # raises the enum's ValueError for a bad value
+            if (label is Label.TARGET) != (a == self.target) and label is not Label.UNFEASIBLE:
                 raise ValueError(f"oracle answered {label.name} for {self.ids[a]!r}: TARGET is for the target only")
             node.label[a] = label
             self.mp_q += 1
-            if label == Label.UNFEASIBLE:
+            if label is Label.UNFEASIBLE:
                 node.q_pruned[a] = 0.0
                 node.pruned |= 1 << a
+                if node.offer is not None:
+                    node.offer.remove(a)
             else:
                 node.q[a] = 0.0
         return label
+
+    def offered(self, node: Node) -> list[int]:
+        """node.offered(n_objects), cached on the node (the list is shared: do not modify it)."""
+        offer = node.offer
+        if offer is None:
+            offer = node.offer = node.offered(self.n_objects)
+        return offer
 
     def child(self, node: Node, a: int) -> Node:
         """The node reached by relocating obstacle a, allocated on first use."""
         c = node.child.get(a)
         if c is None:
-            c = Node(len(self.nodes), node.seq + (a,), node.mask | (1 << a))
+            mask = node.mask | (1 << a)
+            c = Node(len(self.nodes), node.seq + (a,), mask)
+            c.offer = [b for b in self._actions if not (mask >> b) & 1]  # = c.offered(n): nothing pruned yet
             self.nodes.append(c)
             node.child[a] = c
         return c
@@ -138,9 +160,11 @@ class QTree:
         """Follow the highest feasible edge value from the root (ties: lowest index) to the target edge."""
         node, path = self.root, []
         for _ in range(self.n_objects):
-            if not node.q:
+            q = node.q
+            if not q:
                 return None
-            a = max(node.q, key=lambda k: (node.q[k], -k))
+            best = max(q.values())
+            a = min(k for k, v in q.items() if v == best)  # = max(q, key=(q[k], -k))
             path.append((node, a))
             if a == self.target:
                 return path
@@ -250,6 +274,7 @@ class QTree:
                 node.q_pruned.pop(a, None)
                 node.pruned &= ~(1 << a)
                 node.child.pop(a, None)
+                node.offer = None
             elif a in node.q:
                 node.q[a] = old
             else:
