@@ -18,7 +18,7 @@ POLICIES = ("lrnd", "h-lrnd", "h-eg")
 SEARCHES = ("breadth", "depth")
 # The task_planner node's own (non-training) parameters: they share config/task_planner.yaml and from_yaml skips
 # them; the node validates them (qtree_task_planner.task_planner_node).
-NODE_PARAMETERS = ("scene_topic", "scene_max_age", "scene_wait", "feasibility_service", "relocate_action",
+NODE_PARAMETERS = ("scene_topic", "scene_source", "scene_max_age", "scene_wait", "feasibility_service", "relocate_action",
                    "feasibility_timeout", "feasibility_margin", "planner_wait", "relocate_timeout", "checkpoint_path",
                    "checkpoint_every")
 

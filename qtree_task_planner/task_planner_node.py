@@ -53,6 +53,7 @@ from .spin import run_node
 from .training import train
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
 
 
 class PlannerUnavailable(RuntimeError):
@@ -107,6 +108,7 @@ class TaskPlannerNode(Node):
             self.declare_parameter(name, value)
         self.declare_parameter("scenario", "")  # accepted for a uniform command line; the scene comes from the topic
         self.declare_parameter("scene_topic", "/scene/objects")
+        self.declare_parameter("scene_source", "")  # "" = scene_topic; perception | sim (launch file's argument)
         self.declare_parameter("scene_max_age", 10.0)  # s; older scenes are refused (stale perception)
         self.declare_parameter("scene_wait", 3.0)  # s a goal waits for a first scene (discovery after start-up)
         self.declare_parameter("feasibility_service", "/motion_planner/plan_feasibility")
@@ -126,13 +128,14 @@ class TaskPlannerNode(Node):
         self._feas = self.create_client(PlanFeasibility, self.p("feasibility_service"),
                                         callback_group=MutuallyExclusiveCallbackGroup())
         self._relocate = ActionClient(self, RelocateObject, self.p("relocate_action"), callback_group=reentrant)
-        self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS)
+        self._scene_topic = SCENE_SOURCES.get(self.p("scene_source")) or self.p("scene_topic")
+        self.create_subscription(ObjectArray, self._scene_topic, self._on_scene, SCENE_QOS)
         self._markers = self.create_publisher(MarkerArray, "~/markers", SCENE_QOS)
         self._server = ActionServer(self, TrainPlanner, "~/train", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=reentrant)
         self.get_logger().info(f"ready: action {self.resolve_topic_name('~/train')}, scene from "
-                               f"{self.p('scene_topic')}")
+                               f"{self._scene_topic}")
 
     def p(self, name: str):
         return self.get_parameter(name).value
@@ -149,6 +152,9 @@ class TaskPlannerNode(Node):
             v = self.p(name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
                 raise ParameterError(f"{name} must be a finite number >= {lo:g}, got {v!r}")
+        if self.p("scene_source") not in ("", *SCENE_SOURCES):
+            raise ParameterError(f"scene_source must be one of {', '.join(SCENE_SOURCES)} (or empty: scene_topic), "
+                                 f"got {self.p('scene_source')!r}")
         every = self.p("checkpoint_every")
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
@@ -165,7 +171,7 @@ class TaskPlannerNode(Node):
 
         Stale: received longer than scene_max_age ago, or (a stamped message) stamped longer ago than that, which
         catches an old scene handed over by transient-local durability from a perception that stopped."""
-        topic, max_age = self.p("scene_topic"), self.p("scene_max_age")
+        topic, max_age = self._scene_topic, self.p("scene_max_age")
         deadline = time.monotonic() + self.p("scene_wait")
         while self._scene is None and time.monotonic() < deadline:  # just started: discovery may still be going on
             time.sleep(0.05)

@@ -333,6 +333,7 @@ BAD_STARTS = [
     (["-p", "checkpoint_every:=0"], "checkpoint_every"),
     (["-p", "planner_wait:=-1.0"], "planner_wait"),
     (["-p", "alhpa:=0.5"], "unknown parameter(s) alhpa"),
+    (["-p", "scene_source:=camera"], "scene_source must be one of perception, sim"),
     (["--params-file", "MALFORMED"], "malformed YAML"),
     (["--params-file", "PARTIAL"], "expected '<node>: ros__parameters"),
     (["--params-file", "/nonexistent/task_planner.yaml"], "cannot read"),
