@@ -147,6 +147,14 @@ def check_params_files(argv) -> None:
             mark = getattr(e, "problem_mark", None)
             where = f" at line {mark.line + 1}" if mark is not None else ""
             raise ParameterError(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
-        if not isinstance(data, Mapping) or not all(isinstance(v, Mapping) and "ros__parameters" in v
-                                                    for v in data.values()):
+        if not _node_sections(data):
             raise ParameterError(f"{path}: expected '<node>: ros__parameters: {{...}}' sections")
+
+
+def _node_sections(data) -> bool:
+    """Every branch ends in a `ros__parameters` mapping (node names may be nested in namespaces, or `/**`)."""
+    if not isinstance(data, Mapping) or not data:
+        return False
+    if "ros__parameters" in data:
+        return isinstance(data["ros__parameters"], Mapping)
+    return all(_node_sections(v) for v in data.values())

@@ -106,3 +106,8 @@ def test_params_file_precheck_names_the_file_and_line(tmp_path):
         check_params_files(["--params-file", str(f)])
     f.write_text("a:\n  ros__parameters: {b: 1}\n")
     check_params_files(["--params-file", str(f), "-p", "x:=1"])
+    f.write_text("/ns:\n  a:\n    ros__parameters: {b: 1}\n/**:\n  ros__parameters: {c: 2}\n")
+    check_params_files(["--params-file", str(f)])  # namespaced and wildcard sections are fine
+    f.write_text("a:\n  ros__parameters: 3\n")
+    with pytest.raises(ParameterError, match="ros__parameters"):
+        check_params_files(["--params-file", str(f)])
