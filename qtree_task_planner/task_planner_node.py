@@ -53,6 +53,7 @@ from .spin import run_node
 from .training import train
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from this node's clock is on another clock
 SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
 
 
@@ -185,7 +186,11 @@ class TaskPlannerNode(Node):
         stamp = Time.from_msg(msg.header.stamp)
         if max_age > 0 and stamp.nanoseconds > 0:
             stamp_age = (self.get_clock().now() - stamp).nanoseconds * 1e-9
-            if stamp_age > max_age:
+            if not -1.0 < stamp_age < STAMP_PLAUSIBLE:  # another clock (simulated time vs wall time): not comparable
+                self.get_logger().warning(f"scene stamp {stamp_age:.0f} s away from this node's clock: is one of them "
+                                          "on use_sim_time? Checking the scene's age by receive time only",
+                                          throttle_duration_sec=60.0)
+            elif stamp_age > max_age:
                 raise ScenarioError(f"the scene on {topic} is stale: stamped {stamp_age:.1f} s ago > scene_max_age "
                                     f"{max_age:g} s; is perception still running?")
         if not msg.objects:

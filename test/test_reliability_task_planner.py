@@ -301,7 +301,8 @@ def test_stale_empty_or_bad_scenes_are_refused_and_the_node_keeps_serving(env):
     assert not res.success and "stale: received" in res.message, res.message
     assert env.queries() == []  # nothing reached a planner
     env.fake()
-    env.scene(_scene(stamp=_stamp_ago(0.0)))
+    from builtin_interfaces.msg import Time
+    env.scene(_scene(stamp=Time(sec=100)))  # simulated time (a driver on use_sim_time): other clock, not stale
     time.sleep(0.3)
     res, _ = env.goal(tp, max_episodes=30)
     assert res.success or "did not find" in res.message, res.message
