@@ -39,7 +39,7 @@ class Node:
     `label` of every known edge, `child` node of every obstacle edge. `offer` caches `offered()` (ascending
     action indices; kept up to date by QTree when an action is pruned here, None = not computed yet)."""
 
-    __slots__ = ("id", "seq", "mask", "q", "q_pruned", "label", "child", "pruned", "offer", "removed")
+    __slots__ = ("id", "seq", "mask", "q", "q_pruned", "label", "child", "pruned", "offer", "removed", "free")
 
     def __init__(self, node_id: int, seq: tuple[int, ...], mask: int) -> None:
         self.id = node_id
@@ -52,6 +52,7 @@ class Node:
         self.pruned = 0  # bitmask of unfeasible actions at this node
         self.offer: list[int] | None = None  # cache of offered(), see QTree.offered
         self.removed: frozenset[str] | None = None  # cache of the removed ids, see QTree.edge_label
+        self.free: tuple[int, ...] | None = None  # cache: actions not relocated in this sequence (ascending)
 
     def max_q(self) -> float:
         """max_a' Q(s, a') over the known feasible edges; 0 where there is none (Eq. 7)."""
@@ -121,7 +122,8 @@ class QTree:
         if c is None:
             mask = node.mask | (1 << a)
             c = Node(len(self.nodes), node.seq + (a,), mask)
-            c.offer = [b for b in self._actions if not (mask >> b) & 1]  # = c.offered(n): nothing pruned yet
+            c.free = tuple(b for b in self._actions if not (mask >> b) & 1)
+            c.offer = list(c.free)  # = c.offered(n): nothing pruned here yet
             self.nodes.append(c)
             node.child[a] = c
         return c
@@ -151,6 +153,10 @@ class QTree:
     def q_abs_sum(self) -> float:
         """Eq. 15 recomputed from scratch (q_sum is the incremental copy)."""
         return float(sum(abs(v) for n in self.nodes for v in (*n.q.values(), *n.q_pruned.values())))
+
+    @property
+    def node_count(self) -> int:
+        return len(self.nodes)
 
     @property
     def n_edges(self) -> int:

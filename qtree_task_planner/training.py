@@ -11,11 +11,13 @@ evaluation sweeps (with a shared CachedOracle) call it.
 from __future__ import annotations
 
 import gc
+import itertools
 import random
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from . import kernel
 from .checkpoint import Checkpoint, problem_hash
 from .feasibility import CachedOracle, Label
 from .params import TrainingParams
@@ -123,9 +125,13 @@ def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint
     cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
     calls0 = cache.calls
     t0 = time.perf_counter()
-    tree = QTree(problem, cache, params.alpha, params.gamma)
-    rng = random.Random(params.seed)
     policy = POLICY_FUNCTIONS[params.policy]
+    use_kernel = (callback is None and resume is None and on_checkpoint is None and policy in _KIND
+                  and type(cache) is CachedOracle and len(problem.ids) <= kernel.MAX_ACTIONS
+                  and QTree.step is _STOCK_STEP and QTree.edge_label is _STOCK_EDGE_LABEL
+                  and QTree.child is _STOCK_CHILD and kernel.available())
+    tree = (kernel.KernelTree if use_kernel else QTree)(problem, cache, params.alpha, params.gamma)
+    rng = random.Random(params.seed)
     depth = params.search == "depth"
     n_obj, target, root = tree.n_objects, tree.target, tree.root
     e_max, i_max = params.max_episodes, params.max_steps
@@ -152,11 +158,19 @@ def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint
                           tree.to_state(), Checkpoint.table_of(cache), elapsed_before + time.perf_counter() - t0,
                           reason)
 
+    if use_kernel:  # the whole loop in C (kernel.py), bit-identical
+        path_ok = None
+        if optimal_weight is not None:
+            def path_ok(actions, ids=problem.ids):
+                return problem.weight(tuple(ids[a] for a in actions)) <= optimal_weight + WEIGHT_TOL
+        epsilons = [epsilon_schedule(e, e_max, eps0, eps_min) for e in range(e_max)]
+        episode, converged, e_1st, history = tree.run(rng, _KIND[policy], depth, i_max, e_max, epsilons, beta,
+                                                      quiet_needed, path_ok)
     fast = _Fast(tree, _KIND[policy], depth, i_max) if on_checkpoint is None and _stock(tree, policy) else None
     rand = rng.random
     journal: list = []
     last_seq, last_ok = None, False
-    while episode < e_max and not converged:
+    while not use_kernel and episode < e_max and not converged:
         if on_checkpoint is not None:
             episode_start = (rng.getstate(), len(tree.nodes), tree.mp_q, tree.q_sum)
             journal.clear()
@@ -228,7 +242,7 @@ def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint
         e_1st=e_1st,
         optimal_weight=optimal_weight,
         cancelled=cancelled,
-        tree_nodes=len(tree.nodes),
+        tree_nodes=tree.node_count,
         tree_edges=tree.n_edges,
         q_sum_history=history,
         params=params,
@@ -240,6 +254,7 @@ def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint
 _STOCK_STEP, _STOCK_EDGE_LABEL, _STOCK_CHILD = QTree.step, QTree.edge_label, QTree.child
 _KIND = {lrnd: 0, h_lrnd: 1, epsilon_greedy: 2}
 _LABELS = {int(lab): lab for lab in Label}
+_ZEROS = itertools.repeat(0.0)
 
 
 def _stock(tree: QTree, policy) -> bool:
@@ -279,6 +294,7 @@ def _episode(f: _Fast, epsilon: float, rand) -> tuple[int, bool]:
     ask = tree.oracle.feasibility
     obstacle, unfeasible, target_label = Label.OBSTACLE, Label.UNFEASIBLE, Label.TARGET
     q_sum, mp_q = tree.q_sum, tree.mp_q
+    zeros = _ZEROS
     try:
         while steps < i_max:
             offered = node.offer
@@ -295,11 +311,13 @@ def _episode(f: _Fast, epsilon: float, rand) -> tuple[int, bool]:
             elif kind == 1 or rand() < epsilon:
                 a = offered[int(rand() * n_off)]
             else:
-                qget = node.q.get
-                vals = [qget(b, 0.0) for b in offered]
+                vals = list(map(node.q.get, offered, zeros))  # an edge not in the tree counts 0
                 best_v = max(vals)
-                best = [b for b, v in zip(offered, vals) if v == best_v]
-                a = best[0] if len(best) == 1 else best[int(rand() * len(best))]
+                if vals.count(best_v) == 1:
+                    a = offered[vals.index(best_v)]
+                else:  # ties: uniform among them, in offered order
+                    best = [b for b, v in zip(offered, vals) if v == best_v]
+                    a = best[int(rand() * len(best))]
             steps += 1
             # QTree.step: label (Eq. 11, QTree.edge_label), reward (Eq. 13), update (Eq. 7), Eq. 15
             label = node.label.get(a)
@@ -334,7 +352,13 @@ def _episode(f: _Fast, epsilon: float, rand) -> tuple[int, bool]:
                 if nxt is None:  # QTree.child
                     mask = node.mask | (1 << a)
                     nxt = Node(len(nodes), node.seq + (a,), mask)
-                    nxt.offer = [b for b in actions if not (mask >> b) & 1]
+                    free = node.free
+                    if free is None:
+                        free = node.free = tuple(b for b in actions if not (node.mask >> b) & 1)
+                    offer = list(free)
+                    offer.remove(a)  # = nxt.offered(n): nothing pruned there yet
+                    nxt.offer = offer
+                    nxt.free = tuple(offer)
                     nodes.append(nxt)
                     node.child[a] = nxt
                 nq = nxt.q

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Benchmark of the Q-Tree core on the 15-object blocking instance (config/scenarios/blocking_15.yaml).
 
-Prints: training throughput (episodes/s) for each policy x search, with a cold cache (BlockingOracle behind a
+Prints: training throughput (episodes per CPU second of this process, so that other jobs on a shared machine
+distort it less) for each policy x search, with a cold cache (BlockingOracle behind a
 fresh CachedOracle) and a warm shared cache (the evaluation sweeps' case); the exact solver's oracle calls and
 time; and a sweep of quiet_episodes (Eq. 16) behind the default in config/task_planner.yaml.
 Usage: .venv/bin/python scripts/bench_qtree.py [--seeds N] [--episodes E] [--no-sweep]
@@ -34,9 +35,9 @@ def throughput(sc, seeds: int, episodes: int) -> list[dict]:
                 eps, mpq, calls, nodes, optimal = [], [], [], [], 0
                 for s in range(seeds):
                     oracle = CachedOracle(BlockingOracle(sc)) if cache_kind == "cold" else warm
-                    t0 = time.perf_counter()
+                    t0 = time.process_time()
                     r = train(sc, oracle, p.replace(seed=s))
-                    dt = time.perf_counter() - t0
+                    dt = time.process_time() - t0
                     eps.append(r.episodes / dt)
                     mpq.append(r.mp_q)
                     calls.append(r.planner_calls)
