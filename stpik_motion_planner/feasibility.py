@@ -57,13 +57,34 @@ class PlannerParams:
     joint_resolution: float = 0.01  # rad: of the joint-space planner
     simplify_time: float = 0.005  # s of OMPL path simplification
     lift: float = 0.03  # m, after the grasp
-    drop: float = 0.004  # m, bottle base above the bottom shelf at release
+    drop: float = 0.012  # m, bottle base above the bottom shelf at release
     stage_distance: float = 0.30  # m, staging pose in front of the slot
     carry_timeout: float = 2.0  # s for plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple = (1.0, 0.55, 0.65, 0.9)
     stpik: StpikParams = field(default_factory=StpikParams)
+
+    def __post_init__(self) -> None:
+        """Every setting checked once, with its name in the error (ValueError)."""
+        positive = ("timeout", "rrt_timeout", "pre_grasp_distance", "resolution", "joint_resolution",
+                    "stage_distance", "carry_timeout")
+        non_negative = ("max_yaw", "hand_margin", "simplify_time", "lift", "drop")
+        for k in positive + non_negative:
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v < 0 or (v == 0 and k in positive):
+                raise ValueError(f"motion planner parameter {k} must be a finite number "
+                                 f"{'> 0' if k in positive else '>= 0'}, got {v!r}")
+        for k in ("max_attempts", "n_yaws", "seed"):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, int) or (v < 1 and k != "seed"):
+                raise ValueError(f"motion planner parameter {k} must be an integer{' >= 1' if k != 'seed' else ''}, "
+                                 f"got {v!r}")
+        lo, hi = (np.asarray(getattr(self, k), float) for k in ("workspace_lo", "workspace_hi"))
+        if lo.shape != (4,) or hi.shape != (4,) or not np.all(np.isfinite(lo) & np.isfinite(hi) & (lo < hi)):
+            raise ValueError(f"motion planner parameters workspace_lo < workspace_hi must be 4 finite numbers each "
+                             f"(x, y, z, yaw), got {self.workspace_lo!r}, {self.workspace_hi!r}")
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any]) -> "PlannerParams":
@@ -73,27 +94,37 @@ class PlannerParams:
         kw, skw = {}, {}
         for k, v in data.items():
             if k.startswith("stpik.") and k[6:] in sp:
-                skw[k[6:]] = np.array(v, float) if k[6:] == "qdot_max" else float(v)
+                skw[k[6:]] = v
             elif k in NODE_KEYS or k.startswith("follower."):  # the motion_planner node's own parameters
                 continue
             elif k in own:
                 kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
             else:
                 raise ValueError(f"motion planner parameter {k!r} is unknown; known: {sorted(own)} and stpik.*")
-        for k in ("max_attempts", "n_yaws", "seed"):
-            if k in kw:
+        for k in ("max_attempts", "n_yaws", "seed"):  # YAML / ROS give 6.0 for 6: accept whole numbers only
+            if isinstance(kw.get(k), float) and kw[k].is_integer():
                 kw[k] = int(kw[k])
-        if "direct_first" in kw:
-            kw["direct_first"] = bool(kw["direct_first"])
+        if "direct_first" in kw and not isinstance(kw["direct_first"], bool):
+            raise ValueError(f"motion planner parameter direct_first must be true or false, got {kw['direct_first']!r}")
         return cls(**kw, stpik=StpikParams(**skw))
 
     @classmethod
     def load(cls, path: str | Path = CONFIG) -> "PlannerParams":
-        data = yaml.safe_load(Path(path).read_text())
+        """From a ROS params file; ValueError naming the file on malformed YAML, a wrong layout or a bad value."""
         try:
-            return cls.from_mapping(data["motion_planner"]["ros__parameters"])
+            data = yaml.safe_load(Path(path).read_text())
+        except yaml.YAMLError as e:
+            mark = getattr(e, "problem_mark", None)
+            where = f" at line {mark.line + 1}" if mark is not None else ""
+            raise ValueError(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
+        try:
+            section = data["motion_planner"]["ros__parameters"]
         except (KeyError, TypeError):
             raise ValueError(f"{path}: expected motion_planner: ros__parameters: {{...}}") from None
+        try:
+            return cls.from_mapping(section)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{path}: {e}") from None
 
 
 @dataclass

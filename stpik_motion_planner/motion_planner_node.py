@@ -343,7 +343,18 @@ class MotionPlannerNode(Node):
 
 
 def main(args=None) -> None:
-    run_node(MotionPlannerNode, args, threads=6)
+    """Run the node; unusable parameters or scenario: one line on stderr and exit status 2 (no traceback)."""
+    import sys
+
+    from rclpy.exceptions import ParameterException
+
+    from qtree_task_planner.params import ParameterError, check_params_files
+    try:
+        check_params_files(sys.argv if args is None else args)
+        run_node(MotionPlannerNode, args, threads=6)
+    except (ParameterError, ParameterException, ScenarioError, ValueError, TypeError) as e:
+        print(f"motion_planner: {type(e).__name__}: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 if __name__ == "__main__":

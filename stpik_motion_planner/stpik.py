@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import pinocchio as pin
@@ -51,6 +51,23 @@ class StpikParams:
     settle_time: float = 1.0  # s allowed after the reference ends
     damping: float = 0.05
     qdot_max: np.ndarray = field(default_factory=lambda: rd.QDOT_MAX.copy())
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.name == "qdot_max":
+                continue
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"motion planner parameter stpik.{f.name} must be a finite number >= 0, got {v!r}")
+            setattr(self, f.name, float(v))
+        try:
+            q = np.array(self.qdot_max, dtype=float)
+        except (TypeError, ValueError):
+            q = np.zeros(0)
+        if q.shape != (rd.N_JOINTS,) or not np.all(np.isfinite(q) & (q > 0)):
+            raise ValueError(f"motion planner parameter stpik.qdot_max must be {rd.N_JOINTS} positive numbers "
+                             f"(rad/s, Table 7), got {self.qdot_max!r}")
+        self.qdot_max = q
 
 
 @dataclass

@@ -19,6 +19,7 @@ from stpik_motion_planner.feasibility import PlannerParams  # noqa: E402
 
 DRIVER = ("jaco2_sim_driver.driver_node", REPO / "config" / "jaco2_sim_driver.yaml", "jaco2_sim_driver: ")
 PERCEPTION = ("perception_aruco.perception_node", REPO / "config" / "perception.yaml", "perception: ")
+PLANNER = ("stpik_motion_planner.motion_planner_node", REPO / "config" / "motion_planner.yaml", "motion_planner: ")
 
 
 def _files(tmp: Path) -> dict:
@@ -43,10 +44,14 @@ CASES = [  # (node, ros args, words of the one line)
     (PERCEPTION, ["-p", "scenario:=SCENARIO_MALFORMED"], "malformed YAML"),
     (PERCEPTION, ["-p", "process_rate:=0.0"], "process_rate must be > 0"),
     (PERCEPTION, ["-p", "sync_slop:=abc"], "sync_slop"),
+    (PLANNER, ["-p", "timeout:=-1.0"], "timeout must be a finite number > 0"),
+    (PLANNER, ["-p", "stpik.qdot_max:=[0.8,0.8]"], "stpik.qdot_max must be 7 positive numbers"),
+    (PLANNER, ["-p", "scenario:=SCENARIO_PARTIAL"], "ScenarioError"),
+    (PLANNER, ["--params-file", "DRIVER_MALFORMED"], "malformed YAML"),
 ]
 
 
-def test_driver_and_perception_refuse_bad_files_and_parameters_with_one_line(tmp_path):
+def test_driver_perception_and_planner_refuse_bad_files_and_parameters_with_one_line(tmp_path):
     files = _files(tmp_path)
     subst = lambda a: next((files[k.lower()] for k in files if a.endswith(k.upper())), a)  # noqa: E731
     with RosGraph(tmp_path) as g:
@@ -78,16 +83,11 @@ def test_motion_planner_params_partial_or_unknown_key_is_a_clear_error(tmp_path)
     assert PlannerParams.load(REPO / "config" / "motion_planner.yaml").timeout > 0
 
 
-GAPS = "PlannerParams does not validate this yet (stpik_motion_planner/feasibility.py, not owned here)"
-
-
-@pytest.mark.xfail(strict=True, reason=GAPS)
 def test_motion_planner_params_malformed_yaml_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="malformed"):
         PlannerParams.load(_mp(tmp_path, "motion_planner:\n  ros__parameters:\n    timeout: [\n"))
 
 
-@pytest.mark.xfail(strict=True, reason=GAPS)
 @pytest.mark.parametrize("line", ["timeout: abc", "timeout: -1.0", "rrt_timeout: .nan", "stpik.qdot_max: [1.0, 2.0]",
                                   "max_attempts: 0"])
 def test_motion_planner_params_out_of_range_is_a_clear_error(tmp_path, line):
