@@ -47,6 +47,7 @@ from stpik_motion_planner.scene_msgs import msg_to_bottles
 from . import exact
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from .feasibility import CachedOracle, FeasibilityAnswer, Label
+from .markers import tree_markers
 from .params import ParameterError, TrainingParams, check_params_files
 from .problem import RelocationProblem
 from .spin import run_node
@@ -363,7 +364,7 @@ class TaskPlannerNode(Node):
             result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target"
             return
         self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes")
-        self._publish_scene(scene, r.sequence)
+        self._publish_scene(scene, r.sequence, r.tree, problem.ids)
         if not goal_handle.request.execute:
             result.success, result.message = True, "trained (not executed)"
             return
@@ -410,9 +411,12 @@ class TaskPlannerNode(Node):
         return res.success, res.message
 
     # -- visualisation --------------------------------------------------------------------------------------
-    def _publish_scene(self, scene: ObjectArray, sequence) -> None:
-        """The scene's bottles as cylinders in their colour, each labelled with its place in the learned order."""
+    def _publish_scene(self, scene: ObjectArray, sequence, tree=None, ids=()) -> None:
+        """The scene's bottles as cylinders in their colour, each labelled with its place in the learned order;
+        with a trained tree, the Q-Tree beside the shelf (qtree_task_planner.markers)."""
         arr = MarkerArray()
+        if tree is not None:
+            arr.markers += tree_markers(tree.to_state(), tuple(ids), tuple(sequence), scene.header.frame_id).markers
         order = {o: k + 1 for k, o in enumerate(sequence)}
         for k, o in enumerate(scene.objects):
             m = Marker(ns="scene", id=k, type=Marker.CYLINDER, action=Marker.ADD, header=scene.header)

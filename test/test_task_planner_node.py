@@ -93,7 +93,13 @@ def _done(fut, timeout=30):
 
 
 def test_node_trains_like_the_core(graph):
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from visualization_msgs.msg import MarkerArray
+
     g, node, scenario, calls, _ = graph
+    markers = []
+    node.create_subscription(MarkerArray, "/task_planner/markers", markers.append,
+                             QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     res, feedback = _train_goal(node, g, max_episodes=300)
     assert res is not None and res.success, res
     params = TrainingParams.defaults().replace(policy="h-eg", search="depth", seed=3, max_episodes=300)
@@ -111,6 +117,14 @@ def test_node_trains_like_the_core(graph):
         time.sleep(0.05)
     assert feedback and feedback[-1].episode == res.episodes
     assert [f.episode for f in feedback] == sorted(f.episode for f in feedback)
+    # the last MarkerArray: the scene labelled with the learned order, and the tree with the learned path
+    deadline = time.monotonic() + 5
+    while not (markers and any(m.ns == "q_tree" for m in markers[-1].markers)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    last = markers[-1].markers
+    tree_labels = [m.text for m in last if m.ns == "q_tree" and m.type == m.TEXT_VIEW_FACING]
+    assert tree_labels == list(res.sequence)
+    assert sum(1 for m in last if m.ns == "scene") == len(scenario.objects)
 
 
 @pytest.mark.parametrize("fields", [{"alpha": 1.5}, {"policy": "greedy"}, {"gamma": float("nan")}])
