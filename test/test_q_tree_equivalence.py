@@ -7,7 +7,9 @@ Each case is a full TrainingParams (explicit, independent of config/task_planner
 deterministic oracle (blocking_5/10/15 with BlockingOracle; scenario1_5 and scenario2_10 with the cached real
 planner answers of data/feasibility/). Compared exactly: sequence, total_weight, episodes, converged, E_ss,
 MP_q, planner calls, E_1st, tree size, the Eq. 15 history (every float, by its IEEE bits) and the whole tree
-(QTree.to_state(), every Q by its bits).
+(QTree.to_state(), every Q by its bits). Each of the three engines is checked against it: the C kernel
+(qtree_task_planner/kernel.py, plain batch training), the inlined Python episode loop (training._episode: with a
+callback, or without the kernel) and the reference loop (policy + QTree.step: with on_checkpoint).
 """
 from __future__ import annotations
 
@@ -22,7 +24,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from qtree_task_planner import exact  # noqa: E402
+from qtree_task_planner import exact, kernel  # noqa: E402
 from qtree_task_planner.feasibility import BlockingOracle  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.problem import RelocationProblem  # noqa: E402
@@ -95,9 +97,9 @@ def setting(scene: str):
     return _SCENES[scene]
 
 
-def run_case(case: dict) -> dict:
+def run_case(case: dict, **kw) -> dict:
     problem, oracle, opt = setting(case["scene"])
-    r = train(problem, oracle, TrainingParams(**case["params"]), optimal_weight=opt)
+    r = train(problem, oracle, TrainingParams(**case["params"]), optimal_weight=opt, **kw)
     return {"sequence": list(r.sequence) if r.sequence is not None else None,
             "total_weight": None if r.total_weight is None else r.total_weight.hex(),
             "episodes": r.episodes, "converged": r.converged, "e_ss": r.e_ss, "mp_q": r.mp_q,
@@ -120,6 +122,92 @@ def load_fixture() -> list[dict]:
 @pytest.mark.parametrize("case", load_fixture() if FIXTURE.exists() else [], ids=case_id)
 def test_training_reproduces_the_reference_bit_for_bit(case):
     assert run_case(case) == case["result"]
+
+
+@pytest.fixture
+def python_loops(monkeypatch):
+    """Training without the C kernel (as on a machine without a C compiler)."""
+    monkeypatch.setattr(kernel, "_lib", None)
+    monkeypatch.setattr(kernel, "build_error", "disabled by the test")
+    assert not kernel.available()
+
+
+CASES = load_fixture() if FIXTURE.exists() else []
+
+
+@pytest.mark.parametrize("case", CASES[::2], ids=case_id)
+def test_python_episode_loop_reproduces_the_reference(case, python_loops):
+    assert run_case(case) == case["result"]
+
+
+@pytest.mark.parametrize("case", CASES[::3], ids=case_id)
+def test_python_loop_with_callback_reproduces_the_reference(case):
+    seen = []
+    assert run_case(case, callback=seen.append) == case["result"]  # a callback: Python loop, kernel or not
+    assert len(seen) == case["result"]["episodes"]
+
+
+@pytest.mark.parametrize("case", CASES[::7], ids=case_id)
+def test_reference_loop_with_checkpoints_reproduces_the_reference(case):
+    final = []
+    assert run_case(case, on_checkpoint=final.append) == case["result"]
+    assert [c.reason for c in final] == ["final"]
+
+
+def test_kernel_is_built_and_used():
+    assert kernel.available(), kernel.build_error
+    problem, oracle, opt = setting("blocking_10")
+    r = train(problem, oracle, TrainingParams(**(BASE | dict(policy="lrnd", search="depth", seed=0))))
+    assert isinstance(r.tree, kernel.KernelTree)
+    # the tree is exported on first use, and agrees with the kernel's counts
+    assert r.tree._py_nodes is None
+    seq_before = r.tree.best_sequence()
+    assert r.tree_nodes == len(r.tree.nodes) and r.tree_edges == r.tree.n_edges == r.mp_q
+    assert r.tree.best_sequence() == seq_before == r.sequence
+    assert r.tree.q_abs_sum() == pytest.approx(r.q_sum_history[-1])
+    assert "digraph" in r.tree.to_dot()
+
+
+@pytest.mark.parametrize("policy,search", ALGORITHMS)
+def test_kernel_asks_the_cache_exactly_like_the_python_loop(policy, search, monkeypatch):
+    from qtree_task_planner.feasibility import CachedOracle
+    sc = load_scenario(CONFIG_DIR / "scenarios" / "blocking_15.yaml")
+    p = TrainingParams(**(BASE | dict(policy=policy, search=search, seed=4, max_episodes=600)))
+    caches = []
+    for engine in ("kernel", "python"):
+        if engine == "python":
+            monkeypatch.setattr(kernel, "_lib", None)
+            monkeypatch.setattr(kernel, "build_error", "disabled by the test")
+        cache = CachedOracle(BlockingOracle(sc))
+        r = train(sc, cache, p)
+        caches.append((cache.calls, cache.queries, list(cache.table), r.planner_calls, r.mp_q))
+    assert caches[0] == caches[1]
+    assert caches[0][1] == caches[0][4]  # one cache query per new tree edge (MP_q)
+
+
+def test_kernel_propagates_oracle_errors():
+    from qtree_task_planner.feasibility import FeasibilityAnswer, Label
+    problem, oracle, _ = setting("blocking_10")
+
+    class Dies:
+        def __init__(self):
+            self.n = 0
+
+        def feasibility(self, object_id, removed):
+            self.n += 1
+            if self.n > 30:
+                raise ConnectionError("planner gone")
+            return oracle.feasibility(object_id, removed)
+
+    class Liar:
+        def feasibility(self, object_id, removed):
+            return FeasibilityAnswer(Label.TARGET)
+
+    p = TrainingParams(**(BASE | dict(policy="lrnd", search="depth", seed=0)))
+    with pytest.raises(ConnectionError, match="planner gone"):
+        train(problem, Dies(), p)
+    with pytest.raises(ValueError, match="TARGET is for the target only"):
+        train(problem, Liar(), p)
 
 
 def test_fixture_covers_every_algorithm_and_scene():
