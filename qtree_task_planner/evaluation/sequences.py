@@ -87,3 +87,47 @@ def analyse(table: FeasibilityTable, scenario) -> SequenceReport:
     init = tuple(o for o in scenario.obstacle_ids if table.get(o, frozenset()) == Label.OBSTACLE)
     return SequenceReport(len(scenario.obstacle_ids), len(reach), frozenset() in freeing_set, init,
                           tuple(tuple(sorted(s)) for s in minimal), tuple(seqs), best, opt)
+
+
+def discounted_optimum(table: FeasibilityTable, scenario, gamma: float) -> tuple[tuple[str, ...], float] | None:
+    """The sequence a Q-Tree converges to with discount `gamma` (the greedy path of the fixed point of Eq. 7 with
+    the rewards of Eq. 13), and its Eq. 8 weight; None if the target cannot be freed.
+
+    The fixed point depends only on the removed set S: V(S) = max(100 if the target is feasible from S,
+    max over feasible obstacles o of -phi_o + gamma V(S + {o})), 0 when nothing is feasible (unfeasible edges are
+    pruned and leave the max, Eq. 7 as implemented). Ties go to the lowest action index, as in
+    QTree.best_path. With gamma = 1 this is the Eq. 8 optimum (100 - total weight); with gamma < 1 the +100 and
+    the weights are discounted per step, so fewer objects, and heavy objects late, are preferred."""
+    weights, target = scenario.weights, scenario.target_id
+    actions = list(scenario.obstacle_ids) + [target]
+    memo: dict[frozenset[str], float] = {}
+
+    def options(s: frozenset[str]) -> list[tuple[float, int, str]]:
+        out = []
+        for k, o in enumerate(actions):
+            if o in s:
+                continue
+            lab = table.get(o, s)
+            if o == target and lab == Label.TARGET:
+                out.append((100.0, k, o))
+            elif o != target and lab == Label.OBSTACLE:
+                out.append((-weights[o] + gamma * value(s | {o}), k, o))
+        return out
+
+    def value(s: frozenset[str]) -> float:
+        if s not in memo:
+            memo[s] = max((v for v, _, _ in options(s)), default=0.0)
+        return memo[s]
+
+    s, seq = frozenset(), []
+    for _ in actions:
+        opts = options(s)
+        if not opts:
+            return None
+        best = max(v for v, _, _ in opts)
+        _, _, o = min((k, k, o) for v, k, o in opts if v >= best - 1e-12)
+        if o == target:
+            return tuple(seq), sum(weights[x] for x in seq)
+        seq.append(o)
+        s = s | {o}
+    return None
