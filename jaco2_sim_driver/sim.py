@@ -27,6 +27,7 @@ from .scene import (CAMERA_NAME, DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_B
 
 LIMIT_BRAKE_TIME = 0.02     # s: near a limit the allowed speed towards it is distance / LIMIT_BRAKE_TIME
 GRASP_RADIAL_TOL = 0.025    # m: bottle axis to grasp centre, across the hand (fingers open to about +-36 mm)
+RELEASE_DELAY = 0.15        # s from opening the fingers to letting the bottle go (they are clear of it by then)
 GRASP_TILT_COS = math.cos(math.radians(30))  # hand y axis (finger spread) vs bottle axis
 
 
@@ -84,6 +85,7 @@ class Jaco2Sim:
         self._site = m.site("end_effector").id
         self._bodies = {b.id: m.body(b.id).id for b in scenario.objects}
         self._welds = {b.id: m.equality(f"grasp_{b.id}").id for b in scenario.objects}
+        self._release: tuple[str, float] | None = None  # (bottle, sim time) of a pending release
         for g in DESCRIPTION_FINGER_GEOMS:  # the moving finger bodies replace the description's static capsules
             gid = m.geom(g).id
             m.geom_contype[gid] = m.geom_conaffinity[gid] = 0
@@ -169,6 +171,8 @@ class Jaco2Sim:
         for _ in range(n):
             self._apply()
             mujoco.mj_step(self.model, self.data)
+            if self._release is not None and self.data.time >= self._release[1]:
+                self._let_go(self._release[0])
 
     # ---------------------------------------------------------------- scene
     def reset(self) -> None:
@@ -178,6 +182,7 @@ class Jaco2Sim:
         for b in self._bodies.values():
             self.model.body_gravcomp[b] = 0.0
         self.grasped = None
+        self._release = None
         self.data.ctrl[self._fact] = 0.0
         self.home()
 
@@ -218,6 +223,8 @@ class Jaco2Sim:
         self.data.ctrl[self._fact] = FINGER_CLOSED
         if self.grasped is not None:
             return self.grasped
+        if self._release is not None:  # closing again right after opening: finish that release first
+            self._let_go(self._release[0])
         oid = self.bottle_between_fingers()
         if oid is None:
             return None
@@ -238,13 +245,23 @@ class Jaco2Sim:
         return oid
 
     def gripper_open(self) -> str | None:
-        """Open the fingers and release the grasped bottle (weld off, weight back); returns its id or None."""
+        """Open the fingers and release the grasped bottle (weld off, weight back) RELEASE_DELAY later, once the
+        fingers have left it: released at once, the fingers' unequal closing forces (one finger against two)
+        pushed the bottle sideways by about 1 cm and tipped it against a finger. Returns its id or None."""
         self.data.ctrl[self._fact] = 0.0
         oid, self.grasped = self.grasped, None
         if oid is not None:
-            self.data.eq_active[self._welds[oid]] = 0
-            self.model.body_gravcomp[self._bodies[oid]] = 0.0
+            self._release = (oid, self.data.time + RELEASE_DELAY)
         return oid
+
+    def _let_go(self, oid: str) -> None:
+        b = self._bodies[oid]
+        self.data.eq_active[self._welds[oid]] = 0
+        self.model.body_gravcomp[b] = 0.0
+        # a bottle held still sleeps with the hand (MuJoCo sleeping) and would hang in the air where it was let
+        # go: a downward velocity above the sleep tolerance (2 cm/s, against 0.5 m/s after its 12 mm fall) wakes it
+        self.data.qvel[self.model.jnt_dofadr[self.model.body_jntadr[b]] + 2] = -0.02
+        self._release = None
 
     def _place_grasped(self) -> None:
         eq, b = self._welds[self.grasped], self._bodies[self.grasped]

@@ -36,7 +36,7 @@ CONFIG = Path(__file__).resolve().parent.parent / "config" / "motion_planner.yam
 
 # Parameters of the motion_planner node that are not planner settings (config/motion_planner.yaml holds both)
 NODE_KEYS = frozenset({"scenario", "scene_topic", "driver_prefix", "stream_rate", "state_timeout", "home_tol",
-                       "gripper_timeout"})
+                       "gripper_timeout", "gripper_settle"})
 
 
 class PlanningError(RuntimeError):

@@ -106,7 +106,8 @@ class MotionPlannerNode(Node):
     def __init__(self) -> None:
         super().__init__("motion_planner")
         node_defaults = {"scenario": "", "scene_topic": "/scene/objects", "driver_prefix": "/j2s7s300_driver",
-                         "stream_rate": 100.0, "state_timeout": 0.5, "home_tol": 0.05, "gripper_timeout": 5.0}
+                         "stream_rate": 100.0, "state_timeout": 0.5, "home_tol": 0.05, "gripper_timeout": 5.0,
+                         "gripper_settle": 0.8}
         follower = {f"follower.{f.name}": getattr(FollowerParams(), f.name) for f in fields(FollowerParams)}
         for name, value in {**node_defaults, **follower, **_planner_defaults()}.items():
             self.declare_parameter(name, value)
@@ -340,6 +341,9 @@ class MotionPlannerNode(Node):
         if not res.success:
             raise _Aborted(f"gripper {action} failed: {res.message}")
         self.get_logger().info(f"gripper {action}: {res.message}")
+        # the service answers when the command is taken; the fingers need a moment (0.3 s in the simulator, about
+        # 1 s on a Jaco2) before the arm may move: retreating with half-open fingers dragged the bottle 2 cm
+        time.sleep(float(self.p("gripper_settle")))
 
 
 def main(args=None) -> None:
