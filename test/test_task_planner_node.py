@@ -111,12 +111,12 @@ def test_node_trains_like_the_core(graph):
     best = exact.solve(scenario, BlockingOracle(scenario))
     assert tuple(res.optimal_sequence) == best.sequence
     assert res.planner_calls == len(set(calls)) and res.planner_calls <= res.mp_q + best.oracle_calls
-    # feedback and result travel on different topics: give the last feedback a moment to arrive
-    deadline = time.monotonic() + 5
-    while not (feedback and feedback[-1].episode == res.episodes) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert feedback and feedback[-1].episode == res.episodes
-    assert [f.episode for f in feedback] == sorted(f.episode for f in feedback)
+    # one feedback per episode, each carrying that episode's Eq. 15 sum. Feedback and result travel on different
+    # topics and rclpy's action client drops feedback that lands after the result: the last few may be missing
+    episodes = [f.episode for f in feedback if f.phase == "training"]
+    assert episodes == sorted(set(episodes)) and res.episodes - 10 <= episodes[-1] <= res.episodes
+    for f in feedback:
+        assert f.q_sum == pytest.approx(res.q_sum_history[f.episode - 1])
     # the last MarkerArray: the scene labelled with the learned order, and the tree with the learned path
     deadline = time.monotonic() + 5
     while not (markers and any(m.ns == "q_tree" for m in markers[-1].markers)) and time.monotonic() < deadline:
