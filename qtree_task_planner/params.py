@@ -23,6 +23,20 @@ NODE_PARAMETERS = ("scene_topic", "scene_source", "scene_max_age", "scene_wait",
                    "checkpoint_every")
 
 
+def read_yaml(path: str | Path, error: type[Exception] = ValueError, what: str = "file"):
+    """Parse a YAML file; `error` with one line naming the file (and the line of a syntax error) otherwise. The
+    one reader of the project's YAML files: scenarios, node parameters, planner settings."""
+    path = Path(path)
+    try:
+        return yaml.safe_load(path.read_text())
+    except OSError as e:
+        raise error(f"{path}: cannot read {what} ({e.strerror})") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        raise error(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
+
+
 class ParameterError(ValueError):
     """A training parameter that cannot be used; the message names it and says what is allowed."""
 
@@ -99,12 +113,7 @@ class TrainingParams:
         """Read `node: ros__parameters: {...}` from a ROS params file. `ignore_unknown` lets a node's other
         parameters share the file; by default an unknown key is an error."""
         path = Path(path)
-        try:
-            data = yaml.safe_load(path.read_text())
-        except OSError as e:
-            raise ParameterError(f"{path}: cannot read parameters file ({e.strerror})") from None
-        except yaml.YAMLError as e:
-            raise ParameterError(f"{path}: malformed YAML: {getattr(e, 'problem', e)}") from None
+        data = read_yaml(path, ParameterError, "parameters file")
         try:
             section = data[node]["ros__parameters"]
         except (TypeError, KeyError):
@@ -139,14 +148,7 @@ def check_params_files(argv) -> None:
     for flag, path in zip(argv, argv[1:]):
         if flag != "--params-file":
             continue
-        try:
-            data = yaml.safe_load(Path(path).read_text())
-        except OSError as e:
-            raise ParameterError(f"{path}: cannot read parameters file ({e.strerror})") from None
-        except yaml.YAMLError as e:
-            mark = getattr(e, "problem_mark", None)
-            where = f" at line {mark.line + 1}" if mark is not None else ""
-            raise ParameterError(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
+        data = read_yaml(path, ParameterError, "parameters file")
         if not _node_sections(data):
             raise ParameterError(f"{path}: expected '<node>: ros__parameters: {{...}}' sections")
 

@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
-import yaml
 
 from qtree_task_planner.feasibility import FeasibilityAnswer, Label
+from qtree_task_planner.params import read_yaml
 
 from . import robot_description as rd
 from .collision import HAND_PARTS, PENETRATION, ArmGeometry, CollisionScene, HandProxy, ObstacleSet, carried_bottle
@@ -111,12 +111,7 @@ class PlannerParams:
     @classmethod
     def load(cls, path: str | Path = CONFIG) -> "PlannerParams":
         """From a ROS params file; ValueError naming the file on malformed YAML, a wrong layout or a bad value."""
-        try:
-            data = yaml.safe_load(Path(path).read_text())
-        except yaml.YAMLError as e:
-            mark = getattr(e, "problem_mark", None)
-            where = f" at line {mark.line + 1}" if mark is not None else ""
-            raise ValueError(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
+        data = read_yaml(path, ValueError, "motion planner parameters")
         try:
             section = data["motion_planner"]["ros__parameters"]
         except (KeyError, TypeError):

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
+from qtree_task_planner.params import read_yaml
 
 # Distinct colours for the bottles (the paper's bottles were coloured; perception identifies them by
 # colour). The target is green, as in the paper's experiment. RGB in [0, 1].
@@ -333,16 +333,7 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file. Raises ScenarioError with a one-line reason."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as e:
-        raise ScenarioError(f"{path}: cannot read scenario file ({e.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ScenarioError(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
+    data = read_yaml(path, ScenarioError, "scenario file")
     return parse_scenario(data, str(path))
 
 
