@@ -39,6 +39,7 @@ from qtree_task_planner.spin import run_node
 from . import robot_description as rd
 from .execution import FollowerParams, TrajectoryFollower
 from .feasibility import MotionPlanner, PlannerParams, PlanningError
+from .relocation import PHASES, relocate
 from .scenario import DEFAULT_SCENARIO, ScenarioError, UnknownObjectError, load_scenario
 from .scene_msgs import BASE_FRAME, msg_to_bottles
 from .stpik import StpikParams
@@ -48,10 +49,6 @@ SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 REPO = Path(__file__).resolve().parent.parent
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
 ON_SHELF = 0.01  # m: a bottle whose base is farther from the top shelf's surface is lifted or elsewhere
-
-# progress (0..1) of the whole relocation at the start of each phase
-PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, "carry": 0.45, "release": 0.7,
-          "retreat": 0.72, "plan_home": 0.8, "home": 0.82, "done": 1.0}
 
 
 def _planner_defaults() -> dict:
@@ -245,35 +242,11 @@ class MotionPlannerNode(Node):
         return result
 
     def _relocate(self, gh) -> None:
-        oid, removed = gh.request.object_id, list(gh.request.removed_ids)
-        slot = len(removed)
-        placed = [(r, self.base.slot(k)) for k, r in enumerate(removed)]
         deadline = time.monotonic() + 5.0  # right after start-up, discovery of the driver can take a moment
         while self._q is None and time.monotonic() < deadline:
             time.sleep(0.05)
-        q = self._measured()
-        if float(np.max(np.abs(q - rd.Q_HOME))) > self.p("home_tol"):
-            self._feedback(gh, "plan_home")
-            self._follow(gh, self._plan(lambda: self.planner.plan_home(q, removed, placed)), "home")
-        self._feedback(gh, "plan_pick")
-        (pick,) = self._plan(lambda: self.planner.plan_pick(oid, removed))
-        self._follow(gh, pick.trajectory, "approach")
-        self._gripper_call(gh, "close", "grasp")
-        self._feedback(gh, "plan_carry")
-        q = self._measured()
-        carry, retreat = self._plan(lambda: self.planner.plan_carry(oid, removed, slot, q_start=q, placed=placed))
-        self._follow(gh, carry.trajectory, "carry")
-        self._gripper_call(gh, "open", "release")
-        self._follow(gh, retreat.trajectory, "retreat")
-        self._feedback(gh, "plan_home")
-        q = self._measured()
-        home = self._plan(lambda: self.planner.plan_home(q, removed + [oid], placed + [(oid, self.base.slot(slot))]))
-        self._follow(gh, home, "home")
-        self._feedback(gh, "done")
-
-    def _plan(self, fn):
-        with self._plan_lock:
-            return fn()
+        relocate(self.planner, _GoalArm(self, gh), gh.request.object_id, list(gh.request.removed_ids),
+                 home_tol=self.p("home_tol"), lock=self._plan_lock)
 
     def _measured(self) -> np.ndarray:
         st = self._q
@@ -344,6 +317,25 @@ class MotionPlannerNode(Node):
         # the service answers when the command is taken; the fingers need a moment (0.3 s in the simulator, about
         # 1 s on a Jaco2) before the arm may move: retreating with half-open fingers dragged the bottle 2 cm
         time.sleep(float(self.p("gripper_settle")))
+
+
+class _GoalArm:
+    """relocation.Arm over ROS for one RelocateObject goal: streaming, gripper services, feedback."""
+
+    def __init__(self, node: MotionPlannerNode, goal_handle):
+        self.node, self.gh = node, goal_handle
+
+    def measured(self) -> np.ndarray:
+        return self.node._measured()
+
+    def follow(self, trajectory: Trajectory, phase: str) -> None:
+        self.node._follow(self.gh, trajectory, phase)
+
+    def gripper(self, action: str, phase: str) -> None:
+        self.node._gripper_call(self.gh, action, phase)
+
+    def phase(self, phase: str) -> None:
+        self.node._feedback(self.gh, phase)
 
 
 def main(args=None) -> None:

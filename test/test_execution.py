@@ -7,6 +7,7 @@ from jaco2_sim_driver.sim import Jaco2Sim
 from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.execution import FollowerParams, TrajectoryFollower
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+from stpik_motion_planner.relocation import PHASES, relocate
 from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
 from stpik_motion_planner.trajectory import Trajectory
 
@@ -68,14 +69,35 @@ def test_follower_reports_a_blocked_arm_and_a_bad_start():
         FollowerParams(k_track=float("nan"))
 
 
-def _follow(sim, traj):
-    f = TrajectoryFollower(traj)
-    while (status := f.update(sim.q, DT)) == f.RUNNING:
-        sim.set_velocity(f.command(sim.q))
-        sim.step(10)
-    sim.stop()
-    sim.step(20)
-    assert status == f.SETTLED, f.reason
+class SimArm:
+    """relocation.Arm on the MuJoCo core: 100 Hz commands from the follower, gripper with time to move."""
+
+    def __init__(self, sim):
+        self.sim, self.phases = sim, []
+
+    def measured(self):
+        return self.sim.q
+
+    def follow(self, traj, phase):
+        self.phases.append(phase)
+        f = TrajectoryFollower(traj)
+        while (status := f.update(self.sim.q, DT)) == f.RUNNING:
+            self.sim.set_velocity(f.command(self.sim.q))
+            self.sim.step(10)
+        self.sim.stop()
+        self.sim.step(20)
+        assert status == f.SETTLED, f.reason
+
+    def gripper(self, action, phase):
+        self.phases.append(phase)
+        if action == "close":
+            assert self.sim.gripper_close() is not None, "closed on nothing"
+        else:
+            self.sim.gripper_open()
+        self.sim.step(300)
+
+    def phase(self, phase):
+        self.phases.append(phase)
 
 
 def _upright(sim, oid) -> float:
@@ -87,28 +109,20 @@ def _upright(sim, oid) -> float:
 
 @pytest.mark.slow
 def test_planned_relocations_move_bottles_to_their_slots_in_mujoco():
-    """What the motion_planner node does, without ROS: pick, close, carry, open, retreat, home, twice."""
+    """relocation.relocate (what the motion_planner node runs) on the MuJoCo core, twice: bottles on their slots."""
     scenario = load_scenario(DEFAULT_SCENARIO)
     planner, sim = MotionPlanner(scenario, PlannerParams.load()), Jaco2Sim(scenario)
     start = {p.id: np.array(p.position) for p in sim.object_poses()}
-    removed = []
+    removed, arm = [], SimArm(sim)
     for oid in ("o2", "o3"):  # front row: feasible at once, and o3 after o2
-        placed = [(r, scenario.slot(k)) for k, r in enumerate(removed)]
-        (pick,) = planner.plan_pick(oid, removed)
-        _follow(sim, pick.trajectory)
-        assert sim.gripper_close() == oid
-        sim.step(200)
-        carry, retreat = planner.plan_carry(oid, removed, len(removed), q_start=sim.q, placed=placed)
-        _follow(sim, carry.trajectory)
-        assert sim.gripper_open() == oid
-        sim.step(300)
-        _follow(sim, retreat.trajectory)
-        slot = scenario.slot(len(removed))
-        _follow(sim, planner.plan_home(sim.q, removed + [oid], placed + [(oid, slot)]))
+        arm.phases.clear()
+        relocate(planner, arm, oid, removed)
+        assert arm.phases == list(PHASES), arm.phases  # at home already: no way home first
         sim.step(500)
+        slot = scenario.slot(len(removed))
         removed.append(oid)
         pos = {p.id: np.array(p.position) for p in sim.object_poses()}
-        np.testing.assert_allclose(pos[oid], (slot[0], slot[1], scenario.shelf.bottom_z), atol=0.01)
+        np.testing.assert_allclose(pos[oid], (slot[0], slot[1], scenario.shelf.bottom_z), atol=0.005)
         assert _upright(sim, oid) > 0.995
         for other in scenario.ids:  # nothing else was disturbed
             if other not in removed:
