@@ -100,6 +100,8 @@ def run(argv=None) -> int:
     SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
     from qtree_relocation_msgs.srv import PlanFeasibility
 
+    from .task_planner_node import train_goal
+
     t0 = time.monotonic()
     common = {"scenario": a.scenario}
     scene_topic = "/scene/objects" if a.scene_source == "perception" else "/sim/objects"
@@ -134,9 +136,7 @@ def run(argv=None) -> int:
             before = truth.positions()
             print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {a.policy}/{a.search} "
                   f"through the feasibility service")
-            goal = TrainPlanner.Goal(policy=a.policy, search=a.search, seed=a.seed, execute=not a.no_execute)
-            goal.alpha = goal.gamma = goal.epsilon0 = goal.epsilon_min = goal.beta = -1.0  # -1: node defaults
-            goal.max_episodes = goal.max_steps = goal.quiet_episodes = -1
+            goal = train_goal(policy=a.policy, search=a.search, seed=a.seed, execute=not a.no_execute)
             bar = tqdm(desc="training", unit="ep", file=sys.stderr)
 
             def feedback(fb):

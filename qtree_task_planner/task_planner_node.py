@@ -102,6 +102,20 @@ class ServiceOracle:
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message)
 
 
+NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
+                       "quiet_episodes")
+
+
+def train_goal(**fields) -> TrainPlanner.Goal:
+    """A TrainPlanner goal whose numeric settings say "use the node's parameter" (negative) unless given."""
+    goal = TrainPlanner.Goal()
+    for f in NODE_DEFAULT_FIELDS:
+        setattr(goal, f, type(getattr(goal, f))(-1))
+    for k, v in fields.items():
+        setattr(goal, k, v)
+    return goal
+
+
 class TaskPlannerNode(Node):
     def __init__(self) -> None:
         super().__init__("task_planner")

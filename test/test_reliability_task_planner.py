@@ -84,6 +84,7 @@ from rclpy.action import ActionClient  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 
 from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402
+from qtree_task_planner.task_planner_node import train_goal  # noqa: E402
 from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
 from stpik_motion_planner.scene_msgs import bottles_to_msg  # noqa: E402
 
@@ -131,12 +132,7 @@ class Env:
     def goal(self, node: NodeProcess, timeout=120.0, **fields):
         """Send a TrainPlanner goal; returns (result or None if rejected, feedback list)."""
         _wait(lambda: self.client.wait_for_server(timeout_sec=0.2), 30, "train action never appeared", node)
-        goal = TrainPlanner.Goal(seed=SEED, execute=False)
-        for f in ("alpha", "gamma", "epsilon0", "epsilon_min", "beta"):
-            setattr(goal, f, -1.0)
-        goal.max_episodes = goal.max_steps = goal.quiet_episodes = -1
-        for k, v in fields.items():
-            setattr(goal, k, v)
+        goal = train_goal(**{"seed": SEED, "execute": False, **fields})
         feedback = []
         handle = _result(self.client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)),
                          30, node)

@@ -66,17 +66,13 @@ def _train_goal(node, g, **fields):
     from rclpy.action import ActionClient
 
     from qtree_relocation_msgs.action import TrainPlanner
+    from qtree_task_planner.task_planner_node import train_goal
     client = ActionClient(node, TrainPlanner, "/task_planner/train")
     deadline = time.monotonic() + 30
     while not client.wait_for_server(timeout_sec=0.5):
         g.check_alive()
         assert time.monotonic() < deadline, "train action never appeared"
-    goal = TrainPlanner.Goal(policy="h-eg", search="depth", seed=3, execute=False)
-    for f in ("alpha", "gamma", "epsilon0", "epsilon_min", "beta"):
-        setattr(goal, f, -1.0)
-    goal.max_episodes = goal.max_steps = goal.quiet_episodes = -1
-    for k, v in fields.items():
-        setattr(goal, k, v)
+    goal = train_goal(**{"policy": "h-eg", "search": "depth", "seed": 3, "execute": False, **fields})
     feedback = []
     handle = _done(client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback)))
     if not handle.accepted:
