@@ -1,4 +1,5 @@
-"""ament_python package qtree_relocation: four ROS-free cores, their node shells, and the qtree CLI."""
+"""ament_python package qtree_relocation: a common bottom (relocation_common), four cores with their node shells,
+and the application (relocation_app: graph launcher, demo, evaluation, qtree CLI)."""
 from glob import glob
 
 from setuptools import setup
@@ -8,7 +9,9 @@ PACKAGE = "qtree_relocation"
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=["qtree_task_planner", "qtree_task_planner.evaluation", "stpik_motion_planner", "jaco2_sim_driver", "perception_aruco"],
+    packages=["relocation_common", "qtree_task_planner", "stpik_motion_planner", "jaco2_sim_driver", "perception_aruco",
+              "relocation_app", "relocation_app.evaluation"],
+    package_data={"qtree_task_planner": ["_kernel.c"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -28,7 +31,7 @@ setup(
             "motion_planner = stpik_motion_planner.motion_planner_node:main",
             "jaco2_sim_driver = jaco2_sim_driver.driver_node:main",
             "perception = perception_aruco.perception_node:main",
-            "qtree = qtree_task_planner.cli:main",
+            "qtree = relocation_app.cli:main",
         ],
     },
 )

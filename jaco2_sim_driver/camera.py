@@ -15,7 +15,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME  # noqa: E402
-from stpik_motion_planner.scenario import Scenario  # noqa: E402
+from relocation_common.scenario import Scenario  # noqa: E402
 
 from .scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402
 

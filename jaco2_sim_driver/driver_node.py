@@ -11,15 +11,12 @@ import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
 import queue
 import threading
 import time
-from pathlib import Path
 
 import mujoco
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from rosgraph_msgs.msg import Clock
@@ -28,8 +25,9 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from qtree_relocation_msgs.msg import JointVelocity, ObjectArray, ObjectState
-from stpik_motion_planner.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, QDOT_MAX
-from stpik_motion_planner.scenario import CONFIG_DIR, DEFAULT_SCENARIO, load_scenario
+from relocation_common.node import declare_parameters, node_main
+from relocation_common.scenario import load_scenario
+from stpik_motion_planner.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES
 
 from .camera import CameraRenderer, Frame
 from .scene import CameraSpec
@@ -43,14 +41,7 @@ MAX_LAG = 0.5  # s of simulated time the loop may fall behind before it stops tr
 class Jaco2SimDriver(Node):
     def __init__(self):
         super().__init__("jaco2_sim_driver")
-        p = {
-            "scenario": str(DEFAULT_SCENARIO), "real_time_factor": 1.0, "joint_state_rate": 100.0,
-            "state_on_command": True, "objects_rate": 10.0, "camera_rate": 2.0, "camera_width": 640,
-            "camera_height": 480, "camera_fovy": 58.0, "camera_relative_to_shelf": False, "watchdog_timeout": 0.05, "qdot_max": QDOT_MAX.tolist(),
-            "driver_prefix": "/j2s7s300_driver",
-        }
-        for k, v in p.items():
-            self.declare_parameter(k, v)
+        declare_parameters(self)  # config/jaco2_sim_driver.yaml
         g = lambda k: self.get_parameter(k).value  # noqa: E731
         for k, lo in (("joint_state_rate", 0.0), ("objects_rate", 0.0), ("watchdog_timeout", 0.0),
                       ("camera_width", 0), ("camera_height", 0), ("camera_fovy", 0.0)):
@@ -66,7 +57,7 @@ class Jaco2SimDriver(Node):
         cam_rate = float(g("camera_rate"))
         cam_kw = dict(fovy_deg=float(g("camera_fovy")), width=int(g("camera_width")), height=int(g("camera_height")))
         camera = CameraSpec.for_shelf(**cam_kw) if g("camera_relative_to_shelf") else CameraSpec(**cam_kw)
-        scenario = load_scenario(resolve_path(g("scenario")))
+        scenario = load_scenario(g("scenario") or None)
         self.sim = Jaco2Sim(scenario, camera=camera, qdot_max=np.asarray(g("qdot_max"), float),
                             watchdog_timeout=float(g("watchdog_timeout")))
         self.lock = threading.Lock()
@@ -288,7 +279,7 @@ class Jaco2SimDriver(Node):
         self.pub_info.publish(info)
         self.pub_cam_pose.publish(pose)
 
-    def shutdown(self) -> None:
+    def close(self) -> None:
         self._running = False
         self._stopping.set()
         self._sim_thread.join(timeout=2.0)
@@ -296,48 +287,9 @@ class Jaco2SimDriver(Node):
             self._cam_thread.join(timeout=5.0)
 
 
-def resolve_path(path: str) -> Path:
-    """A path as given, or relative to the repository (the package root) when it does not exist as given."""
-    p = Path(path)
-    return p if p.is_absolute() or p.exists() else CONFIG_DIR.parent / p
-
-
-def main(args=None) -> int:
-    import sys
-
-    from rclpy.exceptions import ParameterException
-
-    from qtree_task_planner.params import ParameterError, check_params_files
-    from stpik_motion_planner.scenario import ScenarioError
-    try:  # bad parameters or scenario: one line on stderr, exit status 2 (issue 8)
-        check_params_files(sys.argv if args is None else args)
-        rclpy.init(args=args)
-    except ParameterError as e:
-        print(f"jaco2_sim_driver: {e}", file=sys.stderr)
-        return 2
-    node = None
-    try:
-        try:
-            node = Jaco2SimDriver()
-        except (ScenarioError, ParameterException, ValueError) as e:
-            print(f"jaco2_sim_driver: {type(e).__name__}: {e}", file=sys.stderr)
-            return 2
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RCLError:
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+def main(args=None) -> None:
+    node_main("jaco2_sim_driver", Jaco2SimDriver, args, threads=1)
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()

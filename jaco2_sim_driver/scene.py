@@ -2,7 +2,7 @@
 a scenario as free bodies, the ArUco marker as a texture, the camera and lights. No ROS here.
 
 Frames: the MuJoCo world frame is the robot base frame of the scenario (x towards the shelf, z up, metres).
-Everything is generated from `stpik_motion_planner.robot_description` and `stpik_motion_planner.scenario`, so
+Everything is generated from `stpik_motion_planner.robot_description` and `relocation_common.scenario`, so
 the simulated world is the world the planners reason about (Sect. 5 of the paper: top shelf with the
 obstacles and the target, bottom shelf where relocated objects go, board above the top shelf).
 """
@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 
 from stpik_motion_planner.robot_description import (  # noqa: E402
     D67, FINGER_JOINT_NAMES, LINK_NAMES, PREFIX, mjcf_arm_body)
-from stpik_motion_planner.scenario import Marker, Scenario  # noqa: E402
+from relocation_common.scenario import Marker, Scenario  # noqa: E402
 
 CAMERA_NAME = "camera_color"
 HAND_BODY = LINK_NAMES[-1]

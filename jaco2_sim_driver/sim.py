@@ -21,9 +21,9 @@ import numpy as np
 
 from stpik_motion_planner.robot_description import (
     CONTINUOUS, FINGER_JOINT_NAMES, JOINT_NAMES, N_JOINTS, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX)
-from stpik_motion_planner.scenario import Scenario
+from relocation_common.scenario import Scenario
 
-from .scene import (CAMERA_NAME, DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model)
+from .scene import (DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model)
 
 LIMIT_BRAKE_TIME = 0.02     # s: near a limit the allowed speed towards it is distance / LIMIT_BRAKE_TIME
 GRASP_RADIAL_TOL = 0.025    # m: bottle axis to grasp centre, across the hand (fingers open to about +-36 mm)
@@ -274,7 +274,3 @@ class Jaco2Sim:
         self.data.qpos[adr:adr + 3] = hp + p
         self.data.qpos[adr + 3:adr + 7] = q
         self.data.qvel[vadr:vadr + 6] = 0.0
-
-    @property
-    def camera_name(self) -> str:
-        return CAMERA_NAME

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from stpik_motion_planner.scenario import Marker
+from relocation_common.scenario import Marker
 
 
 class PerceptionError(RuntimeError):

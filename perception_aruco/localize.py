@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from stpik_motion_planner.scenario import Bottle, Scenario
+from relocation_common.scenario import Bottle, Scenario
 
 from .aruco import PerceptionError
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from pathlib import Path
 
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -20,23 +19,15 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
 from qtree_relocation_msgs.msg import ObjectArray
-from qtree_task_planner.spin import run_node
-from stpik_motion_planner.scenario import CONFIG_DIR, DEFAULT_SCENARIO, load_scenario
-from stpik_motion_planner.scene_msgs import BASE_FRAME, bottles_to_msg
+from relocation_common.node import declare_parameters, node_main
+from relocation_common.ros_conversions import bottles_to_msg
+from relocation_common.scenario import load_scenario
 
 from .aruco import PerceptionError
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
 from .pipeline import Perception, SceneMemory
 from .segmentation import SegmentationParams
-
-
-def scenario_path(p: str) -> Path:
-    """A relative scenario path is tried from the working directory, then from the repository root."""
-    path = Path(p)
-    if not path.is_absolute() and not path.exists() and (CONFIG_DIR.parent / path).exists():
-        return CONFIG_DIR.parent / path
-    return path
 
 
 def _stamp_s(msg) -> float:
@@ -46,31 +37,13 @@ def _stamp_s(msg) -> float:
 class PerceptionNode(Node):
     def __init__(self):
         super().__init__("perception")
-        d = self.declare_parameter
-        d("scenario", str(DEFAULT_SCENARIO))
-        d("color_topic", "/camera/color/image_raw")
-        d("depth_topic", "/camera/depth/image_rect_raw")
-        d("camera_info_topic", "/camera/color/camera_info")
-        d("objects_topic", "/scene/objects")
-        d("debug_topic", "/perception/debug_image")
-        d("frame_id", BASE_FRAME)
-        d("sync_slop", 0.05)          # s: max stamp difference of a colour/depth pair
-        d("process_rate", 5.0)        # Hz: frames processed at most this often
-        d("republish_period", 0.5)    # s
-        d("max_scene_age", 5.0)       # s: stop republishing a scene perceived longer ago than this
-        d("hold_frames", 10)          # processed frames an unseen object keeps its last pose
-        d("refine_with_depth", True)  # marker pose refined by a plane fit on the depth image
-        d("gain_min", 0.3)
-        d("gain_max", 1.2)
-        d("max_residual", 40.0)
-        d("min_pixels", 40)
-        d("inlier_tol", 0.004)
+        declare_parameters(self)  # config/perception.yaml
         g = lambda n: self.get_parameter(n).value  # noqa: E731
         self.p = g
         for k in ("process_rate", "republish_period", "sync_slop", "max_scene_age"):
             if not g(k) > 0:  # also NaN
                 raise ValueError(f"parameter {k} must be > 0, got {g(k)!r}")
-        self.scenario = load_scenario(scenario_path(g("scenario")))
+        self.scenario = load_scenario(g("scenario") or None)
         self.perception = Perception(
             self.scenario,
             SegmentationParams(gain_min=g("gain_min"), gain_max=g("gain_max"), max_residual=g("max_residual")),
@@ -192,19 +165,7 @@ class PerceptionNode(Node):
 
 
 def main(args=None) -> None:
-    """Bad parameters or scenario: one line on stderr, exit status 2 (issue 8)."""
-    import sys
-
-    from rclpy.exceptions import ParameterException
-
-    from qtree_task_planner.params import ParameterError, check_params_files
-    from stpik_motion_planner.scenario import ScenarioError
-    try:
-        check_params_files(sys.argv if args is None else args)
-        run_node(PerceptionNode, args)
-    except (ParameterError, ScenarioError, ParameterException, ValueError) as e:
-        print(f"perception: {type(e).__name__}: {e}", file=sys.stderr)
-        raise SystemExit(2) from None
+    node_main("perception", PerceptionNode, args)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from stpik_motion_planner.scenario import Bottle, Scenario
+from relocation_common.scenario import Bottle, Scenario
 
 from .aruco import MarkerLocalizer, MarkerObservation
 from .localize import Detection, FitError, LocalizeParams, locate_bottle

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from stpik_motion_planner.scenario import Scenario
+from relocation_common.scenario import Scenario
 
 from .aruco import ImageFormatError, marker_in_base
 

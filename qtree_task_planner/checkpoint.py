@@ -23,8 +23,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .feasibility import CachedOracle, FeasibilityAnswer, Label
-from .params import ParameterError, TrainingParams
+from .oracles import CachedOracle
+from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.config import ParameterError
+from .params import TrainingParams
 from .problem import RelocationProblem
 
 FORMAT = "qtree-checkpoint"

@@ -15,7 +15,8 @@ import heapq
 import itertools
 from dataclasses import dataclass
 
-from .feasibility import CachedOracle, Label
+from .oracles import CachedOracle
+from relocation_common.feasibility import Label
 from .problem import RelocationProblem
 
 

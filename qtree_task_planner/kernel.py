@@ -23,7 +23,7 @@ import sysconfig
 import tempfile
 from pathlib import Path
 
-from .feasibility import Label
+from relocation_common.feasibility import Label
 from .q_tree import Node, QTree
 
 SOURCE = Path(__file__).with_name("_kernel.c")

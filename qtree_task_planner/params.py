@@ -10,35 +10,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
+from relocation_common.config import ParameterError, node_section
+from relocation_common.paths import config_file
 
-DEFAULT_PARAMS_FILE = Path(__file__).resolve().parent.parent / "config" / "task_planner.yaml"
 NODE_NAME = "task_planner"
 POLICIES = ("lrnd", "h-lrnd", "h-eg")
 SEARCHES = ("breadth", "depth")
-# The task_planner node's own (non-training) parameters: they share config/task_planner.yaml and from_yaml skips
-# them; the node validates them (qtree_task_planner.task_planner_node).
-NODE_PARAMETERS = ("scene_topic", "scene_source", "scene_max_age", "scene_wait", "feasibility_service", "relocate_action",
-                   "feasibility_timeout", "feasibility_margin", "planner_wait", "relocate_timeout", "checkpoint_path",
-                   "checkpoint_every")
-
-
-def read_yaml(path: str | Path, error: type[Exception] = ValueError, what: str = "file"):
-    """Parse a YAML file; `error` with one line naming the file (and the line of a syntax error) otherwise. The
-    one reader of the project's YAML files: scenarios, node parameters, planner settings."""
-    path = Path(path)
-    try:
-        return yaml.safe_load(path.read_text())
-    except OSError as e:
-        raise error(f"{path}: cannot read {what} ({e.strerror})") from None
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        raise error(f"{path}: malformed YAML{where}: {getattr(e, 'problem', e)}") from None
-
-
-class ParameterError(ValueError):
-    """A training parameter that cannot be used; the message names it and says what is allowed."""
 
 
 @dataclass(frozen=True)
@@ -108,30 +85,27 @@ class TrainingParams:
         return cls(**values)
 
     @classmethod
-    def from_yaml(cls, path: str | Path = DEFAULT_PARAMS_FILE, node: str = NODE_NAME,
+    def from_yaml(cls, path: str | Path | None = None, node: str = NODE_NAME,
                   ignore_unknown: bool = False) -> "TrainingParams":
-        """Read `node: ros__parameters: {...}` from a ROS params file. `ignore_unknown` lets a node's other
-        parameters share the file; by default an unknown key is an error."""
-        path = Path(path)
-        data = read_yaml(path, ParameterError, "parameters file")
-        try:
-            section = data[node]["ros__parameters"]
-        except (TypeError, KeyError):
-            raise ParameterError(f"{path}: expected '{node}: ros__parameters: {{...}}'") from None
-        if not isinstance(section, Mapping):
-            raise ParameterError(f"{path}: {node}.ros__parameters must be a mapping")
+        """Read `node: ros__parameters: {...}` from a ROS params file (default config/task_planner.yaml). Keys the
+        shipped file gives the task_planner node for itself are skipped; any other unknown key is an error unless
+        `ignore_unknown` (typos are not ignored)."""
+        shipped = config_file("task_planner.yaml")
+        path = Path(path) if path is not None else shipped
+        section = node_section(path, node)
         if ignore_unknown:
-            section = {k: v for k, v in section.items() if k in cls.fields()}
-        elif node == NODE_NAME:
-            section = {k: v for k, v in section.items() if k not in NODE_PARAMETERS}
+            skip = set(section) - set(cls.fields())
+        else:
+            skip = set(node_section(shipped, NODE_NAME)) - set(cls.fields())
         try:
-            return cls.from_dict(section)
+            return cls.from_dict({k: v for k, v in section.items() if k not in skip})
         except ParameterError as e:
             raise ParameterError(f"{path}: {e}") from None
 
     @classmethod
     def defaults(cls) -> "TrainingParams":
-        return cls.from_yaml(DEFAULT_PARAMS_FILE)
+        """config/task_planner.yaml's training parameters: the one place for their defaults."""
+        return cls.from_yaml()
 
     def replace(self, **changes: Any) -> "TrainingParams":
         """A copy with some fields changed (validated); None values are ignored."""
@@ -139,24 +113,3 @@ class TrainingParams:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
-
-
-def check_params_files(argv) -> None:
-    """ParameterError (one line) for a `--params-file` in a ROS command line that is unreadable, not YAML, or not a
-    mapping of node sections. Called by the nodes' main() before rclpy.init, whose own error is a traceback."""
-    argv = list(argv)
-    for flag, path in zip(argv, argv[1:]):
-        if flag != "--params-file":
-            continue
-        data = read_yaml(path, ParameterError, "parameters file")
-        if not _node_sections(data):
-            raise ParameterError(f"{path}: expected '<node>: ros__parameters: {{...}}' sections")
-
-
-def _node_sections(data) -> bool:
-    """Every branch ends in a `ros__parameters` mapping (node names may be nested in namespaces, or `/**`)."""
-    if not isinstance(data, Mapping) or not data:
-        return False
-    if "ros__parameters" in data:
-        return isinstance(data["ros__parameters"], Mapping)
-    return all(_node_sections(v) for v in data.values())

@@ -1,6 +1,6 @@
 """The relocation problem the task planner solves: obstacles with weights phi_i in (0, 1] and one target.
 
-A light, ROS-free view of a scenario (stpik_motion_planner.scenario.Scenario) that the Q-Tree, the exact
+A light, ROS-free view of a scenario (relocation_common.scenario.Scenario) that the Q-Tree, the exact
 solver and the evaluation share. Objects are indexed 0..N-1 (obstacles, in scenario order) and N (target).
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ class RelocationProblem:
 
     @classmethod
     def from_scenario(cls, scenario) -> "RelocationProblem":
-        """From a stpik_motion_planner.scenario.Scenario (already validated by its loader)."""
+        """From a relocation_common.scenario.Scenario (already validated by its loader)."""
         return cls(scenario.obstacle_ids, scenario.weights, scenario.target_id)
 
     @property

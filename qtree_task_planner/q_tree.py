@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Iterable
 
-from .feasibility import Label
+from relocation_common.feasibility import Label
 from .problem import RelocationProblem
 
 R_UNFEASIBLE = -10.0  # Eq. 13

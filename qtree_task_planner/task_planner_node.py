@@ -24,7 +24,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import sys
 import threading
 import time
 from pathlib import Path
@@ -33,7 +32,6 @@ import rclpy
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
-from rclpy.exceptions import ParameterException
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.time import Time
 from visualization_msgs.msg import Marker, MarkerArray
@@ -41,16 +39,18 @@ from visualization_msgs.msg import Marker, MarkerArray
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
-from stpik_motion_planner.scenario import PALETTE, TARGET_RGB, ScenarioError
-from stpik_motion_planner.scene_msgs import msg_to_bottles
+from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
+from relocation_common.ros_conversions import msg_to_bottles
 
 from . import exact
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
-from .feasibility import CachedOracle, FeasibilityAnswer, Label
+from .oracles import CachedOracle
+from relocation_common.feasibility import FeasibilityAnswer, Label
 from .markers import tree_markers
-from .params import ParameterError, TrainingParams, check_params_files
+from relocation_common.config import ParameterError
+from .params import TrainingParams
 from .problem import RelocationProblem
-from .spin import run_node
+from relocation_common.node import call, declare_parameters, node_main
 from .training import train
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -82,20 +82,15 @@ class ServiceOracle:
         if not self.client.service_is_ready() and not self.client.wait_for_service(timeout_sec=self.connect_wait):
             raise PlannerUnavailable(f"feasibility service {srv} is not available")
         req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout)
-        done = threading.Event()
-        fut = self.client.call_async(req)
-        fut.add_done_callback(lambda _: done.set())
         limit = self.timeout + self.margin
-        deadline = time.monotonic() + limit
-        while not done.wait(0.05):
+        try:
+            resp = call(self.client, req, limit, abandon=lambda: not self.client.service_is_ready())
+        except TimeoutError:
             gone = not self.client.service_is_ready()
-            if gone or time.monotonic() > deadline:
-                self.client.remove_pending_request(fut)
-                raise PlannerUnavailable(
-                    f"feasibility service {srv} went away while answering {object_id!r}" if gone else
-                    f"no feasibility answer for {object_id!r} within {limit:.1f} s "
-                    "(feasibility_timeout + feasibility_margin)")
-        resp = fut.result()
+            raise PlannerUnavailable(
+                f"feasibility service {srv} went away while answering {object_id!r}" if gone else
+                f"no feasibility answer for {object_id!r} within {limit:.1f} s "
+                "(feasibility_timeout + feasibility_margin)") from None
         self.last_ok = time.monotonic()
         if not resp.ok:
             raise ValueError(f"motion planner refused the query for {object_id!r}: {resp.message}")
@@ -103,7 +98,7 @@ class ServiceOracle:
 
 
 NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
-                       "quiet_episodes")
+                       "quiet_episodes", "seed")  # numeric goal fields: negative = the node's parameter
 
 
 def train_goal(**fields) -> TrainPlanner.Goal:
@@ -119,22 +114,7 @@ def train_goal(**fields) -> TrainPlanner.Goal:
 class TaskPlannerNode(Node):
     def __init__(self) -> None:
         super().__init__("task_planner")
-        defaults = TrainingParams.defaults()  # config/task_planner.yaml: the one place for the defaults
-        for name, value in defaults.to_dict().items():
-            self.declare_parameter(name, value)
-        self.declare_parameter("scenario", "")  # accepted for a uniform command line; the scene comes from the topic
-        self.declare_parameter("scene_topic", "/scene/objects")
-        self.declare_parameter("scene_source", "")  # "" = scene_topic; perception | sim (launch file's argument)
-        self.declare_parameter("scene_max_age", 10.0)  # s; older scenes are refused (stale perception)
-        self.declare_parameter("scene_wait", 3.0)  # s a goal waits for a first scene (discovery after start-up)
-        self.declare_parameter("feasibility_service", "/motion_planner/plan_feasibility")
-        self.declare_parameter("relocate_action", "/motion_planner/relocate")
-        self.declare_parameter("feasibility_timeout", 5.0)  # s per query, passed to the planner
-        self.declare_parameter("feasibility_margin", 2.0)  # s on top of it before the planner counts as lost
-        self.declare_parameter("planner_wait", 30.0)  # s to wait for a lost planner to come back before aborting
-        self.declare_parameter("relocate_timeout", 180.0)  # s per relocation
-        self.declare_parameter("checkpoint_path", "")  # Q-Tree checkpoint file; "" = in memory only
-        self.declare_parameter("checkpoint_every", 50)  # episodes between checkpoints
+        declare_parameters(self)  # config/task_planner.yaml: training parameters and the node's own
         self._check_parameters()
 
         self._scene: tuple[ObjectArray, float] | None = None
@@ -158,10 +138,6 @@ class TaskPlannerNode(Node):
 
     def _check_parameters(self) -> None:
         """ParameterError naming the first unusable parameter (main() prints it as one line and exits 2)."""
-        unknown = sorted(set(self._parameter_overrides) - set(self._parameters))
-        if unknown:
-            raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; known: "
-                                 f"{', '.join(sorted(self._parameters))}")
         TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
         for name, lo in (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_timeout", 1e-3),
                          ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3)):
@@ -219,8 +195,7 @@ class TaskPlannerNode(Node):
     def _params(self, goal) -> TrainingParams:
         node = TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
         changes = {f: getattr(goal, f) for f in ("policy", "search") if getattr(goal, f)}
-        for f in ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
-                  "quiet_episodes", "seed"):
+        for f in NODE_DEFAULT_FIELDS:
             v = getattr(goal, f)
             if not v < 0:  # negative: the node's parameter; NaN goes on to validation and is refused
                 changes[f] = v
@@ -449,17 +424,8 @@ class TaskPlannerNode(Node):
         self._markers.publish(arr)
 
 
-STARTUP_ERRORS = (ParameterError, ParameterException, ScenarioError, CheckpointError)
-
-
 def main(args=None) -> None:
-    """Run the node; unusable parameters: one line on stderr and exit status 2 (no traceback)."""
-    try:
-        check_params_files(sys.argv if args is None else args)
-        run_node(TaskPlannerNode, args)
-    except STARTUP_ERRORS as e:
-        print(f"task_planner: {type(e).__name__}: {e}", file=sys.stderr)
-        raise SystemExit(2) from None
+    node_main("task_planner", TaskPlannerNode, args, errors=(CheckpointError,))
 
 
 if __name__ == "__main__":

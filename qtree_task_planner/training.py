@@ -19,7 +19,8 @@ from typing import Any, Callable
 
 from . import kernel
 from .checkpoint import Checkpoint, problem_hash
-from .feasibility import CachedOracle, Label
+from .oracles import CachedOracle
+from relocation_common.feasibility import Label
 from .params import TrainingParams
 from .policies import POLICY_FUNCTIONS, epsilon_greedy, epsilon_schedule, h_lrnd, lrnd
 from .problem import RelocationProblem

@@ -20,8 +20,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from qtree_task_planner.bringup import Graph, wait_for_interfaces  # noqa: E402
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
+from relocation_app.graph import Graph, wait_for_interfaces  # noqa: E402
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 
 def main() -> None:
@@ -32,7 +33,7 @@ def main() -> None:
     import rclpy
     from qtree_relocation_msgs.srv import PlanFeasibility
 
-    scenario = load_scenario(DEFAULT_SCENARIO)
+    scenario = load_scenario(default_scenario())
     rng = random.Random(a.seed)
     with Graph(Path(tempfile.mkdtemp(prefix="bench_srv_"))) as g:
         g.start("motion_planner")

@@ -21,10 +21,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from qtree_task_planner.feasibility import Label  # noqa: E402
+from relocation_common.feasibility import Label  # noqa: E402
 from stpik_motion_planner import robot_description as rd  # noqa: E402
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
-from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario  # noqa: E402
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 
 def pct(xs, p):
@@ -46,7 +47,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--queries", type=int, default=150)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--scenario", default=str(CONFIG_DIR / "scenarios" / "scenario3_15.yaml"))
+    ap.add_argument("--scenario", default=str(scenarios_dir() / "scenario3_15.yaml"))
     ap.add_argument("--profile", action="store_true")
     a = ap.parse_args()
     sc = load_scenario(a.scenario)

@@ -23,7 +23,8 @@ from jaco2_sim_driver.camera import render_frame  # noqa: E402
 from perception_aruco.aruco import pose_error  # noqa: E402
 from perception_aruco.pipeline import Perception  # noqa: E402
 from stpik_motion_planner.robot_description import Q_HOME, Q_UPRIGHT  # noqa: E402
-from stpik_motion_planner.scenario import CONFIG_DIR, DEFAULT_SCENARIO, load_scenario  # noqa: E402
+from relocation_common.paths import default_scenario, scenarios_dir
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 
 def bench(path, repeats: int, q) -> dict:
@@ -45,8 +46,8 @@ def bench(path, repeats: int, q) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=20)
-    ap.add_argument("--scenarios", nargs="*", default=[str(DEFAULT_SCENARIO)] + [
-        str(CONFIG_DIR / "scenarios" / f"blocking_{n}.yaml") for n in (5, 10, 15)])
+    ap.add_argument("--scenarios", nargs="*", default=[str(default_scenario())] + [
+        str(scenarios_dir() / f"blocking_{n}.yaml") for n in (5, 10, 15)])
     ap.add_argument("--arm-away", action="store_true", help="arm at Q_UPRIGHT instead of Q_HOME")
     a = ap.parse_args()
     q = Q_UPRIGHT if a.arm_away else Q_HOME

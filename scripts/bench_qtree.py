@@ -21,10 +21,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from qtree_task_planner.exact import brute_force, solve  # noqa: E402
-from qtree_task_planner.feasibility import BlockingOracle, CachedOracle  # noqa: E402
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle  # noqa: E402
 from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402
-from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario  # noqa: E402
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 
 def throughput(sc, seeds: int, episodes: int) -> list[dict]:
@@ -94,7 +95,7 @@ def main(argv=None) -> int:
         kernel._lib, kernel.build_error = None, "disabled by --python"
     engine = "none (reference loop)" if kernel is None else "C kernel" if kernel.available() else \
         f"Python loop ({kernel.build_error})"
-    sc = load_scenario(CONFIG_DIR / "scenarios" / "blocking_15.yaml")
+    sc = load_scenario(scenarios_dir() / "blocking_15.yaml")
     print(f"# bench_qtree: {sc.name}, {len(sc.obstacle_ids)} obstacles; Python {platform.python_version()}, "
           f"{platform.machine()}; engine: {engine}; defaults {TrainingParams.defaults().to_dict()}")
     print(f"\n## Training throughput: E_max={a.episodes} (beta=0: no early stop), {a.seeds} seeds, medians")
@@ -110,7 +111,7 @@ def main(argv=None) -> int:
     print(f"brute force (every reachable set): weight {e['brute_weight']:.2f}; oracle calls {e['brute_calls']}; "
           f"{e['brute_ms']:.0f} ms")
     if not a.no_sweep:
-        scs = [load_scenario(CONFIG_DIR / "scenarios" / f"blocking_{n}.yaml") for n in (10, 15)]
+        scs = [load_scenario(scenarios_dir() / f"blocking_{n}.yaml") for n in (10, 15)]
         print(f"\n## Eq. 16 quiet_episodes sweep (defaults otherwise), {a.seeds} seeds")
         print("| scenario | search | quiet_episodes | optimal | E_ss median | converged | MP_q median |")
         print("|---|---|---:|---:|---:|---:|---:|")

@@ -58,9 +58,10 @@ def run_client(client: int, n: int, seed: int, answer_timeout: float) -> None:
     import rclpy
 
     from qtree_relocation_msgs.srv import PlanFeasibility
-    from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
 
-    sc = load_scenario(DEFAULT_SCENARIO)
+    sc = load_scenario(default_scenario())
     reqs = requests_for(client, n, list(sc.ids), sc.target_id, seed)
     rclpy.init()
     node = rclpy.create_node(f"load_client_{client}")
@@ -95,7 +96,7 @@ def rss_kb(pid: int) -> dict[str, int]:
 
 
 def bench(n: int, clients: int, seed: int, answer_timeout: float, run_dir: Path) -> dict:
-    from qtree_task_planner.bringup import Graph
+    from relocation_app.graph import Graph
 
     with Graph(run_dir) as g:
         planner = g.start("motion_planner")
@@ -159,14 +160,15 @@ def bench(n: int, clients: int, seed: int, answer_timeout: float, run_dir: Path)
 def bench_checkpoint(scenarios=("blocking_10", "blocking_15", "scenario3_15"), repeats: int = 5) -> list[dict]:
     """Checkpoint size and save/load time of the final Q-Tree of a default training (BlockingOracle, seed 0)."""
     from qtree_task_planner.checkpoint import load_checkpoint, save_checkpoint
-    from qtree_task_planner.feasibility import BlockingOracle
+    from qtree_task_planner.oracles import BlockingOracle
     from qtree_task_planner.params import TrainingParams
     from qtree_task_planner.training import train
-    from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario
+    from relocation_common.paths import scenarios_dir
+    from relocation_common.scenario import load_scenario
 
     rows = []
     for name in scenarios:
-        sc = load_scenario(CONFIG_DIR / "scenarios" / f"{name}.yaml")
+        sc = load_scenario(scenarios_dir() / f"{name}.yaml")
         if sc.blocking is None:
             continue
         got = []

@@ -29,12 +29,13 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from jaco2_sim_driver.sim import Jaco2Sim  # noqa: E402
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, parse_scenario  # noqa: E402
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import parse_scenario  # noqa: E402
 
 
 def scenario_15() -> dict:
     """Fifteen bottles on the top shelf: three rows of five, placed relative to the default scenario's shelf."""
-    data = yaml.safe_load(DEFAULT_SCENARIO.read_text())
+    data = yaml.safe_load(default_scenario().read_text())
     sh = data["shelf"]
     data["name"] = "bench_15"
     rows = [sh["x_front"] + f * sh["depth"] for f in (0.2, 0.5, 0.8)]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Create .venv, install every dependency from PyPI and build the interface package into the venv.
+# Create .venv, install every dependency from PyPI and build the interface packages (msg_defs/) into the venv.
 # Idempotent: each step is skipped when its inputs have not changed since it last succeeded.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -53,18 +53,62 @@ pip_install() { "$VENV/bin/python" -m pip install -q --disable-pip-version-check
 step pip-upgrade scripts/setup_env.sh -- pip_install --upgrade "pip>=24"
 step requirements requirements.txt requirements-build.txt -- pip_install -r requirements.txt -r requirements-build.txt
 
+# Interface packages under msg_defs/, each built with plain cmake (build dir build/<pkg>) and installed
+# into the venv itself, so no environment setup is needed to import them:
+#   qtree_relocation_msgs  this project's messages, services and actions
+#   kinova_msgs            the kinova_msgs definitions of Kinova's kinova-ros driver that this project uses, unchanged
+#   tf2_msgs               tf2_msgs/msg/TFMessage of ROS 2 Jazzy (there is no ros-jazzy-tf2-msgs wheel on PyPI)
+# kinova_msgs is not built when QTREE_SKIP_KINOVA_MSGS=1 (a real kinova_msgs is installed), nor when
+# `import kinova_msgs` already works from outside the venv (e.g. a sourced ROS 2 workspace); the types this
+# project uses are then checked in the installed one.
+
+# check_msgs PKG PYTHON_IMPORTS: the imports work and every imported type loads its C type support.
+check_msgs() {
+  "$VENV/bin/python" -c "$2
+from rclpy.type_support import check_for_type_support
+for _obj in list(globals().values()):
+    if isinstance(_obj, type) and _obj.__module__.startswith('$1.'):
+        check_for_type_support(_obj)"
+}
+
+# build_msgs PKG PYTHON_IMPORTS
 build_msgs() {
-  local build=$ROOT/build/qtree_relocation_msgs
+  local pkg=$1 build=$ROOT/build/$1
   rm -rf "$build"; mkdir -p "$build"
   ( source "$VENV/bin/activate"
     export CMAKE_PREFIX_PATH=$VENV AMENT_PREFIX_PATH=$VENV
-    cmake -S "$ROOT/msg_defs" -B "$build" -DCMAKE_INSTALL_PREFIX="$VENV" -DBUILD_TESTING=OFF \
+    cmake -S "$ROOT/msg_defs/$pkg" -B "$build" -DCMAKE_INSTALL_PREFIX="$VENV" -DBUILD_TESTING=OFF \
       -DPython3_EXECUTABLE="$VENV/bin/python" -DCMAKE_BUILD_TYPE=Release > "$build/cmake.log" 2>&1 \
       || { tail -30 "$build/cmake.log"; exit 1; }
     cmake --build "$build" -j2 >> "$build/cmake.log" 2>&1 || { tail -30 "$build/cmake.log"; exit 1; }
     cmake --install "$build" >> "$build/cmake.log" 2>&1 || { tail -30 "$build/cmake.log"; exit 1; } )
-  "$VENV/bin/python" -c "from qtree_relocation_msgs.srv import PlanFeasibility" \
-    || { echo "error: qtree_relocation_msgs built but does not import" >&2; exit 1; }
+  check_msgs "$pkg" "$2" || { echo "error: $pkg built but does not import" >&2; exit 1; }
 }
-step msgs msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/msg/* msg_defs/srv/* msg_defs/action/* requirements.txt -- build_msgs
 
+# Inputs of a package's build step: its files, its directories (a file added or removed) and the wheels.
+msgs_inputs() { echo msg_defs/$1 msg_defs/$1/* msg_defs/$1/*/* requirements.txt requirements-build.txt; }
+
+step msgs-qtree_relocation_msgs $(msgs_inputs qtree_relocation_msgs) -- build_msgs qtree_relocation_msgs \
+  "from qtree_relocation_msgs.msg import ObjectState, ObjectArray, JointVelocity
+from qtree_relocation_msgs.srv import PlanFeasibility
+from qtree_relocation_msgs.action import RelocateObject, TrainPlanner"
+
+KINOVA_MSGS_IMPORTS="from kinova_msgs.msg import JointVelocity, JointAngles, FingerPosition
+from kinova_msgs.srv import HomeArm, Start, Stop
+from kinova_msgs.action import SetFingersPosition, ArmJointAngles"
+# Where `import kinova_msgs` resolves (empty: not importable).
+kinova_at=$("$VENV/bin/python" -c 'import kinova_msgs; print(list(kinova_msgs.__path__)[0])' 2>/dev/null || true)
+if [ "${QTREE_SKIP_KINOVA_MSGS:-0}" = 1 ] || { [ -n "$kinova_at" ] && [[ "$kinova_at" != "$VENV"/* ]]; }; then
+  if [ -z "$kinova_at" ]; then
+    echo "[setup] warning: QTREE_SKIP_KINOVA_MSGS=1 but kinova_msgs does not import here;" \
+      "make it importable (source its workspace) before running the nodes" >&2
+  else
+    echo "[setup] kinova_msgs: not built, using the one at $kinova_at"
+    check_msgs kinova_msgs "$KINOVA_MSGS_IMPORTS" \
+      || { echo "error: the kinova_msgs at $kinova_at lacks types this project uses" >&2; exit 1; }
+  fi
+else
+  step msgs-kinova_msgs $(msgs_inputs kinova_msgs) -- build_msgs kinova_msgs "$KINOVA_MSGS_IMPORTS"
+fi
+
+step msgs-tf2_msgs $(msgs_inputs tf2_msgs) -- build_msgs tf2_msgs "from tf2_msgs.msg import TFMessage"

@@ -15,7 +15,7 @@ import fcl
 import numpy as np
 
 from . import robot_description as rd
-from .scenario import Scenario
+from relocation_common.scenario import Scenario
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
 

@@ -18,25 +18,20 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from qtree_task_planner.feasibility import FeasibilityAnswer, Label
-from qtree_task_planner.params import read_yaml
+from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.config import node_section
+from relocation_common.paths import config_file
 
 from . import robot_description as rd
 from .collision import HAND_PARTS, PENETRATION, ArmGeometry, CollisionScene, HandProxy, ObstacleSet, carried_bottle
-from .grasp import (Grasp, WorkspaceError, check_pose, grasp_standoff, grasp_yaws, home_pose, lift_pose, place_poses,
+from .grasp import (Grasp, WorkspaceError, grasp_standoff, grasp_yaws, home_pose, lift_pose, place_poses,
                     side_grasp)
 from .kinematics import Kinematics
 from .rrt import CartesianRRT, JointRRT, seed_ompl
-from .scenario import Scenario, UnknownObjectError
+from relocation_common.scenario import Scenario, UnknownObjectError
 from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory
 
-CONFIG = Path(__file__).resolve().parent.parent / "config" / "motion_planner.yaml"
-
-
-# Parameters of the motion_planner node that are not planner settings (config/motion_planner.yaml holds both)
-NODE_KEYS = frozenset({"scenario", "scene_topic", "driver_prefix", "stream_rate", "state_timeout", "home_tol",
-                       "gripper_timeout", "gripper_settle"})
 
 
 class PlanningError(RuntimeError):
@@ -87,6 +82,12 @@ class PlannerParams:
                              f"(x, y, z, yaw), got {self.workspace_lo!r}, {self.workspace_hi!r}")
 
     @classmethod
+    def keys(cls) -> tuple[str, ...]:
+        """The flat parameter names (ROS parameters): the planner's own and stpik.* for StpikParams."""
+        return tuple(f.name for f in fields(cls) if f.name != "stpik") + tuple(
+            f"stpik.{f.name}" for f in fields(StpikParams))
+
+    @classmethod
     def from_mapping(cls, data: Mapping[str, Any]) -> "PlannerParams":
         """From a flat mapping (ROS parameters); stpik.* keys go to StpikParams. Unknown keys are an error."""
         own = {f.name for f in fields(cls)} - {"stpik"}
@@ -95,8 +96,6 @@ class PlannerParams:
         for k, v in data.items():
             if k.startswith("stpik.") and k[6:] in sp:
                 skw[k[6:]] = v
-            elif k in NODE_KEYS or k.startswith("follower."):  # the motion_planner node's own parameters
-                continue
             elif k in own:
                 kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
             else:
@@ -109,15 +108,16 @@ class PlannerParams:
         return cls(**kw, stpik=StpikParams(**skw))
 
     @classmethod
-    def load(cls, path: str | Path = CONFIG) -> "PlannerParams":
-        """From a ROS params file; ValueError naming the file on malformed YAML, a wrong layout or a bad value."""
-        data = read_yaml(path, ValueError, "motion planner parameters")
+    def load(cls, path: str | Path | None = None) -> "PlannerParams":
+        """The planner's keys of a ROS params file (default config/motion_planner.yaml). Keys the shipped file gives
+        the motion_planner node for itself are skipped; any other unknown key is an error. ValueError naming the
+        file on malformed YAML, a wrong layout or a bad value."""
+        shipped = config_file("motion_planner.yaml")
+        path = path if path is not None else shipped
+        section = node_section(path, "motion_planner")
+        node_keys = set(node_section(shipped, "motion_planner")) - set(cls.keys())
         try:
-            section = data["motion_planner"]["ros__parameters"]
-        except (KeyError, TypeError):
-            raise ValueError(f"{path}: expected motion_planner: ros__parameters: {{...}}") from None
-        try:
-            return cls.from_mapping(section)
+            return cls.from_mapping({k: v for k, v in section.items() if k not in node_keys})
         except (TypeError, ValueError) as e:
             raise ValueError(f"{path}: {e}") from None
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import robot_description as rd
-from .scenario import Scenario
+from relocation_common.scenario import Scenario
 
 
 _PALM = next(c for c in rd.CAPSULES if c.name == "palm")

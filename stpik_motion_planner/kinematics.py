@@ -60,9 +60,3 @@ def _skew_t(r: np.ndarray) -> np.ndarray:
     """Matrix S with S @ w = w x r (= -[r]x w)."""
     x, y, z = r
     return np.array([[0.0, z, -y], [-z, 0.0, x], [y, -x, 0.0]])
-
-
-def fk_tool(q) -> tuple[np.ndarray, np.ndarray]:
-    """Tool pose (R, p) of q from the DH table (independent of Pinocchio)."""
-    t = rd.dh_fk(q)[-1]
-    return t[:3, :3], t[:3, 3]

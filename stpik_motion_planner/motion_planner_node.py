@@ -15,8 +15,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import fields
-from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -34,35 +32,19 @@ from visualization_msgs.msg import Marker
 from qtree_relocation_msgs.action import RelocateObject
 from qtree_relocation_msgs.msg import JointVelocity, ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
-from qtree_task_planner.spin import run_node
+from relocation_common.node import SideNode, call, declare_parameters, node_main
+from relocation_common.ros_conversions import BASE_FRAME, msg_to_bottles
+from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
 from . import robot_description as rd
 from .execution import FollowerParams, TrajectoryFollower
 from .feasibility import MotionPlanner, PlannerParams, PlanningError
 from .relocation import PHASES, relocate
-from .scenario import DEFAULT_SCENARIO, ScenarioError, UnknownObjectError, load_scenario
-from .scene_msgs import BASE_FRAME, msg_to_bottles
-from .stpik import StpikParams
 from .trajectory import Trajectory
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
-REPO = Path(__file__).resolve().parent.parent
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
 ON_SHELF = 0.01  # m: a bottle whose base is farther from the top shelf's surface is lifted or elsewhere
-
-
-def _planner_defaults() -> dict:
-    """Flat ROS parameter defaults of PlannerParams (stpik.* for the STPIK settings)."""
-    out = {}
-    for f in fields(PlannerParams):
-        if f.name == "stpik":
-            continue
-        v = getattr(PlannerParams(), f.name)
-        out[f.name] = [float(x) for x in v] if isinstance(v, tuple) else v
-    for f in fields(StpikParams):
-        v = getattr(StpikParams(), f.name)
-        out[f"stpik.{f.name}"] = [float(x) for x in v] if isinstance(v, np.ndarray) else float(v)
-    return out
 
 
 def trajectory_to_msg(traj: Trajectory | None) -> JointTrajectory:
@@ -102,18 +84,11 @@ class _Cancelled(Exception):
 class MotionPlannerNode(Node):
     def __init__(self) -> None:
         super().__init__("motion_planner")
-        node_defaults = {"scenario": "", "scene_topic": "/scene/objects", "driver_prefix": "/j2s7s300_driver",
-                         "stream_rate": 100.0, "state_timeout": 0.5, "home_tol": 0.05, "gripper_timeout": 5.0,
-                         "gripper_settle": 0.8}
-        follower = {f"follower.{f.name}": getattr(FollowerParams(), f.name) for f in fields(FollowerParams)}
-        for name, value in {**node_defaults, **follower, **_planner_defaults()}.items():
-            self.declare_parameter(name, value)
-        planner_params = PlannerParams.from_mapping({k: self.p(k) for k in _planner_defaults()})
-        self.follower_params = FollowerParams(**{k.split(".", 1)[1]: float(self.p(k)) for k in follower})
-        path = self.p("scenario") or str(DEFAULT_SCENARIO)
-        if not Path(path).is_absolute() and not Path(path).exists():
-            path = str(REPO / path)
-        self.base = load_scenario(path)
+        params = declare_parameters(self)  # config/motion_planner.yaml: planner, follower.* and node keys
+        planner_params = PlannerParams.from_mapping({k: v for k, v in params.items() if k in PlannerParams.keys()})
+        self.follower_params = FollowerParams(**{k.split(".", 1)[1]: float(v) for k, v in params.items()
+                                                 if k.startswith("follower.")})
+        self.base = load_scenario(self.p("scenario") or None)
         self.planner = MotionPlanner(self.base, planner_params)
         self.qdot_max = planner_params.stpik.qdot_max
         self._plan_lock = threading.Lock()  # MotionPlanner is not thread-safe
@@ -125,8 +100,8 @@ class MotionPlannerNode(Node):
         pre = str(self.p("driver_prefix")).rstrip("/")
         self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
         self._path = self.create_publisher(Marker, "~/path", SCENE_QOS)
-        self.create_subscription(JointState, f"{pre}/out/joint_state", self._on_joint_state, 10,
-                                 callback_group=MutuallyExclusiveCallbackGroup())
+        self._state = SideNode("motion_planner_joint_state", context=self.context)  # 100 Hz, never late
+        self._state.node.create_subscription(JointState, f"{pre}/out/joint_state", self._on_joint_state, 10)
         self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS,
                                  callback_group=MutuallyExclusiveCallbackGroup())
         clients = ReentrantCallbackGroup()
@@ -143,6 +118,9 @@ class MotionPlannerNode(Node):
 
     def p(self, name: str):
         return self.get_parameter(name).value
+
+    def close(self) -> None:
+        self._state.close()
 
     # -- inputs ---------------------------------------------------------------------------------------------
     def _on_joint_state(self, msg: JointState) -> None:
@@ -305,12 +283,10 @@ class MotionPlannerNode(Node):
         timeout = float(self.p("gripper_timeout"))
         if not client.wait_for_service(timeout_sec=timeout):
             raise _Aborted(f"gripper service {client.srv_name} not available after {timeout:.0f} s")
-        done = threading.Event()
-        fut = client.call_async(Trigger.Request())
-        fut.add_done_callback(lambda _: done.set())
-        if not done.wait(timeout):
-            raise _Aborted(f"gripper {action}: no answer within {timeout:.0f} s")
-        res = fut.result()
+        try:
+            res = call(client, Trigger.Request(), timeout)
+        except TimeoutError:
+            raise _Aborted(f"gripper {action}: no answer within {timeout:.0f} s") from None
         if not res.success:
             raise _Aborted(f"gripper {action} failed: {res.message}")
         self.get_logger().info(f"gripper {action}: {res.message}")
@@ -339,18 +315,7 @@ class _GoalArm:
 
 
 def main(args=None) -> None:
-    """Run the node; unusable parameters or scenario: one line on stderr and exit status 2 (no traceback)."""
-    import sys
-
-    from rclpy.exceptions import ParameterException
-
-    from qtree_task_planner.params import ParameterError, check_params_files
-    try:
-        check_params_files(sys.argv if args is None else args)
-        run_node(MotionPlannerNode, args, threads=6)
-    except (ParameterError, ParameterException, ScenarioError, ValueError, TypeError) as e:
-        print(f"motion_planner: {type(e).__name__}: {e}", file=sys.stderr)
-        raise SystemExit(2) from None
+    node_main("motion_planner", MotionPlannerNode, args, threads=6)
 
 
 if __name__ == "__main__":

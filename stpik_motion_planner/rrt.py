@@ -12,7 +12,6 @@ same process. See docs/motion_planner.md.
 """
 from __future__ import annotations
 
-import time
 from typing import Callable, Sequence
 
 import numpy as np
@@ -112,9 +111,3 @@ class JointRRT:
             return valid(q)
 
         return _solve(space, len(self.lo), start, goal, check, timeout, self.resolution, self.simplify_time, 0.0)
-
-
-def timed(fn, *args, **kw):
-    t = time.perf_counter()
-    out = fn(*args, **kw)
-    return out, time.perf_counter() - t

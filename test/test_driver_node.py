@@ -20,7 +20,8 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from stpik_motion_planner.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, Q_HOME, Q_UPPER, QDOT_MAX  # noqa
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 PARAMS = REPO / "config" / "jaco2_sim_driver.yaml"
 MODULE = "jaco2_sim_driver.driver_node"
@@ -163,7 +164,7 @@ def test_services(g):
 
 
 def test_ground_truth_objects_match_the_scenario(g):
-    sc = load_scenario(DEFAULT_SCENARIO)
+    sc = load_scenario(default_scenario())
     objs = g.probe.collect("/sim/objects", ObjectArray, LATCHED).wait(timeout=10)[-1].objects
     assert [o.id for o in objs] == list(sc.ids)
     for o in objs:

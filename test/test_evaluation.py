@@ -7,14 +7,14 @@ from types import SimpleNamespace
 
 import pytest
 
-from qtree_task_planner.evaluation.__main__ import QUICK_GRID, SCEN_DIR, planner_params, scenes
-from qtree_task_planner.evaluation.feasibility_cache import (FeasibilityCacheError, FeasibilityTable, PlannerOracle,
+from relocation_app.evaluation.__main__ import QUICK_GRID, SCEN_DIR, planner_params, scenes
+from relocation_app.evaluation.feasibility_cache import (FeasibilityCacheError, FeasibilityTable, PlannerOracle,
                                                              cache_key, load_table, open_table)
-from qtree_task_planner.evaluation.report import write_report
-from qtree_task_planner.evaluation.sequences import analyse
-from qtree_task_planner.evaluation.sweep import read_results, sweep
-from qtree_task_planner.feasibility import Label
-from stpik_motion_planner.scenario import load_scenario
+from relocation_app.evaluation.report import write_report
+from relocation_app.evaluation.sequences import analyse
+from relocation_app.evaluation.sweep import read_results, sweep
+from relocation_common.feasibility import Label
+from relocation_common.scenario import load_scenario
 
 S1 = SCEN_DIR / "scenario1_5.yaml"
 
@@ -41,7 +41,7 @@ def test_cache_round_trip_and_key(tmp_path, params):
     # weights do not enter the key (they do not change a feasibility answer); positions do
     d = __import__("yaml").safe_load(S1.read_text())
     d["objects"][0]["weight"] = 0.5
-    from stpik_motion_planner.scenario import parse_scenario
+    from relocation_common.scenario import parse_scenario
     assert cache_key(parse_scenario(d), params) == cache_key(sc, params)
     d["objects"][0]["xy"][1] += 0.01
     assert cache_key(parse_scenario(d), params) != cache_key(sc, params)

@@ -7,15 +7,17 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from qtree_task_planner.exact import brute_force, solve
-from qtree_task_planner.feasibility import BlockingOracle, CachedOracle, FeasibilityAnswer, Label
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+from relocation_common.feasibility import FeasibilityAnswer, Label
 from qtree_task_planner.problem import RelocationProblem
-from stpik_motion_planner.scenario import CONFIG_DIR, ScenarioError, load_scenario
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import ScenarioError, load_scenario
 
 
 @pytest.mark.parametrize("n, sequence, weight", [
     (5, ("o1", "o4", "T"), 0.76), (10, ("o3", "o6", "T"), 1.01), (15, ("o3", "o8", "o13", "T"), 1.09)])
 def test_shipped_blocking_scenarios(n, sequence, weight):
-    sc = load_scenario(CONFIG_DIR / "scenarios" / f"blocking_{n}.yaml")
+    sc = load_scenario(scenarios_dir() / f"blocking_{n}.yaml")
     oracle = BlockingOracle(sc)
     r = solve(sc, oracle)
     assert r.sequence == sequence and r.total_weight == pytest.approx(weight)
@@ -36,7 +38,7 @@ def test_blocking_oracle_answers_and_errors():
     with pytest.raises(ValueError, match="unknown ids"):
         BlockingOracle.from_relation({"T": ["x"]}, "T", ["a", "T"])
     with pytest.raises(ScenarioError, match="no 'blocking:' section"):
-        BlockingOracle(load_scenario(CONFIG_DIR / "scenarios" / "paper_experiment_10.yaml"))
+        BlockingOracle(load_scenario(scenarios_dir() / "paper_experiment_10.yaml"))
 
 
 def test_no_feasible_sequence():
@@ -96,7 +98,7 @@ def test_lazy_ucs_matches_brute_force(seed, n, kind, p):
 
 
 def test_solve_counts_calls_behind_a_cache():
-    sc = load_scenario(CONFIG_DIR / "scenarios" / "blocking_15.yaml")
+    sc = load_scenario(scenarios_dir() / "blocking_15.yaml")
     cache = CachedOracle(BlockingOracle(sc))
     r = solve(sc, cache)
     assert cache.calls == r.oracle_calls == cache.queries

@@ -8,7 +8,8 @@ from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.execution import FollowerParams, TrajectoryFollower
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
 from stpik_motion_planner.relocation import PHASES, relocate
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario
 from stpik_motion_planner.trajectory import Trajectory
 
 DT = 0.01
@@ -110,7 +111,7 @@ def _upright(sim, oid) -> float:
 @pytest.mark.slow
 def test_planned_relocations_move_bottles_to_their_slots_in_mujoco():
     """relocation.relocate (what the motion_planner node runs) on the MuJoCo core, twice: bottles on their slots."""
-    scenario = load_scenario(DEFAULT_SCENARIO)
+    scenario = load_scenario(default_scenario())
     planner, sim = MotionPlanner(scenario, PlannerParams.load()), Jaco2Sim(scenario)
     start = {p.id: np.array(p.position) for p in sim.object_poses()}
     removed, arm = [], SimArm(sim)

@@ -12,11 +12,11 @@ import pytest
 
 from jaco2_sim_driver.sim import GRASP_RADIAL_TOL
 
-from qtree_task_planner.feasibility import Label
+from relocation_common.feasibility import Label
 from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
 from stpik_motion_planner.grasp import PALM_GAP, PALM_REACH, WorkspaceError
-from stpik_motion_planner.scenario import UnknownObjectError, parse_scenario
+from relocation_common.scenario import UnknownObjectError, parse_scenario
 
 SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
          "ceiling_z": 0.28, "bottom_z": -0.18}
@@ -185,8 +185,9 @@ def test_pick_carry_home_relocate_for_real(planner):
 
 
 def test_default_scenario_target_is_blocked_and_freed_by_o2_o3_o6():
-    from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
-    sc = load_scenario(DEFAULT_SCENARIO)
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
+    sc = load_scenario(default_scenario())
     mp = MotionPlanner(sc)
     assert mp.feasibility("T", frozenset()).label == Label.UNFEASIBLE
     assert mp.feasibility("o6", frozenset({"o2"})).label == Label.UNFEASIBLE

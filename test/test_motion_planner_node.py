@@ -19,14 +19,15 @@ from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
-from qtree_task_planner.feasibility import Label  # noqa: E402
+from relocation_common.feasibility import Label  # noqa: E402
 from stpik_motion_planner import robot_description as rd  # noqa: E402
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 SRV = "/motion_planner/plan_feasibility"
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
-SCENARIO = load_scenario(DEFAULT_SCENARIO)
+SCENARIO = load_scenario(default_scenario())
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,8 @@ from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError, pose_e
 from perception_aruco.images import decode_color, decode_depth, encode_color, encode_depth
 from perception_aruco.pipeline import Perception
 from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME
-from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario, parse_scenario
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario, parse_scenario
 
 SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15"]
 VISIBLE_PIXELS = 300  # a bottle with this many pixels in view (~10 % of an unoccluded one) must be found
@@ -42,7 +43,7 @@ def visible_pixels(scenario, camera=CameraSpec()) -> dict[str, int]:
 def frames():
     out = {}
     for name in SCENES:
-        s = load_scenario(CONFIG_DIR / "scenarios" / f"{name}.yaml")
+        s = load_scenario(scenarios_dir() / f"{name}.yaml")
         out[name] = (s, render_frame(s), visible_pixels(s))
     return out
 
@@ -126,7 +127,7 @@ def test_size_mismatch_and_bad_images_raise(frames):
 def test_hidden_bottle_reported_missing_not_made_up():
     """A short bottle right behind a tall one (along the camera ray): invisible, so it must be missing."""
     import yaml
-    data = yaml.safe_load((CONFIG_DIR / "scenarios" / "blocking_5.yaml").read_text())
+    data = yaml.safe_load((scenarios_dir() / "blocking_5.yaml").read_text())
     data["objects"] = [
         {"id": "front", "weight": 0.3, "xy": [0.52, -0.07], "color": "red"},
         {"id": "hidden", "weight": 0.3, "xy": [0.59, -0.032], "color": "blue", "height": 0.05, "radius": 0.025},

@@ -12,8 +12,9 @@ pytestmark = pytest.mark.graph
 
 from jaco2_sim_driver.camera import render_frame  # noqa: E402
 from perception_aruco.images import encode_color, encode_depth  # noqa: E402
-from qtree_task_planner.bringup import Graph  # noqa: E402
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
+from relocation_app.graph import Graph  # noqa: E402
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 
 def _image(stamp, enc, h, w, step, data):
@@ -31,7 +32,7 @@ def test_node_publishes_perceived_scene(tmp_path):
 
     from qtree_relocation_msgs.msg import ObjectArray
 
-    scenario = load_scenario(DEFAULT_SCENARIO)
+    scenario = load_scenario(default_scenario())
     frame = render_frame(scenario)
     with Graph(tmp_path) as g:
         g.start("perception", {"process_rate": 10.0})

@@ -3,7 +3,8 @@ import re
 
 import pytest
 
-from qtree_task_planner.feasibility import BlockingOracle, CachedOracle, FeasibilityAnswer, Label
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+from relocation_common.feasibility import FeasibilityAnswer, Label
 from qtree_task_planner.problem import ProblemError, RelocationProblem
 from qtree_task_planner.q_tree import QTree, reward
 

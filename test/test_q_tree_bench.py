@@ -4,7 +4,9 @@ from pathlib import Path
 
 import pytest
 
-from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario
+from relocation_common.paths import scenarios_dir
+
+from relocation_common.scenario import load_scenario
 
 spec = importlib.util.spec_from_file_location(
     "bench_qtree", Path(__file__).resolve().parent.parent / "scripts" / "bench_qtree.py")
@@ -14,7 +16,7 @@ spec.loader.exec_module(bench)
 
 @pytest.mark.bench
 def test_bench_qtree_tiny():
-    sc = load_scenario(CONFIG_DIR / "scenarios" / "blocking_15.yaml")
+    sc = load_scenario(scenarios_dir() / "blocking_15.yaml")
     rows = bench.throughput(sc, seeds=1, episodes=30)
     assert len(rows) == 12 and all(r["eps"] > 0 and r["mpq"] >= r["calls"] for r in rows)
     e = bench.exact(sc)

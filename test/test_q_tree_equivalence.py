@@ -25,11 +25,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from qtree_task_planner import exact, kernel  # noqa: E402
-from qtree_task_planner.feasibility import BlockingOracle  # noqa: E402
+from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.problem import RelocationProblem  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402
-from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario  # noqa: E402
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 FIXTURE = ROOT / "test" / "data" / "qtree_reference.json"
 ALGORITHMS = [(p, s) for p in ("lrnd", "h-lrnd", "h-eg") for s in ("breadth", "depth")]
@@ -80,12 +81,12 @@ _SCENES: dict = {}
 def setting(scene: str):
     """(problem, oracle, optimal weight) of a scene; the scenario* ones from the committed feasibility cache."""
     if scene not in _SCENES:
-        sc = load_scenario(CONFIG_DIR / "scenarios" / f"{scene}.yaml")
+        sc = load_scenario(scenarios_dir() / f"{scene}.yaml")
         if scene.startswith("blocking"):
             oracle = BlockingOracle(sc)
         else:
-            from qtree_task_planner.evaluation.__main__ import planner_params
-            from qtree_task_planner.evaluation.feasibility_cache import (PlannerOracle, cache_key, cache_path,
+            from relocation_app.evaluation.__main__ import planner_params
+            from relocation_app.evaluation.feasibility_cache import (PlannerOracle, cache_key, cache_path,
                                                                         load_table)
             params = planner_params()
             path = cache_path(sc, params)
@@ -170,8 +171,8 @@ def test_kernel_is_built_and_used():
 
 @pytest.mark.parametrize("policy,search", ALGORITHMS)
 def test_kernel_asks_the_cache_exactly_like_the_python_loop(policy, search, monkeypatch):
-    from qtree_task_planner.feasibility import CachedOracle
-    sc = load_scenario(CONFIG_DIR / "scenarios" / "blocking_15.yaml")
+    from qtree_task_planner.oracles import CachedOracle
+    sc = load_scenario(scenarios_dir() / "blocking_15.yaml")
     p = TrainingParams(**(BASE | dict(policy=policy, search=search, seed=4, max_episodes=600)))
     caches = []
     for engine in ("kernel", "python"):
@@ -186,7 +187,7 @@ def test_kernel_asks_the_cache_exactly_like_the_python_loop(policy, search, monk
 
 
 def test_kernel_propagates_oracle_errors():
-    from qtree_task_planner.feasibility import FeasibilityAnswer, Label
+    from relocation_common.feasibility import FeasibilityAnswer, Label
     problem, oracle, _ = setting("blocking_10")
 
     class Dies:

@@ -5,7 +5,9 @@ from collections import Counter
 
 import pytest
 
-from qtree_task_planner.params import DEFAULT_PARAMS_FILE, ParameterError, TrainingParams
+from relocation_common.config import ParameterError, node_section
+from relocation_common.paths import config_file
+from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.policies import epsilon_greedy, epsilon_schedule, h_lrnd, lrnd
 from qtree_task_planner.q_tree import Node
 
@@ -47,7 +49,8 @@ def test_epsilon_greedy_heuristic_greedy_ties_and_exploration():
 
 def test_default_params_come_from_the_one_yaml():
     p = TrainingParams.defaults()
-    assert p == TrainingParams.from_yaml(DEFAULT_PARAMS_FILE)
+    section = node_section(config_file("task_planner.yaml"), "task_planner")
+    assert p.to_dict() == {k: section[k] for k in TrainingParams.fields()}
     assert (p.policy, p.search, p.epsilon0, p.epsilon_min) == ("h-eg", "depth", 1.0, 0.001)
     assert p.replace(alpha=0.1, seed=None).alpha == 0.1 and p.replace(alpha=0.1).seed == p.seed
 
@@ -85,7 +88,7 @@ def test_params_file_errors(tmp_path):
     with pytest.raises(ParameterError, match="ros__parameters"):
         TrainingParams.from_yaml(f)
     d = TrainingParams.defaults().to_dict()
-    d["scenario"] = "x.yaml"
+    d["alpah"] = 0.5  # a typo: neither a training parameter nor one of the node's own
     import yaml
     f.write_text(yaml.safe_dump({"task_planner": {"ros__parameters": d}}))
     with pytest.raises(ParameterError, match="unknown parameter"):

@@ -7,15 +7,17 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from qtree_task_planner.exact import solve
-from qtree_task_planner.feasibility import BlockingOracle, CachedOracle, Label
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+from relocation_common.feasibility import Label
 from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.q_tree import QTree
 from qtree_task_planner.training import train
-from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario
 
-SC5 = load_scenario(CONFIG_DIR / "scenarios" / "blocking_5.yaml")
-SC10 = load_scenario(CONFIG_DIR / "scenarios" / "blocking_10.yaml")
+SC5 = load_scenario(scenarios_dir() / "blocking_5.yaml")
+SC10 = load_scenario(scenarios_dir() / "blocking_10.yaml")
 BASE = TrainingParams.defaults()
 
 

@@ -12,7 +12,7 @@ SC5 = ROOT / "config" / "scenarios" / "blocking_5.yaml"
 
 
 def qtree(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "qtree_task_planner.cli", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "relocation_app.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, timeout=60)
 
 

@@ -76,7 +76,7 @@ def _mp(tmp_path, body: str) -> Path:
 
 
 def test_motion_planner_params_partial_or_unknown_key_is_a_clear_error(tmp_path):
-    with pytest.raises(ValueError, match="expected motion_planner: ros__parameters"):
+    with pytest.raises(ValueError, match="expected 'motion_planner: ros__parameters"):
         PlannerParams.load(_mp(tmp_path, "motion_planner:\n  timeout: 0.5\n"))
     with pytest.raises(ValueError, match="'timeuot' is unknown"):
         PlannerParams.load(_mp(tmp_path, "motion_planner:\n  ros__parameters:\n    timeuot: 0.5\n"))
@@ -96,7 +96,7 @@ def test_motion_planner_params_out_of_range_is_a_clear_error(tmp_path, line):
 
 
 def test_params_file_precheck_names_the_file_and_line(tmp_path):
-    from qtree_task_planner.params import ParameterError, check_params_files
+    from relocation_common.config import ParameterError, check_params_files
     f = tmp_path / "x.yaml"
     f.write_text("a:\n  ros__parameters:\n    b: [1,\n")
     with pytest.raises(ParameterError, match=r"x.yaml: malformed YAML at line \d"):

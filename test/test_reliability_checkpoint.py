@@ -9,13 +9,14 @@ import pytest
 from qtree_task_planner.checkpoint import (Checkpoint, CheckpointError, load_checkpoint, problem_hash,
                                            save_checkpoint)
 from qtree_task_planner.exact import solve
-from qtree_task_planner.feasibility import BlockingOracle, CachedOracle
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.training import train
-from stpik_motion_planner.scenario import CONFIG_DIR, load_scenario
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario
 
-SC10 = load_scenario(CONFIG_DIR / "scenarios" / "blocking_10.yaml")
+SC10 = load_scenario(scenarios_dir() / "blocking_10.yaml")
 PROBLEM = RelocationProblem.from_scenario(SC10)
 PARAMS = TrainingParams.defaults().replace(seed=11)
 OPT = solve(SC10, BlockingOracle(SC10)).total_weight
@@ -169,7 +170,7 @@ def test_checkpoint_for_another_problem_or_params_is_refused(ck_file):
     ck = load_checkpoint(ck_file)
     with pytest.raises(CheckpointError, match="other training parameters.*seed 11 != 12"):
         train(SC10, BlockingOracle(SC10), PARAMS.replace(seed=12), resume=ck)
-    sc5 = load_scenario(CONFIG_DIR / "scenarios" / "blocking_5.yaml")
+    sc5 = load_scenario(scenarios_dir() / "blocking_5.yaml")
     with pytest.raises(CheckpointError, match="another scene"):
         train(sc5, BlockingOracle(sc5), PARAMS, resume=ck)
     heavier = RelocationProblem(PROBLEM.obstacles, {**PROBLEM.weights, PROBLEM.obstacles[0]: 0.99}, PROBLEM.target)

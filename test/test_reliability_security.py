@@ -5,7 +5,8 @@ import time
 
 import pytest
 
-from qtree_task_planner.bringup import ROOT, Graph, private_domain_id, ros_env
+from relocation_app.graph import Graph, private_domain_id, ros_env
+from relocation_common.paths import config_file
 from ros_procs import RosGraph
 
 pytestmark = pytest.mark.graph
@@ -23,7 +24,7 @@ def test_bringup_environment_is_loopback_and_a_private_domain(tmp_path, monkeypa
 def test_a_graph_is_invisible_from_another_domain(tmp_path):
     with RosGraph(tmp_path / "a") as a, RosGraph(tmp_path / "b") as b:
         assert a.domain_id != b.domain_id
-        tp = a.start("qtree_task_planner.task_planner_node", params_file=ROOT / "config" / "task_planner.yaml")
+        tp = a.start("qtree_task_planner.task_planner_node", params_file=config_file("task_planner.yaml"))
         deadline = time.monotonic() + 30
         while "/task_planner/train/_action/send_goal" not in dict(a.probe.node.get_service_names_and_types()):
             assert tp.alive() and time.monotonic() < deadline, tp.log()

@@ -20,10 +20,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_procs import REPO, NodeProcess, RosGraph  # noqa: E402
 
 from qtree_task_planner import exact  # noqa: E402
-from qtree_task_planner.feasibility import BlockingOracle, CachedOracle  # noqa: E402
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402
-from stpik_motion_planner.scenario import load_scenario  # noqa: E402
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 SCENARIO = REPO / "config" / "scenarios" / "blocking_10.yaml"
 PARAMS_FILE = REPO / "config" / "task_planner.yaml"
@@ -86,7 +86,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402
 from qtree_task_planner.task_planner_node import train_goal  # noqa: E402
 from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
-from stpik_motion_planner.scene_msgs import bottles_to_msg  # noqa: E402
+from relocation_common.ros_conversions import bottles_to_msg  # noqa: E402
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SC10 = load_scenario(SCENARIO)

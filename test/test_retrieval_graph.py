@@ -11,7 +11,7 @@ from ros_procs import REPO, reserve_domain_id
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
-from stpik_motion_planner.scenario import load_scenario  # noqa: E402
+from relocation_common.scenario import load_scenario  # noqa: E402
 
 SCENARIO = REPO / "config" / "scenarios" / "scenario1_5.yaml"
 
@@ -19,7 +19,7 @@ SCENARIO = REPO / "config" / "scenarios" / "scenario1_5.yaml"
 def test_demo_retrieves_the_target_of_a_five_obstacle_scene(tmp_path):
     domain, lock = reserve_domain_id()
     try:
-        cmd = [sys.executable, "-m", "qtree_task_planner.demo", "--scenario", str(SCENARIO),
+        cmd = [sys.executable, "-m", "relocation_app.demo", "--scenario", str(SCENARIO),
                "--out", str(tmp_path), "--seed", "1", "--timeout", "600"]
         env = dict(os.environ, QTREE_DOMAIN_ID=str(domain))
         proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)

@@ -10,7 +10,8 @@ from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.collision import ArmGeometry, CollisionScene, segment_distance
 from stpik_motion_planner.feasibility import PlannerParams
 from stpik_motion_planner.kinematics import Kinematics
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario
 
 MJCF = f"""<mujoco><compiler angle="radian"/><default><default class="arm_collision"><geom contype="1" conaffinity="1"/></default></default>
 <worldbody>{rd.mjcf_arm_body()}</worldbody></mujoco>"""
@@ -82,7 +83,7 @@ def test_home_is_collision_free_self_and_scene():
     for i, j in arm.self_pairs:  # every non-adjacent pair, no broad phase
         d, _, _ = segment_distance(arm.p0[i], arm.p1[i], arm.p0[j], arm.p1[j])
         assert d - arm.radius[i] - arm.radius[j] > p.self_clearance, (arm.specs[i].name, arm.specs[j].name)
-    scene = CollisionScene(load_scenario(DEFAULT_SCENARIO)).obstacles()
+    scene = CollisionScene(load_scenario(default_scenario())).obstacles()
     dists = arm.obstacle_distances(scene, d_act=10.0)
     assert len(dists) == len(arm.moving) * len(scene.items)
     assert min(d for _, _, d, _, _ in dists) > p.clearance

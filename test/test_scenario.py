@@ -5,14 +5,14 @@ import math
 import pytest
 import yaml
 
-from stpik_motion_planner.scenario import (
-    DEFAULT_SCENARIO, ScenarioError, UnknownObjectError, load_scenario, parse_scenario)
+from relocation_common.paths import default_scenario, scenarios_dir
+from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario, parse_scenario
 
-BASE = yaml.safe_load(DEFAULT_SCENARIO.read_text())
+BASE = yaml.safe_load(default_scenario().read_text())
 
 
 def test_default_scenario_is_the_papers_experiment():
-    s = load_scenario(DEFAULT_SCENARIO)
+    s = load_scenario(default_scenario())
     assert len(s.obstacle_ids) == 10 and s.target_id == "T"
     assert sorted(s.weights.values()) == sorted([0.15, 0.13, 0.23, 0.44, 0.65, 0.78, 0.13, 0.34, 0.56, 0.89])
     assert s.object("T").is_target and s.object("T").label == "green"
@@ -23,13 +23,13 @@ def test_default_scenario_is_the_papers_experiment():
 
 
 def test_all_shipped_scenarios_load():
-    for path in sorted(DEFAULT_SCENARIO.parent.glob("*.yaml")):
+    for path in sorted(scenarios_dir().glob("*.yaml")):
         s = load_scenario(path)
         assert s.target_id in s.ids
 
 
 def test_unknown_object_id_names_the_known_ones():
-    s = load_scenario(DEFAULT_SCENARIO)
+    s = load_scenario(default_scenario())
     with pytest.raises(UnknownObjectError, match="unknown object id 'nope'.*o1"):
         s.object("nope")
     with pytest.raises(UnknownObjectError):
@@ -80,7 +80,7 @@ def test_malformed_yaml_and_missing_file(tmp_path):
 
 
 def test_with_objects_keeps_the_shelf_and_validates():
-    s = load_scenario(DEFAULT_SCENARIO)
+    s = load_scenario(default_scenario())
     fewer = s.with_objects([o for o in s.objects if o.id != "o1"])
     assert "o1" not in fewer.ids and fewer.shelf == s.shelf and fewer.slots == s.slots
     with pytest.raises(ScenarioError, match="exactly one target"):
@@ -88,8 +88,8 @@ def test_with_objects_keeps_the_shelf_and_validates():
 
 
 def test_scene_messages_round_trip_and_reject_nan():
-    from stpik_motion_planner.scene_msgs import bottles_to_msg, msg_to_bottles
-    s = load_scenario(DEFAULT_SCENARIO)
+    from relocation_common.ros_conversions import bottles_to_msg, msg_to_bottles
+    s = load_scenario(default_scenario())
     msg = bottles_to_msg(s.objects, s.shelf.top_z)
     assert msg_to_bottles(msg) == s.objects
     msg.objects[2].pose.position.x = math.nan

@@ -13,9 +13,10 @@ from jaco2_sim_driver.camera import intrinsics, render_frame
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, rpy_matrix
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
 from stpik_motion_planner.robot_description import EE_LINK, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX, urdf
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario
 
-SCENARIO = load_scenario(DEFAULT_SCENARIO)
+SCENARIO = load_scenario(default_scenario())
 # hand horizontal, approach +x (towards the shelf), fingers closing along y, finger spread vertical (as Q_HOME)
 R_GRASP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 

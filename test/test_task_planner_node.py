@@ -10,13 +10,14 @@ import pytest
 pytestmark = pytest.mark.graph
 
 from qtree_task_planner import exact  # noqa: E402
-from qtree_task_planner.bringup import ROOT, Graph  # noqa: E402
-from qtree_task_planner.feasibility import BlockingOracle  # noqa: E402
+from relocation_app.graph import Graph  # noqa: E402
+from relocation_common.paths import scenarios_dir  # noqa: E402
+from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402
-from stpik_motion_planner.scenario import load_scenario  # noqa: E402
+from relocation_common.scenario import load_scenario  # noqa: E402
 
-SCENARIO = ROOT / "config" / "scenarios" / "blocking_5.yaml"
+SCENARIO = scenarios_dir() / "blocking_5.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +28,7 @@ def graph(tmp_path_factory):
 
     from qtree_relocation_msgs.msg import ObjectArray
     from qtree_relocation_msgs.srv import PlanFeasibility
-    from stpik_motion_planner.scene_msgs import bottles_to_msg
+    from relocation_common.ros_conversions import bottles_to_msg
 
     scenario = load_scenario(SCENARIO)
     oracle = BlockingOracle(scenario)

@@ -3,14 +3,15 @@ import pytest
 
 pytest.importorskip("visualization_msgs")
 
-from qtree_task_planner.feasibility import BlockingOracle  # noqa: E402
+from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
 from qtree_task_planner.markers import tree_markers  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.problem import RelocationProblem  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402
-from stpik_motion_planner.scenario import DEFAULT_SCENARIO, load_scenario  # noqa: E402
+from relocation_common.paths import scenarios_dir  # noqa: E402
+from relocation_common.scenario import load_scenario  # noqa: E402
 
-SCENE = load_scenario(DEFAULT_SCENARIO.parent / "blocking_5.yaml")
+SCENE = load_scenario(scenarios_dir() / "blocking_5.yaml")
 
 
 def test_tree_markers_draw_every_feasible_edge_and_the_learned_path():

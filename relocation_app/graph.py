@@ -2,11 +2,13 @@
 
 Each node runs as `python -m <module> --ros-args --params-file config/<node>.yaml -p k:=v` in its own process,
 on a private ROS_DOMAIN_ID with discovery limited to the loopback, logs under the run directory. Used by the
-demo, by `qtree bringup`, and by the graph tests. Stop with Ctrl-C: every node gets SIGINT, then SIGKILL
-after a grace period.
+demo, the benchmarks and the graph tests. Stop with Ctrl-C: every node gets SIGINT, then SIGKILL after a grace
+period. Each node gets SIGTERM when the process that started it dies (Linux parent-death signal), so a killed
+launcher leaves no node behind.
 """
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import subprocess
@@ -15,8 +17,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-CONFIG = ROOT / "config"
+from relocation_common.paths import config_file, python_path
 
 # node name -> (module with main(), parameter file)
 NODES = {
@@ -44,9 +45,17 @@ def ros_env(domain_id: int, run_dir: Path) -> dict[str, str]:
         ROS_LOG_DIR=str(run_dir / "ros_log"),
         MUJOCO_GL=env.get("MUJOCO_GL", "egl"),
         PYTHONUNBUFFERED="1",
-        PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")])),
+        PYTHONPATH=os.pathsep.join(filter(None, [str(python_path()), env.get("PYTHONPATH")])),
     )
     return env
+
+
+def die_with_parent() -> None:
+    """preexec_fn: SIGTERM to this child when its parent dies (prctl PR_SET_PDEATHSIG; Linux only)."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 def _param_arg(v) -> str:
@@ -72,12 +81,13 @@ class Graph:
 
     def start(self, name: str, params: dict | None = None, params_file: Path | None = None) -> subprocess.Popen:
         module, cfg = NODES[name]
-        cmd = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file or CONFIG / cfg)]
+        cmd = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file or config_file(cfg))]
         for k, v in (params or {}).items():
             cmd += ["-p", f"{k}:={_param_arg(v)}"]
         log = open(self.run_dir / "logs" / f"{name}.log", "w")
         self.procs[name] = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT,
-                                            stdin=subprocess.DEVNULL, cwd=ROOT)
+                                            stdin=subprocess.DEVNULL, cwd=self.run_dir,
+                                            preexec_fn=die_with_parent)
         log.close()
         return self.procs[name]
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from itertools import combinations
 
-from qtree_task_planner.feasibility import Label
+from relocation_common.feasibility import Label
 
 from .feasibility_cache import FeasibilityTable, reachable_sets
 

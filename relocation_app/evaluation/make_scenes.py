@@ -8,16 +8,16 @@ Feasibility comes from the real planner (evaluation parameters, see __main__.pla
 """
 from __future__ import annotations
 
-from pathlib import Path
+
+from relocation_common.paths import scenarios_dir
 
 import yaml
 
 from .scenarios_gen import accept, evaluate_scene, lattice_scene, write_scene
 
-ROOT = Path(__file__).resolve().parents[2]
-SCEN = ROOT / "config" / "scenarios"
+SCEN = scenarios_dir()
 RANDOM_SEED0 = 1000
-HEADER = ("# Evaluation scene (docs/evaluation.md), made by qtree_task_planner/evaluation/make_scenes.py on the shelf\n"
+HEADER = ("# Evaluation scene (docs/evaluation.md), made by relocation_app/evaluation/make_scenes.py on the shelf\n"
           "# of paper_experiment_10. Format: docs/scenarios.md.")
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from stpik_motion_planner.scenario import parse_scenario
+from relocation_common.scenario import parse_scenario
 
 SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.80, "y_center": 0.0, "board_thickness": 0.02,
          "top_z": 0.02, "ceiling_z": 0.28, "bottom_z": -0.18}

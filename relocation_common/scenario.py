@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from qtree_task_planner.params import read_yaml
+from .config import ConfigError, read_yaml
+from .paths import default_scenario, resolve_scenario
 
 # Distinct colours for the bottles (the paper's bottles were coloured; perception identifies them by
 # colour). The target is green, as in the paper's experiment. RGB in [0, 1].
@@ -37,7 +38,7 @@ TARGET_COLOR = "green"
 TARGET_RGB = (0.10, 0.75, 0.15)
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ConfigError):
     """A scenario file or dict that cannot be used; the message says what to fix."""
 
 
@@ -330,12 +331,9 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
     )
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file. Raises ScenarioError with a one-line reason."""
-    path = Path(path)
+def load_scenario(path: str | Path | None = None) -> Scenario:
+    """Read and validate a scenario YAML file: a path, a name under config/scenarios, or None for the default
+    scene. Raises ScenarioError with a one-line reason."""
+    path = resolve_scenario(path) if path is not None else default_scenario()
     data = read_yaml(path, ScenarioError, "scenario file")
     return parse_scenario(data, str(path))
-
-
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
-DEFAULT_SCENARIO = CONFIG_DIR / "scenarios" / "paper_experiment_10.yaml"

@@ -1,6 +1,6 @@
 """The main job: the paper's real experiment (Sect. 5.2) through the whole node graph.
 
-Starts the four nodes as separate processes on a private ROS domain (qtree_task_planner.bringup), asks the
+Starts the four nodes as separate processes on a private ROS domain (relocation_app.graph), asks the
 task planner to train H-eG with depth search against the motion planner's feasibility service and to execute
 the learned sequence on the MuJoCo Jaco2, and writes under out/: report.json, learning_curve.png and
 retrieval_strip.png (camera frames of the retrieval).
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import threading
 import time
@@ -16,20 +17,23 @@ from pathlib import Path
 
 import numpy as np
 
-from .bringup import ROOT, Graph, wait_for_interfaces
+from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
+from qtree_task_planner.task_planner_node import train_goal
+from relocation_common.paths import default_scenario, resolve_scenario
 
-OUT = ROOT / "out"
+from .graph import Graph, wait_for_interfaces
 
 
 def _args(argv):
     p = argparse.ArgumentParser(prog="qtree demo", description=__doc__.splitlines()[0])
-    p.add_argument("--scenario", default=str(ROOT / "config" / "scenarios" / "paper_experiment_10.yaml"))
+    p.add_argument("--scenario", default=str(default_scenario()),
+                   help="scenario YAML, or a name under config/scenarios (default: the paper's experiment)")
     p.add_argument("--scene-source", choices=("perception", "ground_truth"), default="perception")
-    p.add_argument("--policy", default="h-eg")
-    p.add_argument("--search", default="depth")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--policy", choices=POLICIES, help="default: config/task_planner.yaml")
+    p.add_argument("--search", choices=SEARCHES, help="default: config/task_planner.yaml")
+    p.add_argument("--seed", type=int, help="default: config/task_planner.yaml")
     p.add_argument("--no-execute", action="store_true", help="train only, do not move the robot")
-    p.add_argument("--out", default=str(OUT))
+    p.add_argument("--out", default="out", help="output directory (default: ./out)")
     p.add_argument("--timeout", type=float, default=900.0, help="give up after this many seconds")
     return p.parse_args(argv)
 
@@ -83,11 +87,18 @@ def _learning_curve(history, path: Path, title: str) -> None:
     plt.close(fig)
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt  # SIGTERM (timeout, systemd, docker stop) stops the graph like Ctrl-C
+
+
 def run(argv=None) -> int:
     a = _args(argv)
-    out = Path(a.out)
+    a.scenario = str(resolve_scenario(a.scenario).resolve())  # the nodes run in the output directory
+    used = TrainingParams.defaults().replace(policy=a.policy, search=a.search, seed=a.seed)
+    out = Path(a.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     import rclpy
+    from rclpy.signals import SignalHandlerOptions
     from rclpy.action import ActionClient
     from rclpy.executors import MultiThreadedExecutor
     from sensor_msgs.msg import Image
@@ -99,8 +110,6 @@ def run(argv=None) -> int:
     from qtree_relocation_msgs.msg import ObjectArray
     SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
     from qtree_relocation_msgs.srv import PlanFeasibility
-
-    from .task_planner_node import train_goal
 
     t0 = time.monotonic()
     common = {"scenario": a.scenario}
@@ -114,7 +123,7 @@ def run(argv=None) -> int:
         g.start("task_planner", dict(common, scene_topic=scene_topic))
         import os
         os.environ.update(g.env)
-        rclpy.init()
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node("qtree_demo")
         ex = MultiThreadedExecutor(2)
         ex.add_node(node)
@@ -134,9 +143,9 @@ def run(argv=None) -> int:
             _wait_for(lambda: scene.msg is not None and len(scene.msg.objects) > 0, 90, g,
                       f"no scene on {scene_topic}")
             before = truth.positions()
-            print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {a.policy}/{a.search} "
+            print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {used.policy}/{used.search} "
                   f"through the feasibility service")
-            goal = train_goal(policy=a.policy, search=a.search, seed=a.seed, execute=not a.no_execute)
+            goal = train_goal(policy=used.policy, search=used.search, seed=used.seed, execute=not a.no_execute)
             bar = tqdm(desc="training", unit="ep", file=sys.stderr)
 
             def feedback(fb):
@@ -165,7 +174,7 @@ def run(argv=None) -> int:
             spin.join(timeout=5)
     wall = time.monotonic() - t0
     report = {
-        "scenario": a.scenario, "policy": a.policy, "search": a.search, "seed": a.seed,
+        "scenario": a.scenario, "policy": used.policy, "search": used.search, "seed": used.seed,
         "success": res.success, "message": res.message,
         "learned_sequence": list(res.sequence), "learned_weight": res.total_weight,
         "optimal_sequence": list(res.optimal_sequence), "optimal_weight": res.optimal_weight,
@@ -175,7 +184,7 @@ def run(argv=None) -> int:
         "final_scene": _check_scene(a.scenario, before, after, list(res.sequence) if not a.no_execute else []),
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
-    _learning_curve(res.q_sum_history, out / "learning_curve.png", f"{a.policy} / {a.search}")
+    _learning_curve(res.q_sum_history, out / "learning_curve.png", f"{used.policy} / {used.search}")
     _strip(rec.frames, out / "retrieval_strip.png")
     fs = report["final_scene"]
     if not a.no_execute:
@@ -206,7 +215,7 @@ class _Latest:
 
 def _check_scene(scenario_path: str, before: dict, after: dict, relocated: list) -> dict:
     """Where the bottles ended (simulator ground truth): the target on the bottom shelf, the others unmoved."""
-    from stpik_motion_planner.scenario import load_scenario
+    from relocation_common.scenario import load_scenario
     s = load_scenario(scenario_path)
     z_bottom = s.shelf.bottom_z
     on_bottom = {i: abs(p[2] - z_bottom) < 0.02 and s.shelf.x_front < p[0] < s.shelf.x_back
@@ -238,6 +247,7 @@ def _wait(future, timeout: float, graph: Graph):
 
 
 def main(argv=None) -> None:
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         sys.exit(run(argv))
     except KeyboardInterrupt:

@@ -26,14 +26,16 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Iterable
+
+from relocation_common.paths import data_dir
+
 
 import numpy as np
 
-from qtree_task_planner.feasibility import FeasibilityAnswer, Label
+from relocation_common.feasibility import FeasibilityAnswer, Label
 
 CACHE_VERSION = 1
-DATA_DIR = Path(__file__).resolve().parents[2] / "data" / "feasibility"
+DATA_DIR = data_dir() / "feasibility"
 
 
 class FeasibilityCacheError(ValueError):
@@ -276,22 +278,3 @@ def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, 
             pool.close()
             pool.join()
     return {"real_calls": calls, "seconds": time.perf_counter() - t0, "sets": len(seen)}
-
-
-def lookup_oracle(table: FeasibilityTable):
-    """A plain dict-backed oracle for a complete table (sweep workers): KeyError on a miss is a bug."""
-    return PlannerOracle(None, None, table, planner=_NoPlanner(table))
-
-
-class _NoPlanner:
-    def __init__(self, table) -> None:
-        self.table = table
-
-    def feasibility(self, object_id, removed):
-        raise FeasibilityCacheError(f"feasibility of {object_id!r} with {sorted(removed)} removed is not in the cache "
-                                    f"{self.table.scenario_name} ({self.table.key[:12]}); run the fill step first")
-
-
-def iter_entries(table: FeasibilityTable) -> Iterable[tuple[str, frozenset[str], Label]]:
-    for (o, r), (lab, _, _) in table.entries.items():
-        yield o, r, lab

@@ -1,38 +1,10 @@
-"""The feasibility question the Q-Tree asks the motion planner (paper Eq. 11), defined once.
-
-"Is relocating object i feasible once the objects in `removed` are gone?" The answer is a label g_U
-(unfeasible), g_O (a feasible obstacle) or g_T (the feasible target), and from the real motion planner a
-trajectory. Implementations: the motion planner core (stpik_motion_planner.feasibility), the ROS service
-client of the task planner node, and, for tests of this layer only, a declared blocking relation.
+"""Adapters over a feasibility oracle (the contract is relocation_common.feasibility): a set-keyed cache, and,
+for tests of the Q-Tree layer only, a declared blocking relation.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from enum import IntEnum
-from typing import Any, Protocol
-
-
-class Label(IntEnum):
-    """Eq. 11. Values match qtree_relocation_msgs/srv/PlanFeasibility."""
-
-    UNFEASIBLE = 0  # g_U
-    OBSTACLE = 1  # g_O
-    TARGET = 2  # g_T
-
-
-@dataclass(frozen=True)
-class FeasibilityAnswer:
-    label: Label
-    planning_time: float = 0.0  # s
-    attempts: int = 0
-    message: str = ""
-    trajectory: Any = None  # the motion planner's joint trajectory on success
-
-
-class FeasibilityOracle(Protocol):
-    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
-        """Answer for `object_id` with the objects in `removed` gone (robot starting from home)."""
-        ...
+from relocation_common.feasibility import FeasibilityAnswer, FeasibilityOracle, Label
+from relocation_common.scenario import ScenarioError
 
 
 class CachedOracle:
@@ -71,10 +43,8 @@ class BlockingOracle:
     """
 
     def __init__(self, scenario) -> None:
-        """`scenario`: a stpik_motion_planner.scenario.Scenario with a `blocking` section."""
+        """`scenario`: a relocation_common.scenario.Scenario with a `blocking` section."""
         if getattr(scenario, "blocking", None) is None:
-            from stpik_motion_planner.scenario import ScenarioError
-
             raise ScenarioError(
                 f"{getattr(scenario, 'source', 'scenario')}: no 'blocking:' section, so the blocking oracle "
                 "has nothing to answer from (it is a test double; use a scenario that declares one)")

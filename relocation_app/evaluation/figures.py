@@ -105,7 +105,7 @@ def e1st_spread(records: list[dict], scenarios: list[str], path: Path) -> Path:
 def tree_figure(tree, path: Path, title: str) -> Path:
     """Fig. 3-like drawing of a trained Q-Tree: nodes by depth, edges labelled object and Q; unfeasible red
     dashed, target green, the best sequence bold."""
-    from qtree_task_planner.feasibility import Label
+    from relocation_common.feasibility import Label
 
     best = {(n.id, a) for n, a in (tree.best_path() or [])}
     by_depth: dict[int, list] = {}

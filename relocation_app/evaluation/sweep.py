@@ -63,7 +63,7 @@ def _setting(cell: Cell):
     """Scenario, problem, table and optimum of a cell's scene, loaded once per worker process."""
     key = (cell.scenario_path, cell.cache_path)
     if key not in _LOADED:
-        from stpik_motion_planner.scenario import load_scenario
+        from relocation_common.scenario import load_scenario
         sc = load_scenario(cell.scenario_path)
         table = load_table(cell.cache_path, cell.cache_key)
         oracle = PlannerOracle(sc, None, table)

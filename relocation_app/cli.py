@@ -4,8 +4,8 @@
     qtree solve --scenario FILE [--json OUT]
 
 Defaults come from config/task_planner.yaml (or --params FILE). Bad input: one line on stderr, exit 2.
-Feasibility oracles are built by ORACLES[name](scenario, args); today only `blocking` (the scenario's declared
-relation, a test double). The motion planner adds `planner` there with one function.
+Feasibility oracles are built by ORACLES[name](scenario, args): `blocking` (the scenario's declared relation, a
+test double) or `planner` (the real motion planner in this process, config/motion_planner.yaml).
 """
 from __future__ import annotations
 
@@ -15,11 +15,13 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from .exact import solve
-from .feasibility import BlockingOracle, CachedOracle
-from .params import DEFAULT_PARAMS_FILE, POLICIES, SEARCHES, ParameterError, TrainingParams
-from .problem import ProblemError, RelocationProblem
-from .training import train
+from qtree_task_planner.exact import solve
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
+from qtree_task_planner.problem import ProblemError, RelocationProblem
+from qtree_task_planner.training import train
+from relocation_common.config import ParameterError
+from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
 
 class CliError(Exception):
@@ -30,8 +32,14 @@ def _blocking_oracle(scenario, args):
     return BlockingOracle(scenario)
 
 
+def _planner_oracle(scenario, args):
+    from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+
+    return MotionPlanner(scenario, PlannerParams.load())
+
+
 # name -> factory(scenario, args) -> oracle with feasibility(object_id, removed)
-ORACLES: dict[str, Callable] = {"blocking": _blocking_oracle}
+ORACLES: dict[str, Callable] = {"blocking": _blocking_oracle, "planner": _planner_oracle}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -44,14 +52,15 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def common(sp):
-        sp.add_argument("--scenario", required=True, help="scenario YAML (config/scenarios/*.yaml)")
+        sp.add_argument("--scenario", required=True, help="scenario YAML, or a name under config/scenarios")
         sp.add_argument("--oracle", choices=sorted(ORACLES), default="blocking",
-                        help="feasibility oracle (blocking: the scenario's declared relation, a test double)")
+                        help="feasibility oracle (blocking: the scenario's declared relation, a test double; "
+                             "planner: the motion planner)")
         sp.add_argument("--json", metavar="OUT", help="write the JSON result here instead of stdout")
 
     t = sub.add_parser("train", help="train the Q-Tree")
     common(t)
-    t.add_argument("--params", default=str(DEFAULT_PARAMS_FILE), help="ROS params file with the defaults")
+    t.add_argument("--params", help="ROS params file with the defaults (default: config/task_planner.yaml)")
     t.add_argument("--policy", choices=POLICIES)
     t.add_argument("--search", choices=SEARCHES)
     for name, typ in (("alpha", float), ("gamma", float), ("epsilon0", float), ("epsilon-min", float),
@@ -68,8 +77,6 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _load(args):
-    from stpik_motion_planner.scenario import load_scenario
-
     scenario = load_scenario(args.scenario)
     problem = RelocationProblem.from_scenario(scenario)
     oracle = ORACLES[args.oracle](scenario, args)
@@ -134,8 +141,6 @@ def _solve(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from stpik_motion_planner.scenario import ScenarioError, UnknownObjectError
-
     try:
         args = _parser().parse_args(argv)
         return _train(args) if args.command == "train" else _solve(args)

@@ -13,10 +13,11 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-SCEN_DIR = ROOT / "config" / "scenarios"
+from relocation_common.paths import data_dir, scenarios_dir, share_dir
+
+ROOT = share_dir()  # the checkout: the evaluation writes docs/ and data/ of the source tree
+SCEN_DIR = scenarios_dir()
 MAIN = ("scenario1_5", "scenario2_10", "scenario3_15")
-COMPLEX = ("scenario2_10", "scenario3_15")
 EXPERIMENT = "paper_experiment_10"
 EVAL_TIMEOUT = 3.0  # s per planner query when filling the cache (docs/evaluation.md: load-independent answers)
 QUICK_GRID = ((1.0, 0.1), (0.3, 0.9))
@@ -36,7 +37,7 @@ def scene_paths(quick: bool = False) -> tuple[list[Path], list[Path]]:
 
 
 def scenes(paths, params, data_dir, grid=None):
-    from stpik_motion_planner.scenario import load_scenario
+    from relocation_common.scenario import load_scenario
 
     from .feasibility_cache import cache_key, cache_path
     from .sweep import GRID, Scene
@@ -49,7 +50,7 @@ def scenes(paths, params, data_dir, grid=None):
 
 
 def cmd_fill(paths, params, data_dir, workers) -> dict:
-    from stpik_motion_planner.scenario import load_scenario
+    from relocation_common.scenario import load_scenario
 
     from .feasibility_cache import fill_reachable, open_table
     stats = {}
@@ -70,7 +71,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small version: 3 runs, 2 (alpha, gamma), 2 random scenes")
     ap.add_argument("--out", default=None, help="sweep results directory (default out/evaluation[-quick])")
     ap.add_argument("--docs", default=None, help="where evaluation.md and figures/ go (default docs/, quick: OUT/docs)")
-    ap.add_argument("--data", default=str(ROOT / "data" / "feasibility"), help="feasibility cache directory")
+    ap.add_argument("--data", default=str(data_dir() / "feasibility"), help="feasibility cache directory")
     ap.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     ap.add_argument("--no-random", action="store_true", help="skip the random 5-obstacle scenes (Table 4)")
     ap.add_argument("--no-experiment", action="store_true", help="skip the Sect. 5.2 scene (paper_experiment_10)")

@@ -1,0 +1,1 @@
+"""The application: the only code that knows all four parts (graph launcher, demo, evaluation, qtree CLI)."""
