@@ -58,11 +58,12 @@ def die_with_parent() -> None:
         pass
 
 
-def _param_arg(v) -> str:
+def param_arg(v) -> str:
+    """A parameter value as `-p name:=value` text (YAML: strings in lists quoted)."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (list, tuple)):
-        return "[" + ",".join(_param_arg(x) if not isinstance(x, str) else f"'{x}'" for x in v) + "]"
+        return "[" + ",".join(param_arg(x) if not isinstance(x, str) else f"'{x}'" for x in v) + "]"
     return str(v)
 
 
@@ -83,7 +84,7 @@ class Graph:
         module, cfg = NODES[name]
         cmd = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file or config_file(cfg))]
         for k, v in (params or {}).items():
-            cmd += ["-p", f"{k}:={_param_arg(v)}"]
+            cmd += ["-p", f"{k}:={param_arg(v)}"]
         log = open(self.run_dir / "logs" / f"{name}.log", "w")
         self.procs[name] = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT,
                                             stdin=subprocess.DEVNULL, cwd=self.run_dir,

@@ -52,6 +52,12 @@ pip_install() { "$VENV/bin/python" -m pip install -q --disable-pip-version-check
 
 step pip-upgrade scripts/setup_env.sh -- pip_install --upgrade "pip>=24"
 step requirements requirements.txt requirements-build.txt -- pip_install -r requirements.txt -r requirements-build.txt
+# The project itself, editable: the node executables in .venv/bin (task_planner, motion_planner, jaco2_sim_driver,
+# perception, qtree) run this checkout's code and find config/ through relocation_common.paths.
+install_project() {
+  pip_install --no-deps -e . > "$STAMPS/project.log" 2>&1 || { tail -30 "$STAMPS/project.log"; exit 1; }
+}
+step project setup.py setup.cfg -- install_project
 
 # Interface packages under msg_defs/, each built with plain cmake (build dir build/<pkg>) and installed
 # into the venv itself, so no environment setup is needed to import them:

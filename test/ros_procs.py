@@ -11,7 +11,9 @@ Isolation: every graph gets its own ROS_DOMAIN_ID (reserved with a lock file, so
 one), discovery on loopback only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), and ROS_HOME / ROS_LOG_DIR under the
 test's tmp dir. The test side is a `Probe`: a node in a private rclpy Context spun by a background thread.
 Teardown: SIGINT, wait, then SIGKILL as a fallback; `stop()` returns the exit code so a test can check that a node
-exits cleanly.
+exits cleanly. Nodes are started with the launcher's parent-death signal (relocation_app.graph.die_with_parent):
+a test run killed by `timeout` or SIGKILL leaves no node behind. Environment and parameter text come from the
+launcher too (one formatter for both).
 """
 from __future__ import annotations
 
@@ -27,6 +29,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+from relocation_app.graph import die_with_parent, param_arg, ros_env  # noqa: E402
 VENV_PYTHON = REPO / ".venv" / "bin" / "python"
 _LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"
 
@@ -58,11 +62,11 @@ def reserve_domain_id() -> tuple[int, Path]:
 class NodeProcess:
     """One node started as `python -m module --ros-args ...`; stdout+stderr go to a log file."""
 
-    def __init__(self, argv: list[str], env: dict[str, str], log_path: Path):
+    def __init__(self, argv: list[str], env: dict[str, str], log_path: Path, cwd: Path | None = None):
         self.argv, self.log_path = argv, log_path
         self._log = open(log_path, "wb")
-        self.popen = subprocess.Popen(argv, env=env, cwd=REPO, stdout=self._log, stderr=subprocess.STDOUT,
-                                      start_new_session=True)
+        self.popen = subprocess.Popen(argv, env=env, cwd=cwd or REPO, stdout=self._log, stderr=subprocess.STDOUT,
+                                      start_new_session=True, preexec_fn=die_with_parent)
 
     @property
     def pid(self) -> int:
@@ -200,11 +204,8 @@ class RosGraph:
         self.tmp.mkdir(parents=True, exist_ok=True)
         self.python = str(python or (VENV_PYTHON if VENV_PYTHON.exists() else sys.executable))
         self.domain_id, self._lock = reserve_domain_id()
-        self.env = dict(os.environ)
-        self.env.update(ROS_DOMAIN_ID=str(self.domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-                        ROS_HOME=str(self.tmp / "ros_home"), ROS_LOG_DIR=str(self.tmp / "ros_log"),
-                        PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
-        self.env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))
+        self.env = ros_env(self.domain_id, self.tmp)
+        self.env["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
         self.procs: list[NodeProcess] = []
         self._saved = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_HOME", "ROS_LOG_DIR")}
         for k in self._saved:  # the probe lives in this process: same discovery settings
@@ -218,10 +219,13 @@ class RosGraph:
         if params_file is not None:
             argv += ["--params-file", str(params_file)]
         for k, v in (params or {}).items():
-            argv += ["-p", f"{k}:={_param_text(v)}"]
+            argv += ["-p", f"{k}:={param_arg(v)}"]
         argv += list(ros_args)
-        log = self.tmp / f"{name or module.rsplit('.', 1)[-1]}_{len(self.procs)}.log"
-        p = NodeProcess(argv, self.env, log)
+        return self.start_argv(argv, name or module.rsplit('.', 1)[-1])
+
+    def start_argv(self, argv: list[str], name: str, env: dict | None = None, cwd: Path | None = None) -> NodeProcess:
+        """Start any command (an installed executable) in this graph's domain."""
+        p = NodeProcess(argv, {**self.env, **(env or {})}, self.tmp / f"{name}_{len(self.procs)}.log", cwd)
         self.procs.append(p)
         return p
 
@@ -243,11 +247,3 @@ class RosGraph:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-def _param_text(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (list, tuple)):
-        return "[" + ",".join(_param_text(x) for x in v) + "]"
-    return str(v)
