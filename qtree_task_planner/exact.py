@@ -7,7 +7,8 @@ is asked only when that entry is popped and its head set S + {o} is not settled 
 S" enters at cost g(S) and is checked when popped; the first feasible one popped is optimal, since every entry
 still queued costs at least as much and costs never decrease along a path.
 
-`brute_force` enumerates every set reachable by feasible single removals (asking everything) for tests.
+`brute_force` enumerates every set reachable by feasible single removals (reachable.py, asking everything) for
+tests.
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 from .oracles import CachedOracle
 from relocation_common.feasibility import Label
 from .problem import RelocationProblem
+from .reachable import reachable_sets
 
 
 @dataclass(frozen=True)
@@ -82,17 +84,7 @@ def brute_force(problem, oracle) -> ExactResult:
     problem = _problem(problem)
     cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
     calls0 = cache.calls
-    reachable: dict[frozenset[str], tuple[str, ...]] = {frozenset(): ()}
-    frontier = [frozenset()]
-    while frontier:
-        nxt = []
-        for s in frontier:
-            for o in problem.obstacles:
-                if o not in s and s | {o} not in reachable:
-                    if cache.feasibility(o, s).label != Label.UNFEASIBLE:
-                        reachable[s | {o}] = reachable[s] + (o,)
-                        nxt.append(s | {o})
-        frontier = nxt
+    reachable = reachable_sets(problem.obstacles, lambda o, s: cache.feasibility(o, s).label != Label.UNFEASIBLE)
     best = None
     for s, seq in reachable.items():
         if cache.feasibility(problem.target, s).label == Label.TARGET:

@@ -15,8 +15,9 @@ scene. A file that is not valid JSON, has another key or malformed entries raise
 
 `PlannerOracle` is the FeasibilityOracle the trainings use: a table hit answers at once; a miss runs the real
 MotionPlanner (created lazily, so a complete table never loads Pinocchio/OMPL) and records the answer.
-`fill_reachable` computes the complete table: breadth-first over every set reachable by feasible removals, which
-is exactly the set of questions any training (or the exact solver) can ask; level by level over a process pool.
+`fill_reachable` computes the complete table: breadth-first (qtree_task_planner/reachable.py) over every set
+reachable by feasible removals, which is exactly the set of questions any training (or the exact solver) can
+ask; level by level over a process pool.
 """
 from __future__ import annotations
 
@@ -27,12 +28,11 @@ import os
 import time
 from pathlib import Path
 
-from relocation_common.paths import data_dir
-
-
 import numpy as np
 
+from qtree_task_planner import reachable
 from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.paths import data_dir
 
 CACHE_VERSION = 1
 DATA_DIR = data_dir() / "feasibility"
@@ -214,18 +214,15 @@ def _ask(q: tuple[str, tuple[str, ...]]):
     return o, removed, int(a.label), a.planning_time, a.attempts
 
 
+def _removable(table: FeasibilityTable):
+    """removable(o, s) for reachable.py: the table holds an OBSTACLE answer (feasible removal) for (o, s)."""
+    return lambda o, s: table.get(o, s) == Label.OBSTACLE
+
+
 def reachable_sets(table: FeasibilityTable, scenario) -> list[frozenset[str]]:
-    """Sets reachable from {} by feasible removals, as far as the table knows (breadth-first order)."""
-    seen, frontier = {frozenset()}, [frozenset()]
-    while frontier:
-        nxt = []
-        for s in frontier:
-            for o in scenario.obstacle_ids:
-                if o not in s and table.get(o, s) == Label.OBSTACLE and (s | {o}) not in seen:
-                    seen.add(s | {o})
-                    nxt.append(s | {o})
-        frontier = nxt
-    return sorted(seen, key=lambda s: (len(s), sorted(s)))
+    """Sets reachable from {} by feasible removals, as far as the table knows, sorted by (size, members)."""
+    return sorted(reachable.reachable_sets(scenario.obstacle_ids, _removable(table)),
+                  key=lambda s: (len(s), sorted(s)))
 
 
 def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, progress: bool = True,
@@ -238,7 +235,8 @@ def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, 
     pool = None
     try:
         level = [frozenset()]
-        seen = {frozenset()}
+        reached = {frozenset(): ()}
+        removable = _removable(table)
         while level:
             todo = [(o, tuple(sorted(s))) for s in level for o in scenario.ids
                     if o not in s and table.get(o, s) is None]
@@ -261,12 +259,7 @@ def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, 
                     calls += 1
                 if save_to is not None:
                     table.save(save_to)
-            nxt = []
-            for s in level:
-                for o in scenario.obstacle_ids:
-                    if o not in s and table.get(o, s) == Label.OBSTACLE and (s | {o}) not in seen:
-                        seen.add(s | {o})
-                        nxt.append(s | {o})
+            nxt = reachable.next_level(level, scenario.obstacle_ids, removable, reached)
             if progress:
                 print(f"  fill {scenario.name}: level {len(level[0])}: {len(level)} sets, {len(todo)} planner calls, "
                       f"{time.perf_counter() - t0:.1f} s", flush=True)
@@ -277,4 +270,4 @@ def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, 
         if pool is not None:
             pool.close()
             pool.join()
-    return {"real_calls": calls, "seconds": time.perf_counter() - t0, "sets": len(seen)}
+    return {"real_calls": calls, "seconds": time.perf_counter() - t0, "sets": len(reached)}
