@@ -48,9 +48,10 @@ from .oracles import CachedOracle
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from .markers import tree_markers
 from relocation_common.config import ParameterError
+from .outage import Cancelled, PlannerUnavailable, until_available
 from .params import TrainingParams
 from .problem import RelocationProblem
-from relocation_common.node import call, declare_parameters, node_main
+from relocation_common.node import call, declare_parameters, end_goal, node_main
 from .training import train
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -58,26 +59,23 @@ STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from this node's clock is 
 SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
 
 
-class PlannerUnavailable(RuntimeError):
-    """The feasibility service did not answer in time (planner dead or overloaded)."""
-
-
-class PlannerGone(PlannerUnavailable):
-    """The planner stayed unavailable for longer than planner_wait: the goal is aborted."""
-
-
 class ServiceOracle:
     """FeasibilityOracle over the PlanFeasibility service (blocking call from a worker thread).
 
     Raises PlannerUnavailable as soon as the service is missing (after `connect_wait` s), when it disappears from
     the graph while a query is pending (a clean shutdown), or when no answer came within timeout + margin (a
-    killed or wedged planner). `last_ok` is the monotonic time of the last answer."""
+    killed or wedged planner). `last_ok` is the monotonic time of the last answer. Raises Cancelled before a query
+    when `stop()` is true (goal cancelled, node shutting down); `on_answer()` is called after each answer."""
 
-    def __init__(self, client, timeout: float, margin: float, connect_wait: float = 1.0) -> None:
+    def __init__(self, client, timeout: float, margin: float, connect_wait: float = 1.0,
+                 stop=lambda: False, on_answer=lambda: None) -> None:
         self.client, self.timeout, self.margin, self.connect_wait = client, timeout, margin, connect_wait
+        self.stop, self.on_answer = stop, on_answer
         self.last_ok = time.monotonic()
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        if self.stop():
+            raise Cancelled("cancelled (or shutting down) while asking the motion planner")
         srv = self.client.srv_name
         if not self.client.service_is_ready() and not self.client.wait_for_service(timeout_sec=self.connect_wait):
             raise PlannerUnavailable(f"feasibility service {srv} is not available")
@@ -92,6 +90,7 @@ class ServiceOracle:
                 f"no feasibility answer for {object_id!r} within {limit:.1f} s "
                 "(feasibility_timeout + feasibility_margin)") from None
         self.last_ok = time.monotonic()
+        self.on_answer()
         if not resp.ok:
             raise ValueError(f"motion planner refused the query for {object_id!r}: {resp.message}")
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message)
@@ -119,7 +118,8 @@ class TaskPlannerNode(Node):
 
         self._scene: tuple[ObjectArray, float] | None = None
         self._memory_ckpt: Checkpoint | None = None  # the last checkpoint, also when checkpoint_path is empty
-        self._busy = threading.Lock()
+        self._reserve = threading.Lock()
+        self._reserved = False  # a training goal is accepted and not finished
         reentrant = ReentrantCallbackGroup()
         self._feas = self.create_client(PlanFeasibility, self.p("feasibility_service"),
                                         callback_group=MutuallyExclusiveCallbackGroup())
@@ -140,7 +140,8 @@ class TaskPlannerNode(Node):
         """ParameterError naming the first unusable parameter (main() prints it as one line and exits 2)."""
         TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
         for name, lo in (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_timeout", 1e-3),
-                         ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3)):
+                         ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3),
+                         ("relocate_silence", 1e-3)):
             v = self.p(name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
                 raise ParameterError(f"{name} must be a finite number >= {lo:g}, got {v!r}")
@@ -209,28 +210,27 @@ class TaskPlannerNode(Node):
         except (ParameterError, ValueError) as e:
             self.get_logger().error(f"training goal rejected: {e}")
             return GoalResponse.REJECT
-        if self._busy.locked():
-            self.get_logger().error("training goal rejected: a training is already running")
-            return GoalResponse.REJECT
+        with self._reserve:  # reserved here, not when execution starts: two goals sent back to back
+            if self._reserved:
+                self.get_logger().error("training goal rejected: a training is already running")
+                return GoalResponse.REJECT
+            self._reserved = True
         return GoalResponse.ACCEPT
 
     # -- the action -----------------------------------------------------------------------------------------
     def _execute(self, goal_handle):
-        with self._busy:
-            result = TrainPlanner.Result()
-            try:
-                self._train_and_execute(goal_handle, result)
-            except (PlannerUnavailable, CheckpointError, ParameterError, ScenarioError, ValueError, KeyError,
-                    OSError) as e:
-                result.success, result.message = False, str(e)
-                self.get_logger().error(f"training aborted: {e}")
-            if goal_handle.is_cancel_requested:
-                goal_handle.canceled()
-            elif result.success:
-                goal_handle.succeed()
-            else:
-                goal_handle.abort()
-            return result
+        result = TrainPlanner.Result()
+        try:
+            self._train_and_execute(goal_handle, result)
+        except (PlannerUnavailable, Cancelled, CheckpointError, ParameterError, ScenarioError, ValueError, KeyError,
+                OSError) as e:
+            result.success, result.message = False, str(e)
+            self.get_logger().error(f"training aborted: {e}")
+        finally:
+            self._reserved = False
+        end_goal(goal_handle, "canceled" if goal_handle.is_cancel_requested else
+                 "succeed" if result.success else "abort")
+        return result
 
     # -- checkpoints and a lost planner ---------------------------------------------------------------------
     def _resume_point(self, problem, params, cache) -> Checkpoint | None:
@@ -270,47 +270,43 @@ class TaskPlannerNode(Node):
         return f"in memory{at} only (set checkpoint_path to keep it across restarts)"
 
     def _until_planner(self, fn, goal_handle, oracle: ServiceOracle, fb):
-        """fn() again and again while the planner is unavailable, waiting up to planner_wait s for it."""
-        wait, outage_since = self.p("planner_wait"), None
-        srv = self._feas.srv_name
-        while True:
-            try:
-                return fn()
-            except PlannerGone:
-                raise
-            except PlannerUnavailable as e:
-                if outage_since is None or oracle.last_ok > outage_since:
-                    outage_since = time.monotonic()
-                self.get_logger().warning(f"motion planner lost: {e}; learned so far kept ({self._kept_where()}); "
-                                          f"waiting up to {wait:g} s for {srv}")
-                phase, fb.phase = fb.phase, "waiting for planner"
-                goal_handle.publish_feedback(fb)
-                while not self._feas.wait_for_service(timeout_sec=0.2):
-                    if goal_handle.is_cancel_requested or not rclpy.ok():
-                        raise PlannerGone(f"cancelled while waiting for the motion planner; learned so far kept "
-                                          f"({self._kept_where()})") from None
-                    if time.monotonic() - outage_since > wait:
-                        raise PlannerGone(
-                            f"motion planner unavailable for {wait:g} s (planner_wait): {e}. What was learned is kept "
-                            f"({self._kept_where()}). Start (or restart) the motion_planner node (service {srv}) and "
-                            "send the same goal again to resume.") from None
-                if time.monotonic() - outage_since > wait:  # it is there but does not answer (wedged)
-                    raise PlannerGone(f"motion planner not answering for {wait:g} s (planner_wait): {e}. What was "
-                                      f"learned is kept ({self._kept_where()}). Start (or restart) the "
-                                      f"motion_planner node (service {srv}) and send the same goal again to "
-                                      "resume.") from None
-                fb.phase = phase
-                self.get_logger().info(f"motion planner {srv} is back: resuming")
+        """fn() through planner outages (qtree_task_planner.outage), with feedback while waiting."""
+        phase = fb.phase
+
+        def on_outage(message: str) -> None:
+            self.get_logger().warning(message)
+            fb.phase = "waiting for planner"
+            goal_handle.publish_feedback(fb)
+
+        def on_back() -> None:
+            fb.phase = phase
+            self.get_logger().info(f"motion planner {self._feas.srv_name} is back: resuming")
+
+        return until_available(fn, service_up=lambda t: self._feas.wait_for_service(timeout_sec=t),
+                               stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
+                               wait=self.p("planner_wait"), last_answer=lambda: oracle.last_ok,
+                               kept=self._kept_where, service=self._feas.srv_name, on_outage=on_outage,
+                               on_back=on_back)
 
     def _train_and_execute(self, goal_handle, result) -> None:
         params = self._params(goal_handle.request)
         problem, scene = self._problem()
         self._publish_scene(scene, ())
-        service = ServiceOracle(self._feas, self.p("feasibility_timeout"), self.p("feasibility_margin"))
+        fb = TrainPlanner.Feedback(phase="exact optimum")
+        last = [0.0]
+
+        def on_answer() -> None:  # progress of the exact solve (no episodes yet): planner calls, twice a second
+            if fb.phase == "exact optimum" and time.monotonic() - last[0] > 0.5:
+                last[0], fb.planner_calls = time.monotonic(), len(oracle.table) + 1
+                goal_handle.publish_feedback(fb)
+
+        service = ServiceOracle(self._feas, self.p("feasibility_timeout"), self.p("feasibility_margin"),
+                                stop=lambda: fb.phase == "exact optimum" and (goal_handle.is_cancel_requested
+                                                                             or not rclpy.ok()),
+                                on_answer=on_answer)  # training itself stops at the end of an episode
         oracle = CachedOracle(service)
         state = {"ck": self._resume_point(problem, params, oracle)}
         self._memory_ckpt = state["ck"]
-        fb = TrainPlanner.Feedback(phase="training")
 
         def solve():
             try:
@@ -327,6 +323,7 @@ class TaskPlannerNode(Node):
         result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
         self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
                                f"({oracle.calls} planner calls)")
+        fb.phase = "training"
 
         def on_episode(stats) -> bool:
             fb.episode, fb.q_sum, fb.tree_nodes = stats.episode, stats.q_sum, stats.tree_nodes
@@ -364,14 +361,14 @@ class TaskPlannerNode(Node):
             if goal_handle.is_cancel_requested:
                 result.message = f"cancelled after relocating {removed}"
                 return
-            ok, message = self._relocate_one(object_id, removed)
+            ok, message = self._relocate_one(goal_handle, object_id, removed)
             if not ok:
                 result.success, result.message = False, f"relocating {object_id!r} failed: {message}"
                 return
             removed.append(object_id)
         result.success, result.message = True, f"target {problem.target!r} retrieved after {len(removed) - 1} relocations"
 
-    def _relocate_one(self, object_id: str, removed: list[str]) -> tuple[bool, str]:
+    def _relocate_one(self, goal_handle, object_id: str, removed: list[str]) -> tuple[bool, str]:
         if not self._relocate.wait_for_server(timeout_sec=self.p("planner_wait")):
             return False, "relocate action server not available"
         done = threading.Event()
@@ -390,10 +387,27 @@ class TaskPlannerNode(Node):
             h.get_result_async().add_done_callback(on_result)
 
         self.get_logger().info(f"relocating {object_id} (removed so far: {removed})")
-        self._relocate.send_goal_async(RelocateObject.Goal(object_id=object_id, removed_ids=list(removed))
-                                       ).add_done_callback(on_goal)
-        if not done.wait(self.p("relocate_timeout")):
-            return False, f"no result within {self.p('relocate_timeout')} s"
+        heard = [time.monotonic()]  # the last feedback: a moving motion planner reports at 10 Hz
+
+        def on_feedback(_) -> None:
+            heard[0] = time.monotonic()
+
+        sent = self._relocate.send_goal_async(RelocateObject.Goal(object_id=object_id, removed_ids=list(removed)),
+                                              feedback_callback=on_feedback)
+        sent.add_done_callback(on_goal)
+        limit, silence = self.p("relocate_timeout"), self.p("relocate_silence")
+        deadline = time.monotonic() + limit
+        while not done.wait(0.1):  # never blind: the node stopping, the planner gone, the goal cancelled
+            now = time.monotonic()
+            why = ("the task planner is shutting down" if not rclpy.ok() else
+                   "the motion planner went away (relocate action server gone)" if not self._relocate.server_is_ready()
+                   else f"the motion planner went away (no feedback for {now - heard[0]:.0f} s > relocate_silence)"
+                   if now - heard[0] > silence else "cancelled" if goal_handle.is_cancel_requested else
+                   f"no result within {limit:g} s (relocate_timeout)" if now > deadline else None)
+            if why is not None:
+                if sent.done() and sent.result() is not None and sent.result().accepted and rclpy.ok():
+                    sent.result().cancel_goal_async()  # the arm stops (the motion planner's cancel)
+                return False, why
         if box.get("rejected"):
             return False, "goal rejected by the motion planner"
         res = box["result"].result

@@ -37,13 +37,16 @@ def declare_parameters(node) -> dict[str, Any]:
 class SideNode:
     """A hidden node spun by its own single-threaded executor in a thread: for a high-rate stream (100 Hz joint
     states) that rclpy's MultiThreadedExecutor delivers with gaps of up to 0.8 s (measured here, rclpy 7.1.6; the
-    performance issue rclpy#1452), while the main node's long callbacks need that executor. Call close()."""
+    performance issue rclpy#1452), while the main node's long callbacks need that executor. `threads` > 1: a
+    MultiThreadedExecutor (an action server whose execute callback waits, and whose goal and cancel requests must
+    still be served meanwhile). Call close()."""
 
-    def __init__(self, name: str, context=None) -> None:
+    def __init__(self, name: str, context=None, threads: int = 1) -> None:
         from rclpy.node import Node
 
         self.node = Node(name if name.startswith("_") else f"_{name}", context=context)
-        self._executor = SingleThreadedExecutor(context=context)
+        self._executor = (SingleThreadedExecutor(context=context) if threads <= 1
+                          else MultiThreadedExecutor(num_threads=threads, context=context))
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name=name, daemon=True)
         self._thread.start()
@@ -96,6 +99,18 @@ def node_main(name: str, node_factory, args=None, threads: int = 4, errors: tupl
     except (ConfigError, ParameterException, ValueError, TypeError, *errors) as e:
         print(f"{name}: {type(e).__name__}: {e}", file=sys.stderr)
         raise SystemExit(2) from None
+
+
+def end_goal(goal_handle, outcome: str) -> None:
+    """goal_handle.succeed() / abort() / canceled(), unless the node is shutting down (then the action server's
+    publishers are gone and rclpy raises; a client learns from the server's disappearance instead)."""
+    from rclpy._rclpy_pybind11 import RCLError
+
+    try:
+        getattr(goal_handle, outcome)()
+    except RCLError:
+        if rclpy.ok():
+            raise
 
 
 def call(client, request, timeout: float, abandon: Callable[[], bool] = lambda: False):

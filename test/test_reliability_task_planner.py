@@ -34,10 +34,14 @@ SCENE_TOPIC = "/test/objects"
 
 # ---------------------------------------------------------------------------------------------------------------
 # the fake motion planner (this file run as a script)
-def _serve(scenario: str, die_after: int) -> None:
+def _serve(scenario: str, die_after: int, delay: float = 0.0, relocate: str = "none") -> None:
+    """`delay` s before each answer; `relocate`: none (no action server), hang (accepts and never finishes)."""
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.action import ActionServer, CancelResponse
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
+    from qtree_relocation_msgs.action import RelocateObject
     from qtree_relocation_msgs.srv import PlanFeasibility
 
     sc = load_scenario(scenario)
@@ -51,6 +55,7 @@ def _serve(scenario: str, die_after: int) -> None:
             print(f"dying with request {req.object_id} unanswered", flush=True)
             os.kill(os.getpid(), signal.SIGKILL)
         answered[0] += 1
+        time.sleep(delay)
         print(f"Q {req.object_id} {','.join(req.removed_ids)}", flush=True)
         if req.object_id not in sc.ids:
             resp.ok, resp.message = False, f"unknown object id {req.object_id!r}"
@@ -59,9 +64,22 @@ def _serve(scenario: str, die_after: int) -> None:
         return resp
 
     node.create_service(PlanFeasibility, "/motion_planner/plan_feasibility", feasibility)
+    if relocate == "hang":
+        def execute(handle):
+            print(f"relocating {handle.request.object_id}", flush=True)
+            while rclpy.ok() and not handle.is_cancel_requested:  # moving: feedback at 2 Hz, as a real one does
+                handle.publish_feedback(RelocateObject.Feedback(phase="carry", progress=0.5))
+                time.sleep(0.5)
+            handle.canceled()
+            return RelocateObject.Result(success=False, message="cancelled")
+
+        ActionServer(node, RelocateObject, "/motion_planner/relocate", execute_callback=execute,
+                     cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup())
     print("ready", flush=True)
+    executor = MultiThreadedExecutor(4)
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -72,8 +90,10 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenario", default=str(SCENARIO))
     ap.add_argument("--die-after", type=int, default=-1)
+    ap.add_argument("--delay", type=float, default=0.0)
+    ap.add_argument("--relocate", choices=("none", "hang"), default="none")
     a = ap.parse_args()
-    _serve(a.scenario, a.die_after)
+    _serve(a.scenario, a.die_after, a.delay, a.relocate)
     raise SystemExit(0)
 
 
@@ -114,9 +134,10 @@ class Env:
                 "checkpoint_every": 25}
         return self.g.start(MODULE, params_file=PARAMS_FILE, params={**base, **params}, name="task_planner")
 
-    def fake(self, die_after=-1) -> NodeProcess:
+    def fake(self, die_after=-1, delay=0.0, relocate="none") -> NodeProcess:
         log = self.g.tmp / f"fake_{len(self.fakes)}.log"
-        p = NodeProcess([self.g.python, __file__, "--die-after", str(die_after)], self.g.env, log)
+        p = NodeProcess([self.g.python, __file__, "--die-after", str(die_after), "--delay", str(delay), "--relocate",
+                         relocate], self.g.env, log)
         self.g.procs.append(p)
         self.fakes.append(p)
         _wait(lambda: "ready" in p.log(), 30, "fake planner never ready", p)
@@ -350,3 +371,73 @@ def test_bad_parameters_exit_2_with_one_line(tmp_path):
             lines = [ln for ln in p.log().splitlines() if ln.strip()]
             assert p.popen.returncode == 2, (args, p.log())
             assert len(lines) == 1 and lines[0].startswith("task_planner: ") and words in lines[0], (args, lines)
+
+
+# -- lifecycle (issue 18): nothing hangs ---------------------------------------------------------------------------
+def _send_async(env, node, **fields):
+    """Send a goal; returns (goal handle future, feedback list)."""
+    _wait(lambda: env.client.wait_for_server(timeout_sec=0.2), 30, "train action never appeared", node)
+    feedback = []
+    fut = env.client.send_goal_async(train_goal(**{"seed": SEED, **fields}),
+                                     feedback_callback=lambda f: feedback.append(f.feedback))
+    return _result(fut, 30, node), feedback
+
+
+def test_sigterm_while_executing_a_relocation_exits_at_once(env):
+    """Old code: the execute callback sat in done.wait(relocate_timeout): exit after 177 s with a traceback."""
+    fake = env.fake(relocate="hang")
+    tp = env.task_planner(relocate_timeout=600.0)
+    env.scene()
+    handle, _ = _send_async(env, tp, execute=True, max_episodes=300)
+    assert handle.accepted
+    _wait(lambda: "relocating" in fake.log(), 120, "the relocation never started", tp)
+    t0 = time.monotonic()
+    code = tp.stop(signal.SIGTERM, timeout=30)
+    took = time.monotonic() - t0
+    print(f"\ntask planner exit on SIGTERM during a relocation: {took:.2f} s, status {code}")
+    assert code == 0 and took < 10, tp.log()[-2000:]
+    assert "Traceback" not in tp.log()
+
+
+def test_a_motion_planner_dying_mid_relocation_ends_the_goal(env):
+    """Old code: the goal waited for relocate_timeout (180 s) for a result that never came."""
+    fake = env.fake(relocate="hang")
+    tp = env.task_planner(relocate_timeout=600.0)
+    env.scene()
+    handle, _ = _send_async(env, tp, execute=True, max_episodes=300)
+    _wait(lambda: "relocating" in fake.log(), 120, "the relocation never started", tp)
+    t0 = time.monotonic()
+    fake.send_signal(signal.SIGKILL)
+    res = _result(handle.get_result_async(), 60, tp).result
+    took = time.monotonic() - t0
+    print(f"\ngoal ended {took:.1f} s after the motion planner died: {res.message}")
+    assert not res.success and "went away" in res.message and took < 15
+
+
+def test_two_goals_back_to_back_one_is_rejected(env):
+    """Old code: the busy check ran when execution started, so both goals were accepted and both trained."""
+    env.fake()
+    tp = env.task_planner()
+    env.scene()
+    _wait(lambda: env.client.wait_for_server(timeout_sec=0.2), 30, "train action never appeared", tp)
+    futs = [env.client.send_goal_async(train_goal(seed=SEED, execute=False, max_episodes=50)) for _ in range(2)]
+    handles = [_result(f, 30, tp) for f in futs]
+    assert sorted(h.accepted for h in handles) == [False, True]
+    done = next(h for h in handles if h.accepted)
+    assert _result(done.get_result_async(), 120, tp).result.success
+
+
+def test_cancel_during_the_exact_solve_ends_the_goal_with_progress_reported(env):
+    """Old code: the exact solve (82 planner calls on this scene) sent no feedback and ignored cancel."""
+    env.fake(delay=0.1)
+    tp = env.task_planner()
+    env.scene()
+    handle, feedback = _send_async(env, tp, execute=False)
+    _wait(lambda: any(f.phase == "exact optimum" for f in feedback), 30, "no feedback during the exact solve", tp)
+    t0 = time.monotonic()
+    _result(handle.cancel_goal_async(), 10, tp)
+    res = _result(handle.get_result_async(), 30, tp).result
+    took = time.monotonic() - t0
+    calls = max(f.planner_calls for f in feedback if f.phase == "exact optimum")
+    print(f"\ncancel during the exact solve: goal ended after {took:.2f} s ({calls} planner calls reported)")
+    assert not res.success and "cancel" in res.message and took < 3

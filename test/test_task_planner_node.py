@@ -112,8 +112,10 @@ def test_node_trains_like_the_core(graph):
     # topics and rclpy's action client drops feedback that lands after the result: the last few may be missing
     episodes = [f.episode for f in feedback if f.phase == "training"]
     assert episodes == sorted(set(episodes)) and res.episodes - 10 <= episodes[-1] <= res.episodes
-    for f in feedback:
-        assert f.q_sum == pytest.approx(res.q_sum_history[f.episode - 1])
+    for f in feedback:  # before training, the exact solve reports its planner calls (phase "exact optimum")
+        assert f.phase in ("exact optimum", "training")
+        if f.phase == "training":
+            assert f.q_sum == pytest.approx(res.q_sum_history[f.episode - 1])
     # the last MarkerArray: the scene labelled with the learned order, and the tree with the learned path
     deadline = time.monotonic() + 5
     while not (markers and any(m.ns == "q_tree" for m in markers[-1].markers)) and time.monotonic() < deadline:
