@@ -9,19 +9,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
 from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
-from qtree_task_planner.task_planner_node import train_goal
 from relocation_common.paths import default_scenario, resolve_scenario
 
-from .graph import Graph, wait_for_interfaces
+from .client import ClientError, RelocationClient
+from .graph import Graph
 
 
 def _args(argv):
@@ -91,88 +91,68 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt  # SIGTERM (timeout, systemd, docker stop) stops the graph like Ctrl-C
 
 
-def run(argv=None) -> int:
-    a = _args(argv)
-    a.scenario = str(resolve_scenario(a.scenario).resolve())  # the nodes run in the output directory
-    used = TrainingParams.defaults().replace(policy=a.policy, search=a.search, seed=a.seed)
-    out = Path(a.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
-    from rclpy.action import ActionClient
-    from rclpy.executors import MultiThreadedExecutor
-    from sensor_msgs.msg import Image
+def _start_graph(g: Graph, a, scene_topic: str) -> None:
+    """The four nodes (perception only with --scene-source perception); the Q-Tree checkpointed in the run
+    directory, so a training stopped by a signal or a time limit is resumed by the same command."""
+    common = {"scenario": a.scenario}
+    print(f"[demo] starting the node graph on ROS_DOMAIN_ID={g.domain_id} (logs: {g.run_dir / 'logs'})")
+    g.start("jaco2_sim_driver", common)
+    if a.scene_source == "perception":
+        g.start("perception", common)
+    g.start("motion_planner", dict(common, scene_topic=scene_topic))
+    g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(g.run_dir / "qtree.ckpt")))
+
+
+def _progress_bar(rec: "_Recorder"):
+    """A tqdm bar fed by TrainPlanner feedback: episodes, Eq. 15 sum, tree size, MP_q, planner calls."""
     from tqdm import tqdm
 
+    bar = tqdm(desc="training", unit="ep", file=sys.stderr)
+
+    def on_feedback(f) -> None:
+        if f.phase == "executing":
+            rec.active = True
+            bar.set_description("executing")
+            return
+        bar.set_description("exact optimum" if f.phase == "exact optimum" else "training")
+        bar.n = f.episode
+        bar.set_postfix(q_sum=f"{f.q_sum:.1f}", nodes=f.tree_nodes, mp_q=f.mp_queries, calls=f.planner_calls,
+                        refresh=False)
+        bar.refresh()
+
+    return bar, on_feedback
+
+
+def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
+    """Wait for the graph and a scene, train (and execute) through the client; (result, before, after, frames)."""
     from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import Image
 
-    from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
     from qtree_relocation_msgs.msg import ObjectArray
-    SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
-    from qtree_relocation_msgs.srv import PlanFeasibility
 
-    t0 = time.monotonic()
-    common = {"scenario": a.scenario}
-    scene_topic = "/scene/objects" if a.scene_source == "perception" else "/sim/objects"
-    with Graph(out / "run") as g:
-        print(f"[demo] starting the node graph on ROS_DOMAIN_ID={g.domain_id} (logs: {g.run_dir / 'logs'})")
-        g.start("jaco2_sim_driver", common)
-        if a.scene_source == "perception":
-            g.start("perception", common)
-        g.start("motion_planner", dict(common, scene_topic=scene_topic))
-        g.start("task_planner", dict(common, scene_topic=scene_topic))
-        import os
-        os.environ.update(g.env)
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node("qtree_demo")
-        ex = MultiThreadedExecutor(2)
-        ex.add_node(node)
-        spin = threading.Thread(target=ex.spin, daemon=True)
-        spin.start()
-        try:
-            train = ActionClient(node, TrainPlanner, "/task_planner/train")
-            wait_for_interfaces(node, services=[("/motion_planner/plan_feasibility", PlanFeasibility)],
-                                actions=[train, ActionClient(node, RelocateObject, "/motion_planner/relocate")],
-                                timeout=120, graph=g)
-            rec = _Recorder()
-            node.create_subscription(Image, "/camera/color/image_raw", rec, 2)
-            truth = _Latest()
-            node.create_subscription(ObjectArray, "/sim/objects", truth, SCENE_QOS)
-            scene = _Latest()
-            node.create_subscription(ObjectArray, scene_topic, scene, SCENE_QOS)
-            _wait_for(lambda: scene.msg is not None and len(scene.msg.objects) > 0, 90, g,
-                      f"no scene on {scene_topic}")
-            before = truth.positions()
-            print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {used.policy}/{used.search} "
-                  f"through the feasibility service")
-            goal = train_goal(policy=used.policy, search=used.search, seed=used.seed, execute=not a.no_execute)
-            bar = tqdm(desc="training", unit="ep", file=sys.stderr)
+    latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+    client.wait_until_ready(120, check=g.check_alive)
+    rec, truth, scene = _Recorder(), _Latest(), _Latest()
+    client.node.create_subscription(Image, "/camera/color/image_raw", rec, 2)
+    client.node.create_subscription(ObjectArray, "/sim/objects", truth, latched)
+    client.node.create_subscription(ObjectArray, scene_topic, scene, latched)
+    _wait_for(lambda: scene.msg is not None and len(scene.msg.objects) > 0, 90, g, f"no scene on {scene_topic}")
+    before = truth.positions()
+    print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {used.policy}/{used.search} "
+          f"through the feasibility service")
+    bar, on_feedback = _progress_bar(rec)
+    try:
+        client.train(on_feedback=on_feedback, check=g.check_alive, policy=used.policy, search=used.search,
+                     seed=used.seed, execute=not a.no_execute)
+        res = client.wait(a.timeout, check=g.check_alive)
+    finally:
+        bar.close()
+    time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
+    return res, before, truth.positions(), rec.frames
 
-            def feedback(fb):
-                f = fb.feedback
-                if f.phase == "executing":
-                    rec.active = True
-                    bar.set_description("executing")
-                    return
-                bar.n = f.episode
-                bar.set_postfix(q_sum=f"{f.q_sum:.1f}", nodes=f.tree_nodes, mp_q=f.mp_queries,
-                                calls=f.planner_calls, refresh=False)
-                bar.refresh()
 
-            fut = train.send_goal_async(goal, feedback_callback=feedback)
-            handle = _wait(fut, a.timeout, g)
-            if not handle.accepted:
-                print("[demo] error: the task planner rejected the training goal", file=sys.stderr)
-                return 1
-            res = _wait(handle.get_result_async(), a.timeout, g).result
-            bar.close()
-            time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
-            after = truth.positions()
-        finally:
-            node.destroy_node()
-            rclpy.try_shutdown()
-            spin.join(timeout=5)
-    wall = time.monotonic() - t0
+def _report(out: Path, a, used, res, before, after, frames, wall: float) -> int:
+    """report.json, learning_curve.png, retrieval_strip.png and the summary lines; the exit status."""
     report = {
         "scenario": a.scenario, "policy": used.policy, "search": used.search, "seed": used.seed,
         "success": res.success, "message": res.message,
@@ -185,7 +165,7 @@ def run(argv=None) -> int:
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
     _learning_curve(res.q_sum_history, out / "learning_curve.png", f"{used.policy} / {used.search}")
-    _strip(rec.frames, out / "retrieval_strip.png")
+    _strip(frames, out / "retrieval_strip.png")
     fs = report["final_scene"]
     if not a.no_execute:
         print(f"[demo] target on the bottom shelf: {fs['target_on_bottom_shelf']}; largest displacement of a "
@@ -194,8 +174,31 @@ def run(argv=None) -> int:
     print(f"[demo] exact optimum:    {' -> '.join(res.optimal_sequence)}  weight {res.optimal_weight:.2f}")
     print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={res.e_first} real planner calls={res.planner_calls}")
     print(f"[demo] {'SUCCESS' if res.success else 'FAILED'}: {res.message}  ({wall:.0f} s); outputs in {out}/")
-    ok = res.success and (a.no_execute or fs["target_on_bottom_shelf"])
-    return 0 if ok else 1
+    return 0 if res.success and (a.no_execute or fs["target_on_bottom_shelf"]) else 1
+
+
+def run(argv=None) -> int:
+    a = _args(argv)
+    a.scenario = str(resolve_scenario(a.scenario).resolve())  # the nodes run in the output directory
+    used = TrainingParams.defaults().replace(policy=a.policy, search=a.search, seed=a.seed)
+    out = Path(a.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    t0 = time.monotonic()
+    scene_topic = "/scene/objects" if a.scene_source == "perception" else "/sim/objects"
+    with Graph(out / "run") as g:
+        _start_graph(g, a, scene_topic)
+        os.environ.update(g.env)
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)  # signals are ours: the graph must stop
+        client = RelocationClient("qtree_demo")
+        try:
+            res, before, after, frames = _train_and_watch(client, g, a, used, scene_topic, t0)
+        finally:
+            client.close()
+            rclpy.try_shutdown()
+    return _report(out, a, used, res, before, after, frames, time.monotonic() - t0)
 
 
 class _Latest:
@@ -236,16 +239,6 @@ def _wait_for(predicate, timeout: float, graph: Graph, what: str) -> None:
         time.sleep(0.05)
 
 
-def _wait(future, timeout: float, graph: Graph):
-    deadline = time.monotonic() + timeout
-    while not future.done():
-        graph.check_alive()
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"no answer after {timeout:.0f} s")
-        time.sleep(0.05)
-    return future.result()
-
-
 def main(argv=None) -> None:
     signal.signal(signal.SIGTERM, _interrupt)
     try:
@@ -253,7 +246,7 @@ def main(argv=None) -> None:
     except KeyboardInterrupt:
         print("\n[demo] interrupted; the node graph was shut down", file=sys.stderr)
         sys.exit(130)
-    except (RuntimeError, TimeoutError) as e:
+    except (RuntimeError, TimeoutError, ClientError) as e:
         print(f"[demo] error: {e}", file=sys.stderr)
         sys.exit(1)
 
