@@ -3,7 +3,7 @@
     ros2 launch qtree_relocation retrieval.launch.py scenario:=/path/to/scenario.yaml scene_source:=perception
 
 This machine's PyPI-only ROS has no launch/launch_ros wheels, so this file cannot be exercised here: the
-equivalent process harness is `qtree bringup` (relocation_app/graph.py), which tests start for real.
+equivalent process harness is relocation_app/graph.py (used by `./run demo`), which tests start for real.
 Set use_sim:=false and remap the driver topics to run against Kinova's kinova_driver instead of the simulator.
 """
 import os
