@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -57,6 +58,26 @@ from .training import train
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from this node's clock is on another clock
 SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
+
+
+def check_checkpoint_path(path: str) -> None:
+    """ParameterError at start for a checkpoint_path that cannot hold a checkpoint: a directory, something that is
+    not a regular file (a FIFO would block the goal forever), or a directory where no file can be created (a
+    read-only filesystem; tried for real, as permission bits do not stop root)."""
+    if not path:
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise ParameterError(f"checkpoint_path {path!r} is a directory: give a file name")
+    if p.exists() and not p.is_file():
+        raise ParameterError(f"checkpoint_path {path!r} exists and is not a regular file")
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=p.parent, prefix=f".{p.name}.probe-"):
+            pass
+    except OSError as e:
+        raise ParameterError(f"checkpoint_path {path!r}: cannot write in {str(p.parent)!r} ({e.strerror or e}); "
+                             "give a writable location") from None
 
 
 class ServiceOracle:
@@ -118,6 +139,7 @@ class TaskPlannerNode(Node):
 
         self._scene: tuple[ObjectArray, float] | None = None
         self._memory_ckpt: Checkpoint | None = None  # the last checkpoint, also when checkpoint_path is empty
+        self._written: tuple[int, str] | None = None  # (episode, "") of the last one on disk, or (episode, error)
         self._reserve = threading.Lock()
         self._reserved = False  # a training goal is accepted and not finished
         reentrant = ReentrantCallbackGroup()
@@ -151,9 +173,7 @@ class TaskPlannerNode(Node):
         every = self.p("checkpoint_every")
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
-        path = self.p("checkpoint_path")
-        if path and Path(path).is_dir():
-            raise ParameterError(f"checkpoint_path {path!r} is a directory: give a file name")
+        check_checkpoint_path(self.p("checkpoint_path"))
 
     # -- inputs ---------------------------------------------------------------------------------------------
     def _on_scene(self, msg: ObjectArray) -> None:
@@ -237,10 +257,11 @@ class TaskPlannerNode(Node):
         """The checkpoint this goal resumes from: the file at checkpoint_path when it exists (CheckpointError if
         it is corrupt or for another scene/params), else an unfinished in-memory one of the same goal."""
         path = self.p("checkpoint_path")
-        if path and Path(path).exists():
+        if path and Path(path).is_file():
             ck = load_checkpoint(path)
             ck.check_matches(problem, params, f"checkpoint {path}")
-        elif not path and self._memory_ckpt is not None and self._memory_ckpt.reason.startswith("interrupted"):
+        elif self._memory_ckpt is not None and self._memory_ckpt.reason.startswith("interrupted"):
+            # no file (never written, or removed): what this node kept in memory still counts
             ck = self._memory_ckpt
             try:
                 ck.check_matches(problem, params)
@@ -249,7 +270,8 @@ class TaskPlannerNode(Node):
         else:
             return None
         ck.fill_cache(cache)
-        self.get_logger().info(f"resuming from checkpoint {path or '(in memory)'}: episode {ck.episode}, "
+        self.get_logger().info(f"resuming from checkpoint {path if ck is not self._memory_ckpt else '(in memory)'}: "
+                               f"episode {ck.episode}, "
                                f"{len(ck.tree['nodes'])} tree nodes, {len(ck.feasibility)} feasibility answers")
         return ck
 
@@ -259,15 +281,23 @@ class TaskPlannerNode(Node):
         if path:
             try:
                 save_checkpoint(ck, path)
+                self._written = (ck.episode, "")
             except OSError as e:  # training goes on; the in-memory copy still holds it
+                self._written = (self._written[0] if self._written else -1, f"{e.strerror or e}")
                 self.get_logger().error(f"cannot write checkpoint {path}: {e}", throttle_duration_sec=10.0)
 
     def _kept_where(self) -> str:
+        """Where what was learned is, exactly: never a file that was not written, never a newer episode."""
         ck, path = self._memory_ckpt, self.p("checkpoint_path")
-        at = f" at episode {ck.episode}" if ck is not None else ""
-        if path:
-            return f"checkpoint {path}{at}"
-        return f"in memory{at} only (set checkpoint_path to keep it across restarts)"
+        memory = f"in memory at episode {ck.episode}" if ck is not None else "in memory"
+        if not path:
+            return f"{memory} only (set checkpoint_path to keep it across restarts)"
+        episode, error = self._written if self._written else (-1, "")
+        on_disk = f"checkpoint {path} at episode {episode}" if episode >= 0 else ""
+        if ck is not None and ck.episode == episode and not error:
+            return on_disk
+        failed = f" (writing {path} failed: {error})" if error else ""
+        return "; ".join(filter(None, [on_disk, memory + failed]))
 
     def _until_planner(self, fn, goal_handle, oracle: ServiceOracle, fb):
         """fn() through planner outages (qtree_task_planner.outage), with feedback while waiting."""

@@ -441,3 +441,36 @@ def test_cancel_during_the_exact_solve_ends_the_goal_with_progress_reported(env)
     calls = max(f.planner_calls for f in feedback if f.phase == "exact optimum")
     print(f"\ncancel during the exact solve: goal ended after {took:.2f} s ({calls} planner calls reported)")
     assert not res.success and "cancel" in res.message and took < 3
+
+
+@pytest.mark.parametrize("where", ["fifo", "unwritable"])
+def test_an_unusable_checkpoint_path_is_refused_at_start(env, tmp_path, where):
+    """Old code: a FIFO blocked the goal forever (cancel and SIGINT ignored); an unwritable place was accepted and
+    the abort claimed a checkpoint file that did not exist."""
+    if where == "fifo":
+        path = tmp_path / "ck.fifo"
+        os.mkfifo(path)
+    else:
+        path = Path("/proc/qtree/ck.json")  # no file can be created there, not even by root
+    tp = env.task_planner(checkpoint_path=str(path))
+    _wait(lambda: not tp.alive(), 30, "the task planner kept running", None)
+    assert tp.popen.returncode == 2
+    assert "checkpoint_path" in tp.log() and "Traceback" not in tp.log()
+
+
+def test_the_message_never_claims_a_checkpoint_that_was_not_written():
+    """_kept_where from what was really written (a full disk: the file holds an older episode than memory)."""
+    from qtree_task_planner.task_planner_node import TaskPlannerNode
+
+    class Fake:
+        p = staticmethod(lambda name: "/data/ck.json")
+        _kept_where = TaskPlannerNode._kept_where
+
+    f = Fake()
+    f._memory_ckpt = type("Ck", (), {"episode": 120})()
+    f._written = (100, "No space left on device")
+    said = f._kept_where()
+    assert "checkpoint /data/ck.json at episode 100" in said and "in memory at episode 120" in said
+    assert "No space left" in said
+    f._written = None
+    assert f._kept_where() == "in memory at episode 120"
