@@ -36,8 +36,17 @@ def check(idx: dict, main: list[str], complex_: list[str], random: list[str],
     """[(claim, 'reproduced' | 'not reproduced' | 'partly', evidence)]. off_target: (scene, gamma) pairs where the
     Q-Tree's fixed point is not the Eq. 8 optimum (sequences.discounted_optimum); the breadth/depth E_1st claim is
     decided without them (E_1st there counts optima met by chance), the all-cells numbers are shown too."""
-    out = []
-    # 1 H-eG_d optimal or near on all metrics (rank <= 2 of 6)
+    out = [_heg_d_near_optimal(idx, main), _heg_d_best_ess(idx, complex_), _heg_b_fewest_mpq(idx, main),
+           _depth_beats_breadth(idx, main, off_target), _alpha_gamma(idx, main)]
+    if random:
+        agree = _random_scenes_agree(idx, random)
+        if agree is not None:
+            out.append(agree)
+    return out
+
+
+def _heg_d_near_optimal(idx: dict, main: list[str]) -> tuple[str, str, str]:
+    """Claim 1: H-eG_d is optimal or near on all metrics (rank <= 2 of 6 on E_ss, MP_q, E_1st)."""
     ev, ok = [], []
     for s in main:
         rk = {m: rank(idx[s], m, "H-eG_d") for m in RANK_METRICS}
@@ -45,23 +54,33 @@ def check(idx: dict, main: list[str], complex_: list[str], random: list[str],
         runs = sum(st["runs"] for (al, _, _), st in idx[s].items() if al == "H-eG_d")
         ok.append(all(r <= 2 for r in rk.values()))
         ev.append(f"{s}: ranks E_ss {rk['E_ss']}, MP_q {rk['MP_q']}, E_1st {rk['E_1st']}; optimum in {opt}/{runs} runs")
-    out.append(("H-eG_d is optimal or near-optimal on all metrics (rank <= 2 of 6 on E_ss, MP_q, E_1st)",
-                _verdict(ok), "; ".join(ev)))
-    # 2 H-eG_d best E_ss in complex scenes
+    return ("H-eG_d is optimal or near-optimal on all metrics (rank <= 2 of 6 on E_ss, MP_q, E_1st)",
+            _verdict(ok), "; ".join(ev))
+
+
+def _heg_d_best_ess(idx: dict, complex_: list[str]) -> tuple[str, str, str]:
+    """Claim 2: H-eG_d has the best E_ss (Eq. 16 steady state) in the complex scenes."""
     ev, ok = [], []
     for s in complex_:
         m = means(idx[s], "E_ss")
         ok.append(rank(idx[s], "E_ss", "H-eG_d") == 1)
         ev.append(f"{s}: mean E_ss {_fmt(m)}")
-    out.append(("H-eG_d has the best E_ss in the complex scenes", _verdict(ok), "; ".join(ev)))
-    # 3 H-eG_b fewest MP_q
+    return ("H-eG_d has the best E_ss in the complex scenes", _verdict(ok), "; ".join(ev))
+
+
+def _heg_b_fewest_mpq(idx: dict, main: list[str]) -> tuple[str, str, str]:
+    """Claim 3: H-eG_b needs the fewest motion-planner queries MP_q."""
     ev, ok = [], []
     for s in main:
         m = means(idx[s], "MP_q")
         ok.append(rank(idx[s], "MP_q", "H-eG_b") == 1)
         ev.append(f"{s}: mean MP_q {_fmt(m)}")
-    out.append(("H-eG_b needs the fewest motion-planner queries MP_q", _verdict(ok), "; ".join(ev)))
-    # 4 depth far better than breadth on E_1st (depth <= half of breadth)
+    return ("H-eG_b needs the fewest motion-planner queries MP_q", _verdict(ok), "; ".join(ev))
+
+
+def _depth_beats_breadth(idx: dict, main: list[str], off_target: frozenset) -> tuple[str, str, str]:
+    """Claim 4: depth search is far better than breadth on E_1st (depth <= half of breadth, per policy), decided
+    without the off-target (scene, gamma) cells."""
     ev, ok, better = [], [], []
     for s in main:
         valid = {k: v for k, v in idx[s].items() if (s, k[2]) not in off_target}
@@ -81,9 +100,12 @@ def check(idx: dict, main: list[str], complex_: list[str], random: list[str],
     if better:
         ev.append(f"depth below breadth in {sum(better)}/{len(better)} pairs, at most half of it in "
                   f"{sum(ok)}/{len(ok)}")
-    out.append(("Depth search is far better than breadth on E_1st (depth <= half of breadth, per policy)",
-                _verdict(ok), "; ".join(ev)))
-    # 5 higher alpha and lower gamma better (E_ss and E_1st, all algorithms pooled)
+    return ("Depth search is far better than breadth on E_1st (depth <= half of breadth, per policy)",
+            _verdict(ok), "; ".join(ev))
+
+
+def _alpha_gamma(idx: dict, main: list[str]) -> tuple[str, str, str]:
+    """Claim 5: higher alpha (Eq. 7) and lower gamma are better, on E_ss and E_1st with all algorithms pooled."""
     ev, ok = [], []
     for s in main:
         for metric in ("E_ss", "E_1st"):
@@ -97,26 +119,29 @@ def check(idx: dict, main: list[str], complex_: list[str], random: list[str],
             ok.append(a_ok and g_ok)
             ev.append(f"{s} {metric}: by alpha " + ", ".join(f"{a:g}: {v:.0f}" for a, v in by_a.items())
                       + "; by gamma " + ", ".join(f"{g:g}: {v:.0f}" for g, v in by_g.items()))
-    out.append(("Higher alpha and lower gamma are better (mean E_ss and E_1st over algorithms)", _verdict(ok),
-                "; ".join(ev)))
-    # 6 random scenes agree: H-eG_d rank on E_1st and E_ss, H-eG_b on MP_q, depth < breadth on E_1st
-    if random:
-        pooled: dict = {}
-        for s in random:
-            for k, st in idx.get(s, {}).items():
-                pooled.setdefault(k, []).append(st)
-        cells = {k: {m: statistics.fmean(x[m] for x in v) for m in ("E_ss", "MP_q", "E_1st_pen")}
-                 for k, v in pooled.items()}
-        if cells:
-            r1 = {m: rank(cells, m, "H-eG_d") for m in RANK_METRICS}
-            r3 = rank(cells, "MP_q", "H-eG_b")
-            m1 = means(cells, "E_1st")
-            depth_better = all(m1[p + "_d"] < m1[p + "_b"] for p in ("LRND", "H-LRND", "H-eG"))
-            ok = [all(r <= 2 for r in r1.values()), r3 == 1, depth_better]
-            out.append(("The random 5-obstacle scenes agree (H-eG_d rank <= 2 on all metrics; H-eG_b fewest MP_q; "
-                        "depth better than breadth on E_1st)", _verdict(ok),
-                        f"{len(random)} scenes: H-eG_d ranks {r1}; H-eG_b MP_q rank {r3}; E_1st {_fmt(m1)}"))
-    return out
+    return ("Higher alpha and lower gamma are better (mean E_ss and E_1st over algorithms)", _verdict(ok),
+            "; ".join(ev))
+
+
+def _random_scenes_agree(idx: dict, random: list[str]) -> tuple[str, str, str] | None:
+    """Claim 6: the random scenes, pooled, agree: H-eG_d rank <= 2 on E_1st, E_ss and MP_q, H-eG_b fewest MP_q,
+    depth < breadth on E_1st. None when none of them has results."""
+    pooled: dict = {}
+    for s in random:
+        for k, st in idx.get(s, {}).items():
+            pooled.setdefault(k, []).append(st)
+    cells = {k: {m: statistics.fmean(x[m] for x in v) for m in ("E_ss", "MP_q", "E_1st_pen")}
+             for k, v in pooled.items()}
+    if not cells:
+        return None
+    r1 = {m: rank(cells, m, "H-eG_d") for m in RANK_METRICS}
+    r3 = rank(cells, "MP_q", "H-eG_b")
+    m1 = means(cells, "E_1st")
+    depth_better = all(m1[p + "_d"] < m1[p + "_b"] for p in ("LRND", "H-LRND", "H-eG"))
+    ok = [all(r <= 2 for r in r1.values()), r3 == 1, depth_better]
+    return ("The random 5-obstacle scenes agree (H-eG_d rank <= 2 on all metrics; H-eG_b fewest MP_q; "
+            "depth better than breadth on E_1st)", _verdict(ok),
+            f"{len(random)} scenes: H-eG_d ranks {r1}; H-eG_b MP_q rank {r3}; E_1st {_fmt(m1)}")
 
 
 def _verdict(ok: list[bool]) -> str:

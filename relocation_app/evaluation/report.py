@@ -189,6 +189,9 @@ def _discount_section(records: list[dict], info: dict, scenes: list[str]) -> str
 
 def write_report(out: Path, docs: Path, params, data_dir, main: list[str], random: list[str],
                  quick: bool = False, experiment: list[str] = ()) -> Path:
+    """docs/evaluation.md and docs/figures/ from the sweep results in `out` and the feasibility tables in
+    `data_dir`: definitions, summary, scenes, sweep wall time, Tables 1-4 and figures per scene, Fig. 3, the
+    paper's findings (claims.py) and what lies beyond the paper."""
     docs = Path(docs)
     figdir = docs / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
@@ -198,15 +201,55 @@ def write_report(out: Path, docs: Path, params, data_dir, main: list[str], rando
     md = [INTRO.format(timeout=params.timeout, runs=runs, last=runs - 1, status=_status(records, main + list(
         experiment) + random))]
     if quick:
-        md.insert(1, "\n**Quick version** (a few runs per cell, two (alpha, gamma) pairs): not the real results.\n")
-
+        md.append("\n**Quick version** (a few runs per cell, two (alpha, gamma) pairs): not the real results.\n")
     summary_at = len(md)
-    md.append("## Scenes (feasibility from the real planner)\n")
-    md.append("| scene | obstacles | reachable sets | cached answers | planner time (s) | minimal freeing sets | "
-              "feasible sequences | optimum (weight) |")
-    md.append("|---|---:|---:|---:|---:|---:|---:|---|")
+    scenes_md, info = _scenes_section(main + ["paper_experiment_10"] + random, data_dir, params)
+    md += scenes_md
+    timing = _read_timing(out)
+    if timing is not None:
+        md += _timing_section(timing)
+    for s in list(main) + list(experiment):
+        if s in idx:
+            md += _tables_section(records, idx[s], s, figdir, docs)
+    for s in experiment:
+        md.append(_experiment_section(records, s))
+    if random and any(r in idx for r in random):
+        md.append("## Random 5-obstacle scenes: Table 4 shape (means over scenes and grid)\n")
+        md.append(tables.random_table(idx, random) + "\n")
+    present = [s for s in main if s in idx]
+    if present:
+        f3 = figures.breadth_depth(idx, present, figdir / "breadth_vs_depth.png")
+        f4 = figures.e1st_spread(records, present, figdir / "e1st_min_mean_max.png")
+        md.append(f"## Breadth vs depth, E_1st spread\n\n![breadth vs depth]({f3.relative_to(docs)})\n\n"
+                  f"![E_1st]({f4.relative_to(docs)})\n")
+    if "scenario1_5" in info:
+        md.append(_tree_section(info["scenario1_5"], params, figdir, docs))
+    if present:
+        found = claims.check(idx, present, [s for s in present if s in ("scenario2_10", "scenario3_15")],
+                             [r for r in random if r in idx], _off_target(records, info, present))
+        md.append("## The paper's findings\n")
+        md.append("| finding | verdict | deciding numbers |\n|---|---|---|")
+        md += [f"| {claim} | **{verdict}** | {ev} |" for claim, verdict, ev in found]
+        md.insert(summary_at, _summary(found, timing, runs))
+        md.append("")
+        md.append(_gamma_note(records, info, present))
+        beyond = present + [e for e in experiment if e in idx] + [r for r in random if r in idx]
+        md += _beyond_section(records, info, beyond)
+        md.append(_discount_section(records, info, beyond))
+    path = docs / "evaluation.md"
+    path.write_text("\n".join(md) + "\n")
+    return path
+
+
+def _scenes_section(names: list[str], data_dir, params) -> tuple[list[str], dict]:
+    """Section "Scenes": one row per scene (reachable sets, cached answers, minimal freeing sets, feasible
+    sequences, Eq. 8 optimum), and info: name -> (scenario, table, sequences report) of the scenes that load."""
+    md = ["## Scenes (feasibility from the real planner)\n",
+          "| scene | obstacles | reachable sets | cached answers | planner time (s) | minimal freeing sets | "
+          "feasible sequences | optimum (weight) |",
+          "|---|---:|---:|---:|---:|---:|---:|---|"]
     info = {}
-    for name in main + ["paper_experiment_10"] + random:
+    for name in names:
         try:
             row, info[name] = _scene_section(name, data_dir, params)
             md.append(row)
@@ -215,97 +258,97 @@ def write_report(out: Path, docs: Path, params, data_dir, main: list[str], rando
     md.append("\nPaper (Sect. 5.1): 10, 20 and 20 feasible sequences for scenarios 1-3. `x k`: k orders of the "
               "optimal set.\n")
     md.append(SEQUENCE_GAP)
+    return md, info
 
+
+def _read_timing(out) -> list[dict] | None:
+    """The sweep sessions of out/timing.jsonl (None without that file)."""
     timing = Path(out) / "timing.jsonl"
-    if timing.exists():
-        ts = [json.loads(x) for x in timing.read_text().splitlines() if x.strip()]
-        total = sum(t["wall_s"] for t in ts)
-        cells_run = sum(t["cells_run"] for t in ts)
-        md.append("## Sweep wall time\n")
-        md.append("| session | cells run | runs per cell | wall time (s) | worker processes | training engine | "
-                  "new planner calls |\n|---:|---:|---:|---:|---:|---|---:|")
-        for k, t in enumerate(ts, 1):
-            md.append(f"| {k} | {t['cells_run']} | {t['runs']} | {t['wall_s']:.0f} | {t['workers']} | "
-                      f"{t.get('engine', 'Python loop')} | {t.get('new_planner_calls', 0)} |")
-        md.append(f"\nTotal: {cells_run} cells in {total:.0f} s ({total / 60:.1f} min) on a shared 2-core machine, "
-                  "feasibility from the cache. Training engines: docs/bench/qtree.md.\n")
+    if not timing.exists():
+        return None
+    return [json.loads(x) for x in timing.read_text().splitlines() if x.strip()]
 
-    for s in list(main) + list(experiment):
-        if s not in idx:
-            continue
-        cells = idx[s]
-        md.append(f"## {s}: Tables 1-3 shape\n")
-        for metric in tables.METRICS:
-            md.append(f"**{metric}**\n\n" + tables.metric_table(cells, metric) + "\n")
-        md.append("**Summary over the grid**\n\n" + tables.summary_table(cells) + "\n")
-        ref = (1.0, 0.1) if any(k[1:] == (1.0, 0.1) for k in cells) else sorted(cells)[0][1:]
-        f1 = figures.qsum_curves(records, s, ref[0], ref[1], figdir / f"qsum_{s}.png")
-        f2 = figures.bars(cells, s, figdir / f"bars_{s}.png")
-        md.append(f"![normalised Q_sum]({f1.relative_to(docs)})\n\n![bars]({f2.relative_to(docs)})\n")
 
-    for s in experiment:
-        md.append(_experiment_section(records, s))
+def _timing_totals(ts: list[dict]) -> tuple[int, float]:
+    """(cells run, wall seconds) over all sweep sessions."""
+    return sum(t["cells_run"] for t in ts), sum(t["wall_s"] for t in ts)
 
-    if random and any(r in idx for r in random):
-        md.append("## Random 5-obstacle scenes: Table 4 shape (means over scenes and grid)\n")
-        md.append(tables.random_table(idx, random) + "\n")
 
-    present = [s for s in main if s in idx]
-    if present:
-        f3 = figures.breadth_depth(idx, present, figdir / "breadth_vs_depth.png")
-        f4 = figures.e1st_spread(records, present, figdir / "e1st_min_mean_max.png")
-        md.append(f"## Breadth vs depth, E_1st spread\n\n![breadth vs depth]({f3.relative_to(docs)})\n\n"
-                  f"![E_1st]({f4.relative_to(docs)})\n")
+def _timing_section(ts: list[dict]) -> list[str]:
+    """Section "Sweep wall time": one row per sweep session, then the total."""
+    cells_run, total = _timing_totals(ts)
+    md = ["## Sweep wall time\n",
+          "| session | cells run | runs per cell | wall time (s) | worker processes | training engine | "
+          "new planner calls |\n|---:|---:|---:|---:|---:|---|---:|"]
+    for k, t in enumerate(ts, 1):
+        md.append(f"| {k} | {t['cells_run']} | {t['runs']} | {t['wall_s']:.0f} | {t['workers']} | "
+                  f"{t.get('engine', 'Python loop')} | {t.get('new_planner_calls', 0)} |")
+    md.append(f"\nTotal: {cells_run} cells in {total:.0f} s ({total / 60:.1f} min) on a shared 2-core machine, "
+              "feasibility from the cache. Training engines: docs/bench/qtree.md.\n")
+    return md
 
-    if "scenario1_5" in info:
-        from qtree_task_planner.params import TrainingParams
-        from qtree_task_planner.training import train
 
-        from .feasibility_cache import PlannerOracle
-        sc, table, rep = info["scenario1_5"]
-        r = train(sc, PlannerOracle(sc, params, table),
-                  TrainingParams.from_yaml(ignore_unknown=True).replace(policy="h-eg", search="depth", alpha=1.0, gamma=0.1, seed=0))
-        f5 = figures.tree_figure(r.tree, figdir / "tree_scenario1_5.png",
-                                 f"Fig. 3: Q-Tree of scenario1_5 after H-eG_d training (alpha 1, gamma 0.1, seed 0): "
-                                 f"{len(r.tree.nodes)} nodes, best {' '.join(r.sequence or ())}")
-        (figdir / "tree_scenario1_5.dot").write_text(r.tree.to_dot("scenario1_5"))
-        md.append(f"## Fig. 3: the tree of scenario 1\n\n![tree]({f5.relative_to(docs)})\n\nGraphviz text: "
-                  f"figures/tree_scenario1_5.dot\n")
+def _tables_section(records: list[dict], cells: dict, s: str, figdir: Path, docs: Path) -> list[str]:
+    """Section "<scene>: Tables 1-3 shape": E_ss (Eq. 16), MP_q and E_1st per algorithm and (alpha, gamma), the
+    summary over the grid, normalised Q_sum curves (Eq. 15, Fig. 4) and the bars."""
+    md = [f"## {s}: Tables 1-3 shape\n"]
+    for metric in tables.METRICS:
+        md.append(f"**{metric}**\n\n" + tables.metric_table(cells, metric) + "\n")
+    md.append("**Summary over the grid**\n\n" + tables.summary_table(cells) + "\n")
+    ref = (1.0, 0.1) if any(k[1:] == (1.0, 0.1) for k in cells) else sorted(cells)[0][1:]
+    f1 = figures.qsum_curves(records, s, ref[0], ref[1], figdir / f"qsum_{s}.png")
+    f2 = figures.bars(cells, s, figdir / f"bars_{s}.png")
+    md.append(f"![normalised Q_sum]({f1.relative_to(docs)})\n\n![bars]({f2.relative_to(docs)})\n")
+    return md
 
-    if present:
-        md.append("## The paper's findings\n")
-        md.append("| finding | verdict | deciding numbers |\n|---|---|---|")
-        found = claims.check(idx, present, [s for s in present if s in ("scenario2_10", "scenario3_15")],
-                             [r for r in random if r in idx], _off_target(records, info, present))
-        for claim, verdict, ev in found:
-            md.append(f"| {claim} | **{verdict}** | {ev} |")
-        summary = ["## Summary\n"]
-        if timing.exists():
-            summary.append(f"- Sweep: {cells_run} cells ({runs} runs each) in {total:.0f} s ({total / 60:.1f} min) of wall "
-                           f"time on {ts[-1]['workers']} worker processes (section \"Sweep wall time\").")
-        summary += [f"- {claim}: **{verdict}** (deciding numbers in \"The paper's findings\")."
-                    for claim, verdict, _ in found]
-        md.insert(summary_at, "\n".join(summary) + "\n")
-        md.append("")
-        md.append(_gamma_note(records, info, present))
-        md.append("## Beyond the paper\n")
-        md.append("| scene | exact optimum (weight) | exact solver planner calls | table answers | "
-                  "mean MP_q (all cells) | mean real calls with set cache | runs that learned the optimum |")
-        md.append("|---|---|---:|---:|---:|---:|---:|")
-        for s in present + [e for e in experiment if e in idx] + [r for r in random if r in idx]:
-            recs = [r for r in records if r["scenario"] == s]
-            allruns = [x for r in recs for x in r["runs_data"]]
-            opt = sum(x["optimal"] for x in allruns)
-            mpq = statistics.fmean(x["MP_q"] for x in allruns)
-            calls = statistics.fmean(x["calls"] for x in allruns)
-            ow = recs[0]["optimal_weight"]
-            n_tab = len(info[s][1]) if s in info else "-"
-            seq = " ".join(info[s][2].optimal_sequences[0]) if s in info else ""
-            md.append(f"| {s} | {seq} ({ow:.2f}) | {recs[0]['exact_calls']} | {n_tab} | {mpq:.0f} | {calls:.0f} | "
-                      f"{opt}/{len(allruns)} ({100 * opt / len(allruns):.0f} %) |")
-        md.append("\nPer algorithm, the optimum rate is in the summary tables above (column 'optimal runs').\n")
-        md.append(_discount_section(records, info, present + [e for e in experiment if e in idx]
-                                    + [r for r in random if r in idx]))
-    path = docs / "evaluation.md"
-    path.write_text("\n".join(md) + "\n")
-    return path
+
+def _tree_section(scene_info: tuple, params, figdir: Path, docs: Path) -> str:
+    """Section "Fig. 3": the Q-Tree of scenario1_5 after one H-eG_d training (alpha 1, gamma 0.1, seed 0), drawn
+    and as Graphviz text."""
+    from qtree_task_planner.params import TrainingParams
+    from qtree_task_planner.training import train
+
+    from .feasibility_cache import PlannerOracle
+    sc, table, rep = scene_info
+    r = train(sc, PlannerOracle(sc, params, table),
+              TrainingParams.from_yaml(ignore_unknown=True).replace(policy="h-eg", search="depth", alpha=1.0, gamma=0.1, seed=0))
+    f5 = figures.tree_figure(r.tree, figdir / "tree_scenario1_5.png",
+                             f"Fig. 3: Q-Tree of scenario1_5 after H-eG_d training (alpha 1, gamma 0.1, seed 0): "
+                             f"{len(r.tree.nodes)} nodes, best {' '.join(r.sequence or ())}")
+    (figdir / "tree_scenario1_5.dot").write_text(r.tree.to_dot("scenario1_5"))
+    return (f"## Fig. 3: the tree of scenario 1\n\n![tree]({f5.relative_to(docs)})\n\nGraphviz text: "
+            f"figures/tree_scenario1_5.dot\n")
+
+
+def _summary(found: list[tuple[str, str, str]], timing: list[dict] | None, runs: int) -> str:
+    """Section "Summary" (placed after the definitions): the sweep's size and time, each finding's verdict."""
+    summary = ["## Summary\n"]
+    if timing is not None:
+        cells_run, total = _timing_totals(timing)
+        summary.append(f"- Sweep: {cells_run} cells ({runs} runs each) in {total:.0f} s ({total / 60:.1f} min) of wall "
+                       f"time on {timing[-1]['workers']} worker processes (section \"Sweep wall time\").")
+    summary += [f"- {claim}: **{verdict}** (deciding numbers in \"The paper's findings\")."
+                for claim, verdict, _ in found]
+    return "\n".join(summary) + "\n"
+
+
+def _beyond_section(records: list[dict], info: dict, scenes: list[str]) -> list[str]:
+    """Section "Beyond the paper": per scene the exact optimum (Eq. 8), the exact solver's planner calls, the table
+    size, mean MP_q, mean real calls with the set-keyed cache, and how many runs learned the optimum."""
+    md = ["## Beyond the paper\n",
+          "| scene | exact optimum (weight) | exact solver planner calls | table answers | "
+          "mean MP_q (all cells) | mean real calls with set cache | runs that learned the optimum |",
+          "|---|---|---:|---:|---:|---:|---:|"]
+    for s in scenes:
+        recs = [r for r in records if r["scenario"] == s]
+        allruns = [x for r in recs for x in r["runs_data"]]
+        opt = sum(x["optimal"] for x in allruns)
+        mpq = statistics.fmean(x["MP_q"] for x in allruns)
+        calls = statistics.fmean(x["calls"] for x in allruns)
+        ow = recs[0]["optimal_weight"]
+        n_tab = len(info[s][1]) if s in info else "-"
+        seq = " ".join(info[s][2].optimal_sequences[0]) if s in info else ""
+        md.append(f"| {s} | {seq} ({ow:.2f}) | {recs[0]['exact_calls']} | {n_tab} | {mpq:.0f} | {calls:.0f} | "
+                  f"{opt}/{len(allruns)} ({100 * opt / len(allruns):.0f} %) |")
+    md.append("\nPer algorithm, the optimum rate is in the summary tables above (column 'optimal runs').\n")
+    return md
