@@ -94,6 +94,20 @@ def _emit(data: dict, out: str | None) -> None:
         print(text)
 
 
+def _progress_bar(episodes: int):
+    """(callback, bar): a tqdm bar on stderr advanced by train()'s per-episode callback (Q_sum of Eq. 15, tree
+    nodes and MP_q shown every 50 episodes)."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=episodes, desc="episodes", unit="ep", file=sys.stderr, leave=False)
+
+    def callback(st):
+        bar.update(1)
+        if st.episode % 50 == 0:
+            bar.set_postfix(q_sum=f"{st.q_sum:.1f}", nodes=st.tree_nodes, mp_q=st.mp_q)
+    return callback, bar
+
+
 def _train(args) -> int:
     base = TrainingParams.from_yaml(args.params)
     params = base.replace(policy=args.policy, search=args.search, alpha=args.alpha, gamma=args.gamma,
@@ -106,17 +120,7 @@ def _train(args) -> int:
     if args.solve_first:
         exact = solve(problem, oracle)
         optimum = exact.total_weight
-    callback, bar = None, None
-    if not args.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=params.max_episodes, desc="episodes", unit="ep", file=sys.stderr, leave=False)
-
-        def callback(st):
-            bar.update(1)
-            if st.episode % 50 == 0:
-                bar.set_postfix(q_sum=f"{st.q_sum:.1f}", nodes=st.tree_nodes, mp_q=st.mp_q)
-
+    callback, bar = (None, None) if args.no_progress else _progress_bar(params.max_episodes)
     try:
         result = train(problem, CachedOracle(oracle), params, optimal_weight=optimum, callback=callback)
     finally:
