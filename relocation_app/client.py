@@ -23,6 +23,7 @@ from typing import Any, Callable
 import rclpy
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile
 
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
@@ -44,7 +45,8 @@ class RelocationClient:
         if context is None and not rclpy.ok():
             rclpy.init()
         self.node = rclpy.create_node(name, context=context)
-        self._feasibility = self.node.create_client(PlanFeasibility, FEASIBILITY)
+        # a deep request queue: a burst of questions is never dropped in this process (default depth 10)
+        self._feasibility = self.node.create_client(PlanFeasibility, FEASIBILITY, qos_profile=QoSProfile(depth=1000))
         self._train = ActionClient(self.node, TrainPlanner, TRAIN)
         self._relocate = ActionClient(self.node, RelocateObject, RELOCATE)
         self._executor = SingleThreadedExecutor(context=context)

@@ -2,10 +2,13 @@
 
 - service `~/plan_feasibility` (PlanFeasibility): Eq. 11's answer g_U / g_O / g_T for (object, removed set),
   with the home -> grasp trajectory; a bad request answers ok=false with the reason, the node keeps serving.
-- action `~/relocate` (RelocateObject): plan the pick, stream joint velocities (deg/s, kinova_msgs) at 100 Hz to
-  `<driver_prefix>/in/joint_velocity` with feedback from `<driver_prefix>/out/joint_state`, close the gripper,
-  plan and stream the carry to the next slot of the bottom shelf, release, retreat, plan and stream the way
-  home. Feedback by phase; cancel stops the arm; a silent driver aborts the goal with the reason.
+- action `~/relocate` (RelocateObject): plan the pick, stream joint velocities at 100 Hz with feedback from the
+  joint states, close the gripper, plan and stream the carry to the next slot of the bottom shelf, release,
+  retreat, plan and stream the way home. Feedback by phase; cancel stops the arm; a silent driver aborts the goal
+  with the reason. The driver's surface is `command_interface` (docs/kinova.md): `kinova` = kinova-ros's
+  j2s7s300 driver (kinova_msgs/JointVelocity deg/s on `<driver_prefix>/in/joint_velocity`,
+  `<driver_prefix>/out/joint_state`, the SetFingersPosition action `<driver_prefix>/fingers_action/finger_positions`);
+  `ros2_control` = `/velocity_controller/commands` (rad/s), `/gripper_controller/commands`, `/joint_states`.
 - `~/path` (visualization_msgs/Marker, latched): the tool path of the motion being executed, as a line strip.
 - the scene: the scenario file (shelf, slots, initial bottles), updated from `scene_topic` (ObjectArray,
   transient local). Bottles no longer on the top shelf are ignored; bottles not seen keep their last pose.
@@ -19,20 +22,24 @@ import time
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Duration
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
-from std_srvs.srv import Trigger
+from std_msgs.msg import Float64MultiArray
 from geometry_msgs.msg import Point
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
+from kinova_msgs.action import SetFingersPosition
+from kinova_msgs.msg import FingerPosition, JointVelocity
 from qtree_relocation_msgs.action import RelocateObject
-from qtree_relocation_msgs.msg import JointVelocity, ObjectArray
+from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
-from relocation_common.node import SideNode, call, declare_parameters, node_main
+from relocation_common import kinova
+from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import BASE_FRAME, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
@@ -43,6 +50,12 @@ from .relocation import PHASES, relocate
 from .trajectory import Trajectory
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+# Requests queue here while one is planned: the default depth 10 dropped all but 11 of 50 concurrent requests
+# silently (their clients waited forever); 1000 answers a burst of a whole tree level.
+SERVICE_QOS = QoSProfile(depth=1000)
+INTERFACES = ("kinova", "ros2_control")  # command_interface: the driver's surface (docs/kinova.md)
+VELOCITY_TOPIC = "/velocity_controller/commands"  # ros2_control JointGroupVelocityController (rad/s)
+GRIPPER_TOPIC = "/gripper_controller/commands"    # ros2_control JointGroupPositionController, finger joints (rad)
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
 ON_SHELF = 0.01  # m: a bottle whose base is farther from the top shelf's surface is lifted or elsewhere
 
@@ -96,25 +109,37 @@ class MotionPlannerNode(Node):
         self._q: tuple[np.ndarray, float] | None = None
         self._relocating = threading.Lock()
         self._held: str | None = None  # the object of the running relocation: its perceived pose is ignored
+        self._relocated: dict[str, int] = {}  # object -> slot, relocated by this node (until seen on the top shelf)
 
         pre = str(self.p("driver_prefix")).rstrip("/")
-        self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
+        interface = str(self.p("command_interface"))
+        if interface not in INTERFACES:
+            raise ValueError(f"parameter command_interface must be one of {', '.join(INTERFACES)}, got {interface!r}")
+        self._kinova = interface == "kinova"
+        self._fingers_q: tuple[np.ndarray, float] | None = None  # finger joint angles (rad), time received
+        if self._kinova:  # kinova-ros's j2s7s300 driver surface: kinova_msgs, deg/s, fingers action
+            self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
+            self._fingers = ActionClient(self, SetFingersPosition, f"{pre}/fingers_action/finger_positions",
+                                         callback_group=ReentrantCallbackGroup())
+            state_topic = f"{pre}/out/joint_state"
+        else:  # ros2_control: JointGroupVelocityController, the fingers as a JointGroupPositionController
+            self._cmd = self.create_publisher(Float64MultiArray, VELOCITY_TOPIC, 10)
+            self._gripper_cmd = self.create_publisher(Float64MultiArray, GRIPPER_TOPIC, 10)
+            state_topic = "/joint_states"
         self._path = self.create_publisher(Marker, "~/path", SCENE_QOS)
         self._state = SideNode("motion_planner_joint_state", context=self.context)  # 100 Hz, never late
-        self._state.node.create_subscription(JointState, f"{pre}/out/joint_state", self._on_joint_state, 10)
+        self._state.node.create_subscription(JointState, state_topic, self._on_joint_state, 10)
+        self._state.node.create_subscription(JointState, state_topic, self._on_finger_state, 10)
         self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS,
                                  callback_group=MutuallyExclusiveCallbackGroup())
-        clients = ReentrantCallbackGroup()
-        self._gripper = {a: self.create_client(Trigger, f"{pre}/in/gripper_{a}", callback_group=clients)
-                         for a in ("close", "open")}
-        self.create_service(PlanFeasibility, "~/plan_feasibility", self._on_feasibility,
+        self.create_service(PlanFeasibility, "~/plan_feasibility", self._on_feasibility, qos_profile=SERVICE_QOS,
                             callback_group=MutuallyExclusiveCallbackGroup())
         self._server = ActionServer(self, RelocateObject, "~/relocate", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=ReentrantCallbackGroup())
         self.get_logger().info(f"ready: scenario {self.base.name} ({len(self.base.objects)} bottles), service "
                                f"{self.resolve_service_name('~/plan_feasibility')}, scene from "
-                               f"{self.p('scene_topic')}, driver {pre}")
+                               f"{self.p('scene_topic')}, driver {pre if self._kinova else 'ros2_control'}")
 
     def p(self, name: str):
         return self.get_parameter(name).value
@@ -144,6 +169,8 @@ class MotionPlannerNode(Node):
         on_top = {b.id: b for b, o in zip(bottles, msg.objects)
                   if abs(o.pose.position.z - sh.top_z) < ON_SHELF and b.id != held
                   and sh.x_front < b.x < sh.x_back and sh.y_min < b.y < sh.y_max}
+        for i in on_top:  # seen back on the top shelf (a reset scene): it can be relocated again
+            self._relocated.pop(i, None)
         changed = [i for i, b in on_top.items() if i not in self._bottles
                    or math.hypot(b.x - self._bottles[i].x, b.y - self._bottles[i].y) > MOVED]
         if not changed:
@@ -188,6 +215,8 @@ class MotionPlannerNode(Node):
             removed = self.planner.scenario.check_ids(list(goal.removed_ids))
             if goal.object_id in removed:
                 raise ValueError(f"{goal.object_id!r} is in its own removed set")
+            if goal.object_id in self._relocated:  # it stands on the bottom shelf now: nothing to pick up there
+                raise ValueError(f"{goal.object_id!r} was already relocated (to slot {self._relocated[goal.object_id]})")
             if len(goal.removed_ids) >= len(self.base.slots):
                 raise ValueError(f"no free slot: {len(goal.removed_ids)} objects already relocated")
         except (UnknownObjectError, ScenarioError, ValueError) as e:
@@ -205,15 +234,21 @@ class MotionPlannerNode(Node):
             try:
                 self._relocate(goal_handle)
                 result.success, result.message = True, f"relocated {goal_handle.request.object_id}"
+                self._relocated[goal_handle.request.object_id] = len(goal_handle.request.removed_ids)
                 goal_handle.succeed()
             except _Cancelled:
                 self._stop()
                 result.message = "cancelled: arm stopped"
                 goal_handle.canceled()
-            except (_Aborted, PlanningError) as e:
+            except (_Aborted, PlanningError, UnknownObjectError, ValueError) as e:  # WorkspaceError, ScenarioError
                 self._stop()
                 result.message = str(e)
                 self.get_logger().error(f"relocation of {goal_handle.request.object_id} aborted: {e}")
+                goal_handle.abort()
+            except Exception as e:  # a planner or driver bug ends the goal with its reason, not the node
+                self._stop()
+                result.message = f"internal error: {type(e).__name__}: {e}"
+                self.get_logger().error(f"relocation of {goal_handle.request.object_id} aborted: {result.message}")
                 goal_handle.abort()
             finally:
                 self._held = None
@@ -269,8 +304,12 @@ class MotionPlannerNode(Node):
             time.sleep(max(0.0, next_tick - time.monotonic()))
 
     def _send(self, v: np.ndarray) -> None:
-        d = np.degrees(v)
-        self._cmd.publish(JointVelocity(**{f"joint{i + 1}": float(d[i]) for i in range(rd.N_JOINTS)}))
+        """One velocity command (rad/s): kinova_msgs/JointVelocity in deg/s, or ros2_control's rad/s."""
+        if self._kinova:
+            d = np.degrees(v)
+            self._cmd.publish(JointVelocity(**{f"joint{i + 1}": float(d[i]) for i in range(rd.N_JOINTS)}))
+        else:
+            self._cmd.publish(Float64MultiArray(data=[float(x) for x in v]))
 
     def _stop(self) -> None:
         if rclpy.ok():
@@ -278,25 +317,89 @@ class MotionPlannerNode(Node):
                 self._send(np.zeros(rd.N_JOINTS))
 
     def _gripper_call(self, gh, action: str, phase: str) -> None:
+        """Close or open the fingers and wait until they stop: a kinova_msgs SetFingersPosition goal and its result
+        (kinova-ros ends a goal whose fingers stall on an object as aborted, with the positions reached), or on
+        ros2_control the finger joints' position command, watched in the joint states. Closing has to stop short
+        of `finger_empty_closure` (a bottle is between the fingers), opening has to open, or the relocation aborts."""
         self._feedback(gh, phase)
-        client = self._gripper[action]
+        closing = action == "close"
+        closed = float(self.p("finger_closed"))
+        goal = closed if closing else 0.0
         timeout = float(self.p("gripper_timeout"))
-        if not client.wait_for_service(timeout_sec=timeout):
-            raise _Aborted(f"gripper service {client.srv_name} not available after {timeout:.0f} s")
-        try:
-            res = call(client, Trigger.Request(), timeout)
-        except TimeoutError:
-            raise _Aborted(f"gripper {action}: no answer within {timeout:.0f} s") from None
-        if not res.success:
-            raise _Aborted(f"gripper {action} failed: {res.message}")
-        self.get_logger().info(f"gripper {action}: {res.message}")
-        # the service answers when the command is taken; the fingers need a moment (0.3 s in the simulator, about
-        # 1 s on a Jaco2) before the arm may move: retreating with half-open fingers dragged the bottle 2 cm
+        turns = self._fingers_action(gh, goal, timeout) if self._kinova else self._fingers_command(gh, goal, timeout)
+        closure = float(np.mean(turns)) / closed
+        if closing and closure > float(self.p("finger_empty_closure")):
+            raise _Aborted(f"gripper close: the fingers closed on nothing ({closure:.0%} closed)")
+        if closing and closure < 0.02:
+            raise _Aborted("gripper close: the fingers did not move")
+        if not closing and closure > 0.1:
+            raise _Aborted(f"gripper open: the fingers stopped {closure:.0%} closed")
+        self.get_logger().info(f"gripper {action}: fingers stopped {closure:.0%} closed")
         time.sleep(float(self.p("gripper_settle")))
+
+    def _wait_future(self, gh, future, deadline: float, what: str):
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        while not done.wait(0.02):
+            if gh.is_cancel_requested:
+                raise _Cancelled()
+            if time.monotonic() > deadline:
+                raise _Aborted(f"gripper: no {what} within gripper_timeout")
+        return future.result()
+
+    def _fingers_action(self, gh, goal: float, timeout: float) -> np.ndarray:
+        """kinova surface: SetFingersPosition goal (Kinova turns) -> the finger positions of its result."""
+        deadline = time.monotonic() + timeout
+        if not self._fingers.wait_for_server(timeout_sec=timeout):
+            raise _Aborted(f"gripper: no fingers action server after {timeout:.0f} s (is the driver running?)")
+        msg = SetFingersPosition.Goal(fingers=FingerPosition(finger1=goal, finger2=goal, finger3=goal))
+        handle = self._wait_future(gh, self._fingers.send_goal_async(msg), deadline, "answer to the fingers goal")
+        if not handle.accepted:
+            raise _Aborted("gripper: the driver rejected the fingers goal")
+        try:
+            res = self._wait_future(gh, handle.get_result_async(), deadline, "fingers result")
+        except (_Aborted, _Cancelled):
+            handle.cancel_goal_async()
+            raise
+        if res.status not in (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_ABORTED):
+            raise _Aborted(f"gripper: fingers goal ended with status {res.status}")
+        f = res.result.fingers
+        return np.array([f.finger1, f.finger2, f.finger3], float)
+
+    def _on_finger_state(self, msg: JointState) -> None:
+        try:
+            q = np.array([msg.position[msg.name.index(n)] for n in rd.FINGER_JOINT_NAMES], float)
+        except (ValueError, IndexError):
+            return
+        if np.all(np.isfinite(q)):
+            self._fingers_q = (q, time.monotonic())
+
+    def _fingers_command(self, gh, goal: float, timeout: float) -> np.ndarray:
+        """ros2_control surface: the finger joints' position (Kinova's joint angle of `goal` turns) on the gripper
+        controller, then the joint states until the fingers reach it or stall, as Kinova's action decides."""
+        deadline = time.monotonic() + timeout
+        cmd = Float64MultiArray(data=[float(kinova.turns_to_joint(goal))] * len(rd.FINGER_JOINT_NAMES))
+        monitor = None
+        while True:
+            self._gripper_cmd.publish(cmd)  # forward command: repeating it is harmless and survives a lost message
+            time.sleep(0.02)
+            if gh.is_cancel_requested:
+                raise _Cancelled()
+            now, st = time.monotonic(), self._fingers_q
+            if now > deadline:
+                raise _Aborted("gripper: the fingers did not stop within gripper_timeout")
+            if st is None or now - st[1] > self.p("state_timeout"):
+                continue
+            turns = kinova.joint_to_turns(st[0])
+            if monitor is None:
+                monitor = kinova.FingerMonitor([goal] * len(turns), now, turns, self.p("finger_tolerance"),
+                                               self.p("finger_stall_threshold"), self.p("finger_stall_interval"))
+            elif monitor.update(now, turns) != monitor.MOVING:
+                return turns
 
 
 class _GoalArm:
-    """relocation.Arm over ROS for one RelocateObject goal: streaming, gripper services, feedback."""
+    """relocation.Arm over ROS for one RelocateObject goal: streaming, gripper, feedback."""
 
     def __init__(self, node: MotionPlannerNode, goal_handle):
         self.node, self.gh = node, goal_handle

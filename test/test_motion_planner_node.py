@@ -149,6 +149,14 @@ def _joint_speed(g) -> float:
     return max(float(np.max(np.abs(m.velocity[:7]))) for m in msgs[-3:])
 
 
+def test_a_relocated_object_cannot_be_relocated_again(graph):
+    """Old code: accepted; the arm drove to the empty place, closed on nothing and aborted 0.95 rad from home, and
+    every later goal failed (issue 18). Runs after the o2 relocation above."""
+    handle, _ = _send(graph, "o2", ())
+    assert handle is None
+    assert "already relocated" in graph.planner.log()
+
+
 def test_cancel_stops_the_arm_and_a_dead_driver_aborts_the_relocation(graph):
     handle, feedback = _send(graph, "o3", ["o2"])
     deadline = time.monotonic() + 60

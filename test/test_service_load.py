@@ -1,0 +1,48 @@
+"""PlanFeasibility under a burst (issue 18): every request of a burst of concurrent requests is answered.
+
+Old code: the service kept rclpy's default depth of 10; of 50 (200) concurrent requests from one client, 11 were
+answered and the rest dropped silently, their client waiting forever. A client's own request history (depth 10
+by default) also drops a burst larger than that before it leaves the process: a client that sends 200 at once
+declares a deeper queue, as RelocationClient does."""
+import threading
+import time
+
+import pytest
+
+from ros_procs import REPO, RosGraph
+
+pytestmark = pytest.mark.graph
+rclpy = pytest.importorskip("rclpy")
+from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
+
+SRV = "/motion_planner/plan_feasibility"
+
+
+@pytest.mark.parametrize("burst, client_depth", [(50, None), (200, 1000)])
+def test_a_burst_of_concurrent_requests_is_answered_in_full(tmp_path, burst, client_depth):
+    with RosGraph(tmp_path) as g:
+        planner = g.start("stpik_motion_planner.motion_planner_node", params_file=REPO / "config" / "motion_planner.yaml",
+                          params={"scene_topic": "/none"})
+        from rclpy.qos import QoSProfile
+        qos = QoSProfile(depth=client_depth) if client_depth else None
+        cli = g.probe.node.create_client(PlanFeasibility, SRV, **({"qos_profile": qos} if qos else {}))
+        assert cli.wait_for_service(timeout_sec=60)
+        ids = ["o1", "o4", "o7", "T"]  # a mix of quick unfeasible and slower feasible answers
+        answered, done = [], threading.Event()
+        lock = threading.Lock()
+
+        def on_done(fut):
+            with lock:
+                answered.append(fut.result())
+                if len(answered) == burst:
+                    done.set()
+
+        t0 = time.monotonic()
+        for k in range(burst):
+            cli.call_async(PlanFeasibility.Request(object_id=ids[k % len(ids)], timeout=0.5)).add_done_callback(on_done)
+        done.wait(120)
+        took = time.monotonic() - t0
+        print(f"\n{burst} concurrent requests: {len(answered)} answered in {took:.1f} s "
+              f"({sum(r.ok for r in answered)} ok)")
+        assert len(answered) == burst and all(r.ok for r in answered)
+        assert planner.alive()
