@@ -112,6 +112,7 @@ class Scenario:
     marker: Marker
     blocking: Mapping[str, frozenset[str]] | None = None
     source: str = "<dict>"
+    auto_slots: bool = False  # slots from `slots: auto` (AUTO_SLOT_*); the motion planner checks them at start
     _by_id: dict[str, Bottle] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -154,10 +155,10 @@ class Scenario:
         ids = [b.id for b in bottles]
         if len(set(ids)) != len(ids):
             raise ScenarioError(f"{self.name}: duplicate object ids")
-        if len(bottles) > len(self.slots):
+        if len(bottles) > len(self.slots) and not self.auto_slots:
             raise ScenarioError(f"{self.name}: {len(bottles)} objects but only {len(self.slots)} slots")
         return Scenario(self.name, self.description, self.shelf, bottles, targets[0], self.slots,
-                        self.marker, None, self.source)
+                        self.marker, None, self.source, self.auto_slots)
 
     def slot(self, n_relocated: int) -> tuple[float, float]:
         """Destination on the bottom shelf of the object relocated after n_relocated others (fills in order)."""
@@ -206,12 +207,30 @@ def _shelf(d: Any) -> Shelf:
     return s
 
 
+# `slots: auto`: the layout of paper_experiment_10's explicit slots, which the arm reaches, derived from the shelf.
+# Two rows on the bottom shelf, AUTO_SLOT_ROWS behind its front edge, back row first so that a placement never reaches
+# past a placed bottle; in a row the central slots first (the outer ones are near the edge of the arm's reach),
+# AUTO_SLOT_SPACING apart so that the open hand fits between two bottles (hand 0.124 m wide: 25 mm to spare), and
+# at least AUTO_SLOT_WALL from a side panel (the open fingers reach 0.062 m beside the bottle's axis). A 0.80 m wide
+# shelf holds 12; a scene with more objects gets 12 (a relocation beyond the last slot is refused).
+# The motion planner checks at start that every auto slot is within the arm's reach (MotionPlanner, WorkspaceError).
+AUTO_SLOT_ROWS = (0.14, 0.06)  # m behind x_front: back row, front row
+AUTO_SLOT_SPACING = 0.12  # m between neighbours in a row
+AUTO_SLOT_WALL = 0.09  # m from a slot's axis to a side panel, at least
+
+
 def _default_slots(shelf: Shelf, n: int) -> tuple[tuple[float, float], ...]:
-    """Two rows on the bottom shelf, back row first so that a placement never reaches past a placed bottle."""
-    per_row = max(1, math.ceil(n / 2))
-    ys = [shelf.y_min + shelf.width * (k + 0.5) / per_row for k in range(per_row)]
-    back, front = shelf.x_front + 0.72 * shelf.depth, shelf.x_front + 0.35 * shelf.depth
-    return tuple((x, y) for x in (back, front) for y in ys)[:n]
+    """Up to n slots (see AUTO_SLOT_ROWS): rows that fit in the shelf's depth, positions symmetric about y_center."""
+    half = shelf.width / 2 - AUTO_SLOT_WALL
+    dys: list[float] = []
+    j = 0
+    while (j + 0.5) * AUTO_SLOT_SPACING <= half + 1e-9:
+        dys += [-(j + 0.5) * AUTO_SLOT_SPACING, (j + 0.5) * AUTO_SLOT_SPACING]
+        j += 1
+    if not dys and half >= 0:  # too narrow for two: one central column
+        dys = [0.0]
+    rows = [shelf.x_front + r for r in AUTO_SLOT_ROWS if shelf.x_front + r <= shelf.x_back - 0.06]
+    return tuple((round(x, 6), round(shelf.y_center + dy, 6)) for x in rows for dy in dys)[:n]
 
 
 def parse_scenario(data: Any, source: str = "<dict>") -> Scenario:
@@ -287,8 +306,11 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
                 raise ScenarioError(f"objects {a.id!r} and {b.id!r} overlap")
 
     slots_raw = data.get("slots", "auto")
-    if slots_raw == "auto":
+    auto = slots_raw == "auto"
+    if auto:
         slots = _default_slots(shelf, len(objects))
+        if not slots:
+            raise ScenarioError("slots: 'auto' finds no room on this bottom shelf; list the slots")
     elif isinstance(slots_raw, list) and len(slots_raw) >= len(objects):
         slots = tuple(_vec({"xy": s}, "xy", 2, f"slots[{k}]") for k, s in enumerate(slots_raw))
     else:
@@ -328,6 +350,7 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         marker=marker,
         blocking=blocking,
         source=source,
+        auto_slots=auto,
     )
 
 

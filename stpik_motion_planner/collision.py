@@ -1,7 +1,7 @@
 """Collision scene with python-fcl: arm capsules vs shelf boards vs bottles (the clearance tasks of Eq. 10).
 
-Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel) and the
-bottles of the scenario as cylinders; bottles already relocated may stand on the bottom shelf (`placed`).
+Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel), the floor, the
+pedestal under the robot and the bottles of the scenario as cylinders; bottles already relocated may stand on the bottom shelf (`placed`).
 The set of removed bottles is a parameter of every query (`CollisionScene.obstacles(removed)`).
 A numpy AABB broad phase keeps only the capsule/obstacle pairs closer than an activation distance; fcl
 computes their exact distances and witness points (in the base frame). fcl returns -1 on penetration.
@@ -42,6 +42,11 @@ class ObstacleSet:
         self.hi = np.array([o.hi for o in self.items]).reshape(-1, 3)
 
 
+def _key(o: Obstacle) -> str:
+    """What a query's `skip` names an obstacle by: the bottle id, or the board's name (e.g. "board:top_shelf")."""
+    return o.object_id if o.object_id is not None else o.name
+
+
 def _box(name: str, lo, hi) -> Obstacle:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(np.eye(3), (lo + hi) / 2))
@@ -56,17 +61,29 @@ def cylinder(name: str, object_id: str | None, x: float, y: float, z0: float, ra
                     np.array([x + radius, y + radius, z0 + height]))
 
 
+# The rest of the world of the simulator's scene (jaco2_sim_driver/scene.py, which this layer cannot import; the
+# independent motion checker in the tests replays plans in that scene and finds any difference): the floor
+# FLOOR_DROP below the bottom board, the shelf's side and back panels down to it, the pedestal under the robot base.
+FLOOR_DROP = 0.30
+PEDESTAL = ((-0.11, -0.09), (0.07, 0.09))  # (x, y) of its lower and upper corners; its top is the base frame z = 0
+
+
 def shelf_boards(scenario: Scenario) -> list[Obstacle]:
+    """The boards, the floor and the pedestal (named board:*: a query's `skip` may name them)."""
     s = scenario.shelf
     t = s.board_thickness
     x0, x1, y0, y1 = s.x_front, s.x_back, s.y_min, s.y_max
+    floor = s.bottom_z - FLOOR_DROP
+    (px0, py0), (px1, py1) = PEDESTAL
     return [
         _box("board:top_shelf", (x0, y0, s.top_z - t), (x1, y1, s.top_z)),
         _box("board:ceiling", (x0, y0, s.ceiling_z), (x1, y1, s.ceiling_z + t)),
         _box("board:bottom_shelf", (x0, y0, s.bottom_z - t), (x1, y1, s.bottom_z)),
-        _box("board:side_right", (x0, y0 - t, s.bottom_z - t), (x1, y0, s.ceiling_z + t)),
-        _box("board:side_left", (x0, y1, s.bottom_z - t), (x1, y1 + t, s.ceiling_z + t)),
-        _box("board:back", (x1, y0 - t, s.bottom_z - t), (x1 + t, y1 + t, s.ceiling_z + t)),
+        _box("board:side_right", (x0, y0 - t, floor), (x1, y0, s.ceiling_z + t)),
+        _box("board:side_left", (x0, y1, floor), (x1, y1 + t, s.ceiling_z + t)),
+        _box("board:back", (x1, y0 - t, floor), (x1 + t, y1 + t, s.ceiling_z + t)),
+        _box("board:floor", (-1.5, -1.5, floor - 0.1), (1.5, 1.5, floor)),
+        _box("board:pedestal", (px0, py0, floor), (px1, py1, 0.0)),
     ]
 
 
@@ -108,9 +125,11 @@ class CapsuleSpec:
     centre: np.ndarray
     length: float
     cylinder: bool = False  # a cylinder between p0 and p1 instead of a capsule (for obstacles)
+    clearance: float | None = None  # its own clearance bound to obstacles (None: the planner's)
 
 
-def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = False) -> CapsuleSpec:
+def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = False,
+                 clearance: float | None = None) -> CapsuleSpec:
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     axis = p1 - p0
     length = float(np.linalg.norm(axis))
@@ -118,16 +137,19 @@ def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = F
     x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
     x /= np.linalg.norm(x)
     return CapsuleSpec(name, link, p0, p1, radius, np.column_stack([x, np.cross(z, x), z]), (p0 + p1) / 2, length,
-                       cylinder)
+                       cylinder, clearance)
 
 
-def carried_bottle(radius: float, height: float, trim: float, standoff: float = 0.0) -> CapsuleSpec:
-    """The grasped bottle as a cylinder on link 7 (tool y is vertical, the bottle's centre `standoff` beyond the
-    tool origin along tool z), shortened by `trim` at both ends so that a bottle standing on a board keeps `trim`
-    of clearance to it."""
-    half = max(height / 2 - trim, 0.01)
+def carried_bottle(radius: float, height: float, standoff: float = 0.0,
+                   clearance: float | None = None) -> CapsuleSpec:
+    """The grasped bottle at its real size: a cylinder on link 7 (tool y is vertical, the bottle's centre `standoff`
+    beyond the tool origin along tool z, the tool at its mid-height, as `grasp.side_grasp` places it).
+    `clearance`: its bound to obstacles (None: the arm's). Contact where it is intended (the board the bottle stands
+    on while it is lifted) is exempted by the caller with the `skip` of a query, never by shrinking the model."""
+    half = height / 2
     z = rd.D67 + standoff
-    return capsule_spec("carried", rd.LINK_NAMES[6], (0, -half, z), (0, half, z), radius, cylinder=True)
+    return capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -half, z), (0, half, z), radius, cylinder=True,
+                        clearance=clearance)
 
 
 def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0):
@@ -137,6 +159,7 @@ def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0):
 
 
 HAND_PARTS = ("palm", "finger_1", "finger_2", "finger_3")
+CARRIED = "carried"  # name of the attached bottle's shape
 
 
 class ArmGeometry:
@@ -153,10 +176,11 @@ class ArmGeometry:
         self.index = {n: i for i, n in enumerate(names)}
         # base and shoulder never leave the robot's pedestal: not checked against the shelf
         self.moving = np.array([i for i, s in enumerate(self.specs) if s.name not in ("base", "shoulder")])
-        hand = set(HAND_PARTS) | {"wrist", "carried"}
+        hand = set(HAND_PARTS) | {"wrist", CARRIED}
         # forearm-palm: the wrist capsule lies between them; within joint 6's limits (Table 6) they stay more
-        # than 0.02 m apart, so the pair is left out like the adjacent ones.
-        adjacent = set(rd.ADJACENT) | {frozenset(("carried", h)) for h in hand} | {frozenset(("forearm", "palm"))}
+        # than 0.02 m apart, so the pair is left out like the adjacent ones. The carried bottle and the hand holding
+        # it: fixed to each other (the fingers touch it by design).
+        adjacent = set(rd.ADJACENT) | {frozenset((CARRIED, h)) for h in hand} | {frozenset(("forearm", "palm"))}
         self.self_pairs = [(i, j) for i in range(self.n) for j in range(i + 1, self.n)
                            if frozenset((names[i], names[j])) not in adjacent]
         self._si = np.array([i for i, _ in self.self_pairs])
@@ -200,12 +224,13 @@ class ArmGeometry:
 
     def obstacle_distances(self, obs: ObstacleSet, d_act: float, skip: dict[str, frozenset] | None = None):
         """[(capsule index, obstacle, distance, point on capsule, point on obstacle)] for pairs nearer than d_act
-        (by AABB). Distance PENETRATION (-1) means intersecting. `skip`: capsule name -> object ids to ignore."""
+        (by AABB). Distance PENETRATION (-1) means intersecting. `skip`: capsule name -> object ids (bottles) or
+        board names ("board:top_shelf") to ignore."""
         out = []
         req = fcl.DistanceRequest(enable_nearest_points=True)
         for ci, oi in zip(*self.near_pairs(obs, d_act)):
             o = obs.items[oi]
-            if skip and o.object_id is not None and o.object_id in skip.get(self.specs[ci].name, ()):
+            if skip and _key(o) in skip.get(self.specs[ci].name, ()):
                 continue
             res = fcl.DistanceResult()
             d = fcl.distance(self._fcl(ci), o.obj, req, res)
@@ -249,14 +274,21 @@ class HandProxy:
     a tool pose, inflated by `margin`: the validity check of the Cartesian RRT-Connect (no IK needed)."""
 
     FOREARM_STUB = 0.12
+    # the stub stands for the forearm near the hand; at a staging pose low in front of the bottom shelf it points
+    # back at the pedestal, which the real forearm (rising to the elbow) stays far above: STPIK checks the arm
+    STUB_IGNORES = ("board:pedestal",)
 
-    def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = ()) -> None:
+    def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = (), attached_margin: float | None = None
+                 ) -> None:
+        """`attached_margin`: inflation of the attached shapes (default `margin`)."""
         by = {c.name: c for c in rd.CAPSULES}
         specs = [capsule_spec(n, by[n].link, by[n].p0, by[n].p1, by[n].radius) for n in ("wrist",) + HAND_PARTS]
         specs.append(capsule_spec("forearm_stub", rd.LINK_NAMES[6], (0, 0, 0), (0, 0, -self.FOREARM_STUB), 0.04))
+        am = margin if attached_margin is None else attached_margin
+        margins = [margin] * len(specs) + [am] * len(attached)
         self.specs = specs + list(attached)
-        self.objs = [fcl.CollisionObject(_fcl_shape(s, margin), fcl.Transform()) for s in self.specs]
-        self.reach = np.array([s.radius + margin for s in self.specs])
+        self.objs = [fcl.CollisionObject(_fcl_shape(s, m), fcl.Transform()) for s, m in zip(self.specs, margins)]
+        self.reach = np.array([s.radius + m for s, m in zip(self.specs, margins)])
         self.p0 = np.array([s.p0 for s in self.specs])
         self.p1 = np.array([s.p1 for s in self.specs])
         self.req = fcl.CollisionRequest()
@@ -274,7 +306,7 @@ class HandProxy:
         for c, k in zip(ci, oi):
             o = obs.items[k]
             s = self.specs[c]
-            if skip and o.object_id is not None and o.object_id in skip.get(s.name, ()):
+            if skip and _key(o) in skip.get(s.name, ()) or s.name == "forearm_stub" and o.name in self.STUB_IGNORES:
                 continue
             if c not in posed:
                 self.objs[c].setTransform(fcl.Transform(r_tool @ s.rot, r_tool @ s.centre + p7))

@@ -23,9 +23,10 @@ from relocation_common.config import node_section
 from relocation_common.paths import config_file
 
 from . import robot_description as rd
-from .collision import HAND_PARTS, PENETRATION, ArmGeometry, CollisionScene, HandProxy, ObstacleSet, carried_bottle
-from .grasp import (Grasp, WorkspaceError, grasp_standoff, grasp_yaws, home_pose, lift_pose, place_poses,
-                    side_grasp)
+from .collision import (CARRIED, HAND_PARTS, PENETRATION, ArmGeometry, CollisionScene, HandProxy, ObstacleSet,
+                        carried_bottle)
+from .grasp import (Grasp, WorkspaceError, carry_heights, check_pose, exit_pose, grasp_standoff, grasp_yaws, home_pose,
+                    place_poses, side_grasp)
 from .kinematics import Kinematics
 from .rrt import CartesianRRT, JointRRT, seed_ompl
 from relocation_common.scenario import Scenario, UnknownObjectError
@@ -51,8 +52,11 @@ class PlannerParams:
     resolution: float = 0.01  # m: motion checking resolution of the Cartesian planner
     joint_resolution: float = 0.01  # rad: of the joint-space planner
     simplify_time: float = 0.005  # s of OMPL path simplification
-    lift: float = 0.03  # m, after the grasp
-    drop: float = 0.012  # m, bottle base above the bottom shelf at release
+    lift: float = 0.03  # m, after the grasp (at least carried_clearance + stpik.act: grasp.carry_heights)
+    drop: float = 0.012  # m, bottle base above the bottom shelf at release (at most half the room: carry_heights)
+    carried_clearance: float = 0.005  # m, the carried bottle (real size) to boards and bottles
+    carry_ramp: float = 0.25  # s to full speed and to a stop at each waypoint of the carry and retreat (0: none)
+    carry_accel: float = 3.0  # rad/s^2, joint accelerations while a bottle is held (0: no limit)
     stage_distance: float = 0.30  # m, staging pose in front of the slot
     carry_timeout: float = 2.0  # s for plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
@@ -63,8 +67,8 @@ class PlannerParams:
     def __post_init__(self) -> None:
         """Every setting checked once, with its name in the error (ValueError)."""
         positive = ("timeout", "rrt_timeout", "pre_grasp_distance", "resolution", "joint_resolution",
-                    "stage_distance", "carry_timeout")
-        non_negative = ("max_yaw", "hand_margin", "simplify_time", "lift", "drop")
+                    "stage_distance", "carry_timeout", "carried_clearance")
+        non_negative = ("max_yaw", "hand_margin", "simplify_time", "lift", "drop", "carry_ramp", "carry_accel")
         for k in positive + non_negative:
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
@@ -157,6 +161,11 @@ class MotionPlanner:
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
         self._pick_end: dict[tuple[str, frozenset], np.ndarray] = {}
+        if scenario.auto_slots:  # `slots: auto` must give slots the arm reaches (explicit ones: per relocation)
+            bad = self.slot_problems()
+            if bad:
+                raise WorkspaceError(f"{scenario.source}: slots 'auto' gives {len(bad)} slot(s) out of the arm's "
+                                     f"reach; list reachable slots in the scenario. First: {bad[0]}")
 
     # ---------------------------------------------------------------- input checks
     def _check(self, object_id: str, removed: Iterable[str]) -> frozenset[str]:
@@ -169,6 +178,45 @@ class MotionPlanner:
         if object_id in removed:
             raise ValueError(f"object {object_id!r} is in the removed set: it is no longer on the shelf")
         return removed
+
+    def _carry_heights(self, object_id: str) -> tuple[float, float]:
+        """(lift, release height) of the object carried at its real size (grasp.carry_heights); WorkspaceError if
+        it is too tall for the compartments."""
+        p = self.params
+        return carry_heights(self.scenario, object_id, p.carried_clearance + p.stpik.act, p.lift, p.drop)
+
+    def slot_problems(self) -> list[str]:
+        """Why some of the scenario's slots cannot take a bottle (empty if all can): not on the bottom shelf with room
+        for the open hand beside it, or the place or staging pose of a bottle of any size in the scene out of the
+        arm's reach (grasp.check_pose)."""
+        sc, p = self.scenario, self.params
+        s = sc.shelf
+        hand = max(abs(c.p1[0]) + c.radius for c in rd.CAPSULES if c.name.startswith("finger"))
+        sizes: dict[tuple[float, float], str] = {}
+        for b in sc.objects:
+            sizes.setdefault((b.radius, b.height), b.id)
+        out = []
+        for k, (x, y) in enumerate(sc.slots):
+            where = f"slot {k} {(round(x, 3), round(y, 3))}"
+            r = max(rad for rad, _ in sizes)
+            if not (s.x_front + r <= x <= s.x_back - r):
+                out.append(f"{where} is not on the bottom shelf (x {s.x_front:.2f}-{s.x_back:.2f})")
+                continue
+            if not (s.y_min + hand + p.stpik.clearance <= y <= s.y_max - hand - p.stpik.clearance):
+                out.append(f"{where}: no room for the open hand ({hand:.3f} m beside the axis) before a side panel")
+                continue
+            for oid in sizes.values():
+                try:
+                    _, release = self._carry_heights(oid)
+                except WorkspaceError:
+                    continue  # a bottle that cannot be carried at all is answered UNFEASIBLE, not placed
+                try:
+                    stage, _ = place_poses(sc, oid, (x, y), release, p.stage_distance)
+                    check_pose(stage, f"staging pose of {oid} for {where}")
+                except WorkspaceError as e:
+                    out.append(str(e))
+                    break
+        return out
 
     # ---------------------------------------------------------------- Cartesian validity
     def _path_clear(self, poses, obs: ObstacleSet, hand: HandProxy, skip=None) -> bool:
@@ -224,10 +272,10 @@ class MotionPlanner:
         return path
 
     def _track(self, q0, path, obs, deadline, stats, skip=None, arm: ArmGeometry | None = None,
-               speed: float | None = None) -> StpikResult:
+               speed: float | None = None, ramp: float = 0.0, accel: float = 0.0) -> StpikResult:
         t = time.perf_counter()
         stpik = self.stpik if arm is None else Stpik(self.kin, arm, self.params.stpik)
-        r = stpik.track(q0, path, obs, deadline, skip, speed=speed)
+        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel)
         stats.stpik_time += time.perf_counter() - t
         if not r.ok:
             stats.stpik_reject.append(r.reason)
@@ -255,6 +303,10 @@ class MotionPlanner:
 
     def _pick(self, object_id, removed, deadline, stats) -> tuple[Trajectory | None, int, str]:
         p = self.params
+        try:
+            self._carry_heights(object_id)
+        except WorkspaceError as e:  # it could be grasped but not carried away: not a relocation
+            return None, 0, str(e)
         obs = self.scene.obstacles(removed)
         cands = self._candidates(object_id, obs)
         if not cands:
@@ -307,9 +359,24 @@ class MotionPlanner:
                    placed: list[tuple[str, tuple[float, float]]] | None = None) -> list[Segment]:
         """From the grasp (q_start, default: the end of the last plan_pick/feasibility of this object and set):
         lift, out of the shelf, down to the slot on the bottom shelf (`scenario.slot(slot_index)`), release
-        ('open'), and retreat to the front of the bottom shelf."""
+        ('open'), and retreat to the front of the bottom shelf.
+
+        The bottle is modelled at its real size on the hand (STPIK's arm geometry and the Cartesian planner's hand
+        proxy) with its own clearance bound `carried_clearance`; it may touch only the board it stands on, and only
+        while it is lifted straight up off it (`lift` >= carried_clearance + stpik.act, so it clears the board
+        before any motion out of the shelf). Then straight back out of the shelf at that height (or RRT-Connect if
+        that is blocked), to the staging pose in front of the slot, and straight in at the release height. Raises
+        PlanningError naming the stage that failed (a slot or a pose out of reach included)."""
         removed = self._check(object_id, removed)
-        slot = self.scenario.slot(slot_index)
+        what = f"carry of {object_id!r} to slot {slot_index}"
+        try:
+            slot = self.scenario.slot(slot_index)
+            lift, release = self._carry_heights(object_id)
+            stage, place = (np.array(x) for x in place_poses(self.scenario, object_id, slot, release,
+                                                               self.params.stage_distance))
+            check_pose(stage, f"staging pose for slot {slot_index}")
+        except (ValueError, WorkspaceError) as e:
+            raise PlanningError(f"{what}: {e}") from None
         if q_start is None:
             q_start = self._pick_end.get((object_id, removed))
             if q_start is None:
@@ -321,38 +388,65 @@ class MotionPlanner:
         b = self.scenario.object(object_id)
         placed = self.placed_default(removed, slot_index) if placed is None else list(placed)
         scene = CollisionScene(self.scenario, placed)
-        gone = removed | {object_id}
-        obs = scene.obstacles(gone)
-        trim = p.stpik.clearance + p.drop + 0.002
-        carried = carried_bottle(b.radius, b.height, trim, grasp_standoff(b.radius))
+        obs = scene.obstacles(removed | {object_id})
+        carried = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), p.carried_clearance)
         arm_c = ArmGeometry(self.kin, [carried])
-        hand_c = HandProxy(p.hand_margin, [carried])
+        hand_c = HandProxy(p.hand_margin, [carried], attached_margin=p.carried_clearance + p.stpik.act)
         self.kin.update(q_start, jacobians=False)
         rot, pos = self.kin.tool_pose()
         start = np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
-        lifted = np.array(lift_pose(Grasp(object_id, start[3], tuple(start), tuple(start)), p.lift))
-        stage, place = (np.array(x) for x in place_poses(self.scenario, object_id, slot, p.drop, p.stage_distance))
-        carry = None
+        lifted = start + np.array([0.0, 0.0, lift, 0.0])
+        # 1. lift straight up: the only leg where the bottle may touch a board, the one it stands on
+        support = {CARRIED: frozenset(["board:top_shelf"])}
+        up = self._track(q_start, [start, lifted], obs, deadline, stats, skip=support, arm=arm_c,
+                         speed=p.stpik.approach_speed, ramp=p.carry_ramp,
+                         accel=p.carry_accel)
+        if not up.ok:
+            raise PlanningError(f"{what}: lift: {up.reason}")
+        # 2. out of the shelf at that height, to the staging pose, in to the slot at the release height
+        out = np.array(exit_pose(self.scenario, object_id, lifted, p.hand_margin))
+        carry, last = None, "no Cartesian path out of the shelf"
         for attempt in range(p.max_attempts):
-            mid = self._cartesian_path(lifted, stage, obs, hand_c, max(1e-3, min(0.3, deadline - time.perf_counter())),
-                                       stats, attempt == 0)
-            if mid is None:
-                continue
-            r = self._track(q_start, [start] + mid + [place], obs, deadline, stats, arm=arm_c)
-            if r.ok:
-                carry = r
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                last = f"timeout ({last})"
                 break
+            if attempt == 0 and p.direct_first and self._path_clear([lifted, out, stage], obs, hand_c):
+                stats.direct_paths += 1
+                mid = [lifted, out, stage]
+            else:
+                t = time.perf_counter()
+                mid = self.rrt.plan(lifted, stage, lambda s_: not hand_c.collides(*_mat(s_), obs),
+                                    min(p.rrt_timeout * 4, left))
+                stats.rrt_time += time.perf_counter() - t
+                stats.rrt_calls += 1
+                if mid is None:
+                    continue
+            r = self._track(up.q[-1], mid, obs, deadline, stats, arm=arm_c, ramp=p.carry_ramp, accel=p.carry_accel)
+            if not r.ok:
+                last = f"out of the shelf: {r.reason}"
+                continue
+            # in to the slot at approach speed: 10 mm above and below the bottle in the shipped shelf's bottom
+            # compartment, and the clearance tasks must not freeze it at the front edge
+            r2 = self._track(r.q[-1], [stage, place], obs, deadline, stats, arm=arm_c, speed=p.stpik.approach_speed,
+                             ramp=p.carry_ramp, accel=p.carry_accel)
+            if r2.ok:
+                carry = (r, r2)
+                break
+            last = f"in to the slot: {r2.reason}"
         if carry is None:
-            raise PlanningError(f"carry of {object_id!r} to slot {slot_index}: "
-                                f"{stats.stpik_reject[-1] if stats.stpik_reject else 'no Cartesian path'}")
+            raise PlanningError(f"{what}: {last}")
         scene2 = CollisionScene(self.scenario, placed + [(object_id, slot)])
         obs2 = scene2.obstacles(removed | {object_id})
         skip = {n: frozenset([f"placed:{object_id}"]) for n in HAND_PARTS}
-        back = self._track(carry.q[-1], [place, stage], obs2, time.perf_counter() + p.carry_timeout, stats,
-                           skip=skip)
+        back = self._track(carry[1].q[-1], [place, stage], obs2, time.perf_counter() + p.carry_timeout, stats,
+                           skip=skip, ramp=p.carry_ramp)
         if not back.ok:
             raise PlanningError(f"retreat after placing {object_id!r}: {back.reason}")
-        return [Segment("carry", Trajectory.from_steps(carry.q, carry.qdot, carry.dt, "carry").resample(), "open"),
+        moving = Trajectory.from_steps(up.q, up.qdot, up.dt, "lift").then(
+            Trajectory.from_steps(carry[0].q, carry[0].qdot, carry[0].dt, "carry")).then(
+            Trajectory.from_steps(carry[1].q, carry[1].qdot, carry[1].dt, "place"))
+        return [Segment("carry", moving.resample(), "open"),
                 Segment("retreat", Trajectory.from_steps(back.q, back.qdot, back.dt, "retreat").resample(), None)]
 
     def joint_valid(self, q, obs: ObstacleSet, arm: ArmGeometry | None = None, margin: float = 0.0) -> bool:

@@ -103,10 +103,46 @@ def lift_pose(grasp: Grasp, lift: float) -> tuple[float, float, float, float]:
     return (x, y, z + lift, yaw)
 
 
+def carry_heights(scenario: Scenario, object_id: str, clearance: float, lift: float, drop: float
+                  ) -> tuple[float, float]:
+    """(lift, release height) of a bottle carried at its real size, keeping `clearance` to the boards above and
+    below it: the lift off the top shelf (at least `clearance` so that the bottle clears the board before it moves
+    out, at most what leaves `clearance` under the ceiling board; `lift` if that is within) and the height of its
+    base above the bottom shelf while it is moved in and released (`drop`, or half of the room if that is less:
+    the bottom compartment of the shipped shelf is 0.18 m high for 0.16 m bottles). WorkspaceError if the bottle is
+    too tall for either compartment."""
+    b = scenario.object(object_id)
+    s = scenario.shelf
+    top_room = s.ceiling_z - s.top_z - b.height
+    if top_room < 2 * clearance:
+        raise WorkspaceError(f"{object_id} ({b.height:.3f} m tall) cannot be lifted off the top shelf keeping "
+                             f"{clearance * 1000:.0f} mm to its boards: {top_room * 1000:.0f} mm to spare")
+    bottom_room = s.top_z - s.board_thickness - s.bottom_z - b.height
+    release = min(drop, bottom_room / 2)
+    if release < clearance:
+        raise WorkspaceError(f"{object_id} ({b.height:.3f} m tall) does not fit in the bottom compartment keeping "
+                             f"{clearance * 1000:.0f} mm to its boards: {bottom_room * 1000:.0f} mm to spare")
+    return min(max(lift, clearance), top_room - clearance), release
+
+
+def exit_pose(scenario: Scenario, object_id: str, pose, margin: float) -> tuple[float, float, float, float]:
+    """`pose` moved back against its approach direction, at its height, until the held bottle (its axis
+    `grasp_standoff` beyond the tool) is `margin` in front of the shelf's front edge: out of the shelf."""
+    b = scenario.object(object_id)
+    x, y, z, yaw = (float(v) for v in pose)
+    c = math.cos(yaw)
+    need = x + grasp_standoff(b.radius) * c - (scenario.shelf.x_front - b.radius - margin)
+    if need <= 0.0:
+        return (x, y, z, yaw)
+    back = need / c
+    return (x - back * c, y - back * math.sin(yaw), z, yaw)
+
+
 def place_poses(scenario: Scenario, object_id: str, slot_xy: tuple[float, float], drop: float,
                 stage_distance: float) -> tuple[tuple, tuple]:
     """(staging pose in front of the bottom shelf, place pose at the slot), approach straight in (yaw 0).
-    The tool is at the bottle's mid-height with the bottle's base `drop` above the bottom shelf."""
+    The tool is at the bottle's mid-height with the bottle's base `drop` above the bottom shelf (the release height
+    of `carry_heights`)."""
     b = scenario.object(object_id)
     z = scenario.shelf.bottom_z + drop + b.height / 2
     place = (slot_xy[0] - grasp_standoff(b.radius), slot_xy[1], z, 0.0)

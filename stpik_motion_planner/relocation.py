@@ -1,19 +1,24 @@
 """One relocation on a real or simulated arm (ROS-free): the sequence the RelocateObject action carries out.
 
-home check -> plan_pick -> approach -> close the gripper -> plan_carry from the measured configuration -> carry ->
-open -> retreat -> plan_home -> home. The destination is slot `len(removed)` of the bottom shelf (objects go
-there in relocation order) and the objects already relocated stand in the earlier slots. The arm is anything
-that implements `Arm`: the motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
+plan the whole relocation (pick, carry, retreat, home) -> [the way home first, if the arm is away from it] ->
+approach -> close the gripper -> re-plan the carry from the measured configuration (the plan made before is kept if
+that fails) -> carry -> open -> retreat -> re-plan home from the measured configuration (idem) -> home.
+Nothing moves before the whole relocation is planned, so a carry that cannot be planned never leaves the arm
+holding a bottle. The destination is slot `len(removed)` of the bottom shelf (objects go there in relocation order)
+and the objects already relocated stand in the earlier slots. The arm is anything that implements `Arm`: the
+motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
 """
 from __future__ import annotations
 
 from contextlib import nullcontext
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
 from . import robot_description as rd
-from .feasibility import MotionPlanner
+from .feasibility import MotionPlanner, PlanningError
+from .grasp import WorkspaceError
 from .trajectory import Trajectory
 
 # progress (0..1) of the whole relocation at the start of each phase, in order
@@ -35,35 +40,77 @@ class Arm(Protocol):
         """A planning phase starts (progress reporting)."""
 
 
-def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float = 0.05,
-             lock=None) -> None:
-    """Relocate object_id to its slot; PlanningError (or the arm's error) names the failed stage. `lock` guards
-    the planner (not thread-safe) while it plans, not while the arm moves."""
-    lock = lock if lock is not None else nullcontext()
+@dataclass
+class RelocationPlan:
+    """Every motion of one relocation, planned from the home configuration before the arm moves."""
+
+    object_id: str
+    slot_index: int
+    placed: list  # (id, slot xy) of the objects on the bottom shelf before this one
+    pick: Trajectory  # home -> pre-grasp -> grasp, then close
+    carry: Trajectory  # lift, out of the shelf, in to the slot, then open
+    retreat: Trajectory  # back to the staging pose
+    home: Trajectory  # staging pose -> home
+
+
+def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str]) -> RelocationPlan:
+    """The whole relocation of object_id to slot len(removed), the objects of `removed` (in relocation order) in the
+    earlier slots. PlanningError names the stage that failed (an unreachable pose or slot included)."""
     removed = list(removed)
     slots = planner.scenario.slots
-    placed = [(r, slots[k]) for k, r in enumerate(removed)]
+    k = len(removed)
+    if k >= len(slots):
+        raise PlanningError(f"no free slot for {object_id!r}: {k} objects relocated, the scenario has "
+                            f"{len(slots)} slots")
+    placed = [(r, slots[j]) for j, r in enumerate(removed)]
+    try:
+        (pick,) = planner.plan_pick(object_id, removed)
+    except WorkspaceError as e:
+        raise PlanningError(f"pick of {object_id!r}: {e}") from None
+    carry, retreat = planner.plan_carry(object_id, removed, k, q_start=pick.trajectory.positions[-1], placed=placed)
+    home = planner.plan_home(retreat.trajectory.positions[-1], removed + [object_id],
+                             placed + [(object_id, slots[k])])
+    return RelocationPlan(object_id, k, placed, pick.trajectory, carry.trajectory, retreat.trajectory, home)
+
+
+def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float = 0.05,
+             lock=None) -> RelocationPlan:
+    """Relocate object_id to its slot; PlanningError (or the arm's error) names the failed stage. `lock` guards
+    the planner (not thread-safe) while it plans, not while the arm moves. Returns the plan made before moving."""
+    lock = lock if lock is not None else nullcontext()
+    removed = list(removed)
+    arm.phase("plan_pick")
+    with lock:
+        plan = plan_relocation(planner, object_id, removed)
+    slot = planner.scenario.slots[plan.slot_index]
     q = arm.measured()
     if float(np.max(np.abs(q - rd.Q_HOME))) > home_tol:
         arm.phase("plan_home")
         with lock:
-            home = planner.plan_home(q, removed, placed)
+            home = planner.plan_home(q, removed, plan.placed)
         arm.follow(home, "home")
-    arm.phase("plan_pick")
-    with lock:
-        (pick,) = planner.plan_pick(object_id, removed)
-    arm.follow(pick.trajectory, "approach")
+    arm.follow(plan.pick, "approach")
     arm.gripper("close", "grasp")
     arm.phase("plan_carry")
+    carry, retreat = plan.carry, plan.retreat
     q = arm.measured()
     with lock:
-        carry, retreat = planner.plan_carry(object_id, removed, len(removed), q_start=q, placed=placed)
-    arm.follow(carry.trajectory, "carry")
+        try:  # from where the arm really is; the plan made before is within the follower's settling tolerance
+            c, r = planner.plan_carry(object_id, removed, plan.slot_index, q_start=q, placed=plan.placed)
+            carry, retreat = c.trajectory, r.trajectory
+        except PlanningError:
+            pass
+    arm.follow(carry, "carry")
     arm.gripper("open", "release")
-    arm.follow(retreat.trajectory, "retreat")
+    arm.follow(retreat, "retreat")
     arm.phase("plan_home")
+    home = plan.home
     q = arm.measured()
     with lock:
-        home = planner.plan_home(q, removed + [object_id], placed + [(object_id, slots[len(removed)])])
+        try:
+            home = planner.plan_home(q, removed + [object_id], plan.placed + [(object_id, slot)])
+        except PlanningError:
+            pass
     arm.follow(home, "home")
     arm.phase("done")
+    return plan
