@@ -1,0 +1,225 @@
+"""Every planned motion of the demo sequence of every shipped scene, replayed in the project's MuJoCo model by an
+independent checker (test/motion_checker.py): nothing touches anything it is not meant to touch.
+
+The demo sequence of a scene is its exact optimum (qtree_task_planner.exact.solve with the real planner as the
+oracle): each obstacle of it, then the target, relocated in that order with relocation.plan_relocation (pick,
+carry, retreat, home planned before the arm would move). Also: a sample of feasibility answers (picks), scenes with
+bottles of other sizes, and the slots and planning errors of issue 13.
+"""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from motion_checker import MotionChecker, Report, replay_relocation
+from qtree_task_planner.exact import solve
+from relocation_common.feasibility import Label
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario, parse_scenario
+from stpik_motion_planner import robot_description as rd
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
+from stpik_motion_planner.grasp import WorkspaceError
+from stpik_motion_planner.relocation import plan_relocation, relocate
+
+PARAMS = PlannerParams.load()
+ARM_CLEARANCE = PARAMS.stpik.clearance - 0.002  # the planner's bound less the interpolation between IK samples
+CARRIED_CLEARANCE = PARAMS.carried_clearance - 0.002
+SCENES = sorted(p for p in scenarios_dir().glob("*.yaml") if not p.stem.startswith("blocking_"))
+RANDOM = sorted((scenarios_dir() / "random5").glob("*.yaml"))
+TOTAL = Report()  # over the module, for the summary line
+
+
+def planner_for(scenario):
+    # answers must not depend on machine load: 5 s per query instead of the 0.5 s default
+    return MotionPlanner(scenario, dataclasses.replace(PARAMS, timeout=5.0))
+
+
+def check_sequence(scenario, planner, sequence) -> Report:
+    checker = MotionChecker(scenario)
+    rep = Report()
+    done = []
+    for oid in sequence:
+        plan = plan_relocation(planner, oid, done)
+        rep.merge(replay_relocation(checker, plan.pick, [plan.carry, plan.retreat], plan.home, oid))
+        done.append(oid)
+    return rep
+
+
+def assert_clean(rep: Report, what: str) -> None:
+    print(f"{what}: {rep.summary()}")
+    TOTAL.merge(rep)
+    assert rep.contacts == [], "\n".join(map(str, rep.contacts))
+    assert rep.min_arm >= ARM_CLEARANCE, rep.min_arm_at
+    assert rep.min_carried >= CARRIED_CLEARANCE, rep.min_carried_at
+    assert rep.support_depth <= 0.001
+
+
+@pytest.mark.parametrize("path", SCENES + RANDOM, ids=lambda p: p.stem)
+def test_demo_sequence_touches_nothing_but_the_grasped_bottle(path):
+    scenario = load_scenario(path)
+    planner = planner_for(scenario)
+    result = solve(scenario, planner)
+    assert result.found, scenario.name
+    rep = check_sequence(scenario, planner, result.sequence)
+    assert rep.segments == 4 * len(result.sequence)
+    assert_clean(rep, f"{scenario.name} {'-'.join(result.sequence)}")
+
+
+def test_the_blocking_scenes_are_not_relocation_scenes():
+    """blocking_*.yaml are test scenes of the Q-Tree layer (BlockingOracle) on the first shelf geometry, which the
+    arm does not reach: the real planner frees no target there, so no demo runs on them."""
+    for path in sorted(scenarios_dir().glob("blocking_*.yaml")):
+        scenario = load_scenario(path)
+        assert not solve(scenario, planner_for(scenario)).found, scenario.name
+
+
+def test_a_sample_of_feasibility_answers_touches_nothing():
+    """Every object of three scenes asked with no object removed and with each prefix of the demo sequence
+    removed; every feasible answer's trajectory (home -> pre-grasp -> grasp) replayed."""
+    rep, answers = Report(), 0
+    for name in ("paper_experiment_10", "scenario3_15", "random5/random5_04"):
+        scenario = load_scenario(name)
+        planner = planner_for(scenario)
+        seq = solve(scenario, planner).sequence
+        for k in range(len(seq)):
+            removed = frozenset(seq[:k])
+            for oid in scenario.ids:
+                if oid in removed:
+                    continue
+                ans = planner.feasibility(oid, removed)
+                if ans.label == Label.UNFEASIBLE:
+                    continue
+                answers += 1
+                c = MotionChecker(scenario)
+                _move_to_slots(c, scenario, seq[:k])  # the relocated ones stand in their slots
+                rep.merge(c.check(ans.trajectory, f"{name}:{oid}|{','.join(sorted(removed))}", picking=oid,
+                                  approach_from=dict(ans.trajectory.phases)["approach"]))
+    assert answers >= 20
+    assert_clean(rep, f"{answers} feasibility answers")
+
+
+def _move_to_slots(checker, scenario, relocated):
+    import mujoco
+    for k, oid in enumerate(relocated):
+        a = checker._free[oid]
+        x, y = scenario.slot(k)
+        checker.data.qpos[a:a + 3] = (x, y, scenario.shelf.bottom_z)
+    mujoco.mj_kinematics(checker.model, checker.data)
+
+
+def test_the_checker_sees_a_bottle_pushed_into_its_board():
+    """The checker is not blind: the hand lowered by 1 cm after the grasp (the planner without the bottle in its
+    model) drives the bottle 1 cm into the top board, which the checker reports, and the true carry does not."""
+    scenario = load_scenario("paper_experiment_10")
+    planner = planner_for(scenario)
+    (pick,) = planner.plan_pick("o2", [])
+    q = pick.trajectory.positions[-1]
+    planner.kin.update(q, jacobians=False)
+    rot, pos = planner.kin.tool_pose()
+    start = np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
+    obs = planner.scene.obstacles({"o2"})
+    down = planner.stpik.track(q, [start, start - [0, 0, 0.01, 0]], obs, math.inf, speed=0.05)
+    assert down.ok, down.reason
+    from stpik_motion_planner.trajectory import Trajectory
+    checker = MotionChecker(scenario)
+    checker.check(pick.trajectory, "pick", picking="o2", approach_from=dict(pick.trajectory.phases)["approach"])
+    checker.grasp("o2")
+    checker.support_band = 0.0  # no lift exemption: every contact with the board counts
+    rep = checker.check(Trajectory.from_steps(down.q, down.qdot, down.dt, "down").resample(), "down")
+    deepest = {(c.geom1, c.geom2): -c.distance for c in rep.contacts}
+    assert deepest.get(("o2_geom", "shelf_top_board"), 0.0) == pytest.approx(0.01, abs=0.002), rep.contacts
+
+
+# ------------------------------------------------------------------ bottle sizes
+SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
+         "ceiling_z": 0.28, "bottom_z": -0.18}
+MARKER = {"id": 7, "size": 0.07, "position": [0.625, -0.345, 0.09], "rpy": [1.5708, 0, -1.5708]}
+
+
+def sized_scene(sizes, slots="auto"):
+    """One bottle per (radius, height) in the front row, 0.14 m apart, the last one the target."""
+    objects = [{"id": f"b{k}", "weight": 0.5, "xy": [0.70, -0.14 * (len(sizes) - 1) / 2 + 0.14 * k], "radius": r,
+                "height": h} for k, (r, h) in enumerate(sizes)]
+    return parse_scenario({"shelf": SHELF, "objects": objects, "target": objects[-1]["id"], "marker": MARKER,
+                           "slots": slots})
+
+
+@pytest.mark.parametrize("sizes", [[(0.025, 0.13), (0.033, 0.16), (0.030, 0.14)],
+                                   [(0.028, 0.15), (0.032, 0.13), (0.026, 0.125)]], ids=["mixed1", "mixed2"])
+def test_bottles_of_every_size_are_carried_at_their_size(sizes):
+    """Sizes the hand can grasp from the side (mid-height >= 0.065 m keeps the palm 15 mm above the board, radius <=
+    0.033 m fits between the open fingers) and the bottom compartment can take (<= 0.162 m here)."""
+    scenario = sized_scene(sizes)
+    planner = planner_for(scenario)
+    rep = check_sequence(scenario, planner, scenario.ids)
+    assert_clean(rep, f"sizes {sizes}")
+    assert rep.min_carried < 0.02  # the real size: in the bottom compartment it passes within 2 cm of a board
+
+
+def test_a_bottle_too_tall_for_the_bottom_shelf_is_not_picked():
+    """0.18 m between the bottom and the top board: a 0.17 m bottle fits on the top shelf but cannot be carried
+    in keeping its clearance; it is answered UNFEASIBLE (it could be grasped, not relocated)."""
+    scenario = sized_scene([(0.033, 0.17), (0.033, 0.16)])
+    planner = planner_for(scenario)
+    ans = planner.feasibility("b0", frozenset())
+    assert ans.label == Label.UNFEASIBLE and "bottom compartment" in ans.message, ans.message
+    assert planner.feasibility("b1", frozenset()).label == Label.TARGET
+    with pytest.raises(PlanningError, match="bottom compartment"):
+        plan_relocation(planner, "b0", [])
+
+
+# ------------------------------------------------------------------ slots and planning errors
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
+def test_every_shipped_slot_is_within_reach(path):
+    scenario = load_scenario(path)
+    assert planner_for(scenario).slot_problems() == []
+
+
+def test_auto_slots_follow_the_reachable_layout_and_an_unreachable_shelf_is_refused():
+    s = load_scenario("scenario3_15")
+    assert s.auto_slots and len(s.slots) == 12 < len(s.objects)  # the shelf holds 12 slots 0.12 m apart
+    assert s.slots[:2] == ((0.76, -0.06), (0.76, 0.06))  # back row, central slots first, as paper_experiment_10
+    far = dict(SHELF, x_front=0.80, depth=0.40)
+    scenario = parse_scenario({"shelf": far, "objects": [{"id": "T", "xy": [0.90, 0.0]}], "target": "T",
+                               "marker": MARKER, "slots": "auto"})
+    with pytest.raises(WorkspaceError, match="slots 'auto' gives .* out of the arm's reach"):
+        MotionPlanner(scenario)
+
+
+class RecordingArm:
+    """relocation.Arm that only records: at home, never moves."""
+
+    def __init__(self):
+        self.calls = []
+
+    def measured(self):
+        return rd.Q_HOME.copy()
+
+    def follow(self, trajectory, phase):
+        self.calls.append(("follow", phase))
+
+    def gripper(self, action, phase):
+        self.calls.append(("gripper", action))
+
+    def phase(self, phase):
+        self.calls.append(("phase", phase))
+
+
+def test_a_relocation_that_cannot_be_planned_never_moves_the_arm():
+    """An explicit slot out of reach: the carry cannot be planned, and it is known before the pick starts."""
+    scenario = sized_scene([(0.033, 0.16), (0.033, 0.16)], slots=[[0.95, 0.33], [0.76, 0.06]])
+    planner = MotionPlanner(scenario)  # explicit slots are checked per relocation
+    assert "slot 0" in planner.slot_problems()[0]
+    arm = RecordingArm()
+    with pytest.raises(PlanningError, match="carry of 'b0' to slot 0"):
+        relocate(planner, arm, "b0", [])
+    assert arm.calls == [("phase", "plan_pick")]
+    big = load_scenario("scenario3_15")
+    with pytest.raises(PlanningError, match="no free slot for 'T': 12 objects relocated"):
+        plan_relocation(MotionPlanner(big), "T", [f"o{k}" for k in range(1, 13)])
+
+
+def test_summary():
+    """The figures of the closing note (printed with -s)."""
+    print(f"motion checker, whole module: {TOTAL.summary()}")
