@@ -46,6 +46,7 @@ from relocation_common.scenario import ScenarioError, UnknownObjectError, load_s
 from . import robot_description as rd
 from .execution import FollowerParams, TrajectoryFollower
 from .feasibility import MotionPlanner, PlannerParams, PlanningError
+from .scene_update import merge_perceived
 from .relocation import PHASES, relocate
 from .trajectory import Trajectory
 
@@ -56,8 +57,6 @@ SERVICE_QOS = QoSProfile(depth=1000)
 INTERFACES = ("kinova", "ros2_control")  # command_interface: the driver's surface (docs/kinova.md)
 VELOCITY_TOPIC = "/velocity_controller/commands"  # ros2_control JointGroupVelocityController (rad/s)
 GRIPPER_TOPIC = "/gripper_controller/commands"    # ros2_control JointGroupPositionController, finger joints (rad)
-MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
-ON_SHELF = 0.01  # m: a bottle whose base is farther from the top shelf's surface is lifted or elsewhere
 
 
 def trajectory_to_msg(traj: Trajectory | None) -> JointTrajectory:
@@ -165,17 +164,12 @@ class MotionPlannerNode(Node):
         except ScenarioError as e:
             self.get_logger().error(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return
-        sh, held = self.base.shelf, self._held
-        on_top = {b.id: b for b, o in zip(bottles, msg.objects)
-                  if abs(o.pose.position.z - sh.top_z) < ON_SHELF and b.id != held
-                  and sh.x_front < b.x < sh.x_back and sh.y_min < b.y < sh.y_max}
-        for i in on_top:  # seen back on the top shelf (a reset scene): it can be relocated again
+        perceived = [(b, o.pose.position.z) for b, o in zip(bottles, msg.objects)]
+        merged, changed, seen = merge_perceived(self.base.shelf, self._bottles, perceived, self._held)
+        for i in seen:  # seen back on the top shelf (a reset scene): it can be relocated again
             self._relocated.pop(i, None)
-        changed = [i for i, b in on_top.items() if i not in self._bottles
-                   or math.hypot(b.x - self._bottles[i].x, b.y - self._bottles[i].y) > MOVED]
         if not changed:
             return
-        merged = {**self._bottles, **{i: on_top[i] for i in changed}}
         try:
             scenario = self.base.with_objects(merged.values())
         except ScenarioError as e:
