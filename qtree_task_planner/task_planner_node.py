@@ -22,7 +22,6 @@ Reliability (docs/reliability.md):
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
 import tempfile
 import threading
@@ -43,7 +42,6 @@ from qtree_relocation_msgs.srv import PlanFeasibility
 from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
 from relocation_common.ros_conversions import msg_to_bottles
 
-from . import exact
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from .oracles import CachedOracle
 from relocation_common.feasibility import FeasibilityAnswer, Label
@@ -51,9 +49,9 @@ from .markers import tree_markers
 from relocation_common.config import ParameterError
 from .outage import Cancelled, PlannerUnavailable, until_available
 from .params import TrainingParams
+from .retrieval import execute_sequence, solve_then_train
 from .problem import RelocationProblem
 from relocation_common.node import call, declare_parameters, end_goal, node_main
-from .training import train
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from this node's clock is on another clock
@@ -335,25 +333,15 @@ class TaskPlannerNode(Node):
                                                                              or not rclpy.ok()),
                                 on_answer=on_answer)  # training itself stops at the end of an episode
         oracle = CachedOracle(service)
-        state = {"ck": self._resume_point(problem, params, oracle)}
-        self._memory_ckpt = state["ck"]
+        resume = self._resume_point(problem, params, oracle)
+        self._memory_ckpt = resume
 
-        def solve():
-            try:
-                return exact.solve(problem, oracle)
-            except PlannerUnavailable as e:  # keep the answers gathered so far
-                ck = state["ck"] or Checkpoint.initial(problem, params)
-                state["ck"] = dataclasses.replace(ck, feasibility=Checkpoint.table_of(oracle),
-                                                  reason=f"interrupted: {e}")
-                self._keep(state["ck"])
-                raise
-
-        optimum = self._until_planner(solve, goal_handle, service, fb)
-        result.optimal_sequence = list(optimum.sequence or ())
-        result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
-        self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
-                               f"({oracle.calls} planner calls)")
-        fb.phase = "training"
+        def on_solved(optimum) -> None:
+            result.optimal_sequence = list(optimum.sequence or ())
+            result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
+            self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
+                                   f"({oracle.calls} planner calls)")
+            fb.phase = "training"
 
         def on_episode(stats) -> bool:
             fb.episode, fb.q_sum, fb.tree_nodes = stats.episode, stats.q_sum, stats.tree_nodes
@@ -361,15 +349,9 @@ class TaskPlannerNode(Node):
             goal_handle.publish_feedback(fb)
             return rclpy.ok() and not goal_handle.is_cancel_requested
 
-        def on_checkpoint(ck: Checkpoint) -> None:
-            state["ck"] = ck
-            self._keep(ck)
-
-        def run():
-            return train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode,
-                         resume=state["ck"], checkpoint_every=self.p("checkpoint_every"), on_checkpoint=on_checkpoint)
-
-        r = self._until_planner(run, goal_handle, service, fb)
+        _, r = solve_then_train(problem, oracle, params, resume=resume, keep=self._keep, on_episode=on_episode,
+                                until_planner=lambda fn: self._until_planner(fn, goal_handle, service, fb),
+                                checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved)
         result.sequence = list(r.sequence or ())
         result.total_weight = float(r.total_weight if r.total_weight is not None else -1.0)
         result.e_ss, result.mp_q, result.e_first = r.e_ss, r.mp_q, r.e_1st if r.e_1st is not None else -1
@@ -385,18 +367,9 @@ class TaskPlannerNode(Node):
             result.success, result.message = True, "trained (not executed)"
             return
         fb.phase = "executing"
-        removed: list[str] = []
-        for object_id in r.sequence:
-            goal_handle.publish_feedback(fb)
-            if goal_handle.is_cancel_requested:
-                result.message = f"cancelled after relocating {removed}"
-                return
-            ok, message = self._relocate_one(goal_handle, object_id, removed)
-            if not ok:
-                result.success, result.message = False, f"relocating {object_id!r} failed: {message}"
-                return
-            removed.append(object_id)
-        result.success, result.message = True, f"target {problem.target!r} retrieved after {len(removed) - 1} relocations"
+        result.success, result.message, _ = execute_sequence(
+            r.sequence, lambda i, removed: self._relocate_one(goal_handle, i, removed),
+            cancelled=lambda: goal_handle.is_cancel_requested, before_each=lambda: goal_handle.publish_feedback(fb))
 
     def _relocate_one(self, goal_handle, object_id: str, removed: list[str]) -> tuple[bool, str]:
         if not self._relocate.wait_for_server(timeout_sec=self.p("planner_wait")):
