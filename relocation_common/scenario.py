@@ -7,11 +7,12 @@ The format is documented in docs/scenarios.md.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from .config import ConfigError, read_yaml
+from .config import ConfigError, read_yaml, short
 from .paths import default_scenario, resolve_scenario
 
 # Distinct colours for the bottles (the paper's bottles were coloured; perception identifies them by
@@ -167,15 +168,36 @@ class Scenario:
         return self.slots[n_relocated]
 
 
+# Object ids name MuJoCo bodies (MJCF), ROS messages and log lines: letters, digits, underscore.
+ID_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
+# OpenCV's predefined ArUco dictionaries (cv2.aruco.DICT_*), named here so the loader need not import OpenCV.
+ARUCO_DICTIONARIES = tuple(f"DICT_{n}X{n}_{k}" for n in (4, 5, 6, 7) for k in (50, 100, 250, 1000)) + (
+    "DICT_ARUCO_ORIGINAL", "DICT_APRILTAG_16h5", "DICT_APRILTAG_25h9", "DICT_APRILTAG_36h10", "DICT_APRILTAG_36h11",
+    "DICT_ARUCO_MIP_36h12")
+
+
 def _num(d: Mapping[str, Any], key: str, where: str, default: float | None = None) -> float:
-    if key not in d:
-        if default is None:
-            raise ScenarioError(f"{where}: missing required key {key!r}")
-        return float(default)
-    v = d[key]
+    """A finite number, from `d` or (checked the same way) the default."""
+    v = d.get(key, default) if isinstance(d, Mapping) else None
+    if v is None:
+        raise ScenarioError(f"{where}: missing required key {key!r}")
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ScenarioError(f"{where}: {key} must be a finite number, got {v!r}")
+        raise ScenarioError(f"{where}: {key} must be a finite number, got {short(v)}")
     return float(v)
+
+
+def _marker_id(m: Mapping[str, Any]) -> int:
+    v = _num(m, "id", "marker")
+    if not v.is_integer() or not 0 <= v < 1024:
+        raise ScenarioError(f"marker: id must be an integer in [0, 1024), got {short(m.get('id'))}")
+    return int(v)
+
+
+def _dictionary(m: Mapping[str, Any]) -> str:
+    d = m.get("dictionary", "DICT_4X4_50")
+    if d not in ARUCO_DICTIONARIES:
+        raise ScenarioError(f"marker: dictionary must be one of OpenCV's (e.g. DICT_4X4_50), got {short(d)}")
+    return d
 
 
 def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default=None) -> tuple[float, ...]:
@@ -183,7 +205,7 @@ def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default=None) -> tu
     if v is None:
         raise ScenarioError(f"{where}: missing required key {key!r}")
     if not isinstance(v, (list, tuple)) or len(v) != n:
-        raise ScenarioError(f"{where}: {key} must be a list of {n} numbers, got {v!r}")
+        raise ScenarioError(f"{where}: {key} must be a list of {n} numbers, got {short(v)}")
     return tuple(_num({key: x}, key, where) for x in v)
 
 
@@ -265,8 +287,9 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         if not isinstance(o, Mapping):
             raise ScenarioError(f"{where}: must be a mapping")
         oid = o.get("id")
-        if not isinstance(oid, str) or not oid.strip():
-            raise ScenarioError(f"{where}: id must be a non-empty string, got {oid!r}")
+        if not isinstance(oid, str) or not ID_PATTERN.fullmatch(oid):
+            raise ScenarioError(f"{where}: id must be a letter then up to 31 letters, digits or underscores, "
+                                f"got {short(oid)}")
         if oid in seen:
             raise ScenarioError(f"{where}: duplicate id {oid!r}")
         seen.add(oid)
@@ -275,8 +298,8 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         if not 0.0 < weight <= 1.0:
             raise ScenarioError(f"{where} ({oid}): weight must be in (0, 1], got {weight}")
         x, y = _vec(o, "xy", 2, f"{where} ({oid})")
-        radius = _num(o, "radius", where, defaults.get("radius", 0.033))
-        height = _num(o, "height", where, defaults.get("height", 0.16))
+        radius = _num(o, "radius", where, _num(defaults, "radius", "defaults", 0.033))
+        height = _num(o, "height", where, _num(defaults, "height", "defaults", 0.16))
         if radius <= 0 or height <= 0:
             raise ScenarioError(f"{where} ({oid}): radius and height must be positive")
         if is_target:
@@ -320,8 +343,8 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
     if not isinstance(m, Mapping):
         raise ScenarioError("marker: missing; give id, dictionary, size, position, rpy of the ArUco marker")
     marker = Marker(
-        id=int(_num(m, "id", "marker")),
-        dictionary=str(m.get("dictionary", "DICT_4X4_50")),
+        id=_marker_id(m),
+        dictionary=_dictionary(m),
         size=_num(m, "size", "marker"),
         position=_vec(m, "position", 3, "marker"),
         rpy=_vec(m, "rpy", 3, "marker"),
@@ -336,7 +359,7 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         for oid, needs in b.items():
             if oid not in seen:
                 raise ScenarioError(f"blocking: unknown id {oid!r}")
-            if not isinstance(needs, list) or any(n not in seen for n in needs):
+            if not isinstance(needs, list) or any(not isinstance(n, str) or n not in seen for n in needs):
                 raise ScenarioError(f"blocking[{oid}]: must be a list of known ids, got {needs!r}")
             blocking[oid] = frozenset(needs)
 
