@@ -56,7 +56,7 @@ def _bad(mutate):
     (lambda d: d.update(target="ghost"), "'ghost' is not among the objects"),
     (lambda d: d["objects"][0].update(xy=[2.0, 0.0]), "not on the top shelf"),
     (lambda d: d["objects"][0].update(xy=[0.69, -0.10]), "overlap"),
-    (lambda d: d["objects"][0].update(id=""), "id must be a non-empty string"),
+    (lambda d: d["objects"][0].update(id=""), "id must be a letter"),
     (lambda d: d.update(objects=[]), "non-empty list"),
     (lambda d: d.pop("marker"), "marker: missing"),
     (lambda d: d["shelf"].update(ceiling_z=-0.5), "bottom_z < top_z < ceiling_z"),
