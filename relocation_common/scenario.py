@@ -267,59 +267,44 @@ def parse_scenario(data: Any, source: str = "<dict>") -> Scenario:
 
 def _parse(data: Mapping[str, Any], source: str) -> Scenario:
     shelf = _shelf(data.get("shelf"))
-    defaults = data.get("defaults", {}) or {}
-    if not isinstance(defaults, Mapping):
-        raise ScenarioError("defaults: must be a mapping")
-    raw = data.get("objects")
-    if not isinstance(raw, list) or not raw:
-        raise ScenarioError("objects: must be a non-empty list")
     target_id = data.get("target")
     if not isinstance(target_id, str) or not target_id:
         raise ScenarioError("target: missing; name the id of the object to retrieve")
+    objects = _objects(data, shelf, target_id)
+    slots, auto = _slots(data.get("slots", "auto"), shelf, len(objects))
+    return Scenario(
+        name=str(data.get("name", Path(source).stem)),
+        description=str(data.get("description", "")),
+        shelf=shelf,
+        objects=objects,
+        target_id=target_id,
+        slots=slots,
+        marker=_marker(data.get("marker")),
+        blocking=_blocking(data, {o.id for o in objects}),
+        source=source,
+        auto_slots=auto,
+    )
+
+
+def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bottle, ...]:
+    """The bottles: ids, weights, sizes (or `defaults`), colours; on the top shelf, under the ceiling, apart."""
+    defaults = data.get("defaults", {}) or {}
+    if not isinstance(defaults, Mapping):
+        raise ScenarioError("defaults: must be a mapping")
+    size = (_num(defaults, "radius", "defaults", 0.033), _num(defaults, "height", "defaults", 0.16))
+    raw = data.get("objects")
+    if not isinstance(raw, list) or not raw:
+        raise ScenarioError("objects: must be a non-empty list")
     raw_ids = [o.get("id") for o in raw if isinstance(o, Mapping)]
     if target_id not in raw_ids:
         raise ScenarioError(f"target: {target_id!r} is not among the objects ({', '.join(map(str, raw_ids))})")
     palette = iter(PALETTE.items())
     objects: list[Bottle] = []
-    seen: set[str] = set()
     for k, o in enumerate(raw):
-        where = f"objects[{k}]"
-        if not isinstance(o, Mapping):
-            raise ScenarioError(f"{where}: must be a mapping")
-        oid = o.get("id")
-        if not isinstance(oid, str) or not ID_PATTERN.fullmatch(oid):
-            raise ScenarioError(f"{where}: id must be a letter then up to 31 letters, digits or underscores, "
-                                f"got {short(oid)}")
-        if oid in seen:
-            raise ScenarioError(f"{where}: duplicate id {oid!r}")
-        seen.add(oid)
-        is_target = oid == target_id
-        weight = _num(o, "weight", f"{where} ({oid})", 1.0 if is_target else None)
-        if not 0.0 < weight <= 1.0:
-            raise ScenarioError(f"{where} ({oid}): weight must be in (0, 1], got {weight}")
-        x, y = _vec(o, "xy", 2, f"{where} ({oid})")
-        radius = _num(o, "radius", where, _num(defaults, "radius", "defaults", 0.033))
-        height = _num(o, "height", where, _num(defaults, "height", "defaults", 0.16))
-        if radius <= 0 or height <= 0:
-            raise ScenarioError(f"{where} ({oid}): radius and height must be positive")
-        if is_target:
-            label, rgb = TARGET_COLOR, TARGET_RGB
-        elif "color" in o:
-            label = str(o["color"])
-            if label not in PALETTE:
-                raise ScenarioError(f"{where} ({oid}): unknown color {label!r}; use one of {', '.join(PALETTE)}")
-            rgb = PALETTE[label]
-        else:
-            try:
-                label, rgb = next(palette)
-            except StopIteration:
-                raise ScenarioError(f"more than {len(PALETTE)} obstacles: give each a color") from None
-        if not (shelf.x_front + radius <= x <= shelf.x_back - radius
-                and shelf.y_min + radius <= y <= shelf.y_max - radius):
-            raise ScenarioError(f"{where} ({oid}): xy {x, y} is not on the top shelf")
-        if height >= shelf.ceiling_z - shelf.top_z:
-            raise ScenarioError(f"{where} ({oid}): height {height} does not fit under the ceiling board")
-        objects.append(Bottle(oid, label, rgb, weight, x, y, radius, height, is_target))
+        b = _bottle(o, f"objects[{k}]", shelf, target_id, size, palette)
+        if any(b.id == other.id for other in objects):
+            raise ScenarioError(f"objects[{k}]: duplicate id {b.id!r}")
+        objects.append(b)
     labels = [o.label for o in objects]
     if len(set(labels)) != len(labels):
         raise ScenarioError("objects: two objects share a color; perception identifies bottles by color")
@@ -327,54 +312,78 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         for b in objects[i + 1:]:
             if math.hypot(a.x - b.x, a.y - b.y) < a.radius + b.radius:
                 raise ScenarioError(f"objects {a.id!r} and {b.id!r} overlap")
+    return tuple(objects)
 
-    slots_raw = data.get("slots", "auto")
-    auto = slots_raw == "auto"
-    if auto:
-        slots = _default_slots(shelf, len(objects))
+
+def _bottle(o: Any, where: str, shelf: Shelf, target_id: str, size: tuple[float, float], palette) -> Bottle:
+    if not isinstance(o, Mapping):
+        raise ScenarioError(f"{where}: must be a mapping")
+    oid = o.get("id")
+    if not isinstance(oid, str) or not ID_PATTERN.fullmatch(oid):
+        raise ScenarioError(f"{where}: id must be a letter then up to 31 letters, digits or underscores, "
+                            f"got {short(oid)}")
+    is_target = oid == target_id
+    weight = _num(o, "weight", f"{where} ({oid})", 1.0 if is_target else None)
+    if not 0.0 < weight <= 1.0:
+        raise ScenarioError(f"{where} ({oid}): weight must be in (0, 1], got {weight}")
+    x, y = _vec(o, "xy", 2, f"{where} ({oid})")
+    radius, height = _num(o, "radius", where, size[0]), _num(o, "height", where, size[1])
+    if radius <= 0 or height <= 0:
+        raise ScenarioError(f"{where} ({oid}): radius and height must be positive")
+    if is_target:
+        label, rgb = TARGET_COLOR, TARGET_RGB
+    elif "color" in o:
+        label = str(o["color"])
+        if label not in PALETTE:
+            raise ScenarioError(f"{where} ({oid}): unknown color {short(label)}; use one of {', '.join(PALETTE)}")
+        rgb = PALETTE[label]
+    else:
+        try:
+            label, rgb = next(palette)
+        except StopIteration:
+            raise ScenarioError(f"more than {len(PALETTE)} obstacles: give each a color") from None
+    if not (shelf.x_front + radius <= x <= shelf.x_back - radius
+            and shelf.y_min + radius <= y <= shelf.y_max - radius):
+        raise ScenarioError(f"{where} ({oid}): xy {x, y} is not on the top shelf")
+    if height >= shelf.ceiling_z - shelf.top_z:
+        raise ScenarioError(f"{where} ({oid}): height {height} does not fit under the ceiling board")
+    return Bottle(oid, label, rgb, weight, x, y, radius, height, is_target)
+
+
+def _slots(raw: Any, shelf: Shelf, n: int) -> tuple[tuple[tuple[float, float], ...], bool]:
+    """(slots, whether they were laid out automatically)."""
+    if raw == "auto":
+        slots = _default_slots(shelf, n)
         if not slots:
             raise ScenarioError("slots: 'auto' finds no room on this bottom shelf; list the slots")
-    elif isinstance(slots_raw, list) and len(slots_raw) >= len(objects):
-        slots = tuple(_vec({"xy": s}, "xy", 2, f"slots[{k}]") for k, s in enumerate(slots_raw))
-    else:
-        raise ScenarioError(f"slots: 'auto' or a list of at least {len(objects)} [x, y] positions")
+        return slots, True
+    if isinstance(raw, list) and len(raw) >= n:
+        return tuple(_vec({"xy": s}, "xy", 2, f"slots[{k}]") for k, s in enumerate(raw)), False
+    raise ScenarioError(f"slots: 'auto' or a list of at least {n} [x, y] positions")
 
-    m = data.get("marker")
+
+def _marker(m: Any) -> Marker:
     if not isinstance(m, Mapping):
         raise ScenarioError("marker: missing; give id, dictionary, size, position, rpy of the ArUco marker")
-    marker = Marker(
-        id=_marker_id(m),
-        dictionary=_dictionary(m),
-        size=_num(m, "size", "marker"),
-        position=_vec(m, "position", 3, "marker"),
-        rpy=_vec(m, "rpy", 3, "marker"),
-    )
+    return Marker(id=_marker_id(m), dictionary=_dictionary(m), size=_num(m, "size", "marker"),
+                  position=_vec(m, "position", 3, "marker"), rpy=_vec(m, "rpy", 3, "marker"))
 
-    blocking = None
-    if "blocking" in data:
-        b = data["blocking"]
-        if not isinstance(b, Mapping):
-            raise ScenarioError("blocking: must map an id to the list of ids that must be removed first")
-        blocking = {}
-        for oid, needs in b.items():
-            if oid not in seen:
-                raise ScenarioError(f"blocking: unknown id {oid!r}")
-            if not isinstance(needs, list) or any(not isinstance(n, str) or n not in seen for n in needs):
-                raise ScenarioError(f"blocking[{oid}]: must be a list of known ids, got {needs!r}")
-            blocking[oid] = frozenset(needs)
 
-    return Scenario(
-        name=str(data.get("name", Path(source).stem)),
-        description=str(data.get("description", "")),
-        shelf=shelf,
-        objects=tuple(objects),
-        target_id=target_id,
-        slots=slots,
-        marker=marker,
-        blocking=blocking,
-        source=source,
-        auto_slots=auto,
-    )
+def _blocking(data: Mapping[str, Any], ids: set[str]) -> dict[str, frozenset[str]] | None:
+    """The declared blocking relation (tests only), or None."""
+    if "blocking" not in data:
+        return None
+    b = data["blocking"]
+    if not isinstance(b, Mapping):
+        raise ScenarioError("blocking: must map an id to the list of ids that must be removed first")
+    blocking = {}
+    for oid, needs in b.items():
+        if oid not in ids:
+            raise ScenarioError(f"blocking: unknown id {short(oid)}")
+        if not isinstance(needs, list) or any(not isinstance(n, str) or n not in ids for n in needs):
+            raise ScenarioError(f"blocking[{oid}]: must be a list of known ids, got {short(needs)}")
+        blocking[oid] = frozenset(needs)
+    return blocking
 
 
 def load_scenario(path: str | Path | None = None) -> Scenario:
