@@ -95,12 +95,30 @@ def _start_graph(g: Graph, a, scene_topic: str) -> None:
     """The four nodes (perception only with --scene-source perception); the Q-Tree checkpointed in the run
     directory, so a training stopped by a signal or a time limit is resumed by the same command."""
     common = {"scenario": a.scenario}
+    ckpt = _checkpoint(g.run_dir / "qtree.ckpt")
     print(f"[demo] starting the node graph on ROS_DOMAIN_ID={g.domain_id} (logs: {g.run_dir / 'logs'})")
     g.start("jaco2_sim_driver", common)
     if a.scene_source == "perception":
         g.start("perception", common)
     g.start("motion_planner", dict(common, scene_topic=scene_topic))
-    g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(g.run_dir / "qtree.ckpt")))
+    g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt)))
+
+
+def _checkpoint(path: Path) -> Path:
+    """The demo's checkpoint: an unfinished one (stopped by a signal or the time limit) is resumed by the task
+    planner; a finished or unreadable one is removed, so a rerun trains afresh."""
+    from qtree_task_planner.checkpoint import CheckpointError, load_checkpoint
+
+    if path.exists():
+        try:
+            ck = load_checkpoint(path)
+            if ck.reason != "final":  # periodic, cancelled (a signal), interrupted (planner lost)
+                print(f"[demo] resuming the training stopped at episode {ck.episode} ({path})")
+                return path
+        except (CheckpointError, OSError, ValueError):
+            pass
+        path.unlink()
+    return path
 
 
 def _progress_bar(rec: "_Recorder"):
