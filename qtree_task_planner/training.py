@@ -121,58 +121,137 @@ def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | No
 
 
 def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint_every, on_checkpoint):
+    """train() with the garbage collector held off: the C kernel when nothing needs the Python loop (no callback,
+    resume or checkpoints, stock QTree and policy), else the Python episode loop."""
     if not isinstance(problem, RelocationProblem):
         problem = RelocationProblem.from_scenario(problem)
     cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
-    calls0 = cache.calls
-    t0 = time.perf_counter()
+    run = _Run(problem, params, cache, optimal_weight)
     policy = POLICY_FUNCTIONS[params.policy]
     use_kernel = (callback is None and resume is None and on_checkpoint is None and policy in _KIND
                   and type(cache) is CachedOracle and len(problem.ids) <= kernel.MAX_ACTIONS
                   and QTree.step is _STOCK_STEP and QTree.edge_label is _STOCK_EDGE_LABEL
                   and QTree.child is _STOCK_CHILD and kernel.available())
-    tree = (kernel.KernelTree if use_kernel else QTree)(problem, cache, params.alpha, params.gamma)
-    rng = random.Random(params.seed)
+    run.tree = (kernel.KernelTree if use_kernel else QTree)(problem, cache, params.alpha, params.gamma)
+    if use_kernel:
+        _run_kernel(run, _KIND[policy])
+    else:
+        if resume is not None:
+            run.resume(resume)
+        _run_python(run, policy, callback, checkpoint_every, on_checkpoint)
+    return run.result()
+
+
+class _Run:
+    """One training: problem, params, oracle cache, tree, RNG, and the counters a Checkpoint stores (episode,
+    epsilon of Eq. 14, Q_sum history of Eq. 15, the Eq. 16 state prev_sum / quiet / converged, cancelled, E_1st,
+    and the planner calls and seconds of the runs before a resume)."""
+
+    def __init__(self, problem: RelocationProblem, params: TrainingParams, cache: CachedOracle,
+                 optimal_weight: float | None) -> None:
+        self.problem, self.params, self.cache, self.optimal_weight = problem, params, cache, optimal_weight
+        self.calls0 = cache.calls
+        self.t0 = time.perf_counter()
+        self.tree: QTree | None = None
+        self.rng = random.Random(params.seed)
+        self.episode, self.epsilon, self.history = 0, params.epsilon0, []
+        self.prev_sum, self.quiet, self.converged, self.cancelled, self.e_1st = 0.0, 0, False, False, None
+        self.calls_before, self.elapsed_before = 0, 0.0
+
+    def resume(self, checkpoint: Checkpoint) -> None:
+        """Go on from `checkpoint` (CheckpointError unless it was written for this problem and these params)."""
+        checkpoint.check_matches(self.problem, self.params)
+        checkpoint.fill_cache(self.cache)
+        self.calls0 = self.cache.calls
+        checkpoint.restore_tree(self.tree)
+        self.rng.setstate(checkpoint.rng_state)
+        self.history = list(checkpoint.q_sum_history)
+        self.prev_sum, self.quiet, self.converged = checkpoint.prev_sum, checkpoint.quiet, checkpoint.converged
+        self.e_1st, self.episode, self.epsilon = checkpoint.e_1st, checkpoint.episode, checkpoint.epsilon
+        self.calls_before, self.elapsed_before = checkpoint.planner_calls, checkpoint.elapsed_s
+
+    def planner_calls(self) -> int:
+        """Real oracle calls of this training (before a resume included)."""
+        return self.calls_before + self.cache.calls - self.calls0
+
+    def elapsed(self) -> float:
+        """Seconds of training (before a resume included)."""
+        return self.elapsed_before + time.perf_counter() - self.t0
+
+    def snapshot(self, reason: str) -> Checkpoint:
+        """The state at the end of the last completed episode, for on_checkpoint."""
+        return Checkpoint(self.params, problem_hash(self.problem), self.episode, list(self.history), self.prev_sum,
+                          self.quiet, self.e_1st, self.rng.getstate(), self.epsilon, self.planner_calls(),
+                          self.converged, self.cancelled, self.tree.to_state(), Checkpoint.table_of(self.cache),
+                          self.elapsed(), reason)
+
+    def result(self) -> TrainingResult:
+        """The greedy best sequence (Eq. 8 weight) and the training's counters."""
+        tree = self.tree
+        seq = tree.best_sequence()
+        return TrainingResult(
+            sequence=seq,
+            total_weight=self.problem.weight(seq) if seq is not None else None,
+            episodes=self.episode,
+            converged=self.converged,
+            e_ss=self.episode,
+            mp_q=tree.mp_q,
+            planner_calls=self.planner_calls(),
+            e_1st=self.e_1st,
+            optimal_weight=self.optimal_weight,
+            cancelled=self.cancelled,
+            tree_nodes=tree.node_count,
+            tree_edges=tree.n_edges,
+            q_sum_history=self.history,
+            params=self.params,
+            elapsed_s=self.elapsed(),
+            tree=tree,
+        )
+
+
+def _optimal_path_test(problem: RelocationProblem, optimal_weight: float | None):
+    """For the kernel's E_1st: path_ok(actions) -> the sequence's Eq. 8 weight is the optimum; None without one."""
+    if optimal_weight is None:
+        return None
+
+    def path_ok(actions, ids=problem.ids):
+        return problem.weight(tuple(ids[a] for a in actions)) <= optimal_weight + WEIGHT_TOL
+    return path_ok
+
+
+def _run_kernel(run: _Run, kind: int) -> None:
+    """The whole training loop in C (kernel.py), bit-identical to the Python loop: Eq. 14's epsilons of every
+    episode, the Eq. 16 stop and E_1st computed there."""
+    p = run.params
+    epsilons = [epsilon_schedule(e, p.max_episodes, p.epsilon0, p.epsilon_min) for e in range(p.max_episodes)]
+    run.episode, run.converged, run.e_1st, run.history = run.tree.run(
+        run.rng, kind, p.search == "depth", p.max_steps, p.max_episodes, epsilons, p.beta, p.quiet_episodes,
+        _optimal_path_test(run.problem, run.optimal_weight))
+
+
+def _run_python(run: _Run, policy, callback, checkpoint_every: int, on_checkpoint) -> None:
+    """The Python training loop. Per episode: epsilon (Eq. 14), the episode (inlined `_episode`, or
+    `_reference_episode` when checkpointing or when QTree / the policy is replaced), Q_sum (Eq. 15) and the
+    Eq. 16 stop test, E_1st, the callback, checkpoints. An episode the oracle interrupts is rolled back and
+    checkpointed (see train). The counters stay in locals while looping and go back to `run` for a snapshot and
+    at the end."""
+    tree, rng, problem, optimal_weight, params = run.tree, run.rng, run.problem, run.optimal_weight, run.params
     depth = params.search == "depth"
-    n_obj, target, root = tree.n_objects, tree.target, tree.root
     e_max, i_max = params.max_episodes, params.max_steps
     eps0, eps_min, beta, quiet_needed = params.epsilon0, params.epsilon_min, params.beta, params.quiet_episodes
-    step = tree.step
-    history: list[float] = []
-    prev_sum, quiet, converged, cancelled, e_1st = 0.0, 0, False, False, None
-    episode, epsilon, calls_before, elapsed_before = 0, eps0, 0, 0.0
-    if resume is not None:
-        resume.check_matches(problem, params)
-        resume.fill_cache(cache)
-        calls0 = cache.calls
-        resume.restore_tree(tree)
-        root = tree.root
-        rng.setstate(resume.rng_state)
-        history = list(resume.q_sum_history)
-        prev_sum, quiet, converged, cancelled = resume.prev_sum, resume.quiet, resume.converged, False
-        e_1st, episode, epsilon = resume.e_1st, resume.episode, resume.epsilon
-        calls_before, elapsed_before = resume.planner_calls, resume.elapsed_s
-
-    def snapshot(reason: str) -> Checkpoint:
-        return Checkpoint(params, problem_hash(problem), episode, list(history), prev_sum, quiet, e_1st,
-                          rng.getstate(), epsilon, calls_before + cache.calls - calls0, converged, cancelled,
-                          tree.to_state(), Checkpoint.table_of(cache), elapsed_before + time.perf_counter() - t0,
-                          reason)
-
-    if use_kernel:  # the whole loop in C (kernel.py), bit-identical
-        path_ok = None
-        if optimal_weight is not None:
-            def path_ok(actions, ids=problem.ids):
-                return problem.weight(tuple(ids[a] for a in actions)) <= optimal_weight + WEIGHT_TOL
-        epsilons = [epsilon_schedule(e, e_max, eps0, eps_min) for e in range(e_max)]
-        episode, converged, e_1st, history = tree.run(rng, _KIND[policy], depth, i_max, e_max, epsilons, beta,
-                                                      quiet_needed, path_ok)
+    history, prev_sum, quiet, converged, cancelled = run.history, run.prev_sum, run.quiet, run.converged, False
+    e_1st, episode, epsilon = run.e_1st, run.episode, run.epsilon
     fast = _Fast(tree, _KIND[policy], depth, i_max) if on_checkpoint is None and _stock(tree, policy) else None
     rand = rng.random
-    journal: list = []
+    journal = [] if on_checkpoint is not None else None  # undo log, only to checkpoint an interrupted episode
     last_seq, last_ok = None, False
-    while not use_kernel and episode < e_max and not converged:
-        if on_checkpoint is not None:
+
+    def sync() -> None:  # the loop's counters -> run
+        run.episode, run.epsilon, run.prev_sum, run.quiet = episode, epsilon, prev_sum, quiet
+        run.converged, run.cancelled, run.e_1st = converged, cancelled, e_1st
+
+    while episode < e_max and not converged:
+        if journal is not None:
             episode_start = (rng.getstate(), len(tree.nodes), tree.mp_q, tree.q_sum)
             journal.clear()
         epsilon_prev, epsilon = epsilon, epsilon_schedule(episode, e_max, eps0, eps_min)
@@ -180,32 +259,16 @@ def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint
         if fast is not None:
             steps, reached = _episode(fast, epsilon, rand)
         else:
-            node, steps, reached = root, 0, False
             try:
-                while steps < i_max:
-                    offered = node.offered(n_obj)
-                    if not offered:
-                        break
-                    a = policy(node, offered, target, rng, epsilon)
-                    steps += 1
-                    if on_checkpoint is not None:  # undo log, only needed to checkpoint an interrupted episode
-                        journal.append((node, a, (node.q.get(a, node.q_pruned.get(a)) if a in node.label else None)))
-                    label, nxt = step(node, a)
-                    if label == Label.TARGET:
-                        reached = True
-                        break
-                    if label == Label.UNFEASIBLE:
-                        if depth:
-                            continue
-                        break
-                    node = nxt
+                steps, reached = _reference_episode(tree, policy, rng, epsilon, depth, i_max, journal)
             except Exception as e:
-                if on_checkpoint is not None:
+                if journal is not None:
                     rng_state, n_nodes, mp_q0, q_sum0 = episode_start
                     tree.rollback(journal, n_nodes, mp_q0, q_sum0)
                     rng.setstate(rng_state)
                     episode, epsilon = episode - 1, epsilon_prev
-                    on_checkpoint(snapshot(f"interrupted: {type(e).__name__}: {e}"))
+                    sync()
+                    on_checkpoint(run.snapshot(f"interrupted: {type(e).__name__}: {e}"))
                 raise
         q_sum = tree.q_sum
         history.append(q_sum)
@@ -219,8 +282,8 @@ def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint
             if last_ok:
                 e_1st = episode
         if callback is not None:
-            stats = EpisodeStats(episode, e_max, q_sum, delta, len(tree.nodes), tree.mp_q,
-                                 calls_before + cache.calls - calls0, epsilon, steps, reached)
+            stats = EpisodeStats(episode, e_max, q_sum, delta, len(tree.nodes), tree.mp_q, run.planner_calls(),
+                                 epsilon, steps, reached)
             if callback(stats) is False:
                 cancelled = True
         if quiet >= quiet_needed and not cancelled:
@@ -228,28 +291,36 @@ def _train(problem, oracle, params, optimal_weight, callback, resume, checkpoint
         if on_checkpoint is not None:
             stop = cancelled or converged or episode >= e_max
             if stop or (checkpoint_every > 0 and episode % checkpoint_every == 0):
-                on_checkpoint(snapshot("cancelled" if cancelled else "final" if stop else "periodic"))
+                sync()
+                on_checkpoint(run.snapshot("cancelled" if cancelled else "final" if stop else "periodic"))
         if cancelled:
             break
-    seq = tree.best_sequence()
-    return TrainingResult(
-        sequence=seq,
-        total_weight=problem.weight(seq) if seq is not None else None,
-        episodes=episode,
-        converged=converged,
-        e_ss=episode,
-        mp_q=tree.mp_q,
-        planner_calls=calls_before + cache.calls - calls0,
-        e_1st=e_1st,
-        optimal_weight=optimal_weight,
-        cancelled=cancelled,
-        tree_nodes=tree.node_count,
-        tree_edges=tree.n_edges,
-        q_sum_history=history,
-        params=params,
-        elapsed_s=elapsed_before + time.perf_counter() - t0,
-        tree=tree,
-    )
+    sync()
+
+
+def _reference_episode(tree: QTree, policy, rng: random.Random, epsilon: float, depth: bool, i_max: int,
+                       journal: list | None) -> tuple[int, bool]:
+    """One episode from s_H by the book: the policy (Eq. 14 epsilon) picks an offered action, QTree.step labels it
+    (Eq. 11), rewards (Eq. 13) and updates (Eq. 7). `journal` (or None) gets an undo record per step, for
+    QTree.rollback. Returns (steps, reached)."""
+    node, steps, n_obj, target, step = tree.root, 0, tree.n_objects, tree.target, tree.step
+    while steps < i_max:
+        offered = node.offered(n_obj)
+        if not offered:
+            break
+        a = policy(node, offered, target, rng, epsilon)
+        steps += 1
+        if journal is not None:
+            journal.append((node, a, (node.q.get(a, node.q_pruned.get(a)) if a in node.label else None)))
+        label, nxt = step(node, a)
+        if label == Label.TARGET:
+            return steps, True
+        if label == Label.UNFEASIBLE:
+            if depth:
+                continue
+            break
+        node = nxt
+    return steps, False
 
 
 _STOCK_STEP, _STOCK_EDGE_LABEL, _STOCK_CHILD = QTree.step, QTree.edge_label, QTree.child
@@ -272,30 +343,47 @@ class _Fast:
     memo: (removed mask * (n + 1) + action) -> Label of every (object, removed set) this tree has asked. Only
     used when the oracle is a plain CachedOracle: a repeated question is then answered from the memo and counted
     in CachedOracle.queries exactly as CachedOracle.feasibility would (its answer for a known key never changes),
-    so the cache's table, calls and queries are the same as with one call per new edge."""
+    so the cache's table, calls and queries are the same as with one call per new edge.
+    consts: what `_episode` reads, unpacked in one go (the tree's root, parameters and node list do not change
+    while the loop runs)."""
 
-    __slots__ = ("tree", "kind", "depth", "i_max", "memo", "cache", "n1")
+    __slots__ = ("tree", "kind", "depth", "i_max", "memo", "cache", "n1", "consts")
 
     def __init__(self, tree: QTree, kind: int, depth: bool, i_max: int) -> None:
         self.tree, self.kind, self.depth, self.i_max = tree, kind, depth, i_max
         self.cache = tree.oracle if type(tree.oracle) is CachedOracle else None
         self.memo: dict[int, Label] = {}
         self.n1 = tree.n_objects
+        self.consts = (tree, kind, depth, i_max, tree.root, tree.target, tree.alpha, tree.gamma, tree.phi, tree.nodes,
+                       tree._actions, self.n1, self.cache, self.memo, Label.OBSTACLE, Label.UNFEASIBLE, _ZEROS)
+
+
+def _ask(f: _Fast, node: Node, a: int, key: int) -> Label:
+    """A new edge's label from the oracle (Eq. 11, as QTree.edge_label): object a after the node's removed set;
+    the answer checked (TARGET is for the target only) and memoised under `key` when the memo is in use."""
+    tree = f.tree
+    ids = tree.ids
+    removed = node.removed
+    if removed is None:
+        removed = node.removed = frozenset([ids[i] for i in node.seq])
+    raw = tree.oracle.feasibility(ids[a], removed).label
+    label = _LABELS.get(raw)
+    if label is None:
+        label = Label(raw)
+    if (label is Label.TARGET) != (a == tree.target) and label is not Label.UNFEASIBLE:
+        raise ValueError(f"oracle answered {label.name} for {ids[a]!r}: TARGET is for the target only")
+    if f.cache is not None:
+        f.memo[key] = label
+    return label
 
 
 def _episode(f: _Fast, epsilon: float, rand) -> tuple[int, bool]:
     """One episode from s_H: the reference loop (policy function + QTree.step -> edge_label, child, update)
     inlined. Same random draws, same choices, same float operations in the same order (Eq. 7, Eq. 15), same
     oracle questions, hence bit-identical trees (test/test_q_tree_equivalence.py). Returns (steps, reached)."""
-    tree, kind, depth = f.tree, f.kind, f.depth
-    node, steps, i_max, target = tree.root, 0, f.i_max, tree.target
-    alpha, gamma, phi, ids = tree.alpha, tree.gamma, tree.phi, tree.ids
-    nodes, actions, n1 = tree.nodes, tree._actions, f.n1
-    cache, memo = f.cache, f.memo
-    ask = tree.oracle.feasibility
-    obstacle, unfeasible, target_label = Label.OBSTACLE, Label.UNFEASIBLE, Label.TARGET
-    q_sum, mp_q = tree.q_sum, tree.mp_q
-    zeros = _ZEROS
+    (tree, kind, depth, i_max, node, target, alpha, gamma, phi, nodes, actions, n1, cache, memo, obstacle, unfeasible,
+     zeros) = f.consts
+    steps, q_sum, mp_q = 0, tree.q_sum, tree.mp_q
     try:
         while steps < i_max:
             offered = node.offer
@@ -326,18 +414,7 @@ def _episode(f: _Fast, epsilon: float, rand) -> tuple[int, bool]:
                 key = node.mask * n1 + a
                 label = memo.get(key) if cache is not None else None
                 if label is None:
-                    removed = node.removed
-                    if removed is None:
-                        removed = node.removed = frozenset([ids[i] for i in node.seq])
-                    raw = ask(ids[a], removed).label
-                    label = _LABELS.get(raw)
-                    if label is None:
-                        label = Label(raw)
-                    if (label is target_label) != (a == target) and label is not unfeasible:
-                        raise ValueError(f"oracle answered {label.name} for {ids[a]!r}: TARGET is for the target "
-                                         "only")
-                    if cache is not None:
-                        memo[key] = label
+                    label = _ask(f, node, a, key)
                 else:
                     cache.queries += 1
                 node.label[a] = label
