@@ -5,7 +5,9 @@ asks PlanFeasibility through a service-client oracle, reports Eq. 15 per episode
 relocates the learned sequence with the motion planner's RelocateObject action.
 
 Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local);
-publishes ~/markers (visualization_msgs/MarkerArray: the scene, the learned order).
+publishes ~/markers (visualization_msgs/MarkerArray: the scene, the learned order) and ~/relocating (std_msgs/String,
+latched: the object being relocated); its PlanFeasibility queries and answers are service events (client
+introspection, contents) on <feasibility_service>/_service_event, for recording.
 
 Reliability (docs/reliability.md):
 - Checkpoints: with `checkpoint_path` set, the Q-Tree and the training counters are written there atomically every
@@ -33,7 +35,9 @@ from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalRespons
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.service_introspection import ServiceIntrospectionState
 from rclpy.time import Time
+from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
@@ -143,10 +147,12 @@ class TaskPlannerNode(Node):
         reentrant = ReentrantCallbackGroup()
         self._feas = self.create_client(PlanFeasibility, self.p("feasibility_service"),
                                         callback_group=MutuallyExclusiveCallbackGroup())
+        self._feas.configure_introspection(self.get_clock(), QoSProfile(depth=1000), ServiceIntrospectionState.CONTENTS)
         self._relocate = ActionClient(self, RelocateObject, self.p("relocate_action"), callback_group=reentrant)
         self._scene_topic = SCENE_SOURCES.get(self.p("scene_source")) or self.p("scene_topic")
         self.create_subscription(ObjectArray, self._scene_topic, self._on_scene, SCENE_QOS)
         self._markers = self.create_publisher(MarkerArray, "~/markers", SCENE_QOS)
+        self._relocating = self.create_publisher(String, "~/relocating", SCENE_QOS)
         self._server = ActionServer(self, TrainPlanner, "~/train", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=reentrant)
@@ -390,6 +396,7 @@ class TaskPlannerNode(Node):
             h.get_result_async().add_done_callback(on_result)
 
         self.get_logger().info(f"relocating {object_id} (removed so far: {removed})")
+        self._relocating.publish(String(data=object_id))
         heard = [time.monotonic()]  # the last feedback: a moving motion planner reports at 10 Hz
 
         def on_feedback(_) -> None:
