@@ -57,7 +57,7 @@ class PlannerParams:
     carried_clearance: float = 0.005  # m, the carried bottle (real size) to boards and bottles
     carry_ramp: float = 0.25  # s to full speed and to a stop at each waypoint of the carry and retreat (0: none)
     carry_accel: float = 3.0  # rad/s^2, joint accelerations while a bottle is held (0: no limit)
-    stage_distance: float = 0.30  # m, staging pose in front of the slot
+    stage_distance: float = 0.15  # m, staging pose in front of the slot (at most x_front - 0.07: grasp.place_poses)
     carry_timeout: float = 2.0  # s for plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
@@ -404,7 +404,9 @@ class MotionPlanner:
         if not up.ok:
             raise PlanningError(f"{what}: lift: {up.reason}")
         # 2. out of the shelf at that height, to the staging pose, in to the slot at the release height
-        out = np.array(exit_pose(self.scenario, object_id, lifted, p.hand_margin))
+        # the bottle and the finger tips in front of the shelf by the arm's clearance (+ activation) before going down
+        out = np.array(exit_pose(self.scenario, object_id, lifted,
+                                 max(p.hand_margin, p.stpik.clearance + p.stpik.act) + 0.002))
         carry, last = None, "no Cartesian path out of the shelf"
         for attempt in range(p.max_attempts):
             left = deadline - time.perf_counter()

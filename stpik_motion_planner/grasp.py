@@ -125,13 +125,19 @@ def carry_heights(scenario: Scenario, object_id: str, clearance: float, lift: fl
     return min(max(lift, clearance), top_room - clearance), release
 
 
+# how far the open fingers reach beyond the grasp centre along the approach (their capsules' tips): 0.042 m
+FINGER_REACH = max(c.p1[2] + c.radius for c in rd.CAPSULES if c.name.startswith("finger")) - rd.D67
+
+
 def exit_pose(scenario: Scenario, object_id: str, pose, margin: float) -> tuple[float, float, float, float]:
     """`pose` moved back against its approach direction, at its height, until the held bottle (its axis
-    `grasp_standoff` beyond the tool) is `margin` in front of the shelf's front edge: out of the shelf."""
+    `grasp_standoff` beyond the tool) and the finger tips are `margin` in front of the shelf's front edge: out of
+    the shelf, free to go down."""
     b = scenario.object(object_id)
     x, y, z, yaw = (float(v) for v in pose)
     c = math.cos(yaw)
-    need = x + grasp_standoff(b.radius) * c - (scenario.shelf.x_front - b.radius - margin)
+    front = max(grasp_standoff(b.radius) + b.radius, FINGER_REACH)
+    need = x + front * c - (scenario.shelf.x_front - margin)
     if need <= 0.0:
         return (x, y, z, yaw)
     back = need / c

@@ -229,7 +229,10 @@ class Stpik:
                 changed = False
                 for k, (grp, sigma, jac, buf) in enumerate(cands):
                     v = float(jac @ qdot)
-                    brake = v * v / (2.0 * accel) if (accel > 0.0 and grp == 0) else 0.0
+                    brake = 0.0
+                    if accel > 0.0 and grp == 0 and qdots:  # the rate it can reach next step, and stop from
+                        v = max(v, float(jac @ qdots[-1]) - accel * p.dt)
+                        brake = v * v / (2.0 * accel)
                     if not active[k] and v < 0.0 and sigma + v * p.dt - brake < buf:
                         active[k] = changed = True
                 if not changed:
@@ -237,7 +240,7 @@ class Stpik:
             ratio = float(np.max(np.abs(qdot) / p.qdot_max))
             scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
             qdot = qdot * scale
-            if accel > 0.0 and qdots:
+            if accel > 0.0 and qdots and tau < t_end:  # not while settling on the goal (slow by then)
                 qdot = qdots[-1] + np.clip(qdot - qdots[-1], -accel * p.dt, accel * p.dt)
             q = q + qdot * p.dt
             qs.append(q.copy())

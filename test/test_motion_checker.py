@@ -220,6 +220,23 @@ def test_a_relocation_that_cannot_be_planned_never_moves_the_arm():
         plan_relocation(MotionPlanner(big), "T", [f"o{k}" for k in range(1, 13)])
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("name, oid", [("paper_experiment_10", "o2"), ("scenario3_15", "o3")])
+def test_every_slot_takes_a_bottle(name, oid):
+    """A front-row bottle carried to each slot in turn (the bottom shelf otherwise empty): the outer slots too
+    (a staging pose 0.30 m in front of them put two joints on their limits)."""
+    scenario = load_scenario(name)
+    planner = planner_for(scenario)
+    rep = Report()
+    for k in range(len(scenario.slots)):
+        (pick,) = planner.plan_pick(oid, [])
+        carry, retreat = planner.plan_carry(oid, [], k, q_start=pick.trajectory.positions[-1], placed=[])
+        home = planner.plan_home(retreat.trajectory.positions[-1], [oid], [(oid, scenario.slot(k))])
+        rep.merge(replay_relocation(MotionChecker(scenario), pick.trajectory, [carry.trajectory, retreat.trajectory],
+                                    home, oid))
+    assert_clean(rep, f"{name}: {oid} to each of {len(scenario.slots)} slots")
+
+
 def test_summary():
     """The figures of the closing note (printed with -s)."""
     print(f"motion checker, whole module: {TOTAL.summary()}")
