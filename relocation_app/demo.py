@@ -3,7 +3,8 @@
 Starts the four nodes as separate processes on a private ROS domain (relocation_app.graph), asks the
 task planner to train H-eG with depth search against the motion planner's feasibility service and to execute
 the learned sequence on the MuJoCo Jaco2, and writes under out/: report.json, learning_curve.png and
-retrieval_strip.png (camera frames of the retrieval).
+retrieval_strip.png (camera frames of the retrieval); unless --no-record, also the run as a rosbag2 bag (MCAP) in
+out/bag/ and the retrieval as out/retrieval.mp4 (relocation_app.recording).
 """
 from __future__ import annotations
 
@@ -35,6 +36,8 @@ def _args(argv):
     p.add_argument("--no-execute", action="store_true", help="train only, do not move the robot")
     p.add_argument("--out", default="out", help="output directory (default: ./out)")
     p.add_argument("--timeout", type=float, default=900.0, help="give up after this many seconds")
+    p.add_argument("--no-record", action="store_true",
+                   help="no rosbag2 bag (out/bag/) and no video (out/retrieval.mp4) of the run")
     return p.parse_args(argv)
 
 
@@ -169,7 +172,28 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     return res, before, truth.positions(), rec.frames
 
 
-def _report(out: Path, a, used, res, before, after, frames, wall: float) -> int:
+def _start_recording(g: Graph, a, out: Path):
+    """The bag of the whole run and the video of the retrieval (from the first 'executing' feedback)."""
+    if a.no_record:
+        return None
+    from .recording import RunRecorder
+    return RunRecorder(out / "bag", video=out / "retrieval.mp4", domain_id=g.domain_id,
+                       video_from_phase=None if a.no_execute else "executing").start()
+
+
+def _stop_recording(rec) -> dict | None:
+    if rec is None:
+        return None
+    s = rec.stop()
+    b, v = s["bag"], s["video"]
+    print(f"[demo] bag: {b['path']} ({b['messages']} messages on {len(b['topics'])} topics, "
+          f"{b['bytes'] / 1e6:.1f} MB, {b['duration_s']:.0f} s)")
+    if v and v["path"]:
+        print(f"[demo] video: {v['path']} ({v['frames']} frames at {v['fps']:g} fps, {v['duration_s']:.1f} s)")
+    return s
+
+
+def _report(out: Path, a, used, res, before, after, frames, wall: float, recording: dict | None = None) -> int:
     """report.json, learning_curve.png, retrieval_strip.png and the summary lines; the exit status."""
     report = {
         "scenario": a.scenario, "policy": used.policy, "search": used.search, "seed": used.seed,
@@ -180,6 +204,7 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float) -> int:
         "planner_calls": res.planner_calls, "wall_time_s": round(wall, 1),
         "q_sum_history": list(res.q_sum_history),
         "final_scene": _check_scene(a.scenario, before, after, list(res.sequence) if not a.no_execute else []),
+        "recording": recording,
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
     _learning_curve(res.q_sum_history, out / "learning_curve.png", f"{used.policy} / {used.search}")
@@ -209,6 +234,7 @@ def run(argv=None) -> int:
     with Graph(out / "run") as g:
         _start_graph(g, a, scene_topic)
         os.environ.update(g.env)
+        rec = _start_recording(g, a, out)
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)  # signals are ours: the graph must stop
         client = RelocationClient("qtree_demo")
         try:
@@ -216,7 +242,8 @@ def run(argv=None) -> int:
         finally:
             client.close()
             rclpy.try_shutdown()
-    return _report(out, a, used, res, before, after, frames, time.monotonic() - t0)
+            recording = _stop_recording(rec)  # also on an error or Ctrl-C: the bag so far is a valid bag
+    return _report(out, a, used, res, before, after, frames, time.monotonic() - t0, recording)
 
 
 class _Latest:
