@@ -29,6 +29,7 @@ LIMIT_BRAKE_TIME = 0.02     # s: near a limit the allowed speed towards it is di
 GRASP_RADIAL_TOL = 0.025    # m: bottle axis to grasp centre, across the hand (fingers open to about +-36 mm)
 RELEASE_DELAY = 0.15        # s from opening the fingers to letting the bottle go (they are clear of it by then)
 GRASP_TILT_COS = math.cos(math.radians(30))  # hand y axis (finger spread) vs bottle axis
+GRASP_CLOSURE = 0.5         # finger targets past this fraction of closed grasp, below it release
 
 
 class BadCommandError(ValueError):
@@ -252,6 +253,22 @@ class Jaco2Sim:
         oid, self.grasped = self.grasped, None
         if oid is not None:
             self._release = (oid, self.data.time + RELEASE_DELAY)
+        return oid
+
+    def set_fingers(self, targets) -> str | None:
+        """Drive the three fingers to hinge angles `targets` (rad, 0 open .. FINGER_CLOSED, clamped). A target past
+        half-closed (mean over the fingers) closes the hand as `gripper_close` does (a bottle between the fingers
+        is grasped), one below it opens it as `gripper_open` does (a held bottle is released). Returns the bottle
+        grasped or released, or None. BadCommandError for anything but three finite numbers."""
+        try:
+            t = np.asarray(targets, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise BadCommandError(f"finger command is not a list of numbers: {targets!r}") from None
+        if t.size != len(self._fact) or not np.all(np.isfinite(t)):
+            raise BadCommandError(f"finger command must be {len(self._fact)} finite numbers, got {t.tolist()}")
+        t = np.clip(t, 0.0, FINGER_CLOSED)
+        oid = self.gripper_close() if t.mean() >= GRASP_CLOSURE * FINGER_CLOSED else self.gripper_open()
+        self.data.ctrl[self._fact] = t
         return oid
 
     def _let_go(self, oid: str) -> None:

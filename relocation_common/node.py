@@ -61,9 +61,10 @@ class SideNode:
                 raise
 
     def close(self) -> None:
-        self._executor.shutdown(timeout_sec=1.0)
-        self._thread.join(timeout=2.0)
-        self.node.destroy_node()
+        self._executor.shutdown(timeout_sec=2.0)
+        self._thread.join(timeout=3.0)
+        if not self._thread.is_alive():  # destroying a node its executor still waits on can crash the process
+            self.node.destroy_node()
 
 
 def run_node(node_factory, args=None, threads: int = 4) -> None:

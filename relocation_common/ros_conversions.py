@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import math
 
-from geometry_msgs.msg import Pose
+import numpy as np
+from geometry_msgs.msg import Pose, TransformStamped
 from qtree_relocation_msgs.msg import ObjectArray, ObjectState
 
 from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle, ScenarioError
@@ -56,3 +57,38 @@ def msg_to_bottles(msg: ObjectArray) -> tuple[Bottle, ...]:
     if sum(b.is_target for b in out) != 1:
         raise ScenarioError("the scene must contain exactly one target")
     return tuple(out)
+
+
+def quat_xyzw(rot) -> tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) of a 3x3 rotation matrix (Shepperd's method, w >= 0)."""
+    r = np.asarray(rot, float)[:3, :3]
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q = ((r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s)
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+        q = (0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s)
+    elif r[1, 1] > r[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
+        q = ((r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
+        q = ((r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s)
+    n = math.sqrt(sum(c * c for c in q))
+    sign = -1.0 if q[3] < 0 else 1.0
+    return tuple(float(sign * c / n) for c in q)
+
+
+def transform_msg(t, parent: str, child: str, stamp=None):
+    """geometry_msgs/TransformStamped of the 4x4 pose `t` of `child` in `parent` (as tf2 publishes it)."""
+    m = TransformStamped()
+    if stamp is not None:
+        m.header.stamp = stamp
+    m.header.frame_id, m.child_frame_id = parent, child
+    tr = m.transform.translation
+    t = np.asarray(t, float)
+    tr.x, tr.y, tr.z = (float(v) for v in t[:3, 3])
+    r = m.transform.rotation
+    r.x, r.y, r.z, r.w = quat_xyzw(t[:3, :3])
+    return m

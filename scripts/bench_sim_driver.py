@@ -70,7 +70,8 @@ def bench_node(tmp: Path, seconds: float) -> float:
     path.write_text(yaml.safe_dump(scenario_15()))
     with RosGraph(tmp / "node") as g:
         g.start("jaco2_sim_driver.driver_node", params={"scenario": str(path), "real_time_factor": 0.0,
-                                                         "camera_rate": 0.0, "state_on_command": False})
+                                                         "camera_rate": 0.0, "state_on_command": False,
+                                                         "command_interface": "ros2_control"})
         c = g.probe.collect("/joint_states", JointState)
         c.wait(lambda m: len(m) > 50, timeout=60)
         n0, t0 = len(c.msgs), time.monotonic()
@@ -83,7 +84,8 @@ def bench_latency(tmp: Path, samples: int, state_on_command: bool) -> np.ndarray
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
     with RosGraph(tmp / f"lat_{state_on_command}") as g:
-        g.start("jaco2_sim_driver.driver_node", params={"camera_rate": 0.0, "state_on_command": state_on_command})
+        g.start("jaco2_sim_driver.driver_node", params={"camera_rate": 0.0, "state_on_command": state_on_command,
+                                                         "command_interface": "ros2_control"})
         c = g.probe.collect("/joint_states", JointState)
         c.wait(lambda m: len(m) > 10, timeout=60)
         pub = g.probe.publisher(Float64MultiArray, "/velocity_controller/commands")

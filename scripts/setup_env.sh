@@ -95,7 +95,7 @@ build_msgs() {
 msgs_inputs() { echo msg_defs/$1 msg_defs/$1/* msg_defs/$1/*/* requirements.txt requirements-build.txt; }
 
 step msgs-qtree_relocation_msgs $(msgs_inputs qtree_relocation_msgs) -- build_msgs qtree_relocation_msgs \
-  "from qtree_relocation_msgs.msg import ObjectState, ObjectArray, JointVelocity
+  "from qtree_relocation_msgs.msg import ObjectState, ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner"
 

@@ -35,10 +35,27 @@ VENV_PYTHON = REPO / ".venv" / "bin" / "python"
 _LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"
 
 
+def domains_in_use() -> set[int]:
+    """ROS_DOMAIN_IDs in the environment of running processes: graphs started without a lock file (the demo picks
+    10 + pid % 90) must not be joined; sharing a domain garbles every topic (seen: a demo's /clock and
+    /motion_planner/relocate answering a test's client)."""
+    used = set()
+    for env in Path("/proc").glob("[0-9]*/environ"):
+        try:
+            for item in env.read_bytes().split(b"\0"):
+                if item.startswith(b"ROS_DOMAIN_ID="):
+                    used.add(int(item[len(b"ROS_DOMAIN_ID="):] or b"-1"))
+        except (OSError, ValueError):
+            continue
+    return used
+
+
 def reserve_domain_id() -> tuple[int, Path]:
-    """A ROS_DOMAIN_ID in 1..100 not used by another live test process (lock file with the owner's pid)."""
+    """A ROS_DOMAIN_ID in 1..100 not used by another live test process (lock file with the owner's pid) nor by any
+    running process (domains_in_use)."""
     _LOCK_DIR.mkdir(exist_ok=True)
-    ids = list(range(1, 101))
+    used = domains_in_use()
+    ids = [i for i in range(1, 101) if i not in used]
     random.shuffle(ids)
     for i in ids:
         lock = _LOCK_DIR / f"{i}.lock"

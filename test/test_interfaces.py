@@ -5,7 +5,8 @@
   and order. The definitions are written out below as they are there, not read from msg_defs/.
 - tf2_msgs/msg/TFMessage exactly as in ROS 2 Jazzy's geometry2, checked by its RIHS01 type hash: the one a Jazzy
   node advertises for /tf (`ros2 topic info -v /tf`), found in public generated code and bag metadata.
-- qtree_relocation_msgs still imports after the move to msg_defs/qtree_relocation_msgs/.
+- qtree_relocation_msgs still imports after the move to msg_defs/qtree_relocation_msgs/ (without its JointVelocity:
+  kinova_msgs/JointVelocity replaced it).
 
 The type hash is checked twice: in the type description installed beside the type
 (share/<pkg>/<kind>/<Type>.json, key "type_hashes") and as advertised on the graph by a publisher of this process
@@ -238,7 +239,13 @@ def test_advertised_type_hashes(monkeypatch):
 def test_qtree_relocation_msgs_still_import():
     from rclpy.type_support import check_for_type_support
     from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
-    from qtree_relocation_msgs.msg import JointVelocity, ObjectArray, ObjectState
+    from qtree_relocation_msgs.msg import ObjectArray, ObjectState
     from qtree_relocation_msgs.srv import PlanFeasibility
-    for iface in (PlanFeasibility, JointVelocity, ObjectArray, ObjectState, RelocateObject, TrainPlanner):
+    for iface in (PlanFeasibility, ObjectArray, ObjectState, RelocateObject, TrainPlanner):
         check_for_type_support(iface)
+
+
+def test_the_project_joint_velocity_is_gone():
+    """The planner and the driver speak kinova_msgs/JointVelocity; the project's copy was removed."""
+    import qtree_relocation_msgs.msg as m
+    assert not hasattr(m, "JointVelocity")

@@ -1,0 +1,21 @@
+"""The simulator's fingers in Kinova's finger units (no rclpy): Kinova's turns, 0 open .. 6800 closed
+(relocation_common.kinova, sources in docs/kinova.md), map linearly onto the simulated finger hinges, 0 open ..
+FINGER_CLOSED (0.5 rad, the tips meet)."""
+from __future__ import annotations
+
+import numpy as np
+
+from relocation_common.kinova import (  # noqa: F401  (re-exported for the node)
+    FINGER_JOINT_CLOSED, FINGER_MAX_TURN, FingerMonitor, joint_to_turns, turns_to_joint)
+
+from .scene import FINGER_CLOSED
+
+
+def turns_to_sim(turns) -> np.ndarray:
+    """Finger turns -> simulated finger hinge angles (rad), clamped to 0 .. 6800 turns."""
+    t = np.clip(np.asarray(turns, float), 0.0, FINGER_MAX_TURN)
+    return t / FINGER_MAX_TURN * FINGER_CLOSED
+
+
+def sim_to_turns(q) -> np.ndarray:
+    return np.asarray(q, float) / FINGER_CLOSED * FINGER_MAX_TURN
