@@ -4,7 +4,9 @@ Thin shell over perception_aruco.pipeline. Colour and depth are paired by stamp 
 the newest pair is processed at most `process_rate` times a second. Objects hidden in the current frame are kept
 at their last perceived pose for `hold_frames` processed frames, then dropped; a scene without the target is never
 published (docs/perception.md). The last scene is republished every `republish_period` s while it is younger than
-`max_scene_age` (the task planner refuses stale scenes). Bad input is logged, never fatal.
+`max_scene_age` (the task planner refuses stale scenes). Bad input is logged, never fatal. Every frame with the
+marker also puts on /tf the marker as seen (camera optical frame -> `aruco_marker_<id>`) and the shelf frame
+`shelf_frame` on it (front edge of the top board's surface, centred, axes of the base frame, from the scenario).
 """
 from __future__ import annotations
 
@@ -17,13 +19,14 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
+from tf2_msgs.msg import TFMessage
 
 from qtree_relocation_msgs.msg import ObjectArray
 from relocation_common.node import declare_parameters, node_main
-from relocation_common.ros_conversions import bottles_to_msg
+from relocation_common.ros_conversions import bottles_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
-from .aruco import PerceptionError
+from .aruco import PerceptionError, invert, marker_in_base
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
 from .pipeline import Perception, SceneMemory
@@ -68,6 +71,11 @@ class PerceptionNode(Node):
         self.pub = self.create_publisher(ObjectArray, g("objects_topic"),
                                          QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.debug_pub = self.create_publisher(Image, g("debug_topic"), 1)
+        self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
+        sh = self.scenario.shelf
+        t_base_shelf = np.eye(4)
+        t_base_shelf[:3, 3] = (sh.x_front, sh.y_center, sh.top_z)
+        self._t_marker_shelf = invert(marker_in_base(self.scenario.marker)) @ t_base_shelf
         self.create_timer(1.0 / g("process_rate"), self._process, MutuallyExclusiveCallbackGroup())
         self.create_timer(g("republish_period"), self._republish, MutuallyExclusiveCallbackGroup())
         self.get_logger().info(f"perception on scenario {self.scenario.name!r} ({len(self.scenario.objects)} "
@@ -129,7 +137,16 @@ class PerceptionNode(Node):
                 self._publish_debug(color, self.perception.annotate(rgb, None, note=str(e)))
             return
         self._publish_debug(color, self.perception.annotate(rgb, result, K))
+        self._publish_tf(color, result)
         self._publish_scene(color, result)
+
+    def _publish_tf(self, color: Image, result) -> None:
+        """The marker found in this image, and the shelf on it (/tf, stamped with the image)."""
+        marker = f"aruco_marker_{self.scenario.marker.id}"
+        stamp = color.header.stamp
+        self.tf_pub.publish(TFMessage(transforms=[
+            transform_msg(result.marker.T_camera_marker, color.header.frame_id, marker, stamp),
+            transform_msg(self._t_marker_shelf, marker, self.p("shelf_frame"), stamp)]))
 
     def _publish_scene(self, color: Image, result) -> None:
         log = self.get_logger()

@@ -24,11 +24,24 @@ def _image(stamp, enc, h, w, step, data):
     return m
 
 
+def _matrix(m) -> np.ndarray:
+    """4x4 of a geometry_msgs/TransformStamped."""
+    import mujoco
+    r = np.zeros(9)
+    q = m.transform.rotation
+    mujoco.mju_quat2Mat(r, np.array([q.w, q.x, q.y, q.z]))
+    t = np.eye(4)
+    t[:3, :3] = r.reshape(3, 3)
+    t[:3, 3] = m.transform.translation.x, m.transform.translation.y, m.transform.translation.z
+    return t
+
+
 def test_node_publishes_perceived_scene(tmp_path):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
+    from tf2_msgs.msg import TFMessage
 
     from qtree_relocation_msgs.msg import ObjectArray
 
@@ -47,6 +60,8 @@ def test_node_publishes_perceived_scene(tmp_path):
             node.create_subscription(ObjectArray, "/scene/objects", scenes.append,
                                      QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
             node.create_subscription(Image, "/perception/debug_image", debug.append, 1)
+            tfs = []
+            node.create_subscription(TFMessage, "/tf", tfs.append, 100)
             ex = SingleThreadedExecutor()
             ex.add_node(node)
             t = threading.Thread(target=ex.spin, daemon=True)
@@ -92,6 +107,18 @@ def test_node_publishes_perceived_scene(tmp_path):
                 assert o.pose.position.z == pytest.approx(scenario.shelf.top_z)
             assert max(errs) < 0.02 and np.median(errs) <= 0.01, errs
             assert msg.header.frame_id == "j2s7s300_link_base"
+            # /tf: the marker seen from the camera, the shelf frame on it; through the camera's true pose the shelf
+            # frame lands on the front edge of the top board
+            deadline = time.monotonic() + 5
+            while not tfs and time.monotonic() < deadline:  # another topic: it may arrive after the scene
+                time.sleep(0.05)
+            tf = {m.child_frame_id: m for m in tfs[-1].transforms}
+            assert tf["aruco_marker_7"].header.frame_id == "camera_color_optical_frame"
+            assert tf["shelf"].header.frame_id == "aruco_marker_7"
+            t_base_shelf = frame.T_base_camera @ _matrix(tf["aruco_marker_7"]) @ _matrix(tf["shelf"])
+            sh = scenario.shelf
+            assert np.allclose(t_base_shelf[:3, 3], (sh.x_front, sh.y_center, sh.top_z), atol=0.01), t_base_shelf
+            assert np.allclose(t_base_shelf[:3, :3], np.eye(3), atol=0.03)
             # republished without new frames (the task planner refuses scenes older than 10 s)
             n = len(scenes)
             time.sleep(1.2)
