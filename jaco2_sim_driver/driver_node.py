@@ -69,20 +69,7 @@ class Jaco2SimDriver(Node):
         super().__init__("jaco2_sim_driver")
         declare_parameters(self)  # config/jaco2_sim_driver.yaml
         g = lambda k: self.get_parameter(k).value  # noqa: E731
-        for k, lo in (("joint_state_rate", 0.0), ("objects_rate", 0.0), ("watchdog_timeout", 0.0),
-                      ("camera_width", 0), ("camera_height", 0), ("camera_fovy", 0.0), ("finger_tolerance", 0.0),
-                      ("finger_stall_threshold", 0.0), ("finger_stall_interval", 0.0)):
-            if not g(k) > lo:  # also NaN
-                raise ValueError(f"parameter {k} must be > {lo}, got {g(k)!r}")
-        if not (g("camera_rate") >= 0 and g("camera_fovy") < 180):
-            raise ValueError(f"camera_rate must be >= 0 and camera_fovy < 180, got {g('camera_rate')!r}, "
-                             f"{g('camera_fovy')!r}")
-        if not g("tf_rate") >= 0:
-            raise ValueError(f"parameter tf_rate must be >= 0, got {g('tf_rate')!r}")
-        self.interface = str(g("command_interface"))
-        if self.interface not in INTERFACES:
-            raise ValueError(f"parameter command_interface must be one of {', '.join(INTERFACES)}, "
-                             f"got {self.interface!r}")
+        self._check_parameters(g)
         self.tf_period = 1.0 / float(g("tf_rate")) if g("tf_rate") > 0 else math.inf
         self.finger_params = dict(tolerance=float(g("finger_tolerance")),
                                   stall_threshold=float(g("finger_stall_threshold")),
@@ -113,37 +100,12 @@ class Jaco2SimDriver(Node):
         pre = str(g("driver_prefix")).rstrip("/")
         self.kinova = self.interface == "kinova"
         self.pub_clock = self.create_publisher(Clock, "/clock", 10)  # simulated time, as simulators publish it
-        if self.kinova:  # kinova-ros (kinova_arm.cpp): the topics of the j2s7s300 driver
-            self.create_subscription(JointVelocity, f"{pre}/in/joint_velocity", self.on_kinova_velocity, 10)
-            self.pub_js = self.create_publisher(JointState, f"{pre}/out/joint_state", 10)
-            self.pub_angles = self.create_publisher(JointAngles, f"{pre}/out/joint_angles", 10)
-            self.pub_finger_pos = self.create_publisher(FingerPosition, f"{pre}/out/finger_position", 10)
-            self.create_service(HomeArm, f"{pre}/in/home_arm", self.srv_home_arm)
-            self.create_service(Start, f"{pre}/in/start", self.srv_start)
-            self.create_service(Stop, f"{pre}/in/stop", self.srv_stop)
-            self._fingers = SideNode("jaco2_sim_driver_fingers", context=self.context, threads=3)
-            self._finger_server = ActionServer(
-                self._fingers.node, SetFingersPosition, f"{pre}/fingers_action/finger_positions",
-                execute_callback=self.execute_fingers, goal_callback=lambda _: GoalResponse.ACCEPT,
-                cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup())
-            self.names = list(JOINT_NAMES) + list(FINGER_JOINT_NAMES) + list(FINGER_TIP_NAMES)
-        else:  # ros2_control: forward command controllers and joint_state_broadcaster
-            self.create_subscription(Float64MultiArray, VELOCITY_TOPIC, self.on_velocity, 10)
-            self.create_subscription(Float64MultiArray, GRIPPER_TOPIC, self.on_gripper, 10)
-            self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
-            self.names = list(JOINT_NAMES) + list(FINGER_JOINT_NAMES)
+        if self.kinova:
+            self._kinova_surface(pre)
+        else:
+            self._ros2_control_surface()
         self.create_service(Trigger, f"{pre}/in/reset_scene", self.srv_reset)  # the simulator's own
-        self.pub_objects = self.create_publisher(ObjectArray, "/sim/objects", LATCHED)
-        self.pub_rgb = self.create_publisher(Image, "/camera/color/image_raw", 2)
-        self.pub_info = self.create_publisher(CameraInfo, "/camera/color/camera_info", 2)
-        self.pub_depth = self.create_publisher(Image, "/camera/depth/image_rect_raw", 2)
-        self.pub_cam_pose = self.create_publisher(PoseStamped, "/camera/color/pose", LATCHED)
-        # what robot_state_publisher publishes: the URDF, its fixed joints, the moving joints
-        self.pub_description = self.create_publisher(String, "/robot_description", LATCHED)
-        self.pub_tf_static = self.create_publisher(TFMessage, "/tf_static", LATCHED)
-        self.pub_tf = self.create_publisher(TFMessage, "/tf", TF_QOS)
-        self.pub_description.publish(String(data=urdf()))
-        self.pub_tf_static.publish(self._static_transforms())
+        self._sensor_publishers()
 
         self._sim_thread = threading.Thread(target=self._sim_loop, name="sim", daemon=True)
         self._sim_thread.start()
@@ -156,6 +118,60 @@ class Jaco2SimDriver(Node):
             f"{self.interface} surface, scenario {scenario.name} ({len(scenario.objects)} bottles), real_time_factor "
             f"{self.rtf:g}, joint states {1 / self.js_period:g} Hz, camera {cam_rate:g} Hz "
             f"{camera.width}x{camera.height}")
+
+    def _check_parameters(self, g) -> None:
+        """ValueError naming the first unusable parameter (main() prints it as one line, exit 2)."""
+        for k, lo in (("joint_state_rate", 0.0), ("objects_rate", 0.0), ("watchdog_timeout", 0.0),
+                      ("camera_width", 0), ("camera_height", 0), ("camera_fovy", 0.0), ("finger_tolerance", 0.0),
+                      ("finger_stall_threshold", 0.0), ("finger_stall_interval", 0.0)):
+            if not g(k) > lo:  # also NaN
+                raise ValueError(f"parameter {k} must be > {lo}, got {g(k)!r}")
+        if not (g("camera_rate") >= 0 and g("camera_fovy") < 180):
+            raise ValueError(f"camera_rate must be >= 0 and camera_fovy < 180, got {g('camera_rate')!r}, "
+                             f"{g('camera_fovy')!r}")
+        if not g("tf_rate") >= 0:
+            raise ValueError(f"parameter tf_rate must be >= 0, got {g('tf_rate')!r}")
+        self.interface = str(g("command_interface"))
+        if self.interface not in INTERFACES:
+            raise ValueError(f"parameter command_interface must be one of {', '.join(INTERFACES)}, "
+                             f"got {self.interface!r}")
+
+    def _kinova_surface(self, pre: str) -> None:
+        """kinova-ros (kinova_arm.cpp): the topics, services and fingers action of the j2s7s300 driver."""
+        self.create_subscription(JointVelocity, f"{pre}/in/joint_velocity", self.on_kinova_velocity, 10)
+        self.pub_js = self.create_publisher(JointState, f"{pre}/out/joint_state", 10)
+        self.pub_angles = self.create_publisher(JointAngles, f"{pre}/out/joint_angles", 10)
+        self.pub_finger_pos = self.create_publisher(FingerPosition, f"{pre}/out/finger_position", 10)
+        self.create_service(HomeArm, f"{pre}/in/home_arm", self.srv_home_arm)
+        self.create_service(Start, f"{pre}/in/start", self.srv_start)
+        self.create_service(Stop, f"{pre}/in/stop", self.srv_stop)
+        self._fingers = SideNode("jaco2_sim_driver_fingers", context=self.context, threads=3)
+        self._finger_server = ActionServer(
+            self._fingers.node, SetFingersPosition, f"{pre}/fingers_action/finger_positions",
+            execute_callback=self.execute_fingers, goal_callback=lambda _: GoalResponse.ACCEPT,
+            cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup())
+        self.names = list(JOINT_NAMES) + list(FINGER_JOINT_NAMES) + list(FINGER_TIP_NAMES)
+
+    def _ros2_control_surface(self) -> None:
+        """ros2_control: forward command controllers and joint_state_broadcaster."""
+        self.create_subscription(Float64MultiArray, VELOCITY_TOPIC, self.on_velocity, 10)
+        self.create_subscription(Float64MultiArray, GRIPPER_TOPIC, self.on_gripper, 10)
+        self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
+        self.names = list(JOINT_NAMES) + list(FINGER_JOINT_NAMES)
+
+    def _sensor_publishers(self) -> None:
+        """Ground truth, camera, and what robot_state_publisher publishes: the URDF, its fixed joints, the moving
+        joints."""
+        self.pub_objects = self.create_publisher(ObjectArray, "/sim/objects", LATCHED)
+        self.pub_rgb = self.create_publisher(Image, "/camera/color/image_raw", 2)
+        self.pub_info = self.create_publisher(CameraInfo, "/camera/color/camera_info", 2)
+        self.pub_depth = self.create_publisher(Image, "/camera/depth/image_rect_raw", 2)
+        self.pub_cam_pose = self.create_publisher(PoseStamped, "/camera/color/pose", LATCHED)
+        self.pub_description = self.create_publisher(String, "/robot_description", LATCHED)
+        self.pub_tf_static = self.create_publisher(TFMessage, "/tf_static", LATCHED)
+        self.pub_tf = self.create_publisher(TFMessage, "/tf", TF_QOS)
+        self.pub_description.publish(String(data=urdf()))
+        self.pub_tf_static.publish(self._static_transforms())
 
     # ------------------------------------------------------------------ commands
     def on_kinova_velocity(self, msg: JointVelocity) -> None:
