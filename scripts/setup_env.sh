@@ -92,7 +92,7 @@ build_msgs() {
 }
 
 # Inputs of a package's build step: its files, its directories (a file added or removed) and the wheels.
-msgs_inputs() { echo msg_defs/$1 msg_defs/$1/* msg_defs/$1/*/* requirements.txt requirements-build.txt; }
+msgs_inputs() { echo msg_defs/$1 msg_defs/$1/* msg_defs/$1/*/* msg_defs/cmake/* requirements.txt requirements-build.txt; }
 
 step msgs-qtree_relocation_msgs $(msgs_inputs qtree_relocation_msgs) -- build_msgs qtree_relocation_msgs \
   "from qtree_relocation_msgs.msg import ObjectState, ObjectArray
