@@ -80,7 +80,7 @@ class Jaco2SimDriver(Node):
         self.state_on_command = bool(g("state_on_command"))
         # use_sim_time (rclpy's own parameter): stamp everything with the simulated time, as Gazebo and ros2_control
         # in simulation do; otherwise with the system clock, as kinova-ros does (ros::Time::now())
-        self.sim_stamps = bool(self.get_parameter("use_sim_time").value)
+        self.sim_stamps = bool(g("sim_time_stamps")) or bool(self.get_parameter("use_sim_time").value)
         cam_rate = float(g("camera_rate"))
         cam_kw = dict(fovy_deg=float(g("camera_fovy")), width=int(g("camera_width")), height=int(g("camera_height")))
         camera = CameraSpec.for_shelf(**cam_kw) if g("camera_relative_to_shelf") else CameraSpec(**cam_kw)

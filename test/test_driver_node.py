@@ -43,7 +43,7 @@ def graph(request, tmp_path_factory):
     try:
         node = g.start(MODULE, params_file=PARAMS, params={"camera_rate": 2.0 if kinova else 0.0,
                                                            "command_interface": request.param,
-                                                           "use_sim_time": True})  # stamps in simulated time
+                                                           "sim_time_stamps": True})  # stamps in simulated time
         g.node, g.surface = node, request.param
         g.states = g.probe.collect(f"{PRE}/out/joint_state" if kinova else "/joint_states", JointState)
         g.states.wait(lambda m: len(m) >= 3, timeout=60)

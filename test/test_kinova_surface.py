@@ -58,7 +58,7 @@ class Surface:
             self.node = self.graph.start("jaco2_sim_driver.driver_node",
                                          params_file=REPO / "config" / "jaco2_sim_driver.yaml",
                                          params={"camera_rate": 0.0, "command_interface": interface,
-                                                 "use_sim_time": True})
+                                                 "sim_time_stamps": True})
             self.c = Client(self.graph.domain_id, f"outsider_{interface}")
             self.clock = self.c.collect(Clock, "/clock", 100)
             self.tf = self.c.collect(TFMessage, "/tf", 100)
