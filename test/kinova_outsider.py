@@ -195,7 +195,9 @@ class FakeArm(Client):
 
     def __init__(self, domain_id: int, surface: str, q0, prefix: str = "/j2s7s300_driver",
                  object_turns: float = 1500.0):
-        super().__init__(domain_id, f"fake_{surface}_arm", threads=4)
+        # the fingers action's execute callback blocks, so kinova needs threads; ros2_control has only topics, and
+        # rclpy's MultiThreadedExecutor delivered its 100 Hz commands with gaps up to 0.6 s (watchdog stops)
+        super().__init__(domain_id, f"fake_{surface}_arm", threads=4 if surface == "kinova" else 1)
         self.surface, self.object_turns = surface, object_turns
         self.lock = threading.Lock()
         self.q = np.asarray(q0, float).copy()
