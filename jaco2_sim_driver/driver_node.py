@@ -42,6 +42,7 @@ from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
 
 from qtree_relocation_msgs.msg import ObjectArray, ObjectState
+from relocation_common import kinova as units  # Kinova's units, shared with the planner
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import transform_msg
 from relocation_common.scenario import load_scenario
@@ -191,7 +192,7 @@ class Jaco2SimDriver(Node):
         """ros2_control JointGroupPositionController over the three finger joints: Kinova's finger joint angles
         (rad, 0 open .. 1.396 closed, as in the joint states)."""
         try:
-            target = kinova.turns_to_sim(kinova.joint_to_turns(np.asarray(msg.data, float)))
+            target = kinova.turns_to_sim(units.joint_to_turns(np.asarray(msg.data, float)))
             with self.lock:
                 oid = self.sim.set_fingers(target)
         except (BadCommandError, ValueError, TypeError) as e:
@@ -272,7 +273,7 @@ class Jaco2SimDriver(Node):
         with self.lock:
             oid = self.sim.set_fingers(kinova.turns_to_sim(goal))
         self._log_grasp(oid, float(np.mean(kinova.turns_to_sim(goal))))
-        monitor = kinova.FingerMonitor(goal, t, p, **self.finger_params)
+        monitor = units.FingerMonitor(goal, t, p, **self.finger_params)
         k = 0
         while True:
             time.sleep(0.01)
@@ -377,7 +378,7 @@ class Jaco2SimDriver(Node):
         msg = JointState()
         msg.header.stamp = self._stamp(t)
         msg.name = self.names
-        fingers = kinova.turns_to_joint(turns)
+        fingers = units.turns_to_joint(turns)
         zeros = np.zeros(len(self.names) - len(JOINT_NAMES))
         if self.kinova:
             msg.position = np.concatenate([q, fingers, np.zeros(len(FINGER_TIP_NAMES))]).tolist()
@@ -389,7 +390,7 @@ class Jaco2SimDriver(Node):
             self.pub_finger_pos.publish(_finger_msg(turns))
         else:
             msg.position = np.concatenate([q, fingers]).tolist()
-            msg.velocity = np.concatenate([qdot, kinova.turns_to_joint(turns_dot)]).tolist()
+            msg.velocity = np.concatenate([qdot, units.turns_to_joint(turns_dot)]).tolist()
             msg.effort = np.concatenate([effort, zeros]).tolist()
             self.pub_js.publish(msg)
 

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from relocation_common.kinova import (  # noqa: F401  (re-exported for the node)
-    FINGER_JOINT_CLOSED, FINGER_MAX_TURN, FingerMonitor, joint_to_turns, turns_to_joint)
+from relocation_common.kinova import FINGER_MAX_TURN
 
 from .scene import FINGER_CLOSED
 

@@ -123,7 +123,7 @@ def _stamp(m) -> float:
 
 def _speed_run(msgs, v) -> tuple[float, np.ndarray]:
     """(simulated seconds, displacement) over consecutive joint states both moving at about v, by their stamps
-    (simulated time: the driver runs with use_sim_time). A command stream that falls more than 50 ms behind on a
+    (simulated time: the driver runs with sim_time_stamps). A command stream that falls more than 50 ms behind on a
     loaded machine lets the watchdog stop the arm in between: those pauses do not count."""
     msgs, on = sorted(msgs, key=_stamp), np.asarray(v) != 0  # joints commanded to move
     moving = [bool(np.all(np.abs(np.array(m.velocity[:7]))[on] > 0.9 * np.abs(v)[on])) for m in msgs]

@@ -54,7 +54,7 @@ class Surface:
         self.interface = interface
         self.graph = RosGraph(tmp)
         try:
-            # use_sim_time: the driver stamps its messages with the simulated time (the time of /clock)
+            # sim_time_stamps: the driver stamps its messages with the simulated time (the time of /clock)
             self.node = self.graph.start("jaco2_sim_driver.driver_node",
                                          params_file=REPO / "config" / "jaco2_sim_driver.yaml",
                                          params={"camera_rate": 0.0, "command_interface": interface,
