@@ -195,9 +195,11 @@ class FakeArm(Client):
 
     def __init__(self, domain_id: int, surface: str, q0, prefix: str = "/j2s7s300_driver",
                  object_turns: float = 1500.0):
-        # the fingers action's execute callback blocks, so kinova needs threads; ros2_control has only topics, and
-        # rclpy's MultiThreadedExecutor delivered its 100 Hz commands with gaps up to 0.6 s (watchdog stops)
+        # the fingers action's execute callback blocks, so kinova needs threads; but rclpy's MultiThreadedExecutor
+        # delivered 100 Hz commands with gaps up to 0.6 s (watchdog stops; a CI run's relocation failed on it), so
+        # the velocity commands always come through a node of their own on a single-threaded executor
         super().__init__(domain_id, f"fake_{surface}_arm", threads=4 if surface == "kinova" else 1)
+        self._io = Client(domain_id, f"fake_{surface}_arm_commands") if surface == "kinova" else self
         self.surface, self.object_turns = surface, object_turns
         self.lock = threading.Lock()
         self.q = np.asarray(q0, float).copy()
@@ -211,8 +213,7 @@ class FakeArm(Client):
         self.js_published = 0
         group = ReentrantCallbackGroup()
         if surface == "kinova":
-            self.node.create_subscription(JointVelocity, f"{prefix}/in/joint_velocity", self._on_kinova, 10,
-                                          callback_group=group)
+            self._io.node.create_subscription(JointVelocity, f"{prefix}/in/joint_velocity", self._on_kinova, 10)
             self.pub = self.node.create_publisher(JointState, f"{prefix}/out/joint_state", 10)
             self.names = ARM_JOINTS + FINGER_JOINTS + TIP_JOINTS
             self._server = ActionServer(self.node, SetFingersPosition, f"{prefix}/fingers_action/finger_positions",
@@ -313,6 +314,8 @@ class FakeArm(Client):
     def close(self) -> None:
         self._running = False
         self._loop.join(timeout=2)
+        if self._io is not self:
+            self._io.close()
         super().close()
 
 
