@@ -3,7 +3,7 @@ for tests of the Q-Tree layer only, a declared blocking relation.
 """
 from __future__ import annotations
 
-from relocation_common.feasibility import FeasibilityAnswer, FeasibilityOracle, Label
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, FeasibilityOracle, Label
 from relocation_common.scenario import ScenarioError
 
 
@@ -34,12 +34,19 @@ class CachedOracle:
             self.table[key] = answer
         return answer
 
+    def lane_blockers(self, removed: frozenset[str]):
+        """The wrapped oracle's lane blockers (relocation_common.feasibility.LaneOracle), None if it has none.
+        Not cached, not counted in `calls`: no motion planning."""
+        lanes = getattr(self.oracle, "lane_blockers", None)
+        return None if lanes is None else lanes(frozenset(removed))
+
 
 class BlockingOracle:
     """TEST DOUBLE for the motion planner: a declared blocking relation ("object i becomes reachable once all
     of these are removed"), as in a scenario's `blocking:` section. Never a stand-in for the planner in the
     product. Objects not listed are reachable from the start; the target answers TARGET (g_T), an obstacle
-    OBSTACLE (g_O), a blocked object UNFEASIBLE (g_U).
+    OBSTACLE (g_O), a blocked object UNFEASIBLE (g_U) naming its declared blockers not yet removed as one
+    certain BlockerSet (the relation has one lane per object).
     """
 
     def __init__(self, scenario) -> None:
@@ -73,6 +80,11 @@ class BlockingOracle:
             raise KeyError(f"unknown object id {object_id!r}")
         if object_id in removed:
             raise ValueError(f"object {object_id!r} is already removed")
-        if not self.blocking.get(object_id, frozenset()) <= removed:
-            return FeasibilityAnswer(Label.UNFEASIBLE, message="blocked")
+        left = self.blocking.get(object_id, frozenset()) - removed
+        if left:
+            return FeasibilityAnswer(Label.UNFEASIBLE, message="blocked", blockers=(BlockerSet(left),))
         return FeasibilityAnswer(Label.TARGET if object_id == self.target_id else Label.OBSTACLE)
+
+    def lane_blockers(self, removed: frozenset[str]) -> dict[str, tuple[BlockerSet, ...]]:
+        """Every object not removed -> its one lane: the declared blockers not yet removed (certain)."""
+        return {o: (BlockerSet(self.blocking.get(o, frozenset()) - removed),) for o in self.ids if o not in removed}
