@@ -11,10 +11,11 @@ Search (Lazy Shortest Path, Dellin & Srinivasa 2016). The cost of a removed set 
 search. Its heuristic h(R) = `need(T, R)`: the lightest clearing of one of the target's lanes not yet removed,
 plus, for the objects of that lane, the most any one of them needs removed beyond it (recursively, `depth`
 levels); a lane needing an object that must leave after it is no way. Admissible on the optimistic graph, where
-every claim holds. The path found is then verified with real feasibility calls, the target's edge first, then
-from the start; the first unfeasible answer (and its blockers) is recorded and the search repeated. When every
-edge of the optimistic optimum is feasible it is the proven optimum: the optimistic graph contains every true
-edge. Each (object, set) is asked at most once.
+every claim holds. The path found is then verified with real feasibility calls from the start (the target only
+from a set known reachable: asking it first cost 2.7x the calls on random instances without lane information);
+the first unfeasible answer (and its blockers) is recorded and the search repeated. When every edge of the
+optimistic optimum is feasible it is the proven optimum: the optimistic graph contains every true edge. Each
+(object, set) is asked at most once.
 """
 from __future__ import annotations
 
@@ -164,7 +165,7 @@ def solve(problem, oracle, depth: int = DEPTH) -> AStarResult:
         searches, expanded = searches + 1, expanded + n
         if path is None:
             return AStarResult(None, None, calls, expanded, blocker_calls, searches)
-        for o, s in [path[-1]] + path[:-1]:  # the target's edge first, then from the start
+        for o, s in path:  # from the start: the target is asked only from a set known reachable
             if (o, s) not in kb.answers:
                 calls += 1
                 if not kb.record(o, s, oracle.feasibility(o, s)):
