@@ -35,6 +35,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray, String
@@ -60,6 +61,10 @@ FINGER_TIP_NAMES = tuple(f"{PREFIX}_joint_finger_tip_{i}" for i in range(1, 4)) 
 INTERFACES = ("kinova", "ros2_control")
 VELOCITY_TOPIC = "/velocity_controller/commands"   # ros2_control JointGroupVelocityController, rad/s
 GRIPPER_TOPIC = "/gripper_controller/commands"     # ros2_control JointGroupPositionController, finger joints rad
+# a Float64MultiArray command of 7 values serializes to ~100 bytes; bigger ones are refused before deserialization
+# (8 MB arrays deserialized on every message took the driver from 245 to 351 MiB and halved its joint-state rate)
+MAX_COMMAND_BYTES = 4096
+COMMAND_QOS = 1  # only the newest command matters: no queue of stale (or huge) ones
 MAX_LAG = 0.5  # s of simulated time the loop may fall behind before it stops trying to catch up
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 TF_QOS = QoSProfile(depth=100)  # tf2_ros TransformBroadcaster's
@@ -139,7 +144,7 @@ class Jaco2SimDriver(Node):
 
     def _kinova_surface(self, pre: str) -> None:
         """kinova-ros (kinova_arm.cpp): the topics, services and fingers action of the j2s7s300 driver."""
-        self.create_subscription(JointVelocity, f"{pre}/in/joint_velocity", self.on_kinova_velocity, 10)
+        self.create_subscription(JointVelocity, f"{pre}/in/joint_velocity", self.on_kinova_velocity, COMMAND_QOS)
         self.pub_js = self.create_publisher(JointState, f"{pre}/out/joint_state", 10)
         self.pub_angles = self.create_publisher(JointAngles, f"{pre}/out/joint_angles", 10)
         self.pub_finger_pos = self.create_publisher(FingerPosition, f"{pre}/out/finger_position", 10)
@@ -155,8 +160,8 @@ class Jaco2SimDriver(Node):
 
     def _ros2_control_surface(self) -> None:
         """ros2_control: forward command controllers and joint_state_broadcaster."""
-        self.create_subscription(Float64MultiArray, VELOCITY_TOPIC, self.on_velocity, 10)
-        self.create_subscription(Float64MultiArray, GRIPPER_TOPIC, self.on_gripper, 10)
+        for topic, callback in ((VELOCITY_TOPIC, self.on_velocity), (GRIPPER_TOPIC, self.on_gripper)):
+            self.create_subscription(Float64MultiArray, topic, self._bounded(topic, callback), COMMAND_QOS, raw=True)
         self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
         self.names = list(JOINT_NAMES) + list(FINGER_JOINT_NAMES)
 
@@ -183,6 +188,19 @@ class Jaco2SimDriver(Node):
             return
         v = [msg.joint1, msg.joint2, msg.joint3, msg.joint4, msg.joint5, msg.joint6, msg.joint7]
         self._command(np.radians(np.asarray(v, float)), "joint_velocity")
+
+    def _bounded(self, topic: str, callback):
+        """A raw-subscription callback: a serialized command over MAX_COMMAND_BYTES is refused (the arm holds
+        still) without being deserialized; a smaller one is deserialized and passed to `callback`."""
+        def on_raw(data: bytes) -> None:
+            if len(data) > MAX_COMMAND_BYTES:
+                if topic == VELOCITY_TOPIC:
+                    self._commands.put(None)
+                self.get_logger().error(f"rejected {topic} command: {len(data)} bytes serialized (at most "
+                                        f"{MAX_COMMAND_BYTES}; 7 or 3 values expected)", throttle_duration_sec=1.0)
+                return
+            callback(deserialize_message(data, Float64MultiArray))
+        return on_raw
 
     def on_velocity(self, msg: Float64MultiArray) -> None:
         """ros2_control JointGroupVelocityController command, rad/s."""

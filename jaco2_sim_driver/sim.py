@@ -7,7 +7,9 @@ velocities of its STPIK solution, Eq. 16-17 of the paper) and is
 - rejected whole if it has the wrong length or a NaN/Inf entry (BadCommandError; the previous state is kept),
 - clamped to the velocity limits of Table 7 (`QDOT_MAX`),
 - slowed towards a joint limit of Table 6 so that the joint stops on it (joint-limit stop),
-- zeroed by the watchdog when no command came for `watchdog_timeout` of simulated time (Kinova: 50 ms).
+- zeroed by the watchdog when no command came for `watchdog_timeout` of simulated time (Kinova: 50 ms);
+and after every physics step the joint velocities are held within Table 7 and the angles within Table 6, as the
+arm's firmware does (`_enforce_limits`): the servo alone let joint 3 reach 1.14x its limit under +-1e30 commands.
 
 Grasp: a weld constraint (see `gripper_close`). Physics at 1 kHz (model timestep 0.001).
 """
@@ -167,11 +169,23 @@ class Jaco2Sim:
         v = np.where(lim & (v < 0), np.maximum(v, -lo), v)
         self.data.ctrl[self._act] = v
 
+    def _enforce_limits(self) -> None:
+        """Joint velocities within +-qdot_max (Table 7); a limited joint past Table 6 is put back on its limit and
+        stopped there."""
+        d = self.data
+        d.qvel[self._vadr] = np.clip(d.qvel[self._vadr], -self.qdot_max, self.qdot_max)
+        q = d.qpos[self._qadr]
+        out = self._limited & ((q > Q_UPPER) | (q < Q_LOWER))
+        if out.any():
+            d.qpos[self._qadr[out]] = np.clip(q[out], Q_LOWER[out], Q_UPPER[out])
+            d.qvel[self._vadr[out]] = 0.0
+
     def step(self, n: int = 1) -> None:
         """Advance n physics steps of 1 ms, re-applying watchdog and limit stop before each."""
         for _ in range(n):
             self._apply()
             mujoco.mj_step(self.model, self.data)
+            self._enforce_limits()
             if self._release is not None and self.data.time >= self._release[1]:
                 self._let_go(self._release[0])
 

@@ -188,6 +188,32 @@ def test_bad_command_changes_nothing_and_node_keeps_running(g, bad):
     assert _settled_q(g)[6] - q1[6] > 0.05
 
 
+def _rss_mib(pid: int) -> float:
+    for line in open(f"/proc/{pid}/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return math.nan
+
+
+def test_8_mb_commands_are_refused_unread(g):
+    """150 commands of 1M values (8 MB) in 3 s (issue 18: the driver went from 245 to 351 MiB and its joint-state
+    rate halved): refused before deserialization, the arm holds still, memory and the state rate stay."""
+    _only(g, "ros2_control")
+    q0 = _settled_q(g)
+    n0, t0, rss0 = len(g.states.msgs), time.monotonic(), _rss_mib(g.node.pid)
+    time.sleep(1.0)
+    base_rate = (len(g.states.msgs) - n0) / (time.monotonic() - t0)
+    huge = Float64MultiArray(data=np.full(1_000_000, 0.3))
+    n1, t1 = len(g.states.msgs), time.monotonic()
+    _stream(g.pub, huge, 3.0, rate=50.0)
+    rate = (len(g.states.msgs) - n1) / (time.monotonic() - t1)
+    rss1 = _rss_mib(g.node.pid)
+    print(f"\njoint states {base_rate:.0f}/s before, {rate:.0f}/s during; driver RSS {rss0:.0f} -> {rss1:.0f} MiB")
+    assert np.allclose(_settled_q(g, 0.1), q0, atol=1e-4)
+    assert "bytes serialized" in g.node.log() and g.node.alive()
+    assert rate > 0.7 * base_rate and rss1 - rss0 < 55, (base_rate, rate, rss0, rss1)  # old: +84 MiB; new: +31 (DDS)
+
+
 def test_nan_on_the_kinova_topic_is_rejected(g):
     _only(g, "kinova")
     q0 = _settled_q(g)

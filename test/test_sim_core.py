@@ -85,6 +85,23 @@ def test_bad_command_is_rejected_and_changes_nothing(fresh, bad):
     assert np.allclose(fresh.command, 0.2)
 
 
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_huge_commands_never_leave_tables_6_and_7(fresh, sign):
+    """+-1e30 on every joint for 3 s (issue 18: before the firmware-like limits, joint 3 reached 1.14x Table 7 and
+    joint 4 went past Table 6): at every 1 ms step each joint within its velocity and position limits."""
+    from stpik_motion_planner.robot_description import CONTINUOUS
+    limited = ~np.asarray(CONTINUOUS)
+    worst_v, worst_p = 0.0, 0.0
+    for k in range(3000):
+        if k % 10 == 0:
+            fresh.set_velocity(sign * 1e30 * np.ones(7))
+        fresh.step(1)
+        worst_v = max(worst_v, float(np.max(np.abs(fresh.qdot) / QDOT_MAX)))
+        q = fresh.q
+        worst_p = max(worst_p, float(np.max(np.where(limited, np.maximum(q - Q_UPPER, Q_LOWER - q), 0.0))))
+    assert worst_v <= 1.0 + 1e-9 and worst_p <= 1e-9, (worst_v, worst_p)
+
+
 def test_joint_limit_stop_holds(fresh):
     v = np.zeros(7)
     v[3] = QDOT_MAX[3]  # joint 4 towards its upper limit (0.25 rad away from home)
