@@ -13,6 +13,9 @@ from qtree_relocation_msgs.msg import ObjectArray, ObjectState
 from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle, ScenarioError
 
 BASE_FRAME = "j2s7s300_link_base"
+# PlanFeasibility: ok=false with a message starting so means the planner's wall-clock safety net ran out before its
+# work budget (a loaded machine): no answer, not UNFEASIBLE; ask again.
+NO_ANSWER = "no answer: "
 
 
 def bottle_to_msg(b: Bottle, z: float = 0.0) -> ObjectState:

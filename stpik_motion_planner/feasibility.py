@@ -3,10 +3,15 @@
 feasibility(i, removed): 1) action to pose: side grasp and pre-grasp of object i for a few approach yaws;
 2) RRT-Connect (OMPL) in Cartesian space for the tool from its home pose to the pre-grasp, keeping the hand clear
 of the bottles still there; then the straight approach to the grasp; 3) STPIK check (Eq. 9-10) tracking that path;
-a rejected path is re-sampled until the timeout or max_attempts. 4) label g_U / g_O / g_T, planning time,
+a rejected path is re-sampled up to max_attempts times. 4) label g_U / g_O / g_T, planning time,
 attempts and the joint trajectory (100 Hz, Q convention, within Table 7).
 plan_pick / plan_carry / plan_home give the executor the whole relocation: grasp, lift, out of the shelf, down to
 the slot on the bottom shelf, release, retreat, home.
+
+Budgets are work, not time: validity checks per RRT-Connect attempt (rrt_max_checks), IK steps per STPIK check
+(stpik.step_budget), attempts per query (max_attempts); so a question gets the same answer on an idle and on a
+loaded machine. `timeout` / `carry_timeout` are wall-clock safety nets only: reached first, the query raises
+SafetyNetTimeout (no answer; never g_U, so no cache keeps it).
 """
 from __future__ import annotations
 
@@ -28,7 +33,7 @@ from .collision import (CARRIED, HAND_PARTS, PENETRATION, ArmGeometry, Collision
 from .grasp import (Grasp, WorkspaceError, carry_heights, check_pose, exit_pose, grasp_standoff, grasp_yaws, home_pose,
                     place_poses, side_grasp)
 from .kinematics import Kinematics
-from .rrt import CartesianRRT, JointRRT, seed_ompl
+from .rrt import CartesianRRT, JointRRT, SafetyNetTimeout, seed_ompl  # noqa: F401 (SafetyNetTimeout: for callers)
 from relocation_common.scenario import Scenario, UnknownObjectError
 from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory
@@ -42,8 +47,8 @@ class PlanningError(RuntimeError):
 @dataclass
 class PlannerParams:
     seed: int = 7
-    timeout: float = 0.5  # s per feasibility query (default; the service may pass its own)
-    rrt_timeout: float = 0.08  # s per RRT-Connect attempt
+    timeout: float = 10.0  # s: wall-clock safety net per feasibility query (the service may pass its own)
+    rrt_max_checks: int = 4000  # validity checks per RRT-Connect attempt (about 80 ms here, idle)
     max_attempts: int = 6  # sampled paths per query before answering g_U
     n_yaws: int = 3  # approach yaws tried: 0, +max_yaw, -max_yaw, ...
     max_yaw: float = 0.35  # rad
@@ -51,14 +56,14 @@ class PlannerParams:
     hand_margin: float = 0.012  # m: inflation of the hand proxy in the Cartesian planner
     resolution: float = 0.01  # m: motion checking resolution of the Cartesian planner
     joint_resolution: float = 0.01  # rad: of the joint-space planner
-    simplify_time: float = 0.005  # s of OMPL path simplification
+    simplify_checks: int = 250  # validity checks of OMPL path simplification (0: none)
     lift: float = 0.03  # m, after the grasp (at least carried_clearance + stpik.act: grasp.carry_heights)
     drop: float = 0.012  # m, bottle base above the bottom shelf at release (at most half the room: carry_heights)
     carried_clearance: float = 0.005  # m, the carried bottle (real size) to boards and bottles
     carry_ramp: float = 0.25  # s to full speed and to a stop at each waypoint of the carry and retreat (0: none)
     carry_accel: float = 3.0  # rad/s^2, joint accelerations while a bottle is held (0: no limit)
     stage_distance: float = 0.15  # m, staging pose in front of the slot (at most x_front - 0.07: grasp.place_poses)
-    carry_timeout: float = 2.0  # s for plan_pick / plan_carry / plan_home
+    carry_timeout: float = 10.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple = (1.0, 0.55, 0.65, 0.9)
@@ -66,20 +71,20 @@ class PlannerParams:
 
     def __post_init__(self) -> None:
         """Every setting checked once, with its name in the error (ValueError)."""
-        positive = ("timeout", "rrt_timeout", "pre_grasp_distance", "resolution", "joint_resolution",
+        positive = ("timeout", "pre_grasp_distance", "resolution", "joint_resolution",
                     "stage_distance", "carry_timeout", "carried_clearance")
-        non_negative = ("max_yaw", "hand_margin", "simplify_time", "lift", "drop", "carry_ramp", "carry_accel")
+        non_negative = ("max_yaw", "hand_margin", "lift", "drop", "carry_ramp", "carry_accel")
         for k in positive + non_negative:
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v < 0 or (v == 0 and k in positive):
                 raise ValueError(f"motion planner parameter {k} must be a finite number "
                                  f"{'> 0' if k in positive else '>= 0'}, got {v!r}")
-        for k in ("max_attempts", "n_yaws", "seed"):
-            v = getattr(self, k)
-            if isinstance(v, bool) or not isinstance(v, int) or (v < 1 and k != "seed"):
-                raise ValueError(f"motion planner parameter {k} must be an integer{' >= 1' if k != 'seed' else ''}, "
-                                 f"got {v!r}")
+        for k in ("max_attempts", "n_yaws", "seed", "rrt_max_checks", "simplify_checks"):
+            v, least = getattr(self, k), {"seed": None, "simplify_checks": 0}.get(k, 1)
+            if isinstance(v, bool) or not isinstance(v, int) or (least is not None and v < least):
+                raise ValueError(f"motion planner parameter {k} must be an integer"
+                                 f"{'' if least is None else f' >= {least}'}, got {v!r}")
         lo, hi = (np.asarray(getattr(self, k), float) for k in ("workspace_lo", "workspace_hi"))
         if lo.shape != (4,) or hi.shape != (4,) or not np.all(np.isfinite(lo) & np.isfinite(hi) & (lo < hi)):
             raise ValueError(f"motion planner parameters workspace_lo < workspace_hi must be 4 finite numbers each "
@@ -104,7 +109,7 @@ class PlannerParams:
                 kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
             else:
                 raise ValueError(f"motion planner parameter {k!r} is unknown; known: {sorted(own)} and stpik.*")
-        for k in ("max_attempts", "n_yaws", "seed"):  # YAML / ROS give 6.0 for 6: accept whole numbers only
+        for k in ("max_attempts", "n_yaws", "seed", "rrt_max_checks", "simplify_checks"):  # whole numbers only
             if isinstance(kw.get(k), float) and kw[k].is_integer():
                 kw[k] = int(kw[k])
         if "direct_first" in kw and not isinstance(kw["direct_first"], bool):
@@ -157,7 +162,7 @@ class MotionPlanner:
         p = self.params
         self.stpik = Stpik(self.kin, self.arm, p.stpik)
         self.hand = HandProxy(p.hand_margin)
-        self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_time)
+        self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_checks)
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
         self._pick_end: dict[tuple[str, frozenset], np.ndarray] = {}
@@ -256,7 +261,7 @@ class MotionPlanner:
         x = min(pose[0], self.scenario.shelf.x_front - 0.06)
         return np.array([x, pose[1] - (pose[0] - x) * math.tan(pose[3]), pose[2], pose[3]])
 
-    def _cartesian_path(self, start, goal, obs: ObstacleSet, hand: HandProxy, timeout: float,
+    def _cartesian_path(self, start, goal, obs: ObstacleSet, hand: HandProxy, max_checks: int, deadline: float,
                         stats: QueryStats, first: bool) -> list[np.ndarray] | None:
         """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on
         later attempts RRT-Connect."""
@@ -266,7 +271,7 @@ class MotionPlanner:
                 stats.direct_paths += 1
                 return direct
         t = time.perf_counter()
-        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), timeout)
+        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), max_checks, deadline)
         stats.rrt_time += time.perf_counter() - t
         stats.rrt_calls += 1
         return path
@@ -285,7 +290,8 @@ class MotionPlanner:
     def feasibility(self, object_id: str, removed: Iterable[str] = frozenset(),
                     timeout: float | None = None) -> FeasibilityAnswer:
         """g_T / g_O with the home -> pre-grasp -> grasp trajectory (100 Hz) if a path passes the STPIK check,
-        g_U otherwise. Raises UnknownObjectError / ValueError / WorkspaceError on bad input."""
+        g_U otherwise. Raises UnknownObjectError / ValueError / WorkspaceError on bad input, SafetyNetTimeout when
+        the wall-clock `timeout` (default params.timeout) ran out before the work budget (no answer)."""
         t0 = time.perf_counter()
         removed = self._check(object_id, removed)
         if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout)):
@@ -317,10 +323,7 @@ class MotionPlanner:
             g = cands[attempts % len(cands)]
             first = attempts < len(cands)
             attempts += 1
-            left = deadline - time.perf_counter()
-            if left <= 0:
-                return None, attempts - 1, f"timeout after {attempts - 1} attempts ({last})"
-            path = self._cartesian_path(self.home, g.pre_grasp, obs, self.hand, min(p.rrt_timeout, left), stats,
+            path = self._cartesian_path(self.home, g.pre_grasp, obs, self.hand, p.rrt_max_checks, deadline, stats,
                                         first)
             if path is None:
                 last = f"no Cartesian path to the pre-grasp (yaw {g.yaw:+.2f})"
@@ -409,17 +412,13 @@ class MotionPlanner:
                                  max(p.hand_margin, p.stpik.clearance + p.stpik.act) + 0.002))
         carry, last = None, "no Cartesian path out of the shelf"
         for attempt in range(p.max_attempts):
-            left = deadline - time.perf_counter()
-            if left <= 0:
-                last = f"timeout ({last})"
-                break
             if attempt == 0 and p.direct_first and self._path_clear([lifted, out, stage], obs, hand_c):
                 stats.direct_paths += 1
                 mid = [lifted, out, stage]
             else:
                 t = time.perf_counter()
                 mid = self.rrt.plan(lifted, stage, lambda s_: not hand_c.collides(*_mat(s_), obs),
-                                    min(p.rrt_timeout * 4, left))
+                                    4 * p.rrt_max_checks, deadline)
                 stats.rrt_time += time.perf_counter() - t
                 stats.rrt_calls += 1
                 if mid is None:
@@ -466,13 +465,14 @@ class MotionPlanner:
                 return False
         return True
 
-    def plan_joint(self, q_from, q_to, obs: ObstacleSet, timeout: float, margin: float = 0.005) -> Trajectory | None:
+    def plan_joint(self, q_from, q_to, obs: ObstacleSet, max_checks: int, deadline: float,
+                   margin: float = 0.005) -> Trajectory | None:
         """RRT-Connect in joint space (same collision checker), timed within Table 7 at 90 %."""
         q_from, q_to = _check_q(q_from), _check_q(q_to)
         lo = np.maximum(rd.Q_LOWER, np.minimum(q_from, q_to) - math.pi)
         hi = np.minimum(rd.Q_UPPER, np.maximum(q_from, q_to) + math.pi)
-        rrt = JointRRT(lo, hi, self.params.joint_resolution, self.params.simplify_time)
-        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), timeout)
+        rrt = JointRRT(lo, hi, self.params.joint_resolution, self.params.simplify_checks)
+        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), max_checks, deadline)
         if path is None:
             return None
         return _time_joint_path(path, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt)
@@ -483,7 +483,8 @@ class MotionPlanner:
         removed = self.scenario.check_ids(removed)
         placed = self.placed_default(removed, -1) if placed is None else list(placed)
         obs = CollisionScene(self.scenario, placed).obstacles(removed)
-        traj = self.plan_joint(q_from, rd.Q_HOME, obs, self.params.carry_timeout)
+        traj = self.plan_joint(q_from, rd.Q_HOME, obs, 4 * self.params.rrt_max_checks,
+                               time.perf_counter() + self.params.carry_timeout)
         if traj is None:
             raise PlanningError("no collision-free joint path back to the home configuration")
         return traj.resample()

@@ -40,12 +40,12 @@ from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from relocation_common import kinova
 from relocation_common.node import SideNode, declare_parameters, node_main
-from relocation_common.ros_conversions import BASE_FRAME, msg_to_bottles
+from relocation_common.ros_conversions import BASE_FRAME, NO_ANSWER, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
 from . import robot_description as rd
 from .execution import FollowerParams, TrajectoryFollower
-from .feasibility import MotionPlanner, PlannerParams, PlanningError
+from .feasibility import MotionPlanner, PlannerParams, PlanningError, SafetyNetTimeout
 from .scene_update import merge_perceived
 from .relocation import PHASES, relocate
 from .trajectory import Trajectory
@@ -192,6 +192,10 @@ class MotionPlannerNode(Node):
         except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
             res.message = str(e)
             self.get_logger().warning(f"feasibility request refused: {e}")
+            return res
+        except SafetyNetTimeout as e:
+            res.message = f"{NO_ANSWER}{e}"
+            self.get_logger().warning(res.message)
             return res
         except Exception as e:  # a planner bug must not take the node down
             res.message = f"internal planner error: {type(e).__name__}: {e}"

@@ -6,6 +6,10 @@ YAW_SCALE (m/rad) so that its Euclidean metric and motion-checking resolution ar
 is the rigid hand proxy (collision.HandProxy): no inverse kinematics inside the planner (see STACK-NOTES: IK
 goals make RRT-Connect burn its budget); the STPIK check (stpik.py) then decides whether the arm can follow.
 
+Budget: an attempt ends after `max_checks` validity checks (the work, the same on an idle or a loaded machine), so
+a query's answer does not depend on the load. `deadline` (time.perf_counter()) is only a safety net: reached before
+the checks are spent, `plan` raises SafetyNetTimeout, which is no answer (never "no path").
+
 Randomness: OMPL has one RNG per process, seeded once (`seed_ompl`) before any sampling; later calls with
 another seed are ignored. So a query's path is a function of the seed AND of the queries run before it in the
 same process. See docs/motion_planner.md.
@@ -14,6 +18,8 @@ from __future__ import annotations
 
 from typing import Callable, Sequence
 
+import time
+
 import numpy as np
 import ompl.base as ob
 import ompl.geometric as og
@@ -21,6 +27,17 @@ import ompl.util as ou
 
 YAW_SCALE = 0.25  # metres of OMPL distance per radian of yaw
 _seeded: list[int] = []
+
+
+class SafetyNetTimeout(RuntimeError):
+    """The wall-clock safety net ran out before the work budget was spent: the query has no answer (it is not
+    "unfeasible"; ask again, on a less loaded machine or with a longer timeout)."""
+
+
+def check_deadline(deadline: float, what: str) -> None:
+    """Raise SafetyNetTimeout once time.perf_counter() is past `deadline`."""
+    if time.perf_counter() > deadline:
+        raise SafetyNetTimeout(f"wall-clock safety net reached during {what}, before the work budget was spent")
 
 
 def seed_ompl(seed: int) -> int:
@@ -43,10 +60,25 @@ def _space(lo: Sequence[float], hi: Sequence[float]) -> ob.RealVectorStateSpace:
     return space
 
 
-def _solve(space, n: int, start, goal, valid: Callable[[np.ndarray], bool], timeout: float, resolution: float,
-           simplify: float, planner_range: float) -> list[np.ndarray] | None:
+def _budget(checks: list[int], limit: int, deadline: float) -> ob.PlannerTerminationCondition:
+    """Stop once checks[0] reaches `limit`, or at the wall-clock deadline (the caller tells which)."""
+    spent = ob.PlannerTerminationCondition(lambda: checks[0] >= limit)
+    return ob.plannerOrTerminationCondition(spent, ob.timedPlannerTerminationCondition(
+        max(deadline - time.perf_counter(), 1e-3)))
+
+
+def _solve(space, n: int, start, goal, valid: Callable[[np.ndarray], bool], max_checks: int, deadline: float,
+           resolution: float, simplify_checks: int, planner_range: float) -> list[np.ndarray] | None:
+    """RRT-Connect until a path is found or `max_checks` validity checks are spent (then None); then OMPL's
+    path simplification for `simplify_checks` more checks (0: none)."""
+    checks = [0]
+
+    def check(s) -> bool:
+        checks[0] += 1
+        return valid(np.fromiter((s[i] for i in range(n)), float, n))
+
     ss = og.SimpleSetup(space)
-    ss.setStateValidityChecker(lambda s: valid(np.fromiter((s[i] for i in range(n)), float, n)))
+    ss.setStateValidityChecker(check)
     si = ss.getSpaceInformation()
     si.setStateValidityCheckingResolution(resolution / space.getMaximumExtent())
     a, b = space.allocState(), space.allocState()
@@ -57,10 +89,14 @@ def _solve(space, n: int, start, goal, valid: Callable[[np.ndarray], bool], time
     if planner_range > 0:
         planner.setRange(planner_range)
     ss.setPlanner(planner)
-    if not ss.solve(max(timeout, 1e-3)) or not ss.haveExactSolutionPath():
+    solved = ss.solve(_budget(checks, max_checks, deadline)) and ss.haveExactSolutionPath()
+    if not solved:
+        if checks[0] < max_checks:
+            check_deadline(deadline, f"RRT-Connect ({checks[0]} of {max_checks} checks)")
         return None
-    if simplify > 0:
-        ss.simplifySolution(simplify)
+    if simplify_checks > 0:
+        ss.simplifySolution(_budget(checks, checks[0] + simplify_checks, deadline))
+        check_deadline(deadline, "path simplification")
     path = ss.getSolutionPath()
     return [np.array([path.getState(k)[i] for i in range(n)]) for k in range(path.getStateCount())]
 
@@ -69,27 +105,28 @@ class CartesianRRT:
     """RRT-Connect over (x, y, z, yaw) within a box; `plan` returns a list of poses or None."""
 
     def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float = 0.01,
-                 simplify_time: float = 0.005, planner_range: float = 0.0) -> None:
+                 simplify_checks: int = 250, planner_range: float = 0.0) -> None:
         self.lo = np.array(lo, float)
         self.hi = np.array(hi, float)
         self.scale = np.array([1.0, 1.0, 1.0, YAW_SCALE])
         self.resolution = resolution
-        self.simplify_time = simplify_time
+        self.simplify_checks = simplify_checks
         self.planner_range = planner_range
         self.checks = 0
 
     def contains(self, pose) -> bool:
         return bool(np.all(np.asarray(pose) >= self.lo - 1e-9) and np.all(np.asarray(pose) <= self.hi + 1e-9))
 
-    def plan(self, start, goal, valid: Callable[[np.ndarray], bool], timeout: float) -> list[np.ndarray] | None:
+    def plan(self, start, goal, valid: Callable[[np.ndarray], bool], max_checks: int,
+             deadline: float) -> list[np.ndarray] | None:
         space = _space(self.lo * self.scale, self.hi * self.scale)
 
         def check(s: np.ndarray) -> bool:
             self.checks += 1
             return valid(s / self.scale)
 
-        path = _solve(space, 4, np.asarray(start) * self.scale, np.asarray(goal) * self.scale, check, timeout,
-                      self.resolution, self.simplify_time, self.planner_range)
+        path = _solve(space, 4, np.asarray(start) * self.scale, np.asarray(goal) * self.scale, check, max_checks,
+                      deadline, self.resolution, self.simplify_checks, self.planner_range)
         return None if path is None else [p / self.scale for p in path]
 
 
@@ -97,17 +134,19 @@ class JointRRT:
     """RRT-Connect in joint space (Q convention) between two configurations, for comparison in the benchmark."""
 
     def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float = 0.02,
-                 simplify_time: float = 0.005) -> None:
+                 simplify_checks: int = 250) -> None:
         self.lo, self.hi = np.array(lo, float), np.array(hi, float)
         self.resolution = resolution
-        self.simplify_time = simplify_time
+        self.simplify_checks = simplify_checks
         self.checks = 0
 
-    def plan(self, start, goal, valid: Callable[[np.ndarray], bool], timeout: float) -> list[np.ndarray] | None:
+    def plan(self, start, goal, valid: Callable[[np.ndarray], bool], max_checks: int,
+             deadline: float) -> list[np.ndarray] | None:
         space = _space(self.lo, self.hi)
 
         def check(q: np.ndarray) -> bool:
             self.checks += 1
             return valid(q)
 
-        return _solve(space, len(self.lo), start, goal, check, timeout, self.resolution, self.simplify_time, 0.0)
+        return _solve(space, len(self.lo), start, goal, check, max_checks, deadline, self.resolution,
+                      self.simplify_checks, 0.0)

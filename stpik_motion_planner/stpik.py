@@ -11,13 +11,14 @@ A set-based task sigma >= 0 enters the hierarchy only when its bound is active (
 it is a candidate while sigma is inside a buffer, and it is activated (as an equality task that freezes sigma,
 or pushes it back up to the activation threshold `act`) when the solution without it would bring sigma below
 `act`. Activation is iterated until no further task needs to enter.
-The path is rejected if any bound is violated (sigma < -tol), if tracking error exceeds its tolerance, or if the
-deadline passes. Joint velocities are scaled to Table 7; the reference slows down by the same factor.
+The path is rejected if any bound is violated (sigma < -tol), if tracking error exceeds its tolerance, or when the
+step budget is spent (step_budget times the reference's nominal steps, plus settle_time): IK steps, not seconds,
+so the answer is the same on a loaded machine. The wall-clock deadline is only a safety net (SafetyNetTimeout: no
+answer). Joint velocities are scaled to Table 7; the reference slows down by the same factor.
 """
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -26,6 +27,7 @@ import pinocchio as pin
 from . import robot_description as rd
 from .collision import PENETRATION, ArmGeometry, ObstacleSet
 from .grasp import side_rotation
+from .rrt import check_deadline
 
 
 @dataclass
@@ -50,6 +52,7 @@ class StpikParams:
     final_tol_pos: float = 0.004  # m at the end of the path
     final_tol_ori: float = 0.03  # rad
     settle_time: float = 1.0  # s allowed after the reference ends
+    step_budget: float = 3.0  # IK steps allowed, in multiples of the reference's nominal steps (accepted: <= 1.22)
     damping: float = 0.05
     qdot_max: np.ndarray = field(default_factory=lambda: rd.QDOT_MAX.copy())
 
@@ -149,9 +152,13 @@ class Stpik:
         min_clear, min_self = math.inf, math.inf
         seg = 0
         rate = 0.0  # speed of the reference as a fraction of its nominal speed (ramp > 0)
+        nominal = t_end + ramp * (len(path) - 1)  # a ramp adds about `ramp` s per segment
+        max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
         while True:
-            if time.perf_counter() > deadline:
-                return self._result(False, "timeout", qs, qdots, min_clear, min_self)
+            check_deadline(deadline, "the STPIK check")
+            if len(qdots) >= max_steps:
+                return self._result(False, f"step budget spent ({max_steps} IK steps)", qs, qdots, min_clear,
+                                    min_self)
             # reference pose and velocity at tau
             while seg < len(path) - 2 and tau >= times[seg + 1]:
                 seg += 1

@@ -88,7 +88,7 @@ def test_motion_planner_params_malformed_yaml_is_a_clear_error(tmp_path):
         PlannerParams.load(_mp(tmp_path, "motion_planner:\n  ros__parameters:\n    timeout: [\n"))
 
 
-@pytest.mark.parametrize("line", ["timeout: abc", "timeout: -1.0", "rrt_timeout: .nan", "stpik.qdot_max: [1.0, 2.0]",
+@pytest.mark.parametrize("line", ["timeout: abc", "timeout: -1.0", "rrt_max_checks: .nan", "stpik.qdot_max: [1.0, 2.0]",
                                   "max_attempts: 0"])
 def test_motion_planner_params_out_of_range_is_a_clear_error(tmp_path, line):
     with pytest.raises(ValueError, match=line.split(":")[0].split(".")[-1]):
