@@ -1,21 +1,25 @@
 """`qtree` command line: train the Q-Tree on a scenario, or solve it exactly.
 
     qtree train --scenario FILE [--policy h-eg --search depth --alpha ... --seed ...] [--json OUT] [--tree-dot F]
-    qtree solve --scenario FILE [--json OUT]
+    qtree solve --scenario FILE [--solver astar|ucs] [--oracle planner|blocking] [--json OUT]
 
 Defaults come from config/task_planner.yaml (or --params FILE). Bad input: one line on stderr, exit 2.
 Feasibility oracles are built by ORACLES[name](scenario, args): `blocking` (the scenario's declared relation, a
-test double) or `planner` (the real motion planner in this process, config/motion_planner.yaml).
+test double) or `planner` (the real motion planner in this process, config/motion_planner.yaml, with its lane
+blockers); the default is `blocking` for a scenario with a `blocking:` section, `planner` otherwise. Exact solvers:
+`astar` (qtree_task_planner.astar, blockers) or `ucs` (qtree_task_planner.exact, the uniform-cost reference). The
+real oracle calls and the wall time go into the JSON and, as one line, to stderr.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Callable
 
-from qtree_task_planner.exact import solve
+from qtree_task_planner import astar, exact
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
 from qtree_task_planner.problem import ProblemError, RelocationProblem
@@ -32,14 +36,35 @@ def _blocking_oracle(scenario, args):
     return BlockingOracle(scenario)
 
 
+class PlannerOracle:
+    """The motion planner in this process as a LaneOracle: feasibility (Eq. 11) and every object's lane
+    blockers at once (stpik_motion_planner.blockers, the grasp/approach screen only)."""
+
+    def __init__(self, planner) -> None:
+        self.planner = planner
+
+    def feasibility(self, object_id, removed):
+        return self.planner.feasibility(object_id, removed)
+
+    def lane_blockers(self, removed):
+        from stpik_motion_planner.blockers import lane_blockers
+
+        return lane_blockers(self.planner, removed)
+
+
 def _planner_oracle(scenario, args):
     from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+    from stpik_motion_planner.grasp import WorkspaceError
 
-    return MotionPlanner(scenario, PlannerParams.load())
+    try:
+        return PlannerOracle(MotionPlanner(scenario, PlannerParams.load()))
+    except (WorkspaceError, ValueError) as e:
+        raise CliError(f"motion planner: {e}") from None
 
 
 # name -> factory(scenario, args) -> oracle with feasibility(object_id, removed)
 ORACLES: dict[str, Callable] = {"blocking": _blocking_oracle, "planner": _planner_oracle}
+SOLVERS: dict[str, Callable] = {"astar": astar.solve, "ucs": exact.solve}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -53,9 +78,12 @@ def _parser() -> argparse.ArgumentParser:
 
     def common(sp):
         sp.add_argument("--scenario", required=True, help="scenario YAML, or a name under config/scenarios")
-        sp.add_argument("--oracle", choices=sorted(ORACLES), default="blocking",
+        sp.add_argument("--oracle", choices=sorted(ORACLES),
                         help="feasibility oracle (blocking: the scenario's declared relation, a test double; "
-                             "planner: the motion planner)")
+                             "planner: the motion planner in this process). Default: blocking if the scenario "
+                             "has a blocking: section, else planner")
+        sp.add_argument("--solver", choices=sorted(SOLVERS), default="astar",
+                        help="exact solver (astar: lazy A* with blockers; ucs: uniform-cost reference)")
         sp.add_argument("--json", metavar="OUT", help="write the JSON result here instead of stdout")
 
     t = sub.add_parser("train", help="train the Q-Tree")
@@ -69,9 +97,9 @@ def _parser() -> argparse.ArgumentParser:
         t.add_argument(f"--{name}", type=typ)
     t.add_argument("--tree-dot", metavar="FILE", help="write the tree in Graphviz form (paper Fig. 3)")
     t.add_argument("--solve-first", action="store_true",
-                   help="run the exact solver first (own oracle) to report E_1st")
+                   help="run the exact solver (--solver) first, own cache, to report E_1st")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
-    s = sub.add_parser("solve", help="the exact minimum-weight sequence (lazy uniform-cost search)")
+    s = sub.add_parser("solve", help="the exact minimum-weight sequence (Eq. 8)")
     common(s)
     return p
 
@@ -79,8 +107,23 @@ def _parser() -> argparse.ArgumentParser:
 def _load(args):
     scenario = load_scenario(args.scenario)
     problem = RelocationProblem.from_scenario(scenario)
+    if args.oracle is None:
+        args.oracle = "blocking" if getattr(scenario, "blocking", None) is not None else "planner"
     oracle = ORACLES[args.oracle](scenario, args)
     return scenario, problem, oracle
+
+
+def _exact(problem, oracle, solver: str) -> dict:
+    """The exact solver's result with the real oracle calls (a fresh cache) and its wall time."""
+    cache = CachedOracle(oracle)
+    t0 = time.perf_counter()
+    result = SOLVERS[solver](problem, cache)
+    return {"solver": solver, **result.to_dict(), "planner_calls": cache.calls,
+            "wall_time_s": round(time.perf_counter() - t0, 4)}
+
+
+def _report(what: str, args, calls: int, wall: float) -> None:
+    print(f"qtree: {what}, {args.oracle} oracle: {calls} real oracle calls, {wall:.2f} s", file=sys.stderr)
 
 
 def _emit(data: dict, out: str | None) -> None:
@@ -116,31 +159,37 @@ def _train(args) -> int:
                           seed=args.seed)
     scenario, problem, oracle = _load(args)
     optimum = None
-    exact = None
+    solved = None
     if args.solve_first:
-        exact = solve(problem, oracle)
-        optimum = exact.total_weight
+        solved = _exact(problem, oracle, args.solver)
+        optimum = solved["total_weight"]
     callback, bar = (None, None) if args.no_progress else _progress_bar(params.max_episodes)
+    t0 = time.perf_counter()
     try:
         result = train(problem, CachedOracle(oracle), params, optimal_weight=optimum, callback=callback)
     finally:
         if bar is not None:
             bar.close()
+    wall = time.perf_counter() - t0
     if args.tree_dot:
         try:
             Path(args.tree_dot).write_text(result.tree.to_dot(name=scenario.name.replace("-", "_")))
         except OSError as e:
             raise CliError(f"cannot write {args.tree_dot}: {e.strerror}") from None
-    data = {"scenario": scenario.name, "oracle": args.oracle, **result.to_dict()}
-    if exact is not None:
-        data["exact"] = exact.to_dict()
+    data = {"scenario": scenario.name, "oracle": args.oracle, **result.to_dict(), "wall_time_s": round(wall, 4)}
+    if solved is not None:
+        data["exact"] = solved
+        _report(f"solve {args.solver}", args, solved["planner_calls"], solved["wall_time_s"])
     _emit(data, args.json)
+    _report("train", args, data["planner_calls"], wall)
     return 0
 
 
 def _solve(args) -> int:
     scenario, problem, oracle = _load(args)
-    _emit({"scenario": scenario.name, "oracle": args.oracle, **solve(problem, oracle).to_dict()}, args.json)
+    data = {"scenario": scenario.name, "oracle": args.oracle, **_exact(problem, oracle, args.solver)}
+    _emit(data, args.json)
+    _report(f"solve {args.solver}", args, data["planner_calls"], data["wall_time_s"])
     return 0
 
 

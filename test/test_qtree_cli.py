@@ -75,7 +75,7 @@ def _no_blocking(d):
     (_dup, "duplicate id"), (_unknown, "blocking[T]"), (_weight, "weight must be in (0, 1]"),
     (_no_target, "target: missing"), (_no_blocking, "no 'blocking:' section")])
 def test_bad_scenarios_get_one_line(tmp_path, mutate, expect):
-    p = qtree("train", "--scenario", write_scenario(tmp_path, mutate), "--no-progress")
+    p = qtree("train", "--scenario", write_scenario(tmp_path, mutate), "--oracle", "blocking", "--no-progress")
     assert p.returncode == 2 and p.stdout == ""
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("qtree: error:") and expect in lines[0], p.stderr
