@@ -8,8 +8,9 @@ import math
 
 import numpy as np
 from geometry_msgs.msg import Pose, TransformStamped
-from qtree_relocation_msgs.msg import ObjectArray, ObjectState
+from qtree_relocation_msgs.msg import BlockerSet as BlockerSetMsg, LaneBlockers, ObjectArray, ObjectState
 
+from .feasibility import BlockerSet
 from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle, ScenarioError
 
 BASE_FRAME = "j2s7s300_link_base"
@@ -95,3 +96,21 @@ def transform_msg(t, parent: str, child: str, stamp=None):
     r = m.transform.rotation
     r.x, r.y, r.z, r.w = quat_xyzw(t[:3, :3])
     return m
+
+
+def blockers_to_msgs(blockers) -> list[BlockerSetMsg]:
+    """FeasibilityAnswer.blockers -> PlanFeasibility's `blockers` (ids sorted)."""
+    return [BlockerSetMsg(lane=b.lane, object_ids=sorted(b.objects), certain=bool(b.certain)) for b in blockers]
+
+
+def blockers_from_msgs(msgs) -> tuple[BlockerSet, ...]:
+    return tuple(BlockerSet(frozenset(m.object_ids), bool(m.certain), m.lane) for m in msgs)
+
+
+def lanes_to_msgs(lanes) -> list[LaneBlockers]:
+    """object -> its lanes' BlockerSets (MotionPlanner.lane_blockers) -> PlanFeasibility's `lanes`."""
+    return [LaneBlockers(object_id=o, lanes=blockers_to_msgs(sets)) for o, sets in sorted(lanes.items())]
+
+
+def lanes_from_msgs(msgs) -> dict[str, tuple[BlockerSet, ...]]:
+    return {m.object_id: blockers_from_msgs(m.lanes) for m in msgs}
