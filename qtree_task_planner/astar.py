@@ -32,6 +32,8 @@ DEPTH = 2  # levels of the blockers' own lanes in the heuristic
 
 @dataclass(frozen=True)
 class AStarResult(ExactResult):
+    """ExactResult (sets_settled: the sets expanded by all the optimistic searches) and the blocker counts."""
+
     blocker_calls: int = 0  # lane_blockers calls (the screen only, no motion planning)
     searches: int = 0  # optimistic A* searches (one more than the unfeasible answers that changed the path)
 

@@ -7,7 +7,7 @@
    instances: each object blocked by 0-3 others), oracle calls of uniform-cost search and of the A* with the
    oracle's lane blockers, and with blockers from its answers only.
 
-    .venv/bin/python scripts/bench_astar.py [--instances 30] [--scenes name ...]
+    .venv/bin/python scripts/bench_astar.py [--instances 30] [--scenes name ...] [--qtree] [--skip-scenes]
 """
 from __future__ import annotations
 
@@ -38,30 +38,39 @@ def shipped_scenes() -> list[str]:
 
 
 def solve_cli(scene: str, solver: str) -> dict:
+    """`qtree solve` (solver astar / ucs) or, for solver "qtree", `qtree train` H-eG depth, seed 1."""
+    how = ["train", "--policy", "h-eg", "--search", "depth", "--seed", "1", "--no-progress"] if solver == "qtree" \
+        else ["solve", "--solver", solver]
     with tempfile.TemporaryDirectory() as d:
         out = Path(d) / "r.json"
-        p = subprocess.run([sys.executable, "-m", "relocation_app.cli", "solve", "--scenario", scene, "--solver",
-                            solver, "--oracle", "planner", "--json", str(out)], capture_output=True, text=True)
+        p = subprocess.run([sys.executable, "-m", "relocation_app.cli", *how, "--scenario", scene, "--oracle",
+                            "planner", "--json", str(out)], capture_output=True, text=True)
         if p.returncode != 0:
             return {"error": p.stderr.strip().splitlines()[-1]}
         return json.loads(out.read_text())
 
 
 def _w(r: dict):
-    return None if r["total_weight"] is None else round(r["total_weight"], 4)
+    return None if r.get("total_weight") is None else round(r["total_weight"], 4)
 
 
-def scenes_table(scenes: list[str]) -> None:
-    print("| scene | UCS calls | UCS s | A* calls | A* s | weight (UCS / A*) | A* sequence |")
-    print("|---|---|---|---|---|---|---|")
+def scenes_table(scenes: list[str], qtree: bool) -> None:
+    extra = (" Q-Tree calls | Q-Tree s | Q-Tree weight |", "---|---|---|") if qtree else ("", "")
+    print("| scene | UCS calls | UCS s | A* calls | A* s | weight (UCS / A*) | A* sequence |" + extra[0])
+    print("|---|---|---|---|---|---|---|" + extra[1])
     for s in scenes:
         u, a = solve_cli(s, "ucs"), solve_cli(s, "astar")
         if "error" in u or "error" in a:
             print(f"| {s} | {u.get('error', '')} | | {a.get('error', '')} | | | |")
             continue
         seq = " ".join(a["sequence"]) if a["found"] else "none"
+        q = ""
+        if qtree:
+            t = solve_cli(s, "qtree")
+            q = f" {t.get('error', t.get('planner_calls'))} | {t.get('wall_time_s', 0):.1f} | {_w(t)} |" \
+                if "error" not in t else f" {t['error']} | | |"
         print(f"| {s} | {u['planner_calls']} | {u['wall_time_s']:.2f} | {a['planner_calls']} | "
-              f"{a['wall_time_s']:.2f} | {_w(u)} / {_w(a)} | {seq} |", flush=True)
+              f"{a['wall_time_s']:.2f} | {_w(u)} / {_w(a)} | {seq} |{q}", flush=True)
 
 
 class AnswersOnly:
@@ -125,9 +134,10 @@ def main() -> None:
     ap.add_argument("--instances", type=int, default=30)
     ap.add_argument("--scenes", nargs="*", help="scene names (default: every shipped relocation scene)")
     ap.add_argument("--skip-scenes", action="store_true")
+    ap.add_argument("--qtree", action="store_true", help="also train the Q-Tree (H-eG depth, seed 1) per scene")
     args = ap.parse_args()
     if not args.skip_scenes:
-        scenes_table(args.scenes or shipped_scenes())
+        scenes_table(args.scenes or shipped_scenes(), args.qtree)
         print()
     blocking_table(args.instances)
 
