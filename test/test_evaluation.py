@@ -38,6 +38,9 @@ def test_cache_round_trip_and_key(tmp_path, params):
     assert cache_key(sc, other) != cache_key(sc, params)
     with pytest.raises(FeasibilityCacheError, match="does not match"):
         load_table(path, cache_key(sc, other))
+    net = planner_params()  # the wall-clock safety nets never change an answer: not in the key
+    net.timeout, net.carry_timeout = 1.0, 99.0
+    assert cache_key(sc, net) == cache_key(sc, params)
     # weights do not enter the key (they do not change a feasibility answer); positions do
     d = __import__("yaml").safe_load(S1.read_text())
     d["objects"][0]["weight"] = 0.5
@@ -101,7 +104,7 @@ def test_small_sweep_resume_and_report(tmp_path, params):
     # report: the tables parse, six algorithm rows with a number per (alpha, gamma)
     md = write_report(out, tmp_path / "docs", params, SCEN_DIR.parent.parent / "data" / "feasibility",
                       ["scenario1_5"], [], quick=True).read_text()
-    block = md.split("**E_ss**")[1].split("**MP_q**")[0]
+    block = md.split("## scenario1_5: Tables 1-3 shape")[1].split("**E_ss**")[1].split("**MP_q**")[0]
     rows = [ln for ln in block.splitlines() if re.match(r"\| (H-)?(LRND|eG)", ln)]
     assert len(rows) == 6
     for ln in rows:
@@ -109,6 +112,11 @@ def test_small_sweep_resume_and_report(tmp_path, params):
         assert len(cells) == len(QUICK_GRID) and all(float(c) > 0 for c in cells)
     assert (tmp_path / "docs" / "figures" / "tree_scenario1_5.png").stat().st_size > 1000
     assert "| scenario1_5 | 5 |" in md
+    # issue 16: the paper's numbers beside ours, the complete tree, findings judged on both
+    assert "| scenario1_5 | 5 | 84 / 357 (4.2) | 10 / 155 |" in md
+    beside = md.split("## Table 1 beside the paper: scenario1_5")[1].split("**MP_q**")[0]
+    assert re.search(r"\| LRND_b \| 511 / \d+ \([\d.e+]+\) \|", beside)
+    assert "| finding | the paper's numbers | ours: this project's geometry |" in md
 
 
 def test_committed_cache_agrees_with_the_planner(params):

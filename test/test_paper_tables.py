@@ -7,8 +7,8 @@ import pytest
 
 from qtree_task_planner.oracles import BlockingOracle
 from relocation_app.evaluation import claims, complete_tree, paper, paper_report
-from relocation_app.evaluation.__main__ import SCEN_DIR
-from relocation_app.evaluation.feasibility_cache import FeasibilityTable, load_table
+from relocation_app.evaluation.__main__ import SCEN_DIR, planner_params
+from relocation_app.evaluation.feasibility_cache import FeasibilityTable, open_table
 from relocation_common.feasibility import Label
 from relocation_common.paths import data_dir
 from relocation_common.scenario import load_scenario
@@ -38,8 +38,8 @@ def test_complete_tree_matches_the_definition_on_a_blocking_scene():
 def test_complete_tree_of_scenario1_is_lrnd_mpq():
     """scenario1_5's LRND MP_q is 357 at alpha < 1 (LRND completes the tree; issue 16 quotes 357)."""
     sc = load_scenario(SCEN_DIR / "scenario1_5.yaml")
-    (path,) = sorted((data_dir() / "feasibility").glob("scenario1_5-*.json"))
-    size = complete_tree.of_table(load_table(path), sc)
+    table, _ = open_table(sc, planner_params(), data_dir() / "feasibility")
+    size = complete_tree.of_table(table, sc)
     assert size.edges == 357
     partial = FeasibilityTable("k")
     partial.put("T", frozenset(), Label.UNFEASIBLE)

@@ -54,8 +54,12 @@ def scenario_content(scenario) -> dict:
     }
 
 
+SAFETY_NETS = ("timeout", "carry_timeout")  # wall-clock limits that never change an answer (they raise instead)
+
+
 def planner_content(params) -> dict:
-    """Every PlannerParams field as plain JSON (numpy arrays as lists, nested StpikParams flattened)."""
+    """Every PlannerParams field that can change an answer, as plain JSON (numpy arrays as lists, nested
+    StpikParams flattened); the wall-clock safety nets are left out."""
     def plain(v):
         if isinstance(v, np.ndarray):
             return [float(x) for x in v]
@@ -64,7 +68,7 @@ def planner_content(params) -> dict:
         if dataclasses.is_dataclass(v):
             return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
         return v
-    return plain(params)
+    return {k: v for k, v in plain(params).items() if k not in SAFETY_NETS}
 
 
 def cache_key(scenario, params) -> str:
@@ -208,6 +212,17 @@ def _init_worker(scenario, params) -> None:
     _WORKER["mp"] = MotionPlanner(scenario, params)
 
 
+def _use_scenario(scenario, params) -> None:
+    """This process's planner on `scenario`: a new MotionPlanner for new parameters or another shelf, otherwise
+    the loaded one with the scene swapped (MotionPlanner.set_scenario; a scene search asks thousands of layouts)."""
+    mp = _WORKER.get("mp")
+    if mp is None or _WORKER.get("params") is not params or mp.scenario.shelf != scenario.shelf:
+        _init_worker(scenario, params)
+        _WORKER["params"] = params
+    elif mp.scenario is not scenario:
+        mp.set_scenario(scenario)
+
+
 def _ask(q: tuple[str, tuple[str, ...]]):
     o, removed = q
     a = _WORKER["mp"].feasibility(o, frozenset(removed))
@@ -249,9 +264,7 @@ def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, 
                         pool = mp.get_context("spawn").Pool(workers, _init_worker, (scenario, params))
                     answers = pool.imap_unordered(_ask, todo, chunksize=4)
                 else:
-                    if "mp" not in _WORKER or _WORKER.get("sc") is not scenario:
-                        _init_worker(scenario, params)
-                        _WORKER["sc"] = scenario
+                    _use_scenario(scenario, params)
                     answers = map(_ask, todo)
                 for o, removed, lab, t, a in answers:
                     table.put(o, frozenset(removed), Label(lab), t, a)

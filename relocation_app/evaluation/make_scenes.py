@@ -4,16 +4,25 @@
   among the lattice seeds 0-60 that passed `accept` (it has 7).
 - scenario2_10: scenario3_15 without its five outermost obstacles (o1, o5, o6, o11, o15), renumbered o1..o10.
 - random5/random5_XX: the first ten lattice seeds from RANDOM_SEED0 on that pass `accept` (Table 4).
+- paper1_5, paper2_10, paper3_15 (`python -m relocation_app.evaluation.make_scenes paper N`): scenes of the
+  paper's size, searched with the real planner (paper_scenes.search; issue 16); the search log goes to
+  out/paper_search/.
 Feasibility comes from the real planner (evaluation parameters, see __main__.planner_params).
 """
 from __future__ import annotations
 
+from pathlib import Path
 
 from relocation_common.paths import scenarios_dir
 
 import yaml
 
 from .scenarios_gen import accept, evaluate_scene, lattice_scene, write_scene
+
+PAPER_NAMES = {5: "paper1_5", 10: "paper2_10", 15: "paper3_15"}
+PAPER_HEADER = ("# Scene of the paper's size (issue 16, docs/evaluation.md \"Complete trees\"), found with the real motion\n"
+                "# planner by relocation_app/evaluation/make_scenes.py paper on the shelf of paper_experiment_10.\n"
+                "# Format: docs/scenarios.md.")
 
 SCEN = scenarios_dir()
 RANDOM_SEED0 = 1000
@@ -50,3 +59,75 @@ def make_all(params, data_dir, n_random: int = 10) -> None:
             print(f"random5_{found:02d}: seed {seed}, {rep.n_sequences} sequences", flush=True)
             found += 1
         seed += 1
+
+
+def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float, out_dir=None,
+               seed0: int = 0, write_best: bool = False) -> bool:
+    """Search a scene of the paper's size with n obstacles (paper_scenes.search) and write it with its complete
+    feasibility table when one matches; the best candidate goes to out/paper_search/ either way."""
+    import json
+    import time
+
+    from relocation_common.paths import share_dir
+    from relocation_common.scenario import parse_scenario
+
+    from . import complete_tree, paper_scenes
+    from .feasibility_cache import open_table
+    name = PAPER_NAMES[n]
+    logdir = share_dir() / "out" / "paper_search"
+    logdir.mkdir(parents=True, exist_ok=True)
+    work = logdir / "tables"
+
+    def log(msg: str) -> None:
+        print(time.strftime("%H:%M:%S"), msg, flush=True)
+    smaller = Path(out_dir or SCEN) / f"{PAPER_NAMES[n - 5]}.yaml" if n > 5 else None
+    base = yaml.safe_load(smaller.read_text()) if smaller is not None and smaller.exists() else None
+    best, data, _ = paper_scenes.search(n, name, params, work, range(seed0, seed0 + seeds), steps, log,
+                                        time.time() + 60 * minutes, base)
+    (logdir / f"best_{name}.json").write_text(json.dumps(best.data if best else None))
+    if data is None:
+        log(f"{name}: no match; best {paper_scenes._desc(best) if best else 'none'}")
+        if not write_best or best is None or best.size is None:
+            return False
+        data = best.weighted or best.data
+    sc = parse_scenario(data, name)
+    table = best.table
+    size = complete_tree.of_table(table, sc)
+    data["description"] = (f"{n} obstacles in tight clutter: complete Q-Tree of {size.edges} edges, "
+                           f"{size.target_leaves} target leaves, {size.optimal_leaves} optimal (paper: "
+                           f"{paper_scenes.PAPER_TREES[n][0]}, {paper_scenes.PAPER_TREES[n][1]}, 1)"
+                           + ("" if best.ok(paper_scenes.PAPER_TREES[n]) else "; the closest the search reached")
+                           + ".")
+    write_scene(data, Path(out_dir or SCEN) / f"{name}.yaml", PAPER_HEADER)
+    final, path = open_table(sc, params, data_dir)
+    final.entries.update(table.entries)
+    final.planner_seconds = table.planner_seconds
+    final.save(path)
+    log(f"{name}: written ({size.edges} edges, {size.target_leaves} target leaves), table {path}")
+    return True
+
+
+def main(argv=None) -> int:
+    """`python -m relocation_app.evaluation.make_scenes paper N [--seeds S] [--steps K] [--minutes M]`."""
+    import argparse
+
+    from .__main__ import planner_params
+    ap = argparse.ArgumentParser(description="search a scene of the paper's size with the real planner")
+    ap.add_argument("what", choices=("paper",))
+    ap.add_argument("n", type=int, choices=sorted(PAPER_NAMES))
+    ap.add_argument("--seeds", type=int, default=200000, help="layouts proposed (most rejected by the sketch)")
+    ap.add_argument("--steps", type=int, default=4000, help="hill-climbing steps with the real planner")
+    ap.add_argument("--write-best", action="store_true", help="write the closest scene when none matches")
+    ap.add_argument("--seed0", type=int, default=0, help="first layout seed")
+    ap.add_argument("--minutes", type=float, default=15.0)
+    ap.add_argument("--data", default=None, help="feasibility cache directory (default data/feasibility)")
+    ap.add_argument("--scenarios", default=None, help="where the YAML goes (default config/scenarios)")
+    a = ap.parse_args(argv)
+    from relocation_common.paths import data_dir
+    ok = make_paper(a.n, planner_params(), a.data or data_dir() / "feasibility", a.seeds, a.steps, a.minutes,
+                    a.scenarios, a.seed0, a.write_best)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
