@@ -22,7 +22,7 @@ def test_shipped_scene_has_the_stated_tree(name):
     table, _ = open_table(sc, planner_params(), data_dir() / "feasibility")
     size = complete_tree.of_table(table, sc)
     edges, leaves, optimal = map(int, re.search(r"tree of (\d+) edges, (\d+) target leaves, (\d+) optimal",
-                                                sc.description).groups())
+                                                sc.description, re.I).groups())
     assert (size.edges, size.target_leaves, size.optimal_leaves) == (edges, leaves, optimal)
     goal = paper_scenes.PAPER_TREES[len(sc.obstacle_ids)]
     if "closest" not in sc.description:  # a match: the tolerance

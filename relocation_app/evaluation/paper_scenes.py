@@ -258,6 +258,10 @@ def free_scene(seed: int, n: int, name: str) -> dict:
     tx, ty = rng.uniform(0.87, 0.91), rng.uniform(-0.1, 0.1)
     spread = rng.uniform(min(0.12 + 0.012 * (n - 5), 0.28), 0.33)  # room for n bottles
     pts: list[tuple[float, float]] = [(tx, ty)]
+    for k in range(rng.choice((0, 1, 2, 3))):  # a column straight in front of the target: a removal chain
+        pts.append((round(pts[-1][0] - rng.uniform(0.072, 0.085), 3), round(ty + rng.uniform(-0.01, 0.01), 3)))
+    if pts[-1][0] < 0.655:
+        pts.pop()
     for _ in range(20000):
         if len(pts) == n + 1:
             break
