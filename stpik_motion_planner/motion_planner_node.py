@@ -47,7 +47,7 @@ from . import robot_description as rd
 from .execution import FollowerParams, TrajectoryFollower
 from .feasibility import MotionPlanner, PlannerParams, PlanningError, SafetyNetTimeout
 from .scene_update import merge_perceived
-from .relocation import PHASES, relocate
+from .relocation import PHASES, Progress, recover, relocate
 from .trajectory import Trajectory
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -227,37 +227,51 @@ class MotionPlannerNode(Node):
 
     def _execute(self, goal_handle):
         result = RelocateObject.Result()
+        progress = Progress()
         with self._relocating:
             self._held = goal_handle.request.object_id
             try:
-                self._relocate(goal_handle)
+                self._relocate(goal_handle, progress)
                 result.success, result.message = True, f"relocated {goal_handle.request.object_id}"
                 self._relocated[goal_handle.request.object_id] = len(goal_handle.request.removed_ids)
                 goal_handle.succeed()
             except _Cancelled:
                 self._stop()
-                result.message = "cancelled: arm stopped"
+                result.message = "cancelled: arm stopped" + self._recover(goal_handle, progress)
                 goal_handle.canceled()
-            except (_Aborted, PlanningError, UnknownObjectError, ValueError) as e:  # WorkspaceError, ScenarioError
+            except Exception as e:  # planning, the arm, bad input; a bug ends the goal with its reason, not the node
                 self._stop()
-                result.message = str(e)
-                self.get_logger().error(f"relocation of {goal_handle.request.object_id} aborted: {e}")
-                goal_handle.abort()
-            except Exception as e:  # a planner or driver bug ends the goal with its reason, not the node
-                self._stop()
-                result.message = f"internal error: {type(e).__name__}: {e}"
+                known = isinstance(e, (_Aborted, PlanningError, UnknownObjectError, ValueError))
+                result.message = str(e) if known else f"internal error: {type(e).__name__}: {e}"
                 self.get_logger().error(f"relocation of {goal_handle.request.object_id} aborted: {result.message}")
+                result.message += self._recover(goal_handle, progress)
                 goal_handle.abort()
             finally:
                 self._held = None
         return result
 
-    def _relocate(self, gh) -> None:
+    def _recover(self, gh, progress: Progress) -> str:
+        """After a failed or cancelled goal: relocation.recover (the bottle set down where it was picked, the arm
+        home), not cancellable itself; unless the node is shutting down. The text added to the result message."""
+        if not rclpy.ok() or not progress.moves:
+            return ""
+        try:
+            self._measured()  # a driver that is gone: fail now, not after the gripper's timeout
+            what = recover(self.planner, _GoalArm(self, _Uncancellable(gh)), progress, self._plan_lock)
+        except Exception as e:
+            self.get_logger().error(f"recovery after the failed relocation failed: {e}")
+            return f"; recovery failed: {e}"
+        self.get_logger().info(f"recovered: {what}")
+        if progress.released:
+            self._relocated[progress.object_id] = len(progress.removed)
+        return f"; recovered: {what}"
+
+    def _relocate(self, gh, progress: Progress) -> None:
         deadline = time.monotonic() + 5.0  # right after start-up, discovery of the driver can take a moment
         while self._q is None and time.monotonic() < deadline:
             time.sleep(0.05)
         relocate(self.planner, _GoalArm(self, gh), gh.request.object_id, list(gh.request.removed_ids),
-                 home_tol=self.p("home_tol"), lock=self._plan_lock)
+                 home_tol=self.p("home_tol"), lock=self._plan_lock, progress=progress)
 
     def _measured(self) -> np.ndarray:
         st = self._q
@@ -394,6 +408,16 @@ class MotionPlannerNode(Node):
                                                self.p("finger_stall_threshold"), self.p("finger_stall_interval"))
             elif monitor.update(now, turns) != monitor.MOVING:
                 return turns
+
+
+class _Uncancellable:
+    """A goal handle whose cancel request is not seen (the recovery after a cancel runs to its end); feedback goes
+    to the real goal."""
+
+    is_cancel_requested = False
+
+    def __init__(self, gh) -> None:
+        self.publish_feedback = gh.publish_feedback
 
 
 class _GoalArm:

@@ -4,14 +4,15 @@ plan the whole relocation (pick, carry, retreat, home) -> [the way home first, i
 approach -> close the gripper -> re-plan the carry from the measured configuration (the plan made before is kept if
 that fails) -> carry -> open -> retreat -> re-plan home from the measured configuration (idem) -> home.
 Nothing moves before the whole relocation is planned, so a carry that cannot be planned never leaves the arm
-holding a bottle. The destination is slot `len(removed)` of the bottom shelf (objects go there in relocation order)
+holding a bottle; and when a motion fails or the goal is cancelled, `recover` brings the arm back to a safe state
+along the motions it made (the bottle set down where it was picked, the arm home). The destination is slot `len(removed)` of the bottom shelf (objects go there in relocation order)
 and the objects already relocated stand in the earlier slots. The arm is anything that implements `Arm`: the
 motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
 """
 from __future__ import annotations
 
 from contextlib import nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -23,7 +24,7 @@ from .trajectory import Trajectory
 
 # progress (0..1) of the whole relocation at the start of each phase, in order
 PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, "carry": 0.45, "release": 0.7,
-          "retreat": 0.72, "plan_home": 0.8, "home": 0.82, "done": 1.0}
+          "retreat": 0.72, "plan_home": 0.8, "home": 0.82, "done": 1.0, "recover": 1.0}
 
 
 class Arm(Protocol):
@@ -38,6 +39,17 @@ class Arm(Protocol):
 
     def phase(self, phase: str) -> None:
         """A planning phase starts (progress reporting)."""
+
+
+@dataclass
+class Progress:
+    """What a relocation has done so far, for `recover`: the motions followed (the current one included)."""
+
+    object_id: str = ""
+    removed: list = field(default_factory=list)
+    placed: list = field(default_factory=list)  # (bottle, slot xy) on the bottom shelf, this one once released
+    moves: list = field(default_factory=list)  # (phase, Trajectory), oldest first
+    released: bool = False
 
 
 @dataclass
@@ -74,15 +86,19 @@ def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str]) 
 
 
 def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float = 0.05,
-             lock=None) -> RelocationPlan:
+             lock=None, progress: Progress | None = None) -> RelocationPlan:
     """Relocate object_id to its slot; PlanningError (or the arm's error) names the failed stage. `lock` guards
-    the planner (not thread-safe) while it plans, not while the arm moves. Returns the plan made before moving."""
+    the planner (not thread-safe) while it plans, not while the arm moves. `progress` records what was done (for
+    `recover` after a failure). Returns the plan made before moving."""
     lock = lock if lock is not None else nullcontext()
     removed = list(removed)
     arm.phase("plan_pick")
     with lock:
         plan = plan_relocation(planner, object_id, removed)
     slot = planner.scenario.slots[plan.slot_index]
+    progress = progress if progress is not None else Progress()
+    progress.object_id, progress.removed, progress.placed = object_id, removed, list(plan.placed)
+    arm = _Recorded(arm, progress)
     q = arm.measured()
     if float(np.max(np.abs(q - rd.Q_HOME))) > home_tol:
         arm.phase("plan_home")
@@ -102,6 +118,8 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
             pass
     arm.follow(carry, "carry")
     arm.gripper("open", "release")
+    progress.released = True
+    progress.placed.append((object_id, slot))
     arm.follow(retreat, "retreat")
     arm.phase("plan_home")
     home = plan.home
@@ -114,3 +132,39 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     arm.follow(home, "home")
     arm.phase("done")
     return plan
+
+
+class _Recorded:
+    """An Arm that records each motion in a Progress before following it."""
+
+    def __init__(self, arm: Arm, progress: Progress) -> None:
+        self.arm, self.progress = arm, progress
+        self.measured, self.gripper, self.phase = arm.measured, arm.gripper, arm.phase
+
+    def follow(self, trajectory: Trajectory, phase: str) -> None:
+        self.progress.moves.append((phase, trajectory))
+        self.arm.follow(trajectory, phase)
+
+
+def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock=None) -> str:
+    """A safe state after a failed or cancelled relocation (the next goal starts from home, nothing held).
+
+    Before the release: back along the motions made, newest first (the same paths, as clear as on the way there);
+    the way back along the carry ends at the grasp, where a held bottle is let go, standing where it was picked; then
+    back along the approach to home. After the release: a fresh path home. Returns what was done; raises (the arm's
+    or PlanningError) if it could not."""
+    lock = lock if lock is not None else nullcontext()
+    if progress.released:
+        with lock:
+            home = planner.plan_home(arm.measured(), progress.removed + [progress.object_id], progress.placed)
+        arm.follow(home, "recover")
+        return f"{progress.object_id} was placed; arm back home"
+    moves = [(phase, t) for phase, t in progress.moves if phase in ("approach", "carry")]
+    if not moves:
+        return "arm stopped (it had not moved towards the bottle)"
+    for phase, traj in reversed(moves):
+        if phase == "approach":  # at the grasp: let go of the bottle (if held) where it was picked
+            arm.gripper("open", "recover")
+        arm.follow(traj.back_from(arm.measured()), "recover")
+    return (f"{progress.object_id} set down where it was picked; arm back home" if moves[-1][0] == "carry" else
+            "arm back home along its approach, gripper open")

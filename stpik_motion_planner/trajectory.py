@@ -65,6 +65,19 @@ class Trajectory:
                           np.vstack([self.velocities[:-1], other.velocities]),
                           self.joint_names, self.phases + [(n, t + off) for n, t in other.phases])
 
+    def back_from(self, q) -> "Trajectory":
+        """The way back: from the sample nearest to q (largest joint difference) to the start, reversed in time over
+        the same samples (the same path, as collision-free as the way there, within the same velocity limits)."""
+        if len(self.times) == 0:
+            return Trajectory.empty()
+        k = int(np.argmin(np.max(np.abs(self.positions - np.asarray(q, float)), axis=1)))
+        pos = self.positions[: k + 1][::-1].copy()
+        t = self.times[k] - self.times[: k + 1][::-1]
+        vel = np.zeros_like(pos)
+        if len(t) > 1:
+            vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
+        return Trajectory(t, pos, vel, self.joint_names, [("back", 0.0)])
+
     @classmethod
     def empty(cls) -> "Trajectory":
         return cls(np.zeros(0), np.zeros((0, rd.N_JOINTS)), np.zeros((0, rd.N_JOINTS)))

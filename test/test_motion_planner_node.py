@@ -157,20 +157,45 @@ def test_a_relocated_object_cannot_be_relocated_again(graph):
     assert "already relocated" in graph.planner.log()
 
 
-def test_cancel_stops_the_arm_and_a_dead_driver_aborts_the_relocation(graph):
+def test_cancel_during_the_carry_sets_the_bottle_down_and_the_next_goal_works(graph):
+    """issue 18: the old node stopped the arm where it was, the bottle held in the air. Now the goal ends cancelled
+    after the recovery: back along the carry, the bottle let go where it was picked, back along the approach."""
+    before = _positions(graph)
     handle, feedback = _send(graph, "o3", ["o2"])
+    deadline = time.monotonic() + 90
+    while not any(f.phase == "carry" and f.progress > 0.5 for f in feedback):
+        assert time.monotonic() < deadline, [f.phase for f in feedback]
+        time.sleep(0.02)
+    handle.cancel_goal_async()
+    res = _result(handle, 60)
+    assert res.status == 5 and "set down where it was picked" in res.result.message, res.result.message
+    time.sleep(0.5)
+    after = _positions(graph)
+    moved = {oid: float(np.linalg.norm(after[oid] - before[oid])) for oid in SCENARIO.ids}
+    assert max(moved.values()) < 0.01, moved
+    graph.states.clear()
+    q = np.array(graph.states.wait(timeout=5)[-1].position[:7])
+    np.testing.assert_allclose(q, rd.Q_HOME, atol=0.03)
+    handle, _ = _send(graph, "o3", ["o2"])
+    res = _result(handle)
+    assert res.result.success, res.result.message
+
+
+def test_cancel_stops_the_arm_and_a_dead_driver_aborts_the_relocation(graph):
+    handle, feedback = _send(graph, "o6", ["o2", "o3"])
     deadline = time.monotonic() + 60
     while not any(f.phase == "approach" and f.progress > 0.2 for f in feedback):
         assert time.monotonic() < deadline, [f.phase for f in feedback]
         time.sleep(0.02)
     assert _joint_speed(graph) > 0.05  # moving
     handle.cancel_goal_async()
-    res = _result(handle, 10)
+    res = _result(handle, 30)
     assert res.status == 5 and "cancelled" in res.result.message  # GoalStatus.STATUS_CANCELED
+    assert "arm back home along its approach" in res.result.message, res.result.message
     time.sleep(0.2)
     assert _joint_speed(graph) < 0.01
-    # again, from where the arm stopped (the node plans the way home first); kill the driver on the way
-    handle, feedback = _send(graph, "o3", ["o2"])
+    # again (the arm is home after the recovery); kill the driver on the way
+    handle, feedback = _send(graph, "o6", ["o2", "o3"])
     while not any(f.phase in ("home", "approach") for f in feedback):
         assert time.monotonic() < deadline + 60
         time.sleep(0.02)
@@ -179,4 +204,4 @@ def test_cancel_stops_the_arm_and_a_dead_driver_aborts_the_relocation(graph):
     res = _result(handle, 10)
     assert res.status == 6 and "no joint state" in res.result.message, res.result.message  # ABORTED
     assert time.monotonic() - t0 < 5.0
-    assert _ask(graph, "o3", ["o2"]).ok and graph.planner.alive
+    assert _ask(graph, "o6", ["o2", "o3"]).ok and graph.planner.alive
