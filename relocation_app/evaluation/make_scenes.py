@@ -90,6 +90,7 @@ def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float,
         if not write_best or best is None or best.size is None:
             return False
         data = best.weighted or best.data
+        log(f"{name}: the closest; bottles perception cannot locate: {paper_scenes.visible(data) or 'none'}")
     sc = parse_scenario(data, name)
     table = best.table
     size = complete_tree.of_table(table, sc)
