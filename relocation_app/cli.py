@@ -36,28 +36,12 @@ def _blocking_oracle(scenario, args):
     return BlockingOracle(scenario)
 
 
-class PlannerOracle:
-    """The motion planner in this process as a LaneOracle: feasibility (Eq. 11) and every object's lane
-    blockers at once (stpik_motion_planner.blockers, the grasp/approach screen only)."""
-
-    def __init__(self, planner) -> None:
-        self.planner = planner
-
-    def feasibility(self, object_id, removed):
-        return self.planner.feasibility(object_id, removed)
-
-    def lane_blockers(self, removed):
-        from stpik_motion_planner.blockers import lane_blockers
-
-        return lane_blockers(self.planner, removed)
-
-
 def _planner_oracle(scenario, args):
     from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
     from stpik_motion_planner.grasp import WorkspaceError
 
     try:
-        return PlannerOracle(MotionPlanner(scenario, PlannerParams.load()))
+        return MotionPlanner(scenario, PlannerParams.load())  # a LaneOracle: lane_blockers too
     except (WorkspaceError, ValueError) as e:
         raise CliError(f"motion planner: {e}") from None
 

@@ -23,7 +23,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.config import node_section
 from relocation_common.paths import config_file
 
@@ -32,6 +32,7 @@ from .collision import (CARRIED, HAND_PARTS, PENETRATION, ArmGeometry, Collision
                         carried_bottle)
 from .grasp import (Grasp, WorkspaceError, carry_heights, check_pose, exit_pose, grasp_standoff, grasp_yaws, home_pose,
                     place_poses, side_grasp)
+from .blockers import answer_blockers, lane_blockers
 from .kinematics import Kinematics
 from .rrt import CartesianRRT, JointRRT, SafetyNetTimeout, seed_ompl  # noqa: F401 (SafetyNetTimeout: for callers)
 from relocation_common.scenario import Scenario, UnknownObjectError
@@ -190,6 +191,10 @@ class MotionPlanner:
         p = self.params
         return carry_heights(self.scenario, object_id, p.carried_clearance + p.stpik.act, p.lift, p.drop)
 
+    def lane_blockers(self, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
+        """Every object's grasp-lane blockers at once (blockers.lane_blockers: the screen only, no planning)."""
+        return lane_blockers(self, removed)
+
     def slot_problems(self) -> list[str]:
         """Why some of the scenario's slots cannot take a bottle (empty if all can): not on the bottom shelf with room
         for the open hand beside it, or the place or staging pose of a bottle of any size in the scene out of the
@@ -304,7 +309,8 @@ class MotionPlanner:
         traj, attempts, msg = self._pick(object_id, removed, deadline, stats)
         dt = time.perf_counter() - t0
         if traj is None:
-            return FeasibilityAnswer(Label.UNFEASIBLE, dt, attempts, msg)
+            return FeasibilityAnswer(Label.UNFEASIBLE, dt, attempts, msg,
+                                     blockers=answer_blockers(self, object_id, removed))  # issue 14
         return FeasibilityAnswer(ok_label, dt, attempts, msg, traj)
 
     def _pick(self, object_id, removed, deadline, stats) -> tuple[Trajectory | None, int, str]:

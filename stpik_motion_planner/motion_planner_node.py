@@ -40,11 +40,12 @@ from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from relocation_common import kinova
 from relocation_common.node import SideNode, declare_parameters, node_main
-from relocation_common.ros_conversions import BASE_FRAME, NO_ANSWER, msg_to_bottles
+from relocation_common.ros_conversions import BASE_FRAME, NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
 from . import robot_description as rd
 from .execution import FollowerParams, TrajectoryFollower
+from .blockers import lane_blockers
 from .feasibility import MotionPlanner, PlannerParams, PlanningError, SafetyNetTimeout
 from .scene_update import merge_perceived
 from .relocation import PHASES, Progress, recover, relocate
@@ -187,8 +188,11 @@ class MotionPlannerNode(Node):
             if not math.isfinite(req.timeout):
                 raise ValueError(f"timeout must be a finite number of seconds (<= 0: the default), got {req.timeout}")
             timeout = float(req.timeout) if req.timeout > 0 else None
+            lanes_only = req.all_lanes and not req.object_id  # every object's lane blockers, no question asked
             with self._plan_lock:
-                ans = self.planner.feasibility(req.object_id, list(req.removed_ids), timeout)
+                lanes = lane_blockers(self.planner, list(req.removed_ids)) if req.all_lanes else {}
+                ans = None if lanes_only else self.planner.feasibility(req.object_id, list(req.removed_ids),
+                                                                       timeout)
         except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
             res.message = str(e)
             self.get_logger().warning(f"feasibility request refused: {e}")
@@ -201,9 +205,14 @@ class MotionPlannerNode(Node):
             res.message = f"internal planner error: {type(e).__name__}: {e}"
             self.get_logger().error(res.message)
             return res
-        res.ok, res.label, res.planning_time = True, int(ans.label), float(ans.planning_time)
+        res.ok, res.lanes = True, lanes_to_msgs(lanes)
+        if ans is None:
+            res.message = "lanes only"
+            return res
+        res.label, res.planning_time = int(ans.label), float(ans.planning_time)
         res.attempts, res.message = int(ans.attempts), ans.message
         res.trajectory = trajectory_to_msg(ans.trajectory)
+        res.blockers = blockers_to_msgs(ans.blockers)
         return res
 
     # -- relocation -----------------------------------------------------------------------------------------
