@@ -44,7 +44,7 @@ from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
-from relocation_common.ros_conversions import NO_ANSWER, msg_to_bottles
+from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, msg_to_bottles
 
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from .oracles import CachedOracle
@@ -118,7 +118,8 @@ class ServiceOracle:
             raise PlannerUnavailable(f"no feasibility answer for {object_id!r}: {resp.message[len(NO_ANSWER):]}")
         if not resp.ok:
             raise ValueError(f"motion planner refused the query for {object_id!r}: {resp.message}")
-        return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message)
+        return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
+                                 blockers=blockers_from_msgs(resp.blockers))
 
 
 NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
