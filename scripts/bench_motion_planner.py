@@ -4,22 +4,35 @@ time split into candidate screening, Cartesian RRT-Connect and the STPIK check, 
 the same collision checker for comparison, and a profile of where the time goes.
 
 Usage: .venv/bin/python scripts/bench_motion_planner.py [--queries 150] [--seed 1] [--scenario PATH] [--profile]
+       .venv/bin/python scripts/bench_motion_planner.py --baseline 5bd83aa [--rounds 3] [--scenario NAME ...]
 Workload: random (object, removed set) pairs as the Q-Tree's training asks them (removed sets of 0-6 obstacles).
+--baseline REV: side by side in one run, the planner package (stpik_motion_planner/) of git revision REV against the
+working tree's, each in its own fresh process, alternated `--rounds` times so that a change of the machine's load
+hits both; prints feasible p50/p95 of each and their ratio, and checks that both gave the same labels.
 """
 from __future__ import annotations
 
 import argparse
 import cProfile
 import io
+import json
+import os
 import pstats
 import random
+import subprocess
 import sys
+import tarfile
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+REPO = Path(__file__).resolve().parent.parent
+_IMPL = os.environ.get("BENCH_IMPL_DIR")  # a directory holding another stpik_motion_planner/ (--baseline)
+sys.path.insert(0, str(REPO))
+if _IMPL:
+    sys.path.insert(0, _IMPL)
 
 from relocation_common.feasibility import Label  # noqa: E402
 from stpik_motion_planner import robot_description as rd  # noqa: E402
@@ -43,14 +56,73 @@ def workload(scenario, n, seed):
     return out
 
 
+def latencies(scenario: str, n: int, seed: int) -> list[tuple[str, str, float]]:
+    """(object, label, wall s) of each query of the workload, in order, after one warm-up query."""
+    sc = load_scenario(scenario)
+    mp = MotionPlanner(sc, PlannerParams.load())
+    mp.feasibility(sc.ids[0], frozenset())
+    out = []
+    for oid, removed in workload(sc, n, seed):
+        t = time.perf_counter()
+        ans = mp.feasibility(oid, removed)
+        out.append((oid, ans.label.name, time.perf_counter() - t))
+    return out
+
+
+def _export(rev: str) -> str:
+    """stpik_motion_planner/ of git revision `rev` in a temporary directory."""
+    d = tempfile.mkdtemp(prefix="bench_mp_base_")
+    tar = subprocess.run(["git", "-C", str(REPO), "archive", rev, "stpik_motion_planner"], capture_output=True,
+                         check=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
+        t.extractall(d, filter="data")
+    return d
+
+
+def compare(rev: str, scenarios: list[str], n: int, seed: int, rounds: int) -> None:
+    """Side by side: REV's planner package and the working tree's, alternated, each run a fresh process."""
+    base = _export(rev)
+    for scen in scenarios:
+        runs: dict[str, list] = {rev: [], "working tree": []}
+        for _ in range(rounds):
+            for name, impl in ((rev, base), ("working tree", "")):
+                env = dict(os.environ, BENCH_IMPL_DIR=impl)
+                out = subprocess.run([sys.executable, __file__, "--latencies", "--scenario", scen, "--queries",
+                                      str(n), "--seed", str(seed)], env=env, capture_output=True, text=True,
+                                     check=True).stdout
+                runs[name].append(json.loads(out.strip().splitlines()[-1]))
+        labels = {k: [[r[1] for r in run] for run in v] for k, v in runs.items()}
+        same = all(x == labels[rev][0] for v in labels.values() for x in v)
+        stats = {}
+        for name, rs in runs.items():
+            feas = [r[2] for run in rs for r in run if r[1] != "UNFEASIBLE"]
+            allq = [r[2] for run in rs for r in run]
+            stats[name] = (pct(feas, 50), pct(feas, 95), pct(allq, 50), len(feas))
+        print(f"{Path(scen).stem}: {n} queries x {rounds} rounds, labels identical: {same}")
+        for name, (f50, f95, a50, nf) in stats.items():
+            print(f"  {name:14s} feasible ({nf:3d}) p50 {f50:7.2f} ms  p95 {f95:7.2f} ms   all p50 {a50:6.2f} ms")
+        b, w = stats[rev], stats["working tree"]
+        print(f"  ratio {rev}/working tree: feasible p50 {b[0] / w[0]:.2f}x  p95 {b[1] / w[1]:.2f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--queries", type=int, default=150)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--scenario", default=str(scenarios_dir() / "scenario3_15.yaml"))
+    ap.add_argument("--scenario", action="append", help="path or name (repeatable with --baseline)")
     ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--baseline", help="git revision to compare against, side by side")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--latencies", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
-    sc = load_scenario(a.scenario)
+    names = a.scenario or ["scenario3_15"]
+    paths = [n if n.endswith(".yaml") else str(scenarios_dir() / f"{n}.yaml") for n in names]
+    if a.baseline:
+        return compare(a.baseline, paths, a.queries, a.seed, a.rounds)
+    if a.latencies:
+        print(json.dumps(latencies(paths[0], a.queries, a.seed)))
+        return
+    sc = load_scenario(paths[0])
     params = PlannerParams.load()
     mp = MotionPlanner(sc, params)
     queries = workload(sc, a.queries, a.seed)

@@ -187,26 +187,35 @@ class ArmGeometry:
         self._sj = np.array([j for _, j in self.self_pairs])
         self._l0 = np.array([s.p0 for s in self.specs])
         self._l1 = np.array([s.p1 for s in self.specs])
-        links = sorted(set(self.fids))
-        self._by_link = [(f, np.array([i for i in range(self.n) if self.fids[i] == f])) for f in links]
-        self._link_pose: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._dirty = np.ones(self.n, bool)
+        self._links = sorted(set(self.fids))
+        self._li = np.array([self._links.index(f) for f in self.fids])  # capsule -> row of the link arrays
+        self._rot = np.zeros((len(self._links), 3, 3))
+        self._pos = np.zeros((len(self._links), 3))
+        self._dirty = [True] * self.n
+        self._names = names
+        self._reach = self.radius[self.moving, None]
+        self._pairs_r = self.radius[self._si] + self.radius[self._sj]
         self.p0 = np.zeros((self.n, 3))
         self.p1 = np.zeros((self.n, 3))
 
     def pose(self) -> None:
-        """Place every capsule from the current Kinematics data (call after kin.update)."""
-        for fid, idx in self._by_link:
-            r, p = self.kin.placement(fid)
-            self.p0[idx] = self._l0[idx] @ r.T + p
-            self.p1[idx] = self._l1[idx] @ r.T + p
-            self._link_pose[fid] = (r, p)
-        self._dirty[:] = True
+        """Place every capsule from the current Kinematics data (call after kin.update): all links at once."""
+        omf = self.kin.data.oMf
+        rot, pos = self._rot, self._pos
+        for k, fid in enumerate(self._links):
+            m = omf[fid]
+            rot[k] = m.rotation
+            pos[k] = m.translation
+        r, p = rot[self._li], pos[self._li]
+        self.p0 = np.einsum("nij,nj->ni", r, self._l0) + p
+        self.p1 = np.einsum("nij,nj->ni", r, self._l1) + p
+        self._dirty = [True] * self.n
 
     def _fcl(self, i: int):
         """The fcl object of capsule i at its current pose (transforms are set lazily)."""
         if self._dirty[i]:
-            r, p = self._link_pose[self.fids[i]]
+            k = self._li[i]
+            r, p = self._rot[k], self._pos[k]
             s = self.specs[i]
             self.objs[i].setTransform(fcl.Transform(r @ s.rot, r @ s.centre + p))
             self._dirty[i] = False
@@ -215,7 +224,7 @@ class ArmGeometry:
     def near_pairs(self, obs: ObstacleSet, d_act: float) -> tuple[np.ndarray, np.ndarray]:
         """Broad phase: (capsule, obstacle) index pairs whose AABBs are closer than d_act."""
         idx = self.moving
-        r = self.radius[idx, None]
+        r = self._reach
         lo = np.minimum(self.p0[idx], self.p1[idx]) - r
         hi = np.maximum(self.p0[idx], self.p1[idx]) + r
         gap = np.maximum(np.maximum(obs.lo[None] - hi[:, None], lo[:, None] - obs.hi[None]), 0.0)
@@ -230,7 +239,7 @@ class ArmGeometry:
         req = fcl.DistanceRequest(enable_nearest_points=True)
         for ci, oi in zip(*self.near_pairs(obs, d_act)):
             o = obs.items[oi]
-            if skip and _key(o) in skip.get(self.specs[ci].name, ()):
+            if skip and _key(o) in skip.get(self._names[ci], ()):
                 continue
             res = fcl.DistanceResult()
             d = fcl.distance(self._fcl(ci), o.obj, req, res)

@@ -86,26 +86,70 @@ class StpikResult:
     steps: int
 
 
+try:  # the gufunc behind np.linalg.svd(a, full_matrices=False): the same LAPACK call without its Python wrapper
+    from numpy.linalg import _umath_linalg as _ul
+
+    _SVD_S = _ul.svd_s
+except (ImportError, AttributeError):  # pragma: no cover - another numpy layout
+    _SVD_S = None
+
+
+def _svd(a: np.ndarray):
+    """Thin SVD of a small matrix (bit-identical to np.linalg.svd(a, full_matrices=False), less overhead)."""
+    if _SVD_S is not None:
+        with np.errstate(invalid="ignore"):
+            u, s, vt = _SVD_S(a, signature="d->ddd")
+        if np.isfinite(s).all():
+            return u, s, vt
+    return np.linalg.svd(a, full_matrices=False)  # raises LinAlgError where it did not converge
+
+
 def hierarchy(levels, n: int, damping: float) -> np.ndarray:
-    """Recursive null-space projection: qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
-    damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last)."""
-    qdot = np.zeros(n)
-    proj = np.eye(n)
+    """Recursive null-space projection (Eq. 10): qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
+    damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last).
+    The first level skips its products with N_0 = I and qdot_0 = 0 (exact in floating point)."""
+    qdot = proj = None
     for jac, xd in levels:
         if jac is None:  # identity task (posture): its projection needs no decomposition
-            return qdot + proj @ (xd - qdot)
-        jt = jac @ proj
-        u, s, vt = np.linalg.svd(jt, full_matrices=False)
+            return np.array(xd, float) if qdot is None else qdot + proj @ (xd - qdot)
+        u, s, vt = _svd(jac if proj is None else jac @ proj)
         keep = s > 1e-6
-        if not np.any(keep):
-            continue
-        u, s, vt = u[:, keep], s[keep], vt[keep]
+        if not keep.all():
+            if not keep.any():
+                continue
+            u, s, vt = u[:, keep], s[keep], vt[keep]
         smin = s[-1]
         lam2 = damping ** 2 * (1.0 - (smin / damping) ** 2) if smin < damping else 0.0
         pinv = vt.T @ ((s / (s * s + lam2))[:, None] * u.T)
-        qdot = qdot + pinv @ (xd - jac @ qdot)
-        proj = proj - vt.T @ vt
-    return qdot
+        qdot = pinv @ xd if qdot is None else qdot + pinv @ (xd - jac @ qdot)
+        vv = vt.T @ vt
+        proj = np.eye(n) - vv if proj is None else proj - vv
+    return np.zeros(n) if qdot is None else qdot
+
+
+@dataclass
+class _Run:
+    """The state of one STPIK check (Stpik.track)."""
+
+    q: np.ndarray
+    bound: np.ndarray  # each shape's clearance bound to obstacles
+    d_act: float  # broad-phase distance: the largest bound + buffer
+    qs: list = field(default_factory=list)
+    qdots: list = field(default_factory=list)
+    tau: float = 0.0  # reference time (slows down when joint velocities are scaled)
+    settle: float = 0.0
+    seg: int = 0
+    rate: float = 0.0  # speed of the reference as a fraction of its nominal speed (ramp > 0)
+    min_clear: float = math.inf
+    min_self: float = math.inf
+
+
+class _Reject(Exception):
+    """A rejected path inside a step: the reason, and the minimum clearance to report if it overrides."""
+
+    def __init__(self, reason: str, min_clear: float | None = None) -> None:
+        super().__init__(reason)
+        self.reason, self.min_clear = reason, min_clear
 
 
 class Stpik:
@@ -130,133 +174,161 @@ class Stpik:
     def track(self, q0, path: list[np.ndarray], obs: ObstacleSet, deadline: float,
               skip: dict[str, frozenset] | None = None, posture=None, speed: float | None = None,
               ramp: float = 0.0, accel: float = 0.0) -> StpikResult:
-        """`ramp` > 0 (s): the reference accelerates from rest to its speed in `ramp` and decelerates to stop at
+        """Closed-loop IK (Eq. 9) with the hierarchy of Eq. 10 along `path`, from q0.
+        `ramp` > 0 (s): the reference accelerates from rest to its speed in `ramp` and decelerates to stop at
         every waypoint (trapezoidal in each segment) instead of starting at full speed and turning each corner at
         once. `accel` > 0 (rad/s^2): no joint velocity changes faster, also when a set-based task enters (a task
         entering changed the wrist's speed by 0.85 rad/s within one step: in the simulator the fingers then hit the
         bottle they held, 200-350 N, and it moved 18-25 mm in the hand for a few ms); the joint-limit tasks then
         enter early enough to stop within that acceleration. Both for a hand holding a bottle."""
         p = self.p
-        kin, arm = self.kin, self.arm
         path = [np.asarray(w, float) for w in path]
         times = self._reference(path, speed)
-        t_end = times[-1]
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
-        q = np.array(q0, float)
-        qs, qdots = [q.copy()], []
-        tau = 0.0  # reference time (slows down when joint velocities are scaled)
-        settle = 0.0
         # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
-        bound = np.array([p.clearance if s.clearance is None else s.clearance for s in arm.specs])
-        d_act = float(np.max(bound)) + p.buffer
-        min_clear, min_self = math.inf, math.inf
-        seg = 0
-        rate = 0.0  # speed of the reference as a fraction of its nominal speed (ramp > 0)
-        nominal = t_end + ramp * (len(path) - 1)  # a ramp adds about `ramp` s per segment
+        bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
+        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer)
+        run.qs.append(run.q.copy())
+        nominal = times[-1] + ramp * (len(path) - 1)  # a ramp adds about `ramp` s per segment
         max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
         while True:
             check_deadline(deadline, "the STPIK check")
-            if len(qdots) >= max_steps:
-                return self._result(False, f"step budget spent ({max_steps} IK steps)", qs, qdots, min_clear,
-                                    min_self)
-            # reference pose and velocity at tau
-            while seg < len(path) - 2 and tau >= times[seg + 1]:
-                seg += 1
-            a, b = path[seg], path[min(seg + 1, len(path) - 1)]
-            t0, t1 = times[seg], times[min(seg + 1, len(path) - 1)]
-            if tau >= t_end:
-                ref, vel = path[-1], np.zeros(4)
-            else:
-                f = (tau - t0) / (t1 - t0)
-                ref, vel = a + f * (b - a), (b - a) / (t1 - t0)
-            if ramp > 0.0:
-                rate = max(min(rate + p.dt / ramp, 1.0, math.sqrt(2.0 * max(t1 - tau, 0.0) / ramp)), p.dt / ramp)
-                vel = vel * rate
-            kin.update(q)
-            arm.pose()
-            rot, pos = kin.tool_pose()
-            jt = kin.frame_jacobian(kin.tool_fid)
-            e_p = ref[:3] - pos
-            e_o = pin.log3(side_rotation(ref[3]) @ rot.T)
-            ep_n, eo_n = float(np.linalg.norm(e_p)), float(np.linalg.norm(e_o))
-            if tau >= t_end and ep_n < p.final_tol_pos and eo_n < p.final_tol_ori:
-                return self._result(True, "reached", qs, qdots, min_clear, min_self)
-            if ep_n > p.track_tol or eo_n > 10 * p.final_tol_ori + 0.2:
-                return self._result(False, f"tracking failed (position error {ep_n:.3f} m)", qs, qdots,
-                                    min_clear, min_self)
-            if tau >= t_end:
-                settle += p.dt
-                if settle > p.settle_time:
-                    return self._result(False, "did not converge at the goal", qs, qdots, min_clear, min_self)
-            # set-based candidates: (group, sigma, jacobian row)
-            cands = []
-            for i in range(rd.N_JOINTS):
-                lo, hi = q[i] - self.lower[i], self.upper[i] - q[i]
-                if lo < p.joint_buffer:
-                    cands.append((0, lo, self.eye[i], p.joint_act))
-                if hi < p.joint_buffer:
-                    cands.append((0, hi, -self.eye[i], p.joint_act))
-            for i, j, d, pi, pj in arm.self_distances(p.self_clearance + p.buffer):
-                min_self = min(min_self, d)
-                n = pi - pj
-                nn = np.linalg.norm(n)
-                if nn < 1e-9:
-                    return self._result(False, "self-collision", qs, qdots, min_clear, min_self)
-                jac = (n / nn) @ (kin.point_jacobian(arm.fids[i], pi) - kin.point_jacobian(arm.fids[j], pj))
-                cands.append((1, d - p.self_clearance, jac, p.act))
-            for ci, o, d, pc, po in arm.obstacle_distances(obs, d_act, skip):
-                if d == PENETRATION:
-                    return self._result(False, f"{arm.specs[ci].name} collides with {o.name}", qs, qdots,
-                                        -1.0, min_self)
-                min_clear = min(min_clear, d)
-                if d >= bound[ci] + p.buffer:
-                    continue
-                n = pc - po
-                nn = np.linalg.norm(n)
-                if nn < 1e-9:
-                    return self._result(False, f"{arm.specs[ci].name} touches {o.name}", qs, qdots, 0.0, min_self)
-                cands.append((2, d - bound[ci], (n / nn) @ kin.point_jacobian(arm.fids[ci], pc), p.act))
-            for grp, sigma, _, _ in cands:
-                if sigma < -p.violation_tol:
-                    what = ("joint limit", "self-collision bound", "clearance bound")[grp]
-                    return self._result(False, f"{what} violated ({sigma:.4f})", qs, qdots, min_clear, min_self)
-            # Eq. 9 references of the equality tasks
-            w_d = np.array([0.0, 0.0, vel[3]])
-            eq_levels = [(jt[:3], vel[:3] + p.k_pos * e_p), (jt[3:], w_d + p.k_ori * e_o),
-                         (None, p.k_posture * (posture - q))]
-            active = [False] * len(cands)
-            for _ in range(6):
-                levels = []
-                for grp in (0, 1, 2):
-                    rows = [(c[2], p.k_set * max(0.0, c[3] - c[1])) for c, on in zip(cands, active)
-                            if on and c[0] == grp]
-                    if rows:
-                        levels.append((np.array([r[0] for r in rows]), np.array([r[1] for r in rows])))
-                qdot = hierarchy(levels + eq_levels, rd.N_JOINTS, p.damping)
-                changed = False
-                for k, (grp, sigma, jac, buf) in enumerate(cands):
-                    v = float(jac @ qdot)
-                    brake = 0.0
-                    if accel > 0.0 and grp == 0 and qdots:  # the rate it can reach next step, and stop from
-                        v = max(v, float(jac @ qdots[-1]) - accel * p.dt)
-                        brake = v * v / (2.0 * accel)
-                    if not active[k] and v < 0.0 and sigma + v * p.dt - brake < buf:
-                        active[k] = changed = True
-                if not changed:
-                    break
-            ratio = float(np.max(np.abs(qdot) / p.qdot_max))
-            scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
-            qdot = qdot * scale
-            if accel > 0.0 and qdots and tau < t_end:  # not while settling on the goal (slow by then)
-                qdot = qdots[-1] + np.clip(qdot - qdots[-1], -accel * p.dt, accel * p.dt)
-            q = q + qdot * p.dt
-            qs.append(q.copy())
-            qdots.append(qdot)
+            if len(run.qdots) >= max_steps:
+                return self._result(False, f"step budget spent ({max_steps} IK steps)", run)
+            ref, vel, t1 = self._reference_at(path, times, run, ramp)
+            try:
+                scale = self._step(run, ref, vel, times[-1], obs, skip, posture, accel)
+            except _Reject as e:
+                if e.min_clear is not None:
+                    run.min_clear = e.min_clear
+                return self._result(e.reason == "reached", e.reason, run)
             if ramp > 0.0:  # each waypoint is reached, at the slowest rate, before the next segment starts
-                tau = min(tau + p.dt * scale * rate, t1)
+                run.tau = min(run.tau + p.dt * scale * run.rate, t1)
             else:
-                tau = min(tau + p.dt * scale, t_end)
+                run.tau = min(run.tau + p.dt * scale, times[-1])
 
-    def _result(self, ok, reason, qs, qdots, min_clear, min_self) -> StpikResult:
-        return StpikResult(ok, reason, np.array(qs), np.array(qdots).reshape(-1, rd.N_JOINTS), self.p.dt,
-                           min_clear, min_self, len(qdots))
+    def _reference_at(self, path, times, run: _Run, ramp: float):
+        """Reference pose and velocity at run.tau (piecewise linear; trapezoidal speed with a ramp), segment end."""
+        p = self.p
+        while run.seg < len(path) - 2 and run.tau >= times[run.seg + 1]:
+            run.seg += 1
+        last = len(path) - 1
+        a, b = path[run.seg], path[min(run.seg + 1, last)]
+        t0, t1 = times[run.seg], times[min(run.seg + 1, last)]
+        if run.tau >= times[-1]:
+            ref, vel = path[-1], np.zeros(4)
+        else:
+            f = (run.tau - t0) / (t1 - t0)
+            ref, vel = a + f * (b - a), (b - a) / (t1 - t0)
+        if ramp > 0.0:
+            run.rate = max(min(run.rate + p.dt / ramp, 1.0, math.sqrt(2.0 * max(t1 - run.tau, 0.0) / ramp)),
+                           p.dt / ramp)
+            vel = vel * run.rate
+        return ref, vel, t1
+
+    def _step(self, run: _Run, ref, vel, t_end: float, obs, skip, posture, accel: float) -> float:
+        """One IK step (Eq. 9-10) from run.q; returns the velocity scale of Table 7; raises _Reject to stop
+        (reason "reached" when the goal is reached)."""
+        p, kin = self.p, self.kin
+        q = run.q
+        kin.update(q)
+        self.arm.pose()
+        rot, pos = kin.tool_pose()
+        jt = kin.frame_jacobian(kin.tool_fid)
+        e_p = ref[:3] - pos
+        e_o = pin.log3(side_rotation(ref[3]) @ rot.T)
+        ep_n, eo_n = float(np.linalg.norm(e_p)), float(np.linalg.norm(e_o))
+        if run.tau >= t_end and ep_n < p.final_tol_pos and eo_n < p.final_tol_ori:
+            raise _Reject("reached")
+        if ep_n > p.track_tol or eo_n > 10 * p.final_tol_ori + 0.2:
+            raise _Reject(f"tracking failed (position error {ep_n:.3f} m)")
+        if run.tau >= t_end:
+            run.settle += p.dt
+            if run.settle > p.settle_time:
+                raise _Reject("did not converge at the goal")
+        cands = self._set_tasks(run, obs, skip)
+        # Eq. 9 references of the equality tasks
+        w_d = np.array([0.0, 0.0, vel[3]])
+        eq_levels = [(jt[:3], vel[:3] + p.k_pos * e_p), (jt[3:], w_d + p.k_ori * e_o),
+                     (None, p.k_posture * (posture - q))]
+        prev = run.qdots[-1] if run.qdots else None
+        qdot = self._solve(cands, eq_levels, prev, accel)
+        ratio = float(np.max(np.abs(qdot) / p.qdot_max))
+        scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
+        qdot = qdot * scale
+        if accel > 0.0 and prev is not None and run.tau < t_end:  # not while settling on the goal (slow by then)
+            qdot = prev + np.clip(qdot - prev, -accel * p.dt, accel * p.dt)
+        run.q = q + qdot * p.dt
+        run.qs.append(run.q.copy())
+        run.qdots.append(qdot)
+        return scale
+
+    def _set_tasks(self, run: _Run, obs, skip):
+        """Set-based candidates of Eq. 10 at run.q as arrays (group, sigma, jacobian rows, activation threshold):
+        joint limits (0), self-collision (1), obstacle clearance (2). Raises _Reject on a collision or a violated
+        bound."""
+        p, kin, arm = self.p, self.kin, self.arm
+        q = run.q
+        grp, sig, rows, buf = [], [], [], []
+        lo, hi = q - self.lower, self.upper - q
+        for i in np.nonzero((lo < p.joint_buffer) | (hi < p.joint_buffer))[0]:
+            for s_, row in ((lo[i], self.eye[i]), (hi[i], -self.eye[i])):
+                if s_ < p.joint_buffer:
+                    grp.append(0), sig.append(s_), rows.append(row), buf.append(p.joint_act)
+        for i, j, d, pi, pj in arm.self_distances(p.self_clearance + p.buffer):
+            run.min_self = min(run.min_self, d)
+            n = pi - pj
+            nn = np.linalg.norm(n)
+            if nn < 1e-9:
+                raise _Reject("self-collision")
+            jac = (n / nn) @ (kin.point_jacobian(arm.fids[i], pi) - kin.point_jacobian(arm.fids[j], pj))
+            grp.append(1), sig.append(d - p.self_clearance), rows.append(jac), buf.append(p.act)
+        bound = run.bound
+        for ci, o, d, pc, po in arm.obstacle_distances(obs, run.d_act, skip):
+            if d == PENETRATION:
+                raise _Reject(f"{arm.specs[ci].name} collides with {o.name}", -1.0)
+            run.min_clear = min(run.min_clear, d)
+            if d >= bound[ci] + p.buffer:
+                continue
+            n = pc - po
+            nn = np.linalg.norm(n)
+            if nn < 1e-9:
+                raise _Reject(f"{arm.specs[ci].name} touches {o.name}", 0.0)
+            grp.append(2), sig.append(d - bound[ci]), buf.append(p.act)
+            rows.append((n / nn) @ kin.point_jacobian(arm.fids[ci], pc))
+        for g, s_ in zip(grp, sig):
+            if s_ < -p.violation_tol:
+                what = ("joint limit", "self-collision bound", "clearance bound")[g]
+                raise _Reject(f"{what} violated ({s_:.4f})")
+        if not grp:
+            return None
+        return np.array(grp), np.array(sig, float), np.array(rows), np.array(buf)
+
+    def _solve(self, cands, eq_levels, prev, accel: float) -> np.ndarray:
+        """Eq. 10 with the set-based tasks that must enter: a candidate is activated when the step without it would
+        bring it within its threshold (with `accel`, joint limits early enough to stop); iterated."""
+        p = self.p
+        if cands is None:
+            return hierarchy(eq_levels, rd.N_JOINTS, p.damping)
+        grp, sig, jac, buf = cands
+        push = p.k_set * np.maximum(0.0, buf - sig)
+        active = np.zeros(len(grp), bool)
+        qdot = None
+        for _ in range(6):
+            levels = [(jac[m], push[m]) for m in (active & (grp == g) for g in (0, 1, 2)) if m.any()]
+            qdot = hierarchy(levels + eq_levels, rd.N_JOINTS, p.damping)
+            v = jac @ qdot
+            brake = 0.0
+            if accel > 0.0 and prev is not None:  # the rate it can reach next step, and stop from
+                lim = grp == 0
+                v = np.where(lim, np.maximum(v, jac @ prev - accel * p.dt), v)
+                brake = np.where(lim, v * v / (2.0 * accel), 0.0)
+            new = ~active & (v < 0.0) & (sig + v * p.dt - brake < buf)
+            if not new.any():
+                break
+            active |= new
+        return qdot
+
+    def _result(self, ok: bool, reason: str, run: _Run) -> StpikResult:
+        return StpikResult(ok, reason, np.array(run.qs), np.array(run.qdots).reshape(-1, rd.N_JOINTS), self.p.dt,
+                           run.min_clear, run.min_self, len(run.qdots))
