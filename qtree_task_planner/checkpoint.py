@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from .oracles import CachedOracle
-from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.config import ParameterError
 from .params import TrainingParams
 from .problem import RelocationProblem
@@ -68,7 +68,7 @@ class Checkpoint:
     converged: bool
     cancelled: bool
     tree: dict  # QTree.to_state()
-    feasibility: list = field(default_factory=list)  # [[object_id, [removed ids], label], ...]
+    feasibility: list = field(default_factory=list)  # [[object_id, [removed ids], label(, blocker sets)], ...]
     elapsed_s: float = 0.0
     reason: str = "periodic"  # periodic | final | cancelled | interrupted: <why>
 
@@ -98,16 +98,26 @@ class Checkpoint:
     def fill_cache(self, cache: CachedOracle) -> int:
         """Put the stored feasibility answers into `cache` (not counted as calls); returns how many were new."""
         added = 0
-        for object_id, removed, label in self.feasibility:
+        for object_id, removed, label, *blockers in self.feasibility:
             key = (object_id, frozenset(removed))
             if key not in cache.table:
-                cache.table[key] = FeasibilityAnswer(Label(label), message="from checkpoint")
+                sets = tuple(BlockerSet(frozenset(objs), bool(certain), str(lane))
+                             for objs, certain, lane in (blockers[0] if blockers else ()))
+                cache.table[key] = FeasibilityAnswer(Label(label), message="from checkpoint", blockers=sets)
                 added += 1
         return added
 
     @staticmethod
     def table_of(cache: CachedOracle) -> list:
-        return [[o, sorted(removed), int(a.label)] for (o, removed), a in cache.table.items()]
+        """[object, removed, label] per answer, and the blocker sets [[objects, certain, lane], ...] when the answer
+        named any (the blocker A* needs them to ask nothing twice after a resume)."""
+        out = []
+        for (o, removed), a in cache.table.items():
+            row = [o, sorted(removed), int(a.label)]
+            if a.blockers:
+                row.append([[sorted(b.objects), b.certain, b.lane] for b in a.blockers])
+            out.append(row)
+        return out
 
     # -- plain data ----------------------------------------------------------------------------------
     def to_payload(self) -> dict:
@@ -132,7 +142,7 @@ class Checkpoint:
                 rng_state=(int(version), tuple(int(x) for x in internal), gauss), epsilon=float(p["epsilon"]),
                 planner_calls=int(p["planner_calls"]), converged=bool(p["converged"]),
                 cancelled=bool(p["cancelled"]), tree=dict(p["tree"]),
-                feasibility=[[str(o), [str(x) for x in r], int(Label(lab))] for o, r, lab in p["feasibility"]],
+                feasibility=[_answer_row(row) for row in p["feasibility"]],
                 elapsed_s=float(p["elapsed_s"]), reason=str(p["reason"]))
         except (KeyError, TypeError, ValueError, ParameterError) as e:
             raise CheckpointError(f"{source}: malformed checkpoint contents ({type(e).__name__}: {e})") from None
@@ -204,3 +214,15 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         raise CheckpointError(f"{src}: checksum mismatch: the file is corrupt or was edited; delete it to start "
                               "afresh (it is never reset silently)")
     return Checkpoint.from_payload(payload, src)
+
+
+def _answer_row(row) -> list:
+    """One stored answer, checked: [object, removed, label] or with its blocker sets [[objects, certain, lane], ...]
+    (TypeError/ValueError when malformed)."""
+    o, r, lab, *rest = row
+    out = [str(o), [str(x) for x in r], int(Label(lab))]
+    if len(rest) > 1:
+        raise ValueError(f"feasibility row of {len(row)} fields")
+    if rest:
+        out.append([[[str(x) for x in objs], bool(certain), str(lane)] for objs, certain, lane in rest[0]])
+    return out

@@ -1,5 +1,8 @@
 """The task planner's job, ROS-free: the exact optimum, then Q-Tree training (Sect. 4.2), then the relocations.
 
+The exact optimum comes from the blocker A* (astar.py: the planner's lane blockers bound the search, the optimum
+still proven, Eq. 8) in a handful of planner calls; exact.py's uniform-cost search stays the tested reference.
+
 The node supplies the oracle (its feasibility service behind a CachedOracle), how to get through planner outages
 (`until_planner`, qtree_task_planner.outage), where to keep checkpoints, per-episode feedback and how to relocate
 one object; everything else (order, what is kept when the planner goes away, when execution stops) is here.
@@ -9,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable, TypeVar
 
-from . import exact
+from . import astar
 from .checkpoint import Checkpoint
 from .oracles import CachedOracle
 from .outage import PlannerUnavailable
@@ -31,7 +34,7 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
 
     def solve():
         try:
-            return exact.solve(problem, oracle)
+            return astar.solve(problem, oracle)
         except PlannerUnavailable as e:
             ck = state["ck"] or Checkpoint.initial(problem, params)
             state["ck"] = dataclasses.replace(ck, feasibility=Checkpoint.table_of(oracle), reason=f"interrupted: {e}")

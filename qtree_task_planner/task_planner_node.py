@@ -44,7 +44,7 @@ from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
-from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, msg_to_bottles
+from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs, msg_to_bottles
 
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from .oracles import CachedOracle
@@ -97,29 +97,42 @@ class ServiceOracle:
         self.last_ok = time.monotonic()
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout)
+        resp = self._call(req, repr(object_id))
+        return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
+                                 blockers=blockers_from_msgs(resp.blockers))
+
+    def lane_blockers(self, removed: frozenset[str]) -> dict:
+        """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None
+        from a planner that refuses the question (one without lane blockers: the A* then learns from answers)."""
+        req = PlanFeasibility.Request(object_id="", removed_ids=sorted(removed), timeout=self.timeout, all_lanes=True)
+        try:
+            return lanes_from_msgs(self._call(req, "the lane blockers").lanes)
+        except ValueError:
+            return None
+
+    def _call(self, req, what: str):
         if self.stop():
             raise Cancelled("cancelled (or shutting down) while asking the motion planner")
         srv = self.client.srv_name
         if not self.client.service_is_ready() and not self.client.wait_for_service(timeout_sec=self.connect_wait):
             raise PlannerUnavailable(f"feasibility service {srv} is not available")
-        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout)
         limit = self.timeout + self.margin
         try:
             resp = call(self.client, req, limit, abandon=lambda: not self.client.service_is_ready())
         except TimeoutError:
             gone = not self.client.service_is_ready()
             raise PlannerUnavailable(
-                f"feasibility service {srv} went away while answering {object_id!r}" if gone else
-                f"no feasibility answer for {object_id!r} within {limit:.1f} s "
+                f"feasibility service {srv} went away while answering {what}" if gone else
+                f"no feasibility answer for {what} within {limit:.1f} s "
                 "(feasibility_timeout + feasibility_margin)") from None
         self.last_ok = time.monotonic()
         self.on_answer()
         if not resp.ok and resp.message.startswith(NO_ANSWER):  # its safety net ran out: asked again, never g_U
-            raise PlannerUnavailable(f"no feasibility answer for {object_id!r}: {resp.message[len(NO_ANSWER):]}")
+            raise PlannerUnavailable(f"no feasibility answer for {what}: {resp.message[len(NO_ANSWER):]}")
         if not resp.ok:
-            raise ValueError(f"motion planner refused the query for {object_id!r}: {resp.message}")
-        return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
-                                 blockers=blockers_from_msgs(resp.blockers))
+            raise ValueError(f"motion planner refused the query for {what}: {resp.message}")
+        return resp
 
 
 NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
@@ -376,8 +389,9 @@ class TaskPlannerNode(Node):
             result.success, result.message = True, "trained (not executed)"
             return
         fb.phase = "executing"
+        sequence = result.optimal_sequence if goal_handle.request.execute_optimum else r.sequence
         result.success, result.message, _ = execute_sequence(
-            r.sequence, lambda i, removed: self._relocate_one(goal_handle, i, removed),
+            sequence, lambda i, removed: self._relocate_one(goal_handle, i, removed),
             cancelled=lambda: goal_handle.is_cancel_requested, before_each=lambda: goal_handle.publish_feedback(fb))
 
     def _relocate_one(self, goal_handle, object_id: str, removed: list[str]) -> tuple[bool, str]:

@@ -34,6 +34,8 @@ def _args(argv):
     p.add_argument("--search", choices=SEARCHES, help="default: config/task_planner.yaml")
     p.add_argument("--seed", type=int, help="default: config/task_planner.yaml")
     p.add_argument("--no-execute", action="store_true", help="train only, do not move the robot")
+    p.add_argument("--execute-optimum", action="store_true",
+                   help="relocate the exact optimum (blocker A*) instead of the Q-Tree's learned sequence")
     p.add_argument("--out", default="out", help="output directory (default: ./out)")
     p.add_argument("--timeout", type=float, default=900.0, help="give up after this many seconds")
     p.add_argument("--no-record", action="store_true",
@@ -164,7 +166,7 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     bar, on_feedback = _progress_bar(rec)
     try:
         client.train(on_feedback=on_feedback, check=g.check_alive, policy=used.policy, search=used.search,
-                     seed=used.seed, execute=not a.no_execute)
+                     seed=used.seed, execute=not a.no_execute, execute_optimum=a.execute_optimum)
         res = client.wait(a.timeout, check=g.check_alive)
     finally:
         bar.close()
@@ -203,7 +205,9 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, recordi
         "episodes": res.episodes, "E_ss": res.e_ss, "MP_q": res.mp_q, "E_1st": res.e_first,
         "planner_calls": res.planner_calls, "wall_time_s": round(wall, 1),
         "q_sum_history": list(res.q_sum_history),
-        "final_scene": _check_scene(a.scenario, before, after, list(res.sequence) if not a.no_execute else []),
+        "executed": "optimum" if a.execute_optimum else "learned",
+        "final_scene": _check_scene(a.scenario, before, after, [] if a.no_execute else list(
+            res.optimal_sequence if a.execute_optimum else res.sequence)),
         "recording": recording,
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))

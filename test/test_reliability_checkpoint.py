@@ -200,3 +200,20 @@ def test_checkpoint_round_trip_keeps_rng_and_counters(uninterrupted):
     back = Checkpoint.from_payload(json.loads(json.dumps(c.to_payload())))
     assert back.rng_state == c.rng_state and back.epsilon == c.epsilon and back.quiet == c.quiet
     assert back.params == PARAMS and back.feasibility == c.feasibility
+
+
+def test_blocker_sets_survive_a_checkpoint_on_disk(tmp_path):
+    """The blocker A* (astar.py) needs an unfeasible answer's blockers to ask nothing twice after a resume: they
+    are stored with the answers and come back from the file (answers without blockers keep the 3-field rows)."""
+    cache = CachedOracle(BlockingOracle(SC10))
+    asked = [(o, frozenset()) for o in SC10.ids]
+    for o, s in asked:
+        cache.feasibility(o, s)
+    assert any(a.blockers for a in cache.table.values()) and any(not a.blockers for a in cache.table.values())
+    ck = Checkpoint.initial(RelocationProblem.from_scenario(SC10), TrainingParams.defaults(), cache)
+    back = Checkpoint.from_payload(json.loads(json.dumps(ck.to_payload())))
+    fresh = CachedOracle(BlockingOracle(SC10))
+    assert back.fill_cache(fresh) == len(asked)
+    for key in cache.table:
+        assert fresh.table[key].label == cache.table[key].label
+        assert fresh.table[key].blockers == cache.table[key].blockers, key

@@ -19,7 +19,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_procs import REPO, NodeProcess, RosGraph  # noqa: E402
 
-from qtree_task_planner import exact  # noqa: E402
+from qtree_task_planner import astar  # noqa: E402
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402
@@ -43,6 +43,7 @@ def _serve(scenario: str, die_after: int, delay: float = 0.0, relocate: str = "n
 
     from qtree_relocation_msgs.action import RelocateObject
     from qtree_relocation_msgs.srv import PlanFeasibility
+    from relocation_common.ros_conversions import blockers_to_msgs
 
     sc = load_scenario(scenario)
     oracle = BlockingOracle(sc)
@@ -51,16 +52,17 @@ def _serve(scenario: str, die_after: int, delay: float = 0.0, relocate: str = "n
     answered = [0]
 
     def feasibility(req, resp):
+        if req.object_id not in sc.ids:  # also the task planner's all_lanes question: this fake has no lanes
+            resp.ok, resp.message = False, f"unknown object id {req.object_id!r}"
+            return resp
         if 0 <= die_after <= answered[0]:
             print(f"dying with request {req.object_id} unanswered", flush=True)
             os.kill(os.getpid(), signal.SIGKILL)
         answered[0] += 1
         time.sleep(delay)
         print(f"Q {req.object_id} {','.join(req.removed_ids)}", flush=True)
-        if req.object_id not in sc.ids:
-            resp.ok, resp.message = False, f"unknown object id {req.object_id!r}"
-            return resp
-        resp.ok, resp.label = True, int(oracle.feasibility(req.object_id, frozenset(req.removed_ids)).label)
+        ans = oracle.feasibility(req.object_id, frozenset(req.removed_ids))
+        resp.ok, resp.label, resp.blockers = True, int(ans.label), blockers_to_msgs(ans.blockers)  # as the planner
         return resp
 
     node.create_service(PlanFeasibility, "/motion_planner/plan_feasibility", feasibility)
@@ -117,7 +119,7 @@ def reference():
     """The core's uninterrupted run: exact optimum then training, one shared cache (as the node does)."""
     params = TrainingParams.defaults().replace(seed=SEED)
     cache = CachedOracle(BlockingOracle(SC10))
-    best = exact.solve(SC10, cache)
+    best = astar.solve(SC10, cache)
     r = train(SC10, cache, params, optimal_weight=best.total_weight)
     assert r.found and cache.calls > 300
     return r, best, len(cache.table)
