@@ -7,7 +7,7 @@ from pathlib import Path
 
 from relocation_common.paths import scenarios_dir
 
-from . import figures, paper, paper_report, tables
+from . import figures, paper_report, tables
 from .sweep import read_results
 
 
@@ -211,11 +211,11 @@ def write_report(out: Path, docs: Path, params, data_dir, main: list[str], rando
     summary_at = len(md)
     scenes_md, info = _scenes_section(paper_set + main + ["paper_experiment_10"] + random, data_dir, params)
     md += scenes_md
-    md += _complete_tree_section(info, paper_set, main)
+    md += paper_report.complete_tree_section(info, paper_set, main)
     timing = _read_timing(out)
     if timing is not None:
         md += _timing_section(timing)
-    md += _beside_paper_sections(idx, paper_set, main, random)
+    md += paper_report.beside_paper_sections(idx, paper_set, main, random)
     for s in paper_set + list(main) + list(experiment):
         if s in idx:
             md += _tables_section(records, idx[s], s, figdir, docs)
@@ -232,7 +232,8 @@ def write_report(out: Path, docs: Path, params, data_dir, main: list[str], rando
                   f"({f3.relative_to(docs)})\n\n![E_1st]({f4.relative_to(docs)})\n")
     if "scenario1_5" in info:
         md.append(_tree_section(info["scenario1_5"], params, figdir, docs))
-    found = _findings_section(md, records, idx, info, paper_set, main, random)
+    found = paper_report.findings_section(md, idx, paper_set, main, random,
+                                          lambda present: _off_target(records, info, present))
     md.insert(summary_at, _summary(found, timing, runs))
     present = [s for s in paper_set + main if s in idx]
     if present:
@@ -243,64 +244,6 @@ def write_report(out: Path, docs: Path, params, data_dir, main: list[str], rando
     path = docs / "evaluation.md"
     path.write_text("\n".join(md) + "\n")
     return path
-
-
-def _complete_tree_section(info: dict, paper_set: list[str], main: list[str]) -> list[str]:
-    """Section "Complete trees": edges and target leaves of each scene's complete tree beside the paper's."""
-    from . import complete_tree
-    md = ["## Complete trees: the paper's scenes against ours\n"]
-    for label, names in (("Scenes of the paper's size", paper_set), ("This project's geometry", main)):
-        rows = []
-        for k, name in enumerate(names, 1):
-            if name in info:
-                sc, table, _ = info[name]
-                rows.append((name, k, complete_tree.of_table(table, sc)))
-            else:
-                rows.append((name, k, "no complete feasibility table"))
-        if rows:
-            md.append(f"**{label}**\n\n" + paper_report.tree_table(rows) + "\n")
-    md.append("Paper: LRND's MP_q, constant over alpha and gamma because LRND completes the tree (84 / 621-623 / "
-              "1,645-1,676 in Tables 1-3; about 622 and 1,675 taken), and 10 / 20 / 20 feasible sequences with one "
-              "optimum (Sect. 5.1). 'optimal target leaves': target leaves of least total weight (Eq. 8).\n")
-    return md
-
-
-def _beside_paper_sections(idx: dict, paper_set: list[str], main: list[str], random: list[str]) -> list[str]:
-    """Sections "Table k beside the paper" for both sets of scenes, then Table 4 per case."""
-    md = []
-    for label, names in (("scenes of the paper's size", paper_set), ("this project's geometry", main)):
-        for k, s in enumerate(names, 1):
-            if s not in idx:
-                continue
-            md.append(f"## Table {k} beside the paper: {s} ({label})\n")
-            md.append(f"Ratios: {paper_report.ratio_summary(idx[s], k)}.\n")
-            md.append(paper_report.side_by_side(idx[s], k))
-    if any(r in idx for r in random):
-        md.append("## Table 4 beside the paper, per case (this project's geometry)\n")
-        md.append("Case c of the paper beside random5_{c-1}; ours are the means over the (alpha, gamma) grid, the "
-                  "paper does not say which alpha and gamma Table 4 used.\n")
-        md.append(paper_report.table4(idx, random) + "\n")
-    return md
-
-
-def _findings_section(md: list[str], records, idx, info, paper_set, main, random) -> list:
-    """Section "The paper's findings": each judged on the paper's numbers and on ours (both sets); the deciding
-    numbers per set below. Returns [(set label, [(claim, verdict, evidence)])]."""
-    pidx = paper.index()
-    sets = [("the paper's numbers", pidx, [f"paper scenario {k}" for k in (1, 2, 3)],
-             [f"paper case {c}" for c in range(1, 11)], frozenset())]
-    for label, names, rnd in (("ours: scenes of the paper's size", paper_set, []),
-                              ("ours: this project's geometry", main, random)):
-        present = [s for s in names if s in idx]
-        if present:
-            sets.append((label, idx, present, rnd, _off_target(records, info, present)))
-    table, verdicts = paper_report.findings(sets)
-    md += ["## The paper's findings\n", table, ""]
-    for label, found in verdicts:
-        md.append(f"**Deciding numbers, {label}**\n")
-        md += [f"- {claim}: **{verdict}**. {ev}" for claim, verdict, ev in found]
-        md.append("")
-    return verdicts
 
 
 def _scenes_section(names: list[str], data_dir, params) -> tuple[list[str], dict]:
