@@ -97,7 +97,9 @@ class ServiceOracle:
         self.last_ok = time.monotonic()
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
-        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout)
+        # the label only: training never uses the trajectory (about 5 ms of a feasible answer's round trip)
+        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout,
+                                      label_only=True)
         resp = self._call(req, repr(object_id))
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
                                  blockers=blockers_from_msgs(resp.blockers))

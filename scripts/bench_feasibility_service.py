@@ -1,81 +1,147 @@
 """Round trip of the PlanFeasibility service over DDS (loopback) against the planner's own planning time.
 
 Starts the real motion_planner node (default scenario) on a private domain, sends N requests one at a time from
-one client (the task planner's pattern: one query in flight), and prints the round-trip time, the planning time
-the node reports, and the difference (the ROS overhead: serialisation, DDS, executor).
+one client (the task planner's pattern: one query in flight; a background spin thread and a blocking call, as
+the task planner's ServiceOracle), each query twice in a row, with the trajectory and label-only (the request's
+`label_only`), and prints the round-trip time, the planning time the node reports, and the difference (the ROS
+overhead: serialisation, DDS, executors).
 
-    .venv/bin/python scripts/bench_feasibility_service.py --requests 200
+    .venv/bin/python scripts/bench_feasibility_service.py --requests 200 [--baseline 5bd83aa] [--domain 61]
+
+--baseline REV: the same, first with the motion planner package (stpik_motion_planner/) of git revision REV, then
+with the working tree's, alternated `--rounds` times, on one domain (one node at a time).
 """
 from __future__ import annotations
 
 import argparse
+import io
 import os
 import random
+import subprocess
 import sys
+import tarfile
 import tempfile
-import time
+import threading
 from pathlib import Path
+import time
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
 
 from relocation_app.graph import Graph, wait_for_interfaces  # noqa: E402
-from relocation_common.paths import default_scenario
+from relocation_common.paths import default_scenario  # noqa: E402
 from relocation_common.scenario import load_scenario  # noqa: E402
+
+
+def _export(rev: str) -> str:
+    d = tempfile.mkdtemp(prefix="bench_srv_base_")
+    tar = subprocess.run(["git", "-C", str(REPO), "archive", rev, "stpik_motion_planner"], capture_output=True,
+                         check=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
+        t.extractall(d, filter="data")
+    return d
+
+
+def measure(n: int, seed: int, domain: int, impl: str = "") -> dict[str, list]:
+    """Per mode ("trajectory", "label only"): (round trip ms, planning ms, label) of n queries, each asked in both
+    modes back to back (which first alternates)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from qtree_relocation_msgs.srv import PlanFeasibility
+
+    scenario = load_scenario(default_scenario())
+    rng = random.Random(seed)
+    out: dict[str, list] = {"trajectory": [], "label only": []}
+    with Graph(Path(tempfile.mkdtemp(prefix="bench_srv_")), domain_id=domain) as g:
+        if impl:
+            g.env["PYTHONPATH"] = os.pathsep.join([impl, g.env["PYTHONPATH"]])
+        g.start("motion_planner")
+        os.environ.update({k: v for k, v in g.env.items() if k.startswith("ROS_")})
+        rclpy.init()
+        node = rclpy.create_node("bench_feasibility_service")
+        ex = SingleThreadedExecutor()
+        ex.add_node(node)
+        spin = threading.Thread(target=ex.spin, daemon=True)
+        spin.start()
+        try:
+            wait_for_interfaces(node, services=[("/motion_planner/plan_feasibility", PlanFeasibility)], graph=g)
+            cli = node.create_client(PlanFeasibility, "/motion_planner/plan_feasibility")
+            for k in range(n + 5):
+                obj = rng.choice(scenario.ids)
+                others = [o for o in scenario.obstacle_ids if o != obj]
+                removed = rng.sample(others, rng.randint(0, 4))
+                modes = [False, True] if k % 2 else [True, False]
+                for label_only in modes:
+                    t0 = time.perf_counter()
+                    res = cli.call(PlanFeasibility.Request(object_id=obj, removed_ids=removed, timeout=0.0,
+                                                           label_only=label_only), timeout_sec=30.0)
+                    dt = time.perf_counter() - t0
+                    if k >= 5 and res is not None and res.ok:  # the first 5: warm-up
+                        out["label only" if label_only else "trajectory"].append(
+                            (dt * 1e3, res.planning_time * 1e3, res.label))
+        finally:
+            ex.shutdown(timeout_sec=2.0)
+            spin.join(timeout=3.0)
+            node.destroy_node()
+            rclpy.try_shutdown()
+    return out
+
+
+def q(x) -> str:
+    x = np.asarray(x)
+    return f"p50 {np.percentile(x, 50):7.2f} ms  p95 {np.percentile(x, 95):7.2f} ms  max {x.max():7.2f} ms"
+
+
+def report(name: str, runs: list[dict[str, list]]) -> dict[str, float]:
+    """Prints round trip, planning and overhead per mode; returns the p50s."""
+    p50 = {}
+    for mode in ("trajectory", "label only"):
+        rows = np.array([r for run in runs for r in run[mode]])
+        if not len(rows):
+            continue
+        rtt, plan, lab = rows[:, 0], rows[:, 1], rows[:, 2]
+        feas = lab != 0
+        print(f"  {name} / {mode} ({len(rows)} requests)")
+        print(f"    round trip          {q(rtt)}")
+        print(f"    planning (node)     {q(plan)}")
+        print(f"    overhead            {q(rtt - plan)}")
+        if feas.any():
+            print(f"    round trip feasible   ({feas.sum():3d}) {q(rtt[feas])}   overhead {q((rtt - plan)[feas])}")
+            p50[f"{mode} feasible rtt"] = float(np.percentile(rtt[feas], 50))
+            p50[f"{mode} feasible overhead"] = float(np.percentile((rtt - plan)[feas], 50))
+        p50[f"{mode} overhead"] = float(np.percentile(rtt - plan, 50))
+    return p50
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--requests", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--domain", type=int, default=61, help="ROS_DOMAIN_ID of the benchmark's graph")
+    ap.add_argument("--baseline", help="git revision whose motion planner package to compare against")
+    ap.add_argument("--rounds", type=int, default=1)
     a = ap.parse_args()
-    import rclpy
-    from qtree_relocation_msgs.srv import PlanFeasibility
-
-    scenario = load_scenario(default_scenario())
-    rng = random.Random(a.seed)
-    with Graph(Path(tempfile.mkdtemp(prefix="bench_srv_"))) as g:
-        g.start("motion_planner")
-        os.environ.update(g.env)
-        rclpy.init()
-        node = rclpy.create_node("bench_feasibility_service")
-        try:
-            wait_for_interfaces(node, services=[("/motion_planner/plan_feasibility", PlanFeasibility)], graph=g)
-            cli = node.create_client(PlanFeasibility, "/motion_planner/plan_feasibility")
-            rtt, plan, labels = [], [], []
-            for k in range(a.requests + 5):
-                obj = rng.choice(scenario.ids)
-                others = [o for o in scenario.obstacle_ids if o != obj]
-                removed = rng.sample(others, rng.randint(0, 4))
-                t0 = time.perf_counter()
-                fut = cli.call_async(PlanFeasibility.Request(object_id=obj, removed_ids=removed, timeout=0.0))
-                rclpy.spin_until_future_complete(node, fut, timeout_sec=30)
-                dt = time.perf_counter() - t0
-                res = fut.result()
-                if k < 5 or res is None:  # warm-up
-                    continue
-                rtt.append(dt * 1e3)
-                plan.append(res.planning_time * 1e3)
-                labels.append(res.label)
-        finally:
-            node.destroy_node()
-            rclpy.try_shutdown()
-    rtt, plan = np.array(rtt), np.array(plan)
-    over = rtt - plan
-
-    def q(x):
-        return f"p50 {np.percentile(x, 50):7.2f} ms  p95 {np.percentile(x, 95):7.2f} ms  max {x.max():7.2f} ms"
-
-    feas = np.array(labels) != 0
-    print(f"PlanFeasibility over DDS (loopback), {len(rtt)} sequential requests, default scenario")
-    print(f"round trip          {q(rtt)}")
-    print(f"planning (node)     {q(plan)}")
-    print(f"overhead            {q(over)}")
-    if feas.any():
-        print(f"round trip feasible   ({feas.sum():3d}) {q(rtt[feas])}  (the answer carries the 100 Hz trajectory)")
-    if (~feas).any():
-        print(f"round trip unfeasible ({(~feas).sum():3d}) {q(rtt[~feas])}")
+    impls = [("working tree", "")]
+    if a.baseline:
+        impls.insert(0, (a.baseline, _export(a.baseline)))
+    runs: dict[str, list] = {name: [] for name, _ in impls}
+    for _ in range(a.rounds):
+        for name, impl in impls:
+            runs[name].append(measure(a.requests, a.seed, a.domain, impl))
+    print(f"PlanFeasibility over DDS (loopback), {a.requests} queries x {a.rounds} rounds, each asked with the "
+          f"trajectory and label-only, one in flight, default scenario")
+    got = {name: report(name, rs) for name, rs in runs.items()}
+    if a.baseline:
+        b, w = got[a.baseline], got["working tree"]
+        for k in ("trajectory feasible rtt", "trajectory overhead"):
+            if k in b and k in w:
+                print(f"  {k} p50: {a.baseline} {b[k]:.2f} ms, working tree {w[k]:.2f} ms ({b[k] / w[k]:.2f}x)")
+    w = got["working tree"]
+    if "label only feasible rtt" in w and "trajectory feasible rtt" in w:
+        print(f"  working tree, feasible round trip p50: trajectory {w['trajectory feasible rtt']:.2f} ms, "
+              f"label only {w['label only feasible rtt']:.2f} ms")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """motion_planner node: a thin ROS 2 shell over stpik_motion_planner.feasibility.MotionPlanner (paper Sect. 4.1).
 
 - service `~/plan_feasibility` (PlanFeasibility): Eq. 11's answer g_U / g_O / g_T for (object, removed set),
-  with the home -> grasp trajectory; a bad request answers ok=false with the reason, the node keeps serving.
+  with the home -> grasp trajectory unless the request asks for the label only; a bad request answers ok=false
+  with the reason, the node keeps serving. Served by its own executor thread (SideNode), not the main executor.
 - action `~/relocate` (RelocateObject): plan the pick, stream joint velocities at 100 Hz with feedback from the
   joint states, close the gripper, plan and stream the carry to the next slot of the bottom shelf, release,
   retreat, plan and stream the way home. Feedback by phase; cancel stops the arm; a silent driver aborts the goal
@@ -132,8 +133,11 @@ class MotionPlannerNode(Node):
         self._state.node.create_subscription(JointState, state_topic, self._on_finger_state, 10)
         self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS,
                                  callback_group=MutuallyExclusiveCallbackGroup())
-        self.create_service(PlanFeasibility, "~/plan_feasibility", self._on_feasibility, qos_profile=SERVICE_QOS,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+        # the feasibility service on a node of its own, spun by its own single-threaded executor (a thread): an
+        # answer waits for no thread of the main executor (held by relocations) and scans a wait set of one service
+        self._feas = SideNode("motion_planner_feasibility", context=self.context)
+        self._feas.node.create_service(PlanFeasibility, self.resolve_service_name("~/plan_feasibility"),
+                                       self._on_feasibility, qos_profile=SERVICE_QOS)
         self._server = ActionServer(self, RelocateObject, "~/relocate", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=ReentrantCallbackGroup())
@@ -145,6 +149,7 @@ class MotionPlannerNode(Node):
         return self.get_parameter(name).value
 
     def close(self) -> None:
+        self._feas.close()
         self._state.close()
 
     # -- inputs ---------------------------------------------------------------------------------------------
@@ -211,7 +216,8 @@ class MotionPlannerNode(Node):
             return res
         res.label, res.planning_time = int(ans.label), float(ans.planning_time)
         res.attempts, res.message = int(ans.attempts), ans.message
-        res.trajectory = trajectory_to_msg(ans.trajectory)
+        if not req.label_only:  # training asks for the label only; execution for the trajectory too
+            res.trajectory = trajectory_to_msg(ans.trajectory)
         res.blockers = blockers_to_msgs(ans.blockers)
         return res
 

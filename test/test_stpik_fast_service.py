@@ -1,0 +1,84 @@
+"""PlanFeasibility's label_only (issue 15) over DDS: the same answer without the trajectory; the service is served
+while the node's main executor is busy elsewhere (its own executor thread)."""
+import pytest
+
+from ros_procs import REPO, RosGraph
+
+pytestmark = pytest.mark.graph
+
+rclpy = pytest.importorskip("rclpy")
+from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
+
+SRV = "/motion_planner/plan_feasibility"
+
+
+@pytest.fixture(scope="module")
+def graph(tmp_path_factory):
+    g = RosGraph(tmp_path_factory.mktemp("planner_label_only"))
+    try:
+        g.planner = g.start("stpik_motion_planner.motion_planner_node",
+                            params_file=REPO / "config" / "motion_planner.yaml")
+        yield g
+    finally:
+        g.close()
+
+
+def _ask(g, object_id, removed=(), label_only=False):
+    req = PlanFeasibility.Request(object_id=object_id, removed_ids=list(removed), label_only=label_only)
+    return g.probe.call(PlanFeasibility, SRV, req, timeout=60)
+
+
+@pytest.mark.parametrize("object_id, removed", [("o2", ()), ("o6", ("o2", "o3")), ("T", ())])
+def test_label_only_same_answer_without_trajectory(graph, object_id, removed):
+    full = _ask(graph, object_id, removed)
+    short = _ask(graph, object_id, removed, label_only=True)
+    assert full.ok and short.ok, (full.message, short.message)
+    assert (short.label, short.attempts, short.message) == (full.label, full.attempts, full.message)
+    assert len(short.trajectory.points) == 0 and not short.trajectory.joint_names
+    assert len(short.blockers) == len(full.blockers)
+    if full.label != PlanFeasibility.Response.UNFEASIBLE:
+        assert len(full.trajectory.points) > 100  # execution still gets its 100 Hz trajectory
+    else:
+        assert len(full.trajectory.points) == 0
+
+
+def test_label_only_bad_request_still_refused(graph):
+    res = _ask(graph, "nope", label_only=True)
+    assert not res.ok and "nope" in res.message
+
+
+class _Future:
+    def __init__(self, res):
+        self.res = res
+
+    def add_done_callback(self, f):
+        f(self)
+
+    def result(self):
+        return self.res
+
+
+class _Client:
+    srv_name = "/fake/plan_feasibility"
+
+    def __init__(self):
+        self.requests = []
+
+    def service_is_ready(self):
+        return True
+
+    def call_async(self, req):
+        self.requests.append(req)
+        return _Future(PlanFeasibility.Response(ok=True, label=PlanFeasibility.Response.OBSTACLE, attempts=1))
+
+    def remove_pending_request(self, fut):
+        pass
+
+
+def test_task_planner_oracle_asks_for_the_label_only():
+    from qtree_task_planner.task_planner_node import ServiceOracle
+
+    client = _Client()
+    ans = ServiceOracle(client, timeout=1.0, margin=1.0).feasibility("o1", frozenset({"o2"}))
+    assert ans.label.name == "OBSTACLE" and ans.trajectory is None
+    assert [(r.object_id, list(r.removed_ids), r.label_only) for r in client.requests] == [("o1", ["o2"], True)]
