@@ -14,12 +14,9 @@ with the working tree's, alternated `--rounds` times, on one domain (one node at
 from __future__ import annotations
 
 import argparse
-import io
 import os
 import random
-import subprocess
 import sys
-import tarfile
 import tempfile
 import threading
 from pathlib import Path
@@ -30,18 +27,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bench_motion_planner import export_package  # noqa: E402  (scripts/ is sys.path[0])
 from relocation_app.graph import Graph, wait_for_interfaces  # noqa: E402
 from relocation_common.paths import default_scenario  # noqa: E402
 from relocation_common.scenario import load_scenario  # noqa: E402
-
-
-def _export(rev: str) -> str:
-    d = tempfile.mkdtemp(prefix="bench_srv_base_")
-    tar = subprocess.run(["git", "-C", str(REPO), "archive", rev, "stpik_motion_planner"], capture_output=True,
-                         check=True).stdout
-    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
-        t.extractall(d, filter="data")
-    return d
 
 
 def measure(n: int, seed: int, domain: int, impl: str = "") -> dict[str, list]:
@@ -125,7 +114,7 @@ def main() -> None:
     a = ap.parse_args()
     impls = [("working tree", "")]
     if a.baseline:
-        impls.insert(0, (a.baseline, _export(a.baseline)))
+        impls.insert(0, (a.baseline, export_package(a.baseline)))
     runs: dict[str, list] = {name: [] for name, _ in impls}
     for _ in range(a.rounds):
         for name, impl in impls:

@@ -69,7 +69,7 @@ def latencies(scenario: str, n: int, seed: int) -> list[tuple[str, str, float]]:
     return out
 
 
-def _export(rev: str) -> str:
+def export_package(rev: str) -> str:
     """stpik_motion_planner/ of git revision `rev` in a temporary directory."""
     d = tempfile.mkdtemp(prefix="bench_mp_base_")
     tar = subprocess.run(["git", "-C", str(REPO), "archive", rev, "stpik_motion_planner"], capture_output=True,
@@ -81,7 +81,7 @@ def _export(rev: str) -> str:
 
 def compare(rev: str, scenarios: list[str], n: int, seed: int, rounds: int) -> None:
     """Side by side: REV's planner package and the working tree's, alternated, each run a fresh process."""
-    base = _export(rev)
+    base = export_package(rev)
     for scen in scenarios:
         runs: dict[str, list] = {rev: [], "working tree": []}
         for _ in range(rounds):

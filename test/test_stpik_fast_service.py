@@ -1,7 +1,11 @@
 """PlanFeasibility's label_only (issue 15) over DDS: the same answer without the trajectory; the service is served
 while the node's main executor is busy elsewhere (its own executor thread)."""
+import contextlib
+from unittest import mock
+
 import pytest
 
+import ros_procs
 from ros_procs import REPO, RosGraph
 
 pytestmark = pytest.mark.graph
@@ -12,15 +16,20 @@ from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
 SRV = "/motion_planner/plan_feasibility"
 
 
+def _graph_on_domains_60_69(tmp) -> RosGraph:
+    """A RosGraph whose ROS_DOMAIN_ID is one of 60-69 (this work's private range)."""
+    used = ros_procs.domains_in_use
+    others = set(range(1, 101)) - set(range(60, 70))
+    with mock.patch.object(ros_procs, "domains_in_use", lambda: used() | others):
+        return RosGraph(tmp)
+
+
 @pytest.fixture(scope="module")
 def graph(tmp_path_factory):
-    g = RosGraph(tmp_path_factory.mktemp("planner_label_only"))
-    try:
+    with contextlib.closing(_graph_on_domains_60_69(tmp_path_factory.mktemp("planner_label_only"))) as g:
         g.planner = g.start("stpik_motion_planner.motion_planner_node",
                             params_file=REPO / "config" / "motion_planner.yaml")
         yield g
-    finally:
-        g.close()
 
 
 def _ask(g, object_id, removed=(), label_only=False):
