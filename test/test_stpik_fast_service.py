@@ -91,3 +91,20 @@ def test_task_planner_oracle_asks_for_the_label_only():
     ans = ServiceOracle(client, timeout=1.0, margin=1.0).feasibility("o1", frozenset({"o2"}))
     assert ans.label.name == "OBSTACLE" and ans.trajectory is None
     assert [(r.object_id, list(r.removed_ids), r.label_only) for r in client.requests] == [("o1", ["o2"], True)]
+
+
+def test_trajectory_message_holds_the_trajectory_exactly():
+    import numpy as np
+
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+    from stpik_motion_planner.motion_planner_node import trajectory_to_msg
+
+    tr = MotionPlanner(load_scenario(default_scenario()), PlannerParams.load()).feasibility("o2").trajectory
+    msg = trajectory_to_msg(tr)
+    assert list(msg.joint_names) == list(tr.joint_names)
+    assert np.array_equal(np.array([p.positions for p in msg.points]), tr.positions)
+    assert np.array_equal(np.array([p.velocities for p in msg.points]), tr.velocities)
+    stamps = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points])
+    assert np.allclose(stamps, tr.times, atol=1e-9, rtol=0)
