@@ -40,6 +40,7 @@ class ObstacleSet:
     def __post_init__(self) -> None:
         self.lo = np.array([o.lo for o in self.items]).reshape(-1, 3)
         self.hi = np.array([o.hi for o in self.items]).reshape(-1, 3)
+        self.lo_neg_hi = np.hstack([self.lo, -self.hi])  # AABB overlap in one comparison (HandProxy.collides)
 
 
 def _key(o: Obstacle) -> str:
@@ -300,17 +301,18 @@ class HandProxy:
         self.reach = np.array([s.radius + m for s, m in zip(self.specs, margins)])
         self.p0 = np.array([s.p0 for s in self.specs])
         self.p1 = np.array([s.p1 for s in self.specs])
+        self._reach = np.hstack([self.reach[:, None].repeat(3, 1), self.reach[:, None].repeat(3, 1)])
         self.req = fcl.CollisionRequest()
 
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
                  skip: dict[str, frozenset] | None = None) -> bool:
+        """Any shape in contact with an obstacle (not skipped): AABB broad phase, then fcl.collide."""
         p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
         a = self.p0 @ r_tool.T + p7
         b = self.p1 @ r_tool.T + p7
-        lo = np.minimum(a, b) - self.reach[:, None]
-        hi = np.maximum(a, b) + self.reach[:, None]
-        near = np.all((obs.lo[None] <= hi[:, None]) & (obs.hi[None] >= lo[:, None]), axis=2)
-        ci, oi = np.nonzero(near)
+        # (hi, -lo) of each shape's AABB against (lo, -hi) of each obstacle's: they overlap where all six hold
+        box = np.hstack([np.maximum(a, b), -np.minimum(a, b)]) + self._reach
+        ci, oi = np.nonzero(np.all(obs.lo_neg_hi[None] <= box[:, None], axis=2))
         posed = set()
         for c, k in zip(ci, oi):
             o = obs.items[k]
