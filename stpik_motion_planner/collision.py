@@ -194,8 +194,6 @@ class ArmGeometry:
         self._pos = np.zeros((len(self._links), 3))
         self._dirty = [True] * self.n
         self._names = names
-        self._reach = self.radius[self.moving, None]
-        self._pairs_r = self.radius[self._si] + self.radius[self._sj]
         self.p0 = np.zeros((self.n, 3))
         self.p1 = np.zeros((self.n, 3))
 
@@ -210,6 +208,9 @@ class ArmGeometry:
         r, p = rot[self._li], pos[self._li]
         self.p0 = np.einsum("nij,nj->ni", r, self._l0) + p
         self.p1 = np.einsum("nij,nj->ni", r, self._l1) + p
+        rad = self.radius[:, None]
+        self._lo = np.minimum(self.p0, self.p1) - rad  # AABBs for both broad phases
+        self._hi = np.maximum(self.p0, self.p1) + rad
         self._dirty = [True] * self.n
 
     def _fcl(self, i: int):
@@ -225,9 +226,7 @@ class ArmGeometry:
     def near_pairs(self, obs: ObstacleSet, d_act: float) -> tuple[np.ndarray, np.ndarray]:
         """Broad phase: (capsule, obstacle) index pairs whose AABBs are closer than d_act."""
         idx = self.moving
-        r = self._reach
-        lo = np.minimum(self.p0[idx], self.p1[idx]) - r
-        hi = np.maximum(self.p0[idx], self.p1[idx]) + r
+        lo, hi = self._lo[idx], self._hi[idx]
         gap = np.maximum(np.maximum(obs.lo[None] - hi[:, None], lo[:, None] - obs.hi[None]), 0.0)
         ci, oi = np.nonzero(np.einsum("ijk,ijk->ij", gap, gap) < d_act * d_act)
         return idx[ci], oi
@@ -250,9 +249,7 @@ class ArmGeometry:
     def self_distances(self, d_act: float):
         """[(i, j, distance, point on i, point on j)] of non-adjacent capsule pairs nearer than d_act."""
         out = []
-        r = self.radius[:, None]
-        lo = np.minimum(self.p0, self.p1) - r
-        hi = np.maximum(self.p0, self.p1) + r
+        lo, hi = self._lo, self._hi
         gap = np.maximum(np.maximum(lo[self._si] - hi[self._sj], lo[self._sj] - hi[self._si]), 0.0)
         for k in np.nonzero(np.einsum("ij,ij->i", gap, gap) < d_act * d_act)[0]:
             i, j = self.self_pairs[k]

@@ -237,7 +237,7 @@ class Stpik:
         jt = kin.frame_jacobian(kin.tool_fid)
         e_p = ref[:3] - pos
         e_o = pin.log3(side_rotation(ref[3]) @ rot.T)
-        ep_n, eo_n = float(np.linalg.norm(e_p)), float(np.linalg.norm(e_o))
+        ep_n, eo_n = math.sqrt(e_p.dot(e_p)), math.sqrt(e_o.dot(e_o))  # np.linalg.norm's own formula
         if run.tau >= t_end and ep_n < p.final_tol_pos and eo_n < p.final_tol_ori:
             raise _Reject("reached")
         if ep_n > p.track_tol or eo_n > 10 * p.final_tol_ori + 0.2:
@@ -278,7 +278,7 @@ class Stpik:
         for i, j, d, pi, pj in arm.self_distances(p.self_clearance + p.buffer):
             run.min_self = min(run.min_self, d)
             n = pi - pj
-            nn = np.linalg.norm(n)
+            nn = math.sqrt(n.dot(n))
             if nn < 1e-9:
                 raise _Reject("self-collision")
             jac = (n / nn) @ (kin.point_jacobian(arm.fids[i], pi) - kin.point_jacobian(arm.fids[j], pj))
@@ -291,7 +291,7 @@ class Stpik:
             if d >= bound[ci] + p.buffer:
                 continue
             n = pc - po
-            nn = np.linalg.norm(n)
+            nn = math.sqrt(n.dot(n))
             if nn < 1e-9:
                 raise _Reject(f"{arm.specs[ci].name} touches {o.name}", 0.0)
             grp.append(2), sig.append(d - bound[ci]), buf.append(p.act)
