@@ -77,3 +77,12 @@ def test_side_by_side_cells_and_tree_table():
     assert "E_ss ours/paper median 1" in paper_report.ratio_summary(ours, 1)
     row = paper_report.tree_table([("x", 2, complete_tree.TreeSize(1244, 20, 300, 1, 1.0))])
     assert "622 / 1244 (2)" in row and "20 / 20" in row
+
+
+def test_closing_note_names_sizes_and_both_verdicts():
+    sc = load_scenario(SCEN_DIR / "scenario1_5.yaml")
+    table, _ = open_table(sc, planner_params(), data_dir() / "feasibility")
+    found = [("the paper's numbers", [("claim A", "reproduced", "")]), ("ours", [])]
+    note = paper_report.closing_note({"scenario1_5": (sc, table, None)}, [], ["scenario1_5"], found)
+    assert "scenario1_5 357 edges / 155 target leaves / 1 optimal (paper 84 / 10 / 1)" in note
+    assert "- claim A: the paper's numbers **reproduced**; ours **not checked**." in note

@@ -1,8 +1,10 @@
 """`./run evaluate [fill|sweep|report|scenes|all] [--runs N] [--quick] ...`: the paper's evaluation (docs/evaluation.md).
 
 all (default): fill the missing feasibility answers with the real planner (none when data/feasibility/ is
-complete), run the missing sweep cells (scenarios 1-3, the Sect. 5.2 scene paper_experiment_10, the 10 random
-scenes), regenerate docs/evaluation.md and docs/figures/.
+complete), run the missing sweep cells (the scenes of the paper's size paper1_5/paper2_10/paper3_15, scenarios
+1-3 of this project's geometry, the Sect. 5.2 scene paper_experiment_10, the 10 random scenes), regenerate
+docs/evaluation.md (the paper's Tables 1-4 beside ours, data/paper/) and docs/figures/.
+--only a,b: fill/sweep only those scenes. Scenes of the paper's size: python -m relocation_app.evaluation.make_scenes paper N.
 --quick: 3 runs per cell, two (alpha, gamma) pairs, two random scenes, output under out/evaluation-quick/.
 """
 from __future__ import annotations

@@ -125,17 +125,17 @@ edges, 10 leaves); the paper's 84 / 10 / one optimum needs an optimum that Eq. 8
 """
 
 
+def _trees(info: dict, names: list[str]) -> list[tuple[str, int, object]]:
+    """(scene, paper scenario k, its complete_tree.TreeSize or why not) for scenes 1-3 of a set."""
+    return [(name, k, complete_tree.of_table(info[name][1], info[name][0]) if name in info
+             else "no complete feasibility table") for k, name in enumerate(names, 1)]
+
+
 def complete_tree_section(info: dict, paper_set: list[str], main: list[str]) -> list[str]:
     """Section "Complete trees": edges and target leaves of each scene's complete tree beside the paper's."""
     md = ["## Complete trees: the paper's scenes against ours\n"]
     for label, names in (("Scenes of the paper's size", paper_set), ("This project's geometry", main)):
-        rows = []
-        for k, name in enumerate(names, 1):
-            if name in info:
-                sc, table, _ = info[name]
-                rows.append((name, k, complete_tree.of_table(table, sc)))
-            else:
-                rows.append((name, k, "no complete feasibility table"))
+        rows = _trees(info, names)
         if rows:
             md.append(f"**{label}**\n\n" + tree_table(rows) + "\n")
     md.append("Paper: LRND's MP_q, (nearly) constant over alpha and gamma because LRND completes the tree (84 / "
@@ -182,3 +182,20 @@ def findings_section(md: list[str], idx, paper_set, main, random, off_target) ->
         md += [f"- {claim}: **{verdict}**. {ev}" for claim, verdict, ev in found]
         md.append("")
     return verdicts
+
+
+def closing_note(info: dict, paper_set: list[str], main: list[str], found: list) -> str:
+    """Section "Closing note": the complete trees reached per scene against the paper's, and each finding's
+    verdict on the paper's numbers and on ours (issue 16)."""
+    lines = ["## Closing note: the paper's scenes against ours\n"]
+    for label, names in (("Scenes of the paper's size", paper_set), ("This project's geometry", main)):
+        parts = [f"{name} {t.edges} edges / {t.target_leaves} target leaves / {t.optimal_leaves} optimal (paper "
+                 f"{paper.COMPLETE_TREE[k]} / {paper.TARGET_LEAVES[k]} / 1)"
+                 for name, k, t in _trees(info, names) if not isinstance(t, str)]
+        if parts:
+            lines.append(f"- {label}: " + "; ".join(parts) + ".")
+    if found:
+        for i, (claim, _, _) in enumerate(found[0][1]):
+            lines.append(f"- {claim}: " + "; ".join(f"{label} **{f[i][1] if i < len(f) else 'not checked'}**"
+                                                     for label, f in found) + ".")
+    return "\n".join(lines) + "\n"

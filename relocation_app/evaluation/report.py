@@ -241,6 +241,7 @@ def write_report(out: Path, docs: Path, params, data_dir, main: list[str], rando
         beyond = present + [e for e in experiment if e in idx] + [r for r in random if r in idx]
         md += _beyond_section(records, info, beyond)
         md.append(_discount_section(records, info, beyond))
+    md.append(paper_report.closing_note(info, paper_set, main, found))
     path = docs / "evaluation.md"
     path.write_text("\n".join(md) + "\n")
     return path
