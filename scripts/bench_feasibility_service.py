@@ -10,12 +10,21 @@ overhead: serialisation, DDS, executors).
 
 --baseline REV: the same, first with the motion planner package (stpik_motion_planner/) of git revision REV, then
 with the working tree's, alternated `--rounds` times, on one domain (one node at a time).
+
+    .venv/bin/python scripts/bench_feasibility_service.py --replicas 2 --requests 200 [--scenario scenario3_15]
+
+--replicas N: throughput, not latency. N motion_planner processes (namespaces /replica_<k>), label-only queries from
+a shared list, one in flight per replica in use; phases with 1 and with N replicas alternated `--rounds` times.
+Prints queries/s of each, their ratio, and the planner processes' CPU time per query (utime + stime from /proc:
+what predicts the throughput on more cores).
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import os
 import random
+import subprocess
 import sys
 import tempfile
 import threading
@@ -28,8 +37,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench_motion_planner import export_package  # noqa: E402  (scripts/ is sys.path[0])
-from relocation_app.graph import Graph, wait_for_interfaces  # noqa: E402
-from relocation_common.paths import default_scenario  # noqa: E402
+from relocation_app.graph import Graph, die_with_parent, wait_for_interfaces  # noqa: E402
+from relocation_common.paths import config_file, default_scenario, resolve_scenario  # noqa: E402
 from relocation_common.scenario import load_scenario  # noqa: E402
 
 
@@ -104,6 +113,102 @@ def report(name: str, runs: list[dict[str, list]]) -> dict[str, float]:
     return p50
 
 
+def _cpu_seconds(pids) -> float:
+    """utime + stime of the processes (/proc/<pid>/stat), in s."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0
+    for pid in pids:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        total += int(fields[11]) + int(fields[12])
+    return total / tick
+
+
+def _drain(clients, queries, label_only: bool = True) -> tuple[float, int]:
+    """Every query once, one in flight per client (a thread each, blocking calls); (wall s, answered)."""
+    from qtree_relocation_msgs.srv import PlanFeasibility
+
+    todo = collections.deque(queries)
+    done = [0]
+    lock = threading.Lock()
+
+    def worker(cli):
+        while True:
+            with lock:
+                if not todo:
+                    return
+                obj, removed = todo.popleft()
+            res = cli.call(PlanFeasibility.Request(object_id=obj, removed_ids=removed, label_only=label_only),
+                           timeout_sec=60.0)
+            with lock:
+                done[0] += res is not None and res.ok
+    t0 = time.perf_counter()
+    threads = [threading.Thread(target=worker, args=(c,)) for c in clients]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return time.perf_counter() - t0, done[0]
+
+
+def replicas(n: int, seed: int, domain: int, count: int, rounds: int, scenario_name: str) -> None:
+    """Throughput with 1 and with `count` motion planner processes (see the module docstring)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from qtree_relocation_msgs.srv import PlanFeasibility
+
+    path = resolve_scenario(scenario_name)
+    scenario = load_scenario(path)
+    rng = random.Random(seed)
+    queries = []
+    for _ in range(n):
+        obj = rng.choice(scenario.ids)
+        queries.append((obj, rng.sample([o for o in scenario.obstacle_ids if o != obj], rng.randint(0, 6))))
+    with Graph(Path(tempfile.mkdtemp(prefix="bench_replicas_")), domain_id=domain) as g:
+        for k in range(count):
+            log = open(g.run_dir / "logs" / f"motion_planner_{k}.log", "w")
+            g.procs[f"motion_planner_{k}"] = subprocess.Popen(
+                [sys.executable, "-m", "stpik_motion_planner.motion_planner_node", "--ros-args", "--params-file",
+                 str(config_file("motion_planner.yaml")), "-p", f"scenario:={path}", "-r",
+                 f"__ns:=/replica_{k}"], env=g.env, stdout=log, stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL, cwd=g.run_dir, preexec_fn=die_with_parent)
+            log.close()
+        pids = [p.pid for p in g.procs.values()]
+        os.environ.update({k: v for k, v in g.env.items() if k.startswith("ROS_")})
+        rclpy.init()
+        node = rclpy.create_node("bench_replicas")
+        ex = SingleThreadedExecutor()
+        ex.add_node(node)
+        spin = threading.Thread(target=ex.spin, daemon=True)
+        spin.start()
+        rows = []
+        try:
+            names = [f"/replica_{k}/motion_planner/plan_feasibility" for k in range(count)]
+            wait_for_interfaces(node, services=[(x, PlanFeasibility) for x in names], graph=g)
+            clients = [node.create_client(PlanFeasibility, x) for x in names]
+            for c in clients:
+                _drain([c], queries[:5])  # warm-up
+            for _ in range(rounds):
+                for used in (1, count):
+                    cpu = _cpu_seconds(pids)
+                    wall, answered = _drain(clients[:used], queries)
+                    rows.append((used, wall, answered, _cpu_seconds(pids) - cpu))
+        finally:
+            ex.shutdown(timeout_sec=2.0)
+            spin.join(timeout=3.0)
+            node.destroy_node()
+            rclpy.try_shutdown()
+    print(f"PlanFeasibility throughput, {scenario.name}, {n} label-only queries per phase, {os.cpu_count()} cores")
+    rate = {}
+    for used in (1, count):
+        sub = [r for r in rows if r[0] == used]
+        qps = [r[2] / r[1] for r in sub]
+        cpu_q = sum(r[3] for r in sub) / sum(r[2] for r in sub)
+        rate[used] = float(np.median(qps))
+        print(f"  {used} replica(s): {', '.join(f'{x:.1f}' for x in qps)} queries/s (median {rate[used]:.1f}); "
+              f"planner CPU {cpu_q * 1e3:.2f} ms per query")
+    print(f"  {count} replicas / 1: {rate[count] / rate[1]:.2f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--requests", type=int, default=200)
@@ -111,7 +216,11 @@ def main() -> None:
     ap.add_argument("--domain", type=int, default=61, help="ROS_DOMAIN_ID of the benchmark's graph")
     ap.add_argument("--baseline", help="git revision whose motion planner package to compare against")
     ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--replicas", type=int, default=0, help="throughput with 1 and with N planner processes")
+    ap.add_argument("--scenario", default="paper_experiment_10", help="--replicas: the planners' scenario")
     a = ap.parse_args()
+    if a.replicas:
+        return replicas(a.requests, a.seed, a.domain, a.replicas, max(a.rounds, 2), a.scenario)
     impls = [("working tree", "")]
     if a.baseline:
         impls.insert(0, (a.baseline, export_package(a.baseline)))
