@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
 import os
 import random
 import subprocess
@@ -42,11 +43,32 @@ from relocation_common.paths import config_file, default_scenario, resolve_scena
 from relocation_common.scenario import load_scenario  # noqa: E402
 
 
+@contextlib.contextmanager
+def client_node(g: Graph, name: str):
+    """A client node on the graph's domain, spun by a SingleThreadedExecutor in a background thread (blocking
+    calls from other threads, as the task planner's ServiceOracle)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    os.environ.update({k: v for k, v in g.env.items() if k.startswith("ROS_")})
+    rclpy.init()
+    node = rclpy.create_node(name)
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    spin = threading.Thread(target=ex.spin, daemon=True)
+    spin.start()
+    try:
+        yield node
+    finally:
+        ex.shutdown(timeout_sec=2.0)
+        spin.join(timeout=3.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
 def measure(n: int, seed: int, domain: int, impl: str = "") -> dict[str, list]:
     """Per mode ("trajectory", "label only"): (round trip ms, planning ms, label) of n queries, each asked in both
     modes back to back (which first alternates)."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from qtree_relocation_msgs.srv import PlanFeasibility
 
     scenario = load_scenario(default_scenario())
@@ -56,14 +78,7 @@ def measure(n: int, seed: int, domain: int, impl: str = "") -> dict[str, list]:
         if impl:
             g.env["PYTHONPATH"] = os.pathsep.join([impl, g.env["PYTHONPATH"]])
         g.start("motion_planner")
-        os.environ.update({k: v for k, v in g.env.items() if k.startswith("ROS_")})
-        rclpy.init()
-        node = rclpy.create_node("bench_feasibility_service")
-        ex = SingleThreadedExecutor()
-        ex.add_node(node)
-        spin = threading.Thread(target=ex.spin, daemon=True)
-        spin.start()
-        try:
+        with client_node(g, "bench_feasibility_service") as node:
             wait_for_interfaces(node, services=[("/motion_planner/plan_feasibility", PlanFeasibility)], graph=g)
             cli = node.create_client(PlanFeasibility, "/motion_planner/plan_feasibility")
             for k in range(n + 5):
@@ -79,11 +94,6 @@ def measure(n: int, seed: int, domain: int, impl: str = "") -> dict[str, list]:
                     if k >= 5 and res is not None and res.ok:  # the first 5: warm-up
                         out["label only" if label_only else "trajectory"].append(
                             (dt * 1e3, res.planning_time * 1e3, res.label))
-        finally:
-            ex.shutdown(timeout_sec=2.0)
-            spin.join(timeout=3.0)
-            node.destroy_node()
-            rclpy.try_shutdown()
     return out
 
 
@@ -152,8 +162,6 @@ def _drain(clients, queries, label_only: bool = True) -> tuple[float, int]:
 
 def replicas(n: int, seed: int, domain: int, count: int, rounds: int, scenario_name: str) -> None:
     """Throughput with 1 and with `count` motion planner processes (see the module docstring)."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from qtree_relocation_msgs.srv import PlanFeasibility
 
     path = resolve_scenario(scenario_name)
@@ -173,15 +181,8 @@ def replicas(n: int, seed: int, domain: int, count: int, rounds: int, scenario_n
                 stdin=subprocess.DEVNULL, cwd=g.run_dir, preexec_fn=die_with_parent)
             log.close()
         pids = [p.pid for p in g.procs.values()]
-        os.environ.update({k: v for k, v in g.env.items() if k.startswith("ROS_")})
-        rclpy.init()
-        node = rclpy.create_node("bench_replicas")
-        ex = SingleThreadedExecutor()
-        ex.add_node(node)
-        spin = threading.Thread(target=ex.spin, daemon=True)
-        spin.start()
         rows = []
-        try:
+        with client_node(g, "bench_replicas") as node:
             names = [f"/replica_{k}/motion_planner/plan_feasibility" for k in range(count)]
             wait_for_interfaces(node, services=[(x, PlanFeasibility) for x in names], graph=g)
             clients = [node.create_client(PlanFeasibility, x) for x in names]
@@ -192,11 +193,6 @@ def replicas(n: int, seed: int, domain: int, count: int, rounds: int, scenario_n
                     cpu = _cpu_seconds(pids)
                     wall, answered = _drain(clients[:used], queries)
                     rows.append((used, wall, answered, _cpu_seconds(pids) - cpu))
-        finally:
-            ex.shutdown(timeout_sec=2.0)
-            spin.join(timeout=3.0)
-            node.destroy_node()
-            rclpy.try_shutdown()
     print(f"PlanFeasibility throughput, {scenario.name}, {n} label-only queries per phase, {os.cpu_count()} cores")
     rate = {}
     for used in (1, count):
