@@ -28,7 +28,7 @@ def graph(tmp_path_factory):
 
     from qtree_relocation_msgs.msg import ObjectArray
     from qtree_relocation_msgs.srv import PlanFeasibility
-    from relocation_common.ros_conversions import bottles_to_msg
+    from relocation_common.ros_conversions import blockers_to_msgs, bottles_to_msg
 
     scenario = load_scenario(SCENARIO)
     oracle = BlockingOracle(scenario)
@@ -40,12 +40,12 @@ def graph(tmp_path_factory):
     calls = []
 
     def feasibility(req, resp):
-        calls.append((req.object_id, tuple(req.removed_ids)))
-        if req.object_id not in scenario.ids:
+        if req.object_id not in scenario.ids:  # also the task planner's all_lanes question: no lanes here
             resp.ok, resp.message = False, f"unknown object id {req.object_id!r}"
             return resp
+        calls.append((req.object_id, tuple(req.removed_ids)))
         a = oracle.feasibility(req.object_id, frozenset(req.removed_ids))
-        resp.ok, resp.label = True, int(a.label)
+        resp.ok, resp.label, resp.blockers = True, int(a.label), blockers_to_msgs(a.blockers)  # as the planner
         return resp
 
     node.create_service(PlanFeasibility, "/motion_planner/plan_feasibility", feasibility)
