@@ -167,13 +167,18 @@ def _proposal(seed: int, n: int, name: str, goal: tuple[int, int], params, slack
 
 
 def search(n: int, name: str, params, directory, seeds, steps: int, log=print, deadline: float = math.inf,
-           base: dict | None = None):
+           base: dict | None = None, start: dict | None = None):
     """Random clutter candidates (`seeds`), then `steps` of hill climbing (perturb, keep if not worse) from the
     best; candidates that match the goal (edges within WITHIN x, leaves exact) are checked for visibility and
     one optimum. Returns (best candidate, its weights-fixed data or None, missing bottles)."""
     import time
     goal = PAPER_TREES[n]
     best, best_s = None, math.inf
+    if start is not None:  # resume the climb from a scene found before
+        best = evaluate(start, params, directory, goal)
+        best_s = score(best, goal)
+        log(f"start: {_desc(best)} score {best_s:.2f}")
+        seeds = ()
     climb_from = time.time() + 0.5 * (deadline - time.time())  # half the time for proposals, half for the climb
     for seed in seeds:
         d = _proposal(seed, n, name, goal, params, base=base)
