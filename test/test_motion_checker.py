@@ -55,16 +55,7 @@ def assert_clean(rep: Report, what: str) -> None:
     assert rep.support_depth <= 0.001
 
 
-# Known defect (issue 16, open): the scene search judged the paper-size layouts with the feasibility answer, which
-# checks the pick only; paper1_5's optimum o1 o3 T cannot be carried out: o3 stands 9.2 mm from T, inside the
-# carried bottle's bound (carried_clearance + stpik.act = 9 mm), so the lifted pose already collides. strict: the
-# test fails as soon as it becomes executable (remove the mark then).
-NOT_EXECUTABLE = {"paper1_5"}
-
-
-@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.xfail(
-    strict=True, raises=PlanningError, reason="paper-size scene whose optimum's carry cannot be planned (issue 16)"))
-    if p.stem in NOT_EXECUTABLE else p for p in SCENES + RANDOM], ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", SCENES + RANDOM, ids=lambda p: p.stem)
 def test_demo_sequence_touches_nothing_but_the_grasped_bottle(path):
     scenario = load_scenario(path)
     planner = planner_for(scenario)
