@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import ctypes
 import os
+import random
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,12 +30,54 @@ NODES = {
 }
 
 
-def private_domain_id() -> int:
-    """QTREE_DOMAIN_ID if set (tests reserve one), else one unlikely to collide with other runs on this machine
-    (0..101 are valid with the default ports)."""
+LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"
+
+
+def domains_in_use() -> set[int]:
+    """ROS_DOMAIN_IDs in the environment of running processes: a graph must not join one of them; sharing a domain
+    garbles every topic (seen: a demo's /clock and /motion_planner/relocate answering a test's client)."""
+    used = set()
+    for env in Path("/proc").glob("[0-9]*/environ"):
+        try:
+            for item in env.read_bytes().split(b"\0"):
+                if item.startswith(b"ROS_DOMAIN_ID="):
+                    used.add(int(item[len(b"ROS_DOMAIN_ID="):] or b"-1"))
+        except (OSError, ValueError):
+            continue
+    return used
+
+
+def reserve_domain_id(in_use: set[int] | None = None) -> tuple[int, Path]:
+    """A ROS_DOMAIN_ID in 1..100 that no live reservation holds (lock file with the owner's pid) and no running
+    process uses (`in_use`, default domains_in_use()); (id, lock file: unlink it when done)."""
+    LOCK_DIR.mkdir(exist_ok=True)
+    used = domains_in_use() if in_use is None else in_use
+    ids = [i for i in range(1, 101) if i not in used]
+    random.shuffle(ids)
+    for i in ids:
+        lock = LOCK_DIR / f"{i}.lock"
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                os.kill(int(lock.read_text() or "0"), 0)
+                continue  # owner alive
+            except (ProcessLookupError, ValueError):
+                lock.unlink(missing_ok=True)  # stale: owner gone
+                continue
+            except PermissionError:
+                continue
+        os.write(fd, str(os.getpid()).encode())
+        os.close(fd)
+        return i, lock
+    raise RuntimeError("no free ROS_DOMAIN_ID in 1..100")
+
+
+def private_domain_id() -> tuple[int, Path | None]:
+    """QTREE_DOMAIN_ID if set (a caller reserved one: no lock here), else a reserved one (reserve_domain_id)."""
     if os.environ.get("QTREE_DOMAIN_ID"):
-        return int(os.environ["QTREE_DOMAIN_ID"])
-    return 10 + os.getpid() % 90
+        return int(os.environ["QTREE_DOMAIN_ID"]), None
+    return reserve_domain_id()
 
 
 def ros_env(domain_id: int, run_dir: Path) -> dict[str, str]:
@@ -72,10 +116,13 @@ class Graph:
     """A set of node processes sharing one private domain. Use as a context manager."""
 
     run_dir: Path
-    domain_id: int = field(default_factory=private_domain_id)
+    domain_id: int | None = None  # default: a reserved private one (private_domain_id), released by stop_all
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        self._lock = None
+        if self.domain_id is None:
+            self.domain_id, self._lock = private_domain_id()
         self.run_dir = Path(self.run_dir)
         (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
         self.env = ros_env(self.domain_id, self.run_dir)
@@ -127,6 +174,9 @@ class Graph:
                 p.wait()
             codes[name] = p.returncode
         self.procs.clear()
+        if self._lock is not None:  # the domain is free again
+            self._lock.unlink(missing_ok=True)
+            self._lock = None
         return codes
 
     def __enter__(self) -> "Graph":

@@ -18,11 +18,9 @@ launcher too (one formatter for both).
 from __future__ import annotations
 
 import os
-import random
 import signal
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -30,50 +28,19 @@ from typing import Any, Callable
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+from relocation_app import graph  # noqa: E402
 from relocation_app.graph import die_with_parent, param_arg, ros_env  # noqa: E402
 VENV_PYTHON = REPO / ".venv" / "bin" / "python"
-_LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"
 
 
 def domains_in_use() -> set[int]:
-    """ROS_DOMAIN_IDs in the environment of running processes: graphs started without a lock file (the demo picks
-    10 + pid % 90) must not be joined; sharing a domain garbles every topic (seen: a demo's /clock and
-    /motion_planner/relocate answering a test's client)."""
-    used = set()
-    for env in Path("/proc").glob("[0-9]*/environ"):
-        try:
-            for item in env.read_bytes().split(b"\0"):
-                if item.startswith(b"ROS_DOMAIN_ID="):
-                    used.add(int(item[len(b"ROS_DOMAIN_ID="):] or b"-1"))
-        except (OSError, ValueError):
-            continue
-    return used
+    """graph.domains_in_use; a test may narrow what counts as free by replacing this function."""
+    return graph.domains_in_use()
 
 
 def reserve_domain_id() -> tuple[int, Path]:
-    """A ROS_DOMAIN_ID in 1..100 not used by another live test process (lock file with the owner's pid) nor by any
-    running process (domains_in_use)."""
-    _LOCK_DIR.mkdir(exist_ok=True)
-    used = domains_in_use()
-    ids = [i for i in range(1, 101) if i not in used]
-    random.shuffle(ids)
-    for i in ids:
-        lock = _LOCK_DIR / f"{i}.lock"
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            try:
-                os.kill(int(lock.read_text() or "0"), 0)
-                continue  # owner alive
-            except (ProcessLookupError, ValueError):
-                lock.unlink(missing_ok=True)  # stale: owner gone
-                continue
-            except PermissionError:
-                continue
-        os.write(fd, str(os.getpid()).encode())
-        os.close(fd)
-        return i, lock
-    raise RuntimeError("no free ROS_DOMAIN_ID in 1..100")
+    """graph.reserve_domain_id, minus the domains `domains_in_use` (this module's) reports."""
+    return graph.reserve_domain_id(domains_in_use())
 
 
 class NodeProcess:

@@ -17,8 +17,13 @@ def test_bringup_environment_is_loopback_and_a_private_domain(tmp_path, monkeypa
     env = ros_env(42, tmp_path)
     assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST" and env["ROS_DOMAIN_ID"] == "42"
     assert env["ROS_LOG_DIR"].startswith(str(tmp_path)) and env["ROS_HOME"].startswith(str(tmp_path))
-    assert 0 < private_domain_id() <= 101  # never the default domain 0
-    assert Graph(tmp_path).env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    domain, lock = private_domain_id()
+    if lock is not None:
+        lock.unlink()
+    assert 0 < domain <= 100  # never the default domain 0
+    g = Graph(tmp_path)
+    assert g.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    g.stop_all()  # releases its reserved domain
 
 
 def test_a_graph_is_invisible_from_another_domain(tmp_path):
