@@ -164,15 +164,22 @@ def _t(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
+def _stream_from_rest(s, duration: float, settle: float) -> tuple[int, float, float]:
+    """From home at rest, V_DEG for `duration` s, then `settle` s: (index of a joint state a few before the
+    motion, wall times of the first and last command)."""
+    _home(s)
+    s.q()
+    n = len(s.states.msgs) - 5  # from a few states at rest
+    t0, t1 = s.c.stream(s.vel, s.command(V_DEG), duration)
+    s.q(settle)
+    return n, t0, t1
+
+
 def test_joint_motion_is_velocity_times_simulated_time(surface):
     """1 s of constant joint velocities: each joint moves v x t, t the simulated time the motion lasted (joint
     state stamps, i.e. /clock time: delivery delays on a loaded machine do not enter), within 10 %."""
     s = surface
-    _home(s)
-    s.q()
-    n = len(s.states.msgs) - 5  # from a few states at rest
-    t0, t1 = s.c.stream(s.vel, s.command(V_DEG), 1.0)
-    s.q(0.3)
+    n, t0, t1 = _stream_from_rest(s, 1.0, 0.3)
     duration, moved, stops, _ = s.motion(n, V_DEG)
     window = s.sim_time(t1) - s.sim_time(t0)  # the command window by /clock's receive times (coarse)
     ratio = moved / (np.radians(V_DEG) * duration)
@@ -186,11 +193,7 @@ def test_joint_motion_is_velocity_times_simulated_time(surface):
 def test_the_arm_stops_within_50_ms_when_commands_stop(surface):
     """The motion beyond v x (simulated time of the command window) is the run-on after the last command."""
     s = surface
-    _home(s)
-    s.q()
-    n = len(s.states.msgs) - 5  # from a few states at rest
-    t0, t1 = s.c.stream(s.vel, s.command(V_DEG), 0.3)
-    s.q(0.4)
+    n, t0, t1 = _stream_from_rest(s, 0.3, 0.4)
     _, _, stops, last_moving = s.motion(n, V_DEG)
     run_on = last_moving - s.sim_time(t1)
     print(f"\n[{s.interface}] the arm still moved {run_on * 1000:.0f} ms of simulated time after the last command "
