@@ -13,7 +13,8 @@ plus, for the objects of that lane, the most any one of them needs removed beyon
 levels); a lane needing an object that must leave after it is no way. Admissible on the optimistic graph, where
 every claim holds. The path found is then verified with real feasibility calls from the start (the target only
 from a set known reachable: asking it first cost 2.7x the calls on random instances without lane information);
-the first unfeasible answer (and its blockers) is recorded and the search repeated. When every edge of the
+the first unfeasible answer (and its blockers) is recorded and the search repeated. An oracle with several
+planner replicas (issue 15) is asked up to `in_flight` consecutive edges of the path at once. When every edge of the
 optimistic optimum is feasible it is the proven optimum: the optimistic graph contains every true edge. Each
 (object, set) is asked at most once.
 """
@@ -24,7 +25,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
-from relocation_common.feasibility import Label, claims
+from relocation_common.feasibility import Label, ask_many, claims, in_flight
 from .exact import ExactResult, _problem
 
 DEPTH = 2  # levels of the blockers' own lanes in the heuristic
@@ -167,11 +168,24 @@ def solve(problem, oracle, depth: int = DEPTH) -> AStarResult:
         searches, expanded = searches + 1, expanded + n
         if path is None:
             return AStarResult(None, None, calls, expanded, blocker_calls, searches)
-        for o, s in path:  # from the start: the target is asked only from a set known reachable
-            if (o, s) not in kb.answers:
-                calls += 1
-                if not kb.record(o, s, oracle.feasibility(o, s)):
-                    break
-        else:
+        asked, ok = _verify(path, target, kb, oracle)
+        calls += asked
+        if ok:
             seq = tuple(o for o, _ in path)
             return AStarResult(seq, problem.weight(seq), calls, expanded, blocker_calls, searches)
+
+
+def _verify(path, target: str, kb: Knowledge, oracle) -> tuple[int, bool]:
+    """Ask the path's unasked edges from the start, up to the oracle's `in_flight` at once (planner replicas;
+    one at a time otherwise), the target only from a set known reachable; stop at the first batch with an
+    unfeasible answer. (questions asked, every edge feasible)."""
+    todo = [(o, s) for o, s in path if (o, s) not in kb.answers]
+    asked = 0
+    while todo:
+        batch = [e for e in todo[:in_flight(oracle)] if e[0] != target] or todo[:1]
+        answers = ask_many(oracle, batch)
+        asked += len(batch)
+        if not all([kb.record(o, s, a) for (o, s), a in zip(batch, answers)]):
+            return asked, False
+        todo = todo[len(batch):]
+    return asked, True

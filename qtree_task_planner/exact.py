@@ -5,7 +5,8 @@ uniform-cost search (Dijkstra; weights phi_i > 0) with lazy edge evaluation in t
 Path: an edge "remove object o from set S" enters the queue with its cost g(S) + phi_o unchecked, and the oracle
 is asked only when that entry is popped and its head set S + {o} is not settled yet. "Relocate the target from
 S" enters at cost g(S) and is checked when popped; the first feasible one popped is optimal, since every entry
-still queued costs at least as much and costs never decrease along a path.
+still queued costs at least as much and costs never decrease along a path. An oracle with several planner
+replicas (issue 15) is asked the next cheapest queued questions together with the one popped.
 
 `brute_force` enumerates every set reachable by feasible single removals (reachable.py, asking everything) for
 tests.
@@ -17,7 +18,7 @@ import itertools
 from dataclasses import dataclass
 
 from .oracles import CachedOracle
-from relocation_common.feasibility import Label
+from relocation_common.feasibility import Label, ask_many, in_flight
 from .problem import RelocationProblem
 from .reachable import reachable_sets
 
@@ -51,6 +52,7 @@ def solve(problem, oracle) -> ExactResult:
     problem = _problem(problem)
     obstacles, target, phi = problem.obstacles, problem.target, problem.weights
     calls = 0
+    known: dict = {}  # (object, set) -> answer
     settled: dict[frozenset[str], tuple[float, tuple[str, ...]]] = {}
     tie = itertools.count()
     # entries: (cost, tie, parent set, parent sequence, object)
@@ -63,8 +65,9 @@ def solve(problem, oracle) -> ExactResult:
             state = parent if obj == target else parent | {obj}
             if obj != target and state in settled:
                 continue
-            calls += 1
-            label = Label(oracle.feasibility(obj, parent).label)
+            if (obj, parent) not in known:
+                calls += _ask_next(queue, (obj, parent), oracle, known, settled, target)
+            label = Label(known[(obj, parent)].label)
             if label == Label.UNFEASIBLE:
                 continue
             if obj == target:
@@ -76,6 +79,26 @@ def solve(problem, oracle) -> ExactResult:
             if o not in state and (state | {o}) not in settled:
                 heapq.heappush(queue, (cost + phi[o], next(tie), state, new_seq, o))
     return ExactResult(None, None, calls, len(settled))
+
+
+def _ask_next(queue, question, oracle, known, settled, target) -> int:
+    """Ask `question` and, for an oracle with several questions in flight (planner replicas, issue 15), the
+    next cheapest ones still queued whose sets are not settled, together; the answers go to `known`. Returns the
+    number of questions asked (1 for a plain oracle: the search asks exactly what it pops)."""
+    batch = [question]
+    popped = []
+    while queue and len(batch) < in_flight(oracle):
+        entry = heapq.heappop(queue)
+        popped.append(entry)
+        _, _, parent, _, obj = entry
+        if obj is None or (obj, parent) in known or (obj, parent) in batch:
+            continue
+        if obj == target or (parent | {obj}) not in settled:
+            batch.append((obj, parent))
+    for entry in popped:
+        heapq.heappush(queue, entry)
+    known.update(zip(batch, ask_many(oracle, batch)))
+    return len(batch)
 
 
 def brute_force(problem, oracle) -> ExactResult:

@@ -3,7 +3,7 @@ for tests of the Q-Tree layer only, a declared blocking relation.
 """
 from __future__ import annotations
 
-from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, FeasibilityOracle, Label
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, FeasibilityOracle, Label, ask_many, in_flight
 from relocation_common.scenario import ScenarioError
 
 
@@ -33,6 +33,30 @@ class CachedOracle:
             self.calls += 1
             self.table[key] = answer
         return answer
+
+    @property
+    def in_flight(self) -> int:
+        return in_flight(self.oracle)
+
+    def feasibility_many(self, queries, on_answer=None) -> list[FeasibilityAnswer]:
+        """relocation_common.feasibility.BatchOracle: the misses go to the wrapped oracle together (in parallel
+        when it is a BatchOracle); each answer is kept as it arrives, so an error loses none."""
+        keys = [(o, frozenset(r)) for o, r in queries]
+        self.queries += len(keys)
+
+        def keep(key, answer) -> None:
+            if key not in self.table:
+                self.table[key] = answer
+                self.calls += 1
+
+        misses = list(dict.fromkeys(k for k in keys if k not in self.table))
+        if misses:
+            ask_many(self.oracle, misses, keep)
+        out = [self.table[k] for k in keys]
+        if on_answer is not None:
+            for k, a in zip(keys, out):
+                on_answer(k, a)
+        return out
 
     def lane_blockers(self, removed: frozenset[str]):
         """The wrapped oracle's lane blockers (relocation_common.feasibility.LaneOracle), None if it has none.

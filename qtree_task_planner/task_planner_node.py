@@ -48,13 +48,14 @@ from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lan
 
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from .oracles import CachedOracle
-from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.feasibility import FeasibilityAnswer, Label, replica_services
 from .markers import tree_markers
 from relocation_common.config import ParameterError
 from .outage import Cancelled, PlannerUnavailable, until_available
 from .params import TrainingParams
 from .retrieval import execute_sequence, solve_then_train
 from .problem import RelocationProblem
+from .replicas import ReplicaOracle
 from relocation_common.node import call, declare_parameters, end_goal, node_main
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -95,6 +96,10 @@ class ServiceOracle:
         self.client, self.timeout, self.margin, self.connect_wait = client, timeout, margin, connect_wait
         self.stop, self.on_answer = stop, on_answer
         self.last_ok = time.monotonic()
+        self.name = client.srv_name
+
+    def ready(self, timeout: float) -> bool:
+        return self.client.service_is_ready() or (timeout > 0 and self.client.wait_for_service(timeout_sec=timeout))
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
         # the label only: training never uses the trajectory (about 5 ms of a feasible answer's round trip)
@@ -163,9 +168,10 @@ class TaskPlannerNode(Node):
         self._reserve = threading.Lock()
         self._reserved = False  # a training goal is accepted and not finished
         reentrant = ReentrantCallbackGroup()
-        self._feas = self.create_client(PlanFeasibility, self.p("feasibility_service"),
-                                        callback_group=MutuallyExclusiveCallbackGroup())
-        self._feas.configure_introspection(self.get_clock(), QoSProfile(depth=1000), ServiceIntrospectionState.CONTENTS)
+        self._feas = [self.create_client(PlanFeasibility, name, callback_group=MutuallyExclusiveCallbackGroup())
+                      for name in replica_services(self.p("feasibility_service"), self.p("replicas"))]
+        for c in self._feas:
+            c.configure_introspection(self.get_clock(), QoSProfile(depth=1000), ServiceIntrospectionState.CONTENTS)
         self._relocate = ActionClient(self, RelocateObject, self.p("relocate_action"), callback_group=reentrant)
         self._scene_topic = SCENE_SOURCES.get(self.p("scene_source")) or self.p("scene_topic")
         self.create_subscription(ObjectArray, self._scene_topic, self._on_scene, SCENE_QOS)
@@ -192,6 +198,9 @@ class TaskPlannerNode(Node):
         if self.p("scene_source") not in ("", *SCENE_SOURCES):
             raise ParameterError(f"scene_source must be one of {', '.join(SCENE_SOURCES)} (or empty: scene_topic), "
                                  f"got {self.p('scene_source')!r}")
+        n = self.p("replicas")
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 64:
+            raise ParameterError(f"replicas must be an integer in 1..64 (motion planners), got {n!r}")
         every = self.p("checkpoint_every")
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
@@ -321,7 +330,7 @@ class TaskPlannerNode(Node):
         failed = f" (writing {path} failed: {error})" if error else ""
         return "; ".join(filter(None, [on_disk, memory + failed]))
 
-    def _until_planner(self, fn, goal_handle, oracle: ServiceOracle, fb):
+    def _until_planner(self, fn, goal_handle, oracle: ReplicaOracle, fb):
         """fn() through planner outages (qtree_task_planner.outage), with feedback while waiting."""
         phase = fb.phase
 
@@ -330,15 +339,15 @@ class TaskPlannerNode(Node):
             fb.phase = "waiting for planner"
             goal_handle.publish_feedback(fb)
 
+        services = " or ".join(c.srv_name for c in self._feas)
+
         def on_back() -> None:
             fb.phase = phase
-            self.get_logger().info(f"motion planner {self._feas.srv_name} is back: resuming")
+            self.get_logger().info(f"motion planner {services} is back: resuming")
 
-        return until_available(fn, service_up=lambda t: self._feas.wait_for_service(timeout_sec=t),
-                               stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
+        return until_available(fn, service_up=oracle.ready, stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
                                wait=self.p("planner_wait"), last_answer=lambda: oracle.last_ok,
-                               kept=self._kept_where, service=self._feas.srv_name, on_outage=on_outage,
-                               on_back=on_back)
+                               kept=self._kept_where, service=services, on_outage=on_outage, on_back=on_back)
 
     def _train_and_execute(self, goal_handle, result) -> None:
         params = self._params(goal_handle.request)
@@ -352,10 +361,10 @@ class TaskPlannerNode(Node):
                 last[0], fb.planner_calls = time.monotonic(), len(oracle.table) + 1
                 goal_handle.publish_feedback(fb)
 
-        service = ServiceOracle(self._feas, self.p("feasibility_timeout"), self.p("feasibility_margin"),
-                                stop=lambda: fb.phase == "exact optimum" and (goal_handle.is_cancel_requested
-                                                                             or not rclpy.ok()),
-                                on_answer=on_answer)  # training itself stops at the end of an episode
+        service = ReplicaOracle([  # training itself stops at the end of an episode
+            ServiceOracle(c, self.p("feasibility_timeout"), self.p("feasibility_margin"), on_answer=on_answer,
+                          stop=lambda: fb.phase == "exact optimum" and (goal_handle.is_cancel_requested
+                                                                       or not rclpy.ok())) for c in self._feas])
         oracle = CachedOracle(service)
         resume = self._resume_point(problem, params, oracle)
         self._memory_ckpt = resume
@@ -364,7 +373,7 @@ class TaskPlannerNode(Node):
             result.optimal_sequence = list(optimum.sequence or ())
             result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
             self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
-                                   f"({oracle.calls} planner calls)")
+                                   f"({oracle.calls} planner calls; {service.summary()})")
             fb.phase = "training"
 
         def on_episode(stats) -> bool:
@@ -385,7 +394,8 @@ class TaskPlannerNode(Node):
             result.success = False
             result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target"
             return
-        self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes")
+        self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
+                               f"({service.summary()})")
         self._publish_scene(scene, r.sequence, r.tree, problem.ids)
         if not goal_handle.request.execute:
             result.success, result.message = True, "trained (not executed)"

@@ -36,6 +36,8 @@ def _args(argv):
     p.add_argument("--no-execute", action="store_true", help="train only, do not move the robot")
     p.add_argument("--execute-optimum", action="store_true",
                    help="relocate the exact optimum (blocker A*) instead of the Q-Tree's learned sequence")
+    p.add_argument("--replicas", type=int, default=1, choices=range(1, 9), metavar="N",
+                   help="motion planner processes answering feasibility (1-8; the first also moves the arm)")
     p.add_argument("--out", default="out", help="output directory (default: ./out)")
     p.add_argument("--timeout", type=float, default=900.0, help="give up after this many seconds")
     p.add_argument("--no-record", action="store_true",
@@ -105,8 +107,8 @@ def _start_graph(g: Graph, a, scene_topic: str) -> None:
     g.start("jaco2_sim_driver", common)
     if a.scene_source == "perception":
         g.start("perception", common)
-    g.start("motion_planner", dict(common, scene_topic=scene_topic))
-    g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt)))
+    g.start_planners(a.replicas, dict(common, scene_topic=scene_topic))
+    g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt), replicas=a.replicas))
 
 
 def _checkpoint(path: Path) -> Path:

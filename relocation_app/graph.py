@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from relocation_common.feasibility import replica_namespace
 from relocation_common.paths import config_file, python_path
 
 # node name -> (module with main(), parameter file)
@@ -127,17 +128,31 @@ class Graph:
         (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
         self.env = ros_env(self.domain_id, self.run_dir)
 
-    def start(self, name: str, params: dict | None = None, params_file: Path | None = None) -> subprocess.Popen:
+    def start(self, name: str, params: dict | None = None, params_file: Path | None = None,
+              namespace: str = "") -> subprocess.Popen:
+        """Start node `name` (with a namespace: as `<name>_<namespace>`, e.g. motion_planner_replica_1)."""
         module, cfg = NODES[name]
         cmd = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file or config_file(cfg))]
         for k, v in (params or {}).items():
             cmd += ["-p", f"{k}:={param_arg(v)}"]
+        if namespace:
+            cmd += ["-r", f"__ns:={namespace}"]
+            name = f"{name}_{namespace.strip('/').replace('/', '_')}"
         log = open(self.run_dir / "logs" / f"{name}.log", "w")
         self.procs[name] = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT,
                                             stdin=subprocess.DEVNULL, cwd=self.run_dir,
                                             preexec_fn=die_with_parent)
         log.close()
         return self.procs[name]
+
+    def start_planners(self, replicas: int, params: dict | None = None) -> list[subprocess.Popen]:
+        """The motion planner and replicas - 1 feasibility-only replicas under /replica_<k> (issue 15: the task
+        planner started with the same `replicas` keeps one question in flight per replica)."""
+        procs = [self.start("motion_planner", params)]
+        for k in range(1, replicas):
+            procs.append(self.start("motion_planner", dict(params or {}, serve_relocation=False),
+                                    namespace=replica_namespace(k)))
+        return procs
 
     def log(self, name: str) -> str:
         return (self.run_dir / "logs" / f"{name}.log").read_text(errors="replace")

@@ -69,3 +69,47 @@ class LaneOracle(Protocol):
         """object -> its lanes' blocker sets with `removed` gone, for every object still there: an empty tuple
         = no lane can ever be cleared; an object left out (or None for all) = no information."""
         ...
+
+
+Query = tuple[str, frozenset]  # (object_id, removed)
+
+
+class BatchOracle(Protocol):
+    """An oracle that can keep several questions in flight (planner replicas, issue 15). `in_flight` is how many
+    it answers at once right now (1: no gain in batching); `feasibility_many` answers every query, calling
+    `on_answer(query, answer)` as each arrives (so a caller keeps what came back before an error), and returns
+    the answers in the queries' order."""
+
+    in_flight: int
+
+    def feasibility_many(self, queries: list[Query], on_answer=None) -> list[FeasibilityAnswer]:
+        ...
+
+
+def in_flight(oracle) -> int:
+    """How many questions `oracle` answers at once (1 for a plain FeasibilityOracle)."""
+    return max(1, int(getattr(oracle, "in_flight", 1)))
+
+
+def ask_many(oracle, queries: list[Query], on_answer=None) -> list[FeasibilityAnswer]:
+    """Every query's answer, in parallel when the oracle is a BatchOracle, else one after the other."""
+    many = getattr(oracle, "feasibility_many", None)
+    if many is not None and len(queries) > 1:
+        return many(queries, on_answer)
+    out = []
+    for q in queries:
+        out.append(oracle.feasibility(*q))
+        if on_answer is not None:
+            on_answer(q, out[-1])
+    return out
+
+
+def replica_namespace(k: int) -> str:
+    """The ROS namespace of motion planner replica k >= 1 (replica 0 is the motion planner itself)."""
+    return f"/replica_{k}"
+
+
+def replica_services(service: str, replicas: int) -> list[str]:
+    """The PlanFeasibility services of `replicas` planners: `service`, then the same name under each replica's
+    namespace (a replica is the motion_planner node started with `-r __ns:=/replica_<k>`)."""
+    return [service] + [replica_namespace(k) + "/" + service.lstrip("/") for k in range(1, replicas)]

@@ -121,11 +121,37 @@ class MotionPlannerNode(Node):
         self._held: str | None = None  # the object of the running relocation: its perceived pose is ignored
         self._relocated: dict[str, int] = {}  # object -> slot, relocated by this node (until seen on the top shelf)
 
+        self._state = None
+        self._arm_interface()  # nothing in a feasibility-only replica (serve_relocation false)
+        self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS,
+                                 callback_group=MutuallyExclusiveCallbackGroup())
+        # the feasibility service on a node of its own, spun by its own single-threaded executor (a thread): an
+        # answer waits for no thread of the main executor (held by relocations) and scans a wait set of one service
+        self._feas = SideNode("motion_planner_feasibility", context=self.context)
+        self._feas.node.create_service(PlanFeasibility, self.resolve_service_name("~/plan_feasibility"),
+                                       self._on_feasibility, qos_profile=SERVICE_QOS)
+        if self.p("serve_relocation"):
+            self._server = ActionServer(self, RelocateObject, "~/relocate", execute_callback=self._execute,
+                                        goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                        callback_group=ReentrantCallbackGroup())
+        driver = str(self.p("driver_prefix")) if self._kinova else "ros2_control"
+        self.get_logger().info(f"ready: scenario {self.base.name} ({len(self.base.objects)} bottles), service "
+                               f"{self.resolve_service_name('~/plan_feasibility')}, scene from "
+                               f"{self.p('scene_topic')}, " + (f"driver {driver}" if self._state else
+                                                               "feasibility only (serve_relocation false)"))
+
+    def p(self, name: str):
+        return self.get_parameter(name).value
+
+    def _arm_interface(self) -> None:
+        """The driver's command and state topics, as command_interface says (docs/kinova.md)."""
         pre = str(self.p("driver_prefix")).rstrip("/")
         interface = str(self.p("command_interface"))
         if interface not in INTERFACES:
             raise ValueError(f"parameter command_interface must be one of {', '.join(INTERFACES)}, got {interface!r}")
         self._kinova = interface == "kinova"
+        if not self.p("serve_relocation"):
+            return
         self._fingers_q: tuple[np.ndarray, float] | None = None  # finger joint angles (rad), time received
         if self._kinova:  # kinova-ros's j2s7s300 driver surface: kinova_msgs, deg/s, fingers action
             self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
@@ -140,26 +166,11 @@ class MotionPlannerNode(Node):
         self._state = SideNode("motion_planner_joint_state", context=self.context)  # 100 Hz, never late
         self._state.node.create_subscription(JointState, state_topic, self._on_joint_state, 10)
         self._state.node.create_subscription(JointState, state_topic, self._on_finger_state, 10)
-        self.create_subscription(ObjectArray, self.p("scene_topic"), self._on_scene, SCENE_QOS,
-                                 callback_group=MutuallyExclusiveCallbackGroup())
-        # the feasibility service on a node of its own, spun by its own single-threaded executor (a thread): an
-        # answer waits for no thread of the main executor (held by relocations) and scans a wait set of one service
-        self._feas = SideNode("motion_planner_feasibility", context=self.context)
-        self._feas.node.create_service(PlanFeasibility, self.resolve_service_name("~/plan_feasibility"),
-                                       self._on_feasibility, qos_profile=SERVICE_QOS)
-        self._server = ActionServer(self, RelocateObject, "~/relocate", execute_callback=self._execute,
-                                    goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                    callback_group=ReentrantCallbackGroup())
-        self.get_logger().info(f"ready: scenario {self.base.name} ({len(self.base.objects)} bottles), service "
-                               f"{self.resolve_service_name('~/plan_feasibility')}, scene from "
-                               f"{self.p('scene_topic')}, driver {pre if self._kinova else 'ros2_control'}")
-
-    def p(self, name: str):
-        return self.get_parameter(name).value
 
     def close(self) -> None:
         self._feas.close()
-        self._state.close()
+        if self._state is not None:
+            self._state.close()
 
     # -- inputs ---------------------------------------------------------------------------------------------
     def _on_joint_state(self, msg: JointState) -> None:

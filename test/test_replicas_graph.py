@@ -1,0 +1,68 @@
+"""Planner replicas in the real graph (issue 15): two motion planner processes (Graph.start_planners) and a task
+planner with `replicas: 2`; the first planner is killed (SIGKILL) during training and the replica answers the rest,
+so the goal ends with a learned sequence instead of aborting after planner_wait."""
+import os
+import re
+import signal
+import time
+
+import pytest
+
+pytestmark = pytest.mark.graph
+
+from relocation_app.graph import Graph  # noqa: E402
+from relocation_common.paths import scenarios_dir  # noqa: E402
+from relocation_common.scenario import load_scenario  # noqa: E402
+
+SCENARIO = scenarios_dir() / "paper_experiment_10.yaml"
+TOPIC = "/test/objects"
+
+
+def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch):
+    import rclpy
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    from qtree_relocation_msgs.msg import ObjectArray
+    from relocation_app.client import RelocationClient
+    from relocation_common.ros_conversions import bottles_to_msg
+
+    scenario = load_scenario(SCENARIO)
+    with Graph(tmp_path) as g:
+        g.start_planners(2, {"scenario": str(SCENARIO), "scene_topic": TOPIC})
+        g.start("task_planner", {"scene_topic": TOPIC, "replicas": 2, "feasibility_timeout": 2.0,
+                                 "feasibility_margin": 1.0, "planner_wait": 5.0})
+        for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+            monkeypatch.setenv(k, g.env[k])
+        rclpy.init()
+        client = RelocationClient("replica_test")
+        try:
+            pub = client.node.create_publisher(ObjectArray, TOPIC, QoSProfile(
+                depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            pub.publish(bottles_to_msg(scenario.objects, scenario.shelf.top_z))
+            client.wait_until_ready(120, check=g.check_alive)
+            deadline = time.monotonic() + 120
+            while "feasibility only" not in g.log("motion_planner_replica_1"):
+                g.check_alive()
+                assert time.monotonic() < deadline, g.log("motion_planner_replica_1")[-2000:]
+                time.sleep(0.1)
+            episodes = []
+            client.train(on_feedback=lambda f: episodes.append(f.episode), check=g.check_alive, execute=False,
+                         max_episodes=300, seed=0)
+            while not episodes or max(episodes) < 3:
+                assert not client.is_done(), client.result()
+                time.sleep(0.02)
+            g.stop("motion_planner", signal.SIGKILL)  # mid-training: its questions must go to the replica
+            killed_at = max(episodes)
+            result = client.wait(300, check=g.check_alive)
+        finally:
+            client.close()
+            rclpy.try_shutdown()
+        log = g.log("task_planner")
+    assert result.success, result.message
+    assert result.sequence[-1] == scenario.target_id and result.episodes > killed_at
+    assert result.optimal_weight == pytest.approx(1.14, abs=1e-6)  # o2 o3 o6 (docs/qtree.md)
+    learned = [line for line in log.splitlines() if "learned" in line][-1]
+    answers = dict(re.findall(r"(/\S*plan_feasibility): (\d+) answers", learned))
+    assert int(answers["/replica_1/motion_planner/plan_feasibility"]) > 0, learned
+    assert "(down)" in learned.split("/replica_1")[0], learned  # the first planner, marked down
+    assert "waiting for" not in log  # no outage: the replica took over at once
