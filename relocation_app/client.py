@@ -8,6 +8,7 @@
         time.sleep(0.1)
     result = client.result()                          # TrainPlanner.Result
     client.relocate("o3", removed=["o2"])             # one relocation, same pattern
+    oracle = client.feasibility_oracle(replicas=2)    # feasibility for your own search, 2 planners in flight
     client.cancel()                                   # the goal in flight
     client.close()
 
@@ -27,8 +28,9 @@ from rclpy.qos import QoSProfile
 
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
-from qtree_task_planner.task_planner_node import train_goal
-from relocation_common.feasibility import Label
+from qtree_task_planner.replicas import ReplicaOracle
+from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
+from relocation_common.feasibility import Label, replica_services
 from relocation_common.node import call
 
 FEASIBILITY = "/motion_planner/plan_feasibility"
@@ -80,6 +82,15 @@ class RelocationClient:
         if not res.ok:
             raise ClientError(f"feasibility request refused: {res.message}")
         return Label(res.label), res
+
+    def feasibility_oracle(self, replicas: int = 1, timeout: float = 5.0, margin: float = 2.0) -> ReplicaOracle:
+        """The task planner's view of feasibility, for your own search: a FeasibilityOracle and BatchOracle
+        (relocation_common.feasibility) over the motion planner and its replicas (/replica_<k>), label only, one
+        question in flight per replica, failover when one dies (qtree_task_planner.replicas)."""
+        return ReplicaOracle([ServiceOracle(self.node.create_client(PlanFeasibility, name,
+                                                                    qos_profile=QoSProfile(depth=1000)),
+                                            timeout, margin, connect_wait=timeout)
+                              for name in replica_services(FEASIBILITY, replicas)])
 
     # -- goals ----------------------------------------------------------------------------------------------
     def train(self, on_feedback: Callable | None = None, timeout: float = 30.0,

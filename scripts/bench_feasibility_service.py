@@ -13,10 +13,11 @@ with the working tree's, alternated `--rounds` times, on one domain (one node at
 
     .venv/bin/python scripts/bench_feasibility_service.py --replicas 2 --requests 200 [--scenario scenario3_15]
 
---replicas N: throughput, not latency. N motion_planner processes (namespaces /replica_<k>), label-only queries from
-a shared list, one in flight per replica in use; phases with 1 and with N replicas alternated `--rounds` times.
-Prints queries/s of each, their ratio, and the planner processes' CPU time per query (utime + stime from /proc:
-what predicts the throughput on more cores).
+--replicas N: throughput, not latency. The motion planner and N-1 replicas (Graph.start_planners, namespaces
+/replica_<k>), asked the questions of a table fill (the scene's committed feasibility table, shuffled) through the
+task planner's oracle (ReplicaOracle.feasibility_many: one in flight per replica); phases with 1 and with N replicas
+alternated `--rounds` times. Prints queries/s of each, their ratio, and the CPU time per query of the planner
+processes and of the client (utime + stime: what predicts the throughput on more cores).
 """
 from __future__ import annotations
 
@@ -133,75 +134,47 @@ def _cpu_seconds(pids) -> float:
     return total / tick
 
 
-def _drain(clients, queries, label_only: bool = True) -> tuple[float, int]:
-    """Every query once, one in flight per client (a thread each, blocking calls); (wall s, answered)."""
-    from qtree_relocation_msgs.srv import PlanFeasibility
+def _fill_questions(scenario, n: int, seed: int) -> list:
+    """n questions a table fill asks (object, reachable set) from the scene's committed table, shuffled."""
+    from relocation_app.evaluation.__main__ import planner_params
+    from relocation_app.evaluation.feasibility_cache import open_table
 
-    todo = collections.deque(queries)
-    done = [0]
-    lock = threading.Lock()
-
-    def worker(cli):
-        while True:
-            with lock:
-                if not todo:
-                    return
-                obj, removed = todo.popleft()
-            res = cli.call(PlanFeasibility.Request(object_id=obj, removed_ids=removed, label_only=label_only),
-                           timeout_sec=60.0)
-            with lock:
-                done[0] += res is not None and res.ok
-    t0 = time.perf_counter()
-    threads = [threading.Thread(target=worker, args=(c,)) for c in clients]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    return time.perf_counter() - t0, done[0]
+    table, _ = open_table(scenario, planner_params())
+    qs = list(table.entries)
+    random.Random(seed).shuffle(qs)
+    return qs[:n]
 
 
-def replicas(n: int, seed: int, domain: int, count: int, rounds: int, scenario_name: str) -> None:
-    """Throughput with 1 and with `count` motion planner processes (see the module docstring)."""
-    from qtree_relocation_msgs.srv import PlanFeasibility
+def replicas(n: int, seed: int, count: int, rounds: int, scenario_name: str) -> None:
+    """Throughput with 1 and with `count` motion planner processes through the task planner's oracle
+    (ReplicaOracle.feasibility_many; see the module docstring)."""
+    from relocation_app.evaluation.replica_fill import replica_graph
 
     path = resolve_scenario(scenario_name)
     scenario = load_scenario(path)
-    rng = random.Random(seed)
-    queries = []
-    for _ in range(n):
-        obj = rng.choice(scenario.ids)
-        queries.append((obj, rng.sample([o for o in scenario.obstacle_ids if o != obj], rng.randint(0, 6))))
-    with Graph(Path(tempfile.mkdtemp(prefix="bench_replicas_")), domain_id=domain) as g:
-        for k in range(count):
-            log = open(g.run_dir / "logs" / f"motion_planner_{k}.log", "w")
-            g.procs[f"motion_planner_{k}"] = subprocess.Popen(
-                [sys.executable, "-m", "stpik_motion_planner.motion_planner_node", "--ros-args", "--params-file",
-                 str(config_file("motion_planner.yaml")), "-p", f"scenario:={path}", "-r",
-                 f"__ns:=/replica_{k}"], env=g.env, stdout=log, stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL, cwd=g.run_dir, preexec_fn=die_with_parent)
-            log.close()
+    queries = _fill_questions(scenario, n, seed)
+    rows = []
+    with replica_graph(path, count) as (g, client):
         pids = [p.pid for p in g.procs.values()]
-        rows = []
-        with client_node(g, "bench_replicas") as node:
-            names = [f"/replica_{k}/motion_planner/plan_feasibility" for k in range(count)]
-            wait_for_interfaces(node, services=[(x, PlanFeasibility) for x in names], graph=g)
-            clients = [node.create_client(PlanFeasibility, x) for x in names]
-            for c in clients:
-                _drain([c], queries[:5])  # warm-up
-            for _ in range(rounds):
-                for used in (1, count):
-                    cpu = _cpu_seconds(pids)
-                    wall, answered = _drain(clients[:used], queries)
-                    rows.append((used, wall, answered, _cpu_seconds(pids) - cpu))
-    print(f"PlanFeasibility throughput, {scenario.name}, {n} label-only queries per phase, {os.cpu_count()} cores")
+        one, many = (client.feasibility_oracle(k, timeout=60.0, margin=30.0) for k in (1, count))
+        many.feasibility_many(queries[:10])  # warm-up, every replica
+        for _ in range(rounds):
+            for used, oracle in ((1, one), (count, many)):
+                cpu, client_cpu, t0 = _cpu_seconds(pids), time.process_time(), time.perf_counter()
+                answers = oracle.feasibility_many(queries)
+                rows.append((used, time.perf_counter() - t0, len(answers), _cpu_seconds(pids) - cpu,
+                             time.process_time() - client_cpu))
+    print(f"PlanFeasibility throughput, {scenario.name}, {n} label-only table-fill questions per phase, "
+          f"ReplicaOracle.feasibility_many, {os.cpu_count()} cores")
     rate = {}
     for used in (1, count):
         sub = [r for r in rows if r[0] == used]
         qps = [r[2] / r[1] for r in sub]
-        cpu_q = sum(r[3] for r in sub) / sum(r[2] for r in sub)
+        asked = sum(r[2] for r in sub)
         rate[used] = float(np.median(qps))
         print(f"  {used} replica(s): {', '.join(f'{x:.1f}' for x in qps)} queries/s (median {rate[used]:.1f}); "
-              f"planner CPU {cpu_q * 1e3:.2f} ms per query")
+              f"CPU per query: planners {sum(r[3] for r in sub) / asked * 1e3:.2f} ms, client "
+              f"{sum(r[4] for r in sub) / asked * 1e3:.2f} ms")
     print(f"  {count} replicas / 1: {rate[count] / rate[1]:.2f}x")
 
 
@@ -216,7 +189,7 @@ def main() -> None:
     ap.add_argument("--scenario", default="paper_experiment_10", help="--replicas: the planners' scenario")
     a = ap.parse_args()
     if a.replicas:
-        return replicas(a.requests, a.seed, a.domain, a.replicas, max(a.rounds, 2), a.scenario)
+        return replicas(a.requests, a.seed, a.replicas, max(a.rounds, 2), a.scenario)
     impls = [("working tree", "")]
     if a.baseline:
         impls.insert(0, (a.baseline, export_package(a.baseline)))

@@ -66,3 +66,21 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
     assert int(answers["/replica_1/motion_planner/plan_feasibility"]) > 0, learned
     assert "(down)" in learned.split("/replica_1")[0], learned  # the first planner, marked down
     assert "waiting for" not in log  # no outage: the replica took over at once
+
+
+def test_a_table_filled_through_two_replicas_equals_the_committed_one(tmp_path):
+    """`python -m relocation_app.evaluation fill --replicas 2`: scenario1_5's 84 answers asked of two planner
+    processes over ROS, one in flight each, equal the committed table (filled in-process)."""
+    from relocation_app.evaluation.__main__ import planner_params
+    from relocation_app.evaluation.feasibility_cache import fill_reachable, open_table
+    from relocation_app.evaluation.replica_fill import replica_oracle
+
+    path = scenarios_dir() / "scenario1_5.yaml"
+    scenario, params = load_scenario(path), planner_params()
+    committed, _ = open_table(scenario, params)
+    table, _ = open_table(scenario, params, tmp_path / "feasibility")
+    with replica_oracle(path, 2, params.timeout, tmp_path / "run") as oracle:
+        st = fill_reachable(scenario, params, table, progress=False, oracle=oracle)
+    assert st["real_calls"] == len(table.entries) == len(committed.entries) == 84
+    assert all(oracle.answers) and sum(oracle.answers) == 84, oracle.summary()
+    assert {k: v[0] for k, v in table.entries.items()} == {k: v[0] for k, v in committed.entries.items()}

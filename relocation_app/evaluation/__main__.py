@@ -54,15 +54,21 @@ def scenes(paths, params, data_dir, grid=None):
     return out
 
 
-def cmd_fill(paths, params, data_dir, workers) -> dict:
+def cmd_fill(paths, params, data_dir, workers, replicas: int = 0) -> dict:
+    """Fill each scene's table: with `workers` processes here, or (replicas > 0) through that many motion planner
+    processes over ROS (replica_fill)."""
+    from contextlib import nullcontext
+
     from relocation_common.scenario import load_scenario
 
     from .feasibility_cache import fill_reachable, open_table
+    from .replica_fill import replica_oracle
     stats = {}
     for p in paths:
         sc = load_scenario(p)
         table, path = open_table(sc, params, data_dir)
-        st = fill_reachable(sc, params, table, workers=workers, progress=True, save_to=path)
+        with replica_oracle(p, replicas, params.timeout) if replicas else nullcontext() as oracle:
+            st = fill_reachable(sc, params, table, workers=workers, progress=True, save_to=path, oracle=oracle)
         stats[sc.name] = st | {"entries": len(table), "planner_seconds": round(table.planner_seconds, 1)}
         print(f"{sc.name}: {len(table)} answers in {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path} "
               f"({st['real_calls']} new planner calls)", flush=True)
@@ -82,6 +88,8 @@ def main(argv=None) -> int:
     ap.add_argument("--docs", default=None, help="where evaluation.md and figures/ go (default docs/, quick: OUT/docs)")
     ap.add_argument("--data", default=str(data_dir() / "feasibility"), help="feasibility cache directory")
     ap.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    ap.add_argument("--replicas", type=int, default=0,
+                    help="fill: ask N motion planner processes over ROS instead of --workers local processes")
     ap.add_argument("--no-random", action="store_true", help="skip the random 5-obstacle scenes (Table 4)")
     ap.add_argument("--no-experiment", action="store_true", help="skip the Sect. 5.2 scene (paper_experiment_10)")
     ap.add_argument("--no-progress", action="store_true")
@@ -105,7 +113,8 @@ def main(argv=None) -> int:
     workers = a.workers or os.cpu_count() or 1
     only = set(a.only.split(",")) if a.only else None
     if a.command in ("all", "fill"):
-        cmd_fill(_only(main_p + rnd_p + [SCEN_DIR / f"{EXPERIMENT}.yaml"], only), params, a.data, workers)
+        cmd_fill(_only(main_p + rnd_p + [SCEN_DIR / f"{EXPERIMENT}.yaml"], only), params, a.data, workers,
+                 a.replicas)
     if a.command in ("all", "sweep"):
         from .sweep import sweep
         grid = QUICK_GRID if a.quick else None

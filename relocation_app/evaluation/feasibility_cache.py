@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from qtree_task_planner import reachable
-from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.feasibility import FeasibilityAnswer, Label, ask_many
 from relocation_common.paths import data_dir
 
 CACHE_VERSION = 1
@@ -240,11 +240,19 @@ def reachable_sets(table: FeasibilityTable, scenario) -> list[frozenset[str]]:
                   key=lambda s: (len(s), sorted(s)))
 
 
+def _ask_oracle(oracle, todo):
+    """A level's questions through a BatchOracle (planner replicas over ROS: relocation_app.evaluation.replica_fill)."""
+    qs = [(o, frozenset(r)) for o, r in todo]
+    return [(o, r, int(a.label), a.planning_time, a.attempts) for (o, r), a in zip(todo, ask_many(oracle, qs))]
+
+
 def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, progress: bool = True,
-                   save_to: str | Path | None = None, max_queries: int | None = None) -> dict:
+                   save_to: str | Path | None = None, max_queries: int | None = None, oracle=None) -> dict:
     """Ask the real planner every (object, S) for every reachable S not yet in the table. Level-synchronous BFS;
-    the queries of a level go to `workers` processes (each its own MotionPlanner). Saves after each level when
-    `save_to` is given (so an interruption keeps what was computed). Returns {'real_calls', 'seconds', 'sets'}."""
+    the queries of a level go to `workers` processes (each its own MotionPlanner), or, with `oracle` given, to
+    that oracle all at once (relocation_common.feasibility.ask_many: motion planner replicas keep one each in
+    flight). Saves after each level when `save_to` is given (so an interruption keeps what was computed).
+    Returns {'real_calls', 'seconds', 'sets'}."""
     t0 = time.perf_counter()
     calls = 0
     pool = None
@@ -258,7 +266,9 @@ def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, 
             if max_queries is not None:
                 todo = todo[:max(0, max_queries - calls)]
             if todo:
-                if workers > 1 and len(todo) > 8:
+                if oracle is not None:
+                    answers = _ask_oracle(oracle, todo)
+                elif workers > 1 and len(todo) > 8:
                     if pool is None:
                         import multiprocessing as mp
                         pool = mp.get_context("spawn").Pool(workers, _init_worker, (scenario, params))
