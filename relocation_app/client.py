@@ -29,6 +29,7 @@ from rclpy.qos import QoSProfile
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
 from qtree_task_planner.replicas import ReplicaOracle
+from relocation_app.graph import wait_for_interfaces
 from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
 from relocation_common.feasibility import Label, replica_services
 from relocation_common.node import call
@@ -61,15 +62,8 @@ class RelocationClient:
     # -- readiness ------------------------------------------------------------------------------------------
     def wait_until_ready(self, timeout: float = 120.0, check: Callable[[], None] = lambda: None) -> None:
         """Block until the feasibility service and both actions are served; ClientError after `timeout` s."""
-        deadline = time.monotonic() + timeout
-        pending = [(f"service {FEASIBILITY}", self._feasibility.wait_for_service),
-                   (f"action {TRAIN}", self._train.wait_for_server),
-                   (f"action {RELOCATE}", self._relocate.wait_for_server)]
-        for what, wait in pending:
-            while not wait(timeout_sec=0.2):
-                check()
-                if time.monotonic() > deadline:
-                    raise ClientError(f"{what} not available after {timeout:.0f} s: is the node graph up?")
+        wait_for_interfaces(self.node, [(FEASIBILITY, PlanFeasibility)], [self._train, self._relocate], timeout,
+                            check=check, error=ClientError)
 
     # -- the feasibility question (Eq. 11) ------------------------------------------------------------------
     def plan_feasibility(self, object_id: str, removed=(), timeout: float = 5.0) -> tuple[Label, Any]:

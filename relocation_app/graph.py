@@ -201,17 +201,22 @@ class Graph:
         self.stop_all()
 
 
-def wait_for_interfaces(node, services=(), actions=(), timeout: float = 60.0, graph: Graph | None = None) -> None:
-    """Block until every service (name, type) and action client given is available; RuntimeError on timeout."""
+def wait_for_interfaces(node, services=(), actions=(), timeout: float = 60.0, graph: Graph | None = None,
+                        check=lambda: None, error: type[Exception] = RuntimeError) -> None:
+    """Block until every service (name, type) and action client given is available; `error` on timeout. While
+    waiting, `check()` and the graph's liveness check (a dead node raises at once)."""
     deadline = time.monotonic() + timeout
     clients = [node.create_client(t, n) for n, t in services]
     pending = [(f"service {c.srv_name}", c.wait_for_service) for c in clients]
     pending += [(f"action {a._action_name}", a.wait_for_server) for a in actions]
-    for what, wait in pending:
-        while not wait(timeout_sec=0.2):
-            if graph is not None:
-                graph.check_alive()
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"{what} not available after {timeout:.0f} s")
-    for c in clients:
-        node.destroy_client(c)
+    try:
+        for what, wait in pending:
+            while not wait(timeout_sec=0.2):
+                check()
+                if graph is not None:
+                    graph.check_alive()
+                if time.monotonic() > deadline:
+                    raise error(f"{what} not available after {timeout:.0f} s: is the node graph up?")
+    finally:
+        for c in clients:
+            node.destroy_client(c)
