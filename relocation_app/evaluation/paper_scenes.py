@@ -31,6 +31,7 @@ class Candidate:
     seconds: float
     table: object = None  # its FeasibilityTable (real planner answers)
     weighted: dict | None = None  # the data with weights that give one optimum (None: no draw does)
+    valid: bool | None = None  # strict search: one optimum and every bottle visible (None: not checked)
 
     def score(self, goal: tuple[int, int]) -> float:
         """0 is a perfect match: |log edge ratio| + |log leaf ratio| (inf when too big or no target leaf)."""
@@ -140,12 +141,12 @@ def perturb(data: dict, rng: random.Random, step: float = 0.015) -> dict | None:
 
 
 def score(c: Candidate, goal: tuple[int, int]) -> float:
-    """Search objective (0: exact match): the leaf count first, edges only outside the WITHIN window (and a
-    little inside it)."""
+    """Search objective (0: exact match): the leaf count first, edges only outside the WITHIN window (steeply: a
+    tree within WITHIN x of the paper's edges beats a closer leaf count outside it) and a little inside it."""
     if c.size is None or c.size.target_leaves == 0:
         return math.inf
     e = abs(math.log(c.size.edges / goal[0]))
-    return (2 * abs(math.log(c.size.target_leaves / goal[1])) + 3 * max(0.0, e - math.log(WITHIN)) + 0.1 * e
+    return (2 * abs(math.log(c.size.target_leaves / goal[1])) + 6 * max(0.0, e - math.log(WITHIN)) + 0.1 * e
             + (0.0 if c.weighted is not None else 0.5))
 
 
@@ -167,17 +168,24 @@ def _proposal(seed: int, n: int, name: str, goal: tuple[int, int], params, slack
 
 
 def search(n: int, name: str, params, directory, seeds, steps: int, log=print, deadline: float = math.inf,
-           base: dict | None = None, start: dict | None = None):
+           base: dict | None = None, start: dict | None = None, strict: bool = False, climb_seed: int | None = None):
     """Random clutter candidates (`seeds`), then `steps` of hill climbing (perturb, keep if not worse) from the
     best; candidates that match the goal (edges within WITHIN x, leaves exact) are checked for visibility and
-    one optimum. Returns (best candidate, its weights-fixed data or None, missing bottles)."""
+    one optimum. `strict`: the climb keeps only valid scenes (weights with one optimum, every bottle visible,
+    the optimum executable: `valid`); a start that is not valid is left for the first valid step within INVALID_SLACK of its score.
+    Returns (best candidate, its weights-fixed data or None, missing bottles); with `strict` the candidate is
+    valid unless no valid scene was reached (then `best.valid` is False)."""
     import time
     goal = PAPER_TREES[n]
     best, best_s = None, math.inf
     if start is not None:  # resume the climb from a scene found before
         best = evaluate(start, params, directory, goal)
         best_s = score(best, goal)
-        log(f"start: {_desc(best)} score {best_s:.2f}")
+        if strict:
+            best.valid = valid(best, params, log)
+            if not best.valid:
+                best_s += INVALID_SLACK
+        log(f"start: {_desc(best)} score {best_s:.2f}{'' if not strict or best.valid else ' (not valid)'}")
         seeds = ()
     climb_from = time.time() + 0.5 * (deadline - time.time())  # half the time for proposals, half for the climb
     for seed in seeds:
@@ -190,7 +198,7 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
             log(f"seed {seed}: {_desc(c)} score {best_s:.2f}")
         if time.time() > climb_from or (best is not None and best.ok(goal)):
             break
-    rng = random.Random(n)
+    rng = random.Random(n if climb_seed is None else climb_seed)
     tried_visible = set()
     for k in range(steps):
         if best is not None and best.ok(goal) and id(best) not in tried_visible:
@@ -206,11 +214,61 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
             continue  # the lane screen says it is far off: no planner calls
         c = evaluate(d, params, directory, goal)
         s = score(c, goal)
+        if s <= best_s and strict:
+            c.valid = valid(c, params, log)
+            if not c.valid:
+                continue
         if s <= best_s:
             if s < best_s:
                 log(f"step {k}: {_desc(c)} score {s:.2f}")
             best, best_s = c, s
     return best, None, None
+
+
+INVALID_SLACK = 1.0  # strict climb: how much worse than a start that is not valid its first valid step may be
+
+
+def valid(c: Candidate, params=None, log=None) -> bool:
+    """A scene the evaluation can ship: weights with one optimum (Eq. 8), every bottle seen by perception and
+    (with `params`) the optimum executable (`optimum_plans`)."""
+    if c.weighted is None or visible(c.weighted):
+        return False
+    if params is None:
+        return True
+    err = optimum_plans(c.weighted, c.table, params)
+    if err and log is not None:
+        log(f"  valid but the optimum cannot be carried out: {err}")
+    return not err
+
+
+def optimum_sequence(data: dict, table, params) -> tuple[str, ...]:
+    """The exact optimum (qtree_task_planner.exact.solve) from a filled table: obstacles then the target."""
+    from qtree_task_planner.exact import solve
+
+    from .feasibility_cache import PlannerOracle
+    sc = parse_scenario(data, data["name"])
+    return tuple(solve(sc, PlannerOracle(sc, params, table)).sequence)
+
+
+def optimum_plans(data: dict, table, params, repeats: int = 2) -> str:
+    """'' if every relocation of the optimum (pick, carry, retreat, home: relocation.plan_relocation) can be planned
+    `repeats` times in a row, else what failed. OMPL's random stream is per process (stpik_motion_planner/rrt.py),
+    so a plan depends on the queries before it; planning each relocation twice from different stream states
+    rejects the borderline ones (a feasible pick that the execution then cannot plan)."""
+    from stpik_motion_planner.feasibility import PlanningError
+    from stpik_motion_planner.relocation import plan_relocation
+
+    from .feasibility_cache import _WORKER, _use_scenario
+    sc = parse_scenario(data, data["name"])
+    seq = optimum_sequence(data, table, params)
+    _use_scenario(sc, params)
+    for _ in range(repeats):
+        for k, oid in enumerate(seq):
+            try:
+                plan_relocation(_WORKER["mp"], oid, list(seq[:k]))
+            except PlanningError as e:
+                return f"{'-'.join(seq)}: {e}"
+    return ""
 
 
 def _desc(c: Candidate) -> str:
