@@ -1,12 +1,14 @@
 """`qtree` command line: train the Q-Tree on a scenario, or solve it exactly.
 
     qtree train --scenario FILE [--policy h-eg --search depth --alpha ... --seed ...] [--json OUT] [--tree-dot F]
-    qtree solve --scenario FILE [--solver astar|ucs] [--oracle planner|blocking] [--json OUT]
+    qtree solve --scenario FILE [--solver astar|ucs] [--oracle planner|blocking|replicas [--replicas N]] [--json OUT]
 
 Defaults come from config/task_planner.yaml (or --params FILE). Bad input: one line on stderr, exit 2.
 Feasibility oracles are built by ORACLES[name](scenario, args): `blocking` (the scenario's declared relation, a
 test double) or `planner` (the real motion planner in this process, config/motion_planner.yaml, with its lane
-blockers); the default is `blocking` for a scenario with a `blocking:` section, `planner` otherwise. Exact solvers:
+blockers) or `replicas` (N motion planner processes started over ROS, asked one question each at once by the
+exact solvers: qtree_task_planner.replicas); the default is `blocking` for a scenario with a `blocking:` section,
+`planner` otherwise. Exact solvers:
 `astar` (qtree_task_planner.astar, blockers) or `ucs` (qtree_task_planner.exact, the uniform-cost reference). The
 real oracle calls and the wall time go into the JSON and, as one line, to stderr.
 """
@@ -16,6 +18,7 @@ import argparse
 import json
 import sys
 import time
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Callable
 
@@ -46,8 +49,19 @@ def _planner_oracle(scenario, args):
         raise CliError(f"motion planner: {e}") from None
 
 
+def _replicas_oracle(scenario, args):
+    """N motion planner processes over ROS, one question in flight each (issue 15; stopped when qtree exits)."""
+    from relocation_common.paths import resolve_scenario
+
+    from .evaluation.replica_fill import replica_oracle
+    if not 1 <= args.replicas <= 16:
+        raise CliError(f"--replicas must be in 1..16, got {args.replicas}")
+    return args.stack.enter_context(replica_oracle(resolve_scenario(args.scenario), args.replicas))
+
+
 # name -> factory(scenario, args) -> oracle with feasibility(object_id, removed)
-ORACLES: dict[str, Callable] = {"blocking": _blocking_oracle, "planner": _planner_oracle}
+ORACLES: dict[str, Callable] = {"blocking": _blocking_oracle, "planner": _planner_oracle,
+                                "replicas": _replicas_oracle}
 SOLVERS: dict[str, Callable] = {"astar": astar.solve, "ucs": exact.solve}
 
 
@@ -64,8 +78,10 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--scenario", required=True, help="scenario YAML, or a name under config/scenarios")
         sp.add_argument("--oracle", choices=sorted(ORACLES),
                         help="feasibility oracle (blocking: the scenario's declared relation, a test double; "
-                             "planner: the motion planner in this process). Default: blocking if the scenario "
-                             "has a blocking: section, else planner")
+                             "planner: the motion planner in this process; replicas: N planner processes over "
+                             "ROS). Default: blocking if the scenario has a blocking: section, else planner")
+        sp.add_argument("--replicas", type=int, default=2,
+                        help="--oracle replicas: motion planner processes started over ROS (default 2)")
         sp.add_argument("--solver", choices=sorted(SOLVERS), default="astar",
                         help="exact solver (astar: lazy A* with blockers; ucs: uniform-cost reference)")
         sp.add_argument("--json", metavar="OUT", help="write the JSON result here instead of stdout")
@@ -180,7 +196,8 @@ def _solve(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
-        return _train(args) if args.command == "train" else _solve(args)
+        with ExitStack() as args.stack:  # what an oracle started (planner processes) stops here
+            return _train(args) if args.command == "train" else _solve(args)
     except (CliError, ScenarioError, UnknownObjectError, ParameterError, ProblemError) as e:
         msg = " ".join(str(e).split())  # one line
         print(f"qtree: error: {msg}", file=sys.stderr)

@@ -84,3 +84,22 @@ def test_a_table_filled_through_two_replicas_equals_the_committed_one(tmp_path):
     assert st["real_calls"] == len(table.entries) == len(committed.entries) == 84
     assert all(oracle.answers) and sum(oracle.answers) == 84, oracle.summary()
     assert {k: v[0] for k, v in table.entries.items()} == {k: v[0] for k, v in committed.entries.items()}
+
+
+def test_qtree_solve_through_two_replicas_finds_the_planners_optimum(tmp_path, capsys):
+    """`qtree solve --oracle replicas --replicas 2 --solver ucs`: uniform-cost search with two questions in flight
+    finds the same sequence as with the motion planner in this process; a bad count is one line, exit 2."""
+    import json
+
+    from relocation_app.cli import main
+
+    outs = {}
+    for oracle in ("planner", "replicas"):
+        assert main(["solve", "--scenario", "scenario1_5", "--solver", "ucs", "--oracle", oracle,
+                     "--json", str(tmp_path / f"{oracle}.json")]) == 0
+        outs[oracle] = json.loads((tmp_path / f"{oracle}.json").read_text())
+    assert outs["replicas"]["sequence"] == outs["planner"]["sequence"]
+    assert outs["replicas"]["planner_calls"] >= outs["planner"]["planner_calls"]
+    capsys.readouterr()
+    assert main(["solve", "--scenario", "scenario1_5", "--oracle", "replicas", "--replicas", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "qtree: error: --replicas must be in 1..16, got 0"
