@@ -416,33 +416,7 @@ class MotionPlanner:
         # the bottle and the finger tips in front of the shelf by the arm's clearance (+ activation) before going down
         out = np.array(exit_pose(self.scenario, object_id, lifted,
                                  max(p.hand_margin, p.stpik.clearance + p.stpik.act) + 0.002))
-        carry, last = None, "no Cartesian path out of the shelf"
-        for attempt in range(p.max_attempts):
-            if attempt == 0 and p.direct_first and self._path_clear([lifted, out, stage], obs, hand_c):
-                stats.direct_paths += 1
-                mid = [lifted, out, stage]
-            else:
-                t = time.perf_counter()
-                mid = self.rrt.plan(lifted, stage, lambda s_: not hand_c.collides(*_mat(s_), obs),
-                                    4 * p.rrt_max_checks, deadline)
-                stats.rrt_time += time.perf_counter() - t
-                stats.rrt_calls += 1
-                if mid is None:
-                    continue
-            r = self._track(up.q[-1], mid, obs, deadline, stats, arm=arm_c, ramp=p.carry_ramp, accel=p.carry_accel)
-            if not r.ok:
-                last = f"out of the shelf: {r.reason}"
-                continue
-            # in to the slot at approach speed: 10 mm above and below the bottle in the shipped shelf's bottom
-            # compartment, and the clearance tasks must not freeze it at the front edge
-            r2 = self._track(r.q[-1], [stage, place], obs, deadline, stats, arm=arm_c, speed=p.stpik.approach_speed,
-                             ramp=p.carry_ramp, accel=p.carry_accel)
-            if r2.ok:
-                carry = (r, r2)
-                break
-            last = f"in to the slot: {r2.reason}"
-        if carry is None:
-            raise PlanningError(f"{what}: {last}")
+        carry = self._carry_legs(up.q[-1], [lifted, out, stage], place, obs, (arm_c, hand_c), deadline, stats, what)
         scene2 = CollisionScene(self.scenario, placed + [(object_id, slot)])
         obs2 = scene2.obstacles(removed | {object_id})
         skip = {n: frozenset([f"placed:{object_id}"]) for n in HAND_PARTS}
@@ -455,6 +429,41 @@ class MotionPlanner:
             Trajectory.from_steps(carry[1].q, carry[1].qdot, carry[1].dt, "place"))
         return [Segment("carry", moving.resample(), "open"),
                 Segment("retreat", Trajectory.from_steps(back.q, back.qdot, back.dt, "retreat").resample(), None)]
+
+    def _carry_legs(self, q_lifted, direct: list, place, obs: ObstacleSet, carried: tuple, deadline: float,
+                    stats: QueryStats, what: str):
+        """plan_carry's legs 2-3 with the bottle held (`carried`: its ArmGeometry and HandProxy): from the lifted
+        pose out of the shelf to the staging pose (the `direct` poses lifted, out, stage first, then RRT-Connect;
+        up to max_attempts), then in to the slot at `place`. (out leg, in leg) of STPIK; PlanningError naming the
+        last leg that failed."""
+        p = self.params
+        arm_c, hand_c = carried
+        lifted, stage = direct[0], direct[-1]
+        last = "no Cartesian path out of the shelf"
+        for attempt in range(p.max_attempts):
+            if attempt == 0 and p.direct_first and self._path_clear(direct, obs, hand_c):
+                stats.direct_paths += 1
+                mid = direct
+            else:
+                t = time.perf_counter()
+                mid = self.rrt.plan(lifted, stage, lambda s_: not hand_c.collides(*_mat(s_), obs),
+                                    4 * p.rrt_max_checks, deadline)
+                stats.rrt_time += time.perf_counter() - t
+                stats.rrt_calls += 1
+                if mid is None:
+                    continue
+            r = self._track(q_lifted, mid, obs, deadline, stats, arm=arm_c, ramp=p.carry_ramp, accel=p.carry_accel)
+            if not r.ok:
+                last = f"out of the shelf: {r.reason}"
+                continue
+            # in to the slot at approach speed: 10 mm above and below the bottle in the shipped shelf's bottom
+            # compartment, and the clearance tasks must not freeze it at the front edge
+            r2 = self._track(r.q[-1], [stage, place], obs, deadline, stats, arm=arm_c, speed=p.stpik.approach_speed,
+                             ramp=p.carry_ramp, accel=p.carry_accel)
+            if r2.ok:
+                return r, r2
+            last = f"in to the slot: {r2.reason}"
+        raise PlanningError(f"{what}: {last}")
 
     def joint_valid(self, q, obs: ObstacleSet, arm: ArmGeometry | None = None, margin: float = 0.0) -> bool:
         """Joint-space validity with the same collision checker: limits, self-collision, clearance."""
