@@ -1,16 +1,18 @@
 """Launch the retrieval graph on a machine with a full ROS 2 Jazzy install (launch_ros available).
 
-    ros2 launch qtree_relocation retrieval.launch.py scenario:=/path/to/scenario.yaml scene_source:=perception
+    ros2 launch qtree_relocation retrieval.launch.py scenario:=/path/to/scenario.yaml scene_source:=perception \
+        replicas:=2
 
 This machine's PyPI-only ROS has no launch/launch_ros wheels, so this file cannot be exercised here: the
 equivalent process harness is relocation_app/graph.py (used by `./run demo`), which tests start for real.
 Set use_sim:=false and remap the driver topics to run against Kinova's kinova_driver instead of the simulator.
+replicas:=N adds N-1 feasibility-only motion planners under /replica_<k> (docs/reliability.md, "Planner replicas").
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
@@ -30,9 +32,21 @@ def generate_launch_description():
              condition=IfCondition(LaunchConfiguration("use_sim"))),
         Node(package="qtree_relocation", executable="perception", name="perception",
              parameters=[os.path.join(cfg, "perception.yaml"), common]),
-        Node(package="qtree_relocation", executable="motion_planner", name="motion_planner",
-             parameters=[os.path.join(cfg, "motion_planner.yaml"), common]),
-        Node(package="qtree_relocation", executable="task_planner", name="task_planner",
-             parameters=[os.path.join(cfg, "task_planner.yaml"), common,
-                         {"scene_source": LaunchConfiguration("scene_source")}]),
+        DeclareLaunchArgument("replicas", default_value="1"),
+        OpaqueFunction(function=_planners, args=[cfg, common]),
     ])
+
+
+def _planners(context, cfg, common):
+    """The motion planner, replicas - 1 feasibility-only replicas (namespaces replica_<k>), the task planner."""
+    replicas = int(LaunchConfiguration("replicas").perform(context))
+    planner = os.path.join(cfg, "motion_planner.yaml")
+    nodes = [Node(package="qtree_relocation", executable="motion_planner", name="motion_planner",
+                  parameters=[planner, common])]
+    nodes += [Node(package="qtree_relocation", executable="motion_planner", name="motion_planner",
+                   namespace=f"replica_{k}", parameters=[planner, common, {"serve_relocation": False}])
+              for k in range(1, replicas)]
+    nodes.append(Node(package="qtree_relocation", executable="task_planner", name="task_planner",
+                      parameters=[os.path.join(cfg, "task_planner.yaml"), common,
+                                  {"scene_source": LaunchConfiguration("scene_source"), "replicas": replicas}]))
+    return nodes
