@@ -59,6 +59,12 @@ OPTICAL_FRAME = "camera_color_optical_frame"
 BOTTLE_FRAME = "bottle_{}"  # TF frame of a bottle (ground truth): centre of its base circle
 FINGER_TIP_NAMES = tuple(f"{PREFIX}_joint_finger_tip_{i}" for i in range(1, 4))  # kinova-ros publishes them at 0
 INTERFACES = ("kinova", "ros2_control")
+HOMED = "KINOVA ARM HAS BEEN RETURNED HOME"  # kinova-ros's HomeArm answer
+HOME_SPEED = 0.5  # HomeArm: fraction of Table 7's joint speeds
+HOME_GAIN = 3.0  # 1/s, HomeArm's joint-space proportional gain
+HOME_TOL = 5e-4  # rad, every joint, to count as home
+HOME_TIMEOUT = 30.0  # s (wall) for the arm, then for the fingers
+FINGERS_OPEN = 0.02  # rad of finger hinge: open
 VELOCITY_TOPIC = "/velocity_controller/commands"   # ros2_control JointGroupVelocityController, rad/s
 GRIPPER_TOPIC = "/gripper_controller/commands"     # ros2_control JointGroupPositionController, finger joints rad
 # a Float64MultiArray command of 7 values serializes to ~100 bytes; bigger ones are refused before deserialization
@@ -148,10 +154,11 @@ class Jaco2SimDriver(Node):
         self.pub_js = self.create_publisher(JointState, f"{pre}/out/joint_state", 10)
         self.pub_angles = self.create_publisher(JointAngles, f"{pre}/out/joint_angles", 10)
         self.pub_finger_pos = self.create_publisher(FingerPosition, f"{pre}/out/finger_position", 10)
-        self.create_service(HomeArm, f"{pre}/in/home_arm", self.srv_home_arm)
         self.create_service(Start, f"{pre}/in/start", self.srv_start)
         self.create_service(Stop, f"{pre}/in/stop", self.srv_stop)
         self._fingers = SideNode("jaco2_sim_driver_fingers", context=self.context, threads=3)
+        self._fingers.node.create_service(HomeArm, f"{pre}/in/home_arm", self.srv_home_arm,
+                                          callback_group=ReentrantCallbackGroup())
         self._finger_server = ActionServer(
             self._fingers.node, SetFingersPosition, f"{pre}/fingers_action/finger_positions",
             execute_callback=self.execute_fingers, goal_callback=lambda _: GoalResponse.ACCEPT,
@@ -234,16 +241,36 @@ class Jaco2SimDriver(Node):
 
     # ------------------------------------------------------------------ services
     def srv_home_arm(self, req, res):
-        """kinova_msgs/HomeArm: the arm to home and the fingers open (kinova-ros: homeArm + initFingers). In the
-        simulator home is the project's Q_HOME, reached at once (a teleport), not Kinova's factory home."""
-        if self._stopped:
-            res.homearm_result = "Arm is stopped, cannot home"
-            return res
-        with self.lock:
-            self.sim.home()
-            self.sim.set_fingers(np.zeros(len(FINGER_JOINT_NAMES)))
-        res.homearm_result = "KINOVA ARM HAS BEEN RETURNED HOME"
+        """kinova_msgs/HomeArm: the arm moves home, then the fingers open (kinova-ros: homeArm + initFingers, both
+        waited for); answered when done. Home is the project's Q_HOME, not Kinova's factory home. The motion is
+        straight in joint space at up to HOME_SPEED of Table 7 with no collision avoidance, as the firmware's; an
+        in/stop meanwhile ends it. Served on the fingers' side executor: the main one keeps serving in/stop."""
+        res.homearm_result = self._move_home() if not self._stopped else "Arm is stopped, cannot home"
+        if res.homearm_result == HOMED:
+            with self.lock:
+                self.sim.set_fingers(np.zeros(len(FINGER_JOINT_NAMES)))
+            deadline = time.monotonic() + HOME_TIMEOUT
+            while self.context.ok() and time.monotonic() < deadline:
+                with self.lock:
+                    if np.max(np.abs(self.sim.finger_q)) < FINGERS_OPEN:
+                        break
+                time.sleep(0.01)
         return res
+
+    def _move_home(self) -> str:
+        """Joint velocities toward Q_HOME (gain HOME_GAIN, at most HOME_SPEED x Table 7) through the simulation
+        loop's command queue, every 10 ms, until every joint is within HOME_TOL; the result message."""
+        limit = HOME_SPEED * self.sim.qdot_max
+        deadline = time.monotonic() + HOME_TIMEOUT
+        while self.context.ok() and not self._stopped:
+            with self.lock:
+                err = self.sim.q_home - self.sim.q
+            if np.max(np.abs(err)) < HOME_TOL or time.monotonic() > deadline:
+                self._commands.put(None)
+                return HOMED if np.max(np.abs(err)) < HOME_TOL else f"Homing did not end within {HOME_TIMEOUT:g} s"
+            self._commands.put(np.clip(HOME_GAIN * err, -limit, limit))
+            time.sleep(0.01)
+        return "Arm is stopped, cannot home"
 
     def srv_stop(self, req, res):
         """kinova_msgs/Stop: the arm stops at once; commands (velocities, finger goals) are ignored until Start."""

@@ -229,13 +229,26 @@ def test_joint_limit_holds(g):
     assert Q_UPPER[3] - 0.03 < q[3] <= Q_UPPER[3] + 1e-3
 
 
-def test_home_arm(g):
+def test_home_arm_moves_the_arm_home(g):
+    """Kinova's HomeArm moves the arm (it was a teleport: no joint state between the pose and home) at most at
+    HOME_SPEED of Table 7, answers once home, then the fingers are open."""
+    from jaco2_sim_driver.driver_node import HOME_SPEED
+
     _only(g, "kinova")
-    _stream(g.pub, _deg([0.3] * 7), 0.2)
-    assert not np.allclose(_settled_q(g, 0.1), Q_HOME, atol=1e-2)
-    assert g.probe.call(HomeArm, f"{PRE}/in/home_arm").homearm_result == "KINOVA ARM HAS BEEN RETURNED HOME"
+    _stream(g.pub, _deg([0.3] * 7), 0.3)
+    q0 = _settled_q(g, 0.1)
+    e0 = np.max(np.abs(q0 - Q_HOME))
+    assert e0 > 0.05
+    n = len(g.states.msgs)
+    assert g.probe.call(HomeArm, f"{PRE}/in/home_arm", timeout=40).homearm_result == \
+        "KINOVA ARM HAS BEEN RETURNED HOME"
     assert np.allclose(_settled_q(g, 0.1), Q_HOME, atol=1e-3)
     assert max(g.states.latest().position[7:10]) < 0.05  # fingers open
+    msgs = sorted(g.states.msgs[n:], key=_stamp)
+    between = [m for m in msgs if 0.1 * e0 < np.max(np.abs(_q(m) - Q_HOME)) < 0.9 * e0]
+    assert len(between) >= 10, len(between)  # a motion through the poses in between
+    speed = max(np.max(np.abs(np.array(m.velocity[:7])) / QDOT_MAX) for m in msgs)
+    assert speed <= HOME_SPEED * 1.1, speed
 
 
 def test_ground_truth_objects_match_the_scenario(g):
