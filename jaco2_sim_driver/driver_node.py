@@ -183,7 +183,7 @@ class Jaco2SimDriver(Node):
         self.pub_description = self.create_publisher(String, "/robot_description", LATCHED)
         self.pub_tf_static = self.create_publisher(TFMessage, "/tf_static", LATCHED)
         self.pub_tf = self.create_publisher(TFMessage, "/tf", TF_QOS)
-        self.pub_description.publish(String(data=urdf()))
+        self.pub_description.publish(String(data=urdf(hand=True)))
         self.pub_tf_static.publish(self._static_transforms())
 
     # ------------------------------------------------------------------ commands
@@ -386,7 +386,7 @@ class Jaco2SimDriver(Node):
                     state = self._snapshot()
                 if t >= next_tf:
                     next_tf += self.tf_period * max(1, int((t - next_tf) / self.tf_period) + 1)
-                    tf = (t, self.sim.q, self.sim.object_poses())
+                    tf = (t, self.sim.q, self.sim.finger_q, self.sim.object_poses())
                 objects = None
                 if t >= next_obj:
                     next_obj = t + self.obj_period
@@ -451,11 +451,12 @@ class Jaco2SimDriver(Node):
         out.append(transform_msg(t_cam, BASE_FRAME, OPTICAL_FRAME, stamp))
         return TFMessage(transforms=out)
 
-    def _transforms(self, sim_t, q, poses) -> TFMessage:
-        """/tf: every arm link from the joint angles (URDF chain, as robot_state_publisher), every bottle from the
-        ground truth."""
+    def _transforms(self, sim_t, q, finger_q, poses) -> TFMessage:
+        """/tf: every arm and finger link from the joint angles (URDF chain, as robot_state_publisher), every bottle
+        from the ground truth."""
         stamp = self._stamp(sim_t)
-        out = [transform_msg(t, parent, child, stamp) for parent, child, t in frames.arm_transforms(q)]
+        out = [transform_msg(t, parent, child, stamp)
+               for parent, child, t in frames.arm_transforms(q) + frames.finger_transforms(finger_q)]
         for p in poses:
             t = np.eye(4)
             r = np.zeros(9)

@@ -3,7 +3,8 @@
 
 Each revolute joint i moves link i against its parent by origin_i @ Rz(sign_i * Q_i) (the URDF's <origin> and
 <axis xyz="0 0 sign_i">); the fixed joint puts the tool frame `j2s7s300_end_effector` on link 7. The product of the
-chain equals the DH forward kinematics of Table 5 (tested in test/test_kinova_surface.py against `dh_fk`).
+chain equals the DH forward kinematics of Table 5 (tested in test/test_kinova_surface.py against `dh_fk`). The
+fingers of `urdf(hand=True)` hang on link 7 (`finger_transforms`; tested against MuJoCo's finger bodies).
 """
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import math
 import numpy as np
 
 from stpik_motion_planner.robot_description import (
-    BASE_LINK, EE_LINK, LINK_NAMES, N_JOINTS, Q_SIGN, joint_origins)
+    BASE_LINK, EE_LINK, FINGER_BASE_Z, FINGER_DRIVE_LINK_NAMES, FINGER_GEAR, FINGER_HINGES, FINGER_LINK_NAMES,
+    FINGER_TIP_LINK_NAMES, LINK_NAMES, N_JOINTS, Q_SIGN, finger_tip, joint_origins)
 
 _ORIGINS = joint_origins()
 PARENTS = (BASE_LINK,) + LINK_NAMES[:-1]
@@ -28,6 +30,31 @@ def _rz(a: float) -> np.ndarray:
 def arm_transforms(q) -> list[tuple[str, str, np.ndarray]]:
     """(parent, child, 4x4) of the 7 revolute joints at joint angles q (Kinova's Q, rad)."""
     return [(PARENTS[i], LINK_NAMES[i], _ORIGINS[i] @ _rz(Q_SIGN[i] * float(q[i]))) for i in range(N_JOINTS)]
+
+
+def _ry(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    m = np.eye(4)
+    m[0, 0], m[0, 2], m[2, 0], m[2, 2] = c, s, -s, c
+    return m
+
+
+def finger_transforms(finger_q) -> list[tuple[str, str, np.ndarray]]:
+    """(parent, child, 4x4) of the fingers of `urdf(hand=True)` at the simulated hinge angles finger_q (rad): the
+    drive frame at the hinge turned by the joint state's angle (finger_q / FINGER_GEAR), the finger on it by the
+    mimic joint's (FINGER_GEAR - 1) x that, together the hinge angle; each tip at the finger's end (kinova-ros's tip
+    joints, always 0)."""
+    out = []
+    for k, (x, y, sign) in enumerate(FINGER_HINGES):
+        joint = float(finger_q[k]) / FINGER_GEAR
+        drive = _ry(sign * joint)
+        drive[:3, 3] = (x, y, FINGER_BASE_Z)
+        tip = np.eye(4)
+        tip[:3, 3] = finger_tip(k)
+        out += [(LINK_NAMES[-1], FINGER_DRIVE_LINK_NAMES[k], drive),
+                (FINGER_DRIVE_LINK_NAMES[k], FINGER_LINK_NAMES[k], _ry(sign * (FINGER_GEAR - 1) * joint)),
+                (FINGER_LINK_NAMES[k], FINGER_TIP_LINK_NAMES[k], tip)]
+    return out
 
 
 def fixed_transforms() -> list[tuple[str, str, np.ndarray]]:

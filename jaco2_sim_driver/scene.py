@@ -19,18 +19,16 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stpik_motion_planner.robot_description import (  # noqa: E402
-    D67, FINGER_JOINT_NAMES, LINK_NAMES, PREFIX, mjcf_arm_body)
+    FINGER_BASE_Z, FINGER_CLOSED, FINGER_HINGES, FINGER_JOINT_NAMES, FINGER_LINK_NAMES, FINGER_RADIUS, LINK_NAMES,
+    finger_tip, mjcf_arm_body)
 from relocation_common.scenario import Marker, Scenario  # noqa: E402
 
 CAMERA_NAME = "camera_color"
 HAND_BODY = LINK_NAMES[-1]
-FINGER_BODY_NAMES = tuple(f"{PREFIX}_link_finger_{i}" for i in range(1, 4))
+FINGER_BODY_NAMES = FINGER_LINK_NAMES  # the description's moving fingers (FINGER_HINGES), as MuJoCo bodies
 # Static finger capsules of the description (the planner's conservative envelope of the open hand): the simulator
 # replaces them with moving finger bodies and switches them off (see Jaco2Sim).
 DESCRIPTION_FINGER_GEOMS = ("finger_1", "finger_2", "finger_3")
-FINGER_RADIUS = 0.009      # thinner than the planner's 12 mm capsules: the planner's envelope stays conservative
-FINGER_LENGTH = 0.10
-FINGER_CLOSED = 0.5        # rad: tips of opposing fingers meet
 MARKER_BORDER = 0.25       # white margin around the marker, as a fraction of the marker side
 FLOOR_DROP = 0.30          # floor this far below the bottom shelf board
 
@@ -104,20 +102,17 @@ def marker_image(marker: Marker, pixels_per_bit: int = 20) -> np.ndarray:
 
 
 def _hand_xml() -> str:
-    """Three fingers on the last link (its frame: z = approach, x = closing direction, grasp centre at z = D67).
-
-    Finger 1 opposes fingers 2 and 3 across x, as on the j2s7s300. Each finger is a hinge at the palm; the open
-    fingers lie on the description's finger capsules. Closing rotates the tips towards the grasp centre.
-    """
-    base_z, out = D67 - 0.07, []
-    for k, (x, y, sign) in enumerate([(0.045, 0.0, -1), (-0.045, 0.022, 1), (-0.045, -0.022, 1)]):
-        tip = (0.005 if x > 0 else -0.005, 0.0, FINGER_LENGTH)
+    """The description's three fingers (robot_description.FINGER_HINGES) on the last link (its frame: z = approach,
+    x = closing direction, grasp centre at z = D67): a hinge at the palm each; the open fingers lie on the
+    description's finger capsules, closing rotates the tips towards the grasp centre."""
+    out = []
+    for k, (x, y, sign) in enumerate(FINGER_HINGES):
         out.append(
-            f'<body name="{FINGER_BODY_NAMES[k]}" pos="{x} {y} {base_z}" gravcomp="1">'
-            f'<joint name="{FINGER_JOINT_NAMES[k]}" type="hinge" axis="0 {sign} 0" range="0 {FINGER_CLOSED}" '
+            f'<body name="{FINGER_BODY_NAMES[k]}" pos="{x} {y} {FINGER_BASE_Z}" gravcomp="1">'
+            f'<joint name="{FINGER_JOINT_NAMES[k]}" type="hinge" axis="0 {sign:g} 0" range="0 {FINGER_CLOSED}" '
             f'limited="true" damping="0.05" armature="0.001"/>'
-            f'<geom name="finger_sim_{k + 1}" type="capsule" fromto="0 0 0 {_f(tip)}" size="{FINGER_RADIUS}" '
-            f'mass="0.03" class="finger"/></body>')
+            f'<geom name="finger_sim_{k + 1}" type="capsule" fromto="0 0 0 {_f(finger_tip(k))}" '
+            f'size="{FINGER_RADIUS}" mass="0.03" class="finger"/></body>')
     return "".join(out)
 
 

@@ -345,7 +345,8 @@ class TaskPlannerNode(Node):
             fb.phase = phase
             self.get_logger().info(f"motion planner {services} is back: resuming")
 
-        return until_available(fn, service_up=oracle.ready, stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
+        return until_available(fn, service_up=oracle.ready,
+                               stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
                                wait=self.p("planner_wait"), last_answer=lambda: oracle.last_ok,
                                kept=self._kept_where, service=services, on_outage=on_outage, on_back=on_back)
 

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from relocation_common.kinova import FINGER_JOINT_CLOSED
+
 PI = math.pi
 PREFIX = "j2s7s300"
 N_JOINTS = 7
@@ -26,6 +28,11 @@ LINK_NAMES = tuple(f"{PREFIX}_link_{i}" for i in range(1, N_JOINTS + 1))
 BASE_LINK = f"{PREFIX}_link_base"
 EE_LINK = f"{PREFIX}_end_effector"
 FINGER_JOINT_NAMES = tuple(f"{PREFIX}_joint_finger_{i}" for i in range(1, 4))
+FINGER_LINK_NAMES = tuple(f"{PREFIX}_link_finger_{i}" for i in range(1, 4))
+FINGER_TIP_JOINT_NAMES = tuple(f"{PREFIX}_joint_finger_tip_{i}" for i in range(1, 4))  # kinova-ros: always 0
+FINGER_TIP_LINK_NAMES = tuple(f"{PREFIX}_link_finger_tip_{i}" for i in range(1, 4))
+FINGER_DRIVE_LINK_NAMES = tuple(f"{PREFIX}_link_finger_{i}_drive" for i in range(1, 4))
+FINGER_GEAR_JOINT_NAMES = tuple(f"{PREFIX}_joint_finger_{i}_gear" for i in range(1, 4))
 
 # Table 5: lengths of the j2s7s300 (m). D1 base-shoulder, D2+D3 upper arm, e2 elbow offset,
 # D4+D5 forearm, D6+D7 wrist to grasp centre.
@@ -79,6 +86,24 @@ CAPSULES = (
     Capsule("finger_2", LINK_NAMES[6], (-0.045, 0.022, D67 - 0.07), (-0.05, 0.022, D67 + 0.03), 0.012),
     Capsule("finger_3", LINK_NAMES[6], (-0.045, -0.022, D67 - 0.07), (-0.05, -0.022, D67 + 0.03), 0.012),
 )
+# The moving fingers (the simulator's hand, and the published URDF's finger links): a hinge at the palm on link 7
+# at (x, y, FINGER_BASE_Z) turning about (0, sign, 0), from open (0, along the description's finger capsules) to
+# FINGER_CLOSED (tips of opposing fingers meet). Finger 1 opposes fingers 2 and 3 across x, as on the j2s7s300.
+FINGER_HINGES = ((0.045, 0.0, -1.0), (-0.045, 0.022, 1.0), (-0.045, -0.022, 1.0))  # (x, y, sign)
+FINGER_BASE_Z = D67 - 0.07
+FINGER_LENGTH = 0.10
+FINGER_RADIUS = 0.009  # thinner than the planner's 12 mm capsules: the planner's envelope stays conservative
+FINGER_CLOSED = 0.5  # rad
+
+
+FINGER_GEAR = FINGER_CLOSED / FINGER_JOINT_CLOSED  # hinge angle per joint-state angle (both linear in turns)
+
+
+def finger_tip(k: int) -> tuple[float, float, float]:
+    """Tip of finger k in its own (hinge) frame: FINGER_LENGTH along z, bent 5 mm towards the outside."""
+    return (0.005 if FINGER_HINGES[k][0] > 0 else -0.005, 0.0, FINGER_LENGTH)
+
+
 # Pairs that touch by construction (adjacent links) and are never checked for self-collision.
 ADJACENT = frozenset(
     frozenset(p) for p in [("base", "shoulder"), ("shoulder", "upper_arm"), ("upper_arm", "forearm"),
@@ -138,8 +163,10 @@ def _fmt(v) -> str:
     return " ".join(f"{float(x):.10g}" for x in v)
 
 
-def urdf() -> str:
-    """URDF of the arm for Pinocchio: revolute joints in Q with the limits of Tables 6 and 7, capsule geometry."""
+def urdf(hand: bool = False) -> str:
+    """URDF of the arm for Pinocchio: revolute joints in Q with the limits of Tables 6 and 7, capsule geometry.
+    hand=True adds the moving fingers (what /robot_description publishes, for robot_state_publisher and RViz: the
+    joints of the driver's joint states); the planner's model has only the 7 arm joints and the finger capsules."""
     origins = joint_origins()
     parts = [f'<robot name="{PREFIX}">', f'  <link name="{BASE_LINK}">{_inertial(BASE_MASS, 0.05)}'
              + _capsules_urdf(BASE_LINK) + "</link>"]
@@ -158,8 +185,43 @@ def urdf() -> str:
     parts.append(f'  <joint name="{PREFIX}_joint_end_effector" type="fixed"><parent link="{parent}"/>'
                  f'<child link="{EE_LINK}"/><origin xyz="{_fmt(o[:3, 3])}" rpy="{_fmt(_rpy(o[:3, :3]))}"/></joint>')
     parts.append(f'  <link name="{EE_LINK}"/>')
+    if hand:
+        parts += _fingers_urdf(parent)
     parts.append("</robot>")
     return "\n".join(parts)
+
+
+def _fingers_urdf(palm: str) -> list[str]:
+    """Finger k in kinova-ros's joint convention: `joint_finger_k` (the joint states' angle, 0 .. 1.396 rad at 6800
+    turns: relocation_common.kinova) turns a drive frame at the hinge; a mimic joint `joint_finger_k_gear`
+    (multiplier FINGER_GEAR - 1) turns the capsule link on it, so the finger turns FINGER_GEAR x the joint angle,
+    the simulated hinge's 0 .. FINGER_CLOSED. A tip joint (kinova-ros's joint_finger_tip_k, published at 0) sits at
+    the finger's end."""
+    out = []
+    for k, (x, y, sign) in enumerate(FINGER_HINGES):
+        tip = finger_tip(k)
+        c = Capsule(FINGER_LINK_NAMES[k], FINGER_LINK_NAMES[k], (0.0, 0.0, 0.0), tip, FINGER_RADIUS)
+        xyz, rpy, length = _segment_pose(c)
+        axis = f'<axis xyz="0 {sign:g} 0"/>'
+        out.append(f'  <joint name="{FINGER_JOINT_NAMES[k]}" type="revolute"><parent link="{palm}"/>'
+                   f'<child link="{FINGER_DRIVE_LINK_NAMES[k]}"/>'
+                   f'<origin xyz="{x:g} {y:g} {FINGER_BASE_Z:.10g}" rpy="0 0 0"/>{axis}'
+                   f'<limit lower="0" upper="{FINGER_JOINT_CLOSED:.10g}" effort="2" velocity="1"/></joint>')
+        out.append(f'  <link name="{FINGER_DRIVE_LINK_NAMES[k]}"/>')
+        out.append(f'  <joint name="{FINGER_GEAR_JOINT_NAMES[k]}" type="revolute"><parent '
+                   f'link="{FINGER_DRIVE_LINK_NAMES[k]}"/><child link="{FINGER_LINK_NAMES[k]}"/>'
+                   f'<origin xyz="0 0 0" rpy="0 0 0"/>{axis}<limit lower="-2" upper="2" effort="2" velocity="1"/>'
+                   f'<mimic joint="{FINGER_JOINT_NAMES[k]}" multiplier="{FINGER_GEAR - 1:.10g}" offset="0"/></joint>')
+        geometry = (f'<origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>'
+                    f'<geometry><cylinder radius="{FINGER_RADIUS:g}" length="{length:.10g}"/></geometry>')
+        out.append(f'  <link name="{FINGER_LINK_NAMES[k]}">{_inertial(0.03, FINGER_LENGTH / 2)}'
+                   f'<visual>{geometry}</visual><collision>{geometry}</collision></link>')
+        out.append(f'  <joint name="{FINGER_TIP_JOINT_NAMES[k]}" type="revolute">'
+                   f'<parent link="{FINGER_LINK_NAMES[k]}"/><child link="{FINGER_TIP_LINK_NAMES[k]}"/>'
+                   f'<origin xyz="{_fmt(tip)}" rpy="0 0 0"/>{axis}'
+                   '<limit lower="0" upper="2" effort="1" velocity="1"/></joint>')
+        out.append(f'  <link name="{FINGER_TIP_LINK_NAMES[k]}"/>')
+    return out
 
 
 def _inertial(mass: float, zc: float) -> str:

@@ -294,8 +294,8 @@ def _tf(m) -> np.ndarray:
 
 
 def test_robot_description_and_tf_as_robot_state_publisher(surface):
-    """Every URDF link has a frame; each joint's transform is the URDF's origin and axis at the joint state's angle;
-    the camera's optical frame is static; every bottle has a frame."""
+    """Every URDF link has a frame (the fingers' too); each joint's transform is the URDF's origin and axis at the
+    joint state's angle; the camera's optical frame is static; every bottle has a frame."""
     s = surface
     _home(s)
     s.c.stream(s.vel, s.command(V_DEG), 0.3)
@@ -317,7 +317,12 @@ def test_robot_description_and_tf_as_robot_state_publisher(surface):
                 got = static[child]
             else:
                 axis = [float(x) for x in joint.find("axis").get("xyz").split()]
-                t = t @ _axis_rotation(axis, js.position[js.name.index(joint.get("name"))])
+                name, mimic = joint.get("name"), joint.find("mimic")
+                if mimic is not None:  # the fingers' gear joints, as robot_state_publisher computes them
+                    angle = float(mimic.get("multiplier")) * js.position[js.name.index(mimic.get("joint"))]
+                else:  # the finger tips: at 0 where the surface publishes no state for them
+                    angle = js.position[js.name.index(name)] if name in js.name else 0.0
+                t = t @ _axis_rotation(axis, angle)
                 got = tf[child]
             if got.header.frame_id != parent or not np.allclose(_tf(got), t, atol=1e-6):
                 bad.append(joint.get("name"))
@@ -325,7 +330,7 @@ def test_robot_description_and_tf_as_robot_state_publisher(surface):
 
     # the arm comes to rest: then the newest /tf and the newest joint state describe the same instant
     s.tf.wait(lambda m: not mismatches(m), timeout=10)
-    assert len(list(urdf.iter("joint"))) == 8  # 7 revolute joints and the tool frame
+    assert len(list(urdf.iter("joint"))) == 17  # 7 revolute joints, the tool frame, 3 fingers, their gears and tips
     tf = {m.child_frame_id: m for m in s.tf.latest().transforms}
     assert static["camera_color_optical_frame"].header.frame_id == root
     bottles = [f for f in tf if f.startswith("bottle_")]

@@ -256,3 +256,44 @@ def test_every_bottle_is_visible_from_the_camera_with_the_arm_at_home(cam, min_p
     geoms = np.where(seg[:, :, 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[:, :, 0], -1)
     for b in SCENARIO.objects:
         assert (geoms == sim.model.geom(f"{b.id}_geom").id).sum() >= min_pixels, b.id
+
+
+@pytest.mark.parametrize("finger_q", [(0.0, 0.0, 0.0), (0.1, 0.3, 0.45), (0.5, 0.5, 0.5)])
+def test_the_published_urdf_fingers_are_the_simulated_ones(fresh, finger_q):
+    """urdf(hand=True) is what /robot_description publishes; frames.finger_transforms is the driver's
+    robot_state_publisher for it. The finger links sit on MuJoCo's finger bodies, their tips at the ends of MuJoCo's
+    finger capsules, and Pinocchio reading that URDF at the joint states' finger angles (Kinova's, 1.396 rad
+    closed; the mimic gear joints at their multiplier) puts them there too (away from home, open to closed)."""
+    from jaco2_sim_driver import frames, kinova
+    from relocation_common.kinova import turns_to_joint
+    from stpik_motion_planner.robot_description import (
+        FINGER_DRIVE_LINK_NAMES, FINGER_GEAR, FINGER_GEAR_JOINT_NAMES, FINGER_JOINT_NAMES, FINGER_LINK_NAMES,
+        FINGER_TIP_LINK_NAMES, JOINT_NAMES, LINK_NAMES)
+
+    m, d = fresh.model, fresh.data
+    q = Q_HOME + np.array([0.3, -0.2, 0.4, -0.3, 0.5, 0.2, -0.6])
+    for name, v in zip(JOINT_NAMES + FINGER_JOINT_NAMES, tuple(q) + finger_q):
+        d.qpos[m.joint(name).qposadr[0]] = v
+    mujoco.mj_kinematics(m, d)
+    hand = frames.chain(q)[LINK_NAMES[-1]]
+    published = {child: t for _, child, t in frames.finger_transforms(finger_q)}
+    model = pin.buildModelFromXML(urdf(hand=True))
+    data = model.createData()
+    cfg = pin.neutral(model)
+    joint_states = turns_to_joint(kinova.sim_to_turns(finger_q))  # what the driver publishes for the fingers
+    assert np.allclose(joint_states * FINGER_GEAR, finger_q)
+    gears = tuple((FINGER_GEAR - 1) * joint_states)  # the URDF's mimic joints, as robot_state_publisher sets them
+    names = JOINT_NAMES + FINGER_JOINT_NAMES + FINGER_GEAR_JOINT_NAMES
+    for name, v in zip(names, tuple(q) + tuple(joint_states) + gears):
+        cfg[model.joints[model.getJointId(name)].idx_q] = v
+    pin.framesForwardKinematics(model, data, cfg)
+    for k, link in enumerate(FINGER_LINK_NAMES):
+        body = m.body(link).id
+        finger = hand @ published[FINGER_DRIVE_LINK_NAMES[k]] @ published[link]
+        assert np.allclose(finger[:3, 3], d.xpos[body], atol=1e-9)
+        assert np.allclose(finger[:3, :3], d.xmat[body].reshape(3, 3), atol=1e-9)
+        geom = m.geom(f"finger_sim_{k + 1}").id  # capsule from the hinge to the tip: centre halfway
+        tip = (finger @ published[FINGER_TIP_LINK_NAMES[k]])[:3, 3]
+        assert np.allclose(tip, 2 * d.geom_xpos[geom] - d.xpos[body], atol=1e-9)
+        assert np.allclose(data.oMf[model.getFrameId(link)].homogeneous, finger, atol=1e-9)
+        assert np.allclose(data.oMf[model.getFrameId(FINGER_TIP_LINK_NAMES[k])].translation, tip, atol=1e-9)
