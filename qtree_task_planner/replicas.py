@@ -2,8 +2,9 @@
 
 ROS-free: each replica is an oracle (the node's ServiceOracle, one per PlanFeasibility service) with `name`,
 `last_ok` and `ready(timeout)`. A replica raising PlannerUnavailable (dead, wedged, or its safety net ran out) is
-*down*: its question goes to another replica, and it is asked again only after `retry_after` s or when every other
-replica is down too. PlannerUnavailable leaves this oracle only when no replica could answer a question, so the
+*down*: its question goes to another replica, and it is asked again only after a rest, or when every other replica
+is down too. The rest doubles with each failure in a row (`retry_after`, 2x, 4x ... at most `max_rest` s): a
+SIGKILLed planner's service stays in the DDS graph for some 20 s and each try costs a full query timeout. PlannerUnavailable leaves this oracle only when no replica could answer a question, so the
 task planner's outage handling (outage.until_available) sees an outage only when all of them are gone.
 
 One question at a time (`feasibility`, `lane_blockers`) goes to the first replica that is up, in the given order:
@@ -21,11 +22,12 @@ from .outage import PlannerUnavailable
 
 
 class ReplicaOracle:
-    def __init__(self, replicas: list, retry_after: float = 5.0, clock=time.monotonic) -> None:
+    def __init__(self, replicas: list, retry_after: float = 5.0, max_rest: float = 60.0, clock=time.monotonic) -> None:
         if not replicas:
             raise ValueError("ReplicaOracle needs at least one replica")
-        self.replicas, self.retry_after, self.clock = list(replicas), retry_after, clock
+        self.replicas, self.retry_after, self.max_rest, self.clock = list(replicas), retry_after, max_rest, clock
         self.down: dict[int, float] = {}  # replica index -> when it last failed
+        self.failures: dict[int, int] = {}  # replica index -> failures in a row
         self.answers = [0] * len(self.replicas)  # answers per replica
         self._lock = threading.Lock()
 
@@ -51,7 +53,10 @@ class ReplicaOracle:
 
     def _usable(self) -> list[int]:
         now = self.clock()
-        return [i for i in range(len(self.replicas)) if now - self.down.get(i, -1e18) >= self.retry_after]
+        return [i for i in range(len(self.replicas)) if i not in self.down or now - self.down[i] >= self._rest(i)]
+
+    def _rest(self, i: int) -> float:
+        return min(self.max_rest, self.retry_after * 2 ** (self.failures.get(i, 1) - 1))
 
     def _order(self) -> list[int]:
         """Replicas up first (in order), then the ones down, longest down first."""
@@ -61,10 +66,12 @@ class ReplicaOracle:
     def _failed(self, i: int) -> None:
         with self._lock:
             self.down[i] = self.clock()
+            self.failures[i] = self.failures.get(i, 0) + 1
 
     def _answered(self, i: int) -> None:
         with self._lock:
             self.down.pop(i, None)
+            self.failures.pop(i, None)
             self.answers[i] += 1
 
     def summary(self) -> str:

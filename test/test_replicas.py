@@ -122,6 +122,22 @@ def test_a_replica_down_is_asked_again_after_retry_after():
     assert len(reps[0].asked) == 2 and 0 not in oracle.down
 
 
+def test_a_replica_that_keeps_failing_rests_longer_each_time():
+    truth, ids = relation_oracle()
+    now = [0.0]
+    reps = [Replica(truth, "a", dies_after=0), Replica(truth, "b")]
+    oracle = ReplicaOracle(reps, retry_after=5.0, max_rest=12.0, clock=lambda: now[0])
+    tries = []
+    for t in range(40):  # one question a second, a stays dead
+        now[0] = float(t)
+        calls = oracle.answers[1]
+        oracle.feasibility(*questions(ids, 1, seed=t)[0])
+        assert oracle.answers[1] == calls + 1
+        if oracle.failures[0] > len(tries):
+            tries.append(t)
+    assert tries == [0, 5, 15, 27, 39]  # rests 5, 10, then max_rest 12
+
+
 def test_all_replicas_gone_raise_planner_unavailable_and_keep_what_came_back():
     truth, ids = relation_oracle()
     reps = [Replica(truth, "a", 0.002, dies_after=4), Replica(truth, "b", 0.002, dies_after=5)]
