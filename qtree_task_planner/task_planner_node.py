@@ -367,6 +367,10 @@ class TaskPlannerNode(Node):
                           stop=lambda: fb.phase == "exact optimum" and (goal_handle.is_cancel_requested
                                                                        or not rclpy.ok())) for c in self._feas])
         oracle = CachedOracle(service)
+        missing = [c.srv_name for c in self._feas if not c.service_is_ready()]
+        if missing:  # asked anyway (it may be starting); the others answer meanwhile
+            self.get_logger().warning(f"feasibility service(s) not available at the start of the goal: "
+                                      f"{', '.join(missing)} (replicas: {len(self._feas)})")
         resume = self._resume_point(problem, params, oracle)
         self._memory_ckpt = resume
 
