@@ -34,7 +34,8 @@ from .grasp import (Grasp, WorkspaceError, carry_heights, check_pose, exit_pose,
                     place_poses, side_grasp)
 from .blockers import answer_blockers, lane_blockers
 from .kinematics import Kinematics
-from .rrt import CartesianRRT, JointRRT, SafetyNetTimeout, seed_ompl  # noqa: F401 (SafetyNetTimeout: for callers)
+from .budget import SafetyNetTimeout  # noqa: F401 (for callers)
+from .rrt import CartesianRRT, JointRRT, seed_ompl
 from relocation_common.scenario import Scenario, UnknownObjectError
 from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory

@@ -25,19 +25,10 @@ import ompl.base as ob
 import ompl.geometric as og
 import ompl.util as ou
 
+from .budget import check_deadline
+
 YAW_SCALE = 0.25  # metres of OMPL distance per radian of yaw
 _seeded: list[int] = []
-
-
-class SafetyNetTimeout(RuntimeError):
-    """The wall-clock safety net ran out before the work budget was spent: the query has no answer (it is not
-    "unfeasible"; ask again, on a less loaded machine or with a longer timeout)."""
-
-
-def check_deadline(deadline: float, what: str) -> None:
-    """Raise SafetyNetTimeout once time.perf_counter() is past `deadline`."""
-    if time.perf_counter() > deadline:
-        raise SafetyNetTimeout(f"wall-clock safety net reached during {what}, before the work budget was spent")
 
 
 def seed_ompl(seed: int) -> int:

@@ -27,7 +27,7 @@ import pinocchio as pin
 from . import robot_description as rd
 from .collision import PENETRATION, ArmGeometry, ObstacleSet
 from .grasp import side_rotation
-from .rrt import check_deadline
+from .budget import check_deadline
 
 
 @dataclass
