@@ -22,6 +22,8 @@ from .outage import PlannerUnavailable
 
 
 class ReplicaOracle:
+    """FeasibilityOracle, LaneOracle and BatchOracle over the replicas (the module docstring)."""
+
     def __init__(self, replicas: list, retry_after: float = 5.0, max_rest: float = 60.0, clock=time.monotonic) -> None:
         if not replicas:
             raise ValueError("ReplicaOracle needs at least one replica")
@@ -61,7 +63,9 @@ class ReplicaOracle:
     def _order(self) -> list[int]:
         """Replicas up first (in order), then the ones down, longest down first."""
         up = self._usable()
-        return up + sorted((i for i in self.down if i not in up), key=lambda i: self.down[i])
+        with self._lock:
+            down = dict(self.down)
+        return up + sorted((i for i in down if i not in up), key=lambda i: down[i])
 
     def _failed(self, i: int) -> None:
         with self._lock:
