@@ -62,7 +62,8 @@ def make_all(params, data_dir, n_random: int = 10) -> None:
 
 
 def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float, out_dir=None,
-               seed0: int = 0, write_best: bool = False, resume: bool = False, strict: bool = False) -> bool:
+               seed0: int = 0, write_best: bool = False, resume: bool = False, strict: bool = False,
+               temperature: float = 0.0) -> bool:
     """Search a scene of the paper's size with n obstacles (paper_scenes.search) and write it with its complete
     feasibility table when one matches; the best candidate goes to out/paper_search/ either way. `strict`: the
     climb keeps only valid scenes (one optimum, every bottle visible), and --write-best writes only a valid one."""
@@ -85,8 +86,10 @@ def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float,
     base = yaml.safe_load(smaller.read_text()) if smaller is not None and smaller.exists() else None
     best, data, _ = paper_scenes.search(n, name, params, work, range(seed0, seed0 + seeds), steps, log,
                                         time.time() + 60 * minutes, base, _shipped(out_dir, name) if resume else None,
-                                        strict=strict, climb_seed=seed0 if resume else None)
-    (logdir / f"best_{name}.json").write_text(json.dumps(best.data if best else None))
+                                        strict=strict, climb_seed=seed0 if resume else None,
+                                        temperature=temperature, on_best=lambda c: (logdir / f"best_{name}.json")
+                                        .write_text(json.dumps(c.weighted or c.data)))
+    (logdir / f"best_{name}.json").write_text(json.dumps((best.weighted or best.data) if best else None))
     if data is None:
         log(f"{name}: no match; best {paper_scenes._desc(best) if best else 'none'}")
         if not write_best or best is None or best.size is None or (strict and not best.valid):
@@ -130,6 +133,8 @@ def main(argv=None) -> int:
     ap.add_argument("--resume", action="store_true", help="climb on from the shipped scene of that size")
     ap.add_argument("--strict", action="store_true",
                     help="climb only through valid scenes (one optimum, every bottle visible)")
+    ap.add_argument("--temperature", type=float, default=0.0,
+                    help="annealing: keep a step worse by d with probability exp(-d / T) (0: plain climb)")
     ap.add_argument("--seed0", type=int, default=0, help="first layout seed (with --resume: the climb's seed)")
     ap.add_argument("--minutes", type=float, default=15.0)
     ap.add_argument("--data", default=None, help="feasibility cache directory (default data/feasibility)")
@@ -137,7 +142,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     from relocation_common.paths import data_dir
     ok = make_paper(a.n, planner_params(), a.data or data_dir() / "feasibility", a.seeds, a.steps, a.minutes,
-                    a.scenarios, a.seed0, a.write_best, a.resume, a.strict)
+                    a.scenarios, a.seed0, a.write_best, a.resume, a.strict, a.temperature)
     return 0 if ok else 1
 
 

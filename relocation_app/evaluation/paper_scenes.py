@@ -168,11 +168,15 @@ def _proposal(seed: int, n: int, name: str, goal: tuple[int, int], params, slack
 
 
 def search(n: int, name: str, params, directory, seeds, steps: int, log=print, deadline: float = math.inf,
-           base: dict | None = None, start: dict | None = None, strict: bool = False, climb_seed: int | None = None):
+           base: dict | None = None, start: dict | None = None, strict: bool = False, climb_seed: int | None = None,
+           temperature: float = 0.0, on_best=None):
     """Random clutter candidates (`seeds`), then `steps` of hill climbing (perturb, keep if not worse) from the
     best; candidates that match the goal (edges within WITHIN x, leaves exact) are checked for visibility and
     one optimum. `strict`: the climb keeps only valid scenes (weights with one optimum, every bottle visible,
-    the optimum executable: `valid`); a start that is not valid is left for the first valid step within INVALID_SLACK of its score.
+    the optimum executable: `valid`); a start that is not valid is left for the first valid step within
+    INVALID_SLACK of its score. `temperature` > 0: a worse step is also kept with probability
+    exp(-(score increase) / temperature) (simulated annealing; one bottle at a time cannot otherwise leave a
+    local optimum), the best scene seen is returned. `on_best(candidate)` is called on each new best.
     Returns (best candidate, its weights-fixed data or None, missing bottles); with `strict` the candidate is
     valid unless no valid scene was reached (then `best.valid` is False)."""
     import time
@@ -200,6 +204,7 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
             break
     rng = random.Random(n if climb_seed is None else climb_seed)
     tried_visible = set()
+    cur, cur_s = best, best_s  # the climb's state (= best unless annealing kept a worse step)
     for k in range(steps):
         if best is not None and best.ok(goal) and id(best) not in tried_visible:
             tried_visible.add(id(best))
@@ -207,21 +212,29 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
             if done is not None:
                 return best, done, []
             best_s += 0.5  # invisible or no single optimum: let the climb move on
-        if time.time() > deadline or best is None:
+            cur_s = min(cur_s, best_s)
+        if time.time() > deadline or cur is None:
             break
-        d = perturb(best.data, rng)
-        if d is None or score(Candidate(d, screen_size(d, params), 0, 0.0, None, {}), goal) > best_s + 0.5:
+        d = perturb(cur.data, rng)
+        slack = 0.5 + 4 * temperature
+        if d is None or score(Candidate(d, screen_size(d, params), 0, 0.0, None, {}), goal) > cur_s + slack:
             continue  # the lane screen says it is far off: no planner calls
         c = evaluate(d, params, directory, goal)
         s = score(c, goal)
-        if s <= best_s and strict:
+        keep = s <= cur_s or (temperature > 0 and math.isfinite(s)
+                              and rng.random() < math.exp(-(s - cur_s) / temperature))
+        if keep and strict:
             c.valid = valid(c, params, log)
-            if not c.valid:
-                continue
+            keep = c.valid
+        if not keep:
+            continue
+        if s < cur_s - 1e-9 or s > cur_s + 1e-9:
+            log(f"step {k}: {_desc(c)} score {s:.2f}" + (" (best)" if s < best_s else ""))
+        cur, cur_s = c, s
         if s <= best_s:
-            if s < best_s:
-                log(f"step {k}: {_desc(c)} score {s:.2f}")
             best, best_s = c, s
+            if on_best is not None:
+                on_best(c)
     return best, None, None
 
 
