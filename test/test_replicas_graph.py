@@ -1,10 +1,10 @@
 """Planner replicas in the real graph (issue 15): two motion planner processes (Graph.start_planners) and a task
 planner with `replicas: 2`; the first planner is killed (SIGKILL) during training and the replica answers the rest,
 so the goal ends with a learned sequence instead of aborting after planner_wait."""
-import os
 import re
 import signal
 import time
+from pathlib import Path
 
 import pytest
 
@@ -103,3 +103,20 @@ def test_qtree_solve_through_two_replicas_finds_the_planners_optimum(tmp_path, c
     capsys.readouterr()
     assert main(["solve", "--scenario", "scenario1_5", "--oracle", "replicas", "--replicas", "0"]) == 2
     assert capsys.readouterr().err.strip() == "qtree: error: --replicas must be in 1..16, got 0"
+
+
+def test_the_example_script_finds_the_optimum_over_two_running_planners(tmp_path):
+    """scripts/example_exact_over_replicas.py against two planner processes started as its docstring says."""
+    import subprocess
+    import sys
+
+    from relocation_common.paths import default_scenario
+
+    with Graph(tmp_path) as g:
+        g.start_planners(2)
+        script = Path(__file__).resolve().parent.parent / "scripts" / "example_exact_over_replicas.py"
+        out = subprocess.run([sys.executable, str(script), "--scenario", str(default_scenario()), "--replicas", "2"],
+                             env=g.env, capture_output=True, text=True, timeout=180)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "optimum o2 -> o3 -> o6 -> T (weight 1.14" in out.stdout, out.stdout
+    assert re.search(r"/replica_1/motion_planner/plan_feasibility: [1-9]\d* answers", out.stdout), out.stdout
