@@ -1,6 +1,7 @@
-"""Planner replicas in the real graph (issue 15): two motion planner processes (Graph.start_planners) and a task
-planner with `replicas: 2`; the first planner is killed (SIGKILL) during training and the replica answers the rest,
-so the goal ends with a learned sequence instead of aborting after planner_wait."""
+"""Planner replicas in the real graph (issue 15), each test with real motion planner processes
+(Graph.start_planners): a task planner with `replicas: 2` whose first planner is SIGKILLed during training (the
+replica answers the rest, the goal ends with a learned sequence instead of aborting after planner_wait); a table
+fill, `qtree --oracle replicas`, and the example script, each through two planners."""
 import re
 import signal
 import time
