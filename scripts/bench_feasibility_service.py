@@ -22,11 +22,9 @@ processes and of the client (utime + stime: what predicts the throughput on more
 from __future__ import annotations
 
 import argparse
-import collections
 import contextlib
 import os
 import random
-import subprocess
 import sys
 import tempfile
 import threading
@@ -39,8 +37,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench_motion_planner import export_package  # noqa: E402  (scripts/ is sys.path[0])
-from relocation_app.graph import Graph, die_with_parent, wait_for_interfaces  # noqa: E402
-from relocation_common.paths import config_file, default_scenario, resolve_scenario  # noqa: E402
+from relocation_app.graph import Graph, wait_for_interfaces  # noqa: E402
+from relocation_common.paths import default_scenario, resolve_scenario  # noqa: E402
 from relocation_common.scenario import load_scenario  # noqa: E402
 
 
