@@ -32,6 +32,15 @@ def arm_transforms(q) -> list[tuple[str, str, np.ndarray]]:
     return [(PARENTS[i], LINK_NAMES[i], _ORIGINS[i] @ _rz(Q_SIGN[i] * float(q[i]))) for i in range(N_JOINTS)]
 
 
+def _tip(k: int) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = finger_tip(k)
+    return m
+
+
+_TIPS = tuple(_tip(k) for k in range(len(FINGER_HINGES)))  # the tip joints never move (kinova-ros: always 0)
+
+
 def _ry(a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
     m = np.eye(4)
@@ -49,11 +58,9 @@ def finger_transforms(finger_q) -> list[tuple[str, str, np.ndarray]]:
         joint = float(finger_q[k]) / FINGER_GEAR
         drive = _ry(sign * joint)
         drive[:3, 3] = (x, y, FINGER_BASE_Z)
-        tip = np.eye(4)
-        tip[:3, 3] = finger_tip(k)
         out += [(LINK_NAMES[-1], FINGER_DRIVE_LINK_NAMES[k], drive),
                 (FINGER_DRIVE_LINK_NAMES[k], FINGER_LINK_NAMES[k], _ry(sign * (FINGER_GEAR - 1) * joint)),
-                (FINGER_LINK_NAMES[k], FINGER_TIP_LINK_NAMES[k], tip)]
+                (FINGER_LINK_NAMES[k], FINGER_TIP_LINK_NAMES[k], _TIPS[k].copy())]
     return out
 
 

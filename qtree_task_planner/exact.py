@@ -85,9 +85,8 @@ def _ask_next(queue, question, oracle, known, settled, target) -> int:
     """Ask `question` and, for an oracle with several questions in flight (planner replicas, issue 15), the
     next cheapest ones still queued whose sets are not settled, together; the answers go to `known`. Returns the
     number of questions asked (1 for a plain oracle: the search asks exactly what it pops)."""
-    batch = [question]
-    popped = []
-    while queue and len(batch) < in_flight(oracle):
+    batch, popped, k = [question], [], in_flight(oracle)
+    while queue and len(batch) < k:
         entry = heapq.heappop(queue)
         popped.append(entry)
         _, _, parent, _, obj = entry

@@ -29,10 +29,11 @@ from rclpy.qos import QoSProfile
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
 from qtree_task_planner.replicas import ReplicaOracle
-from relocation_app.graph import wait_for_interfaces
 from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
 from relocation_common.feasibility import Label, replica_services
 from relocation_common.node import call
+
+from .graph import wait_for_interfaces
 
 FEASIBILITY = "/motion_planner/plan_feasibility"
 TRAIN = "/task_planner/train"
