@@ -1,9 +1,10 @@
 """PlanFeasibility under a burst (issue 18): every request of a burst of concurrent requests is answered.
 
 Old code: the service kept rclpy's default depth of 10; of 50 (200) concurrent requests from one client, 11 were
-answered and the rest dropped silently, their client waiting forever. A client's own request history (depth 10
-by default) also drops a burst larger than that before it leaves the process: a client that sends 200 at once
-declares a deeper queue, as RelocationClient does."""
+answered and the rest dropped silently, their client waiting forever. A client's own history (depth 10 by default)
+also drops what the client cannot take in time: requests of a burst before they leave the process, responses before
+its executor reads them (a fresh-clone CI run on a loaded machine lost 1 response of 50 this way). So every client
+here declares a deep queue, as RelocationClient does; what is tested is the server's side."""
 import threading
 import time
 
@@ -18,14 +19,13 @@ from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
 SRV = "/motion_planner/plan_feasibility"
 
 
-@pytest.mark.parametrize("burst, client_depth", [(50, None), (200, 1000)])
-def test_a_burst_of_concurrent_requests_is_answered_in_full(tmp_path, burst, client_depth):
+@pytest.mark.parametrize("burst", [50, 200])
+def test_a_burst_of_concurrent_requests_is_answered_in_full(tmp_path, burst):
     with RosGraph(tmp_path) as g:
         planner = g.start("stpik_motion_planner.motion_planner_node", params_file=REPO / "config" / "motion_planner.yaml",
                           params={"scene_topic": "/none"})
         from rclpy.qos import QoSProfile
-        qos = QoSProfile(depth=client_depth) if client_depth else None
-        cli = g.probe.node.create_client(PlanFeasibility, SRV, **({"qos_profile": qos} if qos else {}))
+        cli = g.probe.node.create_client(PlanFeasibility, SRV, qos_profile=QoSProfile(depth=1000))
         assert cli.wait_for_service(timeout_sec=60)
         ids = ["o1", "o4", "o7", "T"]  # a mix of quick unfeasible and slower feasible answers
         answered, done = [], threading.Event()
