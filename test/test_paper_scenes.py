@@ -47,3 +47,19 @@ def test_score_prefers_the_goal():
     assert paper_scenes.score(c(84, 10, False), goal) > 0.0  # no single optimum
     assert paper_scenes.score(c(100, 10), goal) < paper_scenes.score(c(84, 12), goal)
     assert c(160, 10).ok(goal) and not c(170, 10).ok(goal) and not c(84, 11).ok(goal)
+
+
+@pytest.mark.parametrize("radius", [0.025, 0.033])
+def test_free_scene_of_another_bottle_radius(radius):
+    """`make_scenes paper N --radius R`: the bottles are R apart (2R + 2 mm), the scene says R, and a column in
+    front of the target holds as many bottles as the shelf's depth allows (up to 4 of 0.025, 3 of 0.033)."""
+    longest = 0
+    for seed in range(60):
+        d = paper_scenes.free_scene(seed, 10, "t", radius)
+        assert d["defaults"]["radius"] == radius
+        pts = [o["xy"] for o in d["objects"]]
+        assert min(((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2) ** 0.5 for i, a in enumerate(pts)
+                   for b in pts[i + 1:]) >= 2 * radius + 0.0015
+        tx, ty = pts[-1]
+        longest = max(longest, sum(1 for x, y in pts[:-1] if abs(y - ty) <= 0.012 and x < tx))
+    assert longest >= (4 if radius < 0.03 else 3)

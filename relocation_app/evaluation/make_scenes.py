@@ -17,7 +17,7 @@ from relocation_common.paths import scenarios_dir
 
 import yaml
 
-from .scenarios_gen import accept, evaluate_scene, lattice_scene, write_scene
+from .scenarios_gen import RADIUS, accept, evaluate_scene, lattice_scene, write_scene
 
 PAPER_NAMES = {5: "paper1_5", 10: "paper2_10", 15: "paper3_15"}
 PAPER_HEADER = ("# Scene of the paper's size (issue 16, docs/evaluation.md \"Complete trees\"), found with the real motion\n"
@@ -63,7 +63,7 @@ def make_all(params, data_dir, n_random: int = 10) -> None:
 
 def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float, out_dir=None,
                seed0: int = 0, write_best: bool = False, resume: bool = False, strict: bool = False,
-               temperature: float = 0.0) -> bool:
+               temperature: float = 0.0, radius: float | None = None) -> bool:
     """Search a scene of the paper's size with n obstacles (paper_scenes.search) and write it with its complete
     feasibility table when one matches; the best candidate goes to out/paper_search/ either way. `strict`: the
     climb keeps only valid scenes (one optimum, every bottle visible), and --write-best writes only a valid one."""
@@ -87,7 +87,8 @@ def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float,
     best, data, _ = paper_scenes.search(n, name, params, work, range(seed0, seed0 + seeds), steps, log,
                                         time.time() + 60 * minutes, base, _shipped(out_dir, name) if resume else None,
                                         strict=strict, climb_seed=seed0 if resume else None,
-                                        temperature=temperature, on_best=lambda c: (logdir / f"best_{name}.json")
+                                        temperature=temperature, radius=radius or RADIUS,
+                                        on_best=lambda c: (logdir / f"best_{name}.json")
                                         .write_text(json.dumps(c.weighted or c.data)))
     (logdir / f"best_{name}.json").write_text(json.dumps((best.weighted or best.data) if best else None))
     if data is None:
@@ -135,6 +136,8 @@ def main(argv=None) -> int:
                     help="climb only through valid scenes (one optimum, every bottle visible)")
     ap.add_argument("--temperature", type=float, default=0.0,
                     help="annealing: keep a step worse by d with probability exp(-d / T) (0: plain climb)")
+    ap.add_argument("--radius", type=float, default=None,
+                    help="bottle radius of the proposals, m (default 0.033; 0.025 fits 5 bottles in a row)")
     ap.add_argument("--seed0", type=int, default=0, help="first layout seed (with --resume: the climb's seed)")
     ap.add_argument("--minutes", type=float, default=15.0)
     ap.add_argument("--data", default=None, help="feasibility cache directory (default data/feasibility)")
@@ -142,7 +145,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     from relocation_common.paths import data_dir
     ok = make_paper(a.n, planner_params(), a.data or data_dir() / "feasibility", a.seeds, a.steps, a.minutes,
-                    a.scenarios, a.seed0, a.write_best, a.resume, a.strict, a.temperature)
+                    a.scenarios, a.seed0, a.write_best, a.resume, a.strict, a.temperature, a.radius)
     return 0 if ok else 1
 
 

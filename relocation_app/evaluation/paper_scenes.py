@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from relocation_common.scenario import parse_scenario
 
 from . import complete_tree
-from .scenarios_gen import MAX_REACH, _scene
+from .scenarios_gen import MAX_REACH, RADIUS, _scene
 
 PAPER_TREES = {5: (84, 10), 10: (622, 20), 15: (1675, 20)}  # obstacles -> (complete-tree edges, target leaves)
 WITHIN = 2.0  # accepted factor on the edges (issue 16)
@@ -151,12 +151,12 @@ def score(c: Candidate, goal: tuple[int, int]) -> float:
 
 
 def _proposal(seed: int, n: int, name: str, goal: tuple[int, int], params, slack: float = 0.5,
-              base: dict | None = None) -> dict | None:
-    """free_scene(seed), or `base` extended to n obstacles (odd seeds, when given), if its screened tree is near
+              base: dict | None = None, radius: float = RADIUS) -> dict | None:
+    """free_scene(seed, radius), or `base` extended to n obstacles (odd seeds, when given), if its screened tree is near
     the goal (leaves within `slack`, edges within WITHIN^2 x), else None: the real planner is asked only about
     promising layouts."""
     try:
-        d = extend_scene(base, seed, n, name) if base is not None and seed % 2 else free_scene(seed, n, name)
+        d = extend_scene(base, seed, n, name) if base is not None and seed % 2 else free_scene(seed, n, name, radius)
     except RuntimeError:
         return None
     if d is None:
@@ -169,18 +169,21 @@ def _proposal(seed: int, n: int, name: str, goal: tuple[int, int], params, slack
 
 def search(n: int, name: str, params, directory, seeds, steps: int, log=print, deadline: float = math.inf,
            base: dict | None = None, start: dict | None = None, strict: bool = False, climb_seed: int | None = None,
-           temperature: float = 0.0, on_best=None):
+           temperature: float = 0.0, on_best=None, radius: float = RADIUS):
     """Random clutter candidates (`seeds`), then `steps` of hill climbing (perturb, keep if not worse) from the
     best; candidates that match the goal (edges within WITHIN x, leaves exact) are checked for visibility and
     one optimum. `strict`: the climb keeps only valid scenes (weights with one optimum, every bottle visible,
     the optimum executable: `valid`); a start that is not valid is left for the first valid step within
     INVALID_SLACK of its score. `temperature` > 0: a worse step is also kept with probability
     exp(-(score increase) / temperature) (simulated annealing; one bottle at a time cannot otherwise leave a
-    local optimum), the best scene seen is returned. `on_best(candidate)` is called on each new best.
+    local optimum), the best scene seen is returned. `on_best(candidate)` is called on each new best. `radius`:
+    of the proposals' bottles (a `base` of another radius is not extended).
     Returns (best candidate, its weights-fixed data or None, missing bottles); with `strict` the candidate is
     valid unless no valid scene was reached (then `best.valid` is False)."""
     import time
     goal = PAPER_TREES[n]
+    if base is not None and base.get("defaults", {}).get("radius", RADIUS) != radius:
+        base = None
     best, best_s = None, math.inf
     if start is not None:  # resume the climb from a scene found before
         best = evaluate(start, params, directory, goal)
@@ -193,7 +196,7 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
         seeds = ()
     climb_from = time.time() + 0.5 * (deadline - time.time())  # half the time for proposals, half for the climb
     for seed in seeds:
-        d = _proposal(seed, n, name, goal, params, base=base)
+        d = _proposal(seed, n, name, goal, params, base=base, radius=radius)
         if d is None:
             continue
         c = evaluate(d, params, directory, goal)
@@ -328,14 +331,17 @@ def screen_size(data: dict, params) -> complete_tree.TreeSize:
     return complete_tree.complete_tree(sc.obstacle_ids, sc.target_id, label_of)
 
 
-def free_scene(seed: int, n: int, name: str) -> dict:
-    """n obstacles at random non-overlapping spots in front of and beside a back-row target (no lattice)."""
+def free_scene(seed: int, n: int, name: str, radius: float = RADIUS) -> dict:
+    """n obstacles of `radius` at random non-overlapping spots in front of and beside a back-row target (no
+    lattice), possibly behind a column straight in front of the target: a removal chain of as many bottles as
+    the shelf's depth holds (3 of radius 0.033, 4 of 0.025)."""
     rng = random.Random(seed)
     tx, ty = rng.uniform(0.87, 0.91), rng.uniform(-0.1, 0.1)
     spread = rng.uniform(min(0.12 + 0.012 * (n - 5), 0.28), 0.33)  # room for n bottles
     pts: list[tuple[float, float]] = [(tx, ty)]
-    for k in range(rng.choice((0, 1, 2, 3))):  # a column straight in front of the target: a removal chain
-        pts.append((round(pts[-1][0] - rng.uniform(0.072, 0.085), 3), round(ty + rng.uniform(-0.01, 0.01), 3)))
+    pitch = (2 * radius + 0.006, 2 * radius + 0.019)
+    for k in range(rng.randint(0, int((0.89 - 0.655) / pitch[0]))):  # the column in front of the target
+        pts.append((round(pts[-1][0] - rng.uniform(*pitch), 3), round(ty + rng.uniform(-0.01, 0.01), 3)))
     if pts[-1][0] < 0.655:
         pts.pop()
     for _ in range(20000):
@@ -344,11 +350,11 @@ def free_scene(seed: int, n: int, name: str) -> dict:
         x, y = rng.uniform(0.655, tx + 0.02), ty + rng.uniform(-spread, spread)
         if abs(y) > 0.33 or math.hypot(x, y) > MAX_REACH:
             continue
-        if all(math.hypot(x - a, y - b) >= 0.068 for a, b in pts):
+        if all(math.hypot(x - a, y - b) >= 2 * radius + 0.002 for a, b in pts):
             pts.append((round(x, 3), round(y, 3)))
     if len(pts) < n + 1:
         raise RuntimeError(f"seed {seed}: cannot place {n} obstacles")
-    return _scene(rng, seed, name, pts[0], pts[1:])
+    return _scene(rng, seed, name, pts[0], pts[1:], radius)
 
 
 def extend_scene(base: dict, seed: int, n: int, name: str) -> dict | None:
@@ -359,12 +365,13 @@ def extend_scene(base: dict, seed: int, n: int, name: str) -> dict | None:
     d = copy.deepcopy(base)
     d["name"] = name
     pts = [tuple(o["xy"]) for o in d["objects"]]
+    gap = 2 * d.get("defaults", {}).get("radius", RADIUS) + 0.002
     k = sum(1 for o in d["objects"] if o["id"] != d["target"])
     for _ in range(20000):
         if k == n:
             break
         x, y = round(rng.uniform(0.655, 0.93), 3), round(rng.uniform(-0.33, 0.33), 3)
-        if math.hypot(x, y) <= MAX_REACH and all(math.hypot(x - a, y - b) >= 0.068 for a, b in pts):
+        if math.hypot(x, y) <= MAX_REACH and all(math.hypot(x - a, y - b) >= gap for a, b in pts):
             k += 1
             pts.append((x, y))
             d["objects"].insert(-1, {"id": f"o{k}", "weight": round(rng.uniform(0.05, 0.95), 2), "xy": [x, y]})

@@ -49,7 +49,7 @@ def lattice_scene(seed: int, n: int, name: str, spread: float = 0.3, jitter: flo
     return _scene(rng, seed, name, (tx + rng.uniform(-jitter, jitter), ty), pts)
 
 
-def _scene(rng, seed, name, target, pts) -> dict:
+def _scene(rng, seed, name, target, pts, radius: float = RADIUS) -> dict:
     tx, ty = target
     obstacles = sorted(pts, key=lambda p: (round(p[0], 2), p[1]))
     objects = [{"id": f"o{k + 1}", "weight": round(rng.uniform(0.05, 0.95), 2), "xy": [round(x, 3), round(y, 3)]}
@@ -57,7 +57,7 @@ def _scene(rng, seed, name, target, pts) -> dict:
     objects.append({"id": "T", "xy": [round(tx, 3), round(ty, 3)]})
     n = len(pts)
     return {"name": name, "description": f"Generated (seed {seed}): {n} obstacles, target T blocked.",
-            "shelf": dict(SHELF), "defaults": {"radius": RADIUS, "height": 0.16}, "marker": dict(MARKER),
+            "shelf": dict(SHELF), "defaults": {"radius": radius, "height": 0.16}, "marker": dict(MARKER),
             "target": "T", "objects": objects, "slots": SLOTS12 if n + 1 <= len(SLOTS12) else "auto"}
 
 
