@@ -63,3 +63,11 @@ def test_free_scene_of_another_bottle_radius(radius):
         tx, ty = pts[-1]
         longest = max(longest, sum(1 for x, y in pts[:-1] if abs(y - ty) <= 0.012 and x < tx))
     assert longest >= (4 if radius < 0.03 else 3)
+
+
+def test_resume_with_another_radius_keeps_the_layout():
+    """`make_scenes paper 15 --resume --radius 0.025`: the climb starts from the shipped layout, smaller bottles."""
+    from relocation_app.evaluation.make_scenes import _shipped
+    d = _shipped(None, SHIPPED[-1], 0.025)
+    assert d["defaults"]["radius"] == 0.025 and d["description"] == ""
+    assert [o["xy"] for o in d["objects"]] == [o["xy"] for o in _shipped(None, SHIPPED[-1])["objects"]]

@@ -85,7 +85,8 @@ def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float,
     smaller = Path(out_dir or SCEN) / f"{PAPER_NAMES[n - 5]}.yaml" if n > 5 else None
     base = yaml.safe_load(smaller.read_text()) if smaller is not None and smaller.exists() else None
     best, data, _ = paper_scenes.search(n, name, params, work, range(seed0, seed0 + seeds), steps, log,
-                                        time.time() + 60 * minutes, base, _shipped(out_dir, name) if resume else None,
+                                        time.time() + 60 * minutes, base,
+                                        _shipped(out_dir, name, radius) if resume else None,
                                         strict=strict, climb_seed=seed0 if resume else None,
                                         temperature=temperature, radius=radius or RADIUS,
                                         on_best=lambda c: (logdir / f"best_{name}.json")
@@ -114,9 +115,12 @@ def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float,
     return True
 
 
-def _shipped(out_dir, name: str) -> dict:
+def _shipped(out_dir, name: str, radius: float | None = None) -> dict:
+    """The shipped scene `name`, its bottles of `radius` when given (the layout is kept: smaller bottles fit)."""
     d = yaml.safe_load((Path(out_dir or SCEN) / f"{name}.yaml").read_text())
     d["description"] = ""
+    if radius:
+        d["defaults"]["radius"] = radius
     return d
 
 
