@@ -83,9 +83,24 @@ def test_the_optimum_of_each_paper_scene_table_touches_nothing(name):
     oracle = PlannerOracle(scenario, planner_params(), table)
     result = solve(scenario, oracle)
     assert result.found and oracle.real_calls == 0, name  # the table is complete
-    rep = check_sequence(scenario, planner_for(scenario), result.sequence)
+    planner = planner_for(scenario)
+    rep = check_sequence(scenario, planner, result.sequence)
     assert rep.segments == 4 * len(result.sequence)
     assert_clean(rep, f"{name} table optimum {'-'.join(result.sequence)}")
+    for k in range(REPLANS):  # the same planner again: its OMPL stream has moved on, as a demo's planner's has
+        done = []
+        for oid in result.sequence:
+            try:
+                plan_relocation(planner, oid, done)
+            except PlanningError as e:
+                pytest.fail(f"{name}: planning the optimum again ({k + 2}th time in this process): {e}")
+            done.append(oid)
+
+
+# Plannings of a paper scene's optimum after the first, in the same process: a pick that fails in 5 of 12
+# plannings (paper2_10's T at 0.902, before it moved 10 mm forward; here it failed at the 5th) passes 11 in a row
+# 0.3 % of the time
+REPLANS = 10
 
 
 def test_the_blocking_scenes_are_not_relocation_scenes():

@@ -114,28 +114,29 @@ are screened with the planner's grasp-lane screen (`stpik_motion_planner.blocker
 the real planner (stopped once the tree passes 2x the paper's) and hill-climbed with it, one bottle moved per step;
 weights are then drawn until one target leaf has the least weight (Eq. 8), and perception must locate every bottle
 in the first camera frame (arm at home). With `--strict` the climb keeps only valid scenes: one optimum, every
-bottle seen, and every relocation of the optimum planned twice in a row (OMPL's random stream is per process). Each
-paper scene's optimum is relocated in MuJoCo by the independent checker (`test_motion_checker.py`): 0 contacts,
-carried bottle at least 10.0 mm from everything, arm at least 20.4 mm. paper2_10: 14 min, then 12 more climbing from
-it: edges within 2x, 21 target leaves in the search's fill. paper3_15: `--resume --strict` found 844 edges (within
-2x) and 49 target leaves in 2.5 min; about 45 more minutes of climbing, annealing (`--temperature`) and hand-placed
-variants found nothing valid with 838+ edges and fewer leaves (a valid 788-edge / 29-leaf variant, 6 % short of 2x
-on the edges, was not kept: docs/scenarios.md). Why it is hard: a bottle up to about 0.2 m straight in front of
-another blocks all three approach yaws and two bottles of one row closer than about 0.115 m block each other for
-good, so an added bottle either can be removed, and then multiplies the target leaves (it can be relocated before or
-after others), or cannot, and then adds only one edge per node. Among 150,000 random blocking structures with at
-most three bottles in a row in front of the target (what this shelf's depth allows) and a single-order optimum, none
-with 838+ edges had fewer than 33 target leaves; about 28 would need a five-bottle removal chain. A deeper shelf
-would put its back row beyond the arm's reach (0.92 m), so smaller bottles were tried (`--radius 0.025`, four in a
-column in front of the target): `--resume --strict --radius 0.025` (55 min) reached 844 edges / 39 target leaves,
-one optimum, but its pick of T, at the arm's limit, failed in 2-4 of 12 plannings in one process and moving T
-forward left no single optimum, so it was not kept; a fresh radius-0.025 search (45 min) reached 788 / 29, not
-valid. The hand, not the bottle, decides what blocks what. paper2_10's T was moved 10 mm forward after the search:
-at 0.902 its pick failed in 5 of 12 plannings in one process, 0 of 16 after; a fresh fill gives 353 edges / 24
-target leaves. An earlier search (before the planner's budget became work) reached 83 edges and 10 target leaves
-with five obstacles, but no weights gave it one optimum: 10 sequences of one set of bottles weigh the same, as two
-removal chains of 2 and 3 bottles in front of the target would (exactly 83 edges, 10 leaves); the paper's 84 / 10 /
-one optimum needs an optimum that Eq. 8 alone does not single out.
+bottle seen, and every relocation of the optimum planned six times in a row (OMPL's random stream is per process, so
+a plan depends on the queries before it; the paper scenes were found with two, which let paper2_10's borderline pick
+of T through). Each paper scene's optimum is relocated in MuJoCo by the independent checker
+(`test_motion_checker.py`): 0 contacts, carried bottle at least 10.0 mm from everything, arm at least 20.4 mm.
+paper2_10: 14 min, then 12 more climbing from it: edges within 2x, 21 target leaves in the search's fill. paper3_15:
+`--resume --strict` found 844 edges (within 2x) and 49 target leaves in 2.5 min; about 45 more minutes of climbing,
+annealing (`--temperature`) and hand-placed variants found nothing valid with 838+ edges and fewer leaves (a valid
+788-edge / 29-leaf variant, 6 % short of 2x on the edges, was not kept: docs/scenarios.md). Why it is hard: a bottle
+up to about 0.2 m straight in front of another blocks all three approach yaws and two bottles of one row closer than
+about 0.115 m block each other for good, so an added bottle either can be removed, and then multiplies the target
+leaves (it can be relocated before or after others), or cannot, and then adds only one edge per node. Among 150,000
+random blocking structures with at most three bottles in a row in front of the target (what this shelf's depth
+allows) and a single-order optimum, none with 838+ edges had fewer than 33 target leaves; about 28 would need a
+five-bottle removal chain. A deeper shelf would put its back row beyond the arm's reach (0.92 m), so smaller bottles
+were tried (`--radius 0.025`, four in a column in front of the target): `--resume --strict --radius 0.025` (55 min)
+reached 844 edges / 39 target leaves, one optimum, but its pick of T, at the arm's limit, failed in 2-4 of 12
+plannings in one process and moving T forward left no single optimum, so it was not kept; a fresh radius-0.025
+search (45 min) reached 788 / 29, not valid. The hand, not the bottle, decides what blocks what. paper2_10's T was
+moved 10 mm forward after the search: at 0.902 its pick failed in 5 of 12 plannings in one process, 0 of 16 after; a
+fresh fill gives 353 edges / 24 target leaves. An earlier search (before the planner's budget became work) reached
+83 edges and 10 target leaves with five obstacles, but no weights gave it one optimum: 10 sequences of one set of
+bottles weigh the same, as two removal chains of 2 and 3 bottles in front of the target would (exactly 83 edges, 10
+leaves); the paper's 84 / 10 / one optimum needs an optimum that Eq. 8 alone does not single out.
 """
 
 
