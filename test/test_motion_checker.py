@@ -74,6 +74,7 @@ def test_the_optimum_of_each_paper_scene_table_touches_nothing(name):
     """The optimum the evaluation reports (exact.solve over the committed feasibility table, the answers of a fill
     in its own process) relocated in order: the demo-sequence test above asks a planner whose OMPL stream depends
     on the queries run before it in this process (stpik_motion_planner/rrt.py), so it may solve another sequence."""
+    from relocation_app.evaluation import paper_scenes
     from relocation_app.evaluation.__main__ import planner_params
     from relocation_app.evaluation.feasibility_cache import PlannerOracle, open_table
     from relocation_common.paths import data_dir
@@ -87,14 +88,8 @@ def test_the_optimum_of_each_paper_scene_table_touches_nothing(name):
     rep = check_sequence(scenario, planner, result.sequence)
     assert rep.segments == 4 * len(result.sequence)
     assert_clean(rep, f"{name} table optimum {'-'.join(result.sequence)}")
-    for k in range(REPLANS):  # the same planner again: its OMPL stream has moved on, as a demo's planner's has
-        done = []
-        for oid in result.sequence:
-            try:
-                plan_relocation(planner, oid, done)
-            except PlanningError as e:
-                pytest.fail(f"{name}: planning the optimum again ({k + 2}th time in this process): {e}")
-            done.append(oid)
+    # the same planner again: its OMPL stream has moved on, as a demo's planner's has
+    assert paper_scenes.replans(planner, result.sequence, REPLANS) == "", name
 
 
 # Plannings of a paper scene's optimum after the first, in the same process: a pick that fails in 5 of 12

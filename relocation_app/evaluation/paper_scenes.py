@@ -267,24 +267,29 @@ def optimum_sequence(data: dict, table, params) -> tuple[str, ...]:
 
 
 def optimum_plans(data: dict, table, params, repeats: int = 6) -> str:
-    """'' if every relocation of the optimum (pick, carry, retreat, home: relocation.plan_relocation) can be planned
-    `repeats` times in a row, else what failed. OMPL's random stream is per process (stpik_motion_planner/rrt.py),
-    so a plan depends on the queries before it; planning each relocation `repeats` times from different stream
-    states rejects the borderline ones (a feasible pick that the execution then cannot plan): twice was not
-    enough, paper2_10's first T failed its pick in 5 of 12 plannings."""
-    from stpik_motion_planner.feasibility import PlanningError
-    from stpik_motion_planner.relocation import plan_relocation
-
+    """'' if every relocation of the optimum can be planned `repeats` times in a row (`replans`) by the
+    evaluation's planner for this scene, else what failed."""
     from .feasibility_cache import _WORKER, _use_scenario
     sc = parse_scenario(data, data["name"])
     seq = optimum_sequence(data, table, params)
     _use_scenario(sc, params)
-    for _ in range(repeats):
-        for k, oid in enumerate(seq):
+    return replans(_WORKER["mp"], seq, repeats)
+
+
+def replans(planner, sequence, repeats: int) -> str:
+    """'' if `planner` plans every relocation of `sequence` (pick, carry, retreat, home:
+    relocation.plan_relocation) `repeats` times in a row, else what failed. OMPL's random stream is per process
+    (stpik_motion_planner/rrt.py), so a plan depends on the queries before it; planning each relocation again
+    from other stream states rejects the borderline ones (a feasible pick that the execution then cannot plan):
+    twice was not enough, paper2_10's first T failed its pick in 5 of 12 plannings."""
+    from stpik_motion_planner.feasibility import PlanningError
+    from stpik_motion_planner.relocation import plan_relocation
+    for r in range(repeats):
+        for k, oid in enumerate(sequence):
             try:
-                plan_relocation(_WORKER["mp"], oid, list(seq[:k]))
+                plan_relocation(planner, oid, list(sequence[:k]))
             except PlanningError as e:
-                return f"{'-'.join(seq)}: {e}"
+                return f"{'-'.join(sequence)} (planning {r + 1} of {repeats}): {e}"
     return ""
 
 
