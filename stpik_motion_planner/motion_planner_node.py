@@ -152,6 +152,9 @@ class MotionPlannerNode(Node):
         self._kinova = interface == "kinova"
         if not self.p("serve_relocation"):
             return
+        if not 0.0 < float(self.p("state_hold")) < float(self.p("state_timeout")):
+            raise ValueError(f"parameters state_hold and state_timeout must satisfy 0 < state_hold < state_timeout, "
+                             f"got {self.p('state_hold')} and {self.p('state_timeout')}")
         self._fingers_q: tuple[np.ndarray, float] | None = None  # finger joint angles (rad), time received
         if self._kinova:  # kinova-ros's j2s7s300 driver surface: kinova_msgs, deg/s, fingers action
             self._cmd = self.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
@@ -308,13 +311,34 @@ class MotionPlannerNode(Node):
         relocate(self.planner, _GoalArm(self, gh), gh.request.object_id, list(gh.request.removed_ids),
                  home_tol=self.p("home_tol"), lock=self._plan_lock, progress=progress)
 
-    def _measured(self) -> np.ndarray:
-        st = self._q
-        age = math.inf if st is None else time.monotonic() - st[1]
-        if age > self.p("state_timeout"):
-            raise _Aborted(f"no joint state from the driver for {age:.1f} s (> state_timeout): "
-                           f"is jaco2_sim_driver (or the Kinova driver) running?")
-        return st[0].copy()
+    def _measured(self, gh=None) -> np.ndarray:
+        """The latest joint angles. Older than state_hold: the arm is held (zero velocity, as a Kinova driver that
+        gets no commands does) until a fresh state arrives; older than state_timeout: the relocation aborts."""
+        return self._fresh_state(gh)[0]
+
+    def _fresh_state(self, gh=None) -> tuple[np.ndarray, float]:
+        """(joint angles, seconds the arm was held waiting for them)."""
+        t0 = time.monotonic()
+        held = False
+        while True:
+            st = self._q
+            now = time.monotonic()
+            age = math.inf if st is None else now - st[1]
+            if age <= self.p("state_hold"):
+                if held:
+                    self.get_logger().warning(f"joint states back after {age_max:.2f} s: the arm was held "
+                                              f"{now - t0:.2f} s", throttle_duration_sec=1.0)
+                return st[0].copy(), (now - t0) if held else 0.0
+            if age > self.p("state_timeout"):
+                raise _Aborted(f"no joint state from the driver for {age:.1f} s (> state_timeout): "
+                               f"is jaco2_sim_driver (or the Kinova driver) running?")
+            if gh is not None and gh.is_cancel_requested:
+                raise _Cancelled()
+            if not held:
+                self._stop()
+                held = True
+            age_max = age
+            time.sleep(0.005)
 
     def _feedback(self, gh, phase: str, within: float = 0.0) -> None:
         names = list(PHASES)
@@ -334,9 +358,9 @@ class MotionPlannerNode(Node):
                 raise _Cancelled()
             if not rclpy.ok():
                 raise _Aborted("node shutting down")
-            q = self._measured()
+            q, held = self._fresh_state(gh)
             now = time.monotonic()
-            status = follower.update(q, now - last)
+            status = follower.update(q, period if held else now - last)  # the reference waits while held
             last = now
             if status == follower.SETTLED:
                 self._stop()
@@ -462,7 +486,7 @@ class _GoalArm:
         self.node, self.gh = node, goal_handle
 
     def measured(self) -> np.ndarray:
-        return self.node._measured()
+        return self.node._measured(self.gh)
 
     def follow(self, trajectory: Trajectory, phase: str) -> None:
         self.node._follow(self.gh, trajectory, phase)

@@ -194,7 +194,9 @@ class FakeArm(Client):
     STALL_TIME = 0.5          # s without finger motion: the fingers action aborts (kinova-ros)
 
     def __init__(self, domain_id: int, surface: str, q0, prefix: str = "/j2s7s300_driver",
-                 object_turns: float = 1500.0):
+                 object_turns: float = 1500.0, stall: tuple[int, float] | None = None):
+        """stall = (n, s): after the n-th velocity command no joint state is published for s seconds (the arm
+        still follows the commands), as a driver whose process was not scheduled for that long."""
         # the fingers action's execute callback blocks, so kinova needs threads; but rclpy's MultiThreadedExecutor
         # delivered 100 Hz commands with gaps up to 0.6 s (watchdog stops; a CI run's relocation failed on it), so
         # the velocity commands always come through a node of their own on a single-threaded executor
@@ -211,6 +213,8 @@ class FakeArm(Client):
         self.max_speed = np.zeros(7)     # rad/s, largest commanded per joint
         self.finger_goals: list[float] = []  # every finger target received (turns)
         self.js_published = 0
+        self.stall = stall
+        self.stalled: tuple[float, float] | None = None  # wall time (time.time()) of the stall's start and end
         group = ReentrantCallbackGroup()
         if surface == "kinova":
             self._io.node.create_subscription(JointVelocity, f"{prefix}/in/joint_velocity", self._on_kinova, 10)
@@ -301,15 +305,31 @@ class FakeArm(Client):
                 msg.position = list(self.q) + list(turns_to_rad(self.fingers)) + extra
                 msg.velocity = list(v) + [0.0] * (len(self.names) - 7)
                 msg.effort = [0.0] * len(self.names)
+            if self._silent(now):
+                msg = None
             try:
-                self.pub.publish(msg)
-                self.js_published += 1
+                if msg is not None:
+                    self.pub.publish(msg)
+                    self.js_published += 1
             except Exception:
                 if self.context.ok():
                     raise
                 return
             next_t = max(next_t + period, time.monotonic())
             time.sleep(max(0.0, next_t - time.monotonic()))
+
+    def _silent(self, now: float) -> bool:
+        """In the stall: no joint states (its wall times are printed when it ends)."""
+        if self.stall is None or self.commands < self.stall[0]:
+            return False
+        if self.stalled is None:
+            self.stalled = (time.time(), time.time() + self.stall[1])
+            self._stall_end = now + self.stall[1]
+        if now < self._stall_end:
+            return True
+        print(f"stalled {self.stalled[0]:.3f} {self.stalled[1]:.3f}", flush=True)
+        self.stall = None
+        return False
 
     def close(self) -> None:
         self._running = False
@@ -321,10 +341,11 @@ class FakeArm(Client):
 
 def main(argv: list[str]) -> int:
     surface, q0 = argv[1], [float(x) for x in argv[2:9]]
+    stall = (int(argv[9]), float(argv[10])) if len(argv) > 10 else None  # optional: N SECONDS
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    arm = FakeArm(int(os.environ.get("ROS_DOMAIN_ID", "0")), surface, q0)
+    arm = FakeArm(int(os.environ.get("ROS_DOMAIN_ID", "0")), surface, q0, stall=stall)
     print(f"fake {surface} arm ready", flush=True)
     while not stop.wait(0.2):
         pass

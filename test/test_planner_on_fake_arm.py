@@ -54,10 +54,7 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
             states.wait(timeout=30)
             planner = g.start("stpik_motion_planner.motion_planner_node",
                               params_file=REPO / "config" / "motion_planner.yaml",
-                              # state_timeout: on this shared 2-core machine a Python driver's 100 Hz joint states
-                              # stalled up to 0.9 s under load (measured here); the test is about the interface
-                              params={"command_interface": interface, "scene_topic": "/nobody/publishes/this",
-                                      "state_timeout": 3.0})
+                              params={"command_interface": interface, "scene_topic": "/nobody/publishes/this"})
             ac = client.action(RelocateObject, "/motion_planner/relocate", timeout=60)
             phases = []
             t0 = time.monotonic()
@@ -86,6 +83,45 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
             assert np.abs(q - Q_HOME).max() < 0.05  # back home
             assert {"approach", "grasp", "carry", "release", "home"} <= set(phases), phases
             assert all(math.isfinite(x) for c in cmds for x in c)
+        finally:
+            client.close()
+            assert fake.stop(signal.SIGINT) == 0, fake.log()[-2000:]
+
+
+def test_the_arm_is_held_while_joint_states_stall(tmp_path):
+    """A driver whose joint states stop for 1 s mid-motion (a CI run: 0.9 s, on a loaded machine) does not end
+    the relocation: the planner, with its default parameters, commands zero velocity until the states return and
+    then goes on; only state_timeout (2 s) of silence aborts (test_motion_planner_node.py: a dead driver)."""
+    stall = 1.0
+    with RosGraph(tmp_path) as g:
+        fake = g.start_argv([g.python, str(REPO / "test" / "kinova_outsider.py"), "kinova",
+                             *[repr(float(x)) for x in Q_HOME], "150", repr(stall)], "fake_arm")
+        client = Client(g.domain_id, "relocation_client")
+        try:
+            states = client.collect(JointState, f"{PRE}/out/joint_state", 100)
+            commands = client.collect(JointVelocity, f"{PRE}/in/joint_velocity", 100)
+            states.wait(timeout=30)
+            planner = g.start("stpik_motion_planner.motion_planner_node",
+                              params_file=REPO / "config" / "motion_planner.yaml",
+                              params={"scene_topic": "/nobody/publishes/this"})
+            ac = client.action(RelocateObject, "/motion_planner/relocate", timeout=60)
+            status, result = client.goal(ac, RelocateObject.Goal(object_id="o2", removed_ids=[]), timeout=120)
+            times = np.array(states.snapshot()[1])
+            k = int(np.argmax(np.diff(times)))
+            gap = (times[k], times[k + 1])
+            assert result is not None and result.success, (result, planner.log()[-3000:], fake.log()[-2000:])
+            assert status == SUCCEEDED
+            assert gap[1] - gap[0] > 0.9 * stall, gap  # the stall happened, while the planner was streaming
+            msgs, t_cmd = commands.snapshot()
+            speed = [(t, float(np.abs(_rad_s(m)).max())) for m, t in zip(msgs, t_cmd)]
+            before = max(v for t, v in speed if gap[0] - 0.3 < t < gap[0])
+            held = [v for t, v in speed if gap[0] + 0.25 < t < gap[1] - 0.05]
+            last = [v for t, v in speed if t < gap[1] - 0.05][-1]
+            print(f"\nstall of {gap[1] - gap[0]:.2f} s: before it {before:.3f} rad/s, in it {len(held)} commands "
+                  f"(largest {max(held, default=0.0):.4f} rad/s), the last one {last} rad/s; {result.message!r}")
+            assert before > 0.01  # it was moving
+            assert last == 0.0 and max(held, default=0.0) == 0.0  # held: zero velocity (then the watchdog's)
+            assert "joint states back after" in planner.log()
         finally:
             client.close()
             assert fake.stop(signal.SIGINT) == 0, fake.log()[-2000:]

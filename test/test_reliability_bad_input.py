@@ -47,6 +47,7 @@ CASES = [  # (node, ros args, words of the one line)
     (PLANNER, ["-p", "timeout:=-1.0"], "timeout must be a finite number > 0"),
     (PLANNER, ["-p", "stpik.qdot_max:=[0.8,0.8]"], "stpik.qdot_max must be 7 positive numbers"),
     (PLANNER, ["-p", "scenario:=SCENARIO_PARTIAL"], "ScenarioError"),
+    (PLANNER, ["-p", "state_hold:=3.0"], "0 < state_hold < state_timeout"),
     (PLANNER, ["--params-file", "DRIVER_MALFORMED"], "malformed YAML"),
 ]
 
