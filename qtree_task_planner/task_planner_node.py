@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 import rclpy
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -56,7 +56,7 @@ from .params import TrainingParams
 from .retrieval import execute_sequence, solve_then_train
 from .problem import RelocationProblem
 from .replicas import ReplicaOracle
-from relocation_common.node import call, declare_parameters, end_goal, node_main
+from relocation_common.node import ActionClient, call, declare_parameters, end_goal, node_main
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from this node's clock is on another clock

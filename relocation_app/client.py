@@ -22,7 +22,6 @@ import time
 from typing import Any, Callable
 
 import rclpy
-from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 
@@ -31,7 +30,7 @@ from qtree_relocation_msgs.srv import PlanFeasibility
 from qtree_task_planner.replicas import ReplicaOracle
 from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
 from relocation_common.feasibility import Label, replica_services
-from relocation_common.node import call
+from relocation_common.node import ActionClient, call
 
 from .graph import wait_for_interfaces
 

@@ -1,5 +1,5 @@
 """What every node shares: its parameters declared from its YAML, its main() (spin, clean exit), a blocking
-service call with a timeout.
+service call with a timeout, an action client without rclpy's lost-response race.
 
 SIGINT and SIGTERM end the spin loop, then the context is shut down (running callbacks see rclpy.ok() false)
 and the node closed: exit 0. Bad parameters or a bad scene: one line on stderr and exit status 2, never a traceback.
@@ -13,6 +13,7 @@ import time
 from typing import Any, Callable
 
 import rclpy
+from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
@@ -113,6 +114,34 @@ def node_main(name: str, node_factory, args=None, threads: int = 4, errors: tupl
     except (ConfigError, ParameterException, ValueError, TypeError, *errors) as e:
         print(f"{name}: {type(e).__name__}: {e}", file=sys.stderr)
         raise SystemExit(2) from None
+
+
+class ActionClient(RclpyActionClient):
+    """rclpy's ActionClient with the fix of rclpy#1123 (upstream #1308; not in the Jazzy wheels this project uses).
+    send_goal_async, cancel and get_result send the request and only then register its sequence number; when the
+    executor thread took the response in between, rclpy dropped it ('Ignoring unexpected goal response') and the
+    future never completed: a fresh-clone CI run waited 30 s for a goal response that had come. Here the
+    registration and the handling of responses hold one lock."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._registration = threading.RLock()  # re-entrant: a feedback callback may send a goal
+
+    def send_goal_async(self, *args, **kwargs):
+        with self._registration:
+            return super().send_goal_async(*args, **kwargs)
+
+    def _cancel_goal_async(self, goal_handle):
+        with self._registration:
+            return super()._cancel_goal_async(goal_handle)
+
+    def _get_result_async(self, goal_handle):
+        with self._registration:
+            return super()._get_result_async(goal_handle)
+
+    async def execute(self, taken_data):
+        with self._registration:
+            return await super().execute(taken_data)
 
 
 def end_goal(goal_handle, outcome: str) -> None:

@@ -25,7 +25,7 @@ import numpy as np
 import rclpy
 from builtin_interfaces.msg import Duration
 from action_msgs.msg import GoalStatus
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
@@ -41,7 +41,7 @@ from qtree_relocation_msgs.action import RelocateObject
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from relocation_common import kinova
-from relocation_common.node import SideNode, declare_parameters, node_main
+from relocation_common.node import ActionClient, SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import BASE_FRAME, NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 

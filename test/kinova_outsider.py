@@ -10,8 +10,8 @@ Imports: rclpy and the message packages kinova_msgs, sensor_msgs, std_msgs, tf2_
   rad/s, /gripper_controller/commands, /joint_states). It integrates the velocity commands into its joint state at
   100 Hz (zero velocity 50 ms after the last command) and moves its fingers at a finite speed; closing fingers stop
   on an imaginary object at `object_turns`, as real fingers stop on a bottle. Run it as a process of its own, as a
-  driver is: `python kinova_outsider.py kinova|ros2_control q1 .. q7` (ROS_DOMAIN_ID from the environment; SIGINT
-  or SIGTERM ends it).
+  driver is: `python kinova_outsider.py kinova|ros2_control q1 .. q7 [N S]` (ROS_DOMAIN_ID from the environment;
+  SIGINT or SIGTERM ends it; N S: no joint states for S seconds after the N-th velocity command).
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import numpy as np
 import rclpy
 from kinova_msgs.action import SetFingersPosition
 from kinova_msgs.msg import FingerPosition, JointVelocity
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionClient as RclpyActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
@@ -54,6 +54,31 @@ def turns_to_rad(turns) -> np.ndarray:
 
 def rad_to_turns(rad) -> np.ndarray:
     return np.degrees(np.asarray(rad, float)) / DEG_PER_TURN
+
+
+class ActionClient(RclpyActionClient):
+    """An outsider's workaround of rclpy#1123 (Jazzy wheels; the project has its own in relocation_common.node): a
+    response taken before the request's sequence number was registered is dropped, its future never completes."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._registering = threading.RLock()
+
+    def send_goal_async(self, *args, **kwargs):
+        with self._registering:
+            return super().send_goal_async(*args, **kwargs)
+
+    def _get_result_async(self, goal_handle):
+        with self._registering:
+            return super()._get_result_async(goal_handle)
+
+    def _cancel_goal_async(self, goal_handle):
+        with self._registering:
+            return super()._cancel_goal_async(goal_handle)
+
+    async def execute(self, taken_data):
+        with self._registering:
+            return await super().execute(taken_data)
 
 
 class Topic:

@@ -48,7 +48,11 @@ def test_ros2_run_layout(install):
     assert (install / "share" / "qtree_relocation" / "package.xml").is_file()
     for cfg in ("task_planner", "motion_planner", "jaco2_sim_driver", "perception"):
         assert (install / "share" / "qtree_relocation" / "config" / f"{cfg}.yaml").is_file()
-    assert (install / "share" / "qtree_relocation" / "config" / "scenarios" / "paper_experiment_10.yaml").is_file()
+    scen = install / "share" / "qtree_relocation" / "config" / "scenarios"
+    assert (scen / "paper_experiment_10.yaml").is_file()
+    for d in ("random5", "paper_random5"):  # the Table 4 sets, usable as --scenario random5/random5_00
+        assert sorted(p.name for p in (scen / d).glob("*.yaml")) == \
+            sorted(p.name for p in (ROOT / "config" / "scenarios" / d).glob("*.yaml")), d
 
 
 def test_the_installed_cli_runs_from_anywhere(install, tmp_path):
@@ -62,7 +66,7 @@ def test_the_installed_cli_runs_from_anywhere(install, tmp_path):
 @pytest.mark.graph
 def test_every_installed_node_starts_from_an_empty_directory_and_serves(install, tmp_path):
     from ros_procs import RosGraph
-    from rclpy.action import ActionClient
+    from relocation_common.node import ActionClient  # rclpy#1123 fixed
     from sensor_msgs.msg import JointState
 
     from qtree_relocation_msgs.action import TrainPlanner

@@ -14,7 +14,7 @@ rclpy = pytest.importorskip("rclpy")
 from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
 from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
 from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
-from rclpy.action import ActionClient  # noqa: E402
+from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402

@@ -102,7 +102,7 @@ if __name__ == "__main__":
 # ---------------------------------------------------------------------------------------------------------------
 pytestmark = pytest.mark.graph
 rclpy = pytest.importorskip("rclpy")
-from rclpy.action import ActionClient  # noqa: E402
+from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 
 from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402

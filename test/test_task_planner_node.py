@@ -64,7 +64,7 @@ def graph(tmp_path_factory):
 
 
 def _train_goal(node, g, **fields):
-    from rclpy.action import ActionClient
+    from relocation_common.node import ActionClient  # rclpy#1123 fixed
 
     from qtree_relocation_msgs.action import TrainPlanner
     from qtree_task_planner.task_planner_node import train_goal
