@@ -17,6 +17,8 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
+        *[(f"share/{PACKAGE}/config/scenarios/{d}", glob(f"config/scenarios/{d}/*.yaml"))
+          for d in ("random5", "paper_random5")],  # Table 4's random cases, both sets
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools"],
