@@ -334,6 +334,8 @@ class MotionPlannerNode(Node):
                                f"is jaco2_sim_driver (or the Kinova driver) running?")
             if gh is not None and gh.is_cancel_requested:
                 raise _Cancelled()
+            if not rclpy.ok():
+                raise _Aborted("node shutting down")
             if not held:
                 self._stop()
                 held = True
