@@ -119,6 +119,25 @@ def test_small_sweep_resume_and_report(tmp_path, params):
     assert "| finding | the paper's numbers | ours: this project's geometry |" in md
 
 
+def test_report_puts_the_random_cases_of_the_paper_size_beside_table_4(tmp_path, params):
+    """issue 16: Table 4 case 1 beside paper_random5_00 (its complete tree, the cells, the ratios), and the random
+    finding judged on the paper-size set (it said "not checked" without one)."""
+    data = SCEN_DIR.parent.parent / "data" / "feasibility"
+    sc = scenes([SCEN_DIR / "paper1_5.yaml", SCEN_DIR / "paper_random5" / "paper_random5_00.yaml"], params, data,
+                QUICK_GRID)
+    res = sweep(sc, 2, tmp_path / "out" / "sweep.jsonl", workers=1, progress=False)
+    assert res["cells_run"] == 24 and res["new_planner_calls"] == 0
+    md = write_report(tmp_path / "out", tmp_path / "docs", params, data, [], [], quick=True,
+                      paper_set=["paper1_5"], paper_random=["paper_random5_00"]).read_text()
+    sec = md.split("## Table 4 beside the paper, per case (scenes of the paper's size)")[1].split("\n## ")[0]
+    assert re.search(r"\| 1 \| paper_random5_00 \| 97 / \d+ \([\d.]+\) \| \d+ \| 1 \|", sec)  # complete tree
+    assert re.search(r"\| 1 \| paper_random5_00 \| LRND_b \| 177 / [\d.]+ \([\d.]+\) \| 97 / ", sec)
+    assert "Ratios: E_ss ours/paper median" in sec
+    assert "| finding | the paper's numbers | ours: scenes of the paper's size |" in md
+    random_finding = next(ln for ln in md.splitlines() if ln.startswith("| The random 5-obstacle scenes agree"))
+    assert "not checked" not in random_finding, random_finding
+
+
 def test_committed_cache_agrees_with_the_planner(params):
     """Recompute a handful of the committed answers of scenario 1 live (answers reached without RRT-Connect,
     which are deterministic: attempts <= 1)."""

@@ -67,9 +67,10 @@ def test_demo_sequence_touches_nothing_but_the_grasped_bottle(path):
 
 
 PAPER_SIZE = ("paper1_5", "paper2_10", "paper3_15")  # scenes of the paper's size (issue 16)
+PAPER_RANDOM = tuple(f"paper_random5/{p.stem}" for p in sorted((scenarios_dir() / "paper_random5").glob("*.yaml")))
 
 
-@pytest.mark.parametrize("name", PAPER_SIZE)
+@pytest.mark.parametrize("name", PAPER_SIZE + PAPER_RANDOM)
 def test_the_optimum_of_each_paper_scene_table_touches_nothing(name):
     """The optimum the evaluation reports (exact.solve over the committed feasibility table, the answers of a fill
     in its own process) relocated in order: the demo-sequence test above asks a planner whose OMPL stream depends
@@ -88,8 +89,9 @@ def test_the_optimum_of_each_paper_scene_table_touches_nothing(name):
     rep = check_sequence(scenario, planner, result.sequence)
     assert rep.segments == 4 * len(result.sequence)
     assert_clean(rep, f"{name} table optimum {'-'.join(result.sequence)}")
-    # the same planner again: its OMPL stream has moved on, as a demo's planner's has
-    assert paper_scenes.replans(planner, result.sequence, REPLANS) == "", name
+    # the same planner again: its OMPL stream has moved on, as a demo's planner's has (Table 4's random cases,
+    # drawn with six plannings in a row: twice here, for the suite's time)
+    assert paper_scenes.replans(planner, result.sequence, REPLANS if name in PAPER_SIZE else 2) == "", name
 
 
 # Plannings of a paper scene's optimum after the first, in the same process: a pick that fails in 5 of 12

@@ -29,6 +29,22 @@ def test_shipped_scene_has_the_stated_tree(name):
         assert goal[0] / 2 <= size.edges <= 2 * goal[0] and size.target_leaves == goal[1] and optimal == 1
 
 
+def test_the_random_cases_at_the_paper_size_match_table_4():
+    """paper_random5_XX is Table 4's case XX+1: within 2x of its complete tree, one optimum (committed table),
+    the description true."""
+    from relocation_app.evaluation import paper_random
+    paths = sorted((SCEN_DIR / paper_random.DIR).glob("*.yaml"))
+    assert [p.stem for p in paths] == [paper_random.name(c) for c in range(1, len(paths) + 1)]
+    edges_of = paper_random.case_edges()
+    for case, path in enumerate(paths, 1):
+        sc = load_scenario(path)
+        table, _ = open_table(sc, planner_params(), data_dir() / "feasibility")
+        size = complete_tree.of_table(table, sc)
+        assert edges_of[case] / 2 <= size.edges <= 2 * edges_of[case] and size.optimal_leaves == 1, sc.name
+        assert f"Table 4 case {case} " in sc.description and f"{size.edges} edges (paper: {edges_of[case]})" in \
+            sc.description and f"{size.target_leaves} target leaves" in sc.description, sc.description
+
+
 def test_perturb_and_extend_keep_valid_layouts():
     base = paper_scenes.free_scene(3, 5, "t")
     rng = random.Random(0)

@@ -2,10 +2,10 @@
 
 all (default): fill the missing feasibility answers with the real planner (none when data/feasibility/ is
 complete), run the missing sweep cells (the scenes of the paper's size paper1_5/paper2_10/paper3_15, scenarios
-1-3 of this project's geometry, the Sect. 5.2 scene paper_experiment_10, the 10 random scenes), regenerate
+1-3 of this project's geometry, the Sect. 5.2 scene paper_experiment_10, the 10 random scenes of each set), regenerate
 docs/evaluation.md (the paper's Tables 1-4 beside ours, data/paper/) and docs/figures/.
 --only a,b: fill/sweep only those scenes. Scenes of the paper's size: python -m relocation_app.evaluation.make_scenes paper N.
---quick: 3 runs per cell, two (alpha, gamma) pairs, two random scenes, output under out/evaluation-quick/.
+--quick: 3 runs per cell, two (alpha, gamma) pairs, two random scenes per set, output under out/evaluation-quick/.
 """
 from __future__ import annotations
 
@@ -33,12 +33,13 @@ def planner_params():
     return p
 
 
-def scene_paths(quick: bool = False) -> tuple[list[Path], list[Path]]:
-    """Scenarios 1-3 (the paper-size scenes that exist first, then this project's) and the random scenes."""
+def scene_paths(quick: bool = False) -> tuple[list[Path], list[Path], list[Path]]:
+    """Scenarios 1-3 (the paper-size scenes that exist first, then this project's), the random scenes of this
+    project's geometry (random5/) and of the paper's size (paper_random5/)."""
     main = [SCEN_DIR / f"{n}.yaml" for n in PAPER if (SCEN_DIR / f"{n}.yaml").exists()]
     main += [SCEN_DIR / f"{n}.yaml" for n in MAIN]
-    rnd = sorted((SCEN_DIR / "random5").glob("*.yaml"))
-    return main, (rnd[:2] if quick else rnd)
+    rnd, prnd = (sorted((SCEN_DIR / d).glob("*.yaml")) for d in ("random5", "paper_random5"))
+    return main, (rnd[:2] if quick else rnd), (prnd[:2] if quick else prnd)
 
 
 def scenes(paths, params, data_dir, grid=None):
@@ -90,7 +91,7 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     ap.add_argument("--replicas", type=int, default=0,
                     help="fill: ask N motion planner processes over ROS instead of --workers local processes")
-    ap.add_argument("--no-random", action="store_true", help="skip the random 5-obstacle scenes (Table 4)")
+    ap.add_argument("--no-random", action="store_true", help="skip the random 5-obstacle scenes (Table 4, both sets)")
     ap.add_argument("--no-experiment", action="store_true", help="skip the Sect. 5.2 scene (paper_experiment_10)")
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--only", default=None, help="fill/sweep only these scenes (comma-separated names)")
@@ -101,9 +102,9 @@ def main(argv=None) -> int:
     out = Path(a.out or ROOT / "out" / ("evaluation-quick" if a.quick else "evaluation"))
     docs = Path(a.docs or (out / "docs" if a.quick else ROOT / "docs"))
     params = planner_params()
-    main_p, rnd_p = scene_paths(a.quick)
+    main_p, rnd_p, prnd_p = scene_paths(a.quick)
     if a.no_random:
-        rnd_p = []
+        rnd_p, prnd_p = [], []
     exp_p = [] if a.quick or a.no_experiment else [SCEN_DIR / f"{EXPERIMENT}.yaml"]
     if a.command == "scenes":
         from .make_scenes import make_all
@@ -113,12 +114,12 @@ def main(argv=None) -> int:
     workers = a.workers or os.cpu_count() or 1
     only = set(a.only.split(",")) if a.only else None
     if a.command in ("all", "fill"):
-        cmd_fill(_only(main_p + rnd_p + [SCEN_DIR / f"{EXPERIMENT}.yaml"], only), params, a.data, workers,
+        cmd_fill(_only(main_p + rnd_p + prnd_p + [SCEN_DIR / f"{EXPERIMENT}.yaml"], only), params, a.data, workers,
                  a.replicas)
     if a.command in ("all", "sweep"):
         from .sweep import sweep
         grid = QUICK_GRID if a.quick else None
-        sc = scenes(_only(main_p + exp_p + rnd_p, only), params, a.data, grid)
+        sc = scenes(_only(main_p + exp_p + rnd_p + prnd_p, only), params, a.data, grid)
         t = time.perf_counter()
         res = sweep(sc, runs, out / "sweep.jsonl", workers=workers, progress=not a.no_progress)
         res["wall_s"] = round(time.perf_counter() - t, 1)
@@ -132,7 +133,8 @@ def main(argv=None) -> int:
         from .report import write_report
         path = write_report(out, docs, params, a.data, [p.stem for p in main_p if p.stem in MAIN],
                             [p.stem for p in rnd_p], quick=a.quick, experiment=[p.stem for p in exp_p],
-                            paper_set=[p.stem for p in main_p if p.stem in PAPER])
+                            paper_set=[p.stem for p in main_p if p.stem in PAPER],
+                            paper_random=[p.stem for p in prnd_p])
         print(f"report: {path}", flush=True)
     return 0
 

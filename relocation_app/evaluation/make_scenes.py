@@ -7,6 +7,8 @@
 - paper1_5, paper2_10, paper3_15 (`python -m relocation_app.evaluation.make_scenes paper N`): scenes of the
   paper's size, searched with the real planner (paper_scenes.search; issue 16); the search log goes to
   out/paper_search/.
+- paper_random5/paper_random5_XX (`... make_scenes paper-random`): Table 4's ten random cases at the paper's size,
+  drawn with the real planner (paper_random.py).
 Feasibility comes from the real planner (evaluation parameters, see __main__.planner_params).
 """
 from __future__ import annotations
@@ -125,13 +127,15 @@ def _shipped(out_dir, name: str, radius: float | None = None) -> dict:
 
 
 def main(argv=None) -> int:
-    """`python -m relocation_app.evaluation.make_scenes paper N [--seeds S] [--steps K] [--minutes M]`."""
+    """`python -m relocation_app.evaluation.make_scenes paper N [--seeds S] [--steps K] [--minutes M]`, or
+    `... paper-random [--cases 1,2] [--seed0 S] [--minutes M]`."""
     import argparse
 
     from .__main__ import planner_params
     ap = argparse.ArgumentParser(description="search a scene of the paper's size with the real planner")
-    ap.add_argument("what", choices=("paper",))
-    ap.add_argument("n", type=int, choices=sorted(PAPER_NAMES))
+    ap.add_argument("what", choices=("paper", "paper-random"))
+    ap.add_argument("n", type=int, nargs="?", choices=sorted(PAPER_NAMES), help="obstacles (paper)")
+    ap.add_argument("--cases", default=None, help="paper-random: only these Table 4 cases (comma-separated 1-10)")
     ap.add_argument("--seeds", type=int, default=200000, help="layouts proposed (most rejected by the sketch)")
     ap.add_argument("--steps", type=int, default=4000, help="hill-climbing steps with the real planner")
     ap.add_argument("--write-best", action="store_true", help="write the closest scene when none matches")
@@ -148,6 +152,14 @@ def main(argv=None) -> int:
     ap.add_argument("--scenarios", default=None, help="where the YAML goes (default config/scenarios)")
     a = ap.parse_args(argv)
     from relocation_common.paths import data_dir
+    if a.what == "paper-random":
+        from . import paper_random
+        cases = [int(c) for c in a.cases.split(",")] if a.cases else None
+        n = paper_random.make(planner_params(), a.data or data_dir() / "feasibility", Path(a.scenarios or SCEN),
+                              cases, a.seed0 or paper_random.SEED0, a.minutes)
+        return 0 if n == len(cases or paper_random.case_edges()) else 1
+    if a.n is None:
+        ap.error("paper needs N (5, 10 or 15)")
     ok = make_paper(a.n, planner_params(), a.data or data_dir() / "feasibility", a.seeds, a.steps, a.minutes,
                     a.scenarios, a.seed0, a.write_best, a.resume, a.strict, a.temperature, a.radius)
     return 0 if ok else 1

@@ -93,10 +93,10 @@ def _complete(table, sc) -> bool:
         return False
 
 
-def one_optimum(data: dict, table, tries: int = 200) -> dict | None:
-    """Redraw the obstacles' weights (seeded) until one target leaf has the least total weight; None if no draw
-    does (the cheapest set has several feasible orders)."""
-    rng = random.Random(0)
+def one_optimum(data: dict, table, tries: int = 200, seed: int = 0) -> dict | None:
+    """Redraw the obstacles' weights (from `seed`) until one target leaf has the least total weight; None if no
+    draw does (the cheapest set has several feasible orders)."""
+    rng = random.Random(seed)
     for _ in range(tries):
         for o in data["objects"]:
             if o["id"] != data["target"]:
