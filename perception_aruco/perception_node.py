@@ -110,8 +110,11 @@ class PerceptionNode(Node):
         log = self.get_logger()
         if pair is None:
             if self._colors and self._depths:
-                log.warning("no colour/depth pair within sync_slop "
-                            f"({self.p('sync_slop')} s) of each other", throttle_duration_sec=5.0)
+                with self._lock:
+                    c, d = max(map(_stamp_s, self._colors)), max(map(_stamp_s, self._depths))
+                log.warning(f"no colour/depth pair within sync_slop ({self.p('sync_slop')} s) of each other: newest "
+                            f"colour stamp {c:.3f}, depth {d:.3f} (is one of the streams losing messages?)",
+                            throttle_duration_sec=5.0)
             return
         color, depth = pair
         if self._last_pair == _stamp_s(color):
