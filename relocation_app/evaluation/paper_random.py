@@ -2,7 +2,7 @@
 paper-random`, scenes config/scenarios/paper_random5/paper_random5_XX.yaml.
 
 The paper's random cases have 5 obstacles and complete Q-Trees of 71-104 edges (their LRND MP_q, Table 4). Case c
-gets the first layout, in seed order from SEED0, of `paper_scenes.free_scene` (random spots around a back-row target,
+gets the first layout, in seed order after SEED0, of `paper_scenes.free_scene` (random spots around a back-row target,
 possibly behind a column straight in front of it) that the lane screen puts near such a tree and whose complete tree,
 counted with the real planner, has edges within WITHIN x of case c's, weights with one optimum (Eq. 8), every bottle
 seen by perception and every relocation of the optimum planned six times in a row (`paper_scenes.valid`). There is
@@ -19,7 +19,7 @@ from . import complete_tree, paper, paper_scenes
 from .scenarios_gen import write_scene
 
 DIR = "paper_random5"
-SEED0 = 5000
+SEED0 = 5000  # the first layout seed tried is SEED0 + 1
 LEAVES = 10  # the screen's leaf goal (scenario 1's count), with slack 1.0: 0-20
 HEADER = ("# Table 4 random case at the paper's size (issue 16, docs/evaluation.md), drawn with the real motion planner by\n"
           "# relocation_app/evaluation/paper_random.py on the shelf of paper_experiment_10. Format: docs/scenarios.md.")

@@ -221,7 +221,7 @@ def beside_paper_sections(idx: dict, paper_set: list[str], main: list[str], rand
 
 
 RANDOM_NOTE = """The cases at the paper's size (`python -m relocation_app.evaluation.make_scenes paper-random`,
-`paper_random.py`) are random draws, not searched: case c is the first layout in seed order (from 5000) of the paper
+`paper_random.py`) are random draws, not searched: case c is the first layout in seed order (after 5000) of the paper
 scenes' generator (random spots around a back-row target, sometimes behind a column in front of it) whose complete
 tree, with the real planner, is within 2x of case c's edges, with weights (drawn from the layout's seed) giving one
 optimum, every bottle seen by perception and the optimum planned six times in a row; each optimum is relocated in
