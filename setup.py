@@ -15,7 +15,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml") + ["config/fastdds.xml"]),
         (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
         *[(f"share/{PACKAGE}/config/scenarios/{d}", glob(f"config/scenarios/{d}/*.yaml"))
           for d in ("random5", "paper_random5")],  # Table 4's random cases, both sets

@@ -12,7 +12,7 @@ import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
@@ -23,7 +23,11 @@ def generate_launch_description():
     cfg = os.path.join(share, "config")
     scenario = LaunchConfiguration("scenario")
     common = {"scenario": scenario}
-    return LaunchDescription([
+    # config/fastdds.xml unless the user has a Fast DDS profile: without its larger shared-memory segment most
+    # best-effort camera images are lost (relocation_app/graph.py does the same)
+    profile = [] if os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") else [
+        SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(cfg, "fastdds.xml"))]
+    return LaunchDescription(profile + [
         DeclareLaunchArgument("scenario", default_value=os.path.join(cfg, "scenarios", "paper_experiment_10.yaml")),
         DeclareLaunchArgument("scene_source", default_value="perception"),
         DeclareLaunchArgument("use_sim", default_value="true"),

@@ -89,6 +89,8 @@ def ros_env(domain_id: int, run_dir: Path) -> dict[str, str]:
         ROS_HOME=str(run_dir / "ros_home"),
         ROS_LOG_DIR=str(run_dir / "ros_log"),
         MUJOCO_GL=env.get("MUJOCO_GL", "egl"),
+        # a 16 MB shared-memory segment: with Fast DDS's default most best-effort camera images are lost
+        FASTRTPS_DEFAULT_PROFILES_FILE=env.get("FASTRTPS_DEFAULT_PROFILES_FILE", str(config_file("fastdds.xml"))),
         PYTHONUNBUFFERED="1",
         PYTHONPATH=os.pathsep.join(filter(None, [str(python_path()), env.get("PYTHONPATH")])),
     )

@@ -48,6 +48,7 @@ def test_ros2_run_layout(install):
     assert (install / "share" / "qtree_relocation" / "package.xml").is_file()
     for cfg in ("task_planner", "motion_planner", "jaco2_sim_driver", "perception"):
         assert (install / "share" / "qtree_relocation" / "config" / f"{cfg}.yaml").is_file()
+    assert (install / "share" / "qtree_relocation" / "config" / "fastdds.xml").is_file()  # the graph's DDS profile
     scen = install / "share" / "qtree_relocation" / "config" / "scenarios"
     assert (scen / "paper_experiment_10.yaml").is_file()
     for d in ("random5", "paper_random5"):  # the Table 4 sets, usable as --scenario random5/random5_00
