@@ -10,6 +10,7 @@ marker also puts on /tf the marker as seen (camera optical frame -> `aruco_marke
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections import deque
@@ -23,6 +24,7 @@ from tf2_msgs.msg import TFMessage
 
 from qtree_relocation_msgs.msg import ObjectArray
 from relocation_common.node import declare_parameters, node_main
+from relocation_common.paths import config_file
 from relocation_common.ros_conversions import bottles_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
@@ -80,6 +82,12 @@ class PerceptionNode(Node):
         self.create_timer(g("republish_period"), self._republish, MutuallyExclusiveCallbackGroup())
         self.get_logger().info(f"perception on scenario {self.scenario.name!r} ({len(self.scenario.objects)} "
                                f"objects, marker id {self.scenario.marker.id}); publishing {g('objects_topic')}")
+        if not os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") and \
+                os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") == "rmw_fastrtps_cpp":
+            self.get_logger().warning(  # 3-6 of 40 frames arrived (docs/sim_driver.md, "Camera images over DDS")
+                "FASTRTPS_DEFAULT_PROFILES_FILE is not set: with Fast DDS's defaults most ~1 MB camera images are "
+                f"lost. Set it in the environment of every node: export FASTRTPS_DEFAULT_PROFILES_FILE="
+                f"{config_file('fastdds.xml')}")
 
     # ---- inputs
     def _on_color(self, msg: Image) -> None:
