@@ -56,6 +56,8 @@ def shutdown_rounds(tmp_path, rounds: int, signals=(signal.SIGINT, signal.SIGTER
                                              f"{p.log()[-2000:]}") from None
                     times.setdefault((name, sig.name), []).append(time.monotonic() - t0)
                     assert code == 0, f"{name} exited {code} on {sig.name} (round {r}):\n{p.log()[-3000:]}"
+                    for noise in ("Traceback", "never retrieved"):  # rclpy: a callback's error after shutdown
+                        assert noise not in p.log(), f"{name} on {sig.name} (round {r}):\n{p.log()[-3000:]}"
     return times
 
 
