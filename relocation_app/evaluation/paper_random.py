@@ -39,7 +39,7 @@ def draw(case: int, params, work, seed: int, deadline: float, log=print):
     goal = (case_edges()[case], LEAVES)
     while time.time() < deadline:
         seed += 1
-        d = paper_scenes._proposal(seed, 5, name(case), goal, params, slack=1.0)
+        d = paper_scenes.proposal(seed, 5, name(case), goal, params, slack=1.0)
         if d is None:
             continue
         c = paper_scenes.evaluate(d, params, work, goal)

@@ -150,7 +150,7 @@ def score(c: Candidate, goal: tuple[int, int]) -> float:
             + (0.0 if c.weighted is not None else 0.5))
 
 
-def _proposal(seed: int, n: int, name: str, goal: tuple[int, int], params, slack: float = 0.5,
+def proposal(seed: int, n: int, name: str, goal: tuple[int, int], params, slack: float = 0.5,
               base: dict | None = None, radius: float = RADIUS) -> dict | None:
     """free_scene(seed, radius), or `base` extended to n obstacles (odd seeds, when given), if its screened tree is near
     the goal (leaves within `slack`, edges within WITHIN^2 x), else None: the real planner is asked only about
@@ -196,7 +196,7 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
         seeds = ()
     climb_from = time.time() + 0.5 * (deadline - time.time())  # half the time for proposals, half for the climb
     for seed in seeds:
-        d = _proposal(seed, n, name, goal, params, base=base, radius=radius)
+        d = proposal(seed, n, name, goal, params, base=base, radius=radius)
         if d is None:
             continue
         c = evaluate(d, params, directory, goal)
