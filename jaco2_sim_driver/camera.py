@@ -10,13 +10,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from . import scene  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME  # noqa: E402
 from relocation_common.scenario import Scenario  # noqa: E402
+from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME  # noqa: E402
 
+from . import scene  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from .scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402
 
 # MuJoCo camera frame (x right, y up, looking along -z) -> OpenCV optical frame (x right, y down, z forward)

@@ -16,8 +16,6 @@ the fingers stop). One lock serialises access to the simulation. Interface: docs
 """
 from __future__ import annotations
 
-import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
-
 import math
 import queue
 import threading
@@ -30,6 +28,7 @@ from geometry_msgs.msg import PoseStamped
 from kinova_msgs.action import SetFingersPosition
 from kinova_msgs.msg import FingerPosition, JointAngles, JointVelocity
 from kinova_msgs.srv import HomeArm, Start, Stop
+from qtree_relocation_msgs.msg import ObjectArray, ObjectState
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -42,7 +41,7 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
 
-from qtree_relocation_msgs.msg import ObjectArray, ObjectState
+import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
 from relocation_common import kinova as units  # Kinova's units, shared with the planner
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import transform_msg

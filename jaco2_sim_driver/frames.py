@@ -13,8 +13,20 @@ import math
 import numpy as np
 
 from stpik_motion_planner.robot_description import (
-    BASE_LINK, EE_LINK, FINGER_BASE_Z, FINGER_DRIVE_LINK_NAMES, FINGER_GEAR, FINGER_HINGES, FINGER_LINK_NAMES,
-    FINGER_TIP_LINK_NAMES, LINK_NAMES, N_JOINTS, Q_SIGN, finger_tip, joint_origins)
+    BASE_LINK,
+    EE_LINK,
+    FINGER_BASE_Z,
+    FINGER_DRIVE_LINK_NAMES,
+    FINGER_GEAR,
+    FINGER_HINGES,
+    FINGER_LINK_NAMES,
+    FINGER_TIP_LINK_NAMES,
+    LINK_NAMES,
+    N_JOINTS,
+    Q_SIGN,
+    finger_tip,
+    joint_origins,
+)
 
 _ORIGINS = joint_origins()
 PARENTS = (BASE_LINK,) + LINK_NAMES[:-1]

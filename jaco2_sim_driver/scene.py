@@ -18,10 +18,18 @@ import cv2  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from stpik_motion_planner.robot_description import (  # noqa: E402
-    FINGER_BASE_Z, FINGER_CLOSED, FINGER_HINGES, FINGER_JOINT_NAMES, FINGER_LINK_NAMES, FINGER_RADIUS, LINK_NAMES,
-    finger_tip, mjcf_arm_body)
 from relocation_common.scenario import Marker, Scenario  # noqa: E402
+from stpik_motion_planner.robot_description import (  # noqa: E402
+    FINGER_BASE_Z,
+    FINGER_CLOSED,
+    FINGER_HINGES,
+    FINGER_JOINT_NAMES,
+    FINGER_LINK_NAMES,
+    FINGER_RADIUS,
+    LINK_NAMES,
+    finger_tip,
+    mjcf_arm_body,
+)
 
 CAMERA_NAME = "camera_color"
 HAND_BODY = LINK_NAMES[-1]

@@ -21,11 +21,19 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from stpik_motion_planner.robot_description import (
-    CONTINUOUS, FINGER_JOINT_NAMES, JOINT_NAMES, N_JOINTS, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX)
 from relocation_common.scenario import Scenario
+from stpik_motion_planner.robot_description import (
+    CONTINUOUS,
+    FINGER_JOINT_NAMES,
+    JOINT_NAMES,
+    N_JOINTS,
+    Q_HOME,
+    Q_LOWER,
+    Q_UPPER,
+    QDOT_MAX,
+)
 
-from .scene import (DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model)
+from .scene import DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model
 
 LIMIT_BRAKE_TIME = 0.02     # s: near a limit the allowed speed towards it is distance / LIMIT_BRAKE_TIME
 GRASP_RADIAL_TOL = 0.025    # m: bottle axis to grasp centre, across the hand (fingers open to about +-36 mm)

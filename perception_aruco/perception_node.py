@@ -16,13 +16,13 @@ import time
 from collections import deque
 
 import numpy as np
+from qtree_relocation_msgs.msg import ObjectArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from tf2_msgs.msg import TFMessage
 
-from qtree_relocation_msgs.msg import ObjectArray
 from relocation_common.node import declare_parameters, node_main
 from relocation_common.paths import config_file
 from relocation_common.ros_conversions import bottles_to_msg, transform_msg

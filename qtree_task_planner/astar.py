@@ -26,6 +26,7 @@ import math
 from dataclasses import dataclass
 
 from relocation_common.feasibility import Label, ask_many, claims, in_flight
+
 from .exact import ExactResult, _problem
 
 DEPTH = 2  # levels of the blockers' own lanes in the heuristic

@@ -23,9 +23,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .oracles import CachedOracle
-from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.config import ParameterError
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
+
+from .oracles import CachedOracle
 from .params import TrainingParams
 from .problem import RelocationProblem
 

@@ -17,8 +17,9 @@ import heapq
 import itertools
 from dataclasses import dataclass
 
-from .oracles import CachedOracle
 from relocation_common.feasibility import Label, ask_many, in_flight
+
+from .oracles import CachedOracle
 from .problem import RelocationProblem
 from .reachable import reachable_sets
 

@@ -24,6 +24,7 @@ import tempfile
 from pathlib import Path
 
 from relocation_common.feasibility import Label
+
 from .q_tree import Node, QTree
 
 SOURCE = Path(__file__).with_name("_kernel.c")

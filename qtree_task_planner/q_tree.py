@@ -17,6 +17,7 @@ from __future__ import annotations
 from typing import Iterable
 
 from relocation_common.feasibility import Label
+
 from .problem import RelocationProblem
 
 R_UNFEASIBLE = -10.0  # Eq. 13

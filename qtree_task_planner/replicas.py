@@ -18,6 +18,7 @@ import time
 from collections import deque
 
 from relocation_common.feasibility import FeasibilityAnswer, Query
+
 from .outage import PlannerUnavailable
 
 

@@ -31,6 +31,9 @@ import time
 from pathlib import Path
 
 import rclpy
+from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
+from qtree_relocation_msgs.msg import ObjectArray
+from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
@@ -40,23 +43,20 @@ from rclpy.time import Time
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
-from qtree_relocation_msgs.msg import ObjectArray
-from qtree_relocation_msgs.srv import PlanFeasibility
-from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
+from relocation_common.config import ParameterError
+from relocation_common.feasibility import FeasibilityAnswer, Label, replica_services
+from relocation_common.node import ActionClient, call, declare_parameters, end_goal, node_main
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs, msg_to_bottles
+from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
 
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
-from .oracles import CachedOracle
-from relocation_common.feasibility import FeasibilityAnswer, Label, replica_services
 from .markers import tree_markers
-from relocation_common.config import ParameterError
+from .oracles import CachedOracle
 from .outage import Cancelled, PlannerUnavailable, until_available
 from .params import TrainingParams
-from .retrieval import execute_sequence, solve_then_train
 from .problem import RelocationProblem
 from .replicas import ReplicaOracle
-from relocation_common.node import ActionClient, call, declare_parameters, end_goal, node_main
+from .retrieval import execute_sequence, solve_then_train
 
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from this node's clock is on another clock

@@ -17,10 +17,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from relocation_common.feasibility import Label
+
 from . import kernel
 from .checkpoint import Checkpoint, problem_hash
 from .oracles import CachedOracle
-from relocation_common.feasibility import Label
 from .params import TrainingParams
 from .policies import POLICY_FUNCTIONS, epsilon_greedy, epsilon_schedule, h_lrnd, lrnd
 from .problem import RelocationProblem

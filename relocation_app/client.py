@@ -22,11 +22,11 @@ import time
 from typing import Any, Callable
 
 import rclpy
+from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
+from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 
-from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
-from qtree_relocation_msgs.srv import PlanFeasibility
 from qtree_task_planner.replicas import ReplicaOracle
 from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
 from relocation_common.feasibility import Label, replica_services

@@ -150,10 +150,9 @@ def _progress_bar(rec: "_Recorder"):
 
 def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     """Wait for the graph and a scene, train (and execute) through the client; (result, before, after, frames)."""
+    from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import QoSDurabilityPolicy, QoSProfile
     from sensor_msgs.msg import Image
-
-    from qtree_relocation_msgs.msg import ObjectArray
 
     latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
     client.wait_until_ready(120, check=g.check_alive)

@@ -10,7 +10,6 @@ from typing import Any, Mapping
 
 import yaml
 
-
 MAX_FILE_BYTES = 1 << 20  # scenarios and parameter files are a few kB; a 50 MB one was a mistake or an attack
 MAX_DEPTH = 32  # mapping/list nesting: deeper is refused before Python's recursion limit is reached
 MAX_MESSAGE = 300  # characters of an error message (a value's repr can be megabytes)

@@ -8,7 +8,8 @@ import math
 
 import numpy as np
 from geometry_msgs.msg import Pose, TransformStamped
-from qtree_relocation_msgs.msg import BlockerSet as BlockerSetMsg, LaneBlockers, ObjectArray, ObjectState
+from qtree_relocation_msgs.msg import BlockerSet as BlockerSetMsg
+from qtree_relocation_msgs.msg import LaneBlockers, ObjectArray, ObjectState
 
 from .feasibility import BlockerSet
 from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle, ScenarioError

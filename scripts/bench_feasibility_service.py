@@ -28,8 +28,8 @@ import random
 import sys
 import tempfile
 import threading
-from pathlib import Path
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -37,6 +37,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench_motion_planner import export_package  # noqa: E402  (scripts/ is sys.path[0])
+
 from relocation_app.graph import Graph, wait_for_interfaces  # noqa: E402
 from relocation_common.paths import default_scenario, resolve_scenario  # noqa: E402
 from relocation_common.scenario import load_scenario  # noqa: E402

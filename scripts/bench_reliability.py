@@ -56,8 +56,8 @@ def is_bad(req) -> bool:
 def run_client(client: int, n: int, seed: int, answer_timeout: float) -> None:
     """Runs in a client process: prints one JSON line with every request's outcome."""
     import rclpy
-
     from qtree_relocation_msgs.srv import PlanFeasibility
+
     from relocation_common.paths import default_scenario
     from relocation_common.scenario import load_scenario
 

@@ -23,11 +23,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(REPO), str(REPO / "test")]
 
-import jaco2_sim_driver  # noqa: E402,F401
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
+import jaco2_sim_driver  # noqa: E402,F401
 from jaco2_sim_driver.sim import Jaco2Sim  # noqa: E402
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import parse_scenario  # noqa: E402

@@ -23,7 +23,7 @@ from relocation_common.feasibility import BlockerSet
 
 from . import robot_description as rd
 from .collision import HAND_PARTS, HandProxy, ObstacleSet
-from .grasp import Grasp, WorkspaceError, pose_matrix, side_grasp, grasp_yaws
+from .grasp import Grasp, WorkspaceError, grasp_yaws, pose_matrix, side_grasp
 
 SUSPECT_MARGIN = 0.03  # m added to the hand proxy's inflation to name the suspects of an STPIK/RRT failure
 

@@ -14,8 +14,9 @@ from typing import Iterable, Sequence
 import fcl
 import numpy as np
 
-from . import robot_description as rd
 from relocation_common.scenario import Scenario
+
+from . import robot_description as rd
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
 

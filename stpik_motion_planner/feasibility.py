@@ -23,23 +23,40 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.config import node_section
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.paths import config_file
+from relocation_common.scenario import Scenario, UnknownObjectError
 
 from . import robot_description as rd
-from .collision import (CARRIED, HAND_PARTS, PENETRATION, ArmGeometry, CollisionScene, HandProxy, ObstacleSet,
-                        carried_bottle)
-from .grasp import (Grasp, WorkspaceError, carry_heights, check_pose, exit_pose, grasp_standoff, grasp_yaws, home_pose,
-                    place_poses, side_grasp)
 from .blockers import answer_blockers, lane_blockers
-from .kinematics import Kinematics
 from .budget import SafetyNetTimeout  # noqa: F401 (for callers)
+from .collision import (
+    CARRIED,
+    HAND_PARTS,
+    PENETRATION,
+    ArmGeometry,
+    CollisionScene,
+    HandProxy,
+    ObstacleSet,
+    carried_bottle,
+)
+from .grasp import (
+    Grasp,
+    WorkspaceError,
+    carry_heights,
+    check_pose,
+    exit_pose,
+    grasp_standoff,
+    grasp_yaws,
+    home_pose,
+    place_poses,
+    side_grasp,
+)
+from .kinematics import Kinematics
 from .rrt import CartesianRRT, JointRRT, seed_ompl
-from relocation_common.scenario import Scenario, UnknownObjectError
 from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory
-
 
 
 class PlanningError(RuntimeError):

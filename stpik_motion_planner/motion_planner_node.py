@@ -18,39 +18,39 @@ from __future__ import annotations
 
 import math
 import threading
-from array import array
 import time
+from array import array
 
 import numpy as np
 import rclpy
-from builtin_interfaces.msg import Duration
 from action_msgs.msg import GoalStatus
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import Point
+from kinova_msgs.action import SetFingersPosition
+from kinova_msgs.msg import FingerPosition, JointVelocity
+from qtree_relocation_msgs.action import RelocateObject
+from qtree_relocation_msgs.msg import ObjectArray
+from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from geometry_msgs.msg import Point
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
-from kinova_msgs.action import SetFingersPosition
-from kinova_msgs.msg import FingerPosition, JointVelocity
-from qtree_relocation_msgs.action import RelocateObject
-from qtree_relocation_msgs.msg import ObjectArray
-from qtree_relocation_msgs.srv import PlanFeasibility
 from relocation_common import kinova
 from relocation_common.node import ActionClient, SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import BASE_FRAME, NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
 from . import robot_description as rd
-from .execution import FollowerParams, TrajectoryFollower
 from .blockers import lane_blockers
+from .execution import FollowerParams, TrajectoryFollower
 from .feasibility import MotionPlanner, PlannerParams, PlanningError, SafetyNetTimeout
-from .scene_update import merge_perceived
 from .relocation import PHASES, Progress, recover, relocate
+from .scene_update import merge_perceived
 from .trajectory import Trajectory
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)

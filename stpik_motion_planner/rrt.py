@@ -16,9 +16,8 @@ same process. See docs/motion_planner.md.
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
-
 import time
+from typing import Callable, Sequence
 
 import numpy as np
 import ompl.base as ob

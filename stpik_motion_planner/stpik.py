@@ -25,9 +25,9 @@ import numpy as np
 import pinocchio as pin
 
 from . import robot_description as rd
+from .budget import check_deadline
 from .collision import PENETRATION, ArmGeometry, ObstacleSet
 from .grasp import side_rotation
-from .budget import check_deadline
 
 
 @dataclass

@@ -27,7 +27,8 @@ import numpy as np
 import rclpy
 from kinova_msgs.action import SetFingersPosition
 from kinova_msgs.msg import FingerPosition, JointVelocity
-from rclpy.action import ActionClient as RclpyActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionClient as RclpyActionClient
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions

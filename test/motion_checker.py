@@ -25,11 +25,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL before mujoco)
 import mujoco
 import numpy as np
 
-from jaco2_sim_driver.scene import DESCRIPTION_FINGER_GEOMS, FINGER_BODY_NAMES, HAND_BODY, build_model
+import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL before mujoco)
+from jaco2_sim_driver.scene import DESCRIPTION_FINGER_GEOMS, HAND_BODY, build_model
 from stpik_motion_planner import robot_description as rd
 
 HAND_GEOMS = ("wrist", "palm", "finger_sim_1", "finger_sim_2", "finger_sim_3")

@@ -30,6 +30,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 from relocation_app import graph  # noqa: E402
 from relocation_app.graph import die_with_parent, param_arg, ros_env  # noqa: E402
+
 VENV_PYTHON = REPO / ".venv" / "bin" / "python"
 
 

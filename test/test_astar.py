@@ -8,7 +8,8 @@ import random
 from functools import lru_cache
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from qtree_task_planner import astar, exact
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle

@@ -1,6 +1,5 @@
 """PlanFeasibility's blocker fields, served by the motion_planner node as a real process (issue 14)."""
 import pytest
-
 import ros_procs
 from ros_procs import REPO, RosGraph
 

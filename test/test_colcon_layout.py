@@ -66,12 +66,12 @@ def test_the_installed_cli_runs_from_anywhere(install, tmp_path):
 
 @pytest.mark.graph
 def test_every_installed_node_starts_from_an_empty_directory_and_serves(install, tmp_path):
-    from ros_procs import RosGraph
-    from relocation_common.node import ActionClient  # rclpy#1123 fixed
-    from sensor_msgs.msg import JointState
-
     from qtree_relocation_msgs.action import TrainPlanner
     from qtree_relocation_msgs.srv import PlanFeasibility
+    from ros_procs import RosGraph
+    from sensor_msgs.msg import JointState
+
+    from relocation_common.node import ActionClient  # rclpy#1123 fixed
 
     lib = install / "lib" / "qtree_relocation"
     cwd = tmp_path / "empty"

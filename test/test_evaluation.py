@@ -8,8 +8,14 @@ from types import SimpleNamespace
 import pytest
 
 from relocation_app.evaluation.__main__ import QUICK_GRID, SCEN_DIR, planner_params, scenes
-from relocation_app.evaluation.feasibility_cache import (FeasibilityCacheError, FeasibilityTable, PlannerOracle,
-                                                             cache_key, load_table, open_table)
+from relocation_app.evaluation.feasibility_cache import (
+    FeasibilityCacheError,
+    FeasibilityTable,
+    PlannerOracle,
+    cache_key,
+    load_table,
+    open_table,
+)
 from relocation_app.evaluation.report import write_report
 from relocation_app.evaluation.sequences import analyse
 from relocation_app.evaluation.sweep import read_results, sweep

@@ -4,12 +4,13 @@ import hashlib
 import random
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from qtree_task_planner.exact import brute_force, solve
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from relocation_common.feasibility import FeasibilityAnswer, Label
 from qtree_task_planner.problem import RelocationProblem
+from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import ScenarioError, load_scenario
 

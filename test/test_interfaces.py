@@ -213,8 +213,8 @@ def test_tf_message_type_hash_is_jazzys():
 def test_advertised_type_hashes(monkeypatch):
     """The hash the compiled type support puts on the graph (what `ros2 topic info -v` shows) is the same."""
     import rclpy
-    from rclpy.context import Context
     from kinova_msgs.msg import FingerPosition, JointAngles, JointVelocity
+    from rclpy.context import Context
     from tf2_msgs.msg import TFMessage
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     expected = {TFMessage: TF_MESSAGE_HASH, JointVelocity: KINOVA_HASHES["msg/JointVelocity"],
@@ -237,10 +237,10 @@ def test_advertised_type_hashes(monkeypatch):
 
 
 def test_qtree_relocation_msgs_still_import():
-    from rclpy.type_support import check_for_type_support
     from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
     from qtree_relocation_msgs.msg import ObjectArray, ObjectState
     from qtree_relocation_msgs.srv import PlanFeasibility
+    from rclpy.type_support import check_for_type_support
     for iface in (PlanFeasibility, ObjectArray, ObjectState, RelocateObject, TrainPlanner):
         check_for_type_support(iface)
 

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ros_procs import REPO, RosGraph
 
 pytestmark = pytest.mark.graph
@@ -28,15 +27,22 @@ rclpy = pytest.importorskip("rclpy")
 from kinova_msgs.action import SetFingersPosition  # noqa: E402
 from kinova_msgs.msg import FingerPosition, JointAngles, JointVelocity  # noqa: E402
 from kinova_msgs.srv import HomeArm, Start, Stop  # noqa: E402
+from kinova_outsider import (  # noqa: E402
+    ABORTED,
+    ARM_JOINTS,
+    FINGER_CLOSED,
+    FINGER_JOINTS,
+    FINGER_TOLERANCE,
+    SUCCEEDED,
+    Client,
+    rad_to_turns,
+    turns_to_rad,
+)
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
-
-from kinova_outsider import (  # noqa: E402
-    ABORTED, ARM_JOINTS, FINGER_CLOSED, FINGER_JOINTS, FINGER_TOLERANCE, SUCCEEDED, Client, rad_to_turns,
-    turns_to_rad)
 
 PRE = "/j2s7s300_driver"
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)

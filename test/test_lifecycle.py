@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from ros_procs import REPO, VENV_PYTHON
 
 pytestmark = pytest.mark.graph

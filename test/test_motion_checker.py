@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 import pytest
-
 from motion_checker import MotionChecker, Report, replay_relocation
+
 from qtree_task_planner.exact import solve
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir

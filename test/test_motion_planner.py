@@ -11,12 +11,11 @@ import pinocchio as pin
 import pytest
 
 from jaco2_sim_driver.sim import GRASP_RADIAL_TOL
-
 from relocation_common.feasibility import Label
+from relocation_common.scenario import UnknownObjectError, parse_scenario
 from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
 from stpik_motion_planner.grasp import PALM_GAP, PALM_REACH, WorkspaceError
-from relocation_common.scenario import UnknownObjectError, parse_scenario
 
 SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
          "ceiling_z": 0.28, "bottom_z": -0.18}

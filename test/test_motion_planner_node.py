@@ -5,7 +5,6 @@ import time
 
 import numpy as np
 import pytest
-
 from ros_procs import REPO, RosGraph
 
 pytestmark = pytest.mark.graph
@@ -14,16 +13,16 @@ rclpy = pytest.importorskip("rclpy")
 from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
 from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
 from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
-from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
 from relocation_common.feasibility import Label  # noqa: E402
-from stpik_motion_planner import robot_description as rd  # noqa: E402
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
+from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario  # noqa: E402
+from stpik_motion_planner import robot_description as rd  # noqa: E402
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
 
 SRV = "/motion_planner/plan_feasibility"
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)

@@ -38,12 +38,11 @@ def _matrix(m) -> np.ndarray:
 
 def test_node_publishes_perceived_scene(tmp_path):
     import rclpy
+    from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
     from tf2_msgs.msg import TFMessage
-
-    from qtree_relocation_msgs.msg import ObjectArray
 
     scenario = load_scenario(default_scenario())
     frame = render_frame(scenario)

@@ -11,7 +11,6 @@ import subprocess
 import sys
 
 import pytest
-
 from ros_procs import REPO
 
 # scenario3_15 queries whose answers need RRT-Connect (the direct path is blocked), found with the real planner

@@ -4,9 +4,9 @@ import re
 import pytest
 
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from relocation_common.feasibility import FeasibilityAnswer, Label
 from qtree_task_planner.problem import ProblemError, RelocationProblem
 from qtree_task_planner.q_tree import QTree, reward
+from relocation_common.feasibility import FeasibilityAnswer, Label
 
 # a (phi 0.2) blocks the target T; b (phi 0.5) is free.
 PROBLEM = RelocationProblem(("a", "b"), {"a": 0.2, "b": 0.5}, "T")

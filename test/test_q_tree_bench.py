@@ -5,7 +5,6 @@ from pathlib import Path
 import pytest
 
 from relocation_common.paths import scenarios_dir
-
 from relocation_common.scenario import load_scenario
 
 spec = importlib.util.spec_from_file_location(

@@ -86,8 +86,7 @@ def setting(scene: str):
             oracle = BlockingOracle(sc)
         else:
             from relocation_app.evaluation.__main__ import planner_params
-            from relocation_app.evaluation.feasibility_cache import (PlannerOracle, cache_key, cache_path,
-                                                                        load_table)
+            from relocation_app.evaluation.feasibility_cache import PlannerOracle, cache_key, cache_path, load_table
             params = planner_params()
             path = cache_path(sc, params)
             if not path.exists():

@@ -5,11 +5,11 @@ from collections import Counter
 
 import pytest
 
-from relocation_common.config import ParameterError, node_section
-from relocation_common.paths import config_file
 from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.policies import epsilon_greedy, epsilon_schedule, h_lrnd, lrnd
 from qtree_task_planner.q_tree import Node
+from relocation_common.config import ParameterError, node_section
+from relocation_common.paths import config_file
 
 
 def test_eq14_first_middle_last_episode():

@@ -1,18 +1,18 @@
 """Training: breadth vs depth, pruning, both termination criteria, determinism, metrics, callback, and the
 Q-Tree against the exact optimum on random small instances."""
-import dataclasses
 import random
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from qtree_task_planner.exact import solve
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from relocation_common.feasibility import Label
 from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.q_tree import QTree
 from qtree_task_planner.training import train
+from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 

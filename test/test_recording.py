@@ -24,8 +24,17 @@ from mcap_ros2._dynamic import generate_dynamic  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 
 from relocation_app import recording  # noqa: E402
-from relocation_app.recording import (DELIMITER, BagWriter, RetrievalVideo, Status, full_definition,  # noqa: E402
-                                      message_class, msg_text, qos_dict, to_yaml)
+from relocation_app.recording import (  # noqa: E402
+    DELIMITER,
+    BagWriter,
+    RetrievalVideo,
+    Status,
+    full_definition,
+    message_class,
+    msg_text,
+    qos_dict,
+    to_yaml,
+)
 
 QOS = [{"history": "unknown", "depth": 0, "reliability": "reliable", "durability": "volatile",
         "deadline": {"sec": 9223372036, "nsec": 854775807}, "lifespan": {"sec": 9223372036, "nsec": 854775807},

@@ -6,8 +6,7 @@ import os
 
 import pytest
 
-from qtree_task_planner.checkpoint import (Checkpoint, CheckpointError, load_checkpoint, problem_hash,
-                                           save_checkpoint)
+from qtree_task_planner.checkpoint import Checkpoint, CheckpointError, load_checkpoint, problem_hash, save_checkpoint
 from qtree_task_planner.exact import solve
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.params import TrainingParams

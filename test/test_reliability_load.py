@@ -4,7 +4,6 @@ refusal with a reason (all bad ones, no valid one); the node survives, its memor
 import importlib.util
 
 import pytest
-
 from ros_procs import REPO
 
 pytestmark = [pytest.mark.graph, pytest.mark.bench]

@@ -4,10 +4,10 @@ host: docs/reliability.md says how to open it up across machines and what that e
 import time
 
 import pytest
+from ros_procs import RosGraph
 
 from relocation_app.graph import Graph, private_domain_id, ros_env
 from relocation_common.paths import config_file
-from ros_procs import RosGraph
 
 pytestmark = pytest.mark.graph
 

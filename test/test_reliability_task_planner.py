@@ -37,12 +37,12 @@ SCENE_TOPIC = "/test/objects"
 def _serve(scenario: str, die_after: int, delay: float = 0.0, relocate: str = "none") -> None:
     """`delay` s before each answer; `relocate`: none (no action server), hang (accepts and never finishes)."""
     import rclpy
+    from qtree_relocation_msgs.action import RelocateObject
+    from qtree_relocation_msgs.srv import PlanFeasibility
     from rclpy.action import ActionServer, CancelResponse
     from rclpy.callback_groups import ReentrantCallbackGroup
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
-    from qtree_relocation_msgs.action import RelocateObject
-    from qtree_relocation_msgs.srv import PlanFeasibility
     from relocation_common.ros_conversions import blockers_to_msgs
 
     sc = load_scenario(scenario)
@@ -102,12 +102,12 @@ if __name__ == "__main__":
 # ---------------------------------------------------------------------------------------------------------------
 pytestmark = pytest.mark.graph
 rclpy = pytest.importorskip("rclpy")
-from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
+from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402
+from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 
-from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402
 from qtree_task_planner.task_planner_node import train_goal  # noqa: E402
-from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
+from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from relocation_common.ros_conversions import bottles_to_msg  # noqa: E402
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -5,14 +5,15 @@ import threading
 import time
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_astar import lane_instance
 
 from qtree_task_planner import astar, exact
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.outage import Cancelled, PlannerUnavailable
 from qtree_task_planner.replicas import ReplicaOracle
 from relocation_common.feasibility import Label
-from test_astar import lane_instance
 
 
 class Replica:

@@ -21,9 +21,9 @@ TOPIC = "/test/objects"
 
 def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch):
     import rclpy
+    from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
-    from qtree_relocation_msgs.msg import ObjectArray
     from relocation_app.client import RelocationClient
     from relocation_common.ros_conversions import bottles_to_msg
 

@@ -6,7 +6,6 @@ import subprocess
 import sys
 
 import pytest
-
 from ros_procs import REPO, reserve_domain_id
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]

@@ -6,12 +6,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario
 from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.collision import ArmGeometry, CollisionScene, segment_distance
 from stpik_motion_planner.feasibility import PlannerParams
 from stpik_motion_planner.kinematics import Kinematics
-from relocation_common.paths import default_scenario
-from relocation_common.scenario import load_scenario
 
 MJCF = f"""<mujoco><compiler angle="radian"/><default><default class="arm_collision"><geom contype="1" conaffinity="1"/></default></default>
 <worldbody>{rd.mjcf_arm_body()}</worldbody></mujoco>"""

@@ -9,7 +9,6 @@ import threading
 import time
 
 import pytest
-
 from ros_procs import REPO, RosGraph
 
 pytestmark = pytest.mark.graph

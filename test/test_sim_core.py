@@ -1,6 +1,4 @@
 """Core of the simulated Jaco2 (no ROS): scene, velocity control, watchdog, limits, grasp/carry/release, camera."""
-import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
-
 import math
 
 import cv2
@@ -9,12 +7,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver.camera import intrinsics, render_frame
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, rpy_matrix
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
-from stpik_motion_planner.robot_description import EE_LINK, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX, urdf
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
+from stpik_motion_planner.robot_description import EE_LINK, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX, urdf
 
 SCENARIO = load_scenario(default_scenario())
 # hand horizontal, approach +x (towards the shelf), fingers closing along y, finger spread vertical (as Q_HOME)
@@ -267,8 +266,15 @@ def test_the_published_urdf_fingers_are_the_simulated_ones(fresh, finger_q):
     from jaco2_sim_driver import frames, kinova
     from relocation_common.kinova import turns_to_joint
     from stpik_motion_planner.robot_description import (
-        FINGER_DRIVE_LINK_NAMES, FINGER_GEAR, FINGER_GEAR_JOINT_NAMES, FINGER_JOINT_NAMES, FINGER_LINK_NAMES,
-        FINGER_TIP_LINK_NAMES, JOINT_NAMES, LINK_NAMES)
+        FINGER_DRIVE_LINK_NAMES,
+        FINGER_GEAR,
+        FINGER_GEAR_JOINT_NAMES,
+        FINGER_JOINT_NAMES,
+        FINGER_LINK_NAMES,
+        FINGER_TIP_LINK_NAMES,
+        JOINT_NAMES,
+        LINK_NAMES,
+    )
 
     m, d = fresh.model, fresh.data
     q = Q_HOME + np.array([0.3, -0.2, 0.4, -0.3, 0.5, 0.2, -0.6])

@@ -7,10 +7,9 @@ import numpy as np
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner import robot_description as rd
-from stpik_motion_planner.collision import HAND_PARTS, CollisionScene, HandProxy, _key
+from stpik_motion_planner.collision import HAND_PARTS, ArmGeometry, CollisionScene, HandProxy, _key
 from stpik_motion_planner.grasp import pose_matrix
 from stpik_motion_planner.kinematics import Kinematics
-from stpik_motion_planner.collision import ArmGeometry
 from stpik_motion_planner.stpik import hierarchy
 
 

@@ -4,7 +4,6 @@ import contextlib
 from unittest import mock
 
 import pytest
-
 import ros_procs
 from ros_procs import REPO, RosGraph
 

@@ -10,11 +10,11 @@ import pytest
 pytestmark = pytest.mark.graph
 
 from qtree_task_planner import exact  # noqa: E402
-from relocation_app.graph import Graph  # noqa: E402
-from relocation_common.paths import scenarios_dir  # noqa: E402
 from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402
+from relocation_app.graph import Graph  # noqa: E402
+from relocation_common.paths import scenarios_dir  # noqa: E402
 from relocation_common.scenario import load_scenario  # noqa: E402
 
 SCENARIO = scenarios_dir() / "blocking_5.yaml"
@@ -23,11 +23,11 @@ SCENARIO = scenarios_dir() / "blocking_5.yaml"
 @pytest.fixture(scope="module")
 def graph(tmp_path_factory):
     import rclpy
+    from qtree_relocation_msgs.msg import ObjectArray
+    from qtree_relocation_msgs.srv import PlanFeasibility
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
-    from qtree_relocation_msgs.msg import ObjectArray
-    from qtree_relocation_msgs.srv import PlanFeasibility
     from relocation_common.ros_conversions import blockers_to_msgs, bottles_to_msg
 
     scenario = load_scenario(SCENARIO)
@@ -64,10 +64,10 @@ def graph(tmp_path_factory):
 
 
 def _train_goal(node, g, **fields):
-    from relocation_common.node import ActionClient  # rclpy#1123 fixed
-
     from qtree_relocation_msgs.action import TrainPlanner
+
     from qtree_task_planner.task_planner_node import train_goal
+    from relocation_common.node import ActionClient  # rclpy#1123 fixed
     client = ActionClient(node, TrainPlanner, "/task_planner/train")
     deadline = time.monotonic() + 30
     while not client.wait_for_server(timeout_sec=0.5):

@@ -3,8 +3,8 @@ import pytest
 
 pytest.importorskip("visualization_msgs")
 
-from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
 from qtree_task_planner.markers import tree_markers  # noqa: E402
+from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
 from qtree_task_planner.params import TrainingParams  # noqa: E402
 from qtree_task_planner.problem import RelocationProblem  # noqa: E402
 from qtree_task_planner.training import train  # noqa: E402

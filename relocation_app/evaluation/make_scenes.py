@@ -15,9 +15,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from relocation_common.paths import scenarios_dir
-
 import yaml
+
+from relocation_common.paths import scenarios_dir
 
 from .scenarios_gen import RADIUS, accept, evaluate_scene, lattice_scene, write_scene
 

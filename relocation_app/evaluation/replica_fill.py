@@ -21,8 +21,8 @@ from relocation_common.feasibility import replica_services
 def replica_graph(scenario_path: str | Path, replicas: int, run_dir: str | Path | None = None):
     """(Graph, RelocationClient): the planners up and their services seen; everything stopped on exit."""
     import rclpy
-
     from qtree_relocation_msgs.srv import PlanFeasibility
+
     from relocation_app.client import FEASIBILITY, RelocationClient
     from relocation_app.graph import Graph, wait_for_interfaces
 
