@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from relocation_common.robot_description import JOINT_NAMES, Q_HOME  # noqa: E402
 from relocation_common.scenario import Scenario  # noqa: E402
-from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME  # noqa: E402
 
 from . import scene  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from .scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402

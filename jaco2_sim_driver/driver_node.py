@@ -44,9 +44,9 @@ from tf2_msgs.msg import TFMessage
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
 from relocation_common import kinova as units  # Kinova's units, shared with the planner
 from relocation_common.node import SideNode, declare_parameters, node_main
+from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX, urdf
 from relocation_common.ros_conversions import transform_msg
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX, urdf
 
 from . import frames, kinova
 from .camera import MJ_TO_OPTICAL, CameraRenderer, Frame

@@ -1,5 +1,5 @@
 """The arm's TF frames as robot_state_publisher computes them from the URDF of
-`stpik_motion_planner.robot_description.urdf()` and the joint angles (no rclpy).
+`relocation_common.robot_description.urdf()` and the joint angles (no rclpy).
 
 Each revolute joint i moves link i against its parent by origin_i @ Rz(sign_i * Q_i) (the URDF's <origin> and
 <axis xyz="0 0 sign_i">); the fixed joint puts the tool frame `j2s7s300_end_effector` on link 7. The product of the
@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from stpik_motion_planner.robot_description import (
+from relocation_common.robot_description import (
     BASE_LINK,
     EE_LINK,
     FINGER_BASE_Z,

@@ -2,7 +2,7 @@
 a scenario as free bodies, the ArUco marker as a texture, the camera and lights. No ROS here.
 
 Frames: the MuJoCo world frame is the robot base frame of the scenario (x towards the shelf, z up, metres).
-Everything is generated from `stpik_motion_planner.robot_description` and `relocation_common.scenario`, so
+Everything is generated from `relocation_common.robot_description` and `relocation_common.scenario`, so
 the simulated world is the world the planners reason about (Sect. 5 of the paper: top shelf with the
 obstacles and the target, bottom shelf where relocated objects go, board above the top shelf).
 """
@@ -18,8 +18,7 @@ import cv2  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from relocation_common.scenario import Marker, Scenario  # noqa: E402
-from stpik_motion_planner.robot_description import (  # noqa: E402
+from relocation_common.robot_description import (  # noqa: E402
     FINGER_BASE_Z,
     FINGER_CLOSED,
     FINGER_HINGES,
@@ -30,6 +29,7 @@ from stpik_motion_planner.robot_description import (  # noqa: E402
     finger_tip,
     mjcf_arm_body,
 )
+from relocation_common.scenario import Marker, Scenario  # noqa: E402
 
 CAMERA_NAME = "camera_color"
 HAND_BODY = LINK_NAMES[-1]
@@ -226,7 +226,7 @@ def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> str:
 def _actuators_xml(kv: float = 200.0) -> str:
     """Velocity actuators (gain kv, gravity compensated bodies, STACK-NOTES) for the arm; position actuators with a
     bounded force for the fingers."""
-    from stpik_motion_planner.robot_description import JOINT_NAMES
+    from relocation_common.robot_description import JOINT_NAMES
     arm = "".join(f'<velocity name="v_{j}" joint="{j}" kv="{kv:g}"/>' for j in JOINT_NAMES)
     fingers = "".join(f'<position name="p_{j}" joint="{j}" kp="2" dampratio="1" forcerange="-3 3" '
                       f'ctrlrange="0 {FINGER_CLOSED}"/>' for j in FINGER_JOINT_NAMES)

@@ -21,8 +21,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from relocation_common.scenario import Scenario
-from stpik_motion_planner.robot_description import (
+from relocation_common.robot_description import (
     CONTINUOUS,
     FINGER_JOINT_NAMES,
     JOINT_NAMES,
@@ -32,6 +31,7 @@ from stpik_motion_planner.robot_description import (
     Q_UPPER,
     QDOT_MAX,
 )
+from relocation_common.scenario import Scenario
 
 from .scene import DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model
 

@@ -34,10 +34,10 @@ sys.path.insert(0, str(REPO))
 if _IMPL:
     sys.path.insert(0, _IMPL)
 
+from relocation_common import robot_description as rd  # noqa: E402
 from relocation_common.feasibility import Label  # noqa: E402
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario  # noqa: E402
-from stpik_motion_planner import robot_description as rd  # noqa: E402
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
 
 

@@ -19,9 +19,9 @@ from typing import Iterable
 
 import numpy as np
 
+from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet
 
-from . import robot_description as rd
 from .collision import HAND_PARTS, HandProxy, ObstacleSet
 from .grasp import Grasp, WorkspaceError, grasp_yaws, pose_matrix, side_grasp
 

@@ -14,9 +14,8 @@ from typing import Iterable, Sequence
 import fcl
 import numpy as np
 
+from relocation_common import robot_description as rd
 from relocation_common.scenario import Scenario
-
-from . import robot_description as rd
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
 

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import robot_description as rd
+from relocation_common import robot_description as rd
+
 from .trajectory import Trajectory
 
 

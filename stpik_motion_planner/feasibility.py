@@ -23,12 +23,12 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from relocation_common import robot_description as rd
 from relocation_common.config import node_section
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.paths import config_file
 from relocation_common.scenario import Scenario, UnknownObjectError
 
-from . import robot_description as rd
 from .blockers import answer_blockers, lane_blockers
 from .budget import SafetyNetTimeout  # noqa: F401 (for callers)
 from .collision import (

@@ -14,9 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from relocation_common import robot_description as rd
 from relocation_common.scenario import Scenario
-
-from . import robot_description as rd
 
 _PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 PALM_REACH = rd.D67 - _PALM.p1[2] - _PALM.radius  # m from the grasp centre back to the palm's front (0.025)

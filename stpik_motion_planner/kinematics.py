@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from . import robot_description as rd
+from relocation_common import robot_description as rd
 
 
 class Kinematics:

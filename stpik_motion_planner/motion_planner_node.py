@@ -41,11 +41,11 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
 from relocation_common import kinova
+from relocation_common import robot_description as rd
 from relocation_common.node import ActionClient, SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import BASE_FRAME, NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
-from . import robot_description as rd
 from .blockers import lane_blockers
 from .execution import FollowerParams, TrajectoryFollower
 from .feasibility import MotionPlanner, PlannerParams, PlanningError, SafetyNetTimeout

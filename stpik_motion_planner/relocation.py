@@ -17,7 +17,8 @@ from typing import Protocol
 
 import numpy as np
 
-from . import robot_description as rd
+from relocation_common import robot_description as rd
+
 from .feasibility import MotionPlanner, PlanningError
 from .grasp import WorkspaceError
 from .trajectory import Trajectory

@@ -24,7 +24,8 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 import pinocchio as pin
 
-from . import robot_description as rd
+from relocation_common import robot_description as rd
+
 from .budget import check_deadline
 from .collision import PENETRATION, ArmGeometry, ObstacleSet
 from .grasp import side_rotation

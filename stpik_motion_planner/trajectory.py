@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import robot_description as rd
+from relocation_common import robot_description as rd
 
 STREAM_RATE = 100.0  # Hz, the rate of kinova's joint velocity commands
 

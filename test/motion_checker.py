@@ -30,7 +30,7 @@ import numpy as np
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL before mujoco)
 from jaco2_sim_driver.scene import DESCRIPTION_FINGER_GEOMS, HAND_BODY, build_model
-from stpik_motion_planner import robot_description as rd
+from relocation_common import robot_description as rd
 
 HAND_GEOMS = ("wrist", "palm", "finger_sim_1", "finger_sim_2", "finger_sim_3")
 FINGER_GEOMS = ("finger_sim_1", "finger_sim_2", "finger_sim_3")

@@ -25,8 +25,8 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from relocation_common.paths import default_scenario
+from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, Q_HOME, Q_UPPER, QDOT_MAX  # noqa
 from relocation_common.scenario import load_scenario  # noqa: E402
-from stpik_motion_planner.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, Q_HOME, Q_UPPER, QDOT_MAX  # noqa
 
 PARAMS = REPO / "config" / "jaco2_sim_driver.yaml"
 MODULE = "jaco2_sim_driver.driver_node"

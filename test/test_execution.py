@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from jaco2_sim_driver.sim import Jaco2Sim
+from relocation_common import robot_description as rd
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.execution import FollowerParams, TrajectoryFollower
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
 from stpik_motion_planner.relocation import PHASES, relocate

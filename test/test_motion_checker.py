@@ -14,10 +14,10 @@ import pytest
 from motion_checker import MotionChecker, Report, replay_relocation
 
 from qtree_task_planner.exact import solve
+from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario, parse_scenario
-from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
 from stpik_motion_planner.grasp import WorkspaceError
 from stpik_motion_planner.relocation import plan_relocation, relocate

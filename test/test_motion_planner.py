@@ -11,9 +11,9 @@ import pinocchio as pin
 import pytest
 
 from jaco2_sim_driver.sim import GRASP_RADIAL_TOL
+from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.scenario import UnknownObjectError, parse_scenario
-from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
 from stpik_motion_planner.grasp import PALM_GAP, PALM_REACH, WorkspaceError
 

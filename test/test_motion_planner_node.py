@@ -17,11 +17,11 @@ from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
+from relocation_common import robot_description as rd  # noqa: E402
 from relocation_common.feasibility import Label  # noqa: E402
 from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario  # noqa: E402
-from stpik_motion_planner import robot_description as rd  # noqa: E402
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
 
 SRV = "/motion_planner/plan_feasibility"

@@ -13,8 +13,8 @@ from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError, pose_e
 from perception_aruco.images import decode_color, decode_depth, encode_color, encode_depth
 from perception_aruco.pipeline import Perception
 from relocation_common.paths import scenarios_dir
+from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.scenario import load_scenario, parse_scenario
-from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME
 
 SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15"]
 VISIBLE_PIXELS = 300  # a bottle with this many pixels in view (~10 % of an unoccluded one) must be found

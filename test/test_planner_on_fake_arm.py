@@ -28,7 +28,7 @@ from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from stpik_motion_planner.robot_description import Q_HOME, QDOT_MAX  # noqa: E402
+from relocation_common.robot_description import Q_HOME, QDOT_MAX  # noqa: E402
 
 PRE = "/j2s7s300_driver"
 

@@ -6,9 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from relocation_common import robot_description as rd
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.collision import ArmGeometry, CollisionScene, segment_distance
 from stpik_motion_planner.feasibility import PlannerParams
 from stpik_motion_planner.kinematics import Kinematics

@@ -12,8 +12,8 @@ from jaco2_sim_driver.camera import intrinsics, render_frame
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, rpy_matrix
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
 from relocation_common.paths import default_scenario
+from relocation_common.robot_description import EE_LINK, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX, urdf
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.robot_description import EE_LINK, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX, urdf
 
 SCENARIO = load_scenario(default_scenario())
 # hand horizontal, approach +x (towards the shelf), fingers closing along y, finger spread vertical (as Q_HOME)
@@ -88,7 +88,7 @@ def test_bad_command_is_rejected_and_changes_nothing(fresh, bad):
 def test_huge_commands_never_leave_tables_6_and_7(fresh, sign):
     """+-1e30 on every joint for 3 s (issue 18: before the firmware-like limits, joint 3 reached 1.14x Table 7 and
     joint 4 went past Table 6): at every 1 ms step each joint within its velocity and position limits."""
-    from stpik_motion_planner.robot_description import CONTINUOUS
+    from relocation_common.robot_description import CONTINUOUS
     limited = ~np.asarray(CONTINUOUS)
     worst_v, worst_p = 0.0, 0.0
     for k in range(3000):
@@ -265,7 +265,7 @@ def test_the_published_urdf_fingers_are_the_simulated_ones(fresh, finger_q):
     closed; the mimic gear joints at their multiplier) puts them there too (away from home, open to closed)."""
     from jaco2_sim_driver import frames, kinova
     from relocation_common.kinova import turns_to_joint
-    from stpik_motion_planner.robot_description import (
+    from relocation_common.robot_description import (
         FINGER_DRIVE_LINK_NAMES,
         FINGER_GEAR,
         FINGER_GEAR_JOINT_NAMES,

@@ -4,9 +4,9 @@ the hierarchy (Eq. 10) with numpy's SVD gufunc equals the textbook recursion bit
 import fcl
 import numpy as np
 
+from relocation_common import robot_description as rd
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner import robot_description as rd
 from stpik_motion_planner.collision import HAND_PARTS, ArmGeometry, CollisionScene, HandProxy, _key
 from stpik_motion_planner.grasp import pose_matrix
 from stpik_motion_planner.kinematics import Kinematics

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from relocation_common.kinova import FINGER_JOINT_CLOSED
+from .kinova import FINGER_JOINT_CLOSED
 
 PI = math.pi
 PREFIX = "j2s7s300"
