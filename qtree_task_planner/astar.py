@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from relocation_common.feasibility import Label, ask_many, claims, in_flight
 
-from .exact import ExactResult, _problem
+from .exact import ExactResult, as_problem
 
 DEPTH = 2  # levels of the blockers' own lanes in the heuristic
 
@@ -154,7 +154,7 @@ def solve(problem, oracle, depth: int = DEPTH) -> AStarResult:
 
     oracle: feasibility(object_id, removed) -> FeasibilityAnswer (blockers used when given); an optional
     lane_blockers(removed) (relocation_common.feasibility.LaneOracle) is called once, at the empty set."""
-    problem = _problem(problem)
+    problem = as_problem(problem)
     obstacles, target, phi = problem.obstacles, problem.target, problem.weights
     kb = Knowledge(phi, target, depth)
     blocker_calls = 0

@@ -41,7 +41,8 @@ class ExactResult:
                 "sets_settled": self.sets_settled}
 
 
-def _problem(problem) -> RelocationProblem:
+def as_problem(problem) -> RelocationProblem:
+    """`problem` itself if it is a RelocationProblem, else the problem of that scenario."""
     return problem if isinstance(problem, RelocationProblem) else RelocationProblem.from_scenario(problem)
 
 
@@ -50,7 +51,7 @@ def solve(problem, oracle) -> ExactResult:
 
     oracle: feasibility(object_id, removed: frozenset) -> FeasibilityAnswer. oracle_calls counts the questions
     this search asks (each (object, set) at most once, so a CachedOracle in front changes nothing here)."""
-    problem = _problem(problem)
+    problem = as_problem(problem)
     obstacles, target, phi = problem.obstacles, problem.target, problem.weights
     calls = 0
     known: dict = {}  # (object, set) -> answer
@@ -104,7 +105,7 @@ def _ask_next(queue, question, oracle, known, settled, target) -> int:
 def brute_force(problem, oracle) -> ExactResult:
     """Test reference: every removed set reachable by feasible single removals, asking the oracle about every
     (object, reachable set) pair, then the lightest set from which the target is feasible."""
-    problem = _problem(problem)
+    problem = as_problem(problem)
     cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
     calls0 = cache.calls
     reachable = reachable_sets(problem.obstacles, lambda o, s: cache.feasibility(o, s).label != Label.UNFEASIBLE)

@@ -1,4 +1,4 @@
-"""Which bottles block each grasp lane (issue 14): the grasp/approach screen of feasibility (paper Sect. 4.1,
+"""Which bottles block each grasp lane: the grasp/approach screen of feasibility (paper Sect. 4.1,
 step 1) asked per bottle instead of once for all.
 
 A lane is one approach yaw of `grasp.grasp_yaws`. `MotionPlanner._candidates` keeps a lane when the hand proxy is
@@ -48,8 +48,8 @@ def _lanes(planner, object_id: str) -> list[Grasp]:
 def _blocked(planner, hand: HandProxy, g: Grasp, obs: ObstacleSet) -> bool:
     """The screen of one lane against `obs`: the proxy meets it at the pre-grasp or along the approach."""
     skip = {n: frozenset([g.object_id]) for n in HAND_PARTS}
-    return hand.collides(*pose_matrix(g.pre_grasp), obs) or not planner._path_clear([g.pre_grasp, g.grasp], obs,
-                                                                                      hand, skip)
+    return hand.collides(*pose_matrix(g.pre_grasp), obs) or not hand.path_clear([g.pre_grasp, g.grasp], obs,
+                                                                                planner.params.resolution, skip)
 
 
 def _near(hand: HandProxy, g: Grasp, obs: ObstacleSet) -> list:

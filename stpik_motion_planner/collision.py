@@ -8,6 +8,7 @@ computes their exact distances and witness points (in the base frame). fcl retur
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -322,3 +323,18 @@ class HandProxy:
             if fcl.collide(self.objs[c], o.obj, self.req, fcl.CollisionResult()):
                 return True
         return False
+
+    def path_clear(self, poses, obs: ObstacleSet, resolution: float, skip: dict[str, frozenset] | None = None
+                   ) -> bool:
+        """The proxy is clear at every pose along the polyline of (x, y, z, yaw) poses (grasp.py), sampled every
+        `resolution` m (a yaw change counts 0.25 m per rad): the straight approach of a grasp lane (feasibility's
+        candidates, blockers' screen) and a direct Cartesian path."""
+        from .grasp import pose_matrix
+
+        for a, b in zip(poses[:-1], poses[1:]):
+            a, b = np.asarray(a, float), np.asarray(b, float)
+            n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / resolution)))
+            for k in range(n + 1):
+                if self.collides(*pose_matrix(a + (b - a) * k / n), obs, skip):
+                    return False
+        return True

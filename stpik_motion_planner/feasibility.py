@@ -247,17 +247,6 @@ class MotionPlanner:
         return out
 
     # ---------------------------------------------------------------- Cartesian validity
-    def _path_clear(self, poses, obs: ObstacleSet, hand: HandProxy, skip=None) -> bool:
-        """The hand proxy is clear at every pose along the polyline, sampled at the planner's resolution."""
-        res = self.params.resolution
-        for a, b in zip(poses[:-1], poses[1:]):
-            a, b = np.asarray(a, float), np.asarray(b, float)
-            n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / res)))
-            for k in range(n + 1):
-                if hand.collides(*_mat(a + (b - a) * k / n), obs, skip):
-                    return False
-        return True
-
     def _candidates(self, object_id: str, obs: ObstacleSet) -> list[Grasp]:
         """Grasps whose pre-grasp and straight approach are clear for the hand (the target excluded for the
         palm and fingers on the approach only)."""
@@ -275,7 +264,7 @@ class MotionPlanner:
                 continue
             if self.hand.collides(*_mat(g.pre_grasp), obs):
                 continue
-            if self._path_clear([g.pre_grasp, g.grasp], obs, self.hand, skip):
+            if self.hand.path_clear([g.pre_grasp, g.grasp], obs, self.params.resolution, skip):
                 out.append(g)
         return out
 
@@ -290,7 +279,7 @@ class MotionPlanner:
         later attempts RRT-Connect."""
         if first and self.params.direct_first:
             direct = [np.asarray(start, float), self._stage(goal), np.asarray(goal, float)]
-            if self._path_clear(direct, obs, hand):
+            if hand.path_clear(direct, obs, self.params.resolution):
                 stats.direct_paths += 1
                 return direct
         t = time.perf_counter()
@@ -459,7 +448,7 @@ class MotionPlanner:
         lifted, stage = direct[0], direct[-1]
         last = "no Cartesian path out of the shelf"
         for attempt in range(p.max_attempts):
-            if attempt == 0 and p.direct_first and self._path_clear(direct, obs, hand_c):
+            if attempt == 0 and p.direct_first and hand_c.path_clear(direct, obs, p.resolution):
                 stats.direct_paths += 1
                 mid = direct
             else:

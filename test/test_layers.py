@@ -6,6 +6,9 @@
    simulator alike), no exception.
 3. relocation_app: anything.
 Imports inside functions count too. And `__file__` locates files in one helper only (relocation_common/paths.py).
+Two more rules on the same reading: no import cycle among the project's modules (a cycle through a function-level
+import is a cycle too), and no module uses another module's private (underscore) names: `from m import _f`,
+`m._f` for an imported module m, or `obj._f` where `_f` is a function or method defined only in other modules.
 """
 import ast
 from pathlib import Path
@@ -17,7 +20,6 @@ COMMON = "relocation_common"
 CORES = ("qtree_task_planner", "stpik_motion_planner", "jaco2_sim_driver", "perception_aruco")
 APP = "relocation_app"
 PACKAGES = (COMMON, *CORES, APP)
-EXCEPTIONS = {("jaco2_sim_driver", "relocation_common.robot_description")}
 
 
 def project_imports(path: Path, root: Path):
@@ -79,3 +81,140 @@ def test_file_paths_come_from_one_helper(package):
     next to its module and is package data)."""
     users = [p.relative_to(ROOT).as_posix() for p in (ROOT / package).rglob("*.py") if "__file__" in p.read_text()]
     assert set(users) <= {"relocation_common/paths.py", "qtree_task_planner/kernel.py"}
+
+
+# ---------------------------------------------------------------------------------------------------------- cycles
+def module_names(root: Path = ROOT) -> dict[str, Path]:
+    """Every module of the project's packages: dotted name -> file (a package is its __init__.py)."""
+    out = {}
+    for package in PACKAGES:
+        for path in sorted((root / package).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return out
+
+
+def _imports(path: Path, root: Path, modules: dict[str, Path]):
+    """(line, imported module, {local name: module or None for a name that is not a module}) of every project
+    import in the file, functions included; `from m import n` counts as an import of m.n when that is a module."""
+    tree = ast.parse(path.read_text(), str(path))
+    parts = path.relative_to(root).with_suffix("").parts
+    package = parts[:-1]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] in PACKAGES:
+                    yield node.lineno, a.name, {(a.asname or a.name.split(".")[0]): a.name if a.asname else None}
+        elif isinstance(node, ast.ImportFrom):
+            base = ".".join(package[:len(package) - node.level + 1] + ((node.module,) if node.module else ())) \
+                if node.level else (node.module or "")
+            if base.split(".")[0] not in PACKAGES:
+                continue
+            for a in node.names:
+                sub = f"{base}.{a.name}"
+                yield node.lineno, (sub if sub in modules else base), {a.asname or a.name: sub if sub in modules
+                                                                       else None}
+
+
+def import_graph(root: Path = ROOT) -> dict[str, set[str]]:
+    """module -> the project modules it imports."""
+    modules = module_names(root)
+    return {m: {imp for _, imp, _ in _imports(p, root, modules) if imp in modules and imp != m}
+            for m, p in modules.items()}
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    out = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out)
+
+
+def test_no_import_cycle_among_the_modules():
+    assert import_cycles(import_graph()) == []
+
+
+def test_the_cycle_check_finds_a_cycle_through_a_function_level_import(tmp_path):
+    (tmp_path / "relocation_app").mkdir()
+    (tmp_path / "relocation_app" / "__init__.py").write_text("")
+    (tmp_path / "relocation_app" / "a.py").write_text("from .b import g\n")
+    (tmp_path / "relocation_app" / "b.py").write_text("def g():\n    from relocation_app import a\n")
+    (tmp_path / "relocation_app" / "c.py").write_text("from . import a\n")
+    assert import_cycles(import_graph(tmp_path)) == [["relocation_app.a", "relocation_app.b"]]
+
+
+# ------------------------------------------------------------------------------------------------- private names
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def private_uses(root: Path = ROOT) -> list[str]:
+    """Where a module uses another module's private name (see the module docstring for the three forms)."""
+    modules = module_names(root)
+    trees = {m: ast.parse(p.read_text(), str(p)) for m, p in modules.items()}
+    defined = {m: {n.name for n in ast.walk(t) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))}
+               for m, t in trees.items()}
+    elsewhere: dict[str, set[str]] = {}
+    for m, names in defined.items():
+        for n in names:
+            elsewhere.setdefault(n, set()).add(m)
+    out = []
+    for m, path in modules.items():
+        where = path.relative_to(root)
+        aliases = {}
+        for line, imp, names in _imports(path, root, modules):
+            for local, module in names.items():
+                if module is None and _private(local) and imp != m:
+                    out.append(f"{where}:{line} imports {imp}.{local}")
+                elif module is not None:
+                    aliases[local] = module
+        for node in ast.walk(trees[m]):
+            if not isinstance(node, ast.Attribute) or not _private(node.attr):
+                continue
+            owner = node.value
+            if isinstance(owner, ast.Name) and owner.id in aliases and aliases[owner.id] != m:
+                out.append(f"{where}:{node.lineno} uses {aliases[owner.id]}.{node.attr}")
+            elif node.attr in elsewhere and node.attr not in defined[m] and not (
+                    isinstance(owner, ast.Name) and owner.id in ("self", "cls")):
+                out.append(f"{where}:{node.lineno} calls {node.attr} of {', '.join(sorted(elsewhere[node.attr]))}")
+    return out
+
+
+def test_no_module_uses_another_modules_private_names():
+    assert private_uses() == []
+
+
+def test_the_private_check_finds_each_form(tmp_path):
+    (tmp_path / "stpik_motion_planner").mkdir()
+    pkg = tmp_path / "stpik_motion_planner"
+    (pkg / "a.py").write_text("def _f():\n    pass\n\n\nclass P:\n    def _clear(self):\n        pass\n")
+    (pkg / "b.py").write_text("from .a import _f\nfrom . import a\n\n\ndef g(p):\n    a._f()\n"
+                              "    return p._clear()\n")
+    assert private_uses(tmp_path) == ["stpik_motion_planner/b.py:1 imports stpik_motion_planner.a._f",
+                                      "stpik_motion_planner/b.py:6 uses stpik_motion_planner.a._f",
+                                      "stpik_motion_planner/b.py:7 calls _clear of stpik_motion_planner.a"]

@@ -1,10 +1,12 @@
-"""`./run evaluate [fill|sweep|report|scenes|all] [--runs N] [--quick] ...`: the paper's evaluation (docs/evaluation.md).
+"""`./run evaluate [fill|sweep|report|scenes|all] [--runs N] [--quick] ...`: the paper's evaluation
+(docs/evaluation.md).
 
 all (default): fill the missing feasibility answers with the real planner (none when data/feasibility/ is
 complete), run the missing sweep cells (the scenes of the paper's size paper1_5/paper2_10/paper3_15, scenarios
 1-3 of this project's geometry, the Sect. 5.2 scene paper_experiment_10, the 10 random scenes of each set), regenerate
 docs/evaluation.md (the paper's Tables 1-4 beside ours, data/paper/) and docs/figures/.
---only a,b: fill/sweep only those scenes. Scenes of the paper's size: python -m relocation_app.evaluation.make_scenes paper N.
+--only a,b: fill/sweep only those scenes. Scenes of the paper's size:
+python -m relocation_app.evaluation.make_scenes paper N.
 --quick: 3 runs per cell, two (alpha, gamma) pairs, two random scenes per set, output under out/evaluation-quick/.
 """
 from __future__ import annotations
@@ -17,20 +19,14 @@ from pathlib import Path
 
 from relocation_common.paths import data_dir, scenarios_dir, share_dir
 
+from .feasibility_cache import planner_params
+
 ROOT = share_dir()  # the checkout: the evaluation writes docs/ and data/ of the source tree
 SCEN_DIR = scenarios_dir()
 MAIN = ("scenario1_5", "scenario2_10", "scenario3_15")  # this project's geometry
 PAPER = ("paper1_5", "paper2_10", "paper3_15")  # scenes of the paper's size (make_scenes.py paper)
 EXPERIMENT = "paper_experiment_10"
-EVAL_TIMEOUT = 60.0  # s: wall-clock safety net per planner query when filling the cache (answers are load-independent)
 QUICK_GRID = ((1.0, 0.1), (0.3, 0.9))
-
-
-def planner_params():
-    from stpik_motion_planner.feasibility import PlannerParams
-    p = PlannerParams.load()
-    p.timeout = EVAL_TIMEOUT
-    return p
 
 
 def scene_paths(quick: bool = False) -> tuple[list[Path], list[Path], list[Path]]:
@@ -43,6 +39,7 @@ def scene_paths(quick: bool = False) -> tuple[list[Path], list[Path], list[Path]
 
 
 def scenes(paths, params, data_dir, grid=None):
+    """The sweep's scenes (sweep.Scene) of the scenario files `paths`, each with its feasibility cache file."""
     from relocation_common.scenario import load_scenario
 
     from .feasibility_cache import cache_key, cache_path
@@ -81,6 +78,7 @@ def _only(paths: list[Path], only: set[str] | None) -> list[Path]:
 
 
 def main(argv=None) -> int:
+    """`./run evaluate ...` (the module docstring); exit status."""
     ap = argparse.ArgumentParser(prog="evaluate", description=__doc__.splitlines()[0])
     ap.add_argument("command", nargs="?", default="all", choices=("all", "fill", "sweep", "report", "scenes"))
     ap.add_argument("--runs", type=int, default=50, help="trainings per cell (default 50)")

@@ -36,10 +36,20 @@ from relocation_common.paths import data_dir
 
 CACHE_VERSION = 1
 DATA_DIR = data_dir() / "feasibility"
+EVAL_TIMEOUT = 60.0  # s: wall-clock safety net per planner query when filling the cache (answers are load-independent)
 
 
 class FeasibilityCacheError(ValueError):
     """A cache file that cannot be used (corrupted, for another scene or planner setting, malformed entry)."""
+
+
+def planner_params():
+    """The evaluation's planner parameters: config/motion_planner.yaml's, with the safety net EVAL_TIMEOUT (not part
+    of the cache key). Shared by the evaluation's commands, the scene search and the tests."""
+    from stpik_motion_planner.feasibility import PlannerParams
+    p = PlannerParams.load()
+    p.timeout = EVAL_TIMEOUT
+    return p
 
 
 # ------------------------------------------------------------------------------------------------ keys
@@ -221,6 +231,12 @@ def _use_scenario(scenario, params) -> None:
         _WORKER["params"] = params
     elif mp.scenario is not scenario:
         mp.set_scenario(scenario)
+
+
+def worker_planner(scenario, params):
+    """This process's MotionPlanner on `scenario` (`_use_scenario`: loaded once, the scene swapped after)."""
+    _use_scenario(scenario, params)
+    return _WORKER["mp"]
 
 
 def _ask(q: tuple[str, tuple[str, ...]]):

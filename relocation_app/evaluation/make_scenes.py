@@ -9,7 +9,7 @@
   out/paper_search/.
 - paper_random5/paper_random5_XX (`... make_scenes paper-random`): Table 4's ten random cases at the paper's size,
   drawn with the real planner (paper_random.py).
-Feasibility comes from the real planner (evaluation parameters, see __main__.planner_params).
+Feasibility comes from the real planner (evaluation parameters, feasibility_cache.planner_params).
 """
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ from relocation_common.paths import scenarios_dir
 from .scenarios_gen import RADIUS, accept, evaluate_scene, lattice_scene, write_scene
 
 PAPER_NAMES = {5: "paper1_5", 10: "paper2_10", 15: "paper3_15"}
-PAPER_HEADER = ("# Scene of the paper's size (issue 16, docs/evaluation.md \"Complete trees\"), found with the real motion\n"
+PAPER_HEADER = ("# Scene of the paper's size (issue 16, docs/evaluation.md \"Complete trees\"), found with the real "
+                "motion\n"
                 "# planner by relocation_app/evaluation/make_scenes.py paper on the shelf of paper_experiment_10.\n"
                 "# Format: docs/scenarios.md.")
 
@@ -33,6 +34,7 @@ HEADER = ("# Evaluation scene (docs/evaluation.md), made by relocation_app/evalu
 
 
 def scenario2_from_3() -> dict:
+    """scenario2_10's data: scenario3_15 without its five outermost obstacles, renumbered o1..o10."""
     d = yaml.safe_load((SCEN / "scenario3_15.yaml").read_text())
     drop = {"o1", "o5", "o6", "o11", "o15"}
     objs = [o for o in d["objects"] if o["id"] not in drop]
@@ -47,6 +49,7 @@ def scenario2_from_3() -> dict:
 
 
 def make_all(params, data_dir, n_random: int = 10) -> None:
+    """Write scenario1_5, scenario2_10 and the `n_random` Table 4 scenes random5/ (the module docstring)."""
     d1 = lattice_scene(50, 5, "scenario1_5", 0.3)
     d1["description"] = "Five obstacles in staggered rows in front of the target (lattice seed 50)."
     write_scene(d1, SCEN / "scenario1_5.yaml", HEADER)
@@ -56,7 +59,8 @@ def make_all(params, data_dir, n_random: int = 10) -> None:
         d = lattice_scene(seed, 5, f"random5_{found:02d}", 0.3)
         rep, _, _ = evaluate_scene(d, params, data_dir)
         if accept(rep):
-            d["description"] = f"Table 4 random scene {found} (lattice seed {seed}); {rep.n_sequences} feasible sequences."
+            d["description"] = (f"Table 4 random scene {found} (lattice seed {seed}); {rep.n_sequences} feasible "
+                                f"sequences.")
             write_scene(d, SCEN / "random5" / f"random5_{found:02d}.yaml", HEADER)
             print(f"random5_{found:02d}: seed {seed}, {rep.n_sequences} sequences", flush=True)
             found += 1
@@ -95,7 +99,7 @@ def make_paper(n: int, params, data_dir, seeds: int, steps: int, minutes: float,
                                         .write_text(json.dumps(c.weighted or c.data)))
     (logdir / f"best_{name}.json").write_text(json.dumps((best.weighted or best.data) if best else None))
     if data is None:
-        log(f"{name}: no match; best {paper_scenes._desc(best) if best else 'none'}")
+        log(f"{name}: no match; best {paper_scenes.describe(best) if best else 'none'}")
         if not write_best or best is None or best.size is None or (strict and not best.valid):
             return False
         data = best.weighted or best.data
@@ -131,7 +135,7 @@ def main(argv=None) -> int:
     `... paper-random [--cases 1,2] [--seed0 S] [--minutes M]`."""
     import argparse
 
-    from .__main__ import planner_params
+    from .feasibility_cache import planner_params
     ap = argparse.ArgumentParser(description="search a scene of the paper's size with the real planner")
     ap.add_argument("what", choices=("paper", "paper-random"))
     ap.add_argument("n", type=int, nargs="?", choices=sorted(PAPER_NAMES), help="obstacles (paper)")

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from relocation_common.scenario import parse_scenario
 
 from . import complete_tree
-from .scenarios_gen import MAX_REACH, RADIUS, _scene
+from .scenarios_gen import MAX_REACH, RADIUS, scene_data
 
 PAPER_TREES = {5: (84, 10), 10: (622, 20), 15: (1675, 20)}  # obstacles -> (complete-tree edges, target leaves)
 WITHIN = 2.0  # accepted factor on the edges (issue 16)
@@ -64,7 +64,7 @@ def clutter_scene(seed: int, n: int, name: str) -> dict:
     chosen = pts[:n]
     jit = 0.006
     chosen = [(x + rng.uniform(-jit, jit), y + rng.uniform(-jit, jit)) for x, y in chosen]
-    return _scene(rng, seed, name, (tx, ty), chosen)
+    return scene_data(rng, seed, name, (tx, ty), chosen)
 
 
 def evaluate(data: dict, params, directory, goal: tuple[int, int]) -> Candidate:
@@ -192,7 +192,7 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
             best.valid = valid(best, params, log)
             if not best.valid:
                 best_s += INVALID_SLACK
-        log(f"start: {_desc(best)} score {best_s:.2f}{'' if not strict or best.valid else ' (not valid)'}")
+        log(f"start: {describe(best)} score {best_s:.2f}{'' if not strict or best.valid else ' (not valid)'}")
         seeds = ()
     climb_from = time.time() + 0.5 * (deadline - time.time())  # half the time for proposals, half for the climb
     for seed in seeds:
@@ -202,7 +202,7 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
         c = evaluate(d, params, directory, goal)
         if score(c, goal) < best_s:
             best, best_s = c, score(c, goal)
-            log(f"seed {seed}: {_desc(c)} score {best_s:.2f}")
+            log(f"seed {seed}: {describe(c)} score {best_s:.2f}")
         if time.time() > climb_from or (best is not None and best.ok(goal)):
             break
     rng = random.Random(n if climb_seed is None else climb_seed)
@@ -232,7 +232,7 @@ def search(n: int, name: str, params, directory, seeds, steps: int, log=print, d
         if not keep:
             continue
         if s < cur_s - 1e-9 or s > cur_s + 1e-9:
-            log(f"step {k}: {_desc(c)} score {s:.2f}" + (" (best)" if s < best_s else ""))
+            log(f"step {k}: {describe(c)} score {s:.2f}" + (" (best)" if s < best_s else ""))
         cur, cur_s = c, s
         if s <= best_s:
             best, best_s = c, s
@@ -269,11 +269,10 @@ def optimum_sequence(data: dict, table, params) -> tuple[str, ...]:
 def optimum_plans(data: dict, table, params, repeats: int = 6) -> str:
     """'' if every relocation of the optimum can be planned `repeats` times in a row (`replans`) by the
     evaluation's planner for this scene, else what failed."""
-    from .feasibility_cache import _WORKER, _use_scenario
+    from .feasibility_cache import worker_planner
     sc = parse_scenario(data, data["name"])
     seq = optimum_sequence(data, table, params)
-    _use_scenario(sc, params)
-    return replans(_WORKER["mp"], seq, repeats)
+    return replans(worker_planner(sc, params), seq, repeats)
 
 
 def replans(planner, sequence, repeats: int) -> str:
@@ -293,7 +292,8 @@ def replans(planner, sequence, repeats: int) -> str:
     return ""
 
 
-def _desc(c: Candidate) -> str:
+def describe(c: Candidate) -> str:
+    """One line on a candidate scene for the search log: its tree's size and what it cost."""
     return ("too big" if c.size is None else f"{c.size.edges} edges, {c.size.target_leaves} target leaves") + \
         f" ({c.queries} planner calls, {c.seconds:.1f} s)"
 
@@ -360,7 +360,7 @@ def free_scene(seed: int, n: int, name: str, radius: float = RADIUS) -> dict:
             pts.append((round(x, 3), round(y, 3)))
     if len(pts) < n + 1:
         raise RuntimeError(f"seed {seed}: cannot place {n} obstacles")
-    return _scene(rng, seed, name, pts[0], pts[1:], radius)
+    return scene_data(rng, seed, name, pts[0], pts[1:], radius)
 
 
 def extend_scene(base: dict, seed: int, n: int, name: str) -> dict | None:

@@ -46,10 +46,12 @@ def lattice_scene(seed: int, n: int, name: str, spread: float = 0.3, jitter: flo
         raise RuntimeError(f"seed {seed}: only {len(cands)} lattice points within {spread} m of the target")
     chosen = rng.sample(cands, n)
     pts = [(x + rng.uniform(-jitter, jitter), y + rng.uniform(-jitter, jitter)) for x, y in chosen]
-    return _scene(rng, seed, name, (tx + rng.uniform(-jitter, jitter), ty), pts)
+    return scene_data(rng, seed, name, (tx + rng.uniform(-jitter, jitter), ty), pts)
 
 
-def _scene(rng, seed, name, target, pts, radius: float = RADIUS) -> dict:
+def scene_data(rng, seed, name, target, pts, radius: float = RADIUS) -> dict:
+    """The scenario file's data of a generated scene: the target at `target`, obstacles at `pts` with random
+    weights (`rng`), the shelf, marker and slots of this project's geometry."""
     tx, ty = target
     obstacles = sorted(pts, key=lambda p: (round(p[0], 2), p[1]))
     objects = [{"id": f"o{k + 1}", "weight": round(rng.uniform(0.05, 0.95), 2), "xy": [round(x, 3), round(y, 3)]}
@@ -80,7 +82,7 @@ def random_scene(seed: int, n: int, name: str, spread: float = 0.22) -> dict:
             continue
         if all((x - a) ** 2 + (y - b) ** 2 >= (2 * RADIUS + MIN_GAP) ** 2 for a, b in pts):
             pts.append((x, y))
-    return _scene(rng, seed, name, pts[0], pts[1:])
+    return scene_data(rng, seed, name, pts[0], pts[1:])
 
 
 def accept(report, min_sequences: int = 2) -> bool:
