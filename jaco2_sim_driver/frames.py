@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 
 from relocation_common.robot_description import (
@@ -28,6 +29,7 @@ from relocation_common.robot_description import (
     joint_origins,
 )
 
+BOTTLE_FRAME = "bottle_{}"  # TF frame of a bottle (ground truth): centre of its base circle
 _ORIGINS = joint_origins()
 PARENTS = (BASE_LINK,) + LINK_NAMES[:-1]
 
@@ -88,4 +90,16 @@ def chain(q) -> dict[str, np.ndarray]:
         m = m @ t
         out[child] = m
     out[EE_LINK] = m @ _ORIGINS[N_JOINTS]
+    return out
+
+
+def bottle_transforms(poses) -> list[tuple[str, str, np.ndarray]]:
+    """(base link, `bottle_<id>`, 4x4) of each bottle's ground truth (sim.ObjectPose: its base centre, w-x-y-z
+    quaternion): the bottles' TF frames."""
+    out = []
+    for p in poses:
+        t, r = np.eye(4), np.zeros(9)
+        mujoco.mju_quat2Mat(r, np.asarray(p.quat_wxyz, float))
+        t[:3, :3], t[:3, 3] = r.reshape(3, 3), p.position
+        out.append((BASE_LINK, BOTTLE_FRAME.format(p.id), t))
     return out

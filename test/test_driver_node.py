@@ -231,7 +231,7 @@ def test_joint_limit_holds(g):
 def test_home_arm_moves_the_arm_home(g):
     """Kinova's HomeArm moves the arm (it was a teleport: no joint state between the pose and home) at most at
     HOME_SPEED of Table 7, answers once home, then the fingers are open."""
-    from jaco2_sim_driver.driver_node import HOME_SPEED
+    from jaco2_sim_driver.driver import HOME_SPEED
 
     _only(g, "kinova")
     _stream(g.pub, _deg([0.3] * 7), 0.3)

@@ -1,0 +1,75 @@
+"""The driver's ROS messages (message types only, no rclpy): the driver node's translation of the core's values.
+
+Kinova's messages (joint angles in degrees, finger positions in turns; docs/kinova.md), the ground truth as an
+ObjectArray, and a rendered camera frame (camera.Frame) as the topics of a RealSense-like camera driver.
+"""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped
+from kinova_msgs.msg import FingerPosition, JointAngles
+from qtree_relocation_msgs.msg import ObjectArray
+from sensor_msgs.msg import CameraInfo, Image
+
+from relocation_common.ros_conversions import BASE_FRAME, bottle_to_msg
+
+from .camera import Frame
+
+OPTICAL_FRAME = "camera_color_optical_frame"
+
+
+def time_msg(t: float) -> Time:
+    """Seconds (simulated time) as a builtin_interfaces/Time."""
+    sec = int(t)
+    return Time(sec=sec, nanosec=int((t - sec) * 1e9))
+
+
+def finger_msg(turns) -> FingerPosition:
+    """The three fingers in Kinova's turns (0 open .. 6800 closed)."""
+    return FingerPosition(finger1=float(turns[0]), finger2=float(turns[1]), finger3=float(turns[2]))
+
+
+def joint_angles_msg(q) -> JointAngles:
+    """Joint angles (rad, Kinova's Q) as kinova-ros's out/joint_angles: degrees."""
+    d = np.degrees(np.asarray(q, float))
+    return JointAngles(**{f"joint{i + 1}": float(d[i]) for i in range(len(d))})
+
+
+def objects_msg(scenario, poses, stamp) -> ObjectArray:
+    """The bottles of `scenario` at their ground-truth poses (sim.ObjectPose) in the base frame."""
+    msg = ObjectArray()
+    msg.header.stamp, msg.header.frame_id = stamp, BASE_FRAME
+    for pose in poses:
+        o = bottle_to_msg(scenario.object(pose.id))
+        o.pose.position.x, o.pose.position.y, o.pose.position.z = map(float, pose.position)
+        (o.pose.orientation.w, o.pose.orientation.x, o.pose.orientation.y,
+         o.pose.orientation.z) = map(float, pose.quat_wxyz)
+        msg.objects.append(o)
+    return msg
+
+
+def camera_msgs(f: Frame, stamp) -> tuple[Image, Image, CameraInfo, PoseStamped]:
+    """(RGB, depth in m as 32FC1, camera info, camera pose in the base frame) of one rendered frame."""
+    rgb = Image(height=f.height, width=f.width, encoding="rgb8", step=3 * f.width)
+    rgb.data = f.rgb.tobytes()
+    depth = Image(height=f.height, width=f.width, encoding="32FC1", step=4 * f.width)
+    depth.data = f.depth.astype("<f4").tobytes()
+    info = CameraInfo(height=f.height, width=f.width, distortion_model="plumb_bob")
+    info.d = [0.0] * 5
+    info.k = f.K.reshape(9).tolist()
+    info.r = np.eye(3).reshape(9).tolist()
+    info.p = np.hstack([f.K, np.zeros((3, 1))]).reshape(12).tolist()
+    for m in (rgb, depth, info):
+        m.header.stamp = stamp
+        m.header.frame_id = OPTICAL_FRAME
+    pose = PoseStamped()
+    pose.header.stamp, pose.header.frame_id = stamp, BASE_FRAME
+    t = f.T_base_camera
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, t[:3, 3])
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, t[:3, :3].reshape(9))
+    pose.pose.orientation.w, pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z = \
+        map(float, q)
+    return rgb, depth, info, pose
