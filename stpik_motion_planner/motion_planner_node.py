@@ -74,7 +74,13 @@ class MotionPlannerNode(Node):
                                + (f"driver {driver}" if self.link else "feasibility only (serve_relocation false)"))
 
     def _log(self, level: str, text: str) -> None:
-        getattr(self.get_logger(), level)(text)
+        """The cores' log lines. One call site per severity: rclpy refuses a call site whose severity changes."""
+        if level == "error":
+            self.get_logger().error(text)
+        elif level == "warning":
+            self.get_logger().warning(text, throttle_duration_sec=1.0)
+        else:
+            self.get_logger().info(text)
 
     def close(self) -> None:
         """Stop the side executors (feasibility service, joint states)."""

@@ -5,8 +5,8 @@
 - scenario2_10: scenario3_15 without its five outermost obstacles (o1, o5, o6, o11, o15), renumbered o1..o10.
 - random5/random5_XX: the first ten lattice seeds from RANDOM_SEED0 on that pass `accept` (Table 4).
 - paper1_5, paper2_10, paper3_15 (`python -m relocation_app.evaluation.make_scenes paper N`): scenes of the
-  paper's size, searched with the real planner (paper_scenes.search; issue 16); the search log goes to
-  out/paper_search/.
+  paper's size, searched with the real planner (paper_scenes.search; docs/evaluation.md, "Complete trees"); the
+  search log goes to out/paper_search/.
 - paper_random5/paper_random5_XX (`... make_scenes paper-random`): Table 4's ten random cases at the paper's size,
   drawn with the real planner (paper_random.py).
 Feasibility comes from the real planner (evaluation parameters, feasibility_cache.planner_params).
