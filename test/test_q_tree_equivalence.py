@@ -2,7 +2,7 @@
 
 test/data/qtree_reference.json was recorded with the pure-dict implementation of q_tree.py / policies.py /
 training.py as it was before the speed-up (commit 54e462d), by running this file as a script:
-    .venv/bin/python test/test_q_tree_equivalence.py --record
+    PYTHONPATH=. .venv/bin/python test/test_q_tree_equivalence.py --record
 Each case is a full TrainingParams (explicit, independent of config/task_planner.yaml) on a scene with a
 deterministic oracle (blocking_5/10/15 with BlockingOracle; scenario1_5 and scenario2_10 with the cached real
 planner answers of data/feasibility/). Compared exactly: sequence, total_weight, episodes, converged, E_ss,
@@ -20,18 +20,17 @@ import sys
 from pathlib import Path
 
 import pytest
+from qtree_reference import reference_train
+
+from qtree_task_planner import exact, kernel
+from qtree_task_planner.oracles import BlockingOracle
+from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.training import train
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from qtree_task_planner import exact, kernel  # noqa: E402
-from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
-from qtree_task_planner.params import TrainingParams  # noqa: E402
-from qtree_task_planner.problem import RelocationProblem  # noqa: E402
-from qtree_task_planner.training import train  # noqa: E402
-from qtree_reference import reference_train  # noqa: E402
-from relocation_common.paths import scenarios_dir
-from relocation_common.scenario import load_scenario  # noqa: E402
 
 FIXTURE = ROOT / "test" / "data" / "qtree_reference.json"
 ALGORITHMS = [(p, s) for p in ("lrnd", "h-lrnd", "h-eg") for s in ("breadth", "depth")]

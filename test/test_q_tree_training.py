@@ -5,6 +5,7 @@ import random
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from qtree_reference import reference_train
 
 from qtree_task_planner.exact import solve
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
@@ -37,7 +38,7 @@ def feasible_sequence(oracle, seq, target):
 
 def episodes_of(sc, p):
     seen = []
-    r = train(sc, BlockingOracle(sc), p, callback=seen.append)
+    r = train(sc, BlockingOracle(sc), p, callback=seen.append, callback_every=1)
     return r, seen
 
 
@@ -64,9 +65,9 @@ def test_pruned_actions_are_never_chosen_again(monkeypatch):
 
     monkeypatch.setattr(QTree, "step", spy)
     for policy in ("lrnd", "h-lrnd", "h-eg"):
-        for search in ("breadth", "depth"):
-            r = train(SC10, BlockingOracle(SC10), params(policy=policy, search=search, max_episodes=300))
-            assert r.mp_q == r.tree_edges
+        for search in ("breadth", "depth"):  # the reference loop (the engine equals it: test_q_tree_equivalence)
+            r = reference_train(SC10, BlockingOracle(SC10), params(policy=policy, search=search, max_episodes=300))
+            assert r["tree"].mp_q == r["tree"].n_edges
     assert chosen_pruned == []
 
 
@@ -131,8 +132,12 @@ def test_shared_cache_counts_only_new_real_calls():
 
 
 def test_callback_false_cancels():
-    r = train(SC10, BlockingOracle(SC10), params(), callback=lambda s: s.episode < 7)
+    r = train(SC10, BlockingOracle(SC10), params(), callback=lambda s: s.episode < 7, callback_every=1)
     assert r.cancelled and r.episodes == 7 and not r.converged
+    seen = []
+    r = train(SC10, BlockingOracle(SC10), params(), callback=lambda s: seen.append(s.episode) or s.episode < 7,
+              callback_every=5)  # the engine runs 5 episodes between callbacks
+    assert r.cancelled and r.episodes == 10 and seen == [5, 10]
 
 
 def test_max_steps_bounds_each_episode():
