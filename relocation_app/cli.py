@@ -30,6 +30,8 @@ from qtree_task_planner.training import train
 from relocation_common.config import ParameterError
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
+from .progress import Progress
+
 
 class CliError(Exception):
     """A one-line user error."""
@@ -137,17 +139,13 @@ def _emit(data: dict, out: str | None) -> None:
         print(text)
 
 
-def _progress_bar(episodes: int):
-    """(callback, bar): a tqdm bar on stderr advanced by train()'s per-episode callback (Q_sum of Eq. 15, tree
-    nodes and MP_q shown every 50 episodes)."""
-    from tqdm import tqdm
+def _progress_bar(episodes: int) -> tuple[Callable, Progress]:
+    """(callback, bar): progress on stderr (relocation_app.progress: a bar on a terminal, a line every few seconds
+    in a log) advanced by train()'s callback every few episodes (Q_sum of Eq. 15, tree nodes, MP_q)."""
+    bar = Progress("episodes", "ep", total=episodes, leave=False)
 
-    bar = tqdm(total=episodes, desc="episodes", unit="ep", file=sys.stderr, leave=False)
-
-    def callback(st):
-        bar.update(1)
-        if st.episode % 50 == 0:
-            bar.set_postfix(q_sum=f"{st.q_sum:.1f}", nodes=st.tree_nodes, mp_q=st.mp_q)
+    def callback(st) -> None:
+        bar.update(st.episode, postfix=f"q_sum={st.q_sum:.1f} nodes={st.tree_nodes} mp_q={st.mp_q}")
     return callback, bar
 
 
@@ -163,7 +161,7 @@ def _train(args) -> int:
     if args.solve_first:
         solved = _exact(problem, oracle, args.solver)
         optimum = solved["total_weight"]
-    callback, bar = (None, None) if args.no_progress else _progress_bar(params.max_episodes)
+    callback, bar = (None, None) if args.no_progress else _progress_bar(params.max_episodes)  # type: ignore[assignment]
     t0 = time.perf_counter()
     try:
         result = train(problem, CachedOracle(oracle), params, optimal_weight=optimum, callback=callback)
@@ -194,6 +192,7 @@ def _solve(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run `qtree train` or `qtree solve`; exit status 0, 2 on bad input (one line on stderr), 130 on Ctrl-C."""
     try:
         args = _parser().parse_args(argv)
         with ExitStack() as args.stack:  # what an oracle started (planner processes) stops here
