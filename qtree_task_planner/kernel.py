@@ -143,6 +143,7 @@ class KernelTree(QTree):
             raise MemoryError("Q-Tree kernel: out of memory")
         self._n_nodes: int | None = 1
         self._n_edges = 0
+        self._mt = (ctypes.c_uint32 * 624)()
 
     def __del__(self):
         h = getattr(self, "_handle", None)
@@ -194,28 +195,29 @@ class KernelTree(QTree):
         self._n_edges = self.mp_q
         self._py_nodes = None
 
-    def _export(self) -> list[Node]:
-        """The Python nodes exactly as the reference loop builds them: ids in creation order, edges (label, q,
-        q_pruned, child dicts) in creation order, the offered-action cache."""
+    def _arrays(self) -> dict[str, list]:
+        """The kernel's tree as lists (n nodes): parent, action, n_edges, n_offer; per node rows of n1 actions:
+        order (edges in creation order), label, q, child, offer."""
         import numpy as np
         lib, h, n1 = _lib(), self._handle, self.n_objects
         n = lib.kt_n_nodes(h)
-        parent = np.empty(n, np.int32)
-        action = np.empty(n, np.int32)
-        n_edges = np.empty(n, np.int32)
-        n_offer = np.empty(n, np.int32)
-        order = np.empty((n, n1), np.int8)
-        label = np.empty((n, n1), np.int8)
-        q = np.empty((n, n1), np.float64)
-        child = np.empty((n, n1), np.int32)
-        offer = np.empty((n, n1), np.int8)
-        lib.kt_export(h, *(a.ctypes.data for a in (parent, action, n_edges, n_offer, order, label, q, child,
-                                                   offer)))
-        parent, action, n_edges, n_offer = parent.tolist(), action.tolist(), n_edges.tolist(), n_offer.tolist()
-        order, label, q, child, offer = order.tolist(), label.tolist(), q.tolist(), child.tolist(), offer.tolist()
+        out = {name: np.empty(n, np.int32) for name in ("parent", "action", "n_edges", "n_offer")}
+        for name, dtype in (("order", np.int8), ("label", np.int8), ("q", np.float64), ("child", np.int32),
+                            ("offer", np.int8)):
+            out[name] = np.empty((n, n1), dtype)
+        lib.kt_export(h, *(out[k].ctypes.data for k in ("parent", "action", "n_edges", "n_offer", "order", "label",
+                                                         "q", "child", "offer")))
+        return {k: v.tolist() for k, v in out.items()}
+
+    def _export(self) -> list[Node]:
+        """The Python nodes exactly as the reference loop builds them: ids in creation order, edges (label, q,
+        q_pruned, child dicts) in creation order, the offered-action cache."""
+        t = self._arrays()
+        parent, action, n_edges, n_offer = t["parent"], t["action"], t["n_edges"], t["n_offer"]
+        order, label, q, child, offer = t["order"], t["label"], t["q"], t["child"], t["offer"]
         labels = {int(lab): lab for lab in Label}
         nodes: list[Node] = []
-        for i in range(n):
+        for i in range(len(parent)):
             if i == 0:
                 node = Node(0, (), 0)
             else:
@@ -236,6 +238,23 @@ class KernelTree(QTree):
                         node.child[a] = nodes[child_row[a]]
             node.offer = offer[i][:n_offer[i]]
         return nodes
+
+    def to_state(self) -> dict:
+        """QTree.to_state, read from the kernel's arrays without building Python nodes (a checkpoint every
+        `checkpoint_every` episodes stays cheap)."""
+        if self._py_nodes is not None:
+            return super().to_state()
+        t = self._arrays()
+        parent, action, n_edges, order, label, q = (t[k] for k in ("parent", "action", "n_edges", "order", "label",
+                                                                     "q"))
+        seqs: list[list[int]] = []
+        nodes = []
+        for i in range(len(parent)):
+            seq = seqs[parent[i]] + [action[i]] if i else []
+            seqs.append(seq)
+            lab_row, q_row = label[i], q[i]
+            nodes.append({"seq": seq, "edges": [[a, lab_row[a], q_row[a]] for a in order[i][:n_edges[i]]]})
+        return {"nodes": nodes, "mp_q": self.mp_q, "q_sum": self.q_sum}
 
     def load_state(self, state: dict) -> None:
         """QTree.load_state (validated into Python nodes), then the same tree into the kernel, node by node in
@@ -268,14 +287,16 @@ class KernelTree(QTree):
         mt = (ctypes.c_uint32 * 624)(*internal[:624])
         _lib().kt_set_state(self._handle, mt, internal[624], episode, prev_sum, quiet, int(converged), e_1st or 0)
 
-    def pull_state(self, rng) -> RunState:
-        """The kernel's training state; `rng` (the random.Random it started from) gets the kernel's RNG state."""
-        mt = (ctypes.c_uint32 * 624)()
+    def pull_state(self, rng=None) -> RunState:
+        """The kernel's training state; `rng` (the random.Random it started from), if given, gets the kernel's RNG
+        state."""
+        mt = self._mt
         ints = (ctypes.c_int * 7)()
         prev_sum = ctypes.c_double()
         _lib().kt_get_state(self._handle, mt, ints, ctypes.byref(prev_sum))
-        version, _, gauss = rng.getstate()
-        rng.setstate((version, tuple(mt) + (ints[0],), gauss))
+        if rng is not None:
+            version, _, gauss = rng.getstate()
+            rng.setstate((version, tuple(mt) + (ints[0],), gauss))
         return RunState(ints[1], prev_sum.value, ints[2], bool(ints[3]), ints[4] or None, ints[5], bool(ints[6]))
 
     def run(self, policy: str, depth: bool, i_max: int, stop_at: int, epsilons, beta: float, quiet_needed: int,

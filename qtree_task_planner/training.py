@@ -164,9 +164,9 @@ class _Run:
         self.e_1st, self.episode, self.epsilon = checkpoint.e_1st, checkpoint.episode, checkpoint.epsilon
         self.calls_before, self.elapsed_before = checkpoint.planner_calls, checkpoint.elapsed_s
 
-    def pull(self, history) -> kernel.RunState:
-        """The kernel's counters (and RNG state) -> this run, after a batch."""
-        state = self.tree.pull_state(self.rng)
+    def pull(self, history, rng: bool = False) -> kernel.RunState:
+        """The kernel's counters (and with `rng` its RNG state) -> this run, after a batch."""
+        state = self.tree.pull_state(self.rng if rng else None)
         self.history.extend(history[self.episode:state.episode])
         self.episode, self.prev_sum, self.quiet = state.episode, state.prev_sum, state.quiet
         self.converged, self.e_1st = state.converged, state.e_1st
@@ -257,7 +257,7 @@ def _run_batches(run: _Run, callback, callback_every: int, checkpoint_every: int
             tree.run(p.policy, p.search == "depth", p.max_steps, stop_at, buf.eps_c, p.beta, p.quiet_episodes,
                      path_ok, buf.q_sum, deadline)
         except Exception as e:
-            run.pull(buf)
+            run.pull(buf, rng=True)
             if on_checkpoint is not None:
                 on_checkpoint(run.snapshot(f"interrupted: {type(e).__name__}: {e}"))
             raise
@@ -272,6 +272,8 @@ def _run_batches(run: _Run, callback, callback_every: int, checkpoint_every: int
         if on_checkpoint is not None:
             stop = run.cancelled or run.converged or run.episode >= p.max_episodes
             if stop or (checkpoint_every > 0 and run.episode % checkpoint_every == 0):
+                run.pull(buf, rng=True)
                 on_checkpoint(run.snapshot("cancelled" if run.cancelled else "final" if stop else "periodic"))
         if run.cancelled:
             break
+    run.pull(buf, rng=True)
