@@ -89,22 +89,22 @@ def _load() -> Any:
     except (OSError, subprocess.SubprocessError) as e:
         build_error = str(e)
         return None
-    P, I, D, I64 = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_int64
-    U32P, IP, DP = ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(I), ctypes.POINTER(D)
+    P, INT, D, I64 = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_int64
+    U32P, IP, DP = ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(INT), ctypes.POINTER(D)
     lib.kt_new.restype = P
-    lib.kt_new.argtypes = [I, I, D, D, DP]
+    lib.kt_new.argtypes = [INT, INT, D, D, DP]
     lib.kt_free.argtypes = [P]
-    lib.kt_train.restype = I
-    lib.kt_train.argtypes = [P, I, I, I, I, DP, D, I, I, _ASK, _PATH, DP]
-    lib.kt_set_state.argtypes = [P, U32P, I, I, D, I, I, I]
+    lib.kt_train.restype = INT
+    lib.kt_train.argtypes = [P, INT, INT, INT, INT, DP, D, INT, INT, _ASK, _PATH, DP]
+    lib.kt_set_state.argtypes = [P, U32P, INT, INT, D, INT, INT, INT]
     lib.kt_get_state.argtypes = [P, U32P, IP, DP]
-    lib.kt_add_node.restype = I
-    lib.kt_add_node.argtypes = [P, I, I]
-    lib.kt_add_edge.argtypes = [P, I, I, I, D, I]
+    lib.kt_add_node.restype = INT
+    lib.kt_add_node.argtypes = [P, INT, INT]
+    lib.kt_add_edge.argtypes = [P, INT, INT, INT, D, INT]
     lib.kt_set_counts.argtypes = [P, I64, D]
-    lib.kt_best_path.restype = I
+    lib.kt_best_path.restype = INT
     lib.kt_best_path.argtypes = [P, IP]
-    for name, res in (("kt_n_nodes", I), ("kt_mp_q", I64), ("kt_memo_hits", I64), ("kt_q_sum", D)):
+    for name, res in (("kt_n_nodes", INT), ("kt_mp_q", I64), ("kt_memo_hits", I64), ("kt_q_sum", D)):
         getattr(lib, name).restype = res
         getattr(lib, name).argtypes = [P]
     lib.kt_export.argtypes = [P] + [ctypes.c_void_p] * 9
@@ -154,6 +154,7 @@ class KernelTree(QTree):
     # root / nodes: plain attributes of QTree, here materialised from the kernel on first use
     @property
     def nodes(self) -> list[Node]:
+        """The Python nodes, exported from the kernel on first use."""
         if self._py_nodes is None:
             self._py_nodes = self._export()
         return self._py_nodes
@@ -165,6 +166,7 @@ class KernelTree(QTree):
 
     @property
     def root(self) -> Node:
+        """s_H."""
         return self.nodes[0]
 
     @root.setter
@@ -173,15 +175,21 @@ class KernelTree(QTree):
 
     @property
     def n_edges(self) -> int:
+        """Edges known (= MP_q)."""
         if self._py_nodes is None:
             return self._n_edges
         return sum(len(n.label) for n in self._py_nodes)
 
     @property
     def node_count(self) -> int:
-        return self._n_nodes if self._py_nodes is None else len(self._py_nodes)
+        """Nodes allocated (s_H included)."""
+        if self._py_nodes is not None:
+            return len(self._py_nodes)
+        assert self._n_nodes is not None  # set by _sync whenever the Python nodes are dropped
+        return self._n_nodes
 
     def best_sequence(self) -> tuple[str, ...] | None:
+        """QTree.best_sequence, from the kernel unless the Python nodes are there."""
         if self._py_nodes is not None:
             return super().best_sequence()
         actions = self.best_actions()
@@ -344,6 +352,7 @@ class KernelTree(QTree):
             raise RuntimeError(f"Q-Tree kernel failed ({rc})")
 
     def best_actions(self) -> list[int] | None:
+        """QTree.best_path's actions, in C; None when the greedy path misses the target."""
         buf = (ctypes.c_int * max(1, self.n_objects))()
         n = _lib().kt_best_path(self._handle, buf)
         return None if n < 0 else buf[:n]

@@ -32,10 +32,11 @@ def tree_markers(state: dict, ids: tuple[str, ...], best: tuple[str, ...] | None
     """MarkerArray of the tree in `state` (QTree.to_state()); `ids` maps action index -> object id; `best` is the
     learned sequence (ids, ending with the target) to highlight."""
     nodes = state["nodes"]
-    pos, per_depth = [], {}
+    pos: list = []
+    per_depth: dict[int, int] = {}
     for n in nodes:
         per_depth[len(n["seq"])] = per_depth.get(len(n["seq"]), 0) + 1
-    seen = {}
+    seen: dict[int, int] = {}
     for n in nodes:
         d = len(n["seq"])
         k = seen[d] = seen.get(d, -1) + 1

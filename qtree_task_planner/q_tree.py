@@ -157,10 +157,12 @@ class QTree:
 
     @property
     def node_count(self) -> int:
+        """Nodes allocated (s_H included)."""
         return len(self.nodes)
 
     @property
     def n_edges(self) -> int:
+        """Edges known (= MP_q)."""
         return sum(len(n.label) for n in self.nodes)
 
     def best_path(self) -> list[tuple[Node, int]] | None:
@@ -175,9 +177,10 @@ class QTree:
             path.append((node, a))
             if a == self.target:
                 return path
-            node = node.child.get(a)
-            if node is None:
+            nxt = node.child.get(a)
+            if nxt is None:
                 return None
+            node = nxt
         return None
 
     def best_sequence(self) -> tuple[str, ...] | None:

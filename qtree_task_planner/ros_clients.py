@@ -53,7 +53,7 @@ class ServiceOracle:
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
                                  blockers=blockers_from_msgs(resp.blockers))
 
-    def lane_blockers(self, removed: frozenset[str]) -> dict:
+    def lane_blockers(self, removed: frozenset[str]) -> dict | None:
         """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None
         from a planner that refuses the question (one without lane blockers: the A* then learns from answers)."""
         req = PlanFeasibility.Request(object_id="", removed_ids=sorted(removed), timeout=self.timeout, all_lanes=True)

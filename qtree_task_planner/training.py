@@ -50,6 +50,8 @@ class EpisodeStats:
 
 @dataclass
 class TrainingResult:
+    """What a training learned (the greedy sequence, Eq. 8) and its counters (E_ss, MP_q, E_1st, Eq. 15)."""
+
     sequence: tuple[str, ...] | None  # obstacles in order, then the target; None if the greedy path misses it
     total_weight: float | None  # Eq. 8 of `sequence`
     episodes: int  # episodes run
@@ -69,9 +71,11 @@ class TrainingResult:
 
     @property
     def found(self) -> bool:
+        """Whether the greedy path reaches the target."""
         return self.sequence is not None
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON; the tree left out)."""
         return {
             "found": self.found,
             "sequence": list(self.sequence) if self.sequence is not None else None,

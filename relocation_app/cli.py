@@ -52,7 +52,7 @@ def _planner_oracle(scenario, args):
 
 
 def _replicas_oracle(scenario, args):
-    """N motion planner processes over ROS, one question in flight each (issue 15; stopped when qtree exits)."""
+    """N motion planner processes over ROS, one question in flight each (stopped when qtree exits)."""
     from relocation_common.paths import resolve_scenario
 
     from .evaluation.replica_fill import replica_oracle
@@ -161,7 +161,7 @@ def _train(args) -> int:
     if args.solve_first:
         solved = _exact(problem, oracle, args.solver)
         optimum = solved["total_weight"]
-    callback, bar = (None, None) if args.no_progress else _progress_bar(params.max_episodes)  # type: ignore[assignment]
+    callback, bar = (None, None) if args.no_progress else _progress_bar(params.max_episodes)
     t0 = time.perf_counter()
     try:
         result = train(problem, CachedOracle(oracle), params, optimal_weight=optimum, callback=callback)
@@ -171,6 +171,7 @@ def _train(args) -> int:
     wall = time.perf_counter() - t0
     if args.tree_dot:
         try:
+            assert result.tree is not None  # train always returns its tree
             Path(args.tree_dot).write_text(result.tree.to_dot(name=scenario.name.replace("-", "_")))
         except OSError as e:
             raise CliError(f"cannot write {args.tree_dot}: {e.strerror}") from None
