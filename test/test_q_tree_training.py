@@ -166,3 +166,20 @@ def test_q_tree_never_beats_the_exact_optimum_and_returns_feasible_sequences(see
     if r.found:
         assert feasible_sequence(oracle, r.sequence, "T")
         assert r.total_weight >= opt.total_weight - 1e-9
+
+
+def test_a_slow_planner_ends_a_batch_early_for_the_callback():
+    """With a slow oracle the engine returns after the episode in which an answer came later than CALLBACK_S
+    into the batch, so progress and cancel are not held for callback_every episodes; the result is unchanged."""
+    import time as _time
+
+    class Slow(BlockingOracle):
+        def feasibility(self, object_id, removed):
+            _time.sleep(0.02)
+            return super().feasibility(object_id, removed)
+
+    p = params(policy="lrnd", search="depth", max_episodes=100, beta=0.0)
+    seen = []
+    r = train(SC5, Slow(SC5), p, callback=lambda s: seen.append(s.episode), callback_every=1000)
+    assert 1 < len(seen) < 100 and seen[-1] == 100 and seen == sorted(set(seen))
+    assert r == train(SC5, BlockingOracle(SC5), p)
