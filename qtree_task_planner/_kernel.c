@@ -1,6 +1,7 @@
-/* Q-Tree training kernel (paper Sect. 4.2): the episode loop of qtree_task_planner/training.py in C.
+/* Q-Tree training kernel (paper Sect. 4.2): the one production episode loop (qtree_task_planner/training.py
+ * drives it in batches of episodes and calls back between them).
  *
- * Bit-identical to the Python reference: CPython's MT19937 and random() (genrand_res53) on the state taken from
+ * Bit-identical to the reference (policies.py + QTree.step, kept as the tests' oracle): CPython's MT19937 and random() (genrand_res53) on the state taken from
  * random.Random.getstate(), the same draws in the same order, the same double operations in the same order
  * (Eq. 7 update, Eq. 15 sum, Eq. 16 test; compiled without FMA contraction or fast-math). Used by
  * qtree_task_planner/kernel.py through ctypes; the tree is exported to Python nodes on demand.
@@ -8,6 +9,9 @@
  * Node i: mask (relocated obstacles), parent, action from the parent; per action a (0..n1-1, n1 = obstacles +
  * target): label (-1 unknown, 0 g_U, 1 g_O, 2 g_T, Eq. 11), Q, child (-1 none); the known edges in creation
  * order; the offered actions (ascending, pruned ones removed).
+ * Training state between batches (kt_train calls): the RNG, the episode count, the Eq. 16 state and E_1st.
+ * An episode whose oracle call fails is undone (journal of its steps): the tree, the counters and the RNG are
+ * as at its start, so that a checkpoint taken then resumes exactly.
  */
 #include <math.h>
 #include <stdint.h>
@@ -68,6 +72,16 @@ typedef struct {
     int8_t *mrows;
     uint8_t *mused;
     int64_t mcap, mcount;
+    /* training state kept between kt_train calls */
+    MT rng;
+    int ep, quiet, converged, e_1st, last_ok, last_len, last_steps, last_reached, yield_req;
+    double prev_sum;
+    int last[64];
+    /* undo journal of the running episode: node, action, old Q, 0 known edge / 1 new edge / 2 new and pruned */
+    int32_t *jnode, *ja;
+    int8_t *jkind;
+    double *jold;
+    int jcap;
 } KTree;
 
 #define R_UNFEASIBLE (-10.0)
@@ -134,7 +148,7 @@ static int8_t *memo_row(KTree *t, uint64_t key) {
 KTree *kt_new(int n1, int target, double alpha, double gamma, const double *phi) {
     KTree *t = calloc(1, sizeof(KTree));
     if (!t) return NULL;
-    t->n1 = n1; t->target = target; t->alpha = alpha; t->gamma = gamma;
+    t->n1 = n1; t->target = target; t->alpha = alpha; t->gamma = gamma; t->last_len = -2;
     t->phi = malloc(sizeof(double) * n1);
     if (!t->phi) { free(t); return NULL; }
     memcpy(t->phi, phi, sizeof(double) * n1);
@@ -147,6 +161,7 @@ void kt_free(KTree *t) {
     free(t->phi); free(t->mask); free(t->parent); free(t->action); free(t->n_edges); free(t->n_offer);
     free(t->child); free(t->label); free(t->order); free(t->offer); free(t->q);
     free(t->mkeys); free(t->mrows); free(t->mused);
+    free(t->jnode); free(t->ja); free(t->jkind); free(t->jold);
     free(t);
 }
 
@@ -163,9 +178,40 @@ static double max_q(const KTree *t, int i) {
     return m;
 }
 
-/* One episode (training.py `_episode`). Returns steps, or -1 (ask raised), -2 (out of memory). */
-static int episode(KTree *t, MT *rng, int kind, int depth, int i_max, double eps, ask_fn ask, int *reached) {
-    int node = 0, steps = 0, n1 = t->n1, target = t->target;
+/* Journal one step of the running episode (capacity: i_max steps, reserved by kt_train). */
+static void journal(KTree *t, int *jn, int node, int a, int kind, double old) {
+    int k = (*jn)++;
+    t->jnode[k] = node; t->ja[k] = a; t->jkind[k] = (int8_t)kind; t->jold[k] = old;
+}
+
+/* Undo the journalled steps, newest first (QTree.rollback): new edges forgotten (a pruned action offered again,
+   in ascending place), old Q values back, the nodes created by the episode dropped. */
+static void rollback(KTree *t, int jn, int n_nodes, int64_t mp_q, double q_sum) {
+    int n1 = t->n1;
+    for (int k = jn - 1; k >= 0; k--) {
+        int node = t->jnode[k], a = t->ja[k];
+        size_t e = (size_t)node * n1 + a;
+        if (t->jkind[k] == 0) { t->q[e] = t->jold[k]; continue; }
+        t->label[e] = -1; t->q[e] = 0.0; t->child[e] = -1;
+        t->n_edges[node]--;
+        if (t->jkind[k] == 2) {
+            int8_t *off = t->offer + (size_t)node * n1;
+            int n = t->n_offer[node], i = n;
+            while (i > 0 && off[i - 1] > a) { off[i] = off[i - 1]; i--; }
+            off[i] = (int8_t)a;
+            t->n_offer[node] = n + 1;
+        }
+    }
+    t->n_nodes = n_nodes; t->mp_q = mp_q; t->q_sum = q_sum;
+}
+
+/* One episode from s_H (the reference: policies.py + QTree.step). Returns steps, or -1 (ask raised; the
+   episode is undone), -2 (out of memory). */
+static int episode(KTree *t, int kind, int depth, int i_max, double eps, ask_fn ask, int *reached) {
+    int node = 0, steps = 0, n1 = t->n1, target = t->target, jn = 0, n_nodes0 = t->n_nodes;
+    int64_t mp_q0 = t->mp_q;
+    double q_sum0 = t->q_sum;
+    MT *rng = &t->rng, rng0 = t->rng;
     int best[64];
     *reached = 0;
     while (steps < i_max) {
@@ -197,8 +243,13 @@ static int episode(KTree *t, MT *rng, int kind, int depth, int i_max, double eps
             if (!row) return -2;
             if (row[a] < 0) {
                 int l = ask(t->mask[node], a);
-                if (l < 0) return -1;
-                row[a] = (int8_t)l;
+                if (l < 0) {
+                    rollback(t, jn, n_nodes0, mp_q0, q_sum0);
+                    t->rng = rng0;
+                    return -1;
+                }
+                if (l & 4) t->yield_req = 1;  /* the caller's time for a callback has come */
+                row[a] = (int8_t)(l & 3);
             } else {
                 t->memo_hits++;
             }
@@ -207,12 +258,15 @@ static int episode(KTree *t, MT *rng, int kind, int depth, int i_max, double eps
             t->order[(size_t)node * n1 + t->n_edges[node]++] = (int8_t)a;
             t->mp_q++;
             t->q[e] = 0.0;
+            journal(t, &jn, node, a, lab == 0 ? 2 : 1, 0.0);
             if (lab == 0) {  /* prune: remove a from the offered list, keep ascending */
                 int k = 0;
                 while (off[k] != a) k++;
                 memmove(off + k, off + k + 1, (size_t)(n_off - k - 1));
                 t->n_offer[node]--;
             }
+        } else {
+            journal(t, &jn, node, a, 0, t->q[e]);
         }
         if (lab == 1) {
             int nxt = t->child[e];
@@ -266,50 +320,94 @@ int kt_best_path(const KTree *t, int *out) {
     return -1;
 }
 
-/* The training loop (training.py `_train` without callback / checkpoint / resume). eps: the Eq. 14 value of
-   every episode. out: [episodes, converged, e_1st (0: none)]. Returns 0, -1 (a callback raised), -2 (memory). */
-int kt_train(KTree *t, uint32_t *mt_state, int *mt_index, int kind, int depth, int i_max, int e_max,
-             const double *eps, double beta, int quiet_needed, int want_e1st, ask_fn ask, path_fn path_ok,
-             double *history, int *out) {
-    MT rng;
-    memcpy(rng.mt, mt_state, sizeof(rng.mt));
-    rng.index = *mt_index;
-    double prev_sum = 0.0;
-    int quiet = 0, converged = 0, e_1st = 0, ep = 0, rc = 0, last_ok = 0, reached;
-    int path[64], last[64], last_len = -2;  /* -2: no sequence seen yet (Python: last_seq = None) */
-    while (ep < e_max && !converged) {
-        double epsilon = eps[ep];
-        ep++;
-        int steps = episode(t, &rng, kind, depth, i_max, epsilon, ask, &reached);
-        if (steps < 0) { rc = steps; ep--; break; }
+/* Episodes until `stop_at` episodes are done, Eq. 16 holds, or (after an episode) the ask callback asked for a
+   yield (training.py's loop: its callbacks run between calls). eps, history: indexed by episode (E_max entries).
+   Returns 0, -1 (a callback raised: after an ask, the episode is undone), -2 (out of memory). */
+int kt_train(KTree *t, int kind, int depth, int i_max, int stop_at, const double *eps, double beta,
+             int quiet_needed, int want_e1st, ask_fn ask, path_fn path_ok, double *history) {
+    int path[64], reached;
+    if (t->jcap < i_max) {
+        int32_t *jnode = realloc(t->jnode, sizeof(int32_t) * (size_t)i_max);
+        if (jnode) t->jnode = jnode;
+        int32_t *ja = realloc(t->ja, sizeof(int32_t) * (size_t)i_max);
+        if (ja) t->ja = ja;
+        int8_t *jkind = realloc(t->jkind, (size_t)i_max);
+        if (jkind) t->jkind = jkind;
+        double *jold = realloc(t->jold, sizeof(double) * (size_t)i_max);
+        if (jold) t->jold = jold;
+        if (!jnode || !ja || !jkind || !jold) return -2;
+        t->jcap = i_max;
+    }
+    t->yield_req = 0;
+    while (t->ep < stop_at && !t->converged) {
+        int steps = episode(t, kind, depth, i_max, eps[t->ep], ask, &reached);
+        if (steps < 0) return steps;
+        int ep = ++t->ep;
+        t->last_steps = steps; t->last_reached = reached;
         double q_sum = t->q_sum;
         history[ep - 1] = q_sum;
-        double delta = q_sum - prev_sum;
-        prev_sum = q_sum;
-        quiet = fabs(delta) <= beta ? quiet + 1 : 0;
-        if (want_e1st && !e_1st) {
+        double delta = q_sum - t->prev_sum;
+        t->prev_sum = q_sum;
+        t->quiet = fabs(delta) <= beta ? t->quiet + 1 : 0;
+        if (want_e1st && !t->e_1st) {
             int len = kt_best_path(t, path);
             /* Python compares the sequence with the last one; None == None (len -1 vs -1, or -2 first) */
-            int same = (len == last_len) || (len == -1 && last_len == -2);
-            if (same && len > 0) same = memcmp(path, last, sizeof(int) * (size_t)len) == 0;
+            int same = (len == t->last_len) || (len == -1 && t->last_len == -2);
+            if (same && len > 0) same = memcmp(path, t->last, sizeof(int) * (size_t)len) == 0;
             if (!same) {
-                last_len = len;
-                if (len > 0) memcpy(last, path, sizeof(int) * (size_t)len);
-                if (len < 0) last_ok = 0;
+                t->last_len = len;
+                if (len > 0) memcpy(t->last, path, sizeof(int) * (size_t)len);
+                if (len < 0) t->last_ok = 0;
                 else {
-                    last_ok = path_ok(len, path);
-                    if (last_ok < 0) { rc = -1; break; }
+                    t->last_ok = path_ok(len, path);
+                    if (t->last_ok < 0) { t->last_ok = 0; return -1; }
                 }
             }
-            if (last_ok) e_1st = ep;
+            if (t->last_ok) t->e_1st = ep;
         }
-        if (quiet >= quiet_needed) converged = 1;
+        if (t->quiet >= quiet_needed) t->converged = 1;
+        if (t->yield_req) break;
     }
-    memcpy(mt_state, rng.mt, sizeof(rng.mt));
-    *mt_index = rng.index;
-    out[0] = ep; out[1] = converged; out[2] = e_1st;
-    return rc;
+    return 0;
 }
+
+/* The training state: RNG (CPython's state: 624 words and the index), episodes, Eq. 16 (prev_sum, quiet,
+   converged), E_1st; the steps and the target flag of the last episode. */
+void kt_set_state(KTree *t, const uint32_t *mt, int index, int ep, double prev_sum, int quiet, int converged,
+                  int e_1st) {
+    memcpy(t->rng.mt, mt, sizeof(t->rng.mt));
+    t->rng.index = index;
+    t->ep = ep; t->prev_sum = prev_sum; t->quiet = quiet; t->converged = converged; t->e_1st = e_1st;
+    t->last_len = -2; t->last_ok = 0;
+}
+
+void kt_get_state(const KTree *t, uint32_t *mt, int *ints, double *prev_sum) {
+    memcpy(mt, t->rng.mt, sizeof(t->rng.mt));
+    ints[0] = t->rng.index; ints[1] = t->ep; ints[2] = t->quiet; ints[3] = t->converged; ints[4] = t->e_1st;
+    ints[5] = t->last_steps; ints[6] = t->last_reached;
+    *prev_sum = t->prev_sum;
+}
+
+/* Loading a stored tree (QTree.load_state, then node by node in allocation order): a node below `parent` by
+   action a, an edge with its label and Q (child: the node an obstacle edge leads to), the counters. */
+int kt_add_node(KTree *t, int parent, int a) {
+    return new_node(t, t->mask[parent] | ((uint64_t)1 << a), parent, a);
+}
+
+void kt_add_edge(KTree *t, int node, int a, int label, double q, int child) {
+    int n1 = t->n1;
+    size_t e = (size_t)node * n1 + a;
+    t->label[e] = (int8_t)label; t->q[e] = q; t->child[e] = child;
+    t->order[(size_t)node * n1 + t->n_edges[node]++] = (int8_t)a;
+    if (label == 0) {
+        int8_t *off = t->offer + (size_t)node * n1;
+        int n = t->n_offer[node], k = 0;
+        while (k < n && off[k] != a) k++;
+        if (k < n) { memmove(off + k, off + k + 1, (size_t)(n - k - 1)); t->n_offer[node]--; }
+    }
+}
+
+void kt_set_counts(KTree *t, int64_t mp_q, double q_sum) { t->mp_q = mp_q; t->q_sum = q_sum; }
 
 /* accessors for the export to Python nodes */
 int kt_n_nodes(const KTree *t) { return t->n_nodes; }

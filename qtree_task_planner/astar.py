@@ -1,5 +1,5 @@
 """The exact minimum-weight sequence (Eq. 8) in few planner calls: lazy A* over removed sets with blockers
-(issue 14). exact.solve (uniform-cost search) stays the reference.
+(docs/qtree.md). exact.solve (uniform-cost search) stays the reference.
 
 Knowledge. A certain blocker claim (relocation_common.feasibility: an unfeasible answer whose BlockerSets are all
 certain, or the oracle's `lane_blockers`) made at set S says: from S or any superset, relocating the object needs
@@ -13,10 +13,10 @@ plus, for the objects of that lane, the most any one of them needs removed beyon
 levels); a lane needing an object that must leave after it is no way. Admissible on the optimistic graph, where
 every claim holds. The path found is then verified with real feasibility calls from the start (the target only
 from a set known reachable: asking it first cost 2.7x the calls on random instances without lane information);
-the first unfeasible answer (and its blockers) is recorded and the search repeated. An oracle with several
-planner replicas (issue 15) is asked up to `in_flight` consecutive edges of the path at once. When every edge of the
-optimistic optimum is feasible it is the proven optimum: the optimistic graph contains every true edge. Each
-(object, set) is asked at most once.
+the first unfeasible answer (and its blockers) is recorded and the search repeated. An oracle with several planner
+replicas (docs/architecture.md) is asked up to `in_flight` consecutive edges of the path at once. When every edge of the
+optimistic optimum is feasible it is the proven optimum: the optimistic graph contains every true edge. Each (object,
+set) is asked at most once.
 """
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ class AStarResult(ExactResult):
     searches: int = 0  # optimistic A* searches (one more than the unfeasible answers that changed the path)
 
     def to_dict(self) -> dict:
+        """ExactResult.to_dict plus the blocker calls and the optimistic searches."""
         return {**super().to_dict(), "blocker_calls": self.blocker_calls, "searches": self.searches}
 
 
@@ -69,6 +70,7 @@ class Knowledge:
             self.claim(obj, removed, lanes)
 
     def record(self, obj: str, removed: frozenset, answer) -> bool:
+        """Remember an answer (and its lane blockers); whether the object was feasible."""
         ok = Label(answer.label) != Label.UNFEASIBLE
         self.answers[(obj, removed)] = ok
         if not ok:
@@ -82,6 +84,7 @@ class Knowledge:
         return all(any(b <= removed for b in lanes) for s, lanes in self.claims.get(obj, ()) if s <= removed)
 
     def verified(self, obj: str, removed: frozenset) -> bool:
+        """Whether the planner answered feasible for `obj` after `removed`."""
         return self.answers.get((obj, removed)) is True
 
     def h(self, removed: frozenset) -> float:
@@ -115,12 +118,12 @@ def _optimistic(obstacles, phi, target, kb: Knowledge):
     """A* on the optimistic graph: the edges [(object, set)] of a least-weight path ending with the target's,
     ties to fewer unverified edges; None if there is none. Also returns the sets expanded."""
     tie = itertools.count()
-    start = frozenset()
+    start: frozenset = frozenset()
     h0 = kb.h(start)
     if math.isinf(h0):
         return None, 0
     # entries: (f, unverified edges, -depth, tie, set, parent set, object)
-    heap = [(h0, 0, 0, next(tie), start, None, None)]
+    heap: list[tuple] = [(h0, 0, 0, next(tie), start, None, None)]
     closed: dict[frozenset, tuple] = {}
     while heap:
         f, unv, _, _, state, parent, obj = heapq.heappop(heap)

@@ -122,6 +122,7 @@ class Checkpoint:
 
     # -- plain data ----------------------------------------------------------------------------------
     def to_payload(self) -> dict:
+        """Plain JSON data of the checkpoint (the file's payload)."""
         version, internal, gauss = self.rng_state
         return {
             "params": self.params.to_dict(), "problem_hash": self.problem_hash, "episode": self.episode,
@@ -133,6 +134,7 @@ class Checkpoint:
 
     @classmethod
     def from_payload(cls, p: dict, source: str = "checkpoint") -> "Checkpoint":
+        """The checkpoint in a file's payload; CheckpointError naming `source` when malformed or inconsistent."""
         try:
             version, internal, gauss = p["rng_state"]
             ck = cls(

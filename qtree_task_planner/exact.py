@@ -6,7 +6,7 @@ Path: an edge "remove object o from set S" enters the queue with its cost g(S) +
 is asked only when that entry is popped and its head set S + {o} is not settled yet. "Relocate the target from
 S" enters at cost g(S) and is checked when popped; the first feasible one popped is optimal, since every entry
 still queued costs at least as much and costs never decrease along a path. An oracle with several planner
-replicas (issue 15) is asked the next cheapest queued questions together with the one popped.
+replicas (docs/architecture.md) is asked the next cheapest queued questions together with the one popped.
 
 `brute_force` enumerates every set reachable by feasible single removals (reachable.py, asking everything) for
 tests.
@@ -26,6 +26,8 @@ from .reachable import reachable_sets
 
 @dataclass(frozen=True)
 class ExactResult:
+    """The minimum-weight sequence (Eq. 8) and what finding it cost."""
+
     sequence: tuple[str, ...] | None  # obstacles in order, then the target; None if the target cannot be freed
     total_weight: float | None  # Eq. 8
     oracle_calls: int  # distinct (object, removed set) questions asked
@@ -33,10 +35,12 @@ class ExactResult:
 
     @property
     def found(self) -> bool:
+        """Whether the target can be freed."""
         return self.sequence is not None
 
     def to_dict(self) -> dict:
-        return {"found": self.found, "sequence": list(self.sequence) if self.found else None,
+        """Plain data (JSON)."""
+        return {"found": self.found, "sequence": list(self.sequence) if self.sequence is not None else None,
                 "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
                 "sets_settled": self.sets_settled}
 
@@ -62,7 +66,7 @@ def solve(problem, oracle) -> ExactResult:
     while queue:
         cost, _, parent, seq, obj = heapq.heappop(queue)
         if obj is None:  # the start: the empty set, feasible by definition
-            state, new_seq = frozenset(), ()
+            state, new_seq = frozenset[str](), ()
         else:
             state = parent if obj == target else parent | {obj}
             if obj != target and state in settled:
@@ -84,7 +88,7 @@ def solve(problem, oracle) -> ExactResult:
 
 
 def _ask_next(queue, question, oracle, known, settled, target) -> int:
-    """Ask `question` and, for an oracle with several questions in flight (planner replicas, issue 15), the
+    """Ask `question` and, for an oracle with several questions in flight (planner replicas), the
     next cheapest ones still queued whose sets are not settled, together; the answers go to `known`. Returns the
     number of questions asked (1 for a plain oracle: the search asks exactly what it pops)."""
     batch, popped, k = [question], [], in_flight(oracle)

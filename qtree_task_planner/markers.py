@@ -8,9 +8,13 @@ as a thick LINE_STRIP and labelled with the objects' ids. Imports message types 
 """
 from __future__ import annotations
 
+import copy
+
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
+
+from relocation_common.scenario import PALETTE, TARGET_RGB
 
 UNFEASIBLE = 0
 ORIGIN = (0.35, -0.9, 1.0)  # m: top of the drawing (the root), in the base frame
@@ -28,10 +32,11 @@ def tree_markers(state: dict, ids: tuple[str, ...], best: tuple[str, ...] | None
     """MarkerArray of the tree in `state` (QTree.to_state()); `ids` maps action index -> object id; `best` is the
     learned sequence (ids, ending with the target) to highlight."""
     nodes = state["nodes"]
-    pos, per_depth = [], {}
+    pos: list = []
+    per_depth: dict[int, int] = {}
     for n in nodes:
         per_depth[len(n["seq"])] = per_depth.get(len(n["seq"]), 0) + 1
-    seen = {}
+    seen: dict[int, int] = {}
     for n in nodes:
         d = len(n["seq"])
         k = seen[d] = seen.get(d, -1) + 1
@@ -97,3 +102,29 @@ def tree_markers(state: dict, ids: tuple[str, ...], best: tuple[str, ...] | None
             out.markers.append(t)
         out.markers.append(path)
     return out
+
+
+def scene_markers(scene, sequence: tuple[str, ...], tree_state: dict | None = None,
+                  ids: tuple[str, ...] = ()) -> MarkerArray:
+    """The scene's bottles (an ObjectArray) as cylinders in their colour, each labelled with its place in the
+    learned `sequence`; with a trained tree (`tree_state`, QTree.to_state(); `ids` its action -> id), the Q-Tree
+    beside the shelf (tree_markers)."""
+    arr = MarkerArray()
+    if tree_state is not None:
+        arr.markers += tree_markers(tree_state, ids, sequence, scene.header.frame_id).markers
+    order = {o: k + 1 for k, o in enumerate(sequence)}
+    for k, o in enumerate(scene.objects):
+        m = Marker(ns="scene", id=k, type=Marker.CYLINDER, action=Marker.ADD, header=scene.header)
+        m.pose = copy.deepcopy(o.pose)
+        m.pose.position.z += o.height / 2
+        m.scale.x = m.scale.y = 2 * o.radius
+        m.scale.z = o.height
+        m.color.r, m.color.g, m.color.b, m.color.a = (*PALETTE.get(o.label, TARGET_RGB), 1.0)
+        t = Marker(ns="order", id=k, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD, header=scene.header)
+        t.pose = copy.deepcopy(o.pose)
+        t.pose.position.z += o.height + 0.04
+        t.scale.z = 0.03
+        t.color.r = t.color.g = t.color.b = t.color.a = 1.0
+        t.text = f"{o.id} ({order[o.id]})" if o.id in order else o.id
+        arr.markers += [m, t]
+    return arr

@@ -25,6 +25,7 @@ class CachedOracle:
         self.queries = 0
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """The cached answer for (object, removed set); the wrapped oracle is asked on a miss."""
         self.queries += 1
         key = (object_id, frozenset(removed))
         answer = self.table.get(key)
@@ -36,6 +37,7 @@ class CachedOracle:
 
     @property
     def in_flight(self) -> int:
+        """Questions the wrapped oracle answers at once."""
         return in_flight(self.oracle)
 
     def feasibility_many(self, queries, on_answer=None) -> list[FeasibilityAnswer]:
@@ -100,6 +102,7 @@ class BlockingOracle:
                 raise ValueError(f"blocking relation names unknown ids: {', '.join(sorted(unknown))}")
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """Eq. 11 from the blocking relation; KeyError for an unknown id."""
         if object_id not in self.ids:
             raise KeyError(f"unknown object id {object_id!r}")
         if object_id in removed:

@@ -20,6 +20,8 @@ SEARCHES = ("breadth", "depth")
 
 @dataclass(frozen=True)
 class TrainingParams:
+    """The Q-Tree training parameters (Sect. 4.2; Eq. 7, 14, 16), validated; defaults in config/task_planner.yaml."""
+
     policy: str
     search: str
     alpha: float
@@ -67,6 +69,7 @@ class TrainingParams:
 
     @classmethod
     def fields(cls) -> tuple[str, ...]:
+        """The parameter names."""
         return tuple(f.name for f in dataclasses.fields(cls))
 
     @classmethod
@@ -76,7 +79,8 @@ class TrainingParams:
             raise ParameterError(f"parameters must be a mapping, got {type(d).__name__}")
         unknown = sorted(set(d) - set(cls.fields()))
         if unknown:
-            raise ParameterError(f"unknown parameter(s): {', '.join(map(str, unknown))}; known: {', '.join(cls.fields())}")
+            raise ParameterError(f"unknown parameter(s): {', '.join(map(str, unknown))}; "
+                                 f"known: {', '.join(cls.fields())}")
         values = dataclasses.asdict(base) if base is not None else {}
         values.update(d)
         missing = [f for f in cls.fields() if f not in values]
@@ -112,4 +116,5 @@ class TrainingParams:
         return self.from_dict({k: v for k, v in changes.items() if v is not None}, base=self)
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON, checkpoints)."""
         return dataclasses.asdict(self)

@@ -27,10 +27,12 @@ def epsilon_schedule(episode: int, max_episodes: int, epsilon0: float, epsilon_m
 
 
 def lrnd(node: Node, offered: list[int], target: int, rng: random.Random, epsilon: float) -> int:
+    """LRND: uniform over the offered actions."""
     return offered[int(rng.random() * len(offered))]
 
 
 def h_lrnd(node: Node, offered: list[int], target: int, rng: random.Random, epsilon: float) -> int:
+    """H-LRND: the target when offered, else uniform."""
     if offered[-1] == target:  # offered is ascending and the target has the highest index
         return target
     return offered[int(rng.random() * len(offered))]

@@ -16,6 +16,8 @@ class ProblemError(ValueError):
 
 @dataclass(frozen=True)
 class RelocationProblem:
+    """Obstacles (in order: action indices 0..N-1), their weights phi_i, and the target (index N)."""
+
     obstacles: tuple[str, ...]
     weights: Mapping[str, float]  # phi_i of every obstacle (Eq. 8, 13)
     target: str
@@ -40,6 +42,13 @@ class RelocationProblem:
         """From a relocation_common.scenario.Scenario (already validated by its loader)."""
         return cls(scenario.obstacle_ids, scenario.weights, scenario.target_id)
 
+    @classmethod
+    def from_bottles(cls, bottles) -> "RelocationProblem":
+        """From scene bottles (relocation_common.scenario.Bottle: id, weight, is_target), e.g. a perceived scene."""
+        obstacles = [b for b in bottles if not b.is_target]
+        target = next(b.id for b in bottles if b.is_target)
+        return cls(tuple(b.id for b in obstacles), {b.id: b.weight for b in obstacles}, target)
+
     @property
     def ids(self) -> tuple[str, ...]:
         """Obstacles then the target: index -> id."""
@@ -47,6 +56,7 @@ class RelocationProblem:
 
     @property
     def n(self) -> int:
+        """N, the number of obstacles."""
         return len(self.obstacles)
 
     def weight(self, sequence) -> float:

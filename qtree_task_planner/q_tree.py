@@ -40,7 +40,7 @@ class Node:
     `label` of every known edge, `child` node of every obstacle edge. `offer` caches `offered()` (ascending
     action indices; kept up to date by QTree when an action is pruned here, None = not computed yet)."""
 
-    __slots__ = ("id", "seq", "mask", "q", "q_pruned", "label", "child", "pruned", "offer", "removed", "free")
+    __slots__ = ("id", "seq", "mask", "q", "q_pruned", "label", "child", "pruned", "offer", "removed")
 
     def __init__(self, node_id: int, seq: tuple[int, ...], mask: int) -> None:
         self.id = node_id
@@ -53,7 +53,6 @@ class Node:
         self.pruned = 0  # bitmask of unfeasible actions at this node
         self.offer: list[int] | None = None  # cache of offered(), see QTree.offered
         self.removed: frozenset[str] | None = None  # cache of the removed ids, see QTree.edge_label
-        self.free: tuple[int, ...] | None = None  # cache: actions not relocated in this sequence (ascending)
 
     def max_q(self) -> float:
         """max_a' Q(s, a') over the known feasible edges; 0 where there is none (Eq. 7)."""
@@ -123,8 +122,7 @@ class QTree:
         if c is None:
             mask = node.mask | (1 << a)
             c = Node(len(self.nodes), node.seq + (a,), mask)
-            c.free = tuple(b for b in self._actions if not (mask >> b) & 1)
-            c.offer = list(c.free)  # = c.offered(n): nothing pruned here yet
+            c.offer = [b for b in self._actions if not (mask >> b) & 1]  # = c.offered(n): nothing pruned here yet
             self.nodes.append(c)
             node.child[a] = c
         return c
@@ -157,10 +155,12 @@ class QTree:
 
     @property
     def node_count(self) -> int:
+        """Nodes allocated (s_H included)."""
         return len(self.nodes)
 
     @property
     def n_edges(self) -> int:
+        """Edges known (= MP_q)."""
         return sum(len(n.label) for n in self.nodes)
 
     def best_path(self) -> list[tuple[Node, int]] | None:
@@ -175,9 +175,10 @@ class QTree:
             path.append((node, a))
             if a == self.target:
                 return path
-            node = node.child.get(a)
-            if node is None:
+            nxt = node.child.get(a)
+            if nxt is None:
                 return None
+            node = nxt
         return None
 
     def best_sequence(self) -> tuple[str, ...] | None:
@@ -270,21 +271,3 @@ class QTree:
         self.q_sum = float(state["q_sum"])
         if self.mp_q != self.n_edges or abs(self.q_sum - self.q_abs_sum()) > 1e-6 * max(1.0, self.q_sum):
             raise ValueError("MP_q or the Eq. 15 sum does not match the edges")
-
-    def rollback(self, journal: list, n_nodes: int, mp_q: int, q_sum: float) -> None:
-        """Undo the steps recorded in `journal` (entries (node, action, old Q or None for a new edge), oldest
-        first) and restore the counters: used when an episode is interrupted half-way (planner gone)."""
-        for node, a, old in reversed(journal):
-            if old is None:
-                node.label.pop(a, None)
-                node.q.pop(a, None)
-                node.q_pruned.pop(a, None)
-                node.pruned &= ~(1 << a)
-                node.child.pop(a, None)
-                node.offer = None
-            elif a in node.q:
-                node.q[a] = old
-            else:
-                node.q_pruned[a] = old
-        del self.nodes[n_nodes:]
-        self.mp_q, self.q_sum = mp_q, q_sum

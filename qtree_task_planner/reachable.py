@@ -31,7 +31,7 @@ def reachable_sets(obstacles: Iterable[str], removable: Removable) -> dict[froze
     in breadth-first order (the empty set first)."""
     obstacles = tuple(obstacles)
     reached: dict[frozenset, tuple[str, ...]] = {frozenset(): ()}
-    level = [frozenset()]
+    level: list[frozenset] = [frozenset()]
     while level:
         level = next_level(level, obstacles, removable, reached)
     return reached

@@ -1,11 +1,12 @@
-"""Feasibility over several motion planner replicas (issue 15): N questions in flight, and failover.
+"""Feasibility over several motion planner replicas (docs/architecture.md): N questions in flight, and failover.
 
 ROS-free: each replica is an oracle (the node's ServiceOracle, one per PlanFeasibility service) with `name`,
 `last_ok` and `ready(timeout)`. A replica raising PlannerUnavailable (dead, wedged, or its safety net ran out) is
 *down*: its question goes to another replica, and it is asked again only after a rest, or when every other replica
 is down too. The rest doubles with each failure in a row (`retry_after`, 2x, 4x ... at most `max_rest` s): a
-SIGKILLed planner's service stays in the DDS graph for some 20 s and each try costs a full query timeout. PlannerUnavailable leaves this oracle only when no replica could answer a question, so the
-task planner's outage handling (outage.until_available) sees an outage only when all of them are gone.
+SIGKILLed planner's service stays in the DDS graph for some 20 s and each try costs a full query timeout.
+PlannerUnavailable leaves this oracle only when no replica could answer a question, so the task planner's outage
+handling (outage.until_available) sees an outage only when all of them are gone.
 
 One question at a time (`feasibility`, `lane_blockers`) goes to the first replica that is up, in the given order:
 with replica 0 up, a sequential caller (the Q-Tree's episodes) asks exactly what one planner would be asked.
@@ -37,10 +38,12 @@ class ReplicaOracle:
     # -- state ----------------------------------------------------------------------------------------------
     @property
     def in_flight(self) -> int:
+        """Questions answered at once: the replicas that are up (at least 1)."""
         return max(1, len(self._usable()))
 
     @property
     def last_ok(self) -> float:
+        """Monotonic time of the last answer of any replica."""
         return max(r.last_ok for r in self.replicas)
 
     def ready(self, timeout: float) -> bool:
@@ -80,6 +83,7 @@ class ReplicaOracle:
             self.answers[i] += 1
 
     def summary(self) -> str:
+        """Answers per replica, the down ones marked (for the log)."""
         return ", ".join(f"{r.name}: {n} answers{' (down)' if i in self.down else ''}"
                          for i, (r, n) in enumerate(zip(self.replicas, self.answers)))
 
@@ -100,9 +104,11 @@ class ReplicaOracle:
         raise PlannerUnavailable(f"no replica answered {what} ({'; '.join(f'{n}: {e}' for n, e in errors)})")
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """Eq. 11 from the first replica that is up (failover on PlannerUnavailable)."""
         return self._one(lambda r: r.feasibility(object_id, removed), repr(object_id))
 
     def lane_blockers(self, removed: frozenset[str]):
+        """Every remaining object's lane blockers, from the first replica that is up."""
         return self._one(lambda r: r.lane_blockers(removed), "the lane blockers")
 
     # -- many questions -------------------------------------------------------------------------------------

@@ -12,6 +12,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable, TypeVar
 
+from relocation_common.scenario import ScenarioError
+
 from . import astar
 from .checkpoint import Checkpoint
 from .oracles import CachedOracle
@@ -21,15 +23,41 @@ from .problem import RelocationProblem
 from .training import train
 
 T = TypeVar("T")
+STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from the node's clock is on another clock
+
+
+def check_scene(topic: str, max_age: float, received_s: float | None, stamp_age_s: float | None,
+                n_objects: int) -> str | None:
+    """ScenarioError for a scene a goal must not train on: none received, stale (received longer than max_age
+    ago, or stamped longer ago than that: an old scene handed over by transient-local durability from a
+    perception that stopped; max_age 0: no check), or empty. received_s: seconds since it arrived (None: never);
+    stamp_age_s: the node's clock minus the header stamp (None: unstamped). Returns a warning when the stamp is
+    on another clock (simulated vs wall time: only the receive time counts then)."""
+    if received_s is None:
+        raise ScenarioError(f"no scene received on {topic}: is perception (or the driver) up?")
+    stale = f"the scene on {topic} is stale: %s > scene_max_age {max_age:g} s; is perception still running?"
+    if max_age > 0 and received_s > max_age:
+        raise ScenarioError(stale % f"received {received_s:.1f} s ago")
+    warning = None
+    if max_age > 0 and stamp_age_s is not None:
+        if not -1.0 < stamp_age_s < STAMP_PLAUSIBLE:
+            warning = (f"scene stamp {stamp_age_s:.0f} s away from this node's clock: is one of them on use_sim_time? "
+                       "Checking the scene's age by receive time only")
+        elif stamp_age_s > max_age:
+            raise ScenarioError(stale % f"stamped {stamp_age_s:.1f} s ago")
+    if not n_objects:
+        raise ScenarioError(f"the scene on {topic} is empty: perception sees no objects (camera, marker, lighting?)")
+    return warning
 
 
 def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: TrainingParams, *,
                      resume: Checkpoint | None, until_planner: Callable[[Callable[[], T]], T],
                      keep: Callable[[Checkpoint], None], on_episode: Callable, checkpoint_every: int,
-                     on_solved: Callable = lambda optimum: None):
+                     on_solved: Callable = lambda optimum: None, episode_every: int = 1):
     """(exact optimum, training result). The answers the exact solve gathered before an outage are kept in a
-    checkpoint (`keep`), so nothing asked is asked again; training checkpoints every `checkpoint_every` episodes
-    and stops when `on_episode(stats)` returns False (cancel, shutdown)."""
+    checkpoint (`keep`), so nothing asked is asked again; training checkpoints every `checkpoint_every` episodes,
+    calls `on_episode(stats)` every `episode_every` episodes (training.train's callback) and stops when it
+    returns False (cancel, shutdown)."""
     state = {"ck": resume}
 
     def solve():
@@ -50,7 +78,8 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
 
     def run():
         return train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode,
-                     resume=state["ck"], checkpoint_every=checkpoint_every, on_checkpoint=on_checkpoint)
+                     callback_every=episode_every, resume=state["ck"], checkpoint_every=checkpoint_every,
+                     on_checkpoint=on_checkpoint)
 
     return optimum, until_planner(run)
 
@@ -70,3 +99,22 @@ def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bo
             return False, f"relocating {object_id!r} failed: {message}", removed
         removed.append(object_id)
     return True, f"target {sequence[-1]!r} retrieved after {len(removed) - 1} relocations", removed
+
+
+def relocation_stop(*, shutting_down: bool, server_up: Callable[[], bool], silent_s: float, silence: float,
+                    cancelled: bool, elapsed_s: float, limit: float) -> str | None:
+    """Why a running relocation must stop now, or None (checked in this order): the task planner shutting down,
+    the relocate action server gone (`server_up()`, asked only while the node runs: it needs a valid context), no
+    feedback for more than `silence` s (relocate_silence), the goal cancelled, no result within `limit` s
+    (relocate_timeout)."""
+    if shutting_down:
+        return "the task planner is shutting down"
+    if not server_up():
+        return "the motion planner went away (relocate action server gone)"
+    if silent_s > silence:
+        return f"the motion planner went away (no feedback for {silent_s:.0f} s > relocate_silence)"
+    if cancelled:
+        return "cancelled"
+    if elapsed_s > limit:
+        return f"no result within {limit:g} s (relocate_timeout)"
+    return None

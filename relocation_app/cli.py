@@ -30,6 +30,8 @@ from qtree_task_planner.training import train
 from relocation_common.config import ParameterError
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
+from .progress import Progress
+
 
 class CliError(Exception):
     """A one-line user error."""
@@ -50,7 +52,7 @@ def _planner_oracle(scenario, args):
 
 
 def _replicas_oracle(scenario, args):
-    """N motion planner processes over ROS, one question in flight each (issue 15; stopped when qtree exits)."""
+    """N motion planner processes over ROS, one question in flight each (stopped when qtree exits)."""
     from relocation_common.paths import resolve_scenario
 
     from .evaluation.replica_fill import replica_oracle
@@ -137,17 +139,13 @@ def _emit(data: dict, out: str | None) -> None:
         print(text)
 
 
-def _progress_bar(episodes: int):
-    """(callback, bar): a tqdm bar on stderr advanced by train()'s per-episode callback (Q_sum of Eq. 15, tree
-    nodes and MP_q shown every 50 episodes)."""
-    from tqdm import tqdm
+def _progress_bar(episodes: int) -> tuple[Callable, Progress]:
+    """(callback, bar): progress on stderr (relocation_app.progress: a bar on a terminal, a line every few seconds
+    in a log) advanced by train()'s callback every few episodes (Q_sum of Eq. 15, tree nodes, MP_q)."""
+    bar = Progress("episodes", "ep", total=episodes, leave=False)
 
-    bar = tqdm(total=episodes, desc="episodes", unit="ep", file=sys.stderr, leave=False)
-
-    def callback(st):
-        bar.update(1)
-        if st.episode % 50 == 0:
-            bar.set_postfix(q_sum=f"{st.q_sum:.1f}", nodes=st.tree_nodes, mp_q=st.mp_q)
+    def callback(st) -> None:
+        bar.update(st.episode, postfix=f"q_sum={st.q_sum:.1f} nodes={st.tree_nodes} mp_q={st.mp_q}")
     return callback, bar
 
 
@@ -173,6 +171,7 @@ def _train(args) -> int:
     wall = time.perf_counter() - t0
     if args.tree_dot:
         try:
+            assert result.tree is not None  # train always returns its tree
             Path(args.tree_dot).write_text(result.tree.to_dot(name=scenario.name.replace("-", "_")))
         except OSError as e:
             raise CliError(f"cannot write {args.tree_dot}: {e.strerror}") from None
@@ -194,6 +193,7 @@ def _solve(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run `qtree train` or `qtree solve`; exit status 0, 2 on bad input (one line on stderr), 130 on Ctrl-C."""
     try:
         args = _parser().parse_args(argv)
         with ExitStack() as args.stack:  # what an oracle started (planner processes) stops here

@@ -23,6 +23,7 @@ from relocation_common.paths import default_scenario, resolve_scenario
 
 from .client import ClientError, RelocationClient
 from .graph import Graph
+from .progress import Progress
 
 
 def _args(argv):
@@ -129,21 +130,17 @@ def _checkpoint(path: Path) -> Path:
 
 
 def _progress_bar(rec: "_Recorder"):
-    """A tqdm bar fed by TrainPlanner feedback: episodes, Eq. 15 sum, tree size, MP_q, planner calls."""
-    from tqdm import tqdm
-
-    bar = tqdm(desc="training", unit="ep", file=sys.stderr)
+    """Progress fed by TrainPlanner feedback (relocation_app.progress: a bar on a terminal, a line every few seconds
+    in a log): episodes, Eq. 15 sum, tree size, MP_q, planner calls."""
+    bar = Progress("training", "ep")
 
     def on_feedback(f) -> None:
         if f.phase == "executing":
             rec.active = True
-            bar.set_description("executing")
+            bar.update(desc="executing")
             return
-        bar.set_description("exact optimum" if f.phase == "exact optimum" else "training")
-        bar.n = f.episode
-        bar.set_postfix(q_sum=f"{f.q_sum:.1f}", nodes=f.tree_nodes, mp_q=f.mp_queries, calls=f.planner_calls,
-                        refresh=False)
-        bar.refresh()
+        bar.update(f.episode, desc="exact optimum" if f.phase == "exact optimum" else "training",
+                   postfix=f"q_sum={f.q_sum:.1f} nodes={f.tree_nodes} mp_q={f.mp_queries} calls={f.planner_calls}")
 
     return bar, on_feedback
 

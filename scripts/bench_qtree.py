@@ -5,9 +5,9 @@ Prints: training throughput (episodes per CPU second of this process, so that ot
 distort it less) for each policy x search, with a cold cache (BlockingOracle behind a
 fresh CachedOracle) and a warm shared cache (the evaluation sweeps' case); the exact solver's oracle calls and
 time; and a sweep of quiet_episodes (Eq. 16) behind the default in config/task_planner.yaml.
-Training runs on the C kernel (qtree_task_planner/kernel.py) when it builds; --python measures the pure-Python
-episode loop instead (the fallback, also what trainings with a per-episode callback use).
-Usage: .venv/bin/python scripts/bench_qtree.py [--seeds N] [--episodes E] [--no-sweep] [--python]
+Training runs on the C kernel (qtree_task_planner/kernel.py), the one engine; on a checkout from before it
+(no kernel module) the script measures that checkout's loop (before/after comparisons).
+Usage: .venv/bin/python scripts/bench_qtree.py [--seeds N] [--episodes E] [--no-sweep]
 """
 from __future__ import annotations
 
@@ -85,14 +85,11 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--episodes", type=int, default=2000)
     ap.add_argument("--no-sweep", action="store_true")
-    ap.add_argument("--python", action="store_true", help="disable the C kernel (pure-Python episode loop)")
     a = ap.parse_args(argv)
     try:
         from qtree_task_planner import kernel
     except ImportError:  # a tree from before the kernel (for before/after comparisons)
         kernel = None
-    if kernel is not None and a.python:
-        kernel._lib, kernel.build_error = None, "disabled by --python"
     engine = "none (reference loop)" if kernel is None else "C kernel" if kernel.available() else \
         f"Python loop ({kernel.build_error})"
     sc = load_scenario(scenarios_dir() / "blocking_15.yaml")

@@ -2,14 +2,14 @@
 
 test/data/qtree_reference.json was recorded with the pure-dict implementation of q_tree.py / policies.py /
 training.py as it was before the speed-up (commit 54e462d), by running this file as a script:
-    .venv/bin/python test/test_q_tree_equivalence.py --record
+    PYTHONPATH=. .venv/bin/python test/test_q_tree_equivalence.py --record
 Each case is a full TrainingParams (explicit, independent of config/task_planner.yaml) on a scene with a
 deterministic oracle (blocking_5/10/15 with BlockingOracle; scenario1_5 and scenario2_10 with the cached real
 planner answers of data/feasibility/). Compared exactly: sequence, total_weight, episodes, converged, E_ss,
 MP_q, planner calls, E_1st, tree size, the Eq. 15 history (every float, by its IEEE bits) and the whole tree
-(QTree.to_state(), every Q by its bits). Each of the three engines is checked against it: the C kernel
-(qtree_task_planner/kernel.py, plain batch training), the inlined Python episode loop (training._episode: with a
-callback, or without the kernel) and the reference loop (policy + QTree.step: with on_checkpoint).
+(QTree.to_state(), every Q by its bits). The one engine (the C kernel, qtree_task_planner/kernel.py, through
+training.train) is checked against it in one batch, in batches between callbacks and with checkpoints; the
+reference loop (policies.py + QTree.step, test/qtree_reference.py) is checked against it too.
 """
 from __future__ import annotations
 
@@ -20,17 +20,17 @@ import sys
 from pathlib import Path
 
 import pytest
+from qtree_reference import reference_train
+
+from qtree_task_planner import exact, kernel
+from qtree_task_planner.oracles import BlockingOracle
+from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.training import train
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from qtree_task_planner import exact, kernel  # noqa: E402
-from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
-from qtree_task_planner.params import TrainingParams  # noqa: E402
-from qtree_task_planner.problem import RelocationProblem  # noqa: E402
-from qtree_task_planner.training import train  # noqa: E402
-from relocation_common.paths import scenarios_dir
-from relocation_common.scenario import load_scenario  # noqa: E402
 
 FIXTURE = ROOT / "test" / "data" / "qtree_reference.json"
 ALGORITHMS = [(p, s) for p in ("lrnd", "h-lrnd", "h-eg") for s in ("breadth", "depth")]
@@ -124,34 +124,33 @@ def test_training_reproduces_the_reference_bit_for_bit(case):
     assert run_case(case) == case["result"]
 
 
-@pytest.fixture
-def python_loops(monkeypatch):
-    """Training without the C kernel (as on a machine without a C compiler)."""
-    monkeypatch.setattr(kernel, "_lib", None)
-    monkeypatch.setattr(kernel, "build_error", "disabled by the test")
-    assert not kernel.available()
-
-
 CASES = load_fixture() if FIXTURE.exists() else []
 
 
-@pytest.mark.parametrize("case", CASES[::2], ids=case_id)
-def test_python_episode_loop_reproduces_the_reference(case, python_loops):
-    assert run_case(case) == case["result"]
-
-
 @pytest.mark.parametrize("case", CASES[::3], ids=case_id)
-def test_python_loop_with_callback_reproduces_the_reference(case):
+def test_training_with_callbacks_reproduces_the_reference(case):
     seen = []
-    assert run_case(case, callback=seen.append) == case["result"]  # a callback: Python loop, kernel or not
-    assert len(seen) == case["result"]["episodes"]
+    assert run_case(case, callback=seen.append, callback_every=7) == case["result"]  # batches of 7 episodes
+    assert [s.episode for s in seen][-1] == case["result"]["episodes"]
+    assert all(s.episode % 7 == 0 for s in seen[:-1])
 
 
 @pytest.mark.parametrize("case", CASES[::7], ids=case_id)
-def test_reference_loop_with_checkpoints_reproduces_the_reference(case):
+def test_training_with_checkpoints_reproduces_the_reference(case):
     final = []
     assert run_case(case, on_checkpoint=final.append) == case["result"]
     assert [c.reason for c in final] == ["final"]
+
+
+@pytest.mark.parametrize("case", CASES[::11], ids=case_id)
+def test_the_reference_loop_is_the_recorded_oracle(case):
+    """The reference (policies.py + QTree.step, test/qtree_reference.py) still reproduces the recording."""
+    problem, oracle, opt = setting(case["scene"])
+    ref = reference_train(problem, oracle, TrainingParams(**case["params"]), optimal_weight=opt)
+    want = case["result"]
+    assert (ref["episodes"], ref["converged"], ref["e_1st"]) == (want["episodes"], want["converged"], want["e_1st"])
+    assert float_digest(ref["history"]) == want["q_sum_history"]
+    assert tree_digest(ref["tree"].to_state()) == want["tree"]
 
 
 def test_kernel_is_built_and_used():
@@ -169,20 +168,15 @@ def test_kernel_is_built_and_used():
 
 
 @pytest.mark.parametrize("policy,search", ALGORITHMS)
-def test_kernel_asks_the_cache_exactly_like_the_python_loop(policy, search, monkeypatch):
+def test_kernel_asks_the_cache_exactly_like_the_reference(policy, search):
     from qtree_task_planner.oracles import CachedOracle
     sc = load_scenario(scenarios_dir() / "blocking_15.yaml")
     p = TrainingParams(**(BASE | dict(policy=policy, search=search, seed=4, max_episodes=600)))
-    caches = []
-    for engine in ("kernel", "python"):
-        if engine == "python":
-            monkeypatch.setattr(kernel, "_lib", None)
-            monkeypatch.setattr(kernel, "build_error", "disabled by the test")
-        cache = CachedOracle(BlockingOracle(sc))
-        r = train(sc, cache, p)
-        caches.append((cache.calls, cache.queries, list(cache.table), r.planner_calls, r.mp_q))
-    assert caches[0] == caches[1]
-    assert caches[0][1] == caches[0][4]  # one cache query per new tree edge (MP_q)
+    cache = CachedOracle(BlockingOracle(sc))
+    r = train(sc, cache, p)
+    ref = reference_train(sc, BlockingOracle(sc), p)["cache"]
+    assert (cache.calls, cache.queries, list(cache.table)) == (ref.calls, ref.queries, list(ref.table))
+    assert r.planner_calls == cache.calls and cache.queries == r.mp_q  # one cache query per new tree edge (MP_q)
 
 
 def test_kernel_propagates_oracle_errors():

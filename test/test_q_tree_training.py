@@ -5,6 +5,7 @@ import random
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from qtree_reference import reference_train
 
 from qtree_task_planner.exact import solve
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
@@ -37,7 +38,7 @@ def feasible_sequence(oracle, seq, target):
 
 def episodes_of(sc, p):
     seen = []
-    r = train(sc, BlockingOracle(sc), p, callback=seen.append)
+    r = train(sc, BlockingOracle(sc), p, callback=seen.append, callback_every=1)
     return r, seen
 
 
@@ -64,9 +65,9 @@ def test_pruned_actions_are_never_chosen_again(monkeypatch):
 
     monkeypatch.setattr(QTree, "step", spy)
     for policy in ("lrnd", "h-lrnd", "h-eg"):
-        for search in ("breadth", "depth"):
-            r = train(SC10, BlockingOracle(SC10), params(policy=policy, search=search, max_episodes=300))
-            assert r.mp_q == r.tree_edges
+        for search in ("breadth", "depth"):  # the reference loop (the engine equals it: test_q_tree_equivalence)
+            r = reference_train(SC10, BlockingOracle(SC10), params(policy=policy, search=search, max_episodes=300))
+            assert r["tree"].mp_q == r["tree"].n_edges
     assert chosen_pruned == []
 
 
@@ -131,8 +132,12 @@ def test_shared_cache_counts_only_new_real_calls():
 
 
 def test_callback_false_cancels():
-    r = train(SC10, BlockingOracle(SC10), params(), callback=lambda s: s.episode < 7)
+    r = train(SC10, BlockingOracle(SC10), params(), callback=lambda s: s.episode < 7, callback_every=1)
     assert r.cancelled and r.episodes == 7 and not r.converged
+    seen = []
+    r = train(SC10, BlockingOracle(SC10), params(), callback=lambda s: seen.append(s.episode) or s.episode < 7,
+              callback_every=5)  # the engine runs 5 episodes between callbacks
+    assert r.cancelled and r.episodes == 10 and seen == [5, 10]
 
 
 def test_max_steps_bounds_each_episode():
@@ -161,3 +166,20 @@ def test_q_tree_never_beats_the_exact_optimum_and_returns_feasible_sequences(see
     if r.found:
         assert feasible_sequence(oracle, r.sequence, "T")
         assert r.total_weight >= opt.total_weight - 1e-9
+
+
+def test_a_slow_planner_ends_a_batch_early_for_the_callback():
+    """With a slow oracle the engine returns after the episode in which an answer came later than CALLBACK_S
+    into the batch, so progress and cancel are not held for callback_every episodes; the result is unchanged."""
+    import time as _time
+
+    class Slow(BlockingOracle):
+        def feasibility(self, object_id, removed):
+            _time.sleep(0.02)
+            return super().feasibility(object_id, removed)
+
+    p = params(policy="lrnd", search="depth", max_episodes=100, beta=0.0)
+    seen = []
+    r = train(SC5, Slow(SC5), p, callback=lambda s: seen.append(s.episode), callback_every=1000)
+    assert 1 < len(seen) < 100 and seen[-1] == 100 and seen == sorted(set(seen))
+    assert r == train(SC5, BlockingOracle(SC5), p)

@@ -1,7 +1,9 @@
 """`qtree` command line (subprocess): train/solve outputs, and one clear line + non-zero exit on bad input."""
 import json
+import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -34,6 +36,21 @@ def test_train_to_stdout_with_progress_on_stderr():
     p = qtree("train", "--scenario", SC5, "--max-episodes", 50, "--beta", 0)
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["episodes"] == 50 and "Traceback" not in p.stderr
+
+
+def test_progress_in_a_log_is_a_line_every_few_seconds_not_one_per_update():
+    """stderr piped (not a terminal): the progress is plain lines at most every LOG_INTERVAL_S seconds and one at the
+    end (the old tqdm bar wrote an update every 0.1 s: dozens of them in a CI or launch log)."""
+    from relocation_app.progress import LOG_INTERVAL_S
+    sc15 = ROOT / "config" / "scenarios" / "blocking_15.yaml"
+    t0 = time.monotonic()
+    p = qtree("train", "--scenario", sc15, "--policy", "lrnd", "--search", "depth", "--max-episodes", 8000,
+              "--beta", 0)
+    wall = time.monotonic() - t0
+    assert p.returncode == 0, p.stderr
+    progress = [seg for seg in re.split(r"[\r\n]", p.stderr) if seg.strip() and not seg.startswith("qtree:")]
+    assert len(progress) <= 1 + wall / LOG_INTERVAL_S, progress
+    assert progress[-1].startswith("episodes: 8000/8000 ep q_sum=")
 
 
 def test_solve():

@@ -22,6 +22,7 @@ from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.training import WEIGHT_TOL, train
 
+from ..progress import Progress
 from .feasibility_cache import PlannerOracle, load_table
 
 ALGORITHMS = (("lrnd", "breadth"), ("lrnd", "depth"), ("h-lrnd", "breadth"), ("h-lrnd", "depth"),
@@ -195,11 +196,10 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
         return res
 
     bar = None
-    if progress:
-        from tqdm import tqdm
+    if progress:  # a bar on a terminal, a line every few seconds in a log (relocation_app.progress)
         total = sum(len(s.grid) for s in scenes) * len(algorithms)
-        bar = tqdm(total=total, initial=total - len(cells(1)) - _pending_eg(scenes, algorithms, done, runs),
-                   unit="cell", desc="sweep", dynamic_ncols=True)
+        bar = Progress("sweep", "cell", total=total,
+                       initial=total - len(cells(1)) - _pending_eg(scenes, algorithms, done, runs))
     ctx = mp.get_context("fork")
     with ctx.Pool(workers) as pool, out.open("a") as f:
         for phase in (1, 2):
@@ -211,8 +211,8 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
                 done.add(_ident(rec))
                 ran += 1
                 if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix_str(f"{rec['scenario']} {rec['algorithm']} a={rec['alpha']} g={rec['gamma']}")
+                    bar.update(advance=1, postfix=f"{rec['scenario']} {rec['algorithm']} a={rec['alpha']} "
+                                                  f"g={rec['gamma']}")
     if bar is not None:
         bar.close()
     new = [e for r in records for e in r.get("new_entries", [])]

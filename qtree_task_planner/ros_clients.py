@@ -1,0 +1,164 @@
+"""The task planner's clients over ROS, outside the node file (the node and relocation_app.client use them).
+
+- ServiceOracle: the feasibility oracle (Eq. 11) over the motion planner's PlanFeasibility service, with the
+  outage rules of docs/reliability.md ("Dead planner").
+- Relocator: one RelocateObject goal to the motion planner, watched (shutdown, server gone, silence, cancel,
+  timeout: qtree_task_planner.retrieval.relocation_stop).
+- train_goal / goal_params: a TrainPlanner goal whose numeric fields say "the node's parameter" (negative), and
+  the TrainingParams a goal asks for.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
+from qtree_relocation_msgs.srv import PlanFeasibility
+
+from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.node import ActionClient, call
+from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs
+
+from .outage import Cancelled, PlannerUnavailable
+from .params import TrainingParams
+from .retrieval import relocation_stop
+
+
+class ServiceOracle:
+    """FeasibilityOracle over the PlanFeasibility service (blocking call from a worker thread).
+
+    Raises PlannerUnavailable as soon as the service is missing (after `connect_wait` s), when it disappears from
+    the graph while a query is pending (a clean shutdown), or when no answer came within timeout + margin (a
+    killed or wedged planner). `last_ok` is the monotonic time of the last answer. Raises Cancelled before a query
+    when `stop()` is true (goal cancelled, node shutting down); `on_answer()` is called after each answer."""
+
+    def __init__(self, client, timeout: float, margin: float, connect_wait: float = 1.0,
+                 stop=lambda: False, on_answer=lambda: None) -> None:
+        self.client, self.timeout, self.margin, self.connect_wait = client, timeout, margin, connect_wait
+        self.stop, self.on_answer = stop, on_answer
+        self.last_ok = time.monotonic()
+        self.name = client.srv_name
+
+    def ready(self, timeout: float) -> bool:
+        """Whether the service is up, waiting up to `timeout` s for it."""
+        return self.client.service_is_ready() or (timeout > 0 and self.client.wait_for_service(timeout_sec=timeout))
+
+    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """Eq. 11's label of relocating `object_id` after `removed` (and the lane blockers the planner saw)."""
+        # the label only: training never uses the trajectory (about 5 ms of a feasible answer's round trip)
+        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout,
+                                      label_only=True)
+        resp = self._call(req, repr(object_id))
+        return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
+                                 blockers=blockers_from_msgs(resp.blockers))
+
+    def lane_blockers(self, removed: frozenset[str]) -> dict | None:
+        """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None
+        from a planner that refuses the question (one without lane blockers: the A* then learns from answers)."""
+        req = PlanFeasibility.Request(object_id="", removed_ids=sorted(removed), timeout=self.timeout, all_lanes=True)
+        try:
+            return lanes_from_msgs(self._call(req, "the lane blockers").lanes)
+        except ValueError:
+            return None
+
+    def _call(self, req, what: str):
+        if self.stop():
+            raise Cancelled("cancelled (or shutting down) while asking the motion planner")
+        srv = self.client.srv_name
+        if not self.client.service_is_ready() and not self.client.wait_for_service(timeout_sec=self.connect_wait):
+            raise PlannerUnavailable(f"feasibility service {srv} is not available")
+        limit = self.timeout + self.margin
+        try:
+            resp = call(self.client, req, limit, abandon=lambda: not self.client.service_is_ready())
+        except TimeoutError:
+            gone = not self.client.service_is_ready()
+            raise PlannerUnavailable(
+                f"feasibility service {srv} went away while answering {what}" if gone else
+                f"no feasibility answer for {what} within {limit:.1f} s "
+                "(feasibility_timeout + feasibility_margin)") from None
+        self.last_ok = time.monotonic()
+        self.on_answer()
+        if not resp.ok and resp.message.startswith(NO_ANSWER):  # its safety net ran out: asked again, never g_U
+            raise PlannerUnavailable(f"no feasibility answer for {what}: {resp.message[len(NO_ANSWER):]}")
+        if not resp.ok:
+            raise ValueError(f"motion planner refused the query for {what}: {resp.message}")
+        return resp
+
+
+NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
+                       "quiet_episodes", "seed")  # numeric goal fields: negative = the node's parameter
+
+
+def train_goal(**fields) -> TrainPlanner.Goal:
+    """A TrainPlanner goal whose numeric settings say "use the node's parameter" (negative) unless given."""
+    goal = TrainPlanner.Goal()
+    for f in NODE_DEFAULT_FIELDS:
+        setattr(goal, f, type(getattr(goal, f))(-1))
+    for k, v in fields.items():
+        setattr(goal, k, v)
+    return goal
+
+
+def goal_params(node: TrainingParams, goal) -> TrainingParams:
+    """The node's training parameters with what the goal sets (policy, search; numeric fields that are not
+    negative). ParameterError / ValueError for values out of range (NaN included)."""
+    changes = {f: getattr(goal, f) for f in ("policy", "search") if getattr(goal, f)}
+    for f in NODE_DEFAULT_FIELDS:
+        v = getattr(goal, f)
+        if not v < 0:  # negative: the node's parameter; NaN goes on to validation and is refused
+            changes[f] = v
+    return node.replace(**changes)
+
+
+class Relocator:
+    """RelocateObject goals (pick, carry to the bottom shelf, release, home) sent through `client`, each watched
+    until its result: never blind to the node stopping, the planner gone or silent, a cancel or the time limit."""
+
+    def __init__(self, client: ActionClient, server_wait: float, limit: float, silence: float,
+                 ok: Callable[[], bool]) -> None:
+        """server_wait: s to wait for the action server; limit: relocate_timeout; silence: relocate_silence (a
+        moving motion planner reports at 10 Hz); ok(): rclpy.ok of the node's context."""
+        self.client, self.server_wait, self.limit, self.silence, self.ok = client, server_wait, limit, silence, ok
+
+    def relocate(self, object_id: str, removed: list[str], cancelled: Callable[[], bool]) -> tuple[bool, str]:
+        """Relocate one object after `removed`: (success, message)."""
+        if not self.client.wait_for_server(timeout_sec=self.server_wait):
+            return False, "relocate action server not available"
+        done = threading.Event()
+        box: dict = {}
+
+        def on_result(fut) -> None:
+            box["result"] = fut.result()
+            done.set()
+
+        def on_goal(fut) -> None:
+            h = fut.result()
+            if not h.accepted:
+                box["rejected"] = True
+                done.set()
+                return
+            h.get_result_async().add_done_callback(on_result)
+
+        heard = [time.monotonic()]  # the last feedback
+
+        def on_feedback(_) -> None:
+            heard[0] = time.monotonic()
+
+        sent = self.client.send_goal_async(RelocateObject.Goal(object_id=object_id, removed_ids=list(removed)),
+                                           feedback_callback=on_feedback)
+        sent.add_done_callback(on_goal)
+        start = time.monotonic()
+        while not done.wait(0.1):
+            now = time.monotonic()
+            why = relocation_stop(shutting_down=not self.ok(), server_up=self.client.server_is_ready,
+                                  silent_s=now - heard[0], silence=self.silence, cancelled=cancelled(),
+                                  elapsed_s=now - start, limit=self.limit)
+            if why is not None:
+                if sent.done() and sent.result() is not None and sent.result().accepted and self.ok():
+                    sent.result().cancel_goal_async()  # the arm stops (the motion planner's cancel)
+                return False, why
+        if box.get("rejected"):
+            return False, "goal rejected by the motion planner"
+        res = box["result"].result
+        return res.success, res.message
