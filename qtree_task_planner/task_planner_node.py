@@ -24,6 +24,7 @@ Reliability (docs/reliability.md):
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import tempfile
 import threading
@@ -45,7 +46,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import FeasibilityAnswer, Label, replica_services
-from relocation_common.node import ActionClient, call, declare_parameters, end_goal, node_main
+from relocation_common.node import (ActionClient, call, declare_parameters, end_goal, node_main, stop_reason,
+                                    stopping_as)
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs, msg_to_bottles
 from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
 
@@ -99,7 +101,8 @@ class ServiceOracle:
         self.name = client.srv_name
 
     def ready(self, timeout: float) -> bool:
-        return self.client.service_is_ready() or (timeout > 0 and self.client.wait_for_service(timeout_sec=timeout))
+        with stopping_as(Cancelled):  # the node stopping: Cancelled with the reason, never rclpy's RCLError
+            return self.client.service_is_ready() or (timeout > 0 and self.client.wait_for_service(timeout_sec=timeout))
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
         # the label only: training never uses the trajectory (about 5 ms of a feasible answer's round trip)
@@ -119,8 +122,12 @@ class ServiceOracle:
             return None
 
     def _call(self, req, what: str):
+        with stopping_as(Cancelled):  # the node stopping mid-query: Cancelled with the reason, never RCLError
+            return self._call_once(req, what)
+
+    def _call_once(self, req, what: str):
         if self.stop():
-            raise Cancelled("cancelled (or shutting down) while asking the motion planner")
+            raise Cancelled("cancelled while asking the motion planner" if rclpy.ok() else stop_reason())
         srv = self.client.srv_name
         if not self.client.service_is_ready() and not self.client.wait_for_service(timeout_sec=self.connect_wait):
             raise PlannerUnavailable(f"feasibility service {srv} is not available")
@@ -307,6 +314,8 @@ class TaskPlannerNode(Node):
         return ck
 
     def _keep(self, ck: Checkpoint) -> None:
+        if ck.reason == "cancelled" and not rclpy.ok():  # the training stopped because the node is stopping
+            ck = dataclasses.replace(ck, reason=stop_reason())
         self._memory_ckpt = ck
         path = self.p("checkpoint_path")
         if path:

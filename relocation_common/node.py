@@ -10,7 +10,8 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
@@ -23,6 +24,28 @@ from .config import ConfigError, ParameterError, check_params_files, node_sectio
 from .paths import config_file
 
 STOP_POLL = 0.2  # s: how often a node's main loop looks for SIGINT/SIGTERM
+_stopped_by: list[str] = []  # the signal that ended run_node's loop (SIGINT, SIGTERM)
+
+
+def stop_reason() -> str:
+    """Why this process is stopping: "stopped by the user (SIGTERM)" (or SIGINT) after a signal, else
+    "shutting down"."""
+    return f"stopped by the user ({_stopped_by[-1]})" if _stopped_by else "shutting down"
+
+
+@contextmanager
+def stopping_as(exc_type: Callable[[str], Exception]) -> Iterator[None]:
+    """Inside: an RCLError raised because the node's context was shut down (its process is stopping; e.g. rclpy's
+    "failed to check service availability: rcl node's context is invalid" of Client.service_is_ready) becomes
+    exc_type(stop_reason()), an outcome the caller handles, never a traceback. Any other RCLError is raised as is."""
+    from rclpy._rclpy_pybind11 import RCLError
+
+    try:
+        yield
+    except RCLError:
+        if rclpy.ok():
+            raise
+        raise exc_type(stop_reason()) from None
 
 
 def declare_parameters(node) -> dict[str, Any]:
@@ -87,7 +110,11 @@ def run_node(node_factory, args=None, threads: int = 4) -> None:
     from rclpy's signal thread). Here the flag is checked between waits of at most STOP_POLL s."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    def on_signal(sig, _frame) -> None:
+        _stopped_by.append(signal.Signals(sig).name)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     executor = SingleThreadedExecutor() if threads == 1 else MultiThreadedExecutor(num_threads=threads)
     try:
