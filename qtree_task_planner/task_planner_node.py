@@ -46,10 +46,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import FeasibilityAnswer, Label, replica_services
-from relocation_common.node import (ActionClient, call, declare_parameters, end_goal, node_main, stop_reason,
-                                    stopping_as)
+from relocation_common.node import ActionClient, call, declare_parameters, end_goal, node_main, stop_reason, stopping_as
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs, msg_to_bottles
 from relocation_common.scenario import PALETTE, TARGET_RGB, ScenarioError
+from relocation_common.scene_check import foreign_ids
 
 from .checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
 from .markers import tree_markers
@@ -406,7 +406,8 @@ class TaskPlannerNode(Node):
         result.q_sum_history = [float(x) for x in r.q_sum_history]
         if r.cancelled or not r.found:
             result.success = False
-            result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target"
+            result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target" + \
+                self._foreign_ids(service, problem)
             return
         self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
                                f"({service.summary()})")
@@ -419,6 +420,13 @@ class TaskPlannerNode(Node):
         result.success, result.message, _ = execute_sequence(
             sequence, lambda i, removed: self._relocate_one(goal_handle, i, removed),
             cancelled=lambda: goal_handle.is_cancel_requested, before_each=lambda: goal_handle.publish_feedback(fb))
+
+    def _foreign_ids(self, oracle, problem) -> str:
+        """scene_check.foreign_ids: the motion planner's bottles (its lanes, all_lanes) this scene does not have."""
+        try:
+            return foreign_ids(oracle.lane_blockers(frozenset()) or {}, problem.ids)
+        except Exception:  # a diagnosis only: the planner gone or refusing the question says nothing
+            return ""
 
     def _relocate_one(self, goal_handle, object_id: str, removed: list[str]) -> tuple[bool, str]:
         if not self._relocate.wait_for_server(timeout_sec=self.p("planner_wait")):

@@ -121,7 +121,7 @@ class MotionPlannerNode(Node):
         self._bottles = {b.id: b for b in self.base.objects}
         self._q: tuple[np.ndarray, float] | None = None
         self._relocating = threading.Lock()
-        self._slot, self._checked = 0, None  # the running relocation's slot; the note on an unchecked outcome
+        self._slot, self._checked = 0, ""  # the running relocation's slot; the note on an unchecked outcome
         self._held: str | None = None  # the object of the running relocation: its perceived pose is ignored
         self._relocated: dict[str, int] = {}  # object -> slot, relocated by this node (until seen on the top shelf)
         self._seen: dict[str, goal_check.SeenBottle] = {}  # the last scene as received (goal_check)
@@ -297,7 +297,7 @@ class MotionPlannerNode(Node):
                 self._relocated[oid] = slot
                 problems = self._outcome(before, oid, slot)
                 result.success = not problems
-                result.message = (f"relocated {oid} to slot {slot}" + (self._checked or "") if not problems else
+                result.message = (f"relocated {oid} to slot {slot}{self._checked}" if not problems else
                                   f"relocated {oid} to slot {slot}, but the scene shows: {'; '.join(problems)}")
                 end_goal(goal_handle, "succeed" if result.success else "abort")
             except _Cancelled:
@@ -345,7 +345,7 @@ class MotionPlannerNode(Node):
     def _outcome(self, before: dict, object_id: str, slot: int) -> list[str]:
         """What the scene received after the motion contradicts (goal_check.outcome_problems); [] and a note in
         self._checked when the node has no scene at all (scene_topic silent since start)."""
-        self._checked = None
+        self._checked = ""
         if not before:
             self._checked = f" (outcome not checked: no scene received on {self.p('scene_topic')})"
             return []

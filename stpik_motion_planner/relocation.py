@@ -101,7 +101,7 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     arm.phase("plan_pick")
     with lock:
         plan = plan_relocation(planner, object_id, removed, slot, placed)
-    slot = planner.scenario.slots[plan.slot_index]
+    slot_xy = planner.scenario.slots[plan.slot_index]
     progress = progress if progress is not None else Progress()
     progress.object_id, progress.removed, progress.placed = object_id, removed, list(plan.placed)
     arm = _Recorded(arm, progress)
@@ -125,14 +125,14 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     arm.follow(carry, "carry")
     arm.gripper("open", "release")
     progress.released = True
-    progress.placed.append((object_id, slot))
+    progress.placed.append((object_id, slot_xy))
     arm.follow(retreat, "retreat")
     arm.phase("plan_home")
     home = plan.home
     q = arm.measured()
     with lock:
         try:
-            home = planner.plan_home(q, removed + [object_id], plan.placed + [(object_id, slot)])
+            home = planner.plan_home(q, removed + [object_id], plan.placed + [(object_id, slot_xy)])
         except PlanningError:
             pass
     arm.follow(home, "home")
