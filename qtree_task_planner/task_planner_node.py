@@ -261,13 +261,8 @@ class TaskPlannerNode(Node):
         return node.replace(**changes)
 
     def _on_goal(self, goal) -> GoalResponse:
-        """Bad training parameters: rejected here. The scene is checked when the goal starts (abort with the
-        reason in the result, which a rejection cannot carry)."""
-        try:
-            self._params(goal)
-        except (ParameterError, ValueError) as e:
-            self.get_logger().error(f"training goal rejected: {e}")
-            return GoalResponse.REJECT
+        """Only a second goal is rejected here. Bad training parameters and the scene are checked when the goal
+        starts: it aborts with the reason in the result (as nav2 does; a rejection carries no reason)."""
         with self._reserve:  # reserved here, not when execution starts: two goals sent back to back
             if self._reserved:
                 self.get_logger().error("training goal rejected: a training is already running")
