@@ -12,12 +12,14 @@ moved (docs/reliability.md, "What a relocation reports").
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Callable, Iterable, Mapping, Sequence
 
-from relocation_common.scenario import Shelf
+from relocation_common.scenario import Scenario, ScenarioError, Shelf, UnknownObjectError
 
 ON_BOARD = 0.01  # m: a bottle whose base is this close to a board's surface stands on it (scene_update.ON_SHELF)
+OUTCOME_SETTLE = 0.3  # s after the motion: the scene that shows the outcome is received after this (bottles settled)
 
 
 @dataclass(frozen=True)
@@ -28,6 +30,28 @@ class SeenBottle:
     x: float
     y: float
     z: float
+
+
+class SceneWatch:
+    """The last scene a node received, whole, and when (monotonic clock): what the goal and outcome checks read."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self.seen: dict[str, SeenBottle] = {}
+        self.at = -math.inf
+        self._clock = clock
+
+    def update(self, bottles: Iterable[tuple[str, float, float, float]]) -> None:
+        """A new scene: (id, x, y, base z) of each bottle (checked by scene_check first)."""
+        self.seen, self.at = {i: SeenBottle(i, x, y, z) for i, x, y, z in bottles}, self._clock()
+
+    def after(self, t: float, timeout: float, ok: Callable[[], bool] = lambda: True) -> dict[str, SeenBottle] | None:
+        """The first scene received after clock time t; None after `timeout` s or once ok() is false."""
+        deadline = self._clock() + timeout
+        while self.at < t:
+            if self._clock() > deadline or not ok():
+                return None
+            time.sleep(0.02)
+        return dict(self.seen)
 
 
 def _inside(shelf: Shelf, b: SeenBottle) -> bool:
@@ -60,6 +84,28 @@ def refusal(shelf: Shelf, object_id: str, removed: Sequence[str], seen: Mapping[
     if object_id in relocated and not (b is not None and on_top_shelf(shelf, b)):
         return f"{object_id!r} was already relocated (to slot {relocated[object_id]})"
     return None
+
+
+def goal_refusal(scenario: Scenario, object_id: str, removed: Sequence[str], seen: Mapping[str, SeenBottle],
+                 relocated: Mapping[str, int]) -> str | None:
+    """Why RelocateObject(object_id, removed) cannot be carried out, or None: unknown ids, the object in its own
+    removed set, no free slot, or the scene contradicting the goal (`refusal`)."""
+    try:
+        scenario.object(object_id)
+        if object_id in scenario.check_ids(removed):
+            return f"{object_id!r} is in its own removed set"
+        destination(scenario, seen, relocated)
+    except (UnknownObjectError, ScenarioError, ValueError) as e:
+        return str(e)
+    return refusal(scenario.shelf, object_id, removed, seen, relocated)
+
+
+def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: Mapping[str, int]
+                ) -> tuple[int, list[tuple[str, tuple[float, float]]]]:
+    """(a free slot, the bottles on the bottom shelf) from the scene and what the node placed; ValueError when
+    every slot is taken."""
+    placed = placed_bottles(scenario.shelf, scenario.slots, seen, relocated)
+    return free_slot(scenario.slots, placed, 2 * max(b.radius for b in scenario.objects)), placed
 
 
 def placed_bottles(shelf: Shelf, slots: Sequence[tuple[float, float]], seen: Mapping[str, SeenBottle],
@@ -113,3 +159,19 @@ def check_parameters(values: Mapping[str, float]) -> None:
         v = values[k]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:  # also NaN
             raise ValueError(f"parameter {k} must be > 0, got {v!r}")
+
+
+def outcome(watch: SceneWatch, before: Mapping[str, SeenBottle], scenario: Scenario, object_id: str, slot: int,
+            values: Mapping[str, float], source: str, ok: Callable[[], bool] = lambda: True) -> tuple[bool, str]:
+    """(success, result message) of a relocation whose motion just ended: the first scene received OUTCOME_SETTLE s
+    later against `before` (outcome_problems; `values`: the PARAMETERS). A node that never received a scene says
+    the outcome was not checked; a scene that does not come within outcome_timeout leaves it unknown: failed."""
+    done = f"relocated {object_id} to slot {slot}"
+    if not before:
+        return True, f"{done} (outcome not checked: no scene received on {source})"
+    after = watch.after(time.monotonic() + OUTCOME_SETTLE, float(values["outcome_timeout"]), ok)
+    if after is None:
+        return False, f"{done}, but no scene on {source} within outcome_timeout after the motion: outcome unknown"
+    problems = outcome_problems(scenario.shelf, before, after, object_id, scenario.slots[slot],
+                                float(values["outcome_tolerance"]), float(values["slot_tolerance"]))
+    return not problems, done + (f", but the scene shows: {'; '.join(problems)}" if problems else "")

@@ -62,7 +62,6 @@ SERVICE_QOS = QoSProfile(depth=1000)
 INTERFACES = ("kinova", "ros2_control")  # command_interface: the driver's surface (docs/kinova.md)
 VELOCITY_TOPIC = "/velocity_controller/commands"  # ros2_control JointGroupVelocityController (rad/s)
 GRIPPER_TOPIC = "/gripper_controller/commands"    # ros2_control JointGroupPositionController, finger joints (rad)
-OUTCOME_SETTLE = 0.3  # s after the motion: the scene that shows the outcome is received after this (bottles settled)
 
 
 def trajectory_to_msg(traj: Trajectory | None) -> JointTrajectory:
@@ -121,11 +120,10 @@ class MotionPlannerNode(Node):
         self._bottles = {b.id: b for b in self.base.objects}
         self._q: tuple[np.ndarray, float] | None = None
         self._relocating = threading.Lock()
-        self._slot, self._checked = 0, ""  # the running relocation's slot; the note on an unchecked outcome
+        self._slot = 0  # the running relocation's slot
         self._held: str | None = None  # the object of the running relocation: its perceived pose is ignored
         self._relocated: dict[str, int] = {}  # object -> slot, relocated by this node (until seen on the top shelf)
-        self._seen: dict[str, goal_check.SeenBottle] = {}  # the last scene as received (goal_check)
-        self._seen_at = -math.inf  # monotonic time it was received
+        self._scene = goal_check.SceneWatch()  # the last scene as received
 
         self._state = None
         self._arm_interface()  # nothing in a feasibility-only replica (serve_relocation false)
@@ -206,8 +204,7 @@ class MotionPlannerNode(Node):
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return
-        self._seen, self._seen_at = {b.id: goal_check.SeenBottle(b.id, b.x, b.y, z) for b, z in perceived}, \
-            time.monotonic()
+        self._scene.update((b.id, b.x, b.y, z) for b, z in perceived)
         merged, changed, seen = merge_perceived(self.base.shelf, self._bottles, perceived, self._held)
         for i in seen:  # seen back on the top shelf (a reset scene): it can be relocated again
             self._relocated.pop(i, None)
@@ -259,25 +256,6 @@ class MotionPlannerNode(Node):
         return res
 
     # -- relocation -----------------------------------------------------------------------------------------
-    def _goal_refusal(self, goal) -> str | None:
-        """Why the goal cannot be carried out (ids, the scene: goal_check), or None."""
-        try:
-            self.planner.scenario.object(goal.object_id)
-            removed = self.planner.scenario.check_ids(list(goal.removed_ids))
-            if goal.object_id in removed:
-                raise ValueError(f"{goal.object_id!r} is in its own removed set")
-            self._destination()  # ValueError when no slot is free
-        except (UnknownObjectError, ScenarioError, ValueError) as e:
-            return str(e)
-        return goal_check.refusal(self.base.shelf, goal.object_id, list(goal.removed_ids), self._seen,
-                                  self._relocated)
-
-    def _destination(self) -> tuple[int, list]:
-        """(a free slot, the bottles on the bottom shelf) from the scene and what this node placed."""
-        placed = goal_check.placed_bottles(self.base.shelf, self.base.slots, self._seen, self._relocated)
-        clearance = 2 * max(b.radius for b in self.base.objects)
-        return goal_check.free_slot(self.base.slots, placed, clearance), placed
-
     def _on_goal(self, goal) -> GoalResponse:
         if self._relocating.locked():
             self.get_logger().error("relocation goal rejected: a relocation is already running")
@@ -287,18 +265,18 @@ class MotionPlannerNode(Node):
     def _execute(self, goal_handle):
         result = RelocateObject.Result()
         progress = Progress()
-        why = self._goal_refusal(goal_handle.request)
+        why = goal_check.goal_refusal(self.base, goal_handle.request.object_id, list(goal_handle.request.removed_ids),
+                                      self._scene.seen, self._relocated)
         if why is not None:  # accepted, then aborted with the reason: the client learns why (as nav2 does)
             return abort_with_reason(goal_handle, result, f"relocation goal refused: {why}", self.get_logger())
         with self._relocating:
             self._held = oid = goal_handle.request.object_id
             try:
-                before, slot = dict(self._seen), self._relocate(goal_handle, progress)
+                before, slot = dict(self._scene.seen), self._relocate(goal_handle, progress)
                 self._relocated[oid] = slot
-                problems = self._outcome(before, oid, slot)
-                result.success = not problems
-                result.message = (f"relocated {oid} to slot {slot}{self._checked}" if not problems else
-                                  f"relocated {oid} to slot {slot}, but the scene shows: {'; '.join(problems)}")
+                result.success, result.message = goal_check.outcome(
+                    self._scene, before, self.base, oid, slot, {k: self.p(k) for k in goal_check.PARAMETERS},
+                    self.p("scene_topic"), rclpy.ok)
                 end_goal(goal_handle, "succeed" if result.success else "abort")
             except _Cancelled:
                 self._stop()
@@ -336,28 +314,11 @@ class MotionPlannerNode(Node):
         deadline = time.monotonic() + 5.0  # right after start-up, discovery of the driver can take a moment
         while self._q is None and time.monotonic() < deadline:
             time.sleep(0.05)
-        self._slot, placed = self._destination()
+        self._slot, placed = goal_check.destination(self.base, self._scene.seen, self._relocated)
         relocate(self.planner, _GoalArm(self, gh), gh.request.object_id, list(gh.request.removed_ids),
                  home_tol=self.p("home_tol"), lock=self._plan_lock, progress=progress, slot=self._slot,
                  placed=placed)
         return self._slot
-
-    def _outcome(self, before: dict, object_id: str, slot: int) -> list[str]:
-        """What the scene received after the motion contradicts (goal_check.outcome_problems); [] and a note in
-        self._checked when the node has no scene at all (scene_topic silent since start)."""
-        self._checked = ""
-        if not before:
-            self._checked = f" (outcome not checked: no scene received on {self.p('scene_topic')})"
-            return []
-        ended = time.monotonic()
-        deadline = ended + float(self.p("outcome_timeout"))
-        while self._seen_at < ended + OUTCOME_SETTLE:
-            if time.monotonic() > deadline or not rclpy.ok():
-                return [f"no scene on {self.p('scene_topic')} within outcome_timeout after the motion: the outcome "
-                        "is unknown"]
-            time.sleep(0.02)
-        return goal_check.outcome_problems(self.base.shelf, before, self._seen, object_id, self.base.slots[slot],
-                                           float(self.p("outcome_tolerance")), float(self.p("slot_tolerance")))
 
     def _measured(self, gh=None) -> np.ndarray:
         """The latest joint angles. Older than state_hold: the arm is held (zero velocity, as a Kinova driver that

@@ -111,3 +111,33 @@ def test_a_bad_scene_is_refused_naming_the_fault(change, words):
 def test_foreign_ids_name_what_the_planner_holds_and_the_scene_does_not():
     assert foreign_ids(["o1", "zz3", "o2"], ["o1", "o2"]).startswith("; the motion planner's scene holds zz3,")
     assert foreign_ids(["o1"], ["o1", "o2"]) == ""
+
+
+def test_goal_refusal_checks_ids_own_set_and_the_scene():
+    assert "unknown object id 'ghost'" in gc.goal_refusal(SC, "ghost", [], _scene(), {})
+    assert "unknown object id 'zz'" in gc.goal_refusal(SC, "o2", ["zz"], _scene(), {})
+    assert "in its own removed set" in gc.goal_refusal(SC, "o3", ["o3"], _scene(), {})
+    assert "standing on the top shelf" in gc.goal_refusal(SC, "o6", ["o2"], _scene(), {})
+    assert gc.goal_refusal(SC, "o2", [], _scene(), {}) is None
+    full = {f"b{k}": k for k in range(len(SLOTS))}  # every slot taken by bottles this node placed
+    assert "no free slot" in gc.goal_refusal(SC, "o2", [], {}, full)
+
+
+VALUES = {"outcome_tolerance": 0.015, "slot_tolerance": 0.02, "outcome_timeout": 0.3}
+
+
+def test_the_outcome_waits_for_a_scene_after_the_motion():
+    watch = gc.SceneWatch()
+    assert gc.outcome(watch, {}, SC, "o2", 0, VALUES, "/sim/objects") == (
+        True, "relocated o2 to slot 0 (outcome not checked: no scene received on /sim/objects)")
+    before = _scene()
+    watch.update((b.id, b.x, b.y, b.z) for b in before.values())  # received before the motion ended: not used
+    ok, msg = gc.outcome(watch, before, SC, "o2", 0, VALUES, "/sim/objects")
+    assert not ok and msg.endswith("but no scene on /sim/objects within outcome_timeout after the motion: outcome "
+                                   "unknown"), msg
+    import threading
+    after = _scene(o2=(*SLOTS[0], SHELF.bottom_z), o1=(0.69 + 0.03, -0.21, SHELF.top_z))
+    threading.Timer(0.4, lambda: watch.update((b.id, b.x, b.y, b.z) for b in after.values())).start()
+    values = dict(VALUES, outcome_timeout=3.0)
+    assert gc.outcome(watch, before, SC, "o2", 0, values, "t") == (False, "relocated o2 to slot 0, but the scene "
+                                                                          "shows: o1 moved 30 mm")
