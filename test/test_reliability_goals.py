@@ -39,7 +39,8 @@ def graph(tmp_path_factory):
         g.driver = g.start("jaco2_sim_driver.driver_node", params_file=REPO / "config" / "jaco2_sim_driver.yaml",
                            params={"camera_rate": 0.0})
         g.planner = g.start("stpik_motion_planner.motion_planner_node",
-                            params_file=REPO / "config" / "motion_planner.yaml", params={"scene_topic": RELAYED})
+                            params_file=REPO / "config" / "motion_planner.yaml",
+                            params={"scene_topic": RELAYED, "carry_timeout": 60.0})  # a safety net only: load-proof
         g.pub = g.probe.publisher(ObjectArray, RELAYED, LATCHED)
         g.mutate = lambda msg: msg
         g.truth = g.probe.collect("/sim/objects", ObjectArray, LATCHED)
