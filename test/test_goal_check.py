@@ -64,7 +64,7 @@ def test_the_outcome_names_every_bottle_that_moved_and_a_misplaced_one():
     slot = SLOTS[0]
     good = _scene(o2=(slot[0] + 0.004, slot[1], SHELF.bottom_z), o6=(0.8 + 0.003, 0.0, SHELF.top_z))
     assert gc.outcome_problems(SHELF, before, good, "o2", slot, 0.015, 0.02) == []
-    # the run: o6 relocated while o2 and o3 stood; o2 pushed 65 mm, o3 tipped over
+    # the run that was reported: o6 relocated while o2 and o3 stood; o2 pushed 65 mm, o3 tipped over
     bad = _scene(o6=(*SLOTS[2], SHELF.bottom_z), o2=(0.69 + 0.065, -0.07, SHELF.top_z),
                  o3=(0.69 + 0.08, 0.07, SHELF.top_z + 0.033))
     problems = gc.outcome_problems(SHELF, before, bad, "o6", SLOTS[2], 0.015, 0.02)

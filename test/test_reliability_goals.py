@@ -11,22 +11,19 @@ import time
 
 import numpy as np
 import pytest
+from qtree_relocation_msgs.action import RelocateObject
+from qtree_relocation_msgs.msg import ObjectArray
+from qtree_relocation_msgs.srv import PlanFeasibility
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from ros_procs import REPO, RosGraph
 
+from relocation_common.node import ActionClient
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import load_scenario
+
 pytestmark = pytest.mark.graph
-
-rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
-from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
-from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue  # noqa: E402
-from rcl_interfaces.srv import SetParameters  # noqa: E402
-from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
-
-from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
-from relocation_common.paths import default_scenario  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
-
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 SC = load_scenario(default_scenario())
 RELAYED = "/test/objects"
