@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless offscreen rendering; must precede `import mujoco`
@@ -91,6 +92,7 @@ def rpy_matrix(rpy) -> np.ndarray:
 
 
 def quat_wxyz(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (MuJoCo's mju_mat2Quat)."""
     q = np.zeros(4)
     mujoco.mju_mat2Quat(q, np.asarray(rot, float).reshape(9))
     return q
@@ -109,131 +111,148 @@ def marker_image(marker: Marker, pixels_per_bit: int = 20) -> np.ndarray:
     return cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
 
 
-def _hand_xml() -> str:
+def _el(parent: ET.Element, tag: str, **attrs) -> ET.Element:
+    """A child element; attribute values as text (numbers %.6g, sequences space-separated); `class_` is `class`."""
+    def text(v) -> str:
+        if isinstance(v, str):
+            return v
+        if isinstance(v, (list, tuple, np.ndarray)):
+            return _f(v)
+        return f"{float(v):.6g}" if isinstance(v, float) else str(v)
+    return ET.SubElement(parent, tag, {k.rstrip("_"): text(v) for k, v in attrs.items()})
+
+
+def _hand(last_link: ET.Element) -> None:
     """The description's three fingers (robot_description.FINGER_HINGES) on the last link (its frame: z = approach,
     x = closing direction, grasp centre at z = D67): a hinge at the palm each; the open fingers lie on the
     description's finger capsules, closing rotates the tips towards the grasp centre."""
-    out = []
     for k, (x, y, sign) in enumerate(FINGER_HINGES):
-        out.append(
-            f'<body name="{FINGER_BODY_NAMES[k]}" pos="{x} {y} {FINGER_BASE_Z}" gravcomp="1">'
-            f'<joint name="{FINGER_JOINT_NAMES[k]}" type="hinge" axis="0 {sign:g} 0" range="0 {FINGER_CLOSED}" '
-            f'limited="true" damping="0.05" armature="0.001"/>'
-            f'<geom name="finger_sim_{k + 1}" type="capsule" fromto="0 0 0 {_f(finger_tip(k))}" '
-            f'size="{FINGER_RADIUS}" mass="0.03" class="finger"/></body>')
-    return "".join(out)
+        body = _el(last_link, "body", name=FINGER_BODY_NAMES[k], pos=f"{x} {y} {FINGER_BASE_Z}", gravcomp="1")
+        _el(body, "joint", name=FINGER_JOINT_NAMES[k], type="hinge", axis=f"0 {sign:g} 0",
+            range=f"0 {FINGER_CLOSED}", limited="true", damping="0.05", armature="0.001")
+        _el(body, "geom", name=f"finger_sim_{k + 1}", type="capsule", fromto=f"0 0 0 {_f(finger_tip(k))}",
+            size=f"{FINGER_RADIUS}", mass="0.03", class_="finger")
 
 
-def _box(name: str, lo, hi, cls: str = "shelf") -> str:
+def _box(parent: ET.Element, name: str, lo, hi, cls: str = "shelf") -> None:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    return f'<geom name="{name}" type="box" pos="{_f((lo + hi) / 2)}" size="{_f((hi - lo) / 2)}" class="{cls}"/>'
+    _el(parent, "geom", name=name, type="box", pos=(lo + hi) / 2, size=(hi - lo) / 2, class_=cls)
 
 
-def _shelf_xml(s) -> str:
+def _shelf(world: ET.Element, s) -> None:
     t, x0, x1, y0, y1 = s.board_thickness, s.x_front, s.x_back, s.y_min, s.y_max
     floor = s.bottom_z - FLOOR_DROP
-    return "".join([
-        _box("shelf_top_board", (x0, y0, s.top_z - t), (x1, y1, s.top_z)),
-        _box("shelf_ceiling_board", (x0, y0, s.ceiling_z), (x1, y1, s.ceiling_z + t)),
-        _box("shelf_bottom_board", (x0, y0, s.bottom_z - t), (x1, y1, s.bottom_z)),
-        _box("shelf_side_left", (x0, y1, floor), (x1, y1 + t, s.ceiling_z + t)),
-        _box("shelf_side_right", (x0, y0 - t, floor), (x1, y0, s.ceiling_z + t)),
-        _box("shelf_back_panel", (x1, y0 - t, floor), (x1 + t, y1 + t, s.ceiling_z + t)),
-    ])
+    _box(world, "shelf_top_board", (x0, y0, s.top_z - t), (x1, y1, s.top_z))
+    _box(world, "shelf_ceiling_board", (x0, y0, s.ceiling_z), (x1, y1, s.ceiling_z + t))
+    _box(world, "shelf_bottom_board", (x0, y0, s.bottom_z - t), (x1, y1, s.bottom_z))
+    _box(world, "shelf_side_left", (x0, y1, floor), (x1, y1 + t, s.ceiling_z + t))
+    _box(world, "shelf_side_right", (x0, y0 - t, floor), (x1, y0, s.ceiling_z + t))
+    _box(world, "shelf_back_panel", (x1, y0 - t, floor), (x1 + t, y1 + t, s.ceiling_z + t))
 
 
-def _marker_xml(m: Marker) -> str:
+def _marker(world: ET.Element, m: Marker) -> None:
     """A thin plate whose front face (+z of the marker frame, OpenCV convention) carries the marker texture."""
     rot = rpy_matrix(m.rpy)
     half = m.size * (1 + 2 * MARKER_BORDER) / 2
     thick = 0.002
     centre = np.asarray(m.position) - rot[:, 2] * thick
-    return (f'<body name="aruco_marker" pos="{_f(centre)}" quat="{_f(quat_wxyz(rot))}">'
-            f'<geom name="aruco_plate" type="box" size="{half:.6g} {half:.6g} {thick}" material="aruco" '
-            f'contype="0" conaffinity="0"/></body>')
+    body = _el(world, "body", name="aruco_marker", pos=centre, quat=quat_wxyz(rot))
+    _el(body, "geom", name="aruco_plate", type="box", size=f"{half:.6g} {half:.6g} {thick}", material="aruco",
+        contype="0", conaffinity="0")
 
 
-def _bottle_xml(b, z: float) -> str:
+def _bottle(world: ET.Element, b, z: float) -> None:
     """A bottle: free body whose frame is the centre of its base circle (as ObjectState.pose), mass = weight (kg)."""
-    return (f'<body name="{b.id}" pos="{b.x:.6g} {b.y:.6g} {z:.6g}"><freejoint name="{b.id}_free"/>'
-            f'<geom name="{b.id}_geom" type="cylinder" pos="0 0 {b.height / 2:.6g}" '
-            f'size="{b.radius:.6g} {b.height / 2:.6g}" mass="{b.weight:.6g}" rgba="{_f(b.rgb)} 1" class="bottle"/>'
-            f'</body>')
+    body = _el(world, "body", name=b.id, pos=(b.x, b.y, z))
+    _el(body, "freejoint", name=f"{b.id}_free")
+    _el(body, "geom", name=f"{b.id}_geom", type="cylinder", pos=(0.0, 0.0, b.height / 2),
+        size=(b.radius, b.height / 2), mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
 
 
-def _camera_xml(c: CameraSpec, shelf) -> str:
+def _camera(world: ET.Element, c: CameraSpec, shelf) -> None:
     """MuJoCo camera looking from `position` to `look_at` (MuJoCo cameras look along -z with y up)."""
     p, t = c.placed(shelf)
     fwd = (t - p) / np.linalg.norm(t - p)
     right = np.cross(fwd, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
     up = np.cross(right, fwd)
-    return (f'<camera name="{CAMERA_NAME}" pos="{_f(p)}" xyaxes="{_f(right)} {_f(up)}" fovy="{c.fovy_deg:.6g}" '
-            f'resolution="{c.width} {c.height}"/>')
+    _el(world, "camera", name=CAMERA_NAME, pos=p, xyaxes=f"{_f(right)} {_f(up)}", fovy=c.fovy_deg,
+        resolution=f"{c.width} {c.height}")
+
+
+def _header(root: ET.Element, camera: CameraSpec) -> None:
+    """Compiler, physics options, visual, the default classes and the assets (materials, marker texture)."""
+    _el(root, "compiler", angle="radian", autolimits="true")
+    option = _el(root, "option", timestep="0.001", integrator="implicitfast", cone="elliptic", impratio="5")
+    _el(option, "flag", multiccd="enable", sleep="enable")
+    _el(root, "size", memory="64M")
+    visual = _el(root, "visual")
+    _el(visual, "global", offwidth=max(camera.width, 640), offheight=max(camera.height, 480))
+    _el(visual, "quality", shadowsize="1024")
+    _el(visual, "map", znear="0.01", zfar="20")
+    default = _el(root, "default")
+    for cls, geom in (
+            ("arm_collision", dict(contype="2", conaffinity="1", rgba="0.15 0.15 0.17 1", group="1")),
+            ("finger", dict(contype="2", conaffinity="1", rgba="0.2 0.2 0.22 1", friction="1.2 0.01 0.001",
+                            group="1")),
+            ("shelf", dict(contype="1", conaffinity="3", rgba="0.72 0.58 0.40 1", friction="0.8 0.01 0.001")),
+            ("bottle", dict(contype="1", conaffinity="3", friction="0.8 0.01 0.001", condim="4", solref="0.004 1"))):
+        _el(_el(default, "default", class_=cls), "geom", **geom)
+    asset = _el(root, "asset")
+    _el(asset, "texture", name="aruco", type="2d", file="aruco.png")
+    _el(asset, "material", name="aruco", texture="aruco", texrepeat="1 1", texuniform="false", specular="0",
+        shininess="0")
+    _el(asset, "texture", name="grid", type="2d", builtin="checker", rgb1="0.55 0.55 0.55", rgb2="0.45 0.45 0.45",
+        width="256", height="256")
+    _el(asset, "material", name="floor", texture="grid", texrepeat="8 8")
 
 
 def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> str:
-    """MJCF of the whole scene. Physics at 1 kHz (timestep 0.001). The marker texture is the asset 'aruco.png'
+    """MJCF of the whole scene, built with xml.etree.ElementTree (names from a scenario are attribute values,
+    escaped, never markup). Physics at 1 kHz (timestep 0.001). The marker texture is the asset 'aruco.png'
     (see `scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm."""
     s = scenario.shelf
     floor = s.bottom_z - FLOOR_DROP
-    bottles = "".join(_bottle_xml(b, s.top_z) for b in scenario.objects)
-    welds = "".join(f'<weld name="grasp_{b.id}" body1="{HAND_BODY}" body2="{b.id}" active="false" '
-                    f'solref="0.004 1"/>' for b in scenario.objects)
-    return f"""<mujoco model="jaco2_shelf_{scenario.name}">
-  <compiler angle="radian" autolimits="true"/>
-  <option timestep="0.001" integrator="implicitfast" cone="elliptic" impratio="5">
-    <flag multiccd="enable" sleep="enable"/>
-  </option>
-  <size memory="64M"/>
-  <visual><global offwidth="{max(camera.width, 640)}" offheight="{max(camera.height, 480)}"/>
-    <quality shadowsize="1024"/><map znear="0.01" zfar="20"/></visual>
-  <default>
-    <default class="arm_collision"><geom contype="2" conaffinity="1" rgba="0.15 0.15 0.17 1" group="1"/></default>
-    <default class="finger"><geom contype="2" conaffinity="1" rgba="0.2 0.2 0.22 1" friction="1.2 0.01 0.001"
-      group="1"/></default>
-    <default class="shelf"><geom contype="1" conaffinity="3" rgba="0.72 0.58 0.40 1" friction="0.8 0.01 0.001"/>
-    </default>
-    <default class="bottle"><geom contype="1" conaffinity="3" friction="0.8 0.01 0.001" condim="4"
-      solref="0.004 1"/></default>
-  </default>
-  <asset>
-    <texture name="aruco" type="2d" file="aruco.png"/>
-    <material name="aruco" texture="aruco" texrepeat="1 1" texuniform="false" specular="0" shininess="0"/>
-    <texture name="grid" type="2d" builtin="checker" rgb1="0.55 0.55 0.55" rgb2="0.45 0.45 0.45" width="256"
-      height="256"/>
-    <material name="floor" texture="grid" texrepeat="8 8"/>
-  </asset>
-  <worldbody>
-    <light name="key" pos="0.0 -0.6 1.6" dir="0.35 0.35 -1" diffuse="0.7 0.7 0.7" castshadow="false"/>
-    <light name="fill" pos="-0.3 0.5 1.2" dir="0.5 -0.3 -1" diffuse="0.4 0.4 0.4" castshadow="false"/>
-    <light name="shelf_light" pos="0.2 0 0.44" dir="1 0 -0.4" diffuse="0.35 0.35 0.35" castshadow="false"/>
-    <geom name="floor" type="plane" pos="0 0 {floor:.6g}" size="3 3 0.1" material="floor" contype="1"
-      conaffinity="3"/>
-    <geom name="pedestal" type="box" pos="-0.02 0 {floor / 2:.6g}" size="0.09 0.09 {-floor / 2:.6g}"
-      rgba="0.3 0.3 0.3 1" contype="1" conaffinity="1"/>
-    {_shelf_xml(s)}
-    {_marker_xml(scenario.marker)}
-    {_camera_xml(camera, s)}
-    {mjcf_arm_body(_hand_xml())}
-    {bottles}
-  </worldbody>
-  <equality>{welds}</equality>
-  {_actuators_xml()}
-</mujoco>"""
+    root = ET.Element("mujoco", model=f"jaco2_shelf_{scenario.name}")
+    _header(root, camera)
+    world = _el(root, "worldbody")
+    for name, pos, direction, diffuse in (("key", "0.0 -0.6 1.6", "0.35 0.35 -1", "0.7 0.7 0.7"),
+                                          ("fill", "-0.3 0.5 1.2", "0.5 -0.3 -1", "0.4 0.4 0.4"),
+                                          ("shelf_light", "0.2 0 0.44", "1 0 -0.4", "0.35 0.35 0.35")):
+        _el(world, "light", name=name, pos=pos, dir=direction, diffuse=diffuse, castshadow="false")
+    _el(world, "geom", name="floor", type="plane", pos=(0.0, 0.0, floor), size="3 3 0.1", material="floor",
+        contype="1", conaffinity="3")
+    _el(world, "geom", name="pedestal", type="box", pos=(-0.02, 0.0, floor / 2), size=(0.09, 0.09, -floor / 2),
+        rgba="0.3 0.3 0.3 1", contype="1", conaffinity="1")
+    _shelf(world, s)
+    _marker(world, scenario.marker)
+    _camera(world, camera, s)
+    arm = ET.fromstring(mjcf_arm_body())  # the robot description's arm (its own names and numbers only)
+    _hand(next(b for b in arm.iter("body") if b.get("name") == HAND_BODY))
+    world.append(arm)
+    for b in scenario.objects:
+        _bottle(world, b, s.top_z)
+    equality = _el(root, "equality")
+    for b in scenario.objects:
+        _el(equality, "weld", name=f"grasp_{b.id}", body1=HAND_BODY, body2=b.id, active="false", solref="0.004 1")
+    _actuators(root)
+    return ET.tostring(root, encoding="unicode")
 
 
-def _actuators_xml(kv: float = 200.0) -> str:
+def _actuators(root: ET.Element, kv: float = 200.0) -> None:
     """Velocity actuators (gain kv, gravity compensated bodies, STACK-NOTES) for the arm; position actuators with a
     bounded force for the fingers."""
     from relocation_common.robot_description import JOINT_NAMES
-    arm = "".join(f'<velocity name="v_{j}" joint="{j}" kv="{kv:g}"/>' for j in JOINT_NAMES)
-    fingers = "".join(f'<position name="p_{j}" joint="{j}" kp="2" dampratio="1" forcerange="-3 3" '
-                      f'ctrlrange="0 {FINGER_CLOSED}"/>' for j in FINGER_JOINT_NAMES)
-    return f"<actuator>{arm}{fingers}</actuator>"
+    actuator = _el(root, "actuator")
+    for j in JOINT_NAMES:
+        _el(actuator, "velocity", name=f"v_{j}", joint=j, kv=f"{kv:g}")
+    for j in FINGER_JOINT_NAMES:
+        _el(actuator, "position", name=f"p_{j}", joint=j, kp="2", dampratio="1", forcerange="-3 3",
+            ctrlrange=f"0 {FINGER_CLOSED}")
 
 
 def scene_assets(scenario: Scenario) -> dict[str, bytes]:
+    """The files the MJCF names: the marker texture 'aruco.png'."""
     ok, png = cv2.imencode(".png", marker_image(scenario.marker))
     if not ok:
         raise RuntimeError("could not encode the ArUco marker image")

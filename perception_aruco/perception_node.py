@@ -29,6 +29,7 @@ from relocation_common.ros_conversions import bottles_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
 from .aruco import PerceptionError, invert, marker_in_base
+from .camera_check import camera_info_problem, image_problem
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
 from .pipeline import Perception, SceneMemory
@@ -45,7 +46,7 @@ class PerceptionNode(Node):
         declare_parameters(self)  # config/perception.yaml
         g = lambda n: self.get_parameter(n).value  # noqa: E731
         self.p = g
-        for k in ("process_rate", "republish_period", "sync_slop", "max_scene_age"):
+        for k in ("process_rate", "republish_period", "sync_slop", "max_scene_age", "max_image_pixels"):
             if not g(k) > 0:  # also NaN
                 raise ValueError(f"parameter {k} must be > 0, got {g(k)!r}")
         self.scenario = load_scenario(g("scenario") or None)
@@ -91,12 +92,23 @@ class PerceptionNode(Node):
 
     # ---- inputs
     def _on_color(self, msg: Image) -> None:
+        if self._too_large(msg, "colour image"):
+            return
         with self._lock:
             self._colors.append(msg)
 
     def _on_depth(self, msg: Image) -> None:
+        if self._too_large(msg, "depth image"):
+            return
         with self._lock:
             self._depths.append(msg)
+
+    def _too_large(self, msg: Image, what: str) -> bool:
+        """camera_check.image_problem: an image refused before it is kept (logged with the reason)."""
+        why = image_problem(msg.width, msg.height, int(self.p("max_image_pixels")), what)
+        if why is not None:
+            self.get_logger().error(f"frame dropped: {why}", throttle_duration_sec=2.0)
+        return why is not None
 
     def _on_info(self, msg: CameraInfo) -> None:
         self._info = msg
@@ -137,13 +149,15 @@ class PerceptionNode(Node):
                                bool(color.is_bigendian))
             dep = decode_depth(depth.encoding, depth.height, depth.width, depth.step, depth.data,
                                bool(depth.is_bigendian))
+            why = camera_info_problem(list(self._info.k), (self._info.width, self._info.height),
+                                      (rgb.shape[1], rgb.shape[0]))
+            if why is not None:
+                raise PerceptionError(why)
             K = np.asarray(self._info.k, float).reshape(3, 3)
-            if (self._info.width, self._info.height) != (rgb.shape[1], rgb.shape[0]):
-                raise PerceptionError(f"camera_info is for {self._info.width}x{self._info.height}, colour image "
-                                      f"is {rgb.shape[1]}x{rgb.shape[0]}")
             result = self.perception.process(rgb, dep, K)
-        except PerceptionError as e:
-            log.error(f"frame dropped: {e}", throttle_duration_sec=2.0)
+        except Exception as e:  # bad input (PerceptionError) or a failure on it: the frame, never the node
+            log.error(f"frame dropped: {e}" if isinstance(e, PerceptionError) else
+                      f"frame dropped: internal error: {type(e).__name__}: {e}", throttle_duration_sec=2.0)
             if rgb is not None:
                 self._publish_debug(color, self.perception.annotate(rgb, None, note=str(e)))
             return

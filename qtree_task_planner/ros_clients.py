@@ -13,11 +13,12 @@ import threading
 import time
 from typing import Callable
 
+import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
 
 from relocation_common.feasibility import FeasibilityAnswer, Label
-from relocation_common.node import ActionClient, call
+from relocation_common.node import ActionClient, call, stop_reason, stopping_as
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs
 
 from .outage import Cancelled, PlannerUnavailable
@@ -42,7 +43,8 @@ class ServiceOracle:
 
     def ready(self, timeout: float) -> bool:
         """Whether the service is up, waiting up to `timeout` s for it."""
-        return self.client.service_is_ready() or (timeout > 0 and self.client.wait_for_service(timeout_sec=timeout))
+        with stopping_as(Cancelled):  # the node stopping: Cancelled with the reason, never rclpy's RCLError
+            return self.client.service_is_ready() or (timeout > 0 and self.client.wait_for_service(timeout_sec=timeout))
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
         """Eq. 11's label of relocating `object_id` after `removed` (and the lane blockers the planner saw)."""
@@ -63,8 +65,12 @@ class ServiceOracle:
             return None
 
     def _call(self, req, what: str):
+        with stopping_as(Cancelled):  # the node stopping mid-query: Cancelled with the reason, never RCLError
+            return self._call_once(req, what)
+
+    def _call_once(self, req, what: str):
         if self.stop():
-            raise Cancelled("cancelled (or shutting down) while asking the motion planner")
+            raise Cancelled("cancelled while asking the motion planner" if rclpy.ok() else stop_reason())
         srv = self.client.srv_name
         if not self.client.service_is_ready() and not self.client.wait_for_service(timeout_sec=self.connect_wait):
             raise PlannerUnavailable(f"feasibility service {srv} is not available")

@@ -24,6 +24,7 @@ Reliability (docs/reliability.md):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -43,9 +44,10 @@ from visualization_msgs.msg import MarkerArray
 
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import replica_services
-from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main
+from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main, stop_reason
 from relocation_common.ros_conversions import msg_to_bottles
 from relocation_common.scenario import ScenarioError
+from relocation_common.scene_check import foreign_ids
 
 from .checkpoint import CheckpointError
 from .keeper import CheckpointKeeper, check_checkpoint_path
@@ -144,13 +146,8 @@ class TaskPlannerNode(Node):
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
 
     def _on_goal(self, goal) -> GoalResponse:
-        """Bad training parameters: rejected here. The scene is checked when the goal starts (abort with the
-        reason in the result, which a rejection cannot carry)."""
-        try:
-            self._params(goal)
-        except (ParameterError, ValueError) as e:
-            self.get_logger().error(f"training goal rejected: {e}")
-            return GoalResponse.REJECT
+        """Only a second goal is rejected here. Bad training parameters and the scene are checked when the goal
+        starts: it aborts with the reason in the result (as nav2 does; a rejection carries no reason)."""
         with self._reserve:  # reserved here, not when execution starts: two goals sent back to back
             if self._reserved:
                 self.get_logger().error("training goal rejected: a training is already running")
@@ -230,7 +227,7 @@ class TaskPlannerNode(Node):
             goal_handle.publish_feedback(fb)
             return rclpy.ok() and not goal_handle.is_cancel_requested
 
-        _, r = solve_then_train(problem, oracle, params, resume=resume, keep=self._keeper.keep, on_episode=on_episode,
+        _, r = solve_then_train(problem, oracle, params, resume=resume, keep=self._keep, on_episode=on_episode,
                                 until_planner=lambda fn: self._until_planner(fn, goal_handle, service, fb),
                                 checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved,
                                 episode_every=FEEDBACK_EVERY)
@@ -241,7 +238,8 @@ class TaskPlannerNode(Node):
         result.q_sum_history = [float(x) for x in r.q_sum_history]
         if r.cancelled or not r.found:
             result.success = False
-            result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target"
+            result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target" + \
+                self._foreign_ids(service, problem)
             return
         self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
                                f"({service.summary()})")
@@ -254,6 +252,19 @@ class TaskPlannerNode(Node):
         result.success, result.message, _ = execute_sequence(
             sequence, lambda i, removed: self._relocate_one(goal_handle, i, removed),
             cancelled=lambda: goal_handle.is_cancel_requested, before_each=lambda: goal_handle.publish_feedback(fb))
+
+    def _keep(self, ck) -> None:
+        """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""
+        if ck.reason == "cancelled" and not rclpy.ok():
+            ck = dataclasses.replace(ck, reason=stop_reason())
+        self._keeper.keep(ck)
+
+    def _foreign_ids(self, oracle, problem) -> str:
+        """scene_check.foreign_ids: the motion planner's bottles (its lanes, all_lanes) this scene does not have."""
+        try:
+            return foreign_ids(oracle.lane_blockers(frozenset()) or {}, problem.ids)
+        except Exception:  # a diagnosis only: the planner gone or refusing the question says nothing
+            return ""
 
     def _relocate_one(self, goal_handle, object_id: str, removed: list[str]) -> tuple[bool, str]:
         self.get_logger().info(f"relocating {object_id} (removed so far: {removed})")

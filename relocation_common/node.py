@@ -10,9 +10,11 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
@@ -22,16 +24,42 @@ from .config import ConfigError, ParameterError, check_params_files, node_sectio
 from .paths import config_file
 
 STOP_POLL = 0.2  # s: how often a node's main loop looks for SIGINT/SIGTERM
+_stopped_by: list[str] = []  # the signal that ended run_node's loop (SIGINT, SIGTERM)
+
+
+def stop_reason() -> str:
+    """Why this process is stopping: "stopped by the user (SIGTERM)" (or SIGINT) after a signal, else
+    "shutting down"."""
+    return f"stopped by the user ({_stopped_by[-1]})" if _stopped_by else "shutting down"
+
+
+@contextmanager
+def stopping_as(exc_type: Callable[[str], Exception]) -> Iterator[None]:
+    """Inside: an RCLError raised because the node's context was shut down (its process is stopping; e.g. rclpy's
+    "failed to check service availability: rcl node's context is invalid" of Client.service_is_ready) becomes
+    exc_type(stop_reason()), an outcome the caller handles, never a traceback. Any other RCLError is raised as is."""
+    from rclpy._rclpy_pybind11 import RCLError
+
+    try:
+        yield
+    except RCLError:
+        if rclpy.ok():
+            raise
+        raise exc_type(stop_reason()) from None
 
 
 def declare_parameters(node) -> dict[str, Any]:
     """Declare every parameter of `config/<node name>.yaml` with that file's value as its default: the one place a
     node's parameters and defaults are written. ParameterError for an override (-p, --params-file) that names a
-    parameter the node does not have (a typo is never silently ignored). Returns {name: value}."""
+    parameter the node does not have (a typo is never silently ignored). Returns {name: value}.
+
+    Read-only (ParameterDescriptor.read_only): a node checks its parameters once, at start, and some are read again
+    while it runs; `ros2 param set` is refused ("parameter is read-only") instead of bypassing those checks. Set
+    them with -p or --params-file and restart the node."""
     name = node.get_name()
     defaults = node_section(config_file(f"{name}.yaml"), name)
     for k, v in defaults.items():
-        node.declare_parameter(k, v)
+        node.declare_parameter(k, v, ParameterDescriptor(read_only=True))
     unknown = sorted(set(node._parameter_overrides) - set(node._parameters))
     if unknown:
         raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(defaults))}")
@@ -65,6 +93,7 @@ class SideNode:
                 raise
 
     def close(self) -> None:
+        """Stop the executor and its thread, then destroy the node."""
         self._executor.shutdown(timeout_sec=2.0)
         self._thread.join(timeout=3.0)
         if not self._thread.is_alive():  # destroying a node its executor still waits on can crash the process
@@ -81,7 +110,11 @@ def run_node(node_factory, args=None, threads: int = 4) -> None:
     from rclpy's signal thread). Here the flag is checked between waits of at most STOP_POLL s."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    def on_signal(sig, _frame) -> None:
+        _stopped_by.append(signal.Signals(sig).name)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     executor = SingleThreadedExecutor() if threads == 1 else MultiThreadedExecutor(num_threads=threads)
     try:
@@ -144,6 +177,7 @@ class ActionClient(RclpyActionClient):
         self._registration = threading.RLock()  # re-entrant: a feedback callback may send a goal
 
     def send_goal_async(self, *args, **kwargs):
+        """rclpy's, under the registration lock."""
         with self._registration:
             return super().send_goal_async(*args, **kwargs)
 
@@ -156,8 +190,19 @@ class ActionClient(RclpyActionClient):
             return super()._get_result_async(goal_handle)
 
     async def execute(self, taken_data):
+        """rclpy's handling of responses, under the registration lock."""
         with self._registration:
             return await super().execute(taken_data)
+
+
+def abort_with_reason(goal_handle, result, reason: str, logger):
+    """End a goal that cannot be carried out: accepted, then aborted with `reason` in the result's message (as nav2
+    does: a rejection carries no reason to the client). Logged as an error; returns `result` for the execute
+    callback."""
+    result.success, result.message = False, reason
+    logger.error(reason)
+    end_goal(goal_handle, "abort")
+    return result
 
 
 def end_goal(goal_handle, outcome: str) -> None:

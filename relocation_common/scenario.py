@@ -80,14 +80,17 @@ class Shelf:
 
     @property
     def x_back(self) -> float:
+        """Back edge (x) of the boards."""
         return self.x_front + self.depth
 
     @property
     def y_min(self) -> float:
+        """Right side panel's inner face (y)."""
         return self.y_center - self.width / 2
 
     @property
     def y_max(self) -> float:
+        """Left side panel's inner face (y)."""
         return self.y_center + self.width / 2
 
 
@@ -104,6 +107,8 @@ class Marker:
 
 @dataclass(frozen=True)
 class Scenario:
+    """A validated scene: shelf, bottles, target, bottom-shelf slots, marker (docs/scenarios.md)."""
+
     name: str
     description: str
     shelf: Shelf
@@ -121,10 +126,12 @@ class Scenario:
 
     @property
     def ids(self) -> tuple[str, ...]:
+        """Every object's id, in file order."""
         return tuple(o.id for o in self.objects)
 
     @property
     def obstacle_ids(self) -> tuple[str, ...]:
+        """The ids of the objects other than the target."""
         return tuple(o.id for o in self.objects if not o.is_target)
 
     @property
@@ -133,6 +140,7 @@ class Scenario:
         return {o.id: o.weight for o in self.objects if not o.is_target}
 
     def object(self, object_id: str) -> Bottle:
+        """The bottle of that id; UnknownObjectError naming the known ids."""
         try:
             return self._by_id[object_id]
         except KeyError:
@@ -170,6 +178,8 @@ class Scenario:
 
 # Object ids name MuJoCo bodies (MJCF), ROS messages and log lines: letters, digits, underscore.
 ID_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
+# Scenario names: as ids, plus '-' and '.' (never first: no hidden or relative file names)
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 # OpenCV's predefined ArUco dictionaries (cv2.aruco.DICT_*), named here so the loader need not import OpenCV.
 ARUCO_DICTIONARIES = tuple(f"DICT_{n}X{n}_{k}" for n in (4, 5, 6, 7) for k in (50, 100, 250, 1000)) + (
     "DICT_ARUCO_ORIGINAL", "DICT_APRILTAG_16h5", "DICT_APRILTAG_25h9", "DICT_APRILTAG_36h10", "DICT_APRILTAG_36h11",
@@ -273,7 +283,7 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
     objects = _objects(data, shelf, target_id)
     slots, auto = _slots(data.get("slots", "auto"), shelf, len(objects))
     return Scenario(
-        name=str(data.get("name", Path(source).stem)),
+        name=_name(data, source),
         description=str(data.get("description", "")),
         shelf=shelf,
         objects=objects,
@@ -284,6 +294,17 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         source=source,
         auto_slots=auto,
     )
+
+
+def _name(data: Mapping[str, Any], source: str) -> str:
+    """The scenario's name (`name`, else the file's name without .yaml): it names a MuJoCo model, files of the
+    evaluation's caches, graphs and log lines, so it is checked like an id (NAME_PATTERN)."""
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
+        where = "name" if "name" in data else f"name (from the file name {Path(source).name!r}: give a `name:`)"
+        raise ScenarioError(f"{where}: must be a letter or digit then up to 63 letters, digits, '_', '-' or '.', "
+                            f"got {short(name)}")
+    return name
 
 
 def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bottle, ...]:

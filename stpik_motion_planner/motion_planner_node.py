@@ -14,6 +14,7 @@
 """
 from __future__ import annotations
 
+import rclpy
 from qtree_relocation_msgs.action import RelocateObject
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
@@ -27,6 +28,7 @@ from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 
+from . import goal_check
 from .feasibility import PlannerParams, SafetyNetTimeout
 from .ros_interface import SURFACES, RosArmLink, trajectory_to_msg
 from .service import MotionPlannerService
@@ -52,6 +54,8 @@ class MotionPlannerNode(Node):
                                          float(params["home_tol"]), log=self._log)
         self.link: RosArmLink | None = None  # nothing in a feasibility-only replica (serve_relocation false)
         if params["serve_relocation"]:
+            goal_check.check_parameters({k: params[k] for k in goal_check.PARAMETERS})
+            self.core.checks = {k: float(params[k]) for k in goal_check.PARAMETERS}
             self.stream_params = StreamParams.from_mapping(params, planner_params.stpik.qdot_max)
             self.link = RosArmLink(self, surface, str(params["driver_prefix"]),
                                    self.create_publisher(Marker, "~/path", SCENE_QOS))
@@ -91,9 +95,10 @@ class MotionPlannerNode(Node):
     def _on_scene(self, msg: ObjectArray) -> None:
         """Bottles standing on the top shelf replace the planner's; the rest of the scene stays."""
         try:
-            changed = self.core.update_scene([(b, o.pose.position.z) for b, o in zip(msg_to_bottles(msg), msg.objects)])
+            changed = self.core.update_scene([(b, o.pose.position.z) for b, o in zip(msg_to_bottles(msg), msg.objects)],
+                                             f"scene on {self.scene_topic}")
         except ScenarioError as e:
-            self.get_logger().error(f"scene ignored: {e}", throttle_duration_sec=5.0)
+            self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return
         if changed:
             self.get_logger().info(f"scene updated from {self.scene_topic}: {changed}")
@@ -127,10 +132,9 @@ class MotionPlannerNode(Node):
         return res
 
     def _on_goal(self, goal) -> GoalResponse:
-        try:
-            self.core.check_goal(goal.object_id, list(goal.removed_ids))
-        except (UnknownObjectError, ScenarioError, ValueError) as e:
-            self.get_logger().error(f"relocation goal rejected: {e}")
+        """Only a second goal is rejected; a goal the scene refuses is accepted, then aborted with the reason."""
+        if self.core.busy():
+            self.get_logger().error("relocation goal rejected: a relocation is already running")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
@@ -142,7 +146,8 @@ class MotionPlannerNode(Node):
                                                                                                 progress=p)),
                           self._log)
         req = goal_handle.request
-        outcome = self.core.relocate(arm, req.object_id, list(req.removed_ids))
+        outcome = self.core.relocate(arm, req.object_id, list(req.removed_ids), f"the scene on {self.scene_topic}",
+                                     rclpy.ok)
         {"succeeded": goal_handle.succeed, "canceled": goal_handle.canceled, "aborted": goal_handle.abort}[
             outcome.status]()
         return RelocateObject.Result(success=outcome.status == "succeeded", message=outcome.message)

@@ -5,9 +5,10 @@ approach -> close the gripper -> re-plan the carry from the measured configurati
 that fails) -> carry -> open -> retreat -> re-plan home from the measured configuration (idem) -> home.
 Nothing moves before the whole relocation is planned, so a carry that cannot be planned never leaves the arm
 holding a bottle; and when a motion fails or the goal is cancelled, `recover` brings the arm back to a safe state
-along the motions it made (the bottle set down where it was picked, the arm home). The destination is slot `len(removed)` of the bottom shelf (objects go there in relocation order)
-and the objects already relocated stand in the earlier slots. The arm is anything that implements `Arm`: the
-motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
+along the motions it made (the bottle set down where it was picked, the arm home). The destination is the slot the
+caller chose (the motion_planner node: a free one of the scene, goal_check.free_slot) with the bottles placed so far
+where they stand; by default slot `len(removed)`, the objects already relocated in the earlier slots. The arm is
+anything that implements `Arm`: the motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
 """
 from __future__ import annotations
 
@@ -29,6 +30,8 @@ PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, 
 
 
 class Arm(Protocol):
+    """What a relocation needs of the arm: its joint angles, motions, the gripper, progress reports."""
+
     def measured(self) -> np.ndarray:
         """Current joint positions (Q convention, rad); raises if they cannot be had."""
 
@@ -66,16 +69,18 @@ class RelocationPlan:
     home: Trajectory  # staging pose -> home
 
 
-def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str]) -> RelocationPlan:
-    """The whole relocation of object_id to slot len(removed), the objects of `removed` (in relocation order) in the
-    earlier slots. PlanningError names the stage that failed (an unreachable pose or slot included)."""
+def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str], slot: int | None = None,
+                    placed: list | None = None) -> RelocationPlan:
+    """The whole relocation of object_id to slot `slot` with the bottles `placed` ((id, (x, y))) on the bottom
+    shelf; by default slot len(removed), the objects of `removed` (in relocation order) in the earlier slots.
+    PlanningError names the stage that failed (an unreachable pose or slot included)."""
     removed = list(removed)
     slots = planner.scenario.slots
-    k = len(removed)
+    k = len(removed) if slot is None else slot
     if k >= len(slots):
         raise PlanningError(f"no free slot for {object_id!r}: {k} objects relocated, the scenario has "
                             f"{len(slots)} slots")
-    placed = [(r, slots[j]) for j, r in enumerate(removed)]
+    placed = [(r, slots[j]) for j, r in enumerate(removed)] if placed is None else list(placed)
     try:
         (pick,) = planner.plan_pick(object_id, removed)
     except WorkspaceError as e:
@@ -87,16 +92,17 @@ def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str]) 
 
 
 def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float = 0.05,
-             lock=None, progress: Progress | None = None) -> RelocationPlan:
-    """Relocate object_id to its slot; PlanningError (or the arm's error) names the failed stage. `lock` guards
-    the planner (not thread-safe) while it plans, not while the arm moves. `progress` records what was done (for
-    `recover` after a failure). Returns the plan made before moving."""
+             lock=None, progress: Progress | None = None, slot: int | None = None,
+             placed: list | None = None) -> RelocationPlan:
+    """Relocate object_id to its slot (`slot` and `placed` as plan_relocation); PlanningError (or the arm's error)
+    names the failed stage. `lock` guards the planner (not thread-safe) while it plans, not while the arm moves.
+    `progress` records what was done (for `recover` after a failure). Returns the plan made before moving."""
     lock = lock if lock is not None else nullcontext()
     removed = list(removed)
     arm.phase("plan_pick")
     with lock:
-        plan = plan_relocation(planner, object_id, removed)
-    slot = planner.scenario.slots[plan.slot_index]
+        plan = plan_relocation(planner, object_id, removed, slot, placed)
+    slot_xy = planner.scenario.slots[plan.slot_index]
     progress = progress if progress is not None else Progress()
     progress.object_id, progress.removed, progress.placed = object_id, removed, list(plan.placed)
     arm = _Recorded(arm, progress)
@@ -120,14 +126,14 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     arm.follow(carry, "carry")
     arm.gripper("open", "release")
     progress.released = True
-    progress.placed.append((object_id, slot))
+    progress.placed.append((object_id, slot_xy))
     arm.follow(retreat, "retreat")
     arm.phase("plan_home")
     home = plan.home
     q = arm.measured()
     with lock:
         try:
-            home = planner.plan_home(q, removed + [object_id], plan.placed + [(object_id, slot)])
+            home = planner.plan_home(q, removed + [object_id], plan.placed + [(object_id, slot_xy)])
         except PlanningError:
             pass
     arm.follow(home, "home")

@@ -15,7 +15,9 @@ from typing import Callable, Iterable
 
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
 from relocation_common.scenario import Bottle, Scenario, UnknownObjectError
+from relocation_common.scene_check import check_scene
 
+from . import goal_check
 from .blockers import lane_blockers
 from .feasibility import MotionPlanner, PlannerParams, PlanningError
 from .relocation import Progress, recover, relocate
@@ -45,12 +47,19 @@ class MotionPlannerService:
         self.relocated: dict[str, int] = {}  # object -> slot, relocated by this node (until seen on the top shelf)
         self._held: str | None = None  # the object of the running relocation: its perceived pose is ignored
         self._relocating = threading.Lock()
+        self._slot = 0  # the running relocation's slot
+        self.scene = goal_check.SceneWatch()  # the last scene as received (goal checks, outcome checks)
+        self.checks: dict[str, float] = dict(goal_check.DEFAULTS)  # the node sets the parameters'
 
     # -- the scene ------------------------------------------------------------------------------------------
-    def update_scene(self, perceived: Iterable[tuple[Bottle, float]]) -> list[str]:
+    def update_scene(self, perceived: Iterable[tuple[Bottle, float]], source: str = "the scene") -> list[str]:
         """Bottles standing on the top shelf, as (bottle, base height) pairs, replace the planner's; the rest of the
-        scene stays. The ids that changed; ScenarioError for a scene that cannot be (nothing changes then)."""
-        merged, changed, seen = merge_perceived(self.base.shelf, self.bottles, list(perceived), self._held)
+        scene stays. The ids that changed; ScenarioError for a scene that cannot be (scene_check: unknown or
+        duplicate ids, poses not finite or far from the shelf): the whole message is dropped, nothing changes."""
+        perceived = list(perceived)
+        check_scene(self.base, [(b.id, b.x, b.y, z) for b, z in perceived], source)
+        self.scene.update((b.id, b.x, b.y, z) for b, z in perceived)
+        merged, changed, seen = merge_perceived(self.base.shelf, self.bottles, perceived, self._held)
         for i in seen:  # seen back on the top shelf (a reset scene): it can be relocated again
             self.relocated.pop(i, None)
         if changed:
@@ -76,33 +85,43 @@ class MotionPlannerService:
         return lanes, answer
 
     # -- relocation -----------------------------------------------------------------------------------------
-    def check_goal(self, object_id: str, removed_ids: Iterable[str]) -> None:
-        """Why a RelocateObject goal cannot be accepted (UnknownObjectError, ScenarioError, ValueError), or None."""
-        removed_ids = list(removed_ids)
-        self.planner.scenario.object(object_id)
-        removed = self.planner.scenario.check_ids(removed_ids)
-        if object_id in removed:
-            raise ValueError(f"{object_id!r} is in its own removed set")
-        if object_id in self.relocated:  # it stands on the bottom shelf now: nothing to pick up there
-            raise ValueError(f"{object_id!r} was already relocated (to slot {self.relocated[object_id]})")
-        if len(removed_ids) >= len(self.base.slots):
-            raise ValueError(f"no free slot: {len(removed_ids)} objects already relocated")
-        if self._relocating.locked():
-            raise ValueError("a relocation is already running")
+    def busy(self) -> bool:
+        """A relocation is running (a second goal is rejected: the one refusal without a result message)."""
+        return self._relocating.locked()
 
-    def relocate(self, arm: StreamedArm, object_id: str, removed_ids: Iterable[str]) -> Outcome:
-        """Relocate `object_id` to slot len(removed_ids) with `arm`; after a failure or a cancel, recover (the
-        result message says what was done). Never raises: a bug ends the goal with its reason, not the node."""
+    def check_goal(self, object_id: str, removed_ids: Iterable[str]) -> None:
+        """ValueError with the reason a RelocateObject goal cannot be carried out (goal_check.goal_refusal: unknown
+        ids, the object in its own removed set, no free slot, the goal contradicting the scene)."""
+        why = goal_check.goal_refusal(self.base, object_id, list(removed_ids), self.scene.seen, self.relocated)
+        if why is not None:
+            raise ValueError(why)
+
+    def relocate(self, arm: StreamedArm, object_id: str, removed_ids: Iterable[str], source: str = "the scene",
+                 ok: Callable[[], bool] = lambda: True) -> Outcome:
+        """Relocate `object_id` to a free slot of the scene (goal_check.destination) with `arm`; after a failure or
+        a cancel, recover (the result message says what was done). A goal that contradicts the scene (a removed
+        bottle still on the top shelf, the object already relocated: goal_check.goal_refusal) is aborted with the
+        reason; after the motion, success only if the scene from `source` shows the bottle at its slot and no
+        other bottle moved (goal_check.outcome). Never raises: a bug ends the goal with its reason, not the node."""
         removed_ids = list(removed_ids)
+        try:
+            self.check_goal(object_id, removed_ids)
+        except ValueError as e:  # accepted, then aborted with the reason: the client learns why (as nav2 does)
+            self.log("error", f"relocation goal refused: {e}")
+            return Outcome("aborted", f"relocation goal refused: {e}")
         progress = Progress()
         with self._relocating:
             self._held = object_id
             try:
                 arm.wait_for_state(STATE_WAIT)
+                before = dict(self.scene.seen)
+                self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated)
                 relocate(self.planner, arm, object_id, removed_ids, home_tol=self.home_tol, lock=self.plan_lock,
-                         progress=progress)
-                self.relocated[object_id] = len(removed_ids)
-                return Outcome("succeeded", f"relocated {object_id}")
+                         progress=progress, slot=self._slot, placed=placed)
+                self.relocated[object_id] = self._slot
+                success, message = goal_check.outcome(self.scene, before, self.base, object_id, self._slot,
+                                                      self.checks, source, ok)
+                return Outcome("succeeded" if success else "aborted", message)
             except Cancelled:
                 arm.stop()
                 return Outcome("canceled", "cancelled: arm stopped" + self._recover(arm, progress))
@@ -129,5 +148,5 @@ class MotionPlannerService:
             return f"; recovery failed: {e}"
         self.log("info", f"recovered: {what}")
         if progress.released:
-            self.relocated[progress.object_id] = len(progress.removed)
+            self.relocated[progress.object_id] = self._slot
         return f"; recovered: {what}"

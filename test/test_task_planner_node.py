@@ -130,10 +130,10 @@ def test_node_trains_like_the_core(graph):
 
 
 @pytest.mark.parametrize("fields", [{"alpha": 1.5}, {"policy": "greedy"}, {"gamma": float("nan")}])
-def test_bad_goals_are_rejected_and_the_node_keeps_serving(graph, fields):
+def test_bad_goals_are_refused_with_the_reason_and_the_node_keeps_serving(graph, fields):
     g, node, *_ = graph
     res, _ = _train_goal(node, g, **fields)
-    assert res is None
+    assert res is not None and not res.success and list(fields)[0] in res.message, res
     res, _ = _train_goal(node, g, max_episodes=20)
     assert res is not None and res.episodes <= 20
     g.check_alive()

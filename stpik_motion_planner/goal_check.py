@@ -1,0 +1,178 @@
+"""A RelocateObject goal checked against the scene, and its outcome checked after the motion (ROS-free).
+
+The task planner's `removed_ids` is what it believes (Sect. 4.2: the objects relocated so far); the scene (the
+driver's ground truth or perception) is what is. Before the motion: a removed bottle that still stands on the top
+shelf, or a goal object that already stands on the bottom shelf, refuses the goal with the reason (planning with a
+bottle that is there as if it were gone knocks it over). The destination is a free slot of the bottom shelf: slots
+occupied by a bottle of the scene, or by one this node placed and the scene does not show, are skipped. After the
+motion: the moved bottle stands at its slot (when the scene shows it; perception sees the top shelf only) and no
+other bottle moved more than the tolerance; otherwise the relocation is not a success and the result says what
+moved (docs/reliability.md, "What a relocation reports").
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterable, Mapping, Sequence
+
+from relocation_common.scenario import Scenario, ScenarioError, Shelf, UnknownObjectError
+
+ON_BOARD = 0.01  # m: a bottle whose base is this close to a board's surface stands on it (scene_update.ON_SHELF)
+OUTCOME_SETTLE = 0.3  # s after the motion: the scene that shows the outcome is received after this (bottles settled)
+
+
+@dataclass(frozen=True)
+class SeenBottle:
+    """A bottle of the scene: (x, y) of its frame, z of its base (ObjectState.pose), base frame, metres."""
+
+    id: str
+    x: float
+    y: float
+    z: float
+
+
+class SceneWatch:
+    """The last scene a node received, whole, and when (monotonic clock): what the goal and outcome checks read."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self.seen: dict[str, SeenBottle] = {}
+        self.at = -math.inf
+        self._clock = clock
+
+    def update(self, bottles: Iterable[tuple[str, float, float, float]]) -> None:
+        """A new scene: (id, x, y, base z) of each bottle (checked by scene_check first)."""
+        self.seen, self.at = {i: SeenBottle(i, x, y, z) for i, x, y, z in bottles}, self._clock()
+
+    def after(self, t: float, timeout: float, ok: Callable[[], bool] = lambda: True) -> dict[str, SeenBottle] | None:
+        """The first scene received after clock time t; None after `timeout` s or once ok() is false."""
+        deadline = self._clock() + timeout
+        while self.at < t:
+            if self._clock() > deadline or not ok():
+                return None
+            time.sleep(0.02)
+        return dict(self.seen)
+
+
+def _inside(shelf: Shelf, b: SeenBottle) -> bool:
+    return shelf.x_front < b.x < shelf.x_back and shelf.y_min < b.y < shelf.y_max
+
+
+def on_top_shelf(shelf: Shelf, b: SeenBottle) -> bool:
+    """Standing on the top shelf's board (as scene_update.on_top_shelf)."""
+    return abs(b.z - shelf.top_z) < ON_BOARD and _inside(shelf, b)
+
+
+def on_bottom_shelf(shelf: Shelf, b: SeenBottle) -> bool:
+    """Standing on the bottom shelf's board: relocated."""
+    return abs(b.z - shelf.bottom_z) < ON_BOARD and _inside(shelf, b)
+
+
+def refusal(shelf: Shelf, object_id: str, removed: Sequence[str], seen: Mapping[str, SeenBottle],
+            relocated: Mapping[str, int]) -> str | None:
+    """Why the goal (object_id, removed) contradicts the scene, or None. `relocated`: object -> slot, placed by
+    this node."""
+    standing = [i for i in removed if i in seen and on_top_shelf(shelf, seen[i])]
+    if standing:
+        where = ", ".join(f"{i} at ({seen[i].x:.3f}, {seen[i].y:.3f})" for i in standing)
+        return (f"removed_ids lists {', '.join(standing)} but the scene shows {'it' if len(standing) == 1 else 'them'}"
+                f" standing on the top shelf ({where}); relocate {'it' if len(standing) == 1 else 'them'} first or "
+                "send the removed set the scene shows")
+    b = seen.get(object_id)
+    if b is not None and on_bottom_shelf(shelf, b):
+        return f"{object_id!r} was already relocated: the scene shows it on the bottom shelf at ({b.x:.3f}, {b.y:.3f})"
+    if object_id in relocated and not (b is not None and on_top_shelf(shelf, b)):
+        return f"{object_id!r} was already relocated (to slot {relocated[object_id]})"
+    return None
+
+
+def goal_refusal(scenario: Scenario, object_id: str, removed: Sequence[str], seen: Mapping[str, SeenBottle],
+                 relocated: Mapping[str, int]) -> str | None:
+    """Why RelocateObject(object_id, removed) cannot be carried out, or None: unknown ids, the object in its own
+    removed set, no free slot, or the scene contradicting the goal (`refusal`)."""
+    try:
+        scenario.object(object_id)
+        if object_id in scenario.check_ids(removed):
+            return f"{object_id!r} is in its own removed set"
+        destination(scenario, seen, relocated)
+    except (UnknownObjectError, ScenarioError, ValueError) as e:
+        return str(e)
+    return refusal(scenario.shelf, object_id, removed, seen, relocated)
+
+
+def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: Mapping[str, int]
+                ) -> tuple[int, list[tuple[str, tuple[float, float]]]]:
+    """(a free slot, the bottles on the bottom shelf) from the scene and what the node placed; ValueError when
+    every slot is taken."""
+    placed = placed_bottles(scenario.shelf, scenario.slots, seen, relocated)
+    return free_slot(scenario.slots, placed, 2 * max(b.radius for b in scenario.objects)), placed
+
+
+def placed_bottles(shelf: Shelf, slots: Sequence[tuple[float, float]], seen: Mapping[str, SeenBottle],
+                   relocated: Mapping[str, int]) -> list[tuple[str, tuple[float, float]]]:
+    """(id, (x, y)) of the bottles on the bottom shelf: as the scene shows them, else where this node put them."""
+    placed = [(i, (b.x, b.y)) for i, b in seen.items() if on_bottom_shelf(shelf, b)]
+    shown = {i for i, _ in placed}
+    placed += [(i, slots[k]) for i, k in relocated.items() if i not in shown and i not in seen and k < len(slots)]
+    return sorted(placed)
+
+
+def free_slot(slots: Sequence[tuple[float, float]], placed: Sequence[tuple[str, tuple[float, float]]],
+              clearance: float) -> int:
+    """The first slot with no placed bottle's axis within `clearance` (two radii: the bottles would touch).
+    ValueError when every slot is taken."""
+    for k, (x, y) in enumerate(slots):
+        if all(math.hypot(x - px, y - py) >= clearance for _, (px, py) in placed):
+            return k
+    taken = ", ".join(i for i, _ in placed)
+    raise ValueError(f"no free slot on the bottom shelf: all {len(slots)} slots are taken ({taken})")
+
+
+def outcome_problems(shelf: Shelf, before: Mapping[str, SeenBottle], after: Mapping[str, SeenBottle],
+                     object_id: str, slot: tuple[float, float], tolerance: float, slot_tolerance: float) -> list[str]:
+    """What is wrong after relocating object_id to `slot` (empty: the relocation did what it says). Bottles in
+    both scenes that moved more than `tolerance` (m, 3D); the moved bottle farther than `slot_tolerance` from the
+    slot on the bottom shelf (when `after` shows it), or still on the top shelf."""
+    problems = []
+    b = after.get(object_id)
+    if b is not None:
+        off = math.dist((b.x, b.y, b.z), (slot[0], slot[1], shelf.bottom_z))
+        if on_top_shelf(shelf, b):
+            problems.append(f"{object_id} is still on the top shelf")
+        elif off > slot_tolerance:
+            problems.append(f"{object_id} is {off * 1000:.0f} mm from its slot ({slot[0]:.3f}, {slot[1]:.3f})")
+    for i in sorted(set(before) & set(after) - {object_id}):
+        p, q = before[i], after[i]
+        d = math.dist((p.x, p.y, p.z), (q.x, q.y, q.z))
+        if d > tolerance:
+            fell = " (no longer standing on its board)" if abs(q.z - p.z) > ON_BOARD else ""
+            problems.append(f"{i} moved {d * 1000:.0f} mm{fell}")
+    return problems
+
+
+PARAMETERS = ("outcome_tolerance", "slot_tolerance", "outcome_timeout")  # config/motion_planner.yaml
+DEFAULTS = {"outcome_tolerance": 0.015, "slot_tolerance": 0.02, "outcome_timeout": 3.0}  # a core without a node
+
+
+def check_parameters(values: Mapping[str, float]) -> None:
+    """ValueError naming a parameter of PARAMETERS that is not a positive number."""
+    for k in PARAMETERS:
+        v = values[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:  # also NaN
+            raise ValueError(f"parameter {k} must be > 0, got {v!r}")
+
+
+def outcome(watch: SceneWatch, before: Mapping[str, SeenBottle], scenario: Scenario, object_id: str, slot: int,
+            values: Mapping[str, float], source: str, ok: Callable[[], bool] = lambda: True) -> tuple[bool, str]:
+    """(success, result message) of a relocation whose motion just ended: the first scene received OUTCOME_SETTLE s
+    later against `before` (outcome_problems; `values`: the PARAMETERS). A node that never received a scene says
+    the outcome was not checked; a scene that does not come within outcome_timeout leaves it unknown: failed."""
+    done = f"relocated {object_id} to slot {slot}"
+    if not before:
+        return True, f"{done} (outcome not checked: no scene received on {source})"
+    after = watch.after(time.monotonic() + OUTCOME_SETTLE, float(values["outcome_timeout"]), ok)
+    if after is None:
+        return False, f"{done}, but no scene on {source} within outcome_timeout after the motion: outcome unknown"
+    problems = outcome_problems(scenario.shelf, before, after, object_id, scenario.slots[slot],
+                                float(values["outcome_tolerance"]), float(values["slot_tolerance"]))
+    return not problems, done + (f", but the scene shows: {'; '.join(problems)}" if problems else "")

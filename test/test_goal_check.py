@@ -1,0 +1,143 @@
+"""RelocateObject goals against the scene, the destination slot from the scene's occupancy, the outcome after the
+motion (stpik_motion_planner.goal_check), and scene updates against the scenario (relocation_common.scene_check)."""
+import math
+
+import pytest
+
+from relocation_common.paths import default_scenario
+from relocation_common.scenario import ScenarioError, load_scenario
+from relocation_common.scene_check import check_scene, foreign_ids
+from stpik_motion_planner import goal_check as gc
+from stpik_motion_planner.relocation import plan_relocation
+
+SC = load_scenario(default_scenario())
+SHELF, SLOTS = SC.shelf, SC.slots
+CLEAR = 2 * 0.033
+
+
+def _scene(**moved):
+    """Every bottle where the scenario has it; `moved`: id -> (x, y, z)."""
+    seen = {b.id: gc.SeenBottle(b.id, b.x, b.y, SHELF.top_z) for b in SC.objects}
+    seen.update({i: gc.SeenBottle(i, *xyz) for i, xyz in moved.items()})
+    return seen
+
+
+def test_removed_bottles_still_standing_refuse_the_goal_with_their_names():
+    why = gc.refusal(SHELF, "o6", ["o2", "o3"], _scene(), {})
+    assert why is not None and "o2, o3" in why and "standing on the top shelf" in why, why
+    slot0 = (*SLOTS[0], SHELF.bottom_z)
+    assert gc.refusal(SHELF, "o6", ["o2", "o3"], _scene(o2=slot0, o3=(*SLOTS[1], SHELF.bottom_z)), {}) is None
+    assert "o3" in gc.refusal(SHELF, "o6", ["o2", "o3"], _scene(o2=slot0), {})
+
+
+def test_an_object_already_on_the_bottom_shelf_is_refused():
+    why = gc.refusal(SHELF, "o2", [], _scene(o2=(*SLOTS[0], SHELF.bottom_z)), {})
+    assert why is not None and "already relocated" in why
+    assert "already relocated" in gc.refusal(SHELF, "o2", [], {}, {"o2": 0})  # no scene: what this node placed
+    assert gc.refusal(SHELF, "o2", [], _scene(), {"o2": 0}) is None  # seen back on the top shelf (a reset scene)
+
+
+def test_the_destination_is_a_free_slot_of_the_scene_not_the_count_of_removed():
+    """o2 then o3 both sent with removed=[]: the old node put o3 into slot 0 where o2 stood (shoved 69 mm)."""
+    scene = _scene(o2=(*SLOTS[0], SHELF.bottom_z))
+    placed = gc.placed_bottles(SHELF, SLOTS, scene, {})
+    assert placed == [("o2", SLOTS[0])]
+    assert gc.free_slot(SLOTS, placed, CLEAR) == 1
+    # this node placed o5 in slot 1 and the scene (perception: top shelf only) does not show it
+    placed = gc.placed_bottles(SHELF, SLOTS, {k: v for k, v in scene.items() if k != "o5"}, {"o5": 1})
+    assert gc.free_slot(SLOTS, placed, CLEAR) == 2
+    full = [(f"b{k}", xy) for k, xy in enumerate(SLOTS)]
+    with pytest.raises(ValueError, match="no free slot"):
+        gc.free_slot(SLOTS, full, CLEAR)
+
+
+def test_plan_relocation_goes_to_the_slot_given_with_the_bottles_placed():
+    from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+
+    planner = MotionPlanner(SC, PlannerParams())
+    plan = plan_relocation(planner, "o2", [], slot=1, placed=[("o1", SLOTS[0])])
+    assert plan.slot_index == 1 and plan.placed == [("o1", SLOTS[0])]
+
+
+def test_the_outcome_names_every_bottle_that_moved_and_a_misplaced_one():
+    before = _scene()
+    slot = SLOTS[0]
+    good = _scene(o2=(slot[0] + 0.004, slot[1], SHELF.bottom_z), o6=(0.8 + 0.003, 0.0, SHELF.top_z))
+    assert gc.outcome_problems(SHELF, before, good, "o2", slot, 0.015, 0.02) == []
+    # the run that was reported: o6 relocated while o2 and o3 stood; o2 pushed 65 mm, o3 tipped over
+    bad = _scene(o6=(*SLOTS[2], SHELF.bottom_z), o2=(0.69 + 0.065, -0.07, SHELF.top_z),
+                 o3=(0.69 + 0.08, 0.07, SHELF.top_z + 0.033))
+    problems = gc.outcome_problems(SHELF, before, bad, "o6", SLOTS[2], 0.015, 0.02)
+    assert problems == ["o2 moved 65 mm", "o3 moved 87 mm (no longer standing on its board)"], problems
+    off = gc.outcome_problems(SHELF, before, _scene(o2=(slot[0], slot[1] + 0.05, SHELF.bottom_z)), "o2", slot,
+                              0.015, 0.02)
+    assert off == [f"o2 is 50 mm from its slot ({slot[0]:.3f}, {slot[1]:.3f})"]
+    assert gc.outcome_problems(SHELF, before, before, "o2", slot, 0.015, 0.02) == ["o2 is still on the top shelf"]
+    assert gc.outcome_problems(SHELF, before, {}, "o2", slot, 0.015, 0.02) == []  # nothing seen: nothing contradicts
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0, math.nan, "x", True])
+def test_outcome_parameters_must_be_positive(value):
+    with pytest.raises(ValueError, match="outcome_timeout"):
+        gc.check_parameters({"outcome_tolerance": 0.01, "slot_tolerance": 0.02, "outcome_timeout": value})
+
+
+# -- scene updates against the scenario ---------------------------------------------------------------------------
+def _objects(**change):
+    out = [(b.id, b.x, b.y, SHELF.top_z) for b in SC.objects]
+    for old, new in change.items():
+        out = [new if o[0] == old else o for o in out]
+    return out
+
+
+def test_a_scene_of_the_scenario_passes():
+    check_scene(SC, _objects())
+    check_scene(SC, _objects(o2=("o2", *SLOTS[0], SHELF.bottom_z)))  # relocated
+    check_scene(SC, _objects()[:3])  # perception sees part of the scene
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"o3": ("zz3", 0.69, 0.07, 0.02)}, "id 'zz3' is not in scenario"),
+    ({"o3": ("o2", 0.69, 0.07, 0.02)}, "'o2' appears twice"),
+    ({"o3": ("o3", math.nan, 0.07, 0.02)}, "not finite"),
+    ({"o3": ("o3", 1e6, 0.07, 0.02)}, "away from the shelf"),
+    ({"o3": ("o3", 0.69, 0.07, -5.0)}, "away from the shelf"),
+])
+def test_a_bad_scene_is_refused_naming_the_fault(change, words):
+    with pytest.raises(ScenarioError, match=words):
+        check_scene(SC, _objects(**change), "scene on /sim/objects")
+
+
+def test_foreign_ids_name_what_the_planner_holds_and_the_scene_does_not():
+    assert foreign_ids(["o1", "zz3", "o2"], ["o1", "o2"]).startswith("; the motion planner's scene holds zz3,")
+    assert foreign_ids(["o1"], ["o1", "o2"]) == ""
+
+
+def test_goal_refusal_checks_ids_own_set_and_the_scene():
+    assert "unknown object id 'ghost'" in gc.goal_refusal(SC, "ghost", [], _scene(), {})
+    assert "unknown object id 'zz'" in gc.goal_refusal(SC, "o2", ["zz"], _scene(), {})
+    assert "in its own removed set" in gc.goal_refusal(SC, "o3", ["o3"], _scene(), {})
+    assert "standing on the top shelf" in gc.goal_refusal(SC, "o6", ["o2"], _scene(), {})
+    assert gc.goal_refusal(SC, "o2", [], _scene(), {}) is None
+    full = {f"b{k}": k for k in range(len(SLOTS))}  # every slot taken by bottles this node placed
+    assert "no free slot" in gc.goal_refusal(SC, "o2", [], {}, full)
+
+
+VALUES = {"outcome_tolerance": 0.015, "slot_tolerance": 0.02, "outcome_timeout": 0.3}
+
+
+def test_the_outcome_waits_for_a_scene_after_the_motion():
+    watch = gc.SceneWatch()
+    assert gc.outcome(watch, {}, SC, "o2", 0, VALUES, "/sim/objects") == (
+        True, "relocated o2 to slot 0 (outcome not checked: no scene received on /sim/objects)")
+    before = _scene()
+    watch.update((b.id, b.x, b.y, b.z) for b in before.values())  # received before the motion ended: not used
+    ok, msg = gc.outcome(watch, before, SC, "o2", 0, VALUES, "/sim/objects")
+    assert not ok and msg.endswith("but no scene on /sim/objects within outcome_timeout after the motion: outcome "
+                                   "unknown"), msg
+    import threading
+    after = _scene(o2=(*SLOTS[0], SHELF.bottom_z), o1=(0.69 + 0.03, -0.21, SHELF.top_z))
+    threading.Timer(0.4, lambda: watch.update((b.id, b.x, b.y, b.z) for b in after.values())).start()
+    values = dict(VALUES, outcome_timeout=3.0)
+    assert gc.outcome(watch, before, SC, "o2", 0, values, "t") == (False, "relocated o2 to slot 0, but the scene "
+                                                                          "shows: o1 moved 30 mm")
