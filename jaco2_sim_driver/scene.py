@@ -9,17 +9,14 @@ obstacles and the target, bottom shelf where relocated objects go, board above t
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
-os.environ.setdefault("MUJOCO_GL", "egl")  # headless offscreen rendering; must precede `import mujoco`
+import cv2
+import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
+import numpy as np
 
-import cv2  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from relocation_common.scenario import Marker, Scenario  # noqa: E402
-from stpik_motion_planner.robot_description import (  # noqa: E402
+from relocation_common.scenario import Marker, Scenario
+from stpik_motion_planner.robot_description import (
     FINGER_BASE_Z,
     FINGER_CLOSED,
     FINGER_HINGES,
@@ -91,6 +88,7 @@ def rpy_matrix(rpy) -> np.ndarray:
 
 
 def quat_wxyz(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z; MuJoCo's order) of a 3x3 rotation matrix."""
     q = np.zeros(4)
     mujoco.mju_mat2Quat(q, np.asarray(rot, float).reshape(9))
     return q
@@ -234,6 +232,7 @@ def _actuators_xml(kv: float = 200.0) -> str:
 
 
 def scene_assets(scenario: Scenario) -> dict[str, bytes]:
+    """The scene's in-memory files for MjModel.from_xml_string: the ArUco marker texture as PNG."""
     ok, png = cv2.imencode(".png", marker_image(scenario.marker))
     if not ok:
         raise RuntimeError("could not encode the ArUco marker image")
