@@ -21,17 +21,17 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
-from qtree_task_planner import exact, kernel  # noqa: E402
-from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
-from qtree_task_planner.params import TrainingParams  # noqa: E402
-from qtree_task_planner.problem import RelocationProblem  # noqa: E402
-from qtree_task_planner.training import train  # noqa: E402
+from qtree_task_planner import exact, kernel
+from qtree_task_planner.oracles import BlockingOracle
+from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.training import train
 from relocation_common.paths import scenarios_dir
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_common.scenario import load_scenario
 
+ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "test" / "data" / "qtree_reference.json"
 ALGORITHMS = [(p, s) for p in ("lrnd", "h-lrnd", "h-eg") for s in ("breadth", "depth")]
 BASE = dict(alpha=0.5, gamma=1.0, epsilon0=1.0, epsilon_min=1e-3, max_episodes=1500, max_steps=100, beta=0.01,

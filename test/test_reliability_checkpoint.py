@@ -1,6 +1,6 @@
-"""Q-Tree checkpoints (issue 8): atomic save, validated load, and a resumed training equal to an uninterrupted one
-with the same seed (blocking_10, BlockingOracle), after a periodic checkpoint, after a restart from disk, and after
-the planner died in the middle of an episode."""
+"""Q-Tree checkpoints (docs/reliability.md, section 1): atomic save, validated load, and a resumed training equal to an
+uninterrupted one with the same seed (blocking_10, BlockingOracle), after a periodic checkpoint, after a restart from
+disk, and after the planner died in the middle of an episode."""
 import json
 import os
 

@@ -1,5 +1,5 @@
-"""Task planner reliability over real DDS (issue 8): a feasibility service that dies mid-training (the task planner
-notices, keeps what it learned, waits, resumes; or aborts saying what to do and a restarted task planner resumes
+"""Task planner reliability over real DDS (docs/reliability.md): a feasibility service that dies mid-training (the task
+planner notices, keeps what it learned, waits, resumes; or aborts saying what to do and a restarted task planner resumes
 from the checkpoint on disk), corrupt or mismatched checkpoints, stale or empty or bad scenes, bad goals.
 
 The motion planner is played by a fake PlanFeasibility service in its own process (this file run as a script:
@@ -17,13 +17,13 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_procs import REPO, NodeProcess, RosGraph  # noqa: E402
+from ros_procs import REPO, NodeProcess, RosGraph
 
-from qtree_task_planner import astar  # noqa: E402
-from qtree_task_planner.oracles import BlockingOracle, CachedOracle  # noqa: E402
-from qtree_task_planner.params import TrainingParams  # noqa: E402
-from qtree_task_planner.training import train  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+from qtree_task_planner import astar
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.training import train
+from relocation_common.scenario import load_scenario
 
 SCENARIO = REPO / "config" / "scenarios" / "blocking_10.yaml"
 PARAMS_FILE = REPO / "config" / "task_planner.yaml"
@@ -101,14 +101,15 @@ if __name__ == "__main__":
 
 # ---------------------------------------------------------------------------------------------------------------
 pytestmark = pytest.mark.graph
+# The test side's ROS imports, below the fake planner the subprocesses run (`__main__` above):
 rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402
-from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
-from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
+from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402 -- after the fake planner's script part
+from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402 -- after the fake planner's script part
+from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402 -- after the fake planner's script part
 
-from qtree_task_planner.task_planner_node import train_goal  # noqa: E402
-from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
-from relocation_common.ros_conversions import bottles_to_msg  # noqa: E402
+from qtree_task_planner.task_planner_node import train_goal  # noqa: E402 -- after the fake planner's script part
+from relocation_common.node import ActionClient  # noqa: E402 -- after the script part; has the rclpy#1123 fix
+from relocation_common.ros_conversions import bottles_to_msg  # noqa: E402 -- after the fake planner's script part
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SC10 = load_scenario(SCENARIO)
@@ -375,7 +376,7 @@ def test_bad_parameters_exit_2_with_one_line(tmp_path):
             assert len(lines) == 1 and lines[0].startswith("task_planner: ") and words in lines[0], (args, lines)
 
 
-# -- lifecycle (issue 18): nothing hangs ---------------------------------------------------------------------------
+# -- lifecycle (docs/reliability.md, section 9): nothing hangs ----------------------------------------------------
 def _send_async(env, node, **fields):
     """Send a goal; returns (goal handle future, feedback list)."""
     _wait(lambda: env.client.wait_for_server(timeout_sec=0.2), 30, "train action never appeared", node)

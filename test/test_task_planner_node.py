@@ -7,15 +7,15 @@ import time
 
 import pytest
 
-pytestmark = pytest.mark.graph
+from qtree_task_planner import exact
+from qtree_task_planner.oracles import BlockingOracle
+from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.training import train
+from relocation_app.graph import Graph
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario
 
-from qtree_task_planner import exact  # noqa: E402
-from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
-from qtree_task_planner.params import TrainingParams  # noqa: E402
-from qtree_task_planner.training import train  # noqa: E402
-from relocation_app.graph import Graph  # noqa: E402
-from relocation_common.paths import scenarios_dir  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+pytestmark = pytest.mark.graph
 
 SCENARIO = scenarios_dir() / "blocking_5.yaml"
 
