@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL before mujoco)
 from jaco2_sim_driver.scene import DESCRIPTION_FINGER_GEOMS, HAND_BODY, build_model
 from stpik_motion_planner import robot_description as rd
 

@@ -7,7 +7,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver.camera import intrinsics, render_frame
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, rpy_matrix
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
