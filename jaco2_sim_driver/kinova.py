@@ -17,4 +17,5 @@ def turns_to_sim(turns) -> np.ndarray:
 
 
 def sim_to_turns(q) -> np.ndarray:
+    """Simulated finger hinge angles (rad) -> finger turns; the inverse of `turns_to_sim` without the clamp."""
     return np.asarray(q, float) / FINGER_CLOSED * FINGER_MAX_TURN

@@ -9,17 +9,14 @@ obstacles and the target, bottom shelf where relocated objects go, board above t
 from __future__ import annotations
 
 import math
-import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-os.environ.setdefault("MUJOCO_GL", "egl")  # headless offscreen rendering; must precede `import mujoco`
+import cv2
+import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
+import numpy as np
 
-import cv2  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from relocation_common.robot_description import (  # noqa: E402
+from relocation_common.robot_description import (
     FINGER_BASE_Z,
     FINGER_CLOSED,
     FINGER_HINGES,
@@ -30,7 +27,7 @@ from relocation_common.robot_description import (  # noqa: E402
     finger_tip,
     mjcf_arm_body,
 )
-from relocation_common.scenario import Marker, Scenario  # noqa: E402
+from relocation_common.scenario import Marker, Scenario
 
 CAMERA_NAME = "camera_color"
 HAND_BODY = LINK_NAMES[-1]

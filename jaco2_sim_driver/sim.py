@@ -107,6 +107,7 @@ class Jaco2Sim:
     # ---------------------------------------------------------------- state
     @property
     def time(self) -> float:
+        """Simulated time (s)."""
         return float(self.data.time)
 
     @property
@@ -116,10 +117,12 @@ class Jaco2Sim:
 
     @property
     def qdot(self) -> np.ndarray:
+        """Joint velocities (rad/s)."""
         return self.data.qvel[self._vadr].copy()
 
     @property
     def effort(self) -> np.ndarray:
+        """Actuator torques of the arm joints (N m)."""
         return self.data.actuator_force[self._act].copy()
 
     @property
@@ -129,6 +132,7 @@ class Jaco2Sim:
 
     @property
     def finger_qdot(self) -> np.ndarray:
+        """Finger hinge velocities (rad/s)."""
         return self.data.qvel[self._fvadr].copy()
 
     @property
@@ -138,6 +142,7 @@ class Jaco2Sim:
 
     @property
     def watchdog_tripped(self) -> bool:
+        """True when no command came for `watchdog_timeout` of simulated time (the command is then zero)."""
         return self.time - self._cmd_time > self.watchdog_timeout
 
     def ee_pose(self) -> np.ndarray:
@@ -163,6 +168,7 @@ class Jaco2Sim:
         return v.copy()
 
     def stop(self) -> None:
+        """Command zero joint velocity (the watchdog is not fed)."""
         self._cmd = np.zeros(N_JOINTS)
         self._apply()
 
@@ -218,7 +224,7 @@ class Jaco2Sim:
         self.data.ctrl[self._act] = 0.0
         if self.grasped is not None:  # a carried bottle comes along, at its grasp offset
             mujoco.mj_kinematics(self.model, self.data)
-            self._place_grasped()
+            self._place_grasped(self.grasped)
         mujoco.mj_forward(self.model, self.data)
 
     def bottle_between_fingers(self) -> str | None:
@@ -302,8 +308,8 @@ class Jaco2Sim:
         self.data.qvel[self.model.jnt_dofadr[self.model.body_jntadr[b]] + 2] = -0.02
         self._release = None
 
-    def _place_grasped(self) -> None:
-        eq, b = self._welds[self.grasped], self._bodies[self.grasped]
+    def _place_grasped(self, oid: str) -> None:
+        eq, b = self._welds[oid], self._bodies[oid]
         hp, hq = self.data.xpos[self._hand], self.data.xquat[self._hand]
         p, q = np.zeros(3), np.zeros(4)
         mujoco.mju_rotVecQuat(p, self.model.eq_data[eq, 3:6], hq)

@@ -50,7 +50,8 @@ class _Recorder:
     """Keeps a camera frame every `period` seconds while the robot executes."""
 
     def __init__(self, period: float = 1.5):
-        self.period, self.last, self.frames, self.active = period, 0.0, [], False
+        self.period, self.last, self.active = period, 0.0, False
+        self.frames: list[np.ndarray] = []
 
     def __call__(self, msg) -> None:
         now = time.monotonic()
@@ -223,6 +224,7 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, recordi
 
 
 def run(argv=None) -> int:
+    """The demo (module docstring) for `argv`; 0 when the target was retrieved, else 1."""
     a = _args(argv)
     a.scenario = str(resolve_scenario(a.scenario).resolve())  # the nodes run in the output directory
     used = TrainingParams.defaults().replace(policy=a.policy, search=a.search, seed=a.seed)
@@ -287,6 +289,7 @@ def _wait_for(predicate, timeout: float, graph: Graph, what: str) -> None:
 
 
 def main(argv=None) -> None:
+    """Console entry point: `run`, with SIGTERM and Ctrl-C shutting the graph down and errors on one line."""
     signal.signal(signal.SIGTERM, _interrupt)
     try:
         sys.exit(run(argv))

@@ -82,6 +82,7 @@ def private_domain_id() -> tuple[int, Path | None]:
 
 
 def ros_env(domain_id: int, run_dir: Path) -> dict[str, str]:
+    """Environment of a node process: the private domain, loopback discovery, logs and ROS home under `run_dir`."""
     env = dict(os.environ)
     env.update(
         ROS_DOMAIN_ID=str(domain_id),
@@ -148,8 +149,8 @@ class Graph:
         return self.procs[name]
 
     def start_planners(self, replicas: int, params: dict | None = None) -> list[subprocess.Popen]:
-        """The motion planner and replicas - 1 feasibility-only replicas under /replica_<k> (issue 15: the task
-        planner started with the same `replicas` keeps one question in flight per replica)."""
+        """The motion planner and replicas - 1 feasibility-only replicas under /replica_<k> (docs/architecture.md:
+        the task planner started with the same `replicas` keeps one question in flight per replica)."""
         procs = [self.start("motion_planner", params)]
         for k in range(1, replicas):
             procs.append(self.start("motion_planner", dict(params or {}, serve_relocation=False),
@@ -157,6 +158,7 @@ class Graph:
         return procs
 
     def log(self, name: str) -> str:
+        """The log of node `name` so far."""
         return (self.run_dir / "logs" / f"{name}.log").read_text(errors="replace")
 
     def check_alive(self) -> None:
@@ -166,6 +168,7 @@ class Graph:
                 raise RuntimeError(f"node {name} exited with {p.returncode}:\n{self.log(name)[-3000:]}")
 
     def stop(self, name: str, sig: int = signal.SIGINT, grace: float = 5.0) -> int:
+        """Stop node `name` (signal `sig`, SIGKILL after `grace` s); its exit code."""
         p = self.procs.pop(name)
         if p.poll() is None:
             p.send_signal(sig)
@@ -177,6 +180,7 @@ class Graph:
         return p.returncode
 
     def stop_all(self, grace: float = 5.0) -> dict[str, int]:
+        """SIGINT to every node, SIGKILL to those still running after `grace` s; name -> exit code."""
         for p in self.procs.values():
             if p.poll() is None:
                 p.send_signal(signal.SIGINT)

@@ -38,8 +38,12 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
 
 ROS_DISTRO = "jazzy"
 BAG_VERSION = 9  # rosbag2_storage BagMetadata.version in Jazzy
@@ -95,7 +99,7 @@ def msg_text(type_name: str) -> str:
         return f.read_text()
     m = _SRV_PART.match(name)
     f = _interface_file(pkg, "srv", f"{m.group(1)}.srv") if m else None
-    if f is not None:
+    if m and f is not None:
         base, part = m.groups()
         if part == "Event":
             return (f"service_msgs/ServiceEventInfo info\n{base}_Request[<=1] request\n"
@@ -103,7 +107,7 @@ def msg_text(type_name: str) -> str:
         return _sections(f)[0 if part == "Request" else 1]
     m = _ACTION_PART.match(name)
     f = _interface_file(pkg, "action", f"{m.group(1)}.action") if m else None
-    if f is not None:
+    if m and f is not None:
         base, part = m.groups()
         if part == "FeedbackMessage":
             return f"unique_identifier_msgs/UUID goal_id\n{base}_Feedback feedback\n"
@@ -141,8 +145,9 @@ def full_definition(type_name: str) -> str:
 def type_hash(type_name: str) -> str:
     """RIHS01_... from the type description (.json) rosidl installs beside the interface file; '' if none."""
     pkg, kind, name = _split_type(type_name)
-    m = (_SRV_PART if kind == "srv" else _ACTION_PART if kind == "action" else None)
-    base = m.match(name).group(1) if m and m.match(name) else name
+    pattern = (_SRV_PART if kind == "srv" else _ACTION_PART if kind == "action" else None)
+    m = pattern.match(name) if pattern else None
+    base = m.group(1) if m else name
     f = _interface_file(pkg, kind or "msg", f"{base}.json")
     if f is None:
         return ""
@@ -242,7 +247,8 @@ class BagWriter:
         self._mcap.start(profile="ros2", library="qtree_relocation recorder (rosbag2 mcap layout)")
         self.topics: dict[str, _Topic] = {}
         self._schemas: dict[str, int] = {}
-        self.first = self.last = None
+        self.first: int | None = None  # log time (ns) of the first message
+        self.last: int | None = None
         self.count = 0
 
     def add_topic(self, name: str, type_name: str, qos: list[dict], hash_: str = "") -> _Topic:
@@ -257,6 +263,7 @@ class BagWriter:
         return t
 
     def write(self, topic: _Topic, data: bytes, log_ns: int, publish_ns: int = 0) -> None:
+        """Add one serialized message of `topic` (log and publish time in ns)."""
         self._mcap.add_message(topic.channel, log_time=log_ns, data=data, publish_time=publish_ns or log_ns)
         topic.count += 1
         self.count += 1
@@ -264,6 +271,7 @@ class BagWriter:
         self.last = log_ns if self.last is None else max(self.last, log_ns)
 
     def metadata(self) -> dict:
+        """rosbag2's metadata (metadata.yaml) of what was written so far."""
         start, duration = (self.first or 0), (self.last or 0) - (self.first or 0)
         topics = [{"topic_metadata": {"name": t.name, "type": t.type, "serialization_format": "cdr",
                                       "offered_qos_profiles": t.qos, "type_description_hash": t.type_hash},
@@ -292,15 +300,18 @@ class RetrievalVideo:
 
     def __init__(self, path: Path, fps: float = 5.0):
         self.path, self.fps = Path(path), float(fps)
-        self._writer = self._prev = self._t0 = None
+        self._writer: Any = None  # a cv2.VideoWriter from the first frame (its size); cv2 is imported lazily
+        self._prev: np.ndarray | None = None
+        self._t0 = 0.0  # time of the first frame
         self.frames = 0
 
     def add(self, bgr: np.ndarray, t: float, lines: list[str]) -> None:
+        """Add a camera frame taken at `t` (s) with its caption; the previous frame is repeated up to `t`."""
         import cv2
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             h, w = bgr.shape[:2]
-            self._writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
+            self._writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter.fourcc(*"mp4v"), self.fps, (w, h))
             if not self._writer.isOpened():
                 raise RuntimeError(f"OpenCV cannot write {self.path} (mp4v)")
             self._t0 = t
@@ -317,6 +328,7 @@ class RetrievalVideo:
         self.frames += 1
 
     def close(self, t_end: float) -> dict:
+        """Finish the video at `t_end` (s); its path, frame count, rate and length."""
         if self._writer is None:
             return {"path": None, "frames": 0, "fps": self.fps, "duration_s": 0.0}
         self._fill(t_end)
@@ -366,6 +378,7 @@ class Status:
     progress: float = 0.0
 
     def lines(self, elapsed: float) -> list[str]:
+        """The caption of a video frame `elapsed` s into the run."""
         head = self.phase or "recording"
         if self.phase in ("training", "exact optimum"):
             head += f": episode {self.episode}" if self.phase == "training" else ""
@@ -394,17 +407,19 @@ class RunRecorder:
         self.errors: dict[str, str] = {}   # topic -> the first error handling one of its messages
         self._seen: set[str] = set()
         self._video_on = video_from_phase is None
-        self.bag = self._node = None
+        self.bag: BagWriter | None = None
+        self._node: Node | None = None
 
     # -- life cycle ---------------------------------------------------------------------------------------------
     def start(self) -> "RunRecorder":
+        """Open the bag and start the recording thread on a private rclpy context."""
         import rclpy
         from rclpy.signals import SignalHandlerOptions
         self.bag = BagWriter(self.bag_dir)
         self._t0 = time.monotonic()
         self._context = rclpy.Context()
-        kw = {} if self.domain_id is None else {"domain_id": int(self.domain_id)}
-        rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO, **kw)
+        domain_id = None if self.domain_id is None else int(self.domain_id)
+        rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO, domain_id=domain_id)
         self._node = rclpy.create_node("run_recorder", context=self._context, enable_rosout=False,
                                        start_parameter_services=False)
         self._subs: list[tuple] = []  # (subscription, handler(msg, info))
@@ -443,15 +458,26 @@ class RunRecorder:
         t_end = time.monotonic()
         self._stopping.set()
         self._thread.join(timeout=10.0)
-        self._node.destroy_node()
+        self._ros().destroy_node()
         self._context.try_shutdown()
-        meta = self.bag.close()
-        size = sum(f.stat().st_size for f in self.bag.dir.iterdir() if f.is_file())
-        return {"bag": {"path": str(self.bag.dir), "bytes": size, "messages": meta["message_count"],
+        bag = self._bag()
+        meta = bag.close()
+        size = sum(f.stat().st_size for f in bag.dir.iterdir() if f.is_file())
+        return {"bag": {"path": str(bag.dir), "bytes": size, "messages": meta["message_count"],
                         "duration_s": round(meta["duration"]["nanoseconds"] * 1e-9, 2),
-                        "topics": {t.name: t.count for t in self.bag.topics.values()}, "skipped": self.skipped,
+                        "topics": {t.name: t.count for t in bag.topics.values()}, "skipped": self.skipped,
                         "errors": self.errors},
                 "video": self.video.close(t_end) if self.video is not None else None}
+
+    def _ros(self) -> Node:
+        if self._node is None:
+            raise RuntimeError("RunRecorder: call start() first")
+        return self._node
+
+    def _bag(self) -> BagWriter:
+        if self.bag is None:
+            raise RuntimeError("RunRecorder: call start() first")
+        return self.bag
 
     def __enter__(self) -> "RunRecorder":
         return self.start()
@@ -461,7 +487,7 @@ class RunRecorder:
 
     # -- topics -------------------------------------------------------------------------------------------------
     def _discover(self) -> None:
-        for name, types in self._node.get_topic_names_and_types():
+        for name, types in self._ros().get_topic_names_and_types():
             if name in self._seen:
                 continue
             why = self._excluded(name, types)
@@ -469,7 +495,7 @@ class RunRecorder:
                 self._seen.add(name)
                 self.skipped[name] = why
                 continue
-            pubs = self._node.get_publishers_info_by_topic(name)
+            pubs = self._ros().get_publishers_info_by_topic(name)
             if not pubs:
                 continue  # subscribers only: wait for a publisher (its QoS decides ours)
             self._seen.add(name)
@@ -499,17 +525,17 @@ class RunRecorder:
         profiles = [qos_dict(q) for q in offered]
         if name == self.camera:
             from sensor_msgs.msg import CompressedImage, Image
-            topic = self.bag.add_topic(f"{name}/compressed", "sensor_msgs/msg/CompressedImage", profiles)
-            sub = self._node.create_subscription(Image, name, lambda m: None, qos)
+            topic = self._bag().add_topic(f"{name}/compressed", "sensor_msgs/msg/CompressedImage", profiles)
+            sub = self._ros().create_subscription(Image, name, lambda m: None, qos)
             self._subs.append((sub, lambda m, i: self._on_image(topic, CompressedImage, m, i)))
             return
-        topic = self.bag.add_topic(name, type_name, profiles, next(iter(hashes), ""))
+        topic = self._bag().add_topic(name, type_name, profiles, next(iter(hashes), ""))
         watch = self._watcher(name, type_name)
-        sub = self._node.create_subscription(message_class(type_name), name, lambda m: None, qos, raw=True)
+        sub = self._ros().create_subscription(message_class(type_name), name, lambda m: None, qos, raw=True)
         self._subs.append((sub, lambda raw, info: self._on_raw(topic, watch, raw, info)))
 
     def _on_raw(self, topic: _Topic, watch, raw: bytes, info) -> None:
-        self.bag.write(topic, raw, *_stamps(info))
+        self._bag().write(topic, raw, *_stamps(info))
         if watch is not None:
             watch(raw)
 
@@ -521,7 +547,7 @@ class RunRecorder:
         if ok:
             out = compressed_type(header=msg.header, format=f"{msg.encoding}; jpeg compressed bgr8")
             out.data = jpg.tobytes()
-            self.bag.write(topic, serialize_message(out), *_stamps(info))
+            self._bag().write(topic, serialize_message(out), *_stamps(info))
         if self.video is not None and self._video_on:
             now = time.monotonic()
             self.video.add(bgr, now, self.status.lines(now - self._t0))

@@ -5,11 +5,11 @@
 trajectory. Implementations: the motion planner core (stpik_motion_planner.feasibility.MotionPlanner), the
 task planner node's service client, and the adapters of qtree_task_planner.oracles.
 
-Blockers (issue 14). An unfeasible answer may name, per candidate grasp lane (approach yaw), the objects the hand
-or arm meets there: `BlockerSet`s, the alternatives whose removal would clear an approach. A *certain* set is a
-geometric fact: the lane is clear exactly when all of its objects are removed. An *uncertain* set is a suspicion
-(the lane passed the screen but STPIK or RRT-Connect failed there): it claims nothing. The claim of an answer
-whose sets are all certain: from `removed` or any superset of it, relocating the object needs one of the listed
+Blockers (docs/motion_planner.md, "Blockers"). An unfeasible answer may name, per candidate grasp lane (approach yaw),
+the objects the hand or arm meets there: `BlockerSet`s, the alternatives whose removal would clear an approach. A
+*certain* set is a geometric fact: the lane is clear exactly when all of its objects are removed. An *uncertain* set is
+a suspicion (the lane passed the screen but STPIK or RRT-Connect failed there): it claims nothing. The claim of an
+answer whose sets are all certain: from `removed` or any superset of it, relocating the object needs one of the listed
 lanes cleared. Empty `blockers` = no information.
 """
 from __future__ import annotations
@@ -48,6 +48,8 @@ def claims(blockers) -> bool:
 
 @dataclass(frozen=True)
 class FeasibilityAnswer:
+    """The motion planner's answer to one feasibility question: the label of Eq. 11 and how it was reached."""
+
     label: Label
     planning_time: float = 0.0  # s
     attempts: int = 0
@@ -57,6 +59,8 @@ class FeasibilityAnswer:
 
 
 class FeasibilityOracle(Protocol):
+    """Anything that answers the feasibility question of Eq. 11 for one object and a removed set."""
+
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
         """Answer for `object_id` with the objects in `removed` gone (robot starting from home)."""
         ...
@@ -75,14 +79,15 @@ Query = tuple[str, frozenset]  # (object_id, removed)
 
 
 class BatchOracle(Protocol):
-    """An oracle that can keep several questions in flight (planner replicas, issue 15). `in_flight` is how many
-    it answers at once right now (1: no gain in batching); `feasibility_many` answers every query, calling
+    """An oracle that can keep several questions in flight (planner replicas: docs/architecture.md). `in_flight`
+    is how many it answers at once right now (1: no gain in batching); `feasibility_many` answers every query, calling
     `on_answer(query, answer)` as each arrives (so a caller keeps what came back before an error), and returns
     the answers in the queries' order."""
 
     in_flight: int
 
     def feasibility_many(self, queries: list[Query], on_answer=None) -> list[FeasibilityAnswer]:
+        """Answer every query, in the queries' order (see the class docstring for `on_answer`)."""
         ...
 
 

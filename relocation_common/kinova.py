@@ -33,6 +33,7 @@ def turns_to_joint(turns) -> np.ndarray:
 
 
 def joint_to_turns(rad) -> np.ndarray:
+    """Finger joint angle (rad) -> Kinova finger turns; the inverse of `turns_to_joint`."""
     return np.degrees(np.asarray(rad, float)) / FINGER_DEG_PER_TURN
 
 
@@ -50,6 +51,7 @@ class FingerMonitor:
         self._ref, self._ref_t = np.asarray(positions, float).copy(), t0
 
     def update(self, t: float, positions) -> str:
+        """REACHED, STALLED or MOVING for the finger `positions` (turns) at time `t` (s)."""
         p = np.asarray(positions, float)
         if np.all(np.abs(p - self.goal) <= self.tolerance):
             return self.REACHED

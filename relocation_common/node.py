@@ -93,7 +93,7 @@ class SideNode:
                 raise
 
     def close(self) -> None:
-        """Stop the executor and its thread, then destroy the node."""
+        """Stop the executor, join its thread, and destroy the node once nothing spins it."""
         self._executor.shutdown(timeout_sec=2.0)
         self._thread.join(timeout=3.0)
         if not self._thread.is_alive():  # destroying a node its executor still waits on can crash the process
@@ -177,7 +177,7 @@ class ActionClient(RclpyActionClient):
         self._registration = threading.RLock()  # re-entrant: a feedback callback may send a goal
 
     def send_goal_async(self, *args, **kwargs):
-        """rclpy's, under the registration lock."""
+        """rclpy's send_goal_async, registered under the lock that also handles the responses."""
         with self._registration:
             return super().send_goal_async(*args, **kwargs)
 
@@ -190,7 +190,7 @@ class ActionClient(RclpyActionClient):
             return super()._get_result_async(goal_handle)
 
     async def execute(self, taken_data):
-        """rclpy's handling of responses, under the registration lock."""
+        """rclpy's response handling, under the lock that registers requests."""
         with self._registration:
             return await super().execute(taken_data)
 

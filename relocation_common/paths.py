@@ -36,6 +36,7 @@ def share_dir() -> Path:
 
 
 def config_dir() -> Path:
+    """The project's config/ directory (source checkout or installed share)."""
     return share_dir() / "config"
 
 
@@ -45,6 +46,7 @@ def config_file(name: str) -> Path:
 
 
 def scenarios_dir() -> Path:
+    """config/scenarios/, the scene files."""
     return config_dir() / "scenarios"
 
 

@@ -31,6 +31,7 @@ def bottle_to_msg(b: Bottle, z: float = 0.0) -> ObjectState:
 
 
 def bottles_to_msg(bottles, z: float, stamp=None, frame_id: str = BASE_FRAME) -> ObjectArray:
+    """ObjectArray of `bottles` standing at height `z` in `frame_id`."""
     msg = ObjectArray()
     msg.header.frame_id = frame_id
     if stamp is not None:
@@ -82,7 +83,8 @@ def quat_xyzw(rot) -> tuple[float, float, float, float]:
         q = ((r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s)
     n = math.sqrt(sum(c * c for c in q))
     sign = -1.0 if q[3] < 0 else 1.0
-    return tuple(float(sign * c / n) for c in q)
+    x, y, z, w = (float(sign * c / n) for c in q)
+    return x, y, z, w
 
 
 def transform_msg(t, parent: str, child: str, stamp=None):
@@ -105,6 +107,7 @@ def blockers_to_msgs(blockers) -> list[BlockerSetMsg]:
 
 
 def blockers_from_msgs(msgs) -> tuple[BlockerSet, ...]:
+    """PlanFeasibility's `blockers` -> FeasibilityAnswer.blockers."""
     return tuple(BlockerSet(frozenset(m.object_ids), bool(m.certain), m.lane) for m in msgs)
 
 
@@ -114,4 +117,5 @@ def lanes_to_msgs(lanes) -> list[LaneBlockers]:
 
 
 def lanes_from_msgs(msgs) -> dict[str, tuple[BlockerSet, ...]]:
+    """PlanFeasibility's `lanes` -> object -> its lanes' BlockerSets."""
     return {m.object_id: blockers_from_msgs(m.lanes) for m in msgs}

@@ -80,17 +80,17 @@ class Shelf:
 
     @property
     def x_back(self) -> float:
-        """Back edge (x) of the boards."""
+        """Back edge of the shelf (m)."""
         return self.x_front + self.depth
 
     @property
     def y_min(self) -> float:
-        """Right side panel's inner face (y)."""
+        """Smallest y of the shelf (m)."""
         return self.y_center - self.width / 2
 
     @property
     def y_max(self) -> float:
-        """Left side panel's inner face (y)."""
+        """Largest y of the shelf (m)."""
         return self.y_center + self.width / 2
 
 
@@ -107,7 +107,7 @@ class Marker:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A validated scene: shelf, bottles, target, bottom-shelf slots, marker (docs/scenarios.md)."""
+    """A relocation scene: the shelf, its bottles (one the target), the free slots and the ArUco marker."""
 
     name: str
     description: str
@@ -126,12 +126,12 @@ class Scenario:
 
     @property
     def ids(self) -> tuple[str, ...]:
-        """Every object's id, in file order."""
+        """Ids of every object, target included, in file order."""
         return tuple(o.id for o in self.objects)
 
     @property
     def obstacle_ids(self) -> tuple[str, ...]:
-        """The ids of the objects other than the target."""
+        """Ids of the obstacles (every object but the target), in file order."""
         return tuple(o.id for o in self.objects if not o.is_target)
 
     @property
@@ -140,7 +140,7 @@ class Scenario:
         return {o.id: o.weight for o in self.objects if not o.is_target}
 
     def object(self, object_id: str) -> Bottle:
-        """The bottle of that id; UnknownObjectError naming the known ids."""
+        """The bottle `object_id`; UnknownObjectError names the known ids."""
         try:
             return self._by_id[object_id]
         except KeyError:
@@ -217,6 +217,16 @@ def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default=None) -> tu
     if not isinstance(v, (list, tuple)) or len(v) != n:
         raise ScenarioError(f"{where}: {key} must be a list of {n} numbers, got {short(v)}")
     return tuple(_num({key: x}, key, where) for x in v)
+
+
+def _vec2(d: Mapping[str, Any], key: str, where: str) -> tuple[float, float]:
+    x, y = _vec(d, key, 2, where)
+    return x, y
+
+
+def _vec3(d: Mapping[str, Any], key: str, where: str) -> tuple[float, float, float]:
+    x, y, z = _vec(d, key, 3, where)
+    return x, y, z
 
 
 def _shelf(d: Any) -> Shelf:
@@ -379,7 +389,7 @@ def _slots(raw: Any, shelf: Shelf, n: int) -> tuple[tuple[tuple[float, float], .
             raise ScenarioError("slots: 'auto' finds no room on this bottom shelf; list the slots")
         return slots, True
     if isinstance(raw, list) and len(raw) >= n:
-        return tuple(_vec({"xy": s}, "xy", 2, f"slots[{k}]") for k, s in enumerate(raw)), False
+        return tuple(_vec2({"xy": s}, "xy", f"slots[{k}]") for k, s in enumerate(raw)), False
     raise ScenarioError(f"slots: 'auto' or a list of at least {n} [x, y] positions")
 
 
@@ -387,7 +397,7 @@ def _marker(m: Any) -> Marker:
     if not isinstance(m, Mapping):
         raise ScenarioError("marker: missing; give id, dictionary, size, position, rpy of the ArUco marker")
     return Marker(id=_marker_id(m), dictionary=_dictionary(m), size=_num(m, "size", "marker"),
-                  position=_vec(m, "position", 3, "marker"), rpy=_vec(m, "rpy", 3, "marker"))
+                  position=_vec3(m, "position", "marker"), rpy=_vec3(m, "rpy", "marker"))
 
 
 def _blocking(data: Mapping[str, Any], ids: set[str]) -> dict[str, frozenset[str]] | None:

@@ -1,4 +1,4 @@
-"""Benchmark of the blocker A* (issue 14) against uniform-cost search (not a timed test).
+"""Benchmark of the blocker A* (docs/qtree.md, astar.solve) against uniform-cost search (not a timed test).
 
 1. Every shipped relocation scene, cold, real motion planner: one `qtree solve` process per (scene, solver) (a
    fresh planner, no cache, OMPL seeded as configured); planner calls and the solver's wall time (planner calls

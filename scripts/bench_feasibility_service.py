@@ -33,14 +33,15 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
+
+from bench_motion_planner import export_package  # scripts/ is sys.path[0]: the sibling benchmark
+
+from relocation_app.graph import Graph, wait_for_interfaces
+from relocation_common.paths import default_scenario, resolve_scenario
+from relocation_common.scenario import load_scenario
+
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
-from bench_motion_planner import export_package  # noqa: E402  (scripts/ is sys.path[0])
-
-from relocation_app.graph import Graph, wait_for_interfaces  # noqa: E402
-from relocation_common.paths import default_scenario, resolve_scenario  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
 
 
 @contextlib.contextmanager

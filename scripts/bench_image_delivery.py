@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from relocation_app.graph import Graph  # noqa: E402
+from relocation_app.graph import Graph
 
 COUNTER = """
 import json, sys, time

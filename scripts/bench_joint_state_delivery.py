@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import rclpy  # noqa: E402
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Empty  # noqa: E402
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Empty
 
-from relocation_app.graph import Graph  # noqa: E402
-from relocation_common.node import SideNode  # noqa: E402
+from relocation_app.graph import Graph
+from relocation_common.node import SideNode
 
 TOPIC = "/j2s7s300_driver/out/joint_state"
 

@@ -28,17 +28,17 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-_IMPL = os.environ.get("BENCH_IMPL_DIR")  # a directory holding another stpik_motion_planner/ (--baseline)
-sys.path.insert(0, str(REPO))
-if _IMPL:
-    sys.path.insert(0, _IMPL)
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages
+# BENCH_IMPL_DIR: a directory holding another stpik_motion_planner/ (--baseline), found first (else this checkout)
+sys.path.insert(0, os.environ.get("BENCH_IMPL_DIR", sys.path[0]))
 
-from relocation_common import robot_description as rd  # noqa: E402
-from relocation_common.feasibility import Label  # noqa: E402
+from relocation_common import robot_description as rd
+from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
-from relocation_common.scenario import load_scenario  # noqa: E402
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
+from relocation_common.scenario import load_scenario
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+
+REPO = Path(__file__).resolve().parent.parent
 
 
 def pct(xs, p):
@@ -159,7 +159,8 @@ def main() -> None:
         if sub:
             w = [r["wall"] for r in sub]
             print(f"  {name:10s} p50 {pct(w, 50):7.2f} ms  p95 {pct(w, 95):7.2f} ms   "
-                  f"rrt p50 {pct([r['rrt'] for r in sub], 50):6.2f} ms  stpik p50 {pct([r['stpik'] for r in sub], 50):6.2f} ms"
+                  f"rrt p50 {pct([r['rrt'] for r in sub], 50):6.2f} ms  "
+                  f"stpik p50 {pct([r['stpik'] for r in sub], 50):6.2f} ms"
                   f"   mean attempts {np.mean([r['attempts'] for r in sub]):.2f}")
     tot = sum(walls)
     rrt_t = sum(r["rrt"] for r in rows)
@@ -199,7 +200,8 @@ def main() -> None:
         jt.append(time.perf_counter() - t)
         jok += traj is not None
     if jt:
-        print(f"joint-space RRT-Connect (same checker, home -> STPIK's pre-grasp configuration): p50 {pct(jt, 50):7.2f} ms  p95 {pct(jt, 95):7.2f} ms  solved {jok}/{len(jt)}")
+        print(f"joint-space RRT-Connect (same checker, home -> STPIK's pre-grasp configuration): "
+              f"p50 {pct(jt, 50):7.2f} ms  p95 {pct(jt, 95):7.2f} ms  solved {jok}/{len(jt)}")
     if prof:
         out = io.StringIO()
         pstats.Stats(prof, stream=out).sort_stats("tottime").print_stats(12)

@@ -19,12 +19,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from jaco2_sim_driver.camera import render_frame  # noqa: E402
-from perception_aruco.aruco import pose_error  # noqa: E402
-from perception_aruco.pipeline import Perception  # noqa: E402
+from jaco2_sim_driver.camera import render_frame
+from perception_aruco.aruco import pose_error
+from perception_aruco.pipeline import Perception
 from relocation_common.paths import default_scenario, scenarios_dir
-from relocation_common.robot_description import Q_HOME, Q_UPRIGHT  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_common.robot_description import Q_HOME, Q_UPRIGHT
+from relocation_common.scenario import load_scenario
 
 
 def bench(path, repeats: int, q) -> dict:

@@ -20,12 +20,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from qtree_task_planner.exact import brute_force, solve  # noqa: E402
-from qtree_task_planner.oracles import BlockingOracle, CachedOracle  # noqa: E402
-from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams  # noqa: E402
-from qtree_task_planner.training import train  # noqa: E402
+from qtree_task_planner.exact import brute_force, solve
+from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
+from qtree_task_planner.training import train
 from relocation_common.paths import scenarios_dir
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_common.scenario import load_scenario
 
 
 def throughput(sc, seeds: int, episodes: int) -> list[dict]:

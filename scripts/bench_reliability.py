@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Load test of the motion planner's feasibility service (issue 8): N requests from C concurrent clients.
+"""Load test of the motion planner's feasibility service (docs/reliability.md, section 6): N requests from C concurrent
+clients.
 
 Starts the real motion_planner node (config/motion_planner.yaml) on a private ROS domain with loopback discovery,
 then C client processes, each its own ROS node, sending its share of the requests back to back: valid questions

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmark of the MuJoCo Jaco2 driver (issue 4). Prints numbers; paste them into docs/bench/sim_driver.md.
+"""Benchmark of the MuJoCo Jaco2 driver (docs/sim_driver.md). Prints numbers; paste them into docs/bench/sim_driver.md.
 
 1. Core speed: 15 free bottles, physics at 1 kHz, arm streaming a velocity command at 100 Hz and a JointState
    message built at 100 Hz; with MuJoCo's sleeping of resting bodies (the default) and with it off (every bottle
@@ -15,22 +15,25 @@ Usage: .venv/bin/python scripts/bench_sim_driver.py [--quick]
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(REPO), str(REPO / "test")]
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))  # ros_procs
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages
+os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering: before mujoco is imported (as jaco2_sim_driver does)
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-import yaml  # noqa: E402
+import mujoco
+import numpy as np
+import yaml
 
-import jaco2_sim_driver  # noqa: E402,F401
-from jaco2_sim_driver.sim import Jaco2Sim  # noqa: E402
+from jaco2_sim_driver.sim import Jaco2Sim
 from relocation_common.paths import default_scenario
-from relocation_common.scenario import parse_scenario  # noqa: E402
+from relocation_common.scenario import parse_scenario
+
+REPO = Path(__file__).resolve().parent.parent
 
 
 def scenario_15() -> dict:

@@ -1,4 +1,4 @@
-"""Time to fill a scene's complete feasibility table from scratch (issue 15), side by side in one run:
+"""Time to fill a scene's complete feasibility table from scratch (docs/benchmarks.md), side by side in one run:
 
 - `replicas K`: through K motion planner processes over ROS (`python -m relocation_app.evaluation fill --replicas K`:
   the task planner's ReplicaOracle, one question in flight per replica);
@@ -17,14 +17,15 @@ import time
 from contextlib import nullcontext
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
-from relocation_app.evaluation.__main__ import planner_params  # noqa: E402
-from relocation_app.evaluation.feasibility_cache import fill_reachable, open_table  # noqa: E402
-from relocation_app.evaluation.replica_fill import replica_oracle  # noqa: E402
-from relocation_common.paths import resolve_scenario  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_app.evaluation.__main__ import planner_params
+from relocation_app.evaluation.feasibility_cache import fill_reachable, open_table
+from relocation_app.evaluation.replica_fill import replica_oracle
+from relocation_common.paths import resolve_scenario
+from relocation_common.scenario import load_scenario
+
+REPO = Path(__file__).resolve().parent.parent
 
 
 def fill(path: Path, mode: str) -> tuple[float, dict, object]:

@@ -28,6 +28,8 @@ from .trajectory import Trajectory
 
 @dataclass(frozen=True)
 class FollowerParams:
+    """Gains and tolerances of the trajectory follower (see the module docstring)."""
+
     k_track: float = 4.0  # 1/s, position correction gain
     lag_tol: float = 0.05  # rad: above this tracking error the reference slows down (stops at twice it)
     settle_tol: float = 0.005  # rad, every joint at the end of the trajectory
@@ -51,6 +53,8 @@ def joint_error(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 class TrajectoryFollower:
+    """Time-scaled tracking of one trajectory: call `update(q, dt)` per cycle, stream `command(q)`."""
+
     RUNNING, SETTLED, FAILED = "running", "settled", "failed"
 
     def __init__(self, trajectory: Trajectory, qdot_max=rd.QDOT_MAX, params: FollowerParams | None = None):
@@ -67,10 +71,12 @@ class TrajectoryFollower:
 
     @property
     def duration(self) -> float:
+        """Length of the planned trajectory (s)."""
         return self.traj.duration
 
     @property
     def progress(self) -> float:
+        """Fraction of the planned trajectory the reference has passed (0..1)."""
         return min(1.0, self.tau / self.duration) if self.duration > 0 else 1.0
 
     def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:

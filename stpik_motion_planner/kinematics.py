@@ -24,6 +24,7 @@ class Kinematics:
         self.q = None
 
     def update(self, q, jacobians: bool = True) -> None:
+        """Forward kinematics at `q` (rad), with the joint Jacobians unless `jacobians` is False."""
         q = np.asarray(q, dtype=float)
         if jacobians:
             pin.computeJointJacobians(self.model, self.data, q)
@@ -34,10 +35,12 @@ class Kinematics:
         self.q = q
 
     def placement(self, fid: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rotation and translation of frame `fid` in the base frame, after update(q)."""
         m = self.data.oMf[fid]
         return m.rotation.copy(), m.translation.copy()
 
     def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rotation and translation of the tool frame in the base frame, after update(q)."""
         return self.placement(self.tool_fid)
 
     def frame_jacobian(self, fid: int) -> np.ndarray:

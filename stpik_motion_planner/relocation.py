@@ -30,7 +30,7 @@ PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, 
 
 
 class Arm(Protocol):
-    """What a relocation needs of the arm: its joint angles, motions, the gripper, progress reports."""
+    """The arm a relocation runs on: measured joints, motion, gripper and phase reports."""
 
     def measured(self) -> np.ndarray:
         """Current joint positions (Q convention, rad); raises if they cannot be had."""

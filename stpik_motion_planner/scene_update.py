@@ -17,6 +17,7 @@ ON_SHELF = 0.01  # m: a bottle whose base is farther from the top shelf's surfac
 
 
 def on_top_shelf(shelf: Shelf, bottle: Bottle, base_z: float) -> bool:
+    """True if `bottle` (its base at `base_z`) stands on the top shelf, within its edges."""
     return (abs(base_z - shelf.top_z) < ON_SHELF and shelf.x_front < bottle.x < shelf.x_back
             and shelf.y_min < bottle.y < shelf.y_max)
 

@@ -17,6 +17,8 @@ STREAM_RATE = 100.0  # Hz, the rate of kinova's joint velocity commands
 
 @dataclass
 class Trajectory:
+    """A joint trajectory ready to stream (see the module docstring for the sampling)."""
+
     times: np.ndarray  # (N,) s, from 0
     positions: np.ndarray  # (N, 7) rad, Q convention
     velocities: np.ndarray  # (N, 7) rad/s, velocities[k] held until times[k+1]; last row 0
@@ -25,6 +27,7 @@ class Trajectory:
 
     @property
     def duration(self) -> float:
+        """Length of the trajectory (s); 0 when empty."""
         return float(self.times[-1]) if len(self.times) else 0.0
 
     def __len__(self) -> int:
@@ -80,4 +83,5 @@ class Trajectory:
 
     @classmethod
     def empty(cls) -> "Trajectory":
+        """A trajectory with no points."""
         return cls(np.zeros(0), np.zeros((0, rd.N_JOINTS)), np.zeros((0, rd.N_JOINTS)))

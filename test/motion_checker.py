@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL before mujoco)
 from jaco2_sim_driver.scene import DESCRIPTION_FINGER_GEOMS, HAND_BODY, build_model
 from relocation_common import robot_description as rd
 
@@ -91,8 +90,10 @@ class Report:
     def summary(self) -> str:
         return (f"{self.segments} segments, {self.samples} samples, {len(self.contacts)} contacts "
                 f"(deepest {self.max_depth * 1000:.1f} mm), min clearance {self.min_clearance * 1000:.1f} mm "
-                f"({self.min_clearance_at}), arm {self.min_arm * 1000:.1f} mm ({self.min_arm_at}), carried bottle {self.min_carried * 1000:.1f} mm ({self.min_carried_at}),"
-                f" near pairs {self.min_near * 1000:.1f} mm ({self.min_near_at}), support entry {self.support_depth * 1000:.1f} mm")
+                f"({self.min_clearance_at}), arm {self.min_arm * 1000:.1f} mm ({self.min_arm_at}), "
+                f"carried bottle {self.min_carried * 1000:.1f} mm ({self.min_carried_at}),"
+                f" near pairs {self.min_near * 1000:.1f} mm ({self.min_near_at}), "
+                f"support entry {self.support_depth * 1000:.1f} mm")
 
 
 def _quat(rot) -> np.ndarray:
@@ -109,7 +110,10 @@ class MotionChecker:
         self.model = m = build_model(scenario)
         self.data = mujoco.MjData(m)
         self.distmax, self.support_band, self.support_tol = distmax, support_band, support_tol
-        gid = lambda n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n)  # noqa: E731
+
+        def gid(n):
+            return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n)
+
         self.gid, self.name = gid, lambda g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
         for g in DESCRIPTION_FINGER_GEOMS:  # as in Jaco2Sim: the moving fingers replace them
             m.geom_contype[gid(g)] = m.geom_conaffinity[gid(g)] = 0

@@ -26,11 +26,11 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-from relocation_app import graph  # noqa: E402
-from relocation_app.graph import die_with_parent, param_arg, ros_env  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
+from relocation_app import graph
+from relocation_app.graph import die_with_parent, param_arg, ros_env
 
+REPO = Path(__file__).resolve().parent.parent
 VENV_PYTHON = REPO / ".venv" / "bin" / "python"
 
 

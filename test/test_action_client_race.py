@@ -8,14 +8,15 @@ import time
 
 import pytest
 
-rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
-from rclpy.action import ActionClient as RclpyActionClient  # noqa: E402
+pytest.importorskip("rclpy")
+import rclpy
+from qtree_relocation_msgs.action import RelocateObject
+from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.action import ActionServer
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
-from ros_procs import reserve_domain_id  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor
+from ros_procs import reserve_domain_id
 
-from relocation_common.node import ActionClient  # noqa: E402
+from relocation_common.node import ActionClient
 
 
 class _SlowHandle:

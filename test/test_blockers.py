@@ -1,6 +1,6 @@
 """The motion planner's lane blockers (stpik_motion_planner.blockers) and the blocker A* on the real planner:
 the blockers are the grasp/approach screen exactly, and the A* proves the same optimum as uniform-cost search in
-far fewer planner calls (issue 14)."""
+far fewer planner calls (docs/motion_planner.md, "Blockers")."""
 import json
 import random
 import subprocess

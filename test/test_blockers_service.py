@@ -1,18 +1,19 @@
-"""PlanFeasibility's blocker fields, served by the motion_planner node as a real process (issue 14)."""
+"""PlanFeasibility's blocker fields, served by the motion_planner node as a real process (docs/motion_planner.md,
+"Blockers")."""
 import pytest
 import ros_procs
 from ros_procs import REPO, RosGraph
 
+pytest.importorskip("rclpy")
+from qtree_relocation_msgs.srv import PlanFeasibility
+
+from relocation_common.feasibility import Label
+from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import blockers_from_msgs, lanes_from_msgs
+from relocation_common.scenario import load_scenario
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+
 pytestmark = pytest.mark.graph
-
-rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
-
-from relocation_common.feasibility import Label  # noqa: E402
-from relocation_common.paths import default_scenario  # noqa: E402
-from relocation_common.ros_conversions import blockers_from_msgs, lanes_from_msgs  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
 
 SRV = "/motion_planner/plan_feasibility"
 

@@ -12,21 +12,21 @@ import numpy as np
 import pytest
 from ros_procs import REPO, RosGraph
 
-pytestmark = pytest.mark.graph
-
-rclpy = pytest.importorskip("rclpy")
-from kinova_msgs.msg import JointVelocity  # noqa: E402
-from kinova_msgs.srv import HomeArm  # noqa: E402
-from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
-from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import CameraInfo, Image, JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
+pytest.importorskip("rclpy")
+from kinova_msgs.msg import JointVelocity
+from kinova_msgs.srv import HomeArm
+from qtree_relocation_msgs.msg import ObjectArray
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
 from relocation_common.paths import default_scenario
-from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, Q_HOME, Q_UPPER, QDOT_MAX  # noqa
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, Q_HOME, Q_UPPER, QDOT_MAX
+from relocation_common.scenario import load_scenario
+
+pytestmark = pytest.mark.graph
 
 PARAMS = REPO / "config" / "jaco2_sim_driver.yaml"
 MODULE = "jaco2_sim_driver.driver_node"
@@ -195,8 +195,8 @@ def _rss_mib(pid: int) -> float:
 
 
 def test_8_mb_commands_are_refused_unread(g):
-    """150 commands of 1M values (8 MB) in 3 s (issue 18: the driver went from 245 to 351 MiB and its joint-state
-    rate halved): refused before deserialization, the arm holds still, memory and the state rate stay."""
+    """150 commands of 1M values (8 MB) in 3 s (before the size check the driver went from 245 to 351 MiB and its
+    joint-state rate halved): refused before deserialization, the arm holds still, memory and the state rate stay."""
     _only(g, "ros2_control")
     q0 = _settled_q(g)
     n0, t0, rss0 = len(g.states.msgs), time.monotonic(), _rss_mib(g.node.pid)

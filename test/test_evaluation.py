@@ -118,7 +118,7 @@ def test_small_sweep_resume_and_report(tmp_path, params):
         assert len(cells) == len(QUICK_GRID) and all(float(c) > 0 for c in cells)
     assert (tmp_path / "docs" / "figures" / "tree_scenario1_5.png").stat().st_size > 1000
     assert "| scenario1_5 | 5 |" in md
-    # issue 16: the paper's numbers beside ours, the complete tree, findings judged on both
+    # the paper's numbers beside ours, the complete tree, findings judged on both
     assert "| scenario1_5 | 5 | 84 / 357 (4.2) | 10 / 155 |" in md
     beside = md.split("## Table 1 beside the paper: scenario1_5")[1].split("**MP_q**")[0]
     assert re.search(r"\| LRND_b \| 511 / \d+ \([\d.e+]+\) \|", beside)
@@ -126,7 +126,7 @@ def test_small_sweep_resume_and_report(tmp_path, params):
 
 
 def test_report_puts_the_random_cases_of_the_paper_size_beside_table_4(tmp_path, params):
-    """issue 16: Table 4 case 1 beside paper_random5_00 (its complete tree, the cells, the ratios), and the random
+    """Table 4 case 1 beside paper_random5_00 (its complete tree, the cells, the ratios), and the random
     finding judged on the paper-size set (it said "not checked" without one)."""
     data = SCEN_DIR.parent.parent / "data" / "feasibility"
     sc = scenes([SCEN_DIR / "paper1_5.yaml", SCEN_DIR / "paper_random5" / "paper_random5_00.yaml"], params, data,

@@ -108,7 +108,8 @@ class SimArm:
             if self._rel is None or self._rel[0] != held:
                 self._rel = (held, self._hand_frame(held))
                 self.current = held
-            self.slip[held] = max(self.slip.get(held, 0.0), float(np.linalg.norm(self._hand_frame(held) - self._rel[1])))
+            slip = float(np.linalg.norm(self._hand_frame(held) - self._rel[1]))
+            self.slip[held] = max(self.slip.get(held, 0.0), slip)
         for c in d.contact[:d.ncon]:
             g1, g2 = int(c.geom1), int(c.geom2)
             for a, b in ((g1, g2), (g2, g1)):
@@ -211,7 +212,7 @@ class FailingArm(SimArm):
 
 @pytest.mark.parametrize("phase", ["approach", "carry"])
 def test_recover_after_a_failed_motion_leaves_the_bottle_standing_and_the_arm_home(phase):
-    """issue 18: a relocation that fails in the middle of its approach or of its carry (the target held, 3 cm up
+    """A relocation that fails in the middle of its approach or of its carry (the target held, 3 cm up
     and on its way out) is recovered in MuJoCo: back along the motions made, the bottle let go where it was picked,
     the arm home with the gripper open; no bottle moved more than 5 mm, no unintended contact; the next
     relocation works."""

@@ -1,4 +1,4 @@
-"""Hostile or broken scenario files (issue 18): one short ScenarioError naming the file and the key, never a
+"""Hostile or broken scenario files (docs/reliability.md): one short ScenarioError naming the file and the key, never a
 traceback, a hang or a runaway allocation. Old code: tracebacks (non-numbers in `defaults`, a mapping in a
 `blocking:` list), NaN heights accepted (MuJoCo crashed in the driver), ids breaking the driver's MJCF, marker id
 1e300 and dictionary NOPE accepted, a "billion laughs" growing memory ~20 MB/s, RecursionError on deep nesting,

@@ -21,13 +21,11 @@ import numpy as np
 import pytest
 from ros_procs import REPO, RosGraph
 
-pytestmark = pytest.mark.graph
-
-rclpy = pytest.importorskip("rclpy")
-from kinova_msgs.action import SetFingersPosition  # noqa: E402
-from kinova_msgs.msg import FingerPosition, JointAngles, JointVelocity  # noqa: E402
-from kinova_msgs.srv import HomeArm, Start, Stop  # noqa: E402
-from kinova_outsider import (  # noqa: E402
+pytest.importorskip("rclpy")
+from kinova_msgs.action import SetFingersPosition
+from kinova_msgs.msg import FingerPosition, JointAngles, JointVelocity
+from kinova_msgs.srv import HomeArm, Start, Stop
+from kinova_outsider import (
     ABORTED,
     ARM_JOINTS,
     FINGER_CLOSED,
@@ -38,11 +36,13 @@ from kinova_outsider import (  # noqa: E402
     rad_to_turns,
     turns_to_rad,
 )
-from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray, String  # noqa: E402
-from tf2_msgs.msg import TFMessage  # noqa: E402
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from tf2_msgs.msg import TFMessage
+
+pytestmark = pytest.mark.graph
 
 PRE = "/j2s7s300_driver"
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)

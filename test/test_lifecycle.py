@@ -1,4 +1,5 @@
-"""Nothing hangs, nothing is orphaned (issue 18): the demo under SIGTERM and SIGKILL, a killed test harness.
+"""Nothing hangs, nothing is orphaned (docs/reliability.md, section 9): the demo under SIGTERM and SIGKILL, a killed
+test harness.
 
 Old code: SIGTERM to the demo hung it until its 900 s limit with the four nodes running (rclpy's handler only shut
 the context down); after SIGKILL the nodes were re-parented to PID 1 and went on training. Now SIGTERM stops the

@@ -4,7 +4,8 @@ independent checker (test/motion_checker.py): nothing touches anything it is not
 The demo sequence of a scene is its exact optimum (qtree_task_planner.exact.solve with the real planner as the
 oracle): each obstacle of it, then the target, relocated in that order with relocation.plan_relocation (pick,
 carry, retreat, home planned before the arm would move). Also: a sample of feasibility answers (picks), scenes with
-bottles of other sizes, and the slots and planning errors of issue 13.
+bottles of other sizes, and the slots and planning errors of the carried bottle
+(docs/motion_planner.md, "The carried bottle", "Slots").
 """
 import dataclasses
 import math
@@ -66,7 +67,7 @@ def test_demo_sequence_touches_nothing_but_the_grasped_bottle(path):
     assert_clean(rep, f"{scenario.name} {'-'.join(result.sequence)}")
 
 
-PAPER_SIZE = ("paper1_5", "paper2_10", "paper3_15")  # scenes of the paper's size (issue 16)
+PAPER_SIZE = ("paper1_5", "paper2_10", "paper3_15")  # scenes of the paper's size (docs/evaluation.md)
 PAPER_RANDOM = tuple(f"paper_random5/{p.stem}" for p in sorted((scenarios_dir() / "paper_random5").glob("*.yaml")))
 
 

@@ -7,22 +7,22 @@ import numpy as np
 import pytest
 from ros_procs import REPO, RosGraph
 
-pytestmark = pytest.mark.graph
+pytest.importorskip("rclpy")
+from qtree_relocation_msgs.action import RelocateObject
+from qtree_relocation_msgs.msg import ObjectArray
+from qtree_relocation_msgs.srv import PlanFeasibility
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import Marker
 
-rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
-from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402
-from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
-from rclpy.qos import QoSDurabilityPolicy, QoSProfile  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from visualization_msgs.msg import Marker  # noqa: E402
-
-from relocation_common import robot_description as rd  # noqa: E402
-from relocation_common.feasibility import Label  # noqa: E402
+from relocation_common import robot_description as rd
+from relocation_common.feasibility import Label
 from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from relocation_common.paths import default_scenario
-from relocation_common.scenario import load_scenario  # noqa: E402
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams  # noqa: E402
+from relocation_common.scenario import load_scenario
+from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+
+pytestmark = pytest.mark.graph
 
 SRV = "/motion_planner/plan_feasibility"
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -158,12 +158,12 @@ def _joint_speed(g) -> float:
 
 def test_a_relocated_object_cannot_be_relocated_again(graph):
     """Old code: accepted; the arm drove to the empty place, closed on nothing and aborted 0.95 rad from home, and
-    every later goal failed (issue 18). Runs after the o2 relocation above."""
+    every later goal failed. Runs after the o2 relocation above."""
     assert "already relocated" in _refused(graph, "o2", ())
 
 
 def test_cancel_during_the_carry_sets_the_bottle_down_and_the_next_goal_works(graph):
-    """issue 18: the old node stopped the arm where it was, the bottle held in the air. Now the goal ends cancelled
+    """The old node stopped the arm where it was, the bottle held in the air. Now the goal ends cancelled
     after the recovery: back along the carry, the bottle let go where it was picked, back along the approach."""
     before = _positions(graph)
     handle, feedback = _send(graph, "o3", ["o2"])

@@ -1,4 +1,4 @@
-"""Issue 16: the shipped scenes of the paper's size (config/scenarios/paper*.yaml) have the complete trees their
+"""The shipped scenes of the paper's size (config/scenarios/paper*.yaml) have the complete trees their
 descriptions state, from the committed real-planner feasibility tables; the search's building blocks work."""
 from __future__ import annotations
 
@@ -57,8 +57,10 @@ def test_perturb_and_extend_keep_valid_layouts():
 
 def test_score_prefers_the_goal():
     goal = (84, 10)
-    c = lambda e, lv, w=True: paper_scenes.Candidate({}, complete_tree.TreeSize(e, lv, 1, 1, 0.0), 0, 0.0,  # noqa
-                                                     None, {} if w else None)
+
+    def c(e, lv, w=True):
+        return paper_scenes.Candidate({}, complete_tree.TreeSize(e, lv, 1, 1, 0.0), 0, 0.0, None, {} if w else None)
+
     assert paper_scenes.score(c(84, 10), goal) == 0.0
     assert paper_scenes.score(c(84, 10, False), goal) > 0.0  # no single optimum
     assert paper_scenes.score(c(100, 10), goal) < paper_scenes.score(c(84, 12), goal)

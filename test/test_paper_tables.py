@@ -1,4 +1,4 @@
-"""Issue 16: complete-tree sizes, the paper's Tables 1-4 (data/paper/) and the side-by-side report sections."""
+"""Complete-tree sizes, the paper's Tables 1-4 (data/paper/) and the side-by-side report sections."""
 from __future__ import annotations
 
 import itertools
@@ -29,14 +29,17 @@ def test_complete_tree_matches_the_definition_on_a_blocking_scene():
     sc = load_scenario(SCEN_DIR / "blocking_5.yaml")
     oracle = BlockingOracle(sc)
     size = complete_tree.of_oracle(oracle, sc)
-    label_of = lambda o, s: oracle.feasibility(o, s).label  # noqa: E731
+
+    def label_of(o, s):
+        return oracle.feasibility(o, s).label
+
     assert (size.edges, size.target_leaves) == _naive(sc.obstacle_ids, sc.target_id, label_of)
     assert size.optimal_leaves == 1  # blocking_5: unique optimum o1 o4 T (its header)
     assert size.optimal_weight == pytest.approx(sc.weights["o1"] + sc.weights["o4"])
 
 
 def test_complete_tree_of_scenario1_is_lrnd_mpq():
-    """scenario1_5's LRND MP_q is 357 at alpha < 1 (LRND completes the tree; issue 16 quotes 357)."""
+    """scenario1_5's LRND MP_q is 357 at alpha < 1 (LRND completes the tree; docs/evaluation.md quotes 357)."""
     sc = load_scenario(SCEN_DIR / "scenario1_5.yaml")
     table, _ = open_table(sc, planner_params(), data_dir() / "feasibility")
     size = complete_tree.of_table(table, sc)

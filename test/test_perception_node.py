@@ -8,13 +8,13 @@ import time
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.graph
-
-from jaco2_sim_driver.camera import render_frame  # noqa: E402
-from perception_aruco.images import encode_color, encode_depth  # noqa: E402
-from relocation_app.graph import Graph  # noqa: E402
+from jaco2_sim_driver.camera import render_frame
+from perception_aruco.images import encode_color, encode_depth
+from relocation_app.graph import Graph
 from relocation_common.paths import default_scenario
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_common.scenario import load_scenario
+
+pytestmark = pytest.mark.graph
 
 
 def _image(stamp, enc, h, w, step, data):

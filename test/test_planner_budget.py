@@ -1,5 +1,5 @@
-"""The motion planner's budget is work, not wall time (issue 18): the same question gets the same answer on an idle
-and on a loaded machine, and the wall-clock safety net, when it runs out, is no answer (never UNFEASIBLE).
+"""The motion planner's budget is work, not wall time (docs/reliability.md): the same question gets the same answer on
+an idle and on a loaded machine, and the wall-clock safety net, when it runs out, is no answer (never UNFEASIBLE).
 
 The load is simulated inside the planner's own process: every hand-proxy validity check (RRT-Connect's unit of
 work) busy-waits LOAD_FACTOR times its idle cost more (measured in the idle run), about 8x slower, as on a machine

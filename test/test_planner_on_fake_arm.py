@@ -19,16 +19,16 @@ import numpy as np
 import pytest
 from ros_procs import REPO, RosGraph
 
+pytest.importorskip("rclpy")
+from kinova_msgs.msg import JointVelocity
+from kinova_outsider import ARM_JOINTS, FINGER_CLOSED, FINGER_JOINTS, SUCCEEDED, Client, rad_to_turns
+from qtree_relocation_msgs.action import RelocateObject
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from relocation_common.robot_description import Q_HOME, QDOT_MAX
+
 pytestmark = pytest.mark.graph
-
-rclpy = pytest.importorskip("rclpy")
-from kinova_msgs.msg import JointVelocity  # noqa: E402
-from kinova_outsider import ARM_JOINTS, FINGER_CLOSED, FINGER_JOINTS, SUCCEEDED, Client, rad_to_turns  # noqa: E402
-from qtree_relocation_msgs.action import RelocateObject  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
-
-from relocation_common.robot_description import Q_HOME, QDOT_MAX  # noqa: E402
 
 PRE = "/j2s7s300_driver"
 

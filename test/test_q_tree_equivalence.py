@@ -31,7 +31,6 @@ from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
-
 FIXTURE = ROOT / "test" / "data" / "qtree_reference.json"
 ALGORITHMS = [(p, s) for p in ("lrnd", "h-lrnd", "h-eg") for s in ("breadth", "depth")]
 BASE = dict(alpha=0.5, gamma=1.0, epsilon0=1.0, epsilon_min=1e-3, max_episodes=1500, max_steps=100, beta=0.01,

@@ -18,13 +18,14 @@ import numpy as np
 import pytest
 import yaml
 
-rclpy = pytest.importorskip("rclpy")
-mcap_reader = pytest.importorskip("mcap.reader")
-from mcap_ros2._dynamic import generate_dynamic  # noqa: E402
-from rclpy.serialization import serialize_message  # noqa: E402
+pytest.importorskip("rclpy")
+pytest.importorskip("mcap.reader")
+from mcap import reader as mcap_reader
+from mcap_ros2._dynamic import generate_dynamic
+from rclpy.serialization import serialize_message
 
-from relocation_app import recording  # noqa: E402
-from relocation_app.recording import (  # noqa: E402
+from relocation_app import recording
+from relocation_app.recording import (
     DELIMITER,
     BagWriter,
     RetrievalVideo,

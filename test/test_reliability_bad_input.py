@@ -1,4 +1,4 @@
-"""Bad input across the graph (issue 8): malformed or partial parameter and scenario files.
+"""Bad input across the graph (docs/reliability.md, section 4): malformed or partial parameter and scenario files.
 
 Nodes: the driver and perception exit with status 2 and one line naming the problem (the task planner's cases are
 in test_reliability_task_planner.py). Core: PlannerParams (config/motion_planner.yaml) raises a clear error.
@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_procs import REPO, RosGraph  # noqa: E402
+from ros_procs import REPO, RosGraph
 
-from stpik_motion_planner.feasibility import PlannerParams  # noqa: E402
+from stpik_motion_planner.feasibility import PlannerParams
 
 DRIVER = ("jaco2_sim_driver.driver_node", REPO / "config" / "jaco2_sim_driver.yaml", "jaco2_sim_driver: ")
 PERCEPTION = ("perception_aruco.perception_node", REPO / "config" / "perception.yaml", "perception: ")
@@ -54,7 +54,10 @@ CASES = [  # (node, ros args, words of the one line)
 
 def test_driver_perception_and_planner_refuse_bad_files_and_parameters_with_one_line(tmp_path):
     files = _files(tmp_path)
-    subst = lambda a: next((files[k.lower()] for k in files if a.endswith(k.upper())), a)  # noqa: E731
+
+    def subst(a):
+        return next((files[k.lower()] for k in files if a.endswith(k.upper())), a)
+
     with RosGraph(tmp_path) as g:
         procs = []
         for k, ((module, params_file, _), args, _) in enumerate(CASES):

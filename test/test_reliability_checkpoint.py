@@ -1,4 +1,4 @@
-"""Q-Tree checkpoints (docs/reliability.md): atomic save, validated load, and a resumed training equal to an
+"""Q-Tree checkpoints (docs/reliability.md, section 1): atomic save, validated load, and a resumed training equal to an
 uninterrupted one with the same seed (blocking_10, BlockingOracle), after a periodic checkpoint, after a restart from
 disk, and after the planner died in the middle of an episode."""
 import json

@@ -1,6 +1,7 @@
-"""Load (issue 8), the test-sized version of scripts/bench_reliability.py: 40 feasibility requests (one in ten bad)
-from 4 concurrent client processes against the real motion_planner node. Every request is answered: a label, or a
-refusal with a reason (all bad ones, no valid one); the node survives, its memory stays bounded, it exits 0."""
+"""Load (docs/reliability.md, section 6), the test-sized version of scripts/bench_reliability.py: 40 feasibility
+requests (one in ten bad) from 4 concurrent client processes against the real motion_planner node. Every request is
+answered: a label, or a refusal with a reason (all bad ones, no valid one); the node survives, its memory stays bounded,
+it exits 0."""
 import importlib.util
 
 import pytest

@@ -1,6 +1,6 @@
-"""Security basics (issue 8): the graph starts with discovery on the loopback only and on a private domain id, and a
-graph on one domain is invisible from another. (That LOCALHOST keeps other machines out cannot be shown on one
-host: docs/reliability.md says how to open it up across machines and what that exposes.)"""
+"""Security basics (docs/reliability.md, section 8): the graph starts with discovery on the loopback only and on a
+private domain id, and a graph on one domain is invisible from another. (That LOCALHOST keeps other machines out cannot
+be shown on one host: docs/reliability.md says how to open it up across machines and what that exposes.)"""
 import time
 
 import pytest

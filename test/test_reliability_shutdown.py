@@ -1,9 +1,10 @@
-"""Shutdown (issue 8): every node exits with status 0 within 2 s of SIGINT and of SIGTERM, again and again.
+"""Shutdown (docs/reliability.md, section 7): every node exits with status 0 within 2 s of SIGINT and of SIGTERM, again
+and again.
 
 Each round starts the whole graph at once on a private domain with the real parameter files (so the nodes are
 busy: the driver steps and renders, perception processes the driver's frames), waits until every node has finished
 starting (its ready line in the log), then signals the nodes one at a time and times each exit. The default suite
-runs 3 rounds per signal; the `slow` test runs 20 per signal (issue 8's figure; docs/reliability.md)."""
+runs 3 rounds per signal; the `slow` test runs 20 per signal (docs/reliability.md's figure)."""
 import os
 import signal
 import subprocess
@@ -14,11 +15,11 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_procs import REPO, RosGraph  # noqa: E402
+from ros_procs import REPO, RosGraph
 
 pytestmark = pytest.mark.graph
 
-DEADLINE = 2.0  # s, issue 8
+DEADLINE = 2.0  # s, docs/reliability.md section 7
 # node -> (module, params file, extra params, the log line that ends its start-up)
 NODES = {
     "jaco2_sim_driver": ("jaco2_sim_driver.driver_node", "jaco2_sim_driver.yaml", {}, "real_time_factor"),

@@ -98,14 +98,15 @@ if __name__ == "__main__":
 
 # ---------------------------------------------------------------------------------------------------------------
 pytestmark = pytest.mark.graph
+# The test side's ROS imports, below the fake planner the subprocesses run (`__main__` above):
 rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402 - after the importorskip of rclpy
-from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402 - after the importorskip of rclpy
-from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402 - after the importorskip of rclpy
+from qtree_relocation_msgs.action import TrainPlanner  # noqa: E402 -- after the fake planner's script part
+from qtree_relocation_msgs.msg import ObjectArray  # noqa: E402 -- after the fake planner's script part
+from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402 -- after the fake planner's script part
 
-from qtree_task_planner.ros_clients import train_goal  # noqa: E402 - after the importorskip of rclpy
-from relocation_common.node import ActionClient  # noqa: E402 - after the importorskip (rclpy#1123 fixed)
-from relocation_common.ros_conversions import bottles_to_msg  # noqa: E402 - after the importorskip of rclpy
+from qtree_task_planner.ros_clients import train_goal  # noqa: E402 -- after the fake planner's script part
+from relocation_common.node import ActionClient  # noqa: E402 -- after the script part; has the rclpy#1123 fix
+from relocation_common.ros_conversions import bottles_to_msg  # noqa: E402 -- after the fake planner's script part
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SC10 = load_scenario(SCENARIO)
@@ -373,7 +374,7 @@ def test_bad_parameters_exit_2_with_one_line(tmp_path):
             assert len(lines) == 1 and lines[0].startswith("task_planner: ") and words in lines[0], (args, lines)
 
 
-# -- lifecycle: nothing hangs --------------------------------------------------------------------------------------
+# -- lifecycle (docs/reliability.md, section 9): nothing hangs ----------------------------------------------------
 def _send_async(env, node, **fields):
     """Send a goal; returns (goal handle future, feedback list)."""
     _wait(lambda: env.client.wait_for_server(timeout_sec=0.2), 30, "train action never appeared", node)

@@ -1,6 +1,6 @@
-"""Planner replicas in the real graph (issue 15), each test with real motion planner processes
-(Graph.start_planners): a task planner with `replicas: 2` whose first planner is SIGKILLed during training (the
-replica answers the rest, the goal ends with a learned sequence instead of aborting after planner_wait); a table
+"""Planner replicas in the real graph (docs/architecture.md, "planner replicas"), each test with real motion planner
+processes (Graph.start_planners): a task planner with `replicas: 2` whose first planner is SIGKILLed during training
+(the replica answers the rest, the goal ends with a learned sequence instead of aborting after planner_wait); a table
 fill, `qtree --oracle replicas`, and the example script, each through two planners."""
 import re
 import signal
@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.graph
+from relocation_app.graph import Graph
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario
 
-from relocation_app.graph import Graph  # noqa: E402
-from relocation_common.paths import scenarios_dir  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+pytestmark = pytest.mark.graph
 
 SCENARIO = scenarios_dir() / "paper_experiment_10.yaml"
 TOPIC = "/test/objects"

@@ -8,9 +8,9 @@ import sys
 import pytest
 from ros_procs import REPO, reserve_domain_id
 
-pytestmark = [pytest.mark.graph, pytest.mark.slow]
+from relocation_common.scenario import load_scenario
 
-from relocation_common.scenario import load_scenario  # noqa: E402
+pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
 SCENARIO = REPO / "config" / "scenarios" / "scenario1_5.yaml"
 

@@ -13,7 +13,8 @@ from stpik_motion_planner.collision import ArmGeometry, CollisionScene, segment_
 from stpik_motion_planner.feasibility import PlannerParams
 from stpik_motion_planner.kinematics import Kinematics
 
-MJCF = f"""<mujoco><compiler angle="radian"/><default><default class="arm_collision"><geom contype="1" conaffinity="1"/></default></default>
+MJCF = f"""<mujoco><compiler angle="radian"/>\
+<default><default class="arm_collision"><geom contype="1" conaffinity="1"/></default></default>
 <worldbody>{rd.mjcf_arm_body()}</worldbody></mujoco>"""
 
 

@@ -1,4 +1,5 @@
-"""PlanFeasibility under a burst (issue 18): every request of a burst of concurrent requests is answered.
+"""PlanFeasibility under a burst (docs/reliability.md, section 9): every request of a burst of concurrent requests is
+answered.
 
 Old code: the service kept rclpy's default depth of 10; of 50 (200) concurrent requests from one client, 11 were
 answered and the rest dropped silently, their client waiting forever. A client's own history (depth 10 by default)
@@ -11,9 +12,10 @@ import time
 import pytest
 from ros_procs import REPO, RosGraph
 
+pytest.importorskip("rclpy")
+from qtree_relocation_msgs.srv import PlanFeasibility
+
 pytestmark = pytest.mark.graph
-rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
 
 SRV = "/motion_planner/plan_feasibility"
 
@@ -21,8 +23,8 @@ SRV = "/motion_planner/plan_feasibility"
 @pytest.mark.parametrize("burst", [50, 200])
 def test_a_burst_of_concurrent_requests_is_answered_in_full(tmp_path, burst):
     with RosGraph(tmp_path) as g:
-        planner = g.start("stpik_motion_planner.motion_planner_node", params_file=REPO / "config" / "motion_planner.yaml",
-                          params={"scene_topic": "/none"})
+        planner = g.start("stpik_motion_planner.motion_planner_node",
+                          params_file=REPO / "config" / "motion_planner.yaml", params={"scene_topic": "/none"})
         from rclpy.qos import QoSProfile
         cli = g.probe.node.create_client(PlanFeasibility, SRV, qos_profile=QoSProfile(depth=1000))
         assert cli.wait_for_service(timeout_sec=60)

@@ -7,7 +7,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver.camera import intrinsics, render_frame
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, rpy_matrix
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
@@ -86,7 +85,7 @@ def test_bad_command_is_rejected_and_changes_nothing(fresh, bad):
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_huge_commands_never_leave_tables_6_and_7(fresh, sign):
-    """+-1e30 on every joint for 3 s (issue 18: before the firmware-like limits, joint 3 reached 1.14x Table 7 and
+    """+-1e30 on every joint for 3 s (before the firmware-like limits, joint 3 reached 1.14x Table 7 and
     joint 4 went past Table 6): at every 1 ms step each joint within its velocity and position limits."""
     from relocation_common.robot_description import CONTINUOUS
     limited = ~np.asarray(CONTINUOUS)

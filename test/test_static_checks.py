@@ -31,6 +31,8 @@ def test_noqa_lines_say_why():
     for path in ROOT.rglob("*.py"):
         if any(part in (".venv", "build", "install", "log") for part in path.relative_to(ROOT).parts):
             continue
+        if path == Path(__file__).resolve():  # this file names the marker and the pattern it looks for
+            continue
         for i, line in enumerate(path.read_text().splitlines(), 1):
             if "# noqa" in line:
                 tail = line.split("# noqa", 1)[1]
@@ -48,6 +50,8 @@ def test_comments_cite_no_tracker_issues():
     hits = []
     for path in ROOT.rglob("*.py"):
         if any(part in (".venv", "build", "install", "log") for part in path.relative_to(ROOT).parts):
+            continue
+        if path == Path(__file__).resolve():  # this file names the marker and the pattern it looks for
             continue
         for i, line in enumerate(path.read_text().splitlines(), 1):
             if pat.search(line):

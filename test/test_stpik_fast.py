@@ -1,4 +1,5 @@
-"""The fast STPIK / collision layer gives the answers recorded before it existed (issue 15).
+"""The fast STPIK / collision layer gives the answers recorded before it existed (docs/motion_planner.md,
+"Performance notes").
 
 test/data/stpik_reference.json was recorded from the planner as it was before the speed work (main at 5bd83aa,
 `python test/test_stpik_fast.py record`): feasibility queries on scenario3_15 and paper_experiment_10 (the

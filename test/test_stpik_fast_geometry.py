@@ -1,6 +1,7 @@
-"""The fast pieces of STPIK and the collision layer (issue 15) against straightforward references: the hand
-proxy's broad phase drops no contact, capsules posed all at once sit where each link's placement puts them, and
-the hierarchy (Eq. 10) with numpy's SVD gufunc equals the textbook recursion bit for bit."""
+"""The fast pieces of STPIK and the collision layer (docs/motion_planner.md, "Performance notes") against
+straightforward references: the hand proxy's broad phase drops no contact, capsules posed all at once sit where each
+link's placement puts them, and the hierarchy (Eq. 10) with numpy's SVD gufunc equals the textbook recursion bit for
+bit."""
 import fcl
 import numpy as np
 
@@ -59,7 +60,7 @@ def test_capsules_posed_at_once_sit_on_their_links():
 
 
 def _hierarchy_reference(levels, n, damping):
-    """The recursion as written before issue 15 (np.linalg.svd, identity products included)."""
+    """The recursion as first written, before the fast layer (np.linalg.svd, identity products included)."""
     qdot, proj = np.zeros(n), np.eye(n)
     for jac, xd in levels:
         if jac is None:

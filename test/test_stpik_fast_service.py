@@ -1,5 +1,5 @@
-"""PlanFeasibility's label_only (issue 15) over DDS: the same answer without the trajectory; the service is served
-while the node's main executor is busy elsewhere (its own executor thread)."""
+"""PlanFeasibility's label_only (docs/motion_planner.md, "Performance notes") over DDS: the same answer without the
+trajectory; the service is served while the node's main executor is busy elsewhere (its own executor thread)."""
 import contextlib
 from unittest import mock
 
@@ -7,10 +7,10 @@ import pytest
 import ros_procs
 from ros_procs import REPO, RosGraph
 
-pytestmark = pytest.mark.graph
+pytest.importorskip("rclpy")
+from qtree_relocation_msgs.srv import PlanFeasibility
 
-rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
+pytestmark = pytest.mark.graph
 
 SRV = "/motion_planner/plan_feasibility"
 

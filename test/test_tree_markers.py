@@ -3,13 +3,13 @@ import pytest
 
 pytest.importorskip("visualization_msgs")
 
-from qtree_task_planner.markers import tree_markers  # noqa: E402
-from qtree_task_planner.oracles import BlockingOracle  # noqa: E402
-from qtree_task_planner.params import TrainingParams  # noqa: E402
-from qtree_task_planner.problem import RelocationProblem  # noqa: E402
-from qtree_task_planner.training import train  # noqa: E402
-from relocation_common.paths import scenarios_dir  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+from qtree_task_planner.markers import tree_markers
+from qtree_task_planner.oracles import BlockingOracle
+from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.training import train
+from relocation_common.paths import scenarios_dir
+from relocation_common.scenario import load_scenario
 
 SCENE = load_scenario(scenarios_dir() / "blocking_5.yaml")
 

@@ -13,6 +13,7 @@ RANK_METRICS = {"E_ss": "E_ss", "MP_q": "MP_q", "E_1st": "E_1st_pen"}
 
 
 def means(cells: dict, metric: str) -> dict[str, float]:
+    """Algorithm -> mean of `metric` over its cells (E_1st with never-optimal runs counted in full)."""
     key = RANK_METRICS.get(metric, metric)
     out = {}
     for alg in algorithms_order():
@@ -23,6 +24,7 @@ def means(cells: dict, metric: str) -> dict[str, float]:
 
 
 def rank(cells: dict, metric: str, alg: str) -> int:
+    """1-based rank of `alg` on `metric` (lower mean is better; ties share a rank)."""
     m = means(cells, metric)
     return 1 + sum(1 for v in m.values() if v < m[alg] - 1e-9)
 

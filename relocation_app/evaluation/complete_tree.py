@@ -24,6 +24,8 @@ LabelOf = Callable[[str, frozenset], Label]
 
 @dataclass(frozen=True)
 class TreeSize:
+    """Counts of a scene's complete Q-Tree (module docstring)."""
+
     edges: int          # edges of the complete Q-Tree (the paper's LRND MP_q)
     target_leaves: int  # sequences of feasible relocations ending with the target
     nodes: int          # nodes (sequences of removed obstacles, the root included)

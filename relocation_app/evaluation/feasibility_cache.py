@@ -27,6 +27,7 @@ import json
 import os
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -82,12 +83,14 @@ def planner_content(params) -> dict:
 
 
 def cache_key(scenario, params) -> str:
+    """SHA-256 (hex) of the scene content, planner parameters and CACHE_VERSION: the table's identity."""
     blob = json.dumps({"version": CACHE_VERSION, "scenario": scenario_content(scenario),
                        "planner": planner_content(params)}, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
 def cache_path(scenario, params, directory: str | Path = DATA_DIR) -> Path:
+    """The table file of `scenario` and `params` in `directory`: <scene name>-<first 12 of the key>.json."""
     return Path(directory) / f"{scenario.name}-{cache_key(scenario, params)[:12]}.json"
 
 
@@ -104,22 +107,27 @@ class FeasibilityTable:
 
     @classmethod
     def for_scenario(cls, scenario, params) -> "FeasibilityTable":
+        """An empty table keyed for `scenario` and `params`."""
         return cls(cache_key(scenario, params), scenario.name, planner_content(params))
 
     def __len__(self) -> int:
         return len(self.entries)
 
     def get(self, object_id: str, removed: frozenset[str]) -> Label | None:
+        """The recorded label of (object_id, removed), None when not in the table."""
         e = self.entries.get((object_id, removed))
         return None if e is None else e[0]
 
     def put(self, object_id: str, removed: frozenset[str], label: Label, planning_time: float = 0.0,
             attempts: int = 0) -> None:
+        """Record a label (and its planning time and attempts) for (object_id, removed)."""
         self.entries[(object_id, frozenset(removed))] = (Label(label), float(planning_time), int(attempts))
 
     def to_json(self) -> dict:
-        rows = sorted(([o, sorted(r), int(lab), round(t, 6), a] for (o, r), (lab, t, a) in self.entries.items()),
-                      key=lambda x: (len(x[1]), x[1], x[0]))
+        """The file's JSON object: header and rows sorted by set size, set, object."""
+        rows: list[list[Any]] = [[o, sorted(r), int(lab), round(t, 6), a]
+                                 for (o, r), (lab, t, a) in self.entries.items()]
+        rows.sort(key=lambda x: (len(x[1]), x[1], x[0]))
         return {"format": "qtree-feasibility-cache", "version": CACHE_VERSION, "key": self.key,
                 "scenario": self.scenario_name, "planner": self.planner,
                 "columns": ["object", "removed", "label", "planning_time_s", "attempts"], "entries": rows}
@@ -196,12 +204,14 @@ class PlannerOracle:
 
     @property
     def planner(self):
+        """The real MotionPlanner, created on the first table miss."""
         if self._planner is None:
             from stpik_motion_planner.feasibility import MotionPlanner
             self._planner = MotionPlanner(self.scenario, self.params)
         return self._planner
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """Eq. 11 for `object_id` with `removed` gone: from the table, else planned and recorded."""
         removed = frozenset(removed)
         label = self.table.get(object_id, removed)
         if label is not None:
@@ -273,8 +283,8 @@ def fill_reachable(scenario, params, table: FeasibilityTable, workers: int = 2, 
     calls = 0
     pool = None
     try:
-        level = [frozenset()]
-        reached = {frozenset(): ()}
+        level: list[frozenset] = [frozenset()]
+        reached: dict[frozenset, tuple[str, ...]] = {frozenset(): ()}
         removable = _removable(table)
         while level:
             todo = [(o, tuple(sorted(s))) for s in level for o in scenario.ids

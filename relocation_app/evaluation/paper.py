@@ -14,7 +14,7 @@ from relocation_common.paths import data_dir
 
 PAPER_DIR = data_dir() / "paper"
 SCENARIOS = {1: 5, 2: 10, 3: 15}  # Table k -> obstacles
-COMPLETE_TREE = {1: 84, 2: 622, 3: 1675}  # edges of the complete tree: LRND's MP_q (issue 16)
+COMPLETE_TREE = {1: 84, 2: 622, 3: 1675}  # edges of the complete tree: LRND's MP_q (complete_tree.py)
 TARGET_LEAVES = {1: 10, 2: 20, 3: 20}  # "feasible sequences" (Sect. 5.1)
 MARKS = {"uncertain": "?", "doubtful": "!"}
 
@@ -40,7 +40,8 @@ def _flags() -> dict:
 
 def mark(table: int, k: int, alpha, gamma, algorithm: str, metric: str) -> str:
     """'?' uncertain, '!' doubtful, '' clean (Table 4: alpha = gamma = None)."""
-    return MARKS.get(_flags().get((table, k, alpha, gamma, algorithm, metric)), "")
+    kind = _flags().get((table, k, alpha, gamma, algorithm, metric))
+    return MARKS.get(kind, "") if kind is not None else ""
 
 
 @lru_cache(maxsize=None)

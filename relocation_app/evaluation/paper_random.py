@@ -1,4 +1,4 @@
-"""Table 4's ten random cases at the paper's size (issue 16): `python -m relocation_app.evaluation.make_scenes
+"""Table 4's ten random cases at the paper's size (docs/evaluation.md): `python -m relocation_app.evaluation.make_scenes
 paper-random`, scenes config/scenarios/paper_random5/paper_random5_XX.yaml.
 
 The paper's random cases have 5 obstacles and complete Q-Trees of 71-104 edges (their LRND MP_q, Table 4). Case c
@@ -21,11 +21,12 @@ from .scenarios_gen import write_scene
 DIR = "paper_random5"
 SEED0 = 5000  # the first layout seed tried is SEED0 + 1
 LEAVES = 10  # the screen's leaf goal (scenario 1's count), with slack 1.0: 0-20
-HEADER = ("# Table 4 random case at the paper's size (issue 16, docs/evaluation.md), drawn with the real motion planner by\n"
+HEADER = ("# Table 4 random case at the paper's size (docs/evaluation.md), drawn with the real motion planner by\n"
           "# relocation_app/evaluation/paper_random.py on the shelf of paper_experiment_10. Format: docs/scenarios.md.")
 
 
 def name(case: int) -> str:
+    """Scene name of Table 4 case `case` (1-based): paper_random5_00 .. _09."""
     return f"{DIR}_{case - 1:02d}"
 
 
@@ -43,9 +44,9 @@ def draw(case: int, params, work, seed: int, deadline: float, log=print):
         if d is None:
             continue
         c = paper_scenes.evaluate(d, params, work, goal)
-        edges = c.size.edges if c.size is not None else None
-        if edges is None or not goal[0] / paper_scenes.WITHIN <= edges <= goal[0] * paper_scenes.WITHIN:
+        if c.size is None or not goal[0] / paper_scenes.WITHIN <= c.size.edges <= goal[0] * paper_scenes.WITHIN:
             continue
+        edges = c.size.edges
         # weights drawn from the layout's seed: with the searches' seed 0, two cases of one blocking structure
         # got the same weights, hence the same training statistics
         c.weighted = paper_scenes.one_optimum(copy.deepcopy(d), c.table, 30, seed=seed)

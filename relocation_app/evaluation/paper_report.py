@@ -1,4 +1,4 @@
-"""Sections of docs/evaluation.md that put the paper's numbers (paper.py, data/paper/) beside ours (issue 16):
+"""Sections of docs/evaluation.md that put the paper's numbers (paper.py, data/paper/) beside ours:
 complete-tree sizes, Tables 1-3 cell by cell with the ratio, Table 4 per case, the findings judged on both.
 
 A cell reads `paper / ours (ours/paper)`; the paper's value carries '?' when uncertain and '!' when doubtful
@@ -8,6 +8,7 @@ E_1st a run that never reached the optimum is left out, as in Tables 1-3 shape.
 from __future__ import annotations
 
 import statistics
+from typing import Sequence
 
 from . import claims, complete_tree, paper
 from .tables import METRICS, algorithms_order, grid_of
@@ -23,7 +24,7 @@ def _cell(p, flag: str, ours) -> str:
     return f"{_v(p)}{flag} / {_v(ours)}{ratio}"
 
 
-def tree_table(rows: list[tuple[str, int, object]]) -> str:
+def tree_table(rows: list[tuple[str, int, complete_tree.TreeSize | str]]) -> str:
     """rows: (scene, paper scenario k, complete_tree.TreeSize or an error string)."""
     lines = ["| scene | obstacles | complete-tree edges: paper / ours (ratio) | target leaves: paper / ours | "
              "optimal target leaves | nodes |", "|---|---:|---|---|---:|---:|"]
@@ -110,7 +111,8 @@ def table4_ratios(idx: dict, random: list[str]) -> str:
     return "; ".join(parts) or "no cells in common"
 
 
-def findings(sets: list[tuple[str, dict, list[str], list[str], frozenset]]) -> tuple[str, list[list]]:
+def findings(sets: list[tuple[str, dict, list[str], list[str], frozenset]]
+             ) -> tuple[str, list[tuple[str, list[tuple[str, str, str]]]]]:
     """Each finding judged on each set: (label, index, scenes 1-3, random scenes, off-target cells). The paper's
     own numbers come first. Returns the markdown table and the deciding numbers per set."""
     verdicts = []
@@ -175,7 +177,7 @@ leaves); the paper's 84 / 10 / one optimum needs an optimum that Eq. 8 alone doe
 """
 
 
-def _trees(info: dict, names: list[str]) -> list[tuple[str, int, object]]:
+def _trees(info: dict, names: list[str]) -> list[tuple[str, int, complete_tree.TreeSize | str]]:
     """(scene, paper scenario k, its complete_tree.TreeSize or why not) for scenes 1-3 of a set."""
     return [(name, k, complete_tree.of_table(info[name][1], info[name][0]) if name in info
              else "no complete feasibility table") for k, name in enumerate(names, 1)]
@@ -197,7 +199,7 @@ def complete_tree_section(info: dict, paper_set: list[str], main: list[str]) -> 
 
 
 def beside_paper_sections(idx: dict, paper_set: list[str], main: list[str], random: list[str],
-                          paper_random: list[str] = (), info: dict | None = None) -> list[str]:
+                          paper_random: Sequence[str] = (), info: dict | None = None) -> list[str]:
     """Sections "Table k beside the paper" for both sets of scenes, then Table 4 per case for both random sets."""
     md = []
     for label, names in (("scenes of the paper's size", paper_set), ("this project's geometry", main)):
@@ -233,8 +235,9 @@ def findings_section(md: list[str], idx, paper_set, main, random, off_target, pa
     """Section "The paper's findings": each judged on the paper's numbers and on ours (both sets); the deciding
     numbers per set below. Returns [(set label, [(claim, verdict, evidence)])]."""
     pidx = paper.index()
-    sets = [("the paper's numbers", pidx, [f"paper scenario {k}" for k in (1, 2, 3)],
-             [f"paper case {c}" for c in range(1, 11)], frozenset())]
+    sets: list[tuple[str, dict, list[str], list[str], frozenset]] = [
+        ("the paper's numbers", pidx, [f"paper scenario {k}" for k in (1, 2, 3)],
+         [f"paper case {c}" for c in range(1, 11)], frozenset())]
     for label, names, rnd in (("ours: scenes of the paper's size", paper_set, list(paper_random)),
                               ("ours: this project's geometry", main, random)):
         present = [s for s in names if s in idx]
@@ -251,7 +254,7 @@ def findings_section(md: list[str], idx, paper_set, main, random, off_target, pa
 
 def closing_note(info: dict, paper_set: list[str], main: list[str], found: list) -> str:
     """Section "Closing note": the complete trees reached per scene against the paper's, and each finding's
-    verdict on the paper's numbers and on ours (issue 16)."""
+    verdict on the paper's numbers and on ours."""
     lines = ["## Closing note: the paper's scenes against ours\n"]
     for label, names in (("Scenes of the paper's size", paper_set), ("This project's geometry", main)):
         parts = [f"{name} {t.edges} edges / {t.target_leaves} target leaves / {t.optimal_leaves} optimal (paper "

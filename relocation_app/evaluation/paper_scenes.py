@@ -1,4 +1,5 @@
-"""Search for scenes of the paper's structure (Sect. 5.1) with the real motion planner (issue 16).
+"""Search for scenes of the paper's structure (Sect. 5.1) with the real motion planner
+(docs/evaluation.md, "Complete trees").
 
 The paper's scenarios 1-3 have complete Q-Trees (complete_tree.py) of 84 / about 622 / about 1,675 edges (their
 LRND MP_q) with 10 / 20 / 20 target leaves and one optimum. A candidate is a cluttered layout on the shelf of
@@ -20,11 +21,13 @@ from . import complete_tree
 from .scenarios_gen import MAX_REACH, RADIUS, scene_data
 
 PAPER_TREES = {5: (84, 10), 10: (622, 20), 15: (1675, 20)}  # obstacles -> (complete-tree edges, target leaves)
-WITHIN = 2.0  # accepted factor on the edges (issue 16)
+WITHIN = 2.0  # accepted factor on the edges (docs/evaluation.md, "Complete trees")
 
 
 @dataclass
 class Candidate:
+    """A scene drawn by the search, with its complete-tree size and the checks it passed."""
+
     data: dict
     size: complete_tree.TreeSize | None  # None: the fill stopped, the tree is larger than the cap
     queries: int
@@ -40,6 +43,7 @@ class Candidate:
         return abs(math.log(self.size.edges / goal[0])) + abs(math.log(self.size.target_leaves / goal[1]))
 
     def ok(self, goal: tuple[int, int], leaves_tol: float = 0.0) -> bool:
+        """True when edges are within WITHIN x the goal's, target leaves within tolerance, one optimum."""
         s = self.size
         return (s is not None and goal[0] / WITHIN <= s.edges <= goal[0] * WITHIN
                 and abs(s.target_leaves - goal[1]) <= leaves_tol * goal[1] and self.weighted is not None)
@@ -263,7 +267,10 @@ def optimum_sequence(data: dict, table, params) -> tuple[str, ...]:
 
     from .feasibility_cache import PlannerOracle
     sc = parse_scenario(data, data["name"])
-    return tuple(solve(sc, PlannerOracle(sc, params, table)).sequence)
+    seq = solve(sc, PlannerOracle(sc, params, table)).sequence
+    if seq is None:
+        raise ValueError(f"{data['name']}: no relocation sequence frees the target in this table")
+    return tuple(seq)
 
 
 def optimum_plans(data: dict, table, params, repeats: int = 6) -> str:
@@ -301,6 +308,8 @@ def describe(c: Candidate) -> str:
 def _finish(c: Candidate, params, directory, log) -> dict | None:
     """Weights for one optimum, then the camera check; the data on success, None otherwise."""
     d = c.weighted
+    if d is None:  # no weights give one optimum (Candidate.ok asks for them)
+        return None
     missing = visible(d)
     if missing:
         log(f"  match, but not visible: {missing}")
@@ -310,10 +319,10 @@ def _finish(c: Candidate, params, directory, log) -> dict | None:
 
 
 # ------------------------------------------------------------------------------------------------ screen
-# The proposal filter is the planner's own grasp-lane screen (stpik_motion_planner.blockers, issue 14): per bottle
-# and approach yaw, the bottles the hand meets on that lane with every bottle present; an object passes the screen
-# once all blockers of one of its lanes are removed. STPIK and RRT-Connect can still fail after the screen, so every
-# scene kept is judged by the real planner.
+# The proposal filter is the planner's own grasp-lane screen (stpik_motion_planner.blockers; docs/motion_planner.md,
+# "Blockers"): per bottle and approach yaw, the bottles the hand meets on that lane with every bottle present; an object
+# passes the screen once all blockers of one of its lanes are removed. STPIK and RRT-Connect can still fail after the
+# screen, so every scene kept is judged by the real planner.
 _SCREEN: dict = {}
 
 

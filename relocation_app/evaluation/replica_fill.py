@@ -1,4 +1,5 @@
-"""A feasibility table filled through motion planner processes over ROS (issue 15), instead of this process's pool.
+"""A feasibility table filled through motion planner processes over ROS (planner replicas: docs/architecture.md),
+instead of this process's pool.
 
 `replica_oracle(scenario_path, replicas)` starts the motion planner and replicas - 1 feasibility-only replicas
 (relocation_app.graph.Graph.start_planners) on the scene, on a private domain, and yields the task planner's

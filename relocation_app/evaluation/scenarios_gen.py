@@ -92,6 +92,7 @@ def accept(report, min_sequences: int = 2) -> bool:
 
 
 def write_scene(data: dict, path: str | Path, header: str = "") -> Path:
+    """Validate `data` as a scenario and write it as YAML to `path`, after the comment `header`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     parse_scenario(data, str(path))  # validate before writing

@@ -22,6 +22,8 @@ WEIGHT_TOL = 1e-9
 
 @dataclass(frozen=True)
 class SequenceReport:
+    """The feasible sequences of a scene and their optimum (module docstring)."""
+
     n_obstacles: int
     reachable_sets: int
     target_free_at_start: bool
@@ -33,10 +35,12 @@ class SequenceReport:
 
     @property
     def n_sequences(self) -> int:
+        """Number of feasible sequences."""
         return len(self.sequences)
 
     @property
     def optimal_sets(self) -> tuple[tuple[str, ...], ...]:
+        """The obstacle sets of the optimal sequences, each sorted."""
         return tuple(sorted({tuple(sorted(q)) for q in self.optimal_sequences}))
 
     @property
@@ -45,6 +49,7 @@ class SequenceReport:
         return len(self.optimal_sets) == 1
 
     def to_dict(self) -> dict:
+        """The report as plain JSON."""
         return {"n_obstacles": self.n_obstacles, "reachable_sets": self.reachable_sets,
                 "target_free_at_start": self.target_free_at_start,
                 "initially_feasible": list(self.initially_feasible),
@@ -119,7 +124,8 @@ def discounted_optimum(table: FeasibilityTable, scenario, gamma: float) -> tuple
             memo[s] = max((v for v, _, _ in options(s)), default=0.0)
         return memo[s]
 
-    s, seq = frozenset(), []
+    s: frozenset[str] = frozenset()
+    seq: list[str] = []
     for _ in actions:
         opts = options(s)
         if not opts:

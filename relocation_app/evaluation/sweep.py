@@ -35,11 +35,14 @@ CURVE_POINTS = 200
 
 
 def algo_name(policy: str, search: str) -> str:
+    """Table name of an algorithm: policy and search initial, e.g. H-eG_d (the paper's naming)."""
     return {"lrnd": "LRND", "h-lrnd": "H-LRND", "h-eg": "H-eG"}[policy] + "_" + search[0]
 
 
 @dataclass(frozen=True)
 class Cell:
+    """One cell of the sweep: a scene with its feasibility table, an algorithm, (alpha, gamma), runs and E_max."""
+
     scenario: str  # scenario name
     scenario_path: str
     cache_path: str
@@ -53,6 +56,7 @@ class Cell:
 
     @property
     def ident(self) -> tuple:
+        """What identifies a finished cell in the JSONL results (resume skips it)."""
         return (self.scenario, self.cache_key[:12], self.policy, self.search, self.alpha, self.gamma, self.runs,
                 self.e_max)
 
@@ -92,9 +96,9 @@ def _curve(histories: list[list[float]]) -> list[list[float]]:
 def run_cell(cell: Cell) -> dict:
     """All runs of one cell (seeds 0 .. runs-1); returns the JSONL record."""
     sc, problem, oracle, opt = _setting(cell)
-    base = TrainingParams.from_yaml(ignore_unknown=True).replace(policy=cell.policy, search=cell.search, alpha=cell.alpha,
-                                             gamma=cell.gamma, epsilon0=1.0, epsilon_min=1e-3,
-                                             max_episodes=cell.e_max)
+    base = TrainingParams.from_yaml(ignore_unknown=True).replace(
+        policy=cell.policy, search=cell.search, alpha=cell.alpha, gamma=cell.gamma, epsilon0=1.0, epsilon_min=1e-3,
+        max_episodes=cell.e_max)
     t0 = time.perf_counter()
     runs, histories = [], []
     calls0 = oracle.real_calls
@@ -152,6 +156,8 @@ GRID_IN_USE: dict[str, tuple] = {}
 
 @dataclass(frozen=True)
 class Scene:
+    """A scene of the sweep: its scenario file, feasibility table and (alpha, gamma) grid."""
+
     name: str
     scenario_path: str
     cache_path: str

@@ -15,6 +15,7 @@ METRICS = ("E_ss", "MP_q", "E_1st")
 
 
 def cell_stats(rec: dict) -> dict:
+    """Statistics over the runs of one JSONL record (E_ss, MP_q, E_1st and its spread, calls, optima)."""
     runs = rec["runs_data"]
     e1 = [r["E_1st"] for r in runs if r["E_1st"] is not None]
     return {
@@ -50,10 +51,12 @@ def _fmt(v, missing: int = 0, runs: int = 0) -> str:
 
 
 def algorithms_order() -> list[str]:
+    """The six algorithms in the paper's table order."""
     return [algo_name(p, s) for p, s in ALGORITHMS]
 
 
 def grid_of(cells: dict) -> list[tuple[float, float]]:
+    """The (alpha, gamma) pairs of `cells`, alpha ascending then gamma descending."""
     return sorted({(a, g) for (_, a, g) in cells}, key=lambda x: (x[0], -x[1]))
 
 
