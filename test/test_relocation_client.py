@@ -7,17 +7,16 @@ import threading
 import time
 
 import pytest
+import rclpy
+from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
+from qtree_relocation_msgs.srv import PlanFeasibility
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from ros_procs import reserve_domain_id
 
-rclpy = pytest.importorskip("rclpy")
-from qtree_relocation_msgs.action import RelocateObject, TrainPlanner  # noqa: E402
-from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
-from rclpy.action import ActionServer, CancelResponse, GoalResponse  # noqa: E402
-from rclpy.callback_groups import ReentrantCallbackGroup  # noqa: E402
-from ros_procs import reserve_domain_id  # noqa: E402
-
-from relocation_app.client import FEASIBILITY, RELOCATE, TRAIN, ClientError, RelocationClient, TaskResult  # noqa: E402
-from relocation_common.feasibility import Label  # noqa: E402
-from relocation_common.node import SideNode  # noqa: E402
+from relocation_app.client import FEASIBILITY, RELOCATE, TRAIN, ClientError, RelocationClient, TaskResult
+from relocation_common.feasibility import Label
+from relocation_common.node import SideNode
 
 
 class FakeGraph:

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from .tables import algorithms_order, grid_of
 
-from .tables import algorithms_order, grid_of  # noqa: E402
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402 - pyplot after matplotlib.use("Agg") (headless)
 
 # dot's command-line attributes for Fig. 3 (graph, node and edge defaults; to_dot's own per-edge marks stay)
 TREE_STYLE = ("-Grankdir=LR", "-Gnodesep=0.12", "-Granksep=0.45", "-Glabelloc=t", "-Gfontsize=14",
