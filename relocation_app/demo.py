@@ -166,9 +166,12 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     try:
         client.train(on_feedback=on_feedback, check=g.check_alive, policy=used.policy, search=used.search,
                      seed=used.seed, execute=not a.no_execute, execute_optimum=a.execute_optimum)
-        res = client.wait(a.timeout, check=g.check_alive)
+        outcome = client.wait(a.timeout, check=g.check_alive)
     finally:
         bar.close()
+    if outcome.result is None:  # rejected: no Result to report
+        raise ClientError(outcome.message)
+    res = outcome.result
     time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
     return res, before, truth.positions(), rec.frames
 
@@ -230,8 +233,6 @@ def run(argv=None) -> int:
     used = TrainingParams.defaults().replace(policy=a.policy, search=a.search, seed=a.seed)
     out = Path(a.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
 
     t0 = time.monotonic()
     scene_topic = "/scene/objects" if a.scene_source == "perception" else "/sim/objects"
@@ -239,13 +240,11 @@ def run(argv=None) -> int:
         _start_graph(g, a, scene_topic)
         os.environ.update(g.env)
         rec = _start_recording(g, a, out)
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)  # signals are ours: the graph must stop
-        client = RelocationClient("qtree_demo")
+        client = RelocationClient("qtree_demo")  # its own context, no signal handlers: the signals are ours
         try:
             res, before, after, frames = _train_and_watch(client, g, a, used, scene_topic, t0)
         finally:
             client.close()
-            rclpy.try_shutdown()
             recording = _stop_recording(rec)  # also on an error or Ctrl-C: the bag so far is a valid bag
     return _report(out, a, used, res, before, after, frames, time.monotonic() - t0, recording)
 

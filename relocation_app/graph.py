@@ -209,12 +209,12 @@ class Graph:
 
 def wait_for_interfaces(node, services=(), actions=(), timeout: float = 60.0, graph: Graph | None = None,
                         check=lambda: None, error: type[Exception] = RuntimeError) -> None:
-    """Block until every service (name, type) and action client given is available; `error` on timeout. While
-    waiting, `check()` and the graph's liveness check (a dead node raises at once)."""
+    """Block until every service (name, type) and action (name, action client) given is available; `error` on
+    timeout. While waiting, `check()` and the graph's liveness check (a dead node raises at once)."""
     deadline = time.monotonic() + timeout
     clients = [node.create_client(t, n) for n, t in services]
     pending = [(f"service {c.srv_name}", c.wait_for_service) for c in clients]
-    pending += [(f"action {a._action_name}", a.wait_for_server) for a in actions]
+    pending += [(f"action {name}", a.wait_for_server) for name, a in actions]
     try:
         for what, wait in pending:
             while not wait(timeout_sec=0.2):

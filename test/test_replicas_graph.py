@@ -20,7 +20,6 @@ TOPIC = "/test/objects"
 
 
 def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch):
-    import rclpy
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
@@ -34,7 +33,6 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
                                  "feasibility_margin": 1.0, "planner_wait": 5.0})
         for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
             monkeypatch.setenv(k, g.env[k])
-        rclpy.init()
         client = RelocationClient("replica_test")
         try:
             pub = client.node.create_publisher(ObjectArray, TOPIC, QoSProfile(
@@ -54,10 +52,9 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
                 time.sleep(0.02)
             g.stop("motion_planner", signal.SIGKILL)  # mid-training: its questions must go to the replica
             killed_at = max(episodes)
-            result = client.wait(300, check=g.check_alive)
+            result = client.wait(300, check=g.check_alive).result
         finally:
             client.close()
-            rclpy.try_shutdown()
         log = g.log("task_planner")
     assert result.success, result.message
     assert result.sequence[-1] == scenario.target_id and result.episodes > killed_at

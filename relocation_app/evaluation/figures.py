@@ -1,16 +1,22 @@
 """Figures like the paper's Figs. 3-10 (matplotlib, Agg backend), written as PNG into docs/figures/."""
 from __future__ import annotations
 
+import shutil
 import statistics
+import subprocess
 from pathlib import Path
 
 import matplotlib
 
+from .tables import algorithms_order, grid_of
+
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402 - pyplot after matplotlib.use("Agg") (headless)
 
-from .tables import algorithms_order, grid_of  # noqa: E402
-
+# dot's command-line attributes for Fig. 3 (graph, node and edge defaults; to_dot's own per-edge marks stay)
+TREE_STYLE = ("-Grankdir=LR", "-Gnodesep=0.12", "-Granksep=0.45", "-Glabelloc=t", "-Gfontsize=14",
+              "-Gfontname=Helvetica", "-Nshape=box", "-Nstyle=rounded", "-Nfontsize=12", "-Nfontname=Helvetica",
+              "-Efontsize=9", "-Efontname=Helvetica")
 COLORS = dict(zip(algorithms_order(), ["#bbbbbb", "#777777", "#9ecae1", "#3182bd", "#fdae6b", "#e6550d"]))
 
 
@@ -63,7 +69,8 @@ def breadth_depth(idx: dict, scenarios: list[str], path: Path) -> Path:
         for s in scenarios:
             for p in pols:
                 def m(alg):
-                    v = [st[metric] for (al, _, _), st in idx.get(s, {}).items() if al == alg and st[metric] is not None]
+                    v = [st[metric] for (al, _, _), st in idx.get(s, {}).items()
+                         if al == alg and st[metric] is not None]
                     return statistics.fmean(v) if v else 0
                 labels.append(f"{s.split('_')[0][-1] if s.startswith('scenario') else s}\n{p}")
                 bvals.append(m(p + "_b"))
@@ -102,42 +109,16 @@ def e1st_spread(records: list[dict], scenarios: list[str], path: Path) -> Path:
     return path
 
 
-def tree_figure(tree, path: Path, title: str) -> Path:
-    """Fig. 3-like drawing of a trained Q-Tree: nodes by depth, edges labelled object and Q; unfeasible red
-    dashed, target green, the best sequence bold."""
-    from relocation_common.feasibility import Label
-
-    best = {(n.id, a) for n, a in (tree.best_path() or [])}
-    by_depth: dict[int, list] = {}
-    for n in tree.nodes:
-        by_depth.setdefault(len(n.seq), []).append(n)
-    pos = {}
-    for d, ns in by_depth.items():
-        for i, n in enumerate(ns):
-            pos[n.id] = ((i + 1) / (len(ns) + 1), -d)
-    fig, ax = plt.subplots(figsize=(max(8, 0.5 * max(len(v) for v in by_depth.values())), 2 + 1.6 * len(by_depth)))
-    for n in tree.nodes:
-        x0, y0 = pos[n.id]
-        for a, label in n.label.items():
-            q = n.q.get(a, n.q_pruned.get(a, 0.0))
-            bold = (n.id, a) in best
-            if label == Label.OBSTACLE:
-                x1, y1 = pos[n.child[a].id]
-                color, ls = "black", "-"
-            else:
-                x1, y1 = x0 + 0.02 * (a - tree.n_objects / 2), y0 - 0.45
-                color, ls = ("green", "-") if label == Label.TARGET else ("red", "--")
-                ax.plot([x1], [y1], "o", color=color, ms=3)
-            ax.plot([x0, x1], [y0, y1], ls, color=color, lw=2.5 if bold else 0.6, alpha=1 if bold else 0.6)
-            if bold or label != Label.UNFEASIBLE and len(tree.nodes) < 40:
-                ax.text((x0 + x1) / 2, (y0 + y1) / 2, f"{tree.ids[a]}\n{q:.1f}", fontsize=6, ha="center")
-    for n in tree.nodes:
-        x, y = pos[n.id]
-        ax.plot([x], [y], "o", color="#3182bd", ms=5)
-    ax.text(pos[0][0], 0.15, "s_H", ha="center", fontsize=8)
-    ax.set_axis_off()
-    ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+def tree_figure(dot_file: Path, path: Path, title: str) -> Path:
+    """Fig. 3: the Q-Tree drawn by Graphviz (`dot -Tpng`) from the text QTree.to_dot wrote to `dot_file`, left to
+    right, removed sets in boxes, edges labelled with the object and Q; the learned path bold, edges to the target
+    green, unfeasible ones (g_U, Eq. 11) red dashed, as to_dot marks them. SystemExit with one line when Graphviz is
+    not installed."""
+    dot = shutil.which("dot")
+    if dot is None:
+        raise SystemExit("figures: Graphviz's `dot` is not on PATH, needed for Fig. 3: install graphviz "
+                         "(apt-get install graphviz; ./run setup does)")
+    legend = "bold: the learned path; green: to the target; red dashed: unfeasible"
+    subprocess.run([dot, "-Tpng", "-o", str(path), *TREE_STYLE, f"-Glabel={title}\n{legend}", str(dot_file)],
+                   check=True)
     return path

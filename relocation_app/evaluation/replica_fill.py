@@ -21,7 +21,6 @@ from relocation_common.feasibility import replica_services
 @contextmanager
 def replica_graph(scenario_path: str | Path, replicas: int, run_dir: str | Path | None = None):
     """(Graph, RelocationClient): the planners up and their services seen; everything stopped on exit."""
-    import rclpy
     from qtree_relocation_msgs.srv import PlanFeasibility
 
     from relocation_app.client import FEASIBILITY, RelocationClient
@@ -32,7 +31,6 @@ def replica_graph(scenario_path: str | Path, replicas: int, run_dir: str | Path 
     with Graph(Path(run_dir or tempfile.mkdtemp(prefix="replica_fill_"))) as g:
         g.start_planners(replicas, {"scenario": str(scenario_path)})
         os.environ.update({k: g.env[k] for k in keys})
-        rclpy.init()
         client = RelocationClient("replica_fill")
         try:
             services = [(name, PlanFeasibility) for name in replica_services(FEASIBILITY, replicas)]
@@ -40,7 +38,6 @@ def replica_graph(scenario_path: str | Path, replicas: int, run_dir: str | Path 
             yield g, client
         finally:
             client.close()
-            rclpy.try_shutdown()
             for k, v in saved.items():
                 if v is None:
                     os.environ.pop(k, None)

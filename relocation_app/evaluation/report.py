@@ -320,21 +320,24 @@ def _tables_section(records: list[dict], cells: dict, s: str, figdir: Path, docs
 
 
 def _tree_section(scene_info: tuple, params, figdir: Path, docs: Path) -> str:
-    """Section "Fig. 3": the Q-Tree of scenario1_5 after one H-eG_d training (alpha 1, gamma 0.1, seed 0), drawn
-    and as Graphviz text."""
+    """Section "Fig. 3": the Q-Tree of scenario1_5 after one H-eG_d training (alpha 1, gamma 0.1, seed 0), as
+    Graphviz text and drawn from it by Graphviz."""
     from qtree_task_planner.params import TrainingParams
     from qtree_task_planner.training import train
 
     from .feasibility_cache import PlannerOracle
     sc, table, rep = scene_info
-    r = train(sc, PlannerOracle(sc, params, table), TrainingParams.from_yaml(ignore_unknown=True).replace(
-        policy="h-eg", search="depth", alpha=1.0, gamma=0.1, seed=0))
-    if r.tree is None:
+    used = TrainingParams.from_yaml(ignore_unknown=True).replace(policy="h-eg", search="depth", alpha=1.0, gamma=0.1,
+                                                                  seed=0)
+    r = train(sc, PlannerOracle(sc, params, table), used)
+    tree = r.tree
+    if tree is None:
         raise RuntimeError("the Fig. 3 training returned no tree")
-    f5 = figures.tree_figure(r.tree, figdir / "tree_scenario1_5.png",
+    dot = figdir / "tree_scenario1_5.dot"
+    dot.write_text(tree.to_dot("scenario1_5"))
+    f5 = figures.tree_figure(dot, figdir / "tree_scenario1_5.png",
                              f"Fig. 3: Q-Tree of scenario1_5 after H-eG_d training (alpha 1, gamma 0.1, seed 0): "
-                             f"{len(r.tree.nodes)} nodes, best {' '.join(r.sequence or ())}")
-    (figdir / "tree_scenario1_5.dot").write_text(r.tree.to_dot("scenario1_5"))
+                             f"{len(tree.nodes)} nodes, best {' '.join(r.sequence or ())}")
     return (f"## Fig. 3: the tree of scenario 1\n\n![tree]({f5.relative_to(docs)})\n\nGraphviz text: "
             f"figures/tree_scenario1_5.dot\n")
 
