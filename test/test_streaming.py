@@ -11,7 +11,7 @@ import yaml
 from relocation_common import robot_description as rd
 from relocation_common.kinova import joint_to_turns, turns_to_joint
 from relocation_common.paths import config_file, default_scenario
-from relocation_common.scenario import UnknownObjectError, load_scenario
+from relocation_common.scenario import load_scenario
 from stpik_motion_planner.feasibility import PlannerParams
 from stpik_motion_planner.service import MotionPlannerService
 from stpik_motion_planner.streaming import Aborted, Cancelled, StreamedArm, StreamParams, progress
@@ -157,7 +157,7 @@ def service():
 
 def test_goal_checks_name_the_problem(service):
     target = service.base.target_id
-    with pytest.raises(UnknownObjectError):
+    with pytest.raises(ValueError, match="unknown object id 'nope'"):
         service.check_goal("nope", [])
     with pytest.raises(ValueError, match="own removed set"):
         service.check_goal(target, [target])
