@@ -308,8 +308,9 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
 
 def _name(data: Mapping[str, Any], source: str) -> str:
     """The scenario's name (`name`, else the file's name without .yaml): it names a MuJoCo model, files of the
-    evaluation's caches, graphs and log lines, so it is checked like an id (NAME_PATTERN)."""
-    name = data.get("name", Path(source).stem)
+    evaluation's caches, graphs and log lines, so it is checked like an id (NAME_PATTERN). A scene given as data
+    (source "<dict>") without a name is "unnamed"."""
+    name = data.get("name", "unnamed" if source.startswith("<") else Path(source).stem)  # "<dict>": no file
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         where = "name" if "name" in data else f"name (from the file name {Path(source).name!r}: give a `name:`)"
         raise ScenarioError(f"{where}: must be a letter or digit then up to 63 letters, digits, '_', '-' or '.', "
