@@ -6,8 +6,10 @@ least-squares solution of  min_c sum_i (|p_i,xy - c| - r)^2  (Gauss-Newton), sta
 visible surface along the horizontal viewing ray, with points farther than `inlier_tol` from the circle dropped
 and the fit repeated (stray pixels of another class, specular highlights). The cap (top face) is excluded from
 the fit (its points lie inside the circle) except its rim: blob boundary pixels on the cap that are not occlusion
-edges lie on the circle too, which places a bottle of which only the top is visible (behind others or the arm). The base height z is the board the bottle stands on (top or bottom
-shelf), decided by the points' heights.
+edges lie on the circle too, which places a bottle of which only the top is visible (behind others or the arm).
+The base height z is the board the bottle stands on (top or bottom shelf), decided by the points' heights.
+Checks (docs/perception.md, "Consistency checks"): the fit's rms residual must stay within `max_rms`, and a second
+blob of the same colour away from the fitted bottle makes the identity doubtful (FitError: reported missing).
 """
 from __future__ import annotations
 
@@ -27,6 +29,8 @@ class FitError(PerceptionError):
 
 @dataclass(frozen=True)
 class LocalizeParams:
+    """Bounds of the axis fit (module docstring)."""
+
     min_pixels: int = 40          # fewer pixels of a class: the bottle counts as not visible (hidden)
     inlier_tol: float = 0.004     # m, |distance to axis - r| of an inlier
     cap_margin: float = 0.006     # m below the top of the bottle: points above are the cap, not the side
@@ -35,6 +39,8 @@ class LocalizeParams:
     above_top: float = 0.01       # m: pixels of a colour this far above its bottle's top are not that bottle
     occluder_gap: float = 0.01    # m: a neighbour this much nearer to the camera makes a blob edge an occlusion edge
     iterations: int = 12
+    max_rms: float = 0.003        # m: rms distance of the inliers to the fitted circle
+    elsewhere: float = 0.02       # m: a second blob of the colour this far outside the bottle is another object
 
 
 @dataclass(frozen=True)
@@ -102,7 +108,10 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     r0, r1, c0, c1 = max(rows[0] - 3, 0), rows[-1] + 4, max(cols[0] - 3, 0), cols[-1] + 4
     crop = mask[r0:r1, c0:c1].astype(np.uint8)
     _, comp, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
-    big = (comp == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    order = np.argsort(areas)[::-1]
+    big = (comp == 1 + int(order[0])).astype(np.uint8)
+    other = (comp == 1 + int(order[1])) if len(order) > 1 and areas[order[1]] >= params.min_pixels else None
     v, u = np.nonzero(big)
     pts = points[r0:r1, c0:c1]
     p = pts[v, u]
@@ -122,5 +131,14 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     v, u = v + r0, u + c0
     centre, keep = fit_axis(use, bottle.radius, camera_position, params)
     rms = float(np.sqrt(np.mean((np.linalg.norm(use[keep] - centre, axis=1) - bottle.radius) ** 2)))
+    if rms > params.max_rms:
+        raise FitError(f"{bottle.id!r}: fit residual {rms * 1000:.1f} mm rms (bound {params.max_rms * 1000:.0f} mm)")
+    if other is not None:
+        q = pts[other]
+        q = q[np.isfinite(q).all(axis=1)]
+        far = float(np.median(np.linalg.norm(q[:, :2] - centre, axis=1))) if len(q) else 0.0
+        if far > bottle.radius + params.elsewhere:
+            raise FitError(f"colour {bottle.label!r} seen at two places {far * 1000:.0f} mm apart: identity of "
+                           f"{bottle.id!r} in doubt")
     return Detection(bottle.id, float(centre[0]), float(centre[1]), float(base), int(keep.sum()), rms,
                      (int(np.median(u)), int(np.median(v))))

@@ -1,12 +1,16 @@
-"""One RGB-D frame -> camera pose (marker) -> segmentation -> located bottles, and the debug image (no rclpy).
+"""One RGB-D frame -> camera pose (marker, checked against the shelf) -> segmentation -> located bottles, checked;
+and the debug image (no rclpy).
 
-`Perception(scenario).process(rgb, depth, K)` raises ImageFormatError (bad images) or MarkerNotFoundError (no
-marker: without the common frame nothing can be placed, so nothing is reported); bottles that are not visible
-enough are listed in `missing` with the reason, never guessed. Identity, weight, radius and height of a located
-bottle come from its colour class through the scenario (`Perception.bottles`).
+`Perception(scenario).process(rgb, depth, K)` raises ImageFormatError (bad images), MarkerNotFoundError (no
+marker: without the common frame nothing can be placed; MarkerOccludedError when it is partly covered),
+MarkerInconsistentError or InconsistentFrameError (a consistency check failed: docs/perception.md, "Consistency
+checks"); a frame is never published wrong, it is refused with the reason. Bottles that are not visible enough,
+or whose fit or identity is doubtful, are listed in `missing` with the reason, never guessed. Identity, weight,
+radius and height of a located bottle come from its colour class through the scenario (`Perception.bottles`).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -14,42 +18,97 @@ import numpy as np
 
 from relocation_common.scenario import Bottle, Scenario
 
-from .aruco import MarkerLocalizer, MarkerObservation
+from .aruco import MarkerLocalizer, MarkerNotFoundError, MarkerObservation, MarkerParams, invert
 from .localize import Detection, FitError, LocalizeParams, locate_bottle
-from .segmentation import Segmentation, SegmentationParams, check_images, segment
+from .segmentation import (
+    Segmentation,
+    SegmentationParams,
+    backproject_image,
+    check_images,
+    plate_levels,
+    segment_points,
+)
+from .shelf import ShelfFit, ShelfParams, fit_shelf
 
 
 @dataclass(frozen=True)
 class PerceptionResult:
-    marker: MarkerObservation
+    """One processed frame. T_base_camera: the camera pose used (marker, corrected by the shelf fit); marker: the
+    marker as seen (None when it was not, and the caller's `prior` pose stood in); notes: what the checks said."""
+
+    marker: MarkerObservation | None
     detections: dict[str, Detection]
     missing: dict[str, str]                  # id -> why it was not located
     segmentation: Segmentation = field(repr=False)
-
-    @property
-    def T_base_camera(self) -> np.ndarray:
-        return self.marker.T_base_camera
+    T_base_camera: np.ndarray = field(default_factory=lambda: np.eye(4), repr=False)
+    shelf: ShelfFit | None = None
+    notes: tuple[str, ...] = ()
 
 
 class Perception:
-    def __init__(self, scenario: Scenario, seg: SegmentationParams = SegmentationParams(),
-                 loc: LocalizeParams = LocalizeParams(), refine_with_depth: bool = True):
-        self.scenario, self.seg, self.loc = scenario, seg, loc
-        self.localizer = MarkerLocalizer(scenario.marker, refine_with_depth=refine_with_depth)
+    """The perception core of one scenario (module docstring)."""
 
-    def process(self, rgb, depth, K) -> PerceptionResult:
+    def __init__(self, scenario: Scenario, seg: SegmentationParams = SegmentationParams(),
+                 loc: LocalizeParams = LocalizeParams(), refine_with_depth: bool = True,
+                 shelf: ShelfParams = ShelfParams(), marker: MarkerParams = MarkerParams()):
+        self.scenario, self.seg, self.loc, self.shelf = scenario, seg, loc, shelf
+        self.localizer = MarkerLocalizer(scenario.marker, refine_with_depth=refine_with_depth, params=marker)
+
+    def process(self, rgb, depth, K, prior: np.ndarray | None = None) -> PerceptionResult:
+        """Bottles of one registered RGB-D frame. `prior`: T_base_camera of earlier frames (the node's fused frame);
+        when the marker is not seen now, the prior stands in if the shelf confirms it."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
-        marker = self.localizer.locate(rgb, K, depth)
-        seg = segment(rgb, depth, K, marker.T_base_camera, self.scenario, self.seg)
-        cam = marker.T_base_camera[:3, 3]
+        notes = []
+        marker: MarkerObservation | None
+        try:
+            expected = None if prior is None else invert(prior) @ self.localizer.T_base_marker
+            marker = self.localizer.locate(rgb, K, depth, expected)
+            t0, levels = marker.T_base_camera, plate_levels(rgb, marker.corners)
+        except MarkerNotFoundError as e:
+            if prior is None:
+                raise
+            marker, t0, levels = None, np.asarray(prior, float), None
+            notes.append(f"{e}; using the fused frame of earlier frames")
+        points = backproject_image(depth, K, t0)
+        first = segment_points(rgb, points, self.scenario, self.seg, levels)
+        fit = fit_shelf(points, first.labels >= 0, self.scenario, self.shelf)
+        fit.check(self.shelf)
+        T = fit.correction @ t0
+        r, t = fit.correction[:3, :3].astype(np.float32), fit.correction[:3, 3].astype(np.float32)
+        seg = segment_points(rgb, points @ r.T + t, self.scenario, self.seg, levels)
+        found, missing = self._locate_all(seg, T[:3, 3])
+        return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
+
+    def _locate_all(self, seg: Segmentation, cam: np.ndarray) -> tuple[dict[str, Detection], dict[str, str]]:
+        """Fit every bottle; then drop fits outside the shelf and pairs of fits that overlap (an identity in doubt:
+        two colours on one bottle, or one colour on two), with the reason."""
         found, missing = {}, {}
         for b in self.scenario.objects:
             try:
                 found[b.id] = locate_bottle(b, seg.mask(b.id), seg.points, self.scenario, cam, self.loc)
             except FitError as e:
                 missing[b.id] = str(e)
-        return PerceptionResult(marker, found, missing, seg)
+        sh, tol = self.scenario.shelf, self.loc.inlier_tol
+        for i, d in list(found.items()):
+            r = self.scenario.object(i).radius
+            if not (sh.x_front + r - tol <= d.x <= sh.x_back - r + tol and sh.y_min + r - tol <= d.y <= sh.y_max - r
+                    + tol):
+                missing[i] = f"fit at ({d.x:.3f}, {d.y:.3f}) is not inside the shelf: not this bottle"
+                del found[i]
+        ids = list(found)
+        for a, i in enumerate(ids):
+            for j in ids[a + 1:]:
+                di, dj = found.get(i), found.get(j)
+                if di is None or dj is None:
+                    continue
+                gap = math.hypot(di.x - dj.x, di.y - dj.y) - self.scenario.object(i).radius - \
+                    self.scenario.object(j).radius
+                if gap < -2 * tol:
+                    why = f"overlaps {{}} by {-gap * 1000:.0f} mm: identity in doubt (colours of {i} and {j})"
+                    missing[i], missing[j] = why.format(j), why.format(i)
+                    del found[i], found[j]
+        return found, missing
 
     def bottles(self, detections) -> list[Bottle]:
         """Scenario bottles moved to their perceived (x, y): id, label, weight, size from the colour class."""
@@ -58,13 +117,14 @@ class Perception:
     def annotate(self, rgb: np.ndarray, result: PerceptionResult | None, K=None, note: str = "") -> np.ndarray:
         """Debug image (RGB): marker outline and axes, each located bottle's id at its pixel, missing ids."""
         img = np.ascontiguousarray(rgb).copy()
-        if result is not None:
+        if result is not None and result.marker is not None:
             c = np.round(result.marker.corners).astype(np.int32)
             cv2.polylines(img, [c], True, (0, 255, 0), 2)
             T = result.marker.T_camera_marker
             if K is not None:
                 cv2.drawFrameAxes(img, np.asarray(K, float).reshape(3, 3), None, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3],
                                   self.scenario.marker.size)
+        if result is not None:
             for d in result.detections.values():
                 b = self.scenario.object(d.id)
                 cv2.circle(img, d.pixel, 4, (255, 255, 255), -1)

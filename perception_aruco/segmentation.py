@@ -8,7 +8,13 @@ weights cannot be downloaded here; the paper's bottles were told apart by colour
    a shading gain s in [gain_min, gain_max]:  residual_c(p) = || p - s* a_c ||,  s* = clip(p.a_c / |a_c|^2).
    Colours that are not scalar multiples of each other (orange / brown, yellow / olive) are told apart by their
    chromaticity; scalar multiples (black / white / gray) by their brightness range. Pixels with no class within
-   `max_residual` are left unassigned.
+   `max_residual` are left unassigned, and so are ambiguous pixels: the best class must explain the pixel clearly
+   better than the second best (residual ratio <= `max_ratio`); an ambiguous pixel is never given the nearest,
+   possibly wrong, class.
+4. Colour constancy: before classifying, the image is normalised by the marker's own white and black (its plate
+   is a known neutral: a warm or cool white balance, or an exposure change, is undone), see `plate_levels`.
+5. Each class mask is eroded by `erode_px` (anti-aliased silhouette pixels) without growing depth holes: a pixel
+   without depth does not erode its neighbours.
 No rclpy here.
 """
 from __future__ import annotations
@@ -27,12 +33,18 @@ UNASSIGNED = -1
 
 @dataclass(frozen=True)
 class SegmentationParams:
+    """Colour classes and the workspace gate (module docstring)."""
+
     gain_min: float = 0.3        # darkest shading of a bottle's colour (self-shadowed side)
     gain_max: float = 1.2        # brightest (lit side, before saturation)
     max_residual: float = 40.0   # RGB units (0..255): farther from every class -> unassigned
     wall_margin: float = 0.004   # m kept off the boards and panels by the workspace gate
     marker_margin: float = 0.01  # m around the marker plate excluded from the gate
     erode_px: int = 1            # erosion of each class mask (drops anti-aliased silhouette pixels)
+    max_ratio: float = 0.7       # best / second-best residual above this: ambiguous, unassigned
+    white_level: float = 195.0   # the marker plate's white is scaled to this (0..255; the renderer's at 0.6-0.7 m)
+    min_gain: float = 0.5        # bounds of the colour normalisation's per-channel gain
+    max_gain: float = 2.5
 
 
 def check_images(rgb, depth) -> tuple[np.ndarray, np.ndarray]:
@@ -76,14 +88,48 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
 
 
 def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams) -> np.ndarray:
-    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits."""
+    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits
+    within `max_residual` or the best is not clearly better than the second best (`max_ratio`)."""
     p = rgb_pixels.astype(np.float32)
     a = refs.astype(np.float32)
     s = np.clip(p @ a.T / np.sum(a * a, axis=1), params.gain_min, params.gain_max)       # N x C
     res = np.linalg.norm(p[:, None, :] - s[..., None] * a[None, :, :], axis=2)             # N x C
+    rows = np.arange(len(p))
     best = np.argmin(res, axis=1)
-    best[res[np.arange(len(p)), best] > params.max_residual] = UNASSIGNED
+    first = res[rows, best].copy()
+    bad = first > params.max_residual
+    if res.shape[1] > 1:
+        res[rows, best] = np.inf
+        bad |= first > params.max_ratio * res.min(axis=1)
+    best[bad] = UNASSIGNED
     return best
+
+
+def plate_levels(rgb: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(white, black) RGB of the marker plate (its white margin and bits, its black square), or None when the
+    plate is too small or has no contrast. The two groups are split at the middle of the plate's grey levels."""
+    h, w = rgb.shape[:2]
+    mask = np.zeros((h, w), np.uint8)
+    centre = corners.mean(0)
+    cv2.fillConvexPoly(mask, np.round(centre + 1.3 * (corners - centre)).astype(np.int32), 1)
+    px = rgb[mask > 0].astype(np.float32)
+    if len(px) < 50:
+        return None
+    g = px.mean(1)
+    lo, hi = np.percentile(g, 5), np.percentile(g, 95)
+    if hi - lo < 30:
+        return None
+    mid = (lo + hi) / 2
+    return np.median(px[g > mid], axis=0), np.median(px[g <= mid], axis=0)
+
+
+def normalise_colours(pixels: np.ndarray, levels, params: SegmentationParams) -> np.ndarray:
+    """Pixels (N x 3) with the plate's black subtracted and its white scaled to `white_level` per channel."""
+    if levels is None:
+        return pixels
+    white, black = levels
+    gain = np.clip(params.white_level / np.maximum(white - black, 1.0), params.min_gain, params.max_gain)
+    return np.clip((pixels.astype(np.float32) - black) * gain, 0, 255)
 
 
 @dataclass(frozen=True)
@@ -95,23 +141,33 @@ class Segmentation:
     classes: tuple[str, ...]
 
     def mask(self, object_id: str) -> np.ndarray:
+        """HxW bool: the pixels of this object's colour class."""
         return self.labels == self.classes.index(object_id)
 
 
 def segment(rgb, depth, K, T_base_camera, scenario: Scenario,
-            params: SegmentationParams = SegmentationParams()) -> Segmentation:
+            params: SegmentationParams = SegmentationParams(), levels=None) -> Segmentation:
     """Per-pixel bottle class of a registered RGB-D frame (see the module docstring)."""
     rgb, depth = check_images(rgb, depth)
     points = backproject_image(depth, np.asarray(K, float), np.asarray(T_base_camera, float))
+    return segment_points(rgb, points, scenario, params, levels)
+
+
+def segment_points(rgb: np.ndarray, points: np.ndarray, scenario: Scenario,
+                   params: SegmentationParams = SegmentationParams(), levels=None) -> Segmentation:
+    """`segment` on base-frame points already computed (HxWx3, NaN without depth); `levels`: the marker plate's
+    (white, black) for the colour normalisation (None: none)."""
     gate = workspace_mask(points, scenario, params.wall_margin, params.marker_margin)
     classes = tuple(b.id for b in scenario.objects)
     refs = np.array([b.rgb for b in scenario.objects]) * 255.0
-    labels = np.full(depth.shape, UNASSIGNED, np.int32)
-    labels[gate] = classify_colours(rgb[gate], refs, params)
+    labels = np.full(points.shape[:2], UNASSIGNED, np.int32)
+    labels[gate] = classify_colours(normalise_colours(rgb[gate], levels, params), refs, params)
     if params.erode_px > 0:
         kernel = np.ones((2 * params.erode_px + 1,) * 2, np.uint8)
+        no_depth = ~np.isfinite(points[..., 2])
         for k in range(len(classes)):
-            m = (labels == k).astype(np.uint8)
+            m = labels == k
             if m.any():
-                labels[(m > 0) & (cv2.erode(m, kernel) == 0)] = UNASSIGNED
+                # a pixel without depth is neutral: it neither erodes its neighbours nor is kept itself
+                labels[m & (cv2.erode((m | no_depth).astype(np.uint8), kernel) == 0)] = UNASSIGNED
     return Segmentation(labels, points, classes)
