@@ -51,6 +51,7 @@ from stpik_motion_planner.robot_description import FINGER_JOINT_NAMES, JOINT_NAM
 from . import frames, kinova
 from .camera import MJ_TO_OPTICAL, CameraRenderer, Frame
 from .scene import CAMERA_NAME, CameraSpec
+from .sensor_model import SensorModel
 from .sim import BadCommandError, Jaco2Sim, check_velocity_command
 
 BASE_FRAME = "j2s7s300_link_base"
@@ -142,6 +143,7 @@ class Jaco2SimDriver(Node):
                              f"{g('camera_fovy')!r}")
         if not g("tf_rate") >= 0:
             raise ValueError(f"parameter tf_rate must be >= 0, got {g('tf_rate')!r}")
+        self.sensor = SensorModel.named(str(g("camera_model")))  # camera_model: ideal | realsense_d435
         self.interface = str(g("command_interface"))
         if self.interface not in INTERFACES:
             raise ValueError(f"parameter command_interface must be one of {', '.join(INTERFACES)}, "
@@ -482,7 +484,7 @@ class Jaco2SimDriver(Node):
     def _camera_loop(self, period: float) -> None:
         model = self.sim.model
         spec = self.sim.camera
-        renderer = CameraRenderer(model, spec.width, spec.height)
+        renderer = CameraRenderer(model, spec.width, spec.height, sensor=self.sensor)
         data = mujoco.MjData(model)
         next_t = time.monotonic()
         try:

@@ -1,0 +1,1 @@
+"""ArUco + colour/depth perception of the shelf (docs/perception.md)."""

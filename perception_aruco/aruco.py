@@ -103,7 +103,7 @@ class MarkerParams:
     plane_tol: float = 0.003        # m: RANSAC inlier distance (raised to 3 x the robust noise estimate)
     occluder_gap: float = 0.01      # m: a point this much nearer than the marker plane is something in front
     corner_covered: float = 0.1     # fraction of a corner's neighbourhood in front: the corner is not used
-    max_disagreement_mm: float = 30.0   # colour-only vs depth marker position
+    max_disagreement_mm: float = 30.0   # colour-only vs depth marker position, at fx = 433 px (640x480; x 433/fx)
     max_disagreement_deg: float = 8.0   # colour-only vs depth marker orientation
     size_tol: float = 0.004         # m (+ 5 %): corner distances from depth vs the marker's size
     ransac_iterations: int = 60
@@ -266,10 +266,11 @@ class MarkerLocalizer:
                             f"covered, or the depth not registered to the colour image?)")
         t = _kabsch(obj[good], cam[good])
         dt, dr = pose_error(t, t_pnp)
-        if dt * 1000 > p.max_disagreement_mm or math.degrees(dr) > p.max_disagreement_deg:
+        bound_mm = p.max_disagreement_mm * max(1.0, 433.0 / K[0, 0])  # the colour-only pose degrades with pixel size
+        if dt * 1000 > bound_mm or math.degrees(dr) > p.max_disagreement_deg:
             raise MarkerInconsistentError(
                 f"marker id {mid}: colour-only and depth poses disagree by {dt * 1000:.0f} mm, "
-                f"{math.degrees(dr):.1f} deg (bounds {p.max_disagreement_mm:.0f} mm, {p.max_disagreement_deg:.0f} deg)")
+                f"{math.degrees(dr):.1f} deg (bounds {bound_mm:.0f} mm, {p.max_disagreement_deg:.0f} deg)")
         return t, covered, tuple(bad)
 
     def diagnose_cover(self, K, depth, expected: np.ndarray) -> None:

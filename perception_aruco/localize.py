@@ -13,6 +13,7 @@ blob of the same colour away from the fitted bottle makes the identity doubtful 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -41,6 +42,8 @@ class LocalizeParams:
     iterations: int = 12
     max_rms: float = 0.003        # m: rms distance of the inliers to the fitted circle
     elsewhere: float = 0.02       # m: a second blob of the colour this far outside the bottle is another object
+    max_uncertainty: float = 0.006  # m: 3 sigma of the fitted axis (from the fit's covariance) must stay below
+    depth_noise: float = 0.0      # m: the frame's depth noise (set per frame from the shelf fit); floor of the sigma
 
 
 @dataclass(frozen=True)
@@ -132,13 +135,30 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     centre, keep = fit_axis(use, bottle.radius, camera_position, params)
     rms = float(np.sqrt(np.mean((np.linalg.norm(use[keep] - centre, axis=1) - bottle.radius) ** 2)))
     if rms > params.max_rms:
-        raise FitError(f"{bottle.id!r}: fit residual {rms * 1000:.1f} mm rms (bound {params.max_rms * 1000:.0f} mm)")
-    if other is not None:
-        q = pts[other]
-        q = q[np.isfinite(q).all(axis=1)]
-        far = float(np.median(np.linalg.norm(q[:, :2] - centre, axis=1))) if len(q) else 0.0
-        if far > bottle.radius + params.elsewhere:
-            raise FitError(f"colour {bottle.label!r} seen at two places {far * 1000:.0f} mm apart: identity of "
-                           f"{bottle.id!r} in doubt")
+        raise FitError(f"{bottle.id!r}: fit residual {rms * 1000:.1f} mm rms (bound {params.max_rms * 1000:.1f} mm)")
+    d = use[keep] - centre
+    jac = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
+    cov = np.linalg.inv(jac.T @ jac + 1e-12 * np.eye(2))       # axis covariance / sigma^2 (Gauss-Newton)
+    sd = max(rms, params.depth_noise, 0.0005) * math.sqrt(float(np.max(np.linalg.eigvalsh(cov))))
+    if 3 * sd > params.max_uncertainty:
+        raise FitError(f"too little of {bottle.id!r} visible to place it: axis uncertain by {3 * sd * 1000:.0f} mm "
+                       "(3 sigma)")
+    if other is not None and _another_bottle(pts[other], bottle, centre, camera_position, params):
+        raise FitError(f"colour {bottle.label!r} seen at two places: identity of {bottle.id!r} in doubt")
     return Detection(bottle.id, float(centre[0]), float(centre[1]), float(base), int(keep.sum()), rms,
                      (int(np.median(u)), int(np.median(v))))
+
+
+def _another_bottle(q: np.ndarray, bottle: Bottle, centre: np.ndarray, camera_position: np.ndarray,
+                    params: LocalizeParams) -> bool:
+    """A second blob of the bottle's colour is another bottle-like object when it lies away from the fitted bottle
+    and its points fit a circle of the bottle's radius too."""
+    q = q[np.isfinite(q).all(axis=1)][:, :2].astype(float)
+    if len(q) < params.min_inliers or np.median(np.linalg.norm(q - centre, axis=1)) <= bottle.radius + \
+            params.elsewhere:
+        return False
+    try:
+        fit_axis(q, bottle.radius, camera_position, params)
+    except FitError:
+        return False
+    return True

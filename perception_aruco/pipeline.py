@@ -18,7 +18,7 @@ import numpy as np
 
 from relocation_common.scenario import Bottle, Scenario
 
-from .aruco import MarkerLocalizer, MarkerNotFoundError, MarkerObservation, MarkerParams, invert
+from .aruco import MarkerLocalizer, MarkerNotFoundError, MarkerObservation, MarkerParams, invert, pose_error
 from .localize import Detection, FitError, LocalizeParams, locate_bottle
 from .segmentation import (
     Segmentation,
@@ -28,7 +28,7 @@ from .segmentation import (
     plate_levels,
     segment_points,
 )
-from .shelf import ShelfFit, ShelfParams, fit_shelf
+from .shelf import ShelfFit, ShelfParams, corrected_K, fit_shelf
 
 
 @dataclass(frozen=True)
@@ -70,26 +70,31 @@ class Perception:
                 raise
             marker, t0, levels = None, np.asarray(prior, float), None
             notes.append(f"{e}; using the fused frame of earlier frames")
-        points = backproject_image(depth, K, t0)
-        first = segment_points(rgb, points, self.scenario, self.seg, levels)
-        fit = fit_shelf(points, first.labels >= 0, self.scenario, self.shelf)
+        cam = backproject_image(depth, K, np.eye(4))
+        r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
+        first = segment_points(rgb, cam @ r0.T + p0, self.scenario, self.seg, levels)
+        fit = fit_shelf(cam, first.labels >= 0, t0, self.scenario, self.shelf)
         fit.check(self.shelf)
         T = fit.correction @ t0
-        r, t = fit.correction[:3, :3].astype(np.float32), fit.correction[:3, 3].astype(np.float32)
-        seg = segment_points(rgb, points @ r.T + t, self.scenario, self.seg, levels)
-        found, missing = self._locate_all(seg, T[:3, 3])
+        seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
+                             self.seg, levels)
+        # noisier depth: wider fit tolerances (the shelf's residual spread is the depth noise at the shelf)
+        loc = replace(self.loc, inlier_tol=max(self.loc.inlier_tol, 2.5 * fit.noise),
+                      max_rms=max(self.loc.max_rms, 1.5 * fit.noise), depth_noise=fit.noise)
+        found, missing = self._locate_all(seg, T[:3, 3], loc)
         return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
 
-    def _locate_all(self, seg: Segmentation, cam: np.ndarray) -> tuple[dict[str, Detection], dict[str, str]]:
+    def _locate_all(self, seg: Segmentation, cam: np.ndarray,
+                    loc: LocalizeParams) -> tuple[dict[str, Detection], dict[str, str]]:
         """Fit every bottle; then drop fits outside the shelf and pairs of fits that overlap (an identity in doubt:
         two colours on one bottle, or one colour on two), with the reason."""
         found, missing = {}, {}
         for b in self.scenario.objects:
             try:
-                found[b.id] = locate_bottle(b, seg.mask(b.id), seg.points, self.scenario, cam, self.loc)
+                found[b.id] = locate_bottle(b, seg.mask(b.id), seg.points, self.scenario, cam, loc)
             except FitError as e:
                 missing[b.id] = str(e)
-        sh, tol = self.scenario.shelf, self.loc.inlier_tol
+        sh, tol = self.scenario.shelf, loc.inlier_tol
         for i, d in list(found.items()):
             r = self.scenario.object(i).radius
             if not (sh.x_front + r - tol <= d.x <= sh.x_back - r + tol and sh.y_min + r - tol <= d.y <= sh.y_max - r
@@ -157,3 +162,63 @@ class SceneMemory:
         held = [i for i in self.ids if i in keep and keep[i][1] != self.frame]
         lost = [i for i in self.ids if i not in keep]
         return [keep[i][0] for i in self.ids if i in keep], held, lost
+
+
+class FrameFusion:
+    """The shelf does not move: the camera poses of consistent frames are averaged (translation mean, rotation the
+    projection of the mean matrix onto SO(3)); a frame more than `max_jump` / `max_jump_deg` from the fused pose is
+    refused, unless `reset_after` such frames in a row agree with one another (the camera was moved: start over)."""
+
+    def __init__(self, max_jump: float = 0.005, max_jump_deg: float = 0.5, window: int = 30, reset_after: int = 3):
+        self.max_jump, self.max_jump_deg, self.window, self.reset_after = max_jump, max_jump_deg, window, reset_after
+        self.poses: list[np.ndarray] = []
+        self.outliers: list[np.ndarray] = []
+
+    @property
+    def fused(self) -> np.ndarray | None:
+        """T_base_camera averaged over the consistent frames, or None before the first."""
+        if not self.poses:
+            return None
+        m = np.mean([p[:3, :3] for p in self.poses], axis=0)
+        u, _, vt = np.linalg.svd(m)
+        out = np.eye(4)
+        out[:3, :3] = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+        out[:3, 3] = np.mean([p[:3, 3] for p in self.poses], axis=0)
+        return out
+
+    def update(self, T: np.ndarray) -> str | None:
+        """Add one frame's pose; None when it agrees (or restarts the fusion), else the reason to refuse it."""
+        f = self.fused
+        if f is None or self._agrees(T, f):
+            self.poses = (self.poses + [np.asarray(T, float)])[-self.window:]
+            self.outliers = []
+            return None
+        self.outliers.append(np.asarray(T, float))
+        if len(self.outliers) >= self.reset_after and all(self._agrees(o, self.outliers[-1]) for o in self.outliers):
+            self.poses, self.outliers = self.outliers, []
+            return None
+        dt, dr = pose_error(T, f)
+        return (f"camera pose {dt * 1000:.0f} mm / {math.degrees(dr):.1f} deg from the pose fused over "
+                f"{len(self.poses)} frames (bounds {self.max_jump * 1000:.0f} mm / {self.max_jump_deg} deg): refused "
+                f"until {self.reset_after} frames agree")
+
+    def _agrees(self, a: np.ndarray, b: np.ndarray) -> bool:
+        dt, dr = pose_error(a, b)
+        return dt <= self.max_jump and math.degrees(dr) <= self.max_jump_deg
+
+
+def identity_conflicts(detections: dict[str, Detection], previous: dict[str, Detection], scenario: Scenario,
+                       moved: float = 0.02) -> dict[str, str]:
+    """Detections that take the place of another bottle of the previous scene (overlapping where it stood) while
+    that one is not seen now and this one stood elsewhere (> `moved` away): an identity swap is likelier than a
+    bottle teleported onto another's place. id -> reason."""
+    out = {}
+    for i, d in detections.items():
+        for j, p in previous.items():
+            if j == i or j in detections:
+                continue
+            gap = math.hypot(d.x - p.x, d.y - p.y) - scenario.object(i).radius - scenario.object(j).radius
+            was = previous.get(i)
+            if gap < -0.01 and (was is None or math.hypot(d.x - was.x, d.y - was.y) > moved):
+                out[i] = f"found where {j} stood in the previous scene, and {j} is not seen: identity in doubt"
+    return out

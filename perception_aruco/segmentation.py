@@ -11,6 +11,7 @@ weights cannot be downloaded here; the paper's bottles were told apart by colour
    `max_residual` are left unassigned, and so are ambiguous pixels: the best class must explain the pixel clearly
    better than the second best (residual ratio <= `max_ratio`); an ambiguous pixel is never given the nearest,
    possibly wrong, class.
+   The colour image is median-filtered first (3x3: sensor noise; edges stay sharp).
 4. Colour constancy: before classifying, the image is normalised by the marker's own white and black (its plate
    is a known neutral: a warm or cool white balance, or an exposure change, is undone), see `plate_levels`.
 5. Each class mask is eroded by `erode_px` (anti-aliased silhouette pixels) without growing depth holes: a pixel
@@ -41,6 +42,7 @@ class SegmentationParams:
     wall_margin: float = 0.004   # m kept off the boards and panels by the workspace gate
     marker_margin: float = 0.01  # m around the marker plate excluded from the gate
     erode_px: int = 1            # erosion of each class mask (drops anti-aliased silhouette pixels)
+    median_px: int = 3           # median filter of the colour image before classifying (sensor noise); 0: none
     max_ratio: float = 0.7       # best / second-best residual above this: ambiguous, unassigned
     white_level: float = 195.0   # the marker plate's white is scaled to this (0..255; the renderer's at 0.6-0.7 m)
     min_gain: float = 0.5        # bounds of the colour normalisation's per-channel gain
@@ -158,6 +160,8 @@ def segment_points(rgb: np.ndarray, points: np.ndarray, scenario: Scenario,
     """`segment` on base-frame points already computed (HxWx3, NaN without depth); `levels`: the marker plate's
     (white, black) for the colour normalisation (None: none)."""
     gate = workspace_mask(points, scenario, params.wall_margin, params.marker_margin)
+    if params.median_px > 1:
+        rgb = cv2.medianBlur(np.ascontiguousarray(rgb), params.median_px)
     classes = tuple(b.id for b in scenario.objects)
     refs = np.array([b.rgb for b in scenario.objects]) * 255.0
     labels = np.full(points.shape[:2], UNASSIGNED, np.int32)
