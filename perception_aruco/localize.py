@@ -93,8 +93,10 @@ def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray, params: Local
 
 
 def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario: Scenario,
-                  camera_position: np.ndarray, params: LocalizeParams = LocalizeParams()) -> Detection:
-    """Place one bottle from its class mask; FitError when it is not visible enough."""
+                  camera_position: np.ndarray, params: LocalizeParams = LocalizeParams(),
+                  offset: tuple[int, int] = (0, 0)) -> Detection:
+    """Place one bottle from its class mask; FitError when it is not visible enough. `offset`: (row, column) of
+    mask[0, 0] in the image, when mask and points are a crop of it."""
     n = int(mask.sum())
     if n < params.min_pixels:
         raise FitError(f"{n} pixels of colour {bottle.label!r} (need {params.min_pixels})")
@@ -146,7 +148,7 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     if other is not None and _another_bottle(pts[other], bottle, centre, camera_position, params):
         raise FitError(f"colour {bottle.label!r} seen at two places: identity of {bottle.id!r} in doubt")
     return Detection(bottle.id, float(centre[0]), float(centre[1]), float(base), int(keep.sum()), rms,
-                     (int(np.median(u)), int(np.median(v))))
+                     (int(np.median(u)) + offset[1], int(np.median(v)) + offset[0]))
 
 
 def _another_bottle(q: np.ndarray, bottle: Bottle, centre: np.ndarray, camera_position: np.ndarray,

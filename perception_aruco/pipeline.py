@@ -72,8 +72,12 @@ class Perception:
             notes.append(f"{e}; using the fused frame of earlier frames")
         cam = backproject_image(depth, K, np.eye(4))
         r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
-        first = segment_points(rgb, cam @ r0.T + p0, self.scenario, self.seg, levels)
-        fit = fit_shelf(cam, first.labels >= 0, t0, self.scenario, self.shelf)
+        st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
+        first = segment_points(rgb[::st, ::st], cam[::st, ::st] @ r0.T + p0, self.scenario,
+                               replace(self.seg, erode_px=0, median_px=0), levels)
+        bottles = np.zeros(depth.shape, bool)
+        bottles[::st, ::st] = first.labels >= 0
+        fit = fit_shelf(cam, bottles, t0, self.scenario, self.shelf)
         fit.check(self.shelf)
         T = fit.correction @ t0
         seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
@@ -89,9 +93,18 @@ class Perception:
         """Fit every bottle; then drop fits outside the shelf and pairs of fits that overlap (an identity in doubt:
         two colours on one bottle, or one colour on two), with the reason."""
         found, missing = {}, {}
-        for b in self.scenario.objects:
+        v, u = np.nonzero(seg.labels >= 0)
+        lab = seg.labels[v, u]
+        h, w = seg.labels.shape
+        for k, b in enumerate(self.scenario.objects):
+            sel = lab == k
             try:
-                found[b.id] = locate_bottle(b, seg.mask(b.id), seg.points, self.scenario, cam, loc)
+                if not sel.any():
+                    raise FitError(f"0 pixels of colour {b.label!r} (need {loc.min_pixels})")
+                r0, r1 = max(int(v[sel].min()) - 4, 0), min(int(v[sel].max()) + 5, h)
+                c0, c1 = max(int(u[sel].min()) - 4, 0), min(int(u[sel].max()) + 5, w)
+                found[b.id] = locate_bottle(b, seg.labels[r0:r1, c0:c1] == k, seg.points[r0:r1, c0:c1],
+                                            self.scenario, cam, loc, offset=(r0, c0))
             except FitError as e:
                 missing[b.id] = str(e)
         sh, tol = self.scenario.shelf, loc.inlier_tol

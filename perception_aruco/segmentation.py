@@ -83,10 +83,11 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
         bottom = (z > s.bottom_z + margin) & (z < s.top_z - s.board_thickness - margin)
         mask = inside & (top | bottom)
         m = scenario.marker
-        local = (points - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
+        local = (points[mask] - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
         half = m.size * 0.75 + marker_margin  # the plate carries a white margin of a quarter side
-        on_marker = (np.abs(local[..., 0]) < half) & (np.abs(local[..., 1]) < half) & (np.abs(local[..., 2]) < 0.02)
-    return mask & ~on_marker
+        on_marker = (np.abs(local[:, 0]) < half) & (np.abs(local[:, 1]) < half) & (np.abs(local[:, 2]) < 0.02)
+    mask[mask] = ~on_marker
+    return mask
 
 
 def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams) -> np.ndarray:

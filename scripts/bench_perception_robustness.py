@@ -6,7 +6,8 @@ Per scene (rendered once per resolution, arm at Q_HOME unless --arm-away) and pe
 marker pose in the scenario wrong by L cm and L deg; intrinsics (fx, fy off by L %, principal point by 2L px);
 depth noise (L=1/3/5 mm at 0.75 m, growing with distance squared); depth holes; colour noise; white balance warm
 and cool; exposure; blur; marker occlusion (a small object on the marker, a corner covered, a third covered); bottle
-occlusion (a quarter / half / three quarters of one bottle covered by an object in front); resolution.
+occlusion (a quarter / half / three quarters of one bottle covered by an object in front); resolution; and the
+simulator's realistic sensor (camera_model realsense_d435, jaco2_sim_driver/sensor_model.py; level = seed).
 
 Each case is scored against the scenario's ground truth as the node would publish it (a scene is published when
 `process` raises no PerceptionError and the target is among the detections):
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from collections import defaultdict
@@ -152,13 +154,13 @@ def perturb(cat: str, level: int, s: Scenario, f: Frame, rng: np.random.Generato
     elif cat == "bottle_occl":
         g = cover_bottle(s, f, level, cover or s.target_id)
         rgb, depth = g.rgb, g.depth
-    elif cat != "resolution":
+    elif cat not in ("resolution", "realsense_d435"):
         raise ValueError(cat)
     return s, K, rgb, depth
 
 
 CATEGORIES = ["marker_pose", "intrinsics", "depth_noise", "depth_holes", "colour_noise", "wb_warm", "wb_cool",
-              "exposure", "blur", "marker_occl", "bottle_occl", "resolution"]
+              "exposure", "blur", "marker_occl", "bottle_occl", "resolution", "realsense_d435"]
 
 
 def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str]) -> dict:
@@ -209,20 +211,25 @@ def visible_pixels(s: Scenario, q) -> dict[str, int]:
     return {b.id: int(np.sum(geoms == model.geom(f"{b.id}_geom").id)) for b in s.objects}
 
 
-def fps(scenes: list[tuple[Scenario, Frame]], repeats: int = 5) -> float:
-    n, t = 0, 0.0
+def fps(scenes: list[tuple[Scenario, Frame]], repeats: int = 5) -> tuple[float, float]:
+    """Frames per second of Perception.process: (wall clock, CPU time of this process). On a shared machine the
+    CPU-time figure is what one free core gives."""
+    n, t, c = 0, 0.0, 0.0
     for s, f in scenes:
         p = Perception(s)
         p.process(f.rgb, f.depth, f.K)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(repeats):
             p.process(f.rgb, f.depth, f.K)
         t += time.perf_counter() - t0
+        c += time.process_time() - c0
         n += repeats
-    return n / t
+    return n / t, n / c
 
 
-def run(scene_names, reps: int, q, seed: int, out) -> tuple[list[dict], list[tuple[Scenario, Frame]]]:
+def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES)) \
+        -> tuple[list[dict], list[tuple[Scenario, Frame]]]:
+    """All cases of the scenes x categories x levels x reps (module docstring)."""
     cases = []
     rendered = []
     for name in scene_names:
@@ -232,11 +239,15 @@ def run(scene_names, reps: int, q, seed: int, out) -> tuple[list[dict], list[tup
         required = {i for i, n in visible_pixels(s, q).items() if n >= VISIBLE_PIXELS}
         low = {lv: render_frame(s, q=q, camera=CameraSpec(width=w, height=h)) for lv, (w, h) in RESOLUTIONS.items()}
         for ci, cat in enumerate(CATEGORIES):
+            if cat not in categories:
+                continue
             for level in (1, 2, 3):
                 for rep in range(reps):
                     rng = np.random.default_rng([seed, SCENES.index(name) if name in SCENES else 99, ci, level, rep])
                     cover = sorted(required)[int(rng.integers(len(required)))] if required else None
                     g = low[level] if cat == "resolution" else f
+                    if cat == "realsense_d435":  # the simulator's realistic sensor, seeded by the level
+                        g = render_frame(s, q=q, sensor=sm.SensorModel.named(cat), seed=level + 100 * rep)
                     given, K, rgb, depth = perturb(cat, level, s, g, rng, cover)
                     req = required - {cover} if cat == "bottle_occl" else required
                     c = score(s, given, K, rgb, depth, req)
@@ -257,9 +268,21 @@ def table(cases: list[dict]) -> list[str]:
         groups[(c["cat"], c["level"])].append(c)
     for cat in CATEGORIES:
         for level in (1, 2, 3):
-            rows.append(_row(f"{cat}", str(level), groups[(cat, level)]))
+            if groups[(cat, level)]:
+                rows.append(_row(f"{cat}", str(level), groups[(cat, level)]))
     rows.append(_row("**all**", "", cases))
     return rows
+
+
+def category_summary(cases: list[dict]) -> str:
+    """One line: ok / cases and silently wrong per category."""
+    out = []
+    for cat in CATEGORIES:
+        cs = [c for c in cases if c["cat"] == cat]
+        if cs:
+            ok = sum(c["outcome"] == "ok" for c in cs)
+            out.append(f"{cat} {ok}/{len(cs)} ok, {sum(c['outcome'] == 'WRONG' for c in cs)} wrong")
+    return "; ".join(out)
 
 
 def _row(cat: str, level: str, cs: list[dict]) -> str:
@@ -280,10 +303,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--arm-away", action="store_true", help="arm at Q_UPRIGHT instead of Q_HOME")
     ap.add_argument("--cases-out", help="write one line per case (outcome and reason) to this file")
+    ap.add_argument("--categories", nargs="*", default=CATEGORIES, choices=CATEGORIES)
     a = ap.parse_args()
     out = open(a.cases_out, "w") if a.cases_out else None
     t0 = time.time()
-    cases, rendered = run(a.scenes, a.reps, Q_UPRIGHT if a.arm_away else Q_HOME, a.seed, out)
+    cases, rendered = run(a.scenes, a.reps, Q_UPRIGHT if a.arm_away else Q_HOME, a.seed, out, tuple(a.categories))
     if out:
         out.close()
     print(f"perception robustness: {len(a.scenes)} scenes ({', '.join(a.scenes)}), arm at "
@@ -294,9 +318,12 @@ def main() -> None:
     wrong = [c for c in cases if c["outcome"] == "WRONG"]
     print(f"\nok {ok}/{len(cases)} ({100 * ok / len(cases):.1f} %), silently wrong {len(wrong)}, refused "
           f"{sum(c['outcome'] == 'refused' for c in cases)}")
+    print("per category: " + category_summary(cases))
     for c in wrong:
         print(f"  WRONG {c['scene']} {c['cat']} L{c['level']}: {c['reason']}")
-    print(f"processing at 640x480: {fps(rendered):.1f} frames/s (clean frames, rendering not included)")
+    wall, cpu = fps(rendered)
+    print(f"processing at 640x480: {wall:.1f} frames/s wall clock, {cpu:.1f} frames/s of CPU time (clean frames, "
+          f"rendering not included; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
 
 
 if __name__ == "__main__":
