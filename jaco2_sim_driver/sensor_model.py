@@ -42,7 +42,8 @@ def depth_edges(depth: np.ndarray, jump: float = 0.02) -> np.ndarray:
     """HxW bool: a pixel whose 4-neighbour is more than `jump` (m) farther (the far side of a depth edge)."""
     z = np.where(depth > 0, depth, np.inf).astype(np.float32)
     near = cv2.erode(z, np.ones((3, 3), np.uint8))   # min over the 3x3 neighbourhood
-    return np.isfinite(z) & (z - near > jump)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(z) & (z - near > jump)
 
 
 def edge_holes_and_flying_pixels(depth: np.ndarray, rng: np.random.Generator, hole_prob: float = 0.5,
