@@ -163,10 +163,11 @@ CATEGORIES = ["marker_pose", "intrinsics", "depth_noise", "depth_holes", "colour
               "exposure", "blur", "marker_occl", "bottle_occl", "resolution", "realsense_d435"]
 
 
-def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str]) -> dict:
-    """One case: outcome (ok / incomplete / refused / WRONG), errors of the required bottles, swaps, false ones."""
+def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str], prior=None) -> dict:
+    """One case: outcome (ok / incomplete / refused / WRONG), errors of the required bottles, swaps, false ones.
+    `prior`: the camera pose of earlier frames, as the node's frame fusion gives it (None: a first frame)."""
     try:
-        r = Perception(given).process(rgb, depth, K)
+        r = Perception(given).process(rgb, depth, K, **({} if prior is None else {"prior": prior}))
     except PerceptionError as exc:
         return dict(outcome="refused", reason=str(exc), errors=[], swaps=0, false=0)
     if truth.target_id not in r.detections:
@@ -227,7 +228,7 @@ def fps(scenes: list[tuple[Scenario, Frame]], repeats: int = 5) -> tuple[float, 
     return n / t, n / c
 
 
-def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES)) \
+def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES), prior: bool = False) \
         -> tuple[list[dict], list[tuple[Scenario, Frame]]]:
     """All cases of the scenes x categories x levels x reps (module docstring)."""
     cases = []
@@ -237,6 +238,7 @@ def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES))
         f = render_frame(s, q=q)
         rendered.append((s, f))
         required = {i for i, n in visible_pixels(s, q).items() if n >= VISIBLE_PIXELS}
+        fused = Perception(s).process(f.rgb, f.depth, f.K).T_base_camera if prior else None
         low = {lv: render_frame(s, q=q, camera=CameraSpec(width=w, height=h)) for lv, (w, h) in RESOLUTIONS.items()}
         for ci, cat in enumerate(CATEGORIES):
             if cat not in categories:
@@ -250,7 +252,7 @@ def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES))
                         g = render_frame(s, q=q, sensor=sm.SensorModel.named(cat), seed=level + 100 * rep)
                     given, K, rgb, depth = perturb(cat, level, s, g, rng, cover)
                     req = required - {cover} if cat == "bottle_occl" else required
-                    c = score(s, given, K, rgb, depth, req)
+                    c = score(s, given, K, rgb, depth, req, fused if cat != "resolution" else None)
                     c.update(scene=name, cat=cat, level=level, rep=rep)
                     cases.append(c)
                     if out:
@@ -304,14 +306,17 @@ def main() -> None:
     ap.add_argument("--arm-away", action="store_true", help="arm at Q_UPRIGHT instead of Q_HOME")
     ap.add_argument("--cases-out", help="write one line per case (outcome and reason) to this file")
     ap.add_argument("--categories", nargs="*", default=CATEGORIES, choices=CATEGORIES)
+    ap.add_argument("--prior", action="store_true", help="give each case the camera pose of the clean frame, as the "
+                    "node's frame fusion does after its first frames")
     a = ap.parse_args()
     out = open(a.cases_out, "w") if a.cases_out else None
     t0 = time.time()
-    cases, rendered = run(a.scenes, a.reps, Q_UPRIGHT if a.arm_away else Q_HOME, a.seed, out, tuple(a.categories))
+    cases, rendered = run(a.scenes, a.reps, Q_UPRIGHT if a.arm_away else Q_HOME, a.seed, out, tuple(a.categories), a.prior)
     if out:
         out.close()
     print(f"perception robustness: {len(a.scenes)} scenes ({', '.join(a.scenes)}), arm at "
           f"{'Q_UPRIGHT' if a.arm_away else 'Q_HOME'}, seed {a.seed}, {a.reps} rep(s), {len(cases)} cases, "
+          f"{'with the fused pose of earlier frames, ' if a.prior else ''}"
           f"{time.time() - t0:.0f} s")
     print("\n".join(table(cases)))
     ok = sum(c["outcome"] == "ok" for c in cases)

@@ -143,7 +143,7 @@ def test_depth_holes_do_not_grow(frames):
     """5 % of the depth missing loses about 5 % of a colour class's pixels, not more (the erosion ignores holes)."""
     from perception_aruco.segmentation import segment
     s, f = frames["blocking_10"]
-    holes = sm.depth_holes(f.depth, 0.05, np.random.default_rng(0))
+    holes = sm.depth_holes(f.depth, 0.05, np.random.default_rng(0), clump_px=1)
     clean = np.sum(segment(f.rgb, f.depth, f.K, f.T_base_camera, s).labels >= 0)
     holed = np.sum(segment(f.rgb, holes, f.K, f.T_base_camera, s).labels >= 0)
     assert holed >= 0.9 * clean, (holed, clean)
