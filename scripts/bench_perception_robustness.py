@@ -311,7 +311,8 @@ def main() -> None:
     a = ap.parse_args()
     out = open(a.cases_out, "w") if a.cases_out else None
     t0 = time.time()
-    cases, rendered = run(a.scenes, a.reps, Q_UPRIGHT if a.arm_away else Q_HOME, a.seed, out, tuple(a.categories), a.prior)
+    q = Q_UPRIGHT if a.arm_away else Q_HOME
+    cases, rendered = run(a.scenes, a.reps, q, a.seed, out, tuple(a.categories), a.prior)
     if out:
         out.close()
     print(f"perception robustness: {len(a.scenes)} scenes ({', '.join(a.scenes)}), arm at "
