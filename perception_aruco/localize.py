@@ -8,8 +8,9 @@ and the fit repeated (stray pixels of another class, specular highlights). The c
 the fit (its points lie inside the circle) except its rim: blob boundary pixels on the cap that are not occlusion
 edges lie on the circle too, which places a bottle of which only the top is visible (behind others or the arm).
 The base height z is the board the bottle stands on (top or bottom shelf), decided by the points' heights.
-Checks (docs/perception.md, "Consistency checks"): the fit's rms residual must stay within `max_rms`, and a second
-blob of the same colour away from the fitted bottle makes the identity doubtful (FitError: reported missing).
+Checks (docs/perception.md, "Consistency checks"): the fit's rms residual must stay within `max_rms` and its axis
+uncertainty within `max_uncertainty`; a second bottle-like blob of the same colour away from the fitted bottle is
+returned (`Detection.elsewhere`) for the frame's identity check.
 """
 from __future__ import annotations
 
@@ -57,6 +58,7 @@ class Detection:
     n_points: int
     rms: float
     pixel: tuple[int, int]        # image point of the fit's visible centre (for the debug image)
+    elsewhere: tuple[float, float] | None = None  # axis of a second bottle-like blob of this colour (identity check)
 
 
 def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray, params: LocalizeParams = LocalizeParams()):
@@ -145,22 +147,21 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     if 3 * sd > params.max_uncertainty:
         raise FitError(f"too little of {bottle.id!r} visible to place it: axis uncertain by {3 * sd * 1000:.0f} mm "
                        "(3 sigma)")
-    if other is not None and _another_bottle(pts[other], bottle, centre, camera_position, params):
-        raise FitError(f"colour {bottle.label!r} seen at two places: identity of {bottle.id!r} in doubt")
+    elsewhere = None if other is None else _another_bottle(pts[other], bottle, centre, camera_position, params)
     return Detection(bottle.id, float(centre[0]), float(centre[1]), float(base), int(keep.sum()), rms,
-                     (int(np.median(u)) + offset[1], int(np.median(v)) + offset[0]))
+                     (int(np.median(u)) + offset[1], int(np.median(v)) + offset[0]),
+                     None if elsewhere is None else (float(elsewhere[0]), float(elsewhere[1])))
 
 
 def _another_bottle(q: np.ndarray, bottle: Bottle, centre: np.ndarray, camera_position: np.ndarray,
-                    params: LocalizeParams) -> bool:
-    """A second blob of the bottle's colour is another bottle-like object when it lies away from the fitted bottle
-    and its points fit a circle of the bottle's radius too."""
+                    params: LocalizeParams) -> np.ndarray | None:
+    """The axis of a second blob of the bottle's colour when it lies away from the fitted bottle and its points fit
+    a circle of the bottle's radius too (another bottle-like object of this colour), else None."""
     q = q[np.isfinite(q).all(axis=1)][:, :2].astype(float)
     if len(q) < params.min_inliers or np.median(np.linalg.norm(q - centre, axis=1)) <= bottle.radius + \
             params.elsewhere:
-        return False
+        return None
     try:
-        fit_axis(q, bottle.radius, camera_position, params)
+        return fit_axis(q, bottle.radius, camera_position, params)[0]
     except FitError:
-        return False
-    return True
+        return None

@@ -82,9 +82,13 @@ class Perception:
         T = fit.correction @ t0
         seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
                              self.seg, levels)
-        # noisier depth: wider fit tolerances (the shelf's residual spread is the depth noise at the shelf)
+        # noisier depth: wider fit tolerances (the shelf's residual spread is the depth noise at the shelf); fewer
+        # pixels: pixel counts scaled with the image area (the axis uncertainty check still bounds the fit)
+        area = min(1.0, depth.size / (640 * 480))
         loc = replace(self.loc, inlier_tol=max(self.loc.inlier_tol, 2.5 * fit.noise),
-                      max_rms=max(self.loc.max_rms, 1.5 * fit.noise), depth_noise=fit.noise)
+                      max_rms=max(self.loc.max_rms, 1.5 * fit.noise), depth_noise=fit.noise,
+                      min_pixels=max(12, round(self.loc.min_pixels * area)),
+                      min_inliers=max(10, round(self.loc.min_inliers * area)))
         found, missing = self._locate_all(seg, T[:3, 3], loc)
         return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
 
@@ -113,6 +117,12 @@ class Perception:
             if not (sh.x_front + r - tol <= d.x <= sh.x_back - r + tol and sh.y_min + r - tol <= d.y <= sh.y_max - r
                     + tol):
                 missing[i] = f"fit at ({d.x:.3f}, {d.y:.3f}) is not inside the shelf: not this bottle"
+                del found[i]
+        for i, d in list(found.items()):  # a second bottle-like blob of i's colour not at another located bottle
+            if d.elsewhere is not None and not any(
+                    j != i and math.hypot(d.elsewhere[0] - e.x, d.elsewhere[1] - e.y) < self.scenario.object(j).radius
+                    for j, e in found.items()):
+                missing[i] = f"colour {self.scenario.object(i).label!r} seen at two places: identity of {i} in doubt"
                 del found[i]
         ids = list(found)
         for a, i in enumerate(ids):
