@@ -65,12 +65,15 @@ def check_images(rgb, depth) -> tuple[np.ndarray, np.ndarray]:
 def backproject_image(depth: np.ndarray, K: np.ndarray, T_base_camera: np.ndarray) -> np.ndarray:
     """HxWx3 points in the base frame (NaN where depth is 0 or not finite). Depth is planar z (RealSense)."""
     h, w = depth.shape
-    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     z = depth.astype(np.float32)
-    z = np.where(np.isfinite(z) & (z > 0), z, np.nan)
-    cam = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=-1)
-    r, t = T_base_camera[:3, :3].astype(np.float32), T_base_camera[:3, 3].astype(np.float32)
-    return cam @ r.T + t
+    z = np.where(np.isfinite(z) & (z > 0), z, np.float32(np.nan))
+    x = ((np.arange(w, dtype=np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0]))[None, :] * z
+    y = ((np.arange(h, dtype=np.float32) - np.float32(K[1, 2])) / np.float32(K[1, 1]))[:, None] * z
+    r, t = np.asarray(T_base_camera, np.float32)[:3, :3], np.asarray(T_base_camera, np.float32)[:3, 3]
+    out = np.empty((h, w, 3), np.float32)
+    for k in range(3):
+        out[..., k] = r[k, 0] * x + r[k, 1] * y + r[k, 2] * z + t[k]
+    return out
 
 
 def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker_margin: float) -> np.ndarray:

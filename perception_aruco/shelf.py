@@ -6,7 +6,7 @@ bottom_z) and the ceiling board's (the camera looks down on it), the boards' fro
 panel's front face (x = x_back) and the side panels' inner faces
 (y = y_min, y_max). Depth points of the frame (base frame, bottle pixels excluded) near a plane and inside its
 extent are its observations. A small rigid correction of the base frame (rotation w, translation t) minimises
-sum_i rho(n_i . (p_i + w x p_i + t) - d_i), linear in (w, t), with Huber weights, in three passes with a
+sum_i rho(n_i . (p_i + w x p_i + t) - d_i), linear in (w, t), with Huber weights, in four passes with a
 narrowing band (the points are re-assigned to planes after each pass). The correction is how far the marker frame
 is from where the shelf says it is; `ShelfFit.check` refuses a frame whose correction or plane residuals are out of
 bounds, naming the planes. No rclpy here.
@@ -31,11 +31,11 @@ class InconsistentFrameError(PerceptionError):
 class ShelfParams:
     """Bounds of the shelf fit and its checks (module docstring)."""
 
-    bands: tuple[float, ...] = (0.05, 0.05, 0.03, 0.015, 0.008)  # m: a plane's observations, per pass
+    bands: tuple[float, ...] = (0.05, 0.03, 0.015, 0.008)  # m: a plane's observations, per pass
     huber: float = 0.003          # m: residuals beyond this are down-weighted
     edge_margin: float = 0.012    # m kept off a plane's borders (corners belong to two planes)
     min_points: int = 800         # image pixels on a plane (before the stride), to use it
-    stride: int = 3               # every stride-th pixel in each direction (speed)
+    stride: int = 4               # every stride-th pixel in each direction (speed)
     max_shift: float = 0.05       # m: a larger correction of the marker frame (at the shelf's centre) refuses it
     max_rotation: float = 5.0     # deg
     max_rms: float = 0.006        # m: a used plane's rms residual after the correction
