@@ -121,7 +121,8 @@ class ShelfFit:
         if max(abs(kx), abs(ky)) > params.max_focal or max(abs(px), abs(py)) > params.max_centre:
             raise InconsistentFrameError(
                 f"the camera intrinsics would need a correction of {kx:+.1%} / {ky:+.1%} in focal length and "
-                f"({px:+.3f}, {py:+.3f}) x f in principal point to fit the shelf: check camera_info; {self.summary()}")
+                f"({px:+.3f}, {py:+.3f}) x f in principal point to fit the shelf: check camera_info (or the scenario's "
+                f"marker pose); {self.summary()}")
         bad = [f"{n}: {rms * 1000:.1f} mm rms, {med * 1000:+.1f} mm off" for n, (_, rms, med, _) in self.planes.items()
                if rms > params.max_rms or abs(med) > params.max_offset]
         if bad:
