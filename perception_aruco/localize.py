@@ -43,7 +43,7 @@ class LocalizeParams:
     iterations: int = 12
     max_rms: float = 0.003        # m: rms distance of the inliers to the fitted circle
     elsewhere: float = 0.02       # m: a second blob of the colour this far outside the bottle is another object
-    max_uncertainty: float = 0.006  # m: 3 sigma of the fitted axis (from the fit's covariance) must stay below
+    max_uncertainty: float = 0.0045  # m: 3 sigma of the fitted axis (from the fit's covariance) must stay below
     depth_noise: float = 0.0      # m: the frame's depth noise (set per frame from the shelf fit); floor of the sigma
 
 
@@ -131,6 +131,11 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
     nearest = cv2.erode(dist, np.ones((5, 5), np.uint8))  # min over a 5x5 neighbourhood
     rim = (big > 0) & (cv2.erode(big, np.ones((3, 3), np.uint8)) == 0) & (nearest > dist - params.occluder_gap)
     rim &= pts[..., 2] >= top
+    # a real sensor's flying pixels: depth off its 3x3 median by more than occluder_gap (not on either surface)
+    med = cv2.medianBlur(np.where(np.isfinite(dist), dist, 0).astype(np.float32), 3)
+    steady = np.abs(dist - med) < params.occluder_gap
+    side &= steady[v, u]
+    rim &= steady
     use = np.concatenate([p[side, :2], pts[rim][:, :2]]).astype(float)
     if len(use) < params.min_inliers:
         raise FitError(f"too little of {bottle.id!r} visible: {int(side.sum())} side and {int(rim.sum())} rim "
