@@ -30,8 +30,10 @@ from collections import defaultdict
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node runs (perception_aruco/__init__.py)
+
+import cv2  # noqa: E402  (after the BLAS thread setting, which must precede numpy)
+import numpy as np  # noqa: E402  (same)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
