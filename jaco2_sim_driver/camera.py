@@ -18,6 +18,7 @@ from relocation_common.scenario import Scenario  # noqa: E402
 
 from . import scene  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from .scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402
+from .sensor_model import SensorModel, SensorSimulator  # noqa: E402
 
 # MuJoCo camera frame (x right, y up, looking along -z) -> OpenCV optical frame (x right, y down, z forward)
 MJ_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
@@ -37,26 +38,32 @@ class Frame:
 
     @property
     def width(self) -> int:
+        """Image width (px)."""
         return int(self.rgb.shape[1])
 
     @property
     def height(self) -> int:
+        """Image height (px)."""
         return int(self.rgb.shape[0])
 
     @property
     def fx(self) -> float:
+        """Focal length x (px)."""
         return float(self.K[0, 0])
 
     @property
     def fy(self) -> float:
+        """Focal length y (px)."""
         return float(self.K[1, 1])
 
     @property
     def cx(self) -> float:
+        """Principal point x (px)."""
         return float(self.K[0, 2])
 
     @property
     def cy(self) -> float:
+        """Principal point y (px)."""
         return float(self.K[1, 2])
 
 
@@ -68,22 +75,28 @@ def intrinsics(fovy_deg: float, width: int, height: int) -> np.ndarray:
 
 
 class CameraRenderer:
-    """Renders the named camera of a model from an MjData (its own GL context; use from one thread)."""
+    """Renders the named camera of a model from an MjData (its own GL context; use from one thread). `sensor`: what
+    the images go through after rendering (sensor_model.SensorModel, e.g. `SensorModel.named("realsense_d435")`;
+    default: none, the ideal camera); `seed` seeds its noise."""
 
-    def __init__(self, model: mujoco.MjModel, width: int, height: int, camera: str = CAMERA_NAME):
+    def __init__(self, model: mujoco.MjModel, width: int, height: int, camera: str = CAMERA_NAME,
+                 sensor: SensorModel = SensorModel(), seed: int = 0):
         self.model, self.camera = model, camera
+        self.sensor = SensorSimulator(sensor, seed)
         self._cam = model.camera(camera).id
         self._renderer = mujoco.Renderer(model, height, width)
         self.K = intrinsics(float(model.cam_fovy[self._cam]), width, height)
         self.zfar = float(model.vis.map.zfar * model.stat.extent)
 
     def camera_pose(self, data: mujoco.MjData) -> np.ndarray:
+        """T_base_camera: the optical frame (OpenCV) in the base frame."""
         t = np.eye(4)
         t[:3, :3] = data.cam_xmat[self._cam].reshape(3, 3) @ MJ_TO_OPTICAL
         t[:3, 3] = data.cam_xpos[self._cam]
         return t
 
     def render(self, data: mujoco.MjData) -> Frame:
+        """One frame of `data` (through the sensor model)."""
         r = self._renderer
         r.update_scene(data, camera=self.camera)
         rgb = r.render().copy()
@@ -93,20 +106,24 @@ class CameraRenderer:
         finally:
             r.disable_depth_rendering()
         depth[depth >= 0.999 * self.zfar] = 0.0
+        rgb, depth = self.sensor.apply(rgb, depth)
         return Frame(rgb, depth, self.K.copy(), self.camera_pose(data), float(data.time))
 
     def close(self) -> None:
+        """Release the GL context."""
         self._renderer.close()
 
 
-def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec = CameraSpec()) -> Frame:
-    """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception."""
+def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec = CameraSpec(), sensor: SensorModel = SensorModel(),
+                 seed: int = 0) -> Frame:
+    """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception;
+    `sensor` / `seed` as in CameraRenderer."""
     model = build_model(scenario, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
         data.qpos[model.joint(j).qposadr[0]] = qj
     mujoco.mj_forward(model, data)
-    r = CameraRenderer(model, camera.width, camera.height)
+    r = CameraRenderer(model, camera.width, camera.height, sensor=sensor, seed=seed)
     try:
         return r.render(data)
     finally:

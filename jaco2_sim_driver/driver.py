@@ -29,6 +29,7 @@ from relocation_common.scenario import load_scenario
 from . import kinova
 from .camera import MJ_TO_OPTICAL, CameraRenderer, Frame
 from .scene import CAMERA_NAME, CameraSpec
+from .sensor_model import SensorModel
 from .sim import BadCommandError, Jaco2Sim, ObjectPose, check_velocity_command
 
 SURFACES = ("kinova", "ros2_control")  # the node's command_interface
@@ -115,6 +116,7 @@ def check_parameters(g: Callable[[str], Any]) -> None:
     if str(g("command_interface")) not in SURFACES:
         raise ValueError(f"parameter command_interface must be one of {', '.join(SURFACES)}, "
                          f"got {str(g('command_interface'))!r}")
+    SensorModel.named(str(g("camera_model")))  # camera_model: ideal | realsense_d435 (ValueError naming it)
 
 
 def _check_goal(goal) -> np.ndarray:
@@ -129,8 +131,9 @@ class SimDriver:
     tolerance, stall_threshold, stall_interval; `log`: where grasps and refusals are told (the node's logger)."""
 
     def __init__(self, sim: Jaco2Sim, rates: Rates = Rates(), finger_params: dict | None = None,
-                 log: Callable[[str], None] = lambda _: None) -> None:
+                 log: Callable[[str], None] = lambda _: None, sensor: SensorModel | None = None) -> None:
         self.sim, self.rates, self.log = sim, rates, log
+        self.sensor = sensor  # the camera's sensor model (sensor_model; None: the ideal camera)
         self.finger_params = dict(finger_params or {})
         self.lock = threading.Lock()
         self.stopped = False  # kinova in/stop: commands are ignored until in/start
@@ -158,7 +161,7 @@ class SimDriver:
                       state_on_command=bool(g("state_on_command")))
         fingers = dict(tolerance=float(g("finger_tolerance")), stall_threshold=float(g("finger_stall_threshold")),
                        stall_interval=float(g("finger_stall_interval")))
-        return cls(sim, rates, fingers, log)
+        return cls(sim, rates, fingers, log, SensorModel.named(str(g("camera_model"))))
 
     # ------------------------------------------------------------------ commands
     def command(self, v) -> None:
@@ -352,7 +355,7 @@ class SimDriver:
         or `publish` returns False. Renders on a copy of the joint positions (the lock is held only to copy), with
         its own renderer: call it in the thread that owns the GL context."""
         model, spec = self.sim.model, self.sim.camera
-        renderer = CameraRenderer(model, spec.width, spec.height)
+        renderer = CameraRenderer(model, spec.width, spec.height, sensor=self.sensor)
         data = mujoco.MjData(model)
         next_t = time.monotonic()
         try:

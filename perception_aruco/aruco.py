@@ -26,6 +26,14 @@ class MarkerNotFoundError(PerceptionError):
     """The scenario's ArUco marker is not in the image (or is too damaged to decode)."""
 
 
+class MarkerOccludedError(MarkerNotFoundError):
+    """The marker is in view but partly covered: too few of its corners lie on the marker plane to place it."""
+
+
+class MarkerInconsistentError(PerceptionError):
+    """The marker was found but its colour-only and depth poses, or its size in depth, disagree."""
+
+
 class ImageFormatError(PerceptionError):
     """An image with an unexpected shape, dtype or encoding, or colour and depth of different sizes."""
 
@@ -40,12 +48,14 @@ def rpy_matrix(rpy) -> np.ndarray:
 
 
 def transform(rot: np.ndarray, t) -> np.ndarray:
+    """4x4 homogeneous transform of a rotation and a translation."""
     out = np.eye(4)
     out[:3, :3], out[:3, 3] = rot, np.asarray(t, float).reshape(3)
     return out
 
 
 def invert(t: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform."""
     r = t[:3, :3]
     return transform(r.T, -r.T @ t[:3, 3])
 
@@ -72,12 +82,34 @@ def pose_error(t_est: np.ndarray, t_true: np.ndarray) -> tuple[float, float]:
 @dataclass(frozen=True)
 class MarkerObservation:
     """The marker seen in one image: pixel corners (4x2, ArUco order), T_camera_marker, and the resulting
-    T_base_camera; `refined` tells whether the depth plane refinement was applied."""
+    T_base_camera; `refined` tells whether the depth refinement was applied; `T_camera_marker_pnp` is the
+    colour-only pose; `covered`: fraction of the marker face with something in front; `dropped`: corners on an
+    occluding edge (not used)."""
 
     corners: np.ndarray
     T_camera_marker: np.ndarray
     T_base_camera: np.ndarray
     refined: bool
+    T_camera_marker_pnp: np.ndarray | None = None
+    covered: float = 0.0
+    dropped: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class MarkerParams:
+    """Bounds of the marker checks (docs/perception.md, "Consistency checks")."""
+
+    min_plane_points: int = 30
+    plane_tol: float = 0.003        # m: RANSAC inlier distance (raised to 3 x the robust noise estimate)
+    occluder_gap: float = 0.01      # m: a point this much nearer than the marker plane is something in front
+    corner_covered: float = 0.1     # fraction of a corner's neighbourhood in front: the corner is not used
+    max_disagreement_mm: float = 30.0   # colour-only vs depth marker position, at fx = 433 px (640x480; x 433/fx)
+    max_disagreement_deg: float = 8.0   # colour-only vs depth marker orientation
+    size_tol: float = 0.004         # m (+ 5 %): corner distances from depth vs the marker's size
+    ransac_iterations: int = 60
+
+
+CORNER_NAMES = ("top-left", "top-right", "bottom-right", "bottom-left")
 
 
 def _backproject(K: np.ndarray, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -95,22 +127,49 @@ def _kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return transform(rot, cd - rot @ cs)
 
 
+def robust_plane(pts: np.ndarray, tol: float, iterations: int, rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """(unit normal n, offset c) of the plane n.p = c through most of the points: RANSAC on 3-point samples, then
+    least squares on the inliers (tolerance raised to 3 x the inliers' robust spread when the depth is noisier)."""
+    best, best_n = None, -1
+    for _ in range(iterations):
+        a, b, c = pts[rng.choice(len(pts), 3, replace=False)]
+        n = np.cross(b - a, c - a)
+        if np.linalg.norm(n) < 1e-12:
+            continue
+        n = n / np.linalg.norm(n)
+        k = int(np.sum(np.abs(pts @ n - n @ a) < tol))
+        if k > best_n:
+            best, best_n = (n, float(n @ a)), k
+    if best is None:
+        raise MarkerInconsistentError("marker depth is degenerate (no plane)")
+    n, off = best
+    for _ in range(3):
+        r = pts @ n - off
+        spread = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+        inl = np.abs(r) < max(tol, 3 * spread)
+        q = pts[inl]
+        cen = q.mean(0)
+        n_new = np.linalg.eigh(np.cov((q - cen).T))[1][:, 0]
+        n, off = (n_new if n_new @ n > 0 else -n_new), float((n_new if n_new @ n > 0 else -n_new) @ cen)
+    return n, off
+
+
 class MarkerLocalizer:
     """Finds the scenario's marker and returns the camera pose in the base frame."""
 
-    def __init__(self, marker: Marker, refine_with_depth: bool = True, min_plane_points: int = 30):
+    def __init__(self, marker: Marker, refine_with_depth: bool = True, params: MarkerParams = MarkerParams()):
         try:
             dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, marker.dictionary))
         except AttributeError:
             raise ValueError(f"unknown ArUco dictionary {marker.dictionary!r}") from None
-        params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        self.detector = cv2.aruco.ArucoDetector(dictionary, params)
+        det = cv2.aruco.DetectorParameters()
+        det.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        self.detector = cv2.aruco.ArucoDetector(dictionary, det)
         self.marker = marker
         self.T_base_marker = marker_in_base(marker)
         self.object_points = marker_corners_3d(marker.size)
         self.refine_with_depth = refine_with_depth
-        self.min_plane_points = min_plane_points
+        self.params = params
 
     def detect(self, rgb: np.ndarray) -> np.ndarray:
         """Pixel corners (4x2) of the scenario's marker id; MarkerNotFoundError if it is not seen."""
@@ -119,45 +178,113 @@ class MarkerLocalizer:
         seen = [] if ids is None else [int(i) for i in np.asarray(ids).reshape(-1)]
         if self.marker.id not in seen:
             raise MarkerNotFoundError(
-                f"ArUco marker id {self.marker.id} ({self.marker.dictionary}) not in view"
-                + (f" (saw ids {seen})" if seen else " (no marker detected)"))
+                f"ArUco marker id {self.marker.id} ({self.marker.dictionary}) not detected: not in view, covered or "
+                "blurred" + (f" (saw ids {seen})" if seen else " (no marker detected)"))
         return np.asarray(corners[seen.index(self.marker.id)], float).reshape(4, 2)
 
-    def locate(self, rgb: np.ndarray, K: np.ndarray, depth: np.ndarray | None = None) -> MarkerObservation:
-        """Camera pose in the base frame from the marker (and depth, when given and valid on the marker)."""
-        corners = self.detect(rgb)
-        ok, rvec, tvec = cv2.solvePnP(self.object_points, corners, np.asarray(K, float), None,
-                                      flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    def locate(self, rgb: np.ndarray, K: np.ndarray, depth: np.ndarray | None = None,
+               expected: np.ndarray | None = None) -> MarkerObservation:
+        """Camera pose in the base frame from the marker (and depth, when given and valid on the marker).
+        `expected`: T_camera_marker of earlier frames (the node's fused frame): when the marker is not decoded,
+        the depth there tells whether it is covered (MarkerOccludedError names how much)."""
+        K = np.asarray(K, float)
+        try:
+            corners = self.detect(rgb)
+        except MarkerNotFoundError:
+            if expected is not None and depth is not None:
+                self.diagnose_cover(K, depth, expected)
+            raise
+        ok, rvec, tvec = cv2.solvePnP(self.object_points, corners, K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             raise MarkerNotFoundError(f"solvePnP failed on marker {self.marker.id}")
-        t_cam_marker = transform(cv2.Rodrigues(rvec)[0], tvec)
-        refined = False
-        if self.refine_with_depth and depth is not None:
-            t = self._refine(corners, t_cam_marker, K, depth)
-            if t is not None:
-                t_cam_marker, refined = t, True
-        return MarkerObservation(corners, t_cam_marker, self.T_base_marker @ invert(t_cam_marker), refined)
+        t_pnp = transform(cv2.Rodrigues(rvec)[0], tvec)
+        if not (self.refine_with_depth and depth is not None):
+            return MarkerObservation(corners, t_pnp, self.T_base_marker @ invert(t_pnp), False, t_pnp)
+        refined = self._refine(corners, t_pnp, K, depth)
+        if refined is None:
+            return MarkerObservation(corners, t_pnp, self.T_base_marker @ invert(t_pnp), False, t_pnp)
+        t, covered, dropped = refined
+        return MarkerObservation(corners, t, self.T_base_marker @ invert(t), True, t_pnp, covered, dropped)
 
-    def _refine(self, corners, t_cam_marker, K, depth) -> np.ndarray | None:
-        """Fit a plane to the depth pixels inside the marker quad; intersect the corner rays with it; Kabsch.
-        None when too few valid depth pixels (then the PnP pose stands)."""
+    def _plate_points(self, K, depth, quad: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+        """(pixels N x 2, camera points N x 3) with depth inside the quad scaled by `scale` about its centre."""
         h, w = depth.shape
         mask = np.zeros((h, w), np.uint8)
-        centre = corners.mean(0)
-        inner = centre + 0.8 * (corners - centre)  # stay off the silhouette edges
-        cv2.fillConvexPoly(mask, np.round(inner).astype(np.int32), 1)
+        centre = quad.mean(0)
+        cv2.fillConvexPoly(mask, np.round(centre + scale * (quad - centre)).astype(np.int32), 1)
         v, u = np.nonzero(mask & (depth > 0))
-        if len(u) < self.min_plane_points:
+        uv = np.stack([u, v], 1).astype(float)
+        return uv, _backproject(K, uv, depth[v, u].astype(float))
+
+    def _covered_corners(self, K, depth, corners, n, off) -> tuple[float, list[int]]:
+        """(fraction of the plate with something in front, corners whose neighbourhood has something in front)."""
+        p = self.params
+        uv, pts = self._plate_points(K, depth, corners, 1.3)
+        front = (pts @ n - off) > p.occluder_gap          # nearer to the camera than the plane (n faces it)
+        side = float(np.mean(np.linalg.norm(corners - np.roll(corners, 1, 0), axis=1)))
+        radius = max(3.0, 0.15 * side)
+        bad = []
+        for k, c in enumerate(corners):
+            near = np.linalg.norm(uv - c, axis=1) < radius
+            if not near.any() or np.mean(front[near]) > p.corner_covered:
+                bad.append(k)
+        return float(np.mean(front)) if len(front) else 1.0, bad
+
+    def _refine(self, corners, t_pnp, K, depth):
+        """(T_camera_marker, covered fraction, dropped corners) from a robust plane fit to the marker's depth and
+        the unoccluded corners' rays; None when too few depth pixels (the colour-only pose stands).
+        Raises MarkerOccludedError / MarkerInconsistentError when the checks fail."""
+        p = self.params
+        _, pts = self._plate_points(K, depth, corners, 1.25)  # the plate's white margin is a quarter side
+        if len(pts) < p.min_plane_points:
             return None
-        pts = _backproject(K, np.stack([u, v], 1).astype(float), depth[v, u].astype(float))
-        c = pts.mean(0)
-        n = np.linalg.eigh(np.cov((pts - c).T))[1][:, 0]  # normal: direction of least spread
+        n, off = robust_plane(pts, p.plane_tol, p.ransac_iterations, np.random.default_rng(0))
+        if n[2] > 0:  # normal towards the camera
+            n, off = -n, -off
+        covered, bad = self._covered_corners(K, depth, corners, n, off)
+        good = [k for k in range(4) if k not in bad]
+        mid = self.marker.id
+        if len(good) < 3:
+            raise MarkerOccludedError(
+                f"marker id {mid} partly covered: {len(bad)} corners on an occluding edge "
+                f"({', '.join(CORNER_NAMES[k] for k in bad)}; {covered:.0%} of the plate has something in front)")
         rays = np.c_[(corners[:, 0] - K[0, 2]) / K[0, 0], (corners[:, 1] - K[1, 2]) / K[1, 1], np.ones(4)]
         denom = rays @ n
-        if np.any(np.abs(denom) < 1e-6):
+        if np.any(np.abs(denom[good]) < 1e-6):
             return None
-        corners_cam = rays * ((c @ n) / denom)[:, None]
-        t = _kabsch(self.object_points, corners_cam)
-        # reject a refinement that disagrees grossly with PnP (depth of something else inside the quad)
-        dt, dr = pose_error(t, t_cam_marker)
-        return t if dt < 0.05 and dr < math.radians(20) else None
+        cam = rays * (off / denom)[:, None]
+        obj = self.object_points
+        for i in good:
+            for j in good:
+                if i < j:
+                    want = float(np.linalg.norm(obj[i] - obj[j]))
+                    got = float(np.linalg.norm(cam[i] - cam[j]))
+                    if abs(got - want) > p.size_tol + 0.05 * want:
+                        raise MarkerInconsistentError(
+                            f"marker id {mid}: corners {CORNER_NAMES[i]}-{CORNER_NAMES[j]} are {got * 1000:.0f} mm "
+                            f"apart on the depth plane, expected {want * 1000:.0f} mm (a corner misplaced: partly "
+                            f"covered, or the depth not registered to the colour image?)")
+        t = _kabsch(obj[good], cam[good])
+        dt, dr = pose_error(t, t_pnp)
+        bound_mm = p.max_disagreement_mm * max(1.0, 433.0 / K[0, 0])  # the colour-only pose degrades with pixel size
+        if dt * 1000 > bound_mm or math.degrees(dr) > p.max_disagreement_deg:
+            raise MarkerInconsistentError(
+                f"marker id {mid}: colour-only and depth poses disagree by {dt * 1000:.0f} mm, "
+                f"{math.degrees(dr):.1f} deg (bounds {bound_mm:.0f} mm, {p.max_disagreement_deg:.0f} deg)")
+        return t, covered, tuple(bad)
+
+    def diagnose_cover(self, K, depth, expected: np.ndarray) -> None:
+        """MarkerOccludedError when the marker where `expected` (T_camera_marker) puts it has something in front."""
+        obj = self.object_points
+        cam = obj @ expected[:3, :3].T + expected[:3, 3]
+        if np.any(cam[:, 2] <= 0):
+            return
+        px = np.c_[K[0, 0] * cam[:, 0] / cam[:, 2] + K[0, 2], K[1, 1] * cam[:, 1] / cam[:, 2] + K[1, 2]]
+        n = expected[:3, 2]
+        n = -n if n[2] > 0 else n
+        covered, bad = self._covered_corners(K, depth, px, n, float(n @ expected[:3, 3]))
+        if bad or covered > 0.02:
+            raise MarkerOccludedError(
+                f"marker id {self.marker.id} not decoded: partly covered, {len(bad)} corners on an occluding edge"
+                + (f" ({', '.join(CORNER_NAMES[k] for k in bad)})" if bad else "")
+                + f"; {covered:.0%} of the plate has something in front")

@@ -58,6 +58,7 @@ def encode_color(rgb: np.ndarray) -> tuple[str, int, int, int, bytes]:
 
 
 def encode_depth(depth_m: np.ndarray, encoding: str = "32FC1") -> tuple[str, int, int, int, bytes]:
+    """(encoding, height, width, step, data) of a depth image in metres: 32FC1 metres or 16UC1 millimetres."""
     depth_m = np.asarray(depth_m, np.float32)
     h, w = depth_m.shape
     if encoding == "32FC1":

@@ -7,6 +7,9 @@ published (docs/perception.md). The last scene is republished every `republish_p
 `max_scene_age` (the task planner refuses stale scenes). Bad input is logged, never fatal. Every frame with the
 marker also puts on /tf the marker as seen (camera optical frame -> `aruco_marker_<id>`) and the shelf frame
 `shelf_frame` on it (front edge of the top board's surface, centred, axes of the base frame, from the scenario).
+Health goes out on /diagnostics (diagnostic_msgs/DiagnosticArray, the ROS convention): OK with the checks' numbers,
+WARN with bottles missing, ERROR with the reason a frame was refused. The camera poses of consistent frames are
+fused (`pipeline.FrameFusion`); the fused pose stands in when the marker is covered, if the shelf confirms it.
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ import time
 from collections import deque
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from qtree_relocation_msgs.msg import ObjectArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
@@ -32,7 +36,7 @@ from .aruco import PerceptionError, invert, marker_in_base
 from .camera_check import camera_info_problem, image_problem
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
-from .pipeline import Perception, SceneMemory
+from .pipeline import FrameFusion, Perception, PerceptionResult, SceneMemory, identity_conflicts
 from .segmentation import SegmentationParams
 
 
@@ -41,6 +45,8 @@ def _stamp_s(msg) -> float:
 
 
 class PerceptionNode(Node):
+    """The perception node (module docstring; docs/perception.md)."""
+
     def __init__(self):
         super().__init__("perception")
         declare_parameters(self)  # config/perception.yaml
@@ -61,6 +67,8 @@ class PerceptionNode(Node):
         self._info = None
         self._last_pair = None                     # stamp of the last processed pair
         self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")))
+        self.fusion = FrameFusion()
+        self._previous: dict = {}                  # id -> Detection of the last published scene
         self._scene: ObjectArray | None = None
         self._scene_time = 0.0
 
@@ -75,10 +83,12 @@ class PerceptionNode(Node):
                                          QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.debug_pub = self.create_publisher(Image, g("debug_topic"), 1)
         self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         sh = self.scenario.shelf
         t_base_shelf = np.eye(4)
         t_base_shelf[:3, 3] = (sh.x_front, sh.y_center, sh.top_z)
-        self._t_marker_shelf = invert(marker_in_base(self.scenario.marker)) @ t_base_shelf
+        self._t_base_marker = marker_in_base(self.scenario.marker)
+        self._t_marker_shelf = invert(self._t_base_marker) @ t_base_shelf
         self.create_timer(1.0 / g("process_rate"), self._process, MutuallyExclusiveCallbackGroup())
         self.create_timer(g("republish_period"), self._republish, MutuallyExclusiveCallbackGroup())
         self.get_logger().info(f"perception on scenario {self.scenario.name!r} ({len(self.scenario.objects)} "
@@ -154,23 +164,58 @@ class PerceptionNode(Node):
             if why is not None:
                 raise PerceptionError(why)
             K = np.asarray(self._info.k, float).reshape(3, 3)
-            result = self.perception.process(rgb, dep, K)
+            result = self.perception.process(rgb, dep, K, prior=self.fusion.fused)
+            jump = self.fusion.update(result.T_base_camera)
+            if jump:
+                raise PerceptionError(jump)
         except Exception as e:  # bad input (PerceptionError) or a failure on it: the frame, never the node
-            log.error(f"frame dropped: {e}" if isinstance(e, PerceptionError) else
-                      f"frame dropped: internal error: {type(e).__name__}: {e}", throttle_duration_sec=2.0)
+            why = str(e) if isinstance(e, PerceptionError) else f"internal error: {type(e).__name__}: {e}"
+            log.error(f"frame refused: {why}", throttle_duration_sec=2.0)
+            self._publish_health(DiagnosticStatus.ERROR, f"frame refused: {why}", {"error": type(e).__name__})
             if rgb is not None:
                 self._publish_debug(color, self.perception.annotate(rgb, None, note=str(e)))
             return
+        doubt = identity_conflicts(result.detections, self._previous, self.scenario)
+        if doubt:
+            result = PerceptionResult(result.marker, {i: d for i, d in result.detections.items() if i not in doubt},
+                                      {**result.missing, **doubt}, result.segmentation, result.T_base_camera,
+                                      result.shelf, result.notes)
+        self._report_health(result)
         self._publish_debug(color, self.perception.annotate(rgb, result, K))
         self._publish_tf(color, result)
         self._publish_scene(color, result)
 
+    def _report_health(self, result: PerceptionResult) -> None:
+        fit = result.shelf
+        values = {"bottles found": str(len(result.detections)), "missing": ", ".join(sorted(result.missing)),
+                  "marker seen": str(result.marker is not None)}
+        if fit is not None:
+            values.update({"shelf vs marker (mm)": f"{fit.shift * 1000:.1f}",
+                           "shelf vs marker (deg)": f"{fit.rotation_deg:.2f}",
+                           "depth noise at the shelf (mm)": f"{fit.noise * 1000:.1f}"})
+        notes = "; ".join(result.notes)
+        if result.missing or notes:
+            why = "; ".join(f"{i}: {w}" for i, w in sorted(result.missing.items()))
+            self._publish_health(DiagnosticStatus.WARN, "; ".join(x for x in (notes, why) if x), values)
+        else:
+            self._publish_health(DiagnosticStatus.OK, "every bottle located; frame consistent", values)
+
+    def _publish_health(self, level: bytes, message: str, values: dict) -> None:
+        """One status on /diagnostics (diagnostic_msgs: OK, WARN, ERROR) for the last processed frame."""
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [DiagnosticStatus(level=level, name="perception: frame", message=message[:1000],
+                                       hardware_id="camera", values=[KeyValue(key=k, value=v)
+                                                                     for k, v in values.items()])]
+        self.diag_pub.publish(msg)
+
     def _publish_tf(self, color: Image, result) -> None:
-        """The marker found in this image, and the shelf on it (/tf, stamped with the image)."""
+        """The marker where this frame's camera pose (marker, corrected by the shelf) puts it, and the shelf on it
+        (/tf, stamped with the image)."""
         marker = f"aruco_marker_{self.scenario.marker.id}"
         stamp = color.header.stamp
         self.tf_pub.publish(TFMessage(transforms=[
-            transform_msg(result.marker.T_camera_marker, color.header.frame_id, marker, stamp),
+            transform_msg(invert(result.T_base_camera) @ self._t_base_marker, color.header.frame_id, marker, stamp),
             transform_msg(self._t_marker_shelf, marker, self.p("shelf_frame"), stamp)]))
 
     def _publish_scene(self, color: Image, result) -> None:
@@ -189,6 +234,7 @@ class PerceptionNode(Node):
         for m, d in zip(msg.objects, dets):
             m.pose.position.z = d.z
         self._scene, self._scene_time = msg, time.monotonic()
+        self._previous = {d.id: d for d in dets}
         self.pub.publish(msg)
 
     def _republish(self) -> None:
@@ -207,6 +253,7 @@ class PerceptionNode(Node):
 
 
 def main(args=None) -> None:
+    """Entry point of the perception node."""
     node_main("perception", PerceptionNode, args)
 
 

@@ -1,12 +1,16 @@
-"""One RGB-D frame -> camera pose (marker) -> segmentation -> located bottles, and the debug image (no rclpy).
+"""One RGB-D frame -> camera pose (marker, checked against the shelf) -> segmentation -> located bottles, checked;
+and the debug image (no rclpy).
 
-`Perception(scenario).process(rgb, depth, K)` raises ImageFormatError (bad images) or MarkerNotFoundError (no
-marker: without the common frame nothing can be placed, so nothing is reported); bottles that are not visible
-enough are listed in `missing` with the reason, never guessed. Identity, weight, radius and height of a located
-bottle come from its colour class through the scenario (`Perception.bottles`).
+`Perception(scenario).process(rgb, depth, K)` raises ImageFormatError (bad images), MarkerNotFoundError (no
+marker: without the common frame nothing can be placed; MarkerOccludedError when it is partly covered),
+MarkerInconsistentError or InconsistentFrameError (a consistency check failed: docs/perception.md, "Consistency
+checks"); a frame is never published wrong, it is refused with the reason. Bottles that are not visible enough,
+or whose fit or identity is doubtful, are listed in `missing` with the reason, never guessed. Identity, weight,
+radius and height of a located bottle come from its colour class through the scenario (`Perception.bottles`).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -14,42 +18,125 @@ import numpy as np
 
 from relocation_common.scenario import Bottle, Scenario
 
-from .aruco import MarkerLocalizer, MarkerObservation
+from .aruco import MarkerLocalizer, MarkerNotFoundError, MarkerObservation, MarkerParams, invert, pose_error
 from .localize import Detection, FitError, LocalizeParams, locate_bottle
-from .segmentation import Segmentation, SegmentationParams, check_images, segment
+from .segmentation import (
+    Segmentation,
+    SegmentationParams,
+    backproject_image,
+    check_images,
+    plate_levels,
+    segment_points,
+)
+from .shelf import ShelfFit, ShelfParams, corrected_K, fit_shelf
 
 
 @dataclass(frozen=True)
 class PerceptionResult:
-    marker: MarkerObservation
+    """One processed frame. T_base_camera: the camera pose used (marker, corrected by the shelf fit); marker: the
+    marker as seen (None when it was not, and the caller's `prior` pose stood in); notes: what the checks said."""
+
+    marker: MarkerObservation | None
     detections: dict[str, Detection]
     missing: dict[str, str]                  # id -> why it was not located
     segmentation: Segmentation = field(repr=False)
-
-    @property
-    def T_base_camera(self) -> np.ndarray:
-        return self.marker.T_base_camera
+    T_base_camera: np.ndarray = field(default_factory=lambda: np.eye(4), repr=False)
+    shelf: ShelfFit | None = None
+    notes: tuple[str, ...] = ()
 
 
 class Perception:
-    def __init__(self, scenario: Scenario, seg: SegmentationParams = SegmentationParams(),
-                 loc: LocalizeParams = LocalizeParams(), refine_with_depth: bool = True):
-        self.scenario, self.seg, self.loc = scenario, seg, loc
-        self.localizer = MarkerLocalizer(scenario.marker, refine_with_depth=refine_with_depth)
+    """The perception core of one scenario (module docstring)."""
 
-    def process(self, rgb, depth, K) -> PerceptionResult:
+    def __init__(self, scenario: Scenario, seg: SegmentationParams = SegmentationParams(),
+                 loc: LocalizeParams = LocalizeParams(), refine_with_depth: bool = True,
+                 shelf: ShelfParams = ShelfParams(), marker: MarkerParams = MarkerParams()):
+        self.scenario, self.seg, self.loc, self.shelf = scenario, seg, loc, shelf
+        self.localizer = MarkerLocalizer(scenario.marker, refine_with_depth=refine_with_depth, params=marker)
+
+    def process(self, rgb, depth, K, prior: np.ndarray | None = None) -> PerceptionResult:
+        """Bottles of one registered RGB-D frame. `prior`: T_base_camera of earlier frames (the node's fused frame);
+        when the marker is not seen now, the prior stands in if the shelf confirms it."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
-        marker = self.localizer.locate(rgb, K, depth)
-        seg = segment(rgb, depth, K, marker.T_base_camera, self.scenario, self.seg)
-        cam = marker.T_base_camera[:3, 3]
+        notes = []
+        marker: MarkerObservation | None
+        try:
+            expected = None if prior is None else invert(prior) @ self.localizer.T_base_marker
+            marker = self.localizer.locate(rgb, K, depth, expected)
+            t0, levels = marker.T_base_camera, plate_levels(rgb, marker.corners)
+        except MarkerNotFoundError as e:
+            if prior is None:
+                raise
+            marker, t0, levels = None, np.asarray(prior, float), None
+            notes.append(f"{e}; using the fused frame of earlier frames")
+        cam = backproject_image(depth, K, np.eye(4))
+        r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
+        st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
+        first = segment_points(rgb[::st, ::st], cam[::st, ::st] @ r0.T + p0, self.scenario,
+                               replace(self.seg, erode_px=0, median_px=0), levels)
+        bottles = np.zeros(depth.shape, bool)
+        bottles[::st, ::st] = first.labels >= 0
+        fit = fit_shelf(cam, bottles, t0, self.scenario, self.shelf)
+        fit.check(self.shelf)
+        T = fit.correction @ t0
+        seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
+                             self.seg, levels)
+        # noisier depth: wider fit tolerances (the shelf's residual spread is the depth noise at the shelf); fewer
+        # pixels: pixel counts scaled with the image area (the axis uncertainty check still bounds the fit)
+        area = min(1.0, depth.size / (640 * 480))
+        loc = replace(self.loc, inlier_tol=max(self.loc.inlier_tol, 2.5 * fit.noise),
+                      max_rms=max(self.loc.max_rms, 1.5 * fit.noise), depth_noise=fit.noise,
+                      min_pixels=max(12, round(self.loc.min_pixels * area)),
+                      min_inliers=max(10, round(self.loc.min_inliers * area)))
+        found, missing = self._locate_all(seg, T[:3, 3], loc)
+        return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
+
+    def _locate_all(self, seg: Segmentation, cam: np.ndarray,
+                    loc: LocalizeParams) -> tuple[dict[str, Detection], dict[str, str]]:
+        """Fit every bottle; then drop fits outside the shelf and pairs of fits that overlap (an identity in doubt:
+        two colours on one bottle, or one colour on two), with the reason."""
         found, missing = {}, {}
-        for b in self.scenario.objects:
+        v, u = np.nonzero(seg.labels >= 0)
+        lab = seg.labels[v, u]
+        h, w = seg.labels.shape
+        for k, b in enumerate(self.scenario.objects):
+            sel = lab == k
             try:
-                found[b.id] = locate_bottle(b, seg.mask(b.id), seg.points, self.scenario, cam, self.loc)
+                if not sel.any():
+                    raise FitError(f"0 pixels of colour {b.label!r} (need {loc.min_pixels})")
+                r0, r1 = max(int(v[sel].min()) - 4, 0), min(int(v[sel].max()) + 5, h)
+                c0, c1 = max(int(u[sel].min()) - 4, 0), min(int(u[sel].max()) + 5, w)
+                found[b.id] = locate_bottle(b, seg.labels[r0:r1, c0:c1] == k, seg.points[r0:r1, c0:c1],
+                                            self.scenario, cam, loc, offset=(r0, c0))
             except FitError as e:
                 missing[b.id] = str(e)
-        return PerceptionResult(marker, found, missing, seg)
+        sh, tol = self.scenario.shelf, loc.inlier_tol
+        for i, d in list(found.items()):
+            r = self.scenario.object(i).radius
+            if not (sh.x_front + r - tol <= d.x <= sh.x_back - r + tol and sh.y_min + r - tol <= d.y <= sh.y_max - r
+                    + tol):
+                missing[i] = f"fit at ({d.x:.3f}, {d.y:.3f}) is not inside the shelf: not this bottle"
+                del found[i]
+        for i, d in list(found.items()):  # a second bottle-like blob of i's colour not at another located bottle
+            if d.elsewhere is not None and not any(
+                    j != i and math.hypot(d.elsewhere[0] - e.x, d.elsewhere[1] - e.y) < self.scenario.object(j).radius
+                    for j, e in found.items()):
+                missing[i] = f"colour {self.scenario.object(i).label!r} seen at two places: identity of {i} in doubt"
+                del found[i]
+        ids = list(found)
+        for a, i in enumerate(ids):
+            for j in ids[a + 1:]:
+                di, dj = found.get(i), found.get(j)
+                if di is None or dj is None:
+                    continue
+                gap = math.hypot(di.x - dj.x, di.y - dj.y) - self.scenario.object(i).radius - \
+                    self.scenario.object(j).radius
+                if gap < -2 * tol:
+                    why = f"overlaps {{}} by {-gap * 1000:.0f} mm: identity in doubt (colours of {i} and {j})"
+                    missing[i], missing[j] = why.format(j), why.format(i)
+                    del found[i], found[j]
+        return found, missing
 
     def bottles(self, detections) -> list[Bottle]:
         """Scenario bottles moved to their perceived (x, y): id, label, weight, size from the colour class."""
@@ -58,13 +145,14 @@ class Perception:
     def annotate(self, rgb: np.ndarray, result: PerceptionResult | None, K=None, note: str = "") -> np.ndarray:
         """Debug image (RGB): marker outline and axes, each located bottle's id at its pixel, missing ids."""
         img = np.ascontiguousarray(rgb).copy()
-        if result is not None:
+        if result is not None and result.marker is not None:
             c = np.round(result.marker.corners).astype(np.int32)
             cv2.polylines(img, [c], True, (0, 255, 0), 2)
             T = result.marker.T_camera_marker
             if K is not None:
                 cv2.drawFrameAxes(img, np.asarray(K, float).reshape(3, 3), None, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3],
                                   self.scenario.marker.size)
+        if result is not None:
             for d in result.detections.values():
                 b = self.scenario.object(d.id)
                 cv2.circle(img, d.pixel, 4, (255, 255, 255), -1)
@@ -97,3 +185,63 @@ class SceneMemory:
         held = [i for i in self.ids if i in keep and keep[i][1] != self.frame]
         lost = [i for i in self.ids if i not in keep]
         return [keep[i][0] for i in self.ids if i in keep], held, lost
+
+
+class FrameFusion:
+    """The shelf does not move: the camera poses of consistent frames are averaged (translation mean, rotation the
+    projection of the mean matrix onto SO(3)); a frame more than `max_jump` / `max_jump_deg` from the fused pose is
+    refused, unless `reset_after` such frames in a row agree with one another (the camera was moved: start over)."""
+
+    def __init__(self, max_jump: float = 0.005, max_jump_deg: float = 0.5, window: int = 30, reset_after: int = 3):
+        self.max_jump, self.max_jump_deg, self.window, self.reset_after = max_jump, max_jump_deg, window, reset_after
+        self.poses: list[np.ndarray] = []
+        self.outliers: list[np.ndarray] = []
+
+    @property
+    def fused(self) -> np.ndarray | None:
+        """T_base_camera averaged over the consistent frames, or None before the first."""
+        if not self.poses:
+            return None
+        m = np.mean([p[:3, :3] for p in self.poses], axis=0)
+        u, _, vt = np.linalg.svd(m)
+        out = np.eye(4)
+        out[:3, :3] = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+        out[:3, 3] = np.mean([p[:3, 3] for p in self.poses], axis=0)
+        return out
+
+    def update(self, T: np.ndarray) -> str | None:
+        """Add one frame's pose; None when it agrees (or restarts the fusion), else the reason to refuse it."""
+        f = self.fused
+        if f is None or self._agrees(T, f):
+            self.poses = (self.poses + [np.asarray(T, float)])[-self.window:]
+            self.outliers = []
+            return None
+        self.outliers.append(np.asarray(T, float))
+        if len(self.outliers) >= self.reset_after and all(self._agrees(o, self.outliers[-1]) for o in self.outliers):
+            self.poses, self.outliers = self.outliers, []
+            return None
+        dt, dr = pose_error(T, f)
+        return (f"camera pose {dt * 1000:.0f} mm / {math.degrees(dr):.1f} deg from the pose fused over "
+                f"{len(self.poses)} frames (bounds {self.max_jump * 1000:.0f} mm / {self.max_jump_deg} deg): refused "
+                f"until {self.reset_after} frames agree")
+
+    def _agrees(self, a: np.ndarray, b: np.ndarray) -> bool:
+        dt, dr = pose_error(a, b)
+        return dt <= self.max_jump and math.degrees(dr) <= self.max_jump_deg
+
+
+def identity_conflicts(detections: dict[str, Detection], previous: dict[str, Detection], scenario: Scenario,
+                       moved: float = 0.02) -> dict[str, str]:
+    """Detections that take the place of another bottle of the previous scene (overlapping where it stood) while
+    that one is not seen now and this one stood elsewhere (> `moved` away): an identity swap is likelier than a
+    bottle teleported onto another's place. id -> reason."""
+    out = {}
+    for i, d in detections.items():
+        for j, p in previous.items():
+            if j == i or j in detections:
+                continue
+            gap = math.hypot(d.x - p.x, d.y - p.y) - scenario.object(i).radius - scenario.object(j).radius
+            was = previous.get(i)
+            if gap < -0.01 and (was is None or math.hypot(d.x - was.x, d.y - was.y) > moved):
+                out[i] = f"found where {j} stood in the previous scene, and {j} is not seen: identity in doubt"
+    return out

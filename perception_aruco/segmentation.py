@@ -8,7 +8,14 @@ weights cannot be downloaded here; the paper's bottles were told apart by colour
    a shading gain s in [gain_min, gain_max]:  residual_c(p) = || p - s* a_c ||,  s* = clip(p.a_c / |a_c|^2).
    Colours that are not scalar multiples of each other (orange / brown, yellow / olive) are told apart by their
    chromaticity; scalar multiples (black / white / gray) by their brightness range. Pixels with no class within
-   `max_residual` are left unassigned.
+   `max_residual` are left unassigned, and so are ambiguous pixels: the best class must explain the pixel clearly
+   better than the second best (residual ratio <= `max_ratio`); an ambiguous pixel is never given the nearest,
+   possibly wrong, class.
+   The colour image is median-filtered first (3x3: sensor noise; edges stay sharp).
+4. Colour constancy: before classifying, the image is normalised by the marker's own white and black (its plate
+   is a known neutral: a warm or cool white balance, or an exposure change, is undone), see `plate_levels`.
+5. Each class mask is eroded by `erode_px` (anti-aliased silhouette pixels) without growing depth holes: a pixel
+   without depth does not erode its neighbours.
 No rclpy here.
 """
 from __future__ import annotations
@@ -27,12 +34,19 @@ UNASSIGNED = -1
 
 @dataclass(frozen=True)
 class SegmentationParams:
+    """Colour classes and the workspace gate (module docstring)."""
+
     gain_min: float = 0.3        # darkest shading of a bottle's colour (self-shadowed side)
     gain_max: float = 1.2        # brightest (lit side, before saturation)
     max_residual: float = 40.0   # RGB units (0..255): farther from every class -> unassigned
     wall_margin: float = 0.004   # m kept off the boards and panels by the workspace gate
     marker_margin: float = 0.01  # m around the marker plate excluded from the gate
     erode_px: int = 1            # erosion of each class mask (drops anti-aliased silhouette pixels)
+    median_px: int = 3           # median filter of the colour image before classifying (sensor noise); 0: none
+    max_ratio: float = 0.7       # best / second-best residual above this: ambiguous, unassigned
+    white_level: float = 195.0   # the marker plate's white is scaled to this (0..255; the renderer's at 0.6-0.7 m)
+    min_gain: float = 0.5        # bounds of the colour normalisation's per-channel gain
+    max_gain: float = 2.5
 
 
 def check_images(rgb, depth) -> tuple[np.ndarray, np.ndarray]:
@@ -51,12 +65,15 @@ def check_images(rgb, depth) -> tuple[np.ndarray, np.ndarray]:
 def backproject_image(depth: np.ndarray, K: np.ndarray, T_base_camera: np.ndarray) -> np.ndarray:
     """HxWx3 points in the base frame (NaN where depth is 0 or not finite). Depth is planar z (RealSense)."""
     h, w = depth.shape
-    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     z = depth.astype(np.float32)
-    z = np.where(np.isfinite(z) & (z > 0), z, np.nan)
-    cam = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=-1)
-    r, t = T_base_camera[:3, :3].astype(np.float32), T_base_camera[:3, 3].astype(np.float32)
-    return cam @ r.T + t
+    z = np.where(np.isfinite(z) & (z > 0), z, np.float32(np.nan))
+    x = ((np.arange(w, dtype=np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0]))[None, :] * z
+    y = ((np.arange(h, dtype=np.float32) - np.float32(K[1, 2])) / np.float32(K[1, 1]))[:, None] * z
+    r, t = np.asarray(T_base_camera, np.float32)[:3, :3], np.asarray(T_base_camera, np.float32)[:3, 3]
+    out = np.empty((h, w, 3), np.float32)
+    for k in range(3):
+        out[..., k] = r[k, 0] * x + r[k, 1] * y + r[k, 2] * z + t[k]
+    return out
 
 
 def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker_margin: float) -> np.ndarray:
@@ -69,21 +86,56 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
         bottom = (z > s.bottom_z + margin) & (z < s.top_z - s.board_thickness - margin)
         mask = inside & (top | bottom)
         m = scenario.marker
-        local = (points - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
+        local = (points[mask] - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
         half = m.size * 0.75 + marker_margin  # the plate carries a white margin of a quarter side
-        on_marker = (np.abs(local[..., 0]) < half) & (np.abs(local[..., 1]) < half) & (np.abs(local[..., 2]) < 0.02)
-    return mask & ~on_marker
+        on_marker = (np.abs(local[:, 0]) < half) & (np.abs(local[:, 1]) < half) & (np.abs(local[:, 2]) < 0.02)
+    mask[mask] = ~on_marker
+    return mask
 
 
 def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams) -> np.ndarray:
-    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits."""
+    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits
+    within `max_residual` or the best is not clearly better than the second best (`max_ratio`)."""
     p = rgb_pixels.astype(np.float32)
     a = refs.astype(np.float32)
     s = np.clip(p @ a.T / np.sum(a * a, axis=1), params.gain_min, params.gain_max)       # N x C
     res = np.linalg.norm(p[:, None, :] - s[..., None] * a[None, :, :], axis=2)             # N x C
+    rows = np.arange(len(p))
     best = np.argmin(res, axis=1)
-    best[res[np.arange(len(p)), best] > params.max_residual] = UNASSIGNED
+    first = res[rows, best].copy()
+    bad = first > params.max_residual
+    if res.shape[1] > 1:
+        res[rows, best] = np.inf
+        bad |= first > params.max_ratio * res.min(axis=1)
+    best[bad] = UNASSIGNED
     return best
+
+
+def plate_levels(rgb: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(white, black) RGB of the marker plate (its white margin and bits, its black square), or None when the
+    plate is too small or has no contrast. The two groups are split at the middle of the plate's grey levels."""
+    h, w = rgb.shape[:2]
+    mask = np.zeros((h, w), np.uint8)
+    centre = corners.mean(0)
+    cv2.fillConvexPoly(mask, np.round(centre + 1.3 * (corners - centre)).astype(np.int32), 1)
+    px = rgb[mask > 0].astype(np.float32)
+    if len(px) < 50:
+        return None
+    g = px.mean(1)
+    lo, hi = np.percentile(g, 5), np.percentile(g, 95)
+    if hi - lo < 30:
+        return None
+    mid = (lo + hi) / 2
+    return np.median(px[g > mid], axis=0), np.median(px[g <= mid], axis=0)
+
+
+def normalise_colours(pixels: np.ndarray, levels, params: SegmentationParams) -> np.ndarray:
+    """Pixels (N x 3) with the plate's black subtracted and its white scaled to `white_level` per channel."""
+    if levels is None:
+        return pixels
+    white, black = levels
+    gain = np.clip(params.white_level / np.maximum(white - black, 1.0), params.min_gain, params.max_gain)
+    return np.clip((pixels.astype(np.float32) - black) * gain, 0, 255)
 
 
 @dataclass(frozen=True)
@@ -95,23 +147,35 @@ class Segmentation:
     classes: tuple[str, ...]
 
     def mask(self, object_id: str) -> np.ndarray:
+        """HxW bool: the pixels of this object's colour class."""
         return self.labels == self.classes.index(object_id)
 
 
 def segment(rgb, depth, K, T_base_camera, scenario: Scenario,
-            params: SegmentationParams = SegmentationParams()) -> Segmentation:
+            params: SegmentationParams = SegmentationParams(), levels=None) -> Segmentation:
     """Per-pixel bottle class of a registered RGB-D frame (see the module docstring)."""
     rgb, depth = check_images(rgb, depth)
     points = backproject_image(depth, np.asarray(K, float), np.asarray(T_base_camera, float))
+    return segment_points(rgb, points, scenario, params, levels)
+
+
+def segment_points(rgb: np.ndarray, points: np.ndarray, scenario: Scenario,
+                   params: SegmentationParams = SegmentationParams(), levels=None) -> Segmentation:
+    """`segment` on base-frame points already computed (HxWx3, NaN without depth); `levels`: the marker plate's
+    (white, black) for the colour normalisation (None: none)."""
     gate = workspace_mask(points, scenario, params.wall_margin, params.marker_margin)
+    if params.median_px > 1:
+        rgb = cv2.medianBlur(np.ascontiguousarray(rgb), params.median_px)
     classes = tuple(b.id for b in scenario.objects)
     refs = np.array([b.rgb for b in scenario.objects]) * 255.0
-    labels = np.full(depth.shape, UNASSIGNED, np.int32)
-    labels[gate] = classify_colours(rgb[gate], refs, params)
+    labels = np.full(points.shape[:2], UNASSIGNED, np.int32)
+    labels[gate] = classify_colours(normalise_colours(rgb[gate], levels, params), refs, params)
     if params.erode_px > 0:
         kernel = np.ones((2 * params.erode_px + 1,) * 2, np.uint8)
+        no_depth = ~np.isfinite(points[..., 2])
         for k in range(len(classes)):
-            m = (labels == k).astype(np.uint8)
+            m = labels == k
             if m.any():
-                labels[(m > 0) & (cv2.erode(m, kernel) == 0)] = UNASSIGNED
+                # a pixel without depth is neutral: it neither erodes its neighbours nor is kept itself
+                labels[m & (cv2.erode((m | no_depth).astype(np.uint8), kernel) == 0)] = UNASSIGNED
     return Segmentation(labels, points, classes)

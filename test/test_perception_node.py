@@ -1,6 +1,7 @@
 """The perception node in its own process over real DDS: this test plays the camera driver (a frame rendered by the
 MuJoCo scene, published as RealSense-named topics) and checks the ObjectArray on /scene/objects (transient local)
-and the debug image. A colour image with an unsupported encoding is logged, not fatal."""
+and the debug image, and the health on /diagnostics. A colour image with an unsupported encoding is logged, not
+fatal."""
 import os
 import threading
 import time
@@ -38,6 +39,7 @@ def _matrix(m) -> np.ndarray:
 
 def test_node_publishes_perceived_scene(tmp_path):
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
@@ -59,8 +61,9 @@ def test_node_publishes_perceived_scene(tmp_path):
             node.create_subscription(ObjectArray, "/scene/objects", scenes.append,
                                      QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
             node.create_subscription(Image, "/perception/debug_image", debug.append, 1)
-            tfs = []
+            tfs, health = [], []
             node.create_subscription(TFMessage, "/tf", tfs.append, 100)
+            node.create_subscription(DiagnosticArray, "/diagnostics", health.append, 10)
             ex = SingleThreadedExecutor()
             ex.add_node(node)
             t = threading.Thread(target=ex.spin, daemon=True)
@@ -123,6 +126,10 @@ def test_node_publishes_perceived_scene(tmp_path):
             time.sleep(1.2)
             assert len(scenes) > n
             assert debug and debug[-1].encoding == "rgb8" and debug[-1].width == frame.width
+            # health on /diagnostics: the refused frames (bad encoding) as ERROR with the reason, then the good ones
+            levels = [(st.level, st.message) for a in health for st in a.status]
+            assert any(lv == DiagnosticStatus.ERROR and "not supported" in m for lv, m in levels), levels
+            assert levels[-1][0] in (DiagnosticStatus.OK, DiagnosticStatus.WARN), levels[-1]
             g.check_alive()
             ex.shutdown()
             node.destroy_node()
