@@ -133,7 +133,7 @@ class SimDriver:
     def __init__(self, sim: Jaco2Sim, rates: Rates = Rates(), finger_params: dict | None = None,
                  log: Callable[[str], None] = lambda _: None, sensor: SensorModel | None = None) -> None:
         self.sim, self.rates, self.log = sim, rates, log
-        self.sensor = sensor  # the camera's sensor model (sensor_model; None: the ideal camera)
+        self.sensor = sensor or SensorModel()  # the camera's sensor model (sensor_model; the default: ideal)
         self.finger_params = dict(finger_params or {})
         self.lock = threading.Lock()
         self.stopped = False  # kinova in/stop: commands are ignored until in/start

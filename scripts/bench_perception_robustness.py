@@ -43,8 +43,8 @@ from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model  # noqa:
 from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base, rpy_matrix  # noqa: E402
 from perception_aruco.pipeline import Perception  # noqa: E402
 from relocation_common.paths import scenarios_dir  # noqa: E402
+from relocation_common.robot_description import JOINT_NAMES, Q_HOME, Q_UPRIGHT  # noqa: E402
 from relocation_common.scenario import Scenario, load_scenario  # noqa: E402
-from stpik_motion_planner.robot_description import JOINT_NAMES, Q_HOME, Q_UPRIGHT  # noqa: E402
 
 SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15", "scenario2_10"]
 TOL = 0.010  # m: a published bottle farther than this from its true position is wrong

@@ -99,9 +99,9 @@ def test_the_gripper_command_grasps_nothing_and_refuses_bad_values(sim):
 
 
 def test_home_brings_the_arm_back_and_opens_the_fingers(sim):
-    core = driver(sim, real_time_factor=2.0)
-    core.command(np.full(N_JOINTS, 0.5))
-    for _ in range(100):
+    core = driver(sim)  # real_time_factor 0: one physics step (1 ms) a tick, whatever the machine's load
+    for _ in range(200):  # 0.2 s of commands at 0.5 rad/s, each within the driver's 50 ms watchdog
+        core.command(np.full(N_JOINTS, 0.5))
         core.tick()
     core.gripper(turns_to_joint([3000.0] * 3))
     for _ in range(300):
