@@ -17,6 +17,8 @@ report's `disturbances` list.
 """
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import random
 from dataclasses import dataclass, field
@@ -214,6 +216,7 @@ def drop_grasped(sim) -> Applied | None:
     g = int(sim.model.geom(f"{oid}_geom").id)
     sim.model.geom_contype[g] = 0  # no contact with the fingers and arm (contype 2); still with boards and bottles
     sim.model.geom_conaffinity[g] = 1
+    sim.data.qvel[_free_adr(sim, b)[1] + 2] = -0.02  # awake: a body held still sleeps with the hand (sim._let_go)
     p, _ = _pose(sim, oid)
     return Applied("drop", oid, sim.time, {"at": [round(float(v), 4) for v in p]})
 
@@ -346,6 +349,24 @@ class DisturbancePlan:
         """The report's `disturbances` (planned; `apply` records add what was done)."""
         return [d.to_dict() for d in self.disturbances]
 
+    def to_json(self) -> str:
+        """The whole plan as one JSON string (a string parameter of the driver), read back by `from_json`."""
+        return json.dumps({"seed": self.seed, "disturbances": [dataclasses.asdict(d) for d in self.disturbances]})
+
+    @classmethod
+    def from_json(cls, text: str) -> "DisturbancePlan":
+        """The plan of `to_json`; ValueError naming what is wrong."""
+        try:
+            data = json.loads(text)
+            ds = tuple(Disturbance(**{**d, "where": tuple(d.get("where", (0.5, 0.5)))}) for d in data["disturbances"])
+            plan = cls(int(data["seed"]), ds)
+        except (ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"not a disturbance plan (DisturbancePlan.to_json): {e}") from None
+        bad = [d for d in ds if d.kind not in KINDS or d.moment not in ("after", "during") or d.relocation < 0]
+        if bad:
+            raise ValueError(f"disturbance plan: bad entry {bad[0]}")
+        return plan
+
 
 def on_top_shelf(sim, tol: float = 0.02) -> list[str]:
     """Ids of the bottles standing on the top shelf (base within tol of top_z, upright), not in the hand."""
@@ -389,3 +410,52 @@ def _move_somewhere(sim, object_id: str, where: tuple[float, float]) -> Applied:
         if _room(sim, object_id, xy, xy, r, sh.top_z) is None:
             return move_to(sim, object_id, float(xy[0]), float(xy[1]))
     raise DisturbanceError(f"cannot move {object_id}: no free spot on the top shelf")
+
+
+class DisturbanceSchedule:
+    """Applies a DisturbancePlan while an execution goes on, from what the simulator shows (the driver calls
+    `update` once per loop): carry j begins with the (j+1)-th grasp, and relocation i has ended once the (i+1)-th
+    carried bottle was released (or dropped) and the arm is back within `home_tol` rad of home. A drop happens
+    `drop_delay` s after its carry's grasp; a disturbance whose moment has passed is recorded as skipped."""
+
+    def __init__(self, plan: DisturbancePlan, home_tol: float = 0.05, drop_delay: float = 0.5) -> None:
+        self.plan, self.home_tol, self.drop_delay = plan, home_tol, drop_delay
+        self.pending = list(plan.disturbances)
+        self.records: list[dict[str, Any]] = []  # the report's `disturbances`, in the order they happened
+        self.carries = self.ended = 0
+        self._held: str | None = None
+        self._grasped_at = 0.0
+        self._slipping: str | None = None
+
+    def at_home(self, sim) -> bool:
+        """The arm within home_tol of its home angles (continuous joints compared modulo 2 pi)."""
+        d = (np.asarray(sim.q) - np.asarray(sim.q_home) + math.pi) % (2 * math.pi) - math.pi
+        return float(np.max(np.abs(d))) < self.home_tol
+
+    def update(self, sim) -> list[dict[str, Any]]:
+        """Track grasps and releases, apply what is due; returns the records made now."""
+        if self._slipping is not None and clear_of_hand(sim, self._slipping):
+            restore_contacts(sim, self._slipping)
+            self._slipping = None
+        if sim.grasped != self._held:
+            self.ended += self._held is not None
+            if sim.grasped is not None:
+                self.carries, self._grasped_at = self.carries + 1, sim.time
+            self._held = sim.grasped
+        out = []
+        for d in list(self.pending):
+            n = d.relocation + 1
+            if d.moment == "during":
+                due = self.carries == n and sim.grasped is not None and sim.time - self._grasped_at >= self.drop_delay
+                missed = self.carries > n or self.ended >= n
+            else:
+                due = self.ended >= n and sim.grasped is None and self.at_home(sim)
+                missed = self.carries > n
+            if due or missed:
+                self.pending.remove(d)
+                record = apply(sim, d) if due else {**d.to_dict(), "skipped": "its moment has passed"}
+                if due and d.kind == "drop" and "object" in record:
+                    self._slipping = record["object"]
+                out.append(record)
+        self.records += out
+        return out

@@ -3,8 +3,9 @@
 A feasibility answer (relocate o with a set removed, from home) depends on the geometry of the objects still on
 the top shelf: o and every object not removed. `GeometryCache` keys each answer by those objects and the
 *version* of each one's pose; a version changes only when the object is perceived to have moved (more than
-`tol` m, or tipped). So after a disturbance only the answers in which a moved object was still present are
-asked again; those where it was already removed, and everything about undisturbed parts of the shelf, stay.
+`tol` m, by default the tolerance within which closed_loop.verify_relocation says a bottle stayed) or tipped.
+So after a disturbance only the answers in which a moved object was still present are asked again; those
+where it was already removed, and everything about undisturbed parts of the shelf, stay.
 Relocating an object does not change anyone's answers: a question after it is the old question with one more
 object removed.
 
@@ -21,7 +22,7 @@ from typing import Iterable, Mapping
 from relocation_common.feasibility import FeasibilityAnswer, Label
 
 from . import astar
-from .closed_loop import Option, RemainingProblem, ReplanAnswer
+from .closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances
 
 Pose = tuple[float, float, float]  # x, y, tilt
 
@@ -30,7 +31,7 @@ class GeometryCache:
     """Feasibility answers kept while the geometry they were computed on is unchanged (module doc). `calls`: real
     planner calls; `hits`: questions answered from the cache."""
 
-    def __init__(self, oracle, tol: float = 0.005, tilt_tol: float = math.radians(10)) -> None:
+    def __init__(self, oracle, tol: float = Tolerances().still, tilt_tol: float = Tolerances().tilt) -> None:
         self.oracle, self.tol, self.tilt_tol = oracle, tol, tilt_tol
         self._ref: dict[str, Pose] = {}
         self._version: dict[str, int] = {}

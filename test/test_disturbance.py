@@ -175,3 +175,45 @@ def test_applying_a_plan_records_what_was_done(fresh):
         assert "object" in r or "skipped" in r
     drop = dist.apply(fresh, dist.Disturbance("drop", "during", 0))
     assert drop["skipped"] == "nothing in the hand"
+
+
+def test_plan_json_round_trip_and_bad_json():
+    plan = dist.DisturbancePlan.draw(5, seed=11, relocations=4)
+    assert dist.DisturbancePlan.from_json(plan.to_json()) == plan
+    with pytest.raises(ValueError, match="not a disturbance plan"):
+        dist.DisturbancePlan.from_json('{"seed": 1}')
+    with pytest.raises(ValueError, match="bad entry"):
+        dist.DisturbancePlan.from_json('{"seed": 1, "disturbances": [{"kind": "explode", "moment": "after", '
+                                       '"relocation": 0}]}')
+
+
+def _release(sim, steps: int = 300) -> None:
+    sim.gripper_open()
+    sim.step(steps)
+
+
+def test_schedule_applies_each_disturbance_at_its_moment(fresh):
+    """After relocation 1 (the first release, arm at home): a nudge; during carry 2 (after the second grasp): a
+    drop; a drop planned for carry 1 whose carry passed without it being due is recorded as skipped."""
+    plan = dist.DisturbancePlan(0, (dist.Disturbance("nudge", "after", 0, choice=0.99, amount=0.01),
+                                    dist.Disturbance("drop", "during", 1),
+                                    dist.Disturbance("drop", "during", 0)))
+    schedule = dist.DisturbanceSchedule(plan, drop_delay=10.0)  # the drop of carry 1 never gets due
+    assert schedule.update(fresh) == []
+    _hold(fresh)  # carry 1
+    assert schedule.update(fresh) == []
+    _release(fresh)
+    done = schedule.update(fresh)  # relocation 1 ended, the arm is at home: the nudge; carry 1's drop missed
+    assert [(r["kind"], r["when"]) for r in done] == [("nudge", "after relocation 1"), ("drop", "during carry 1")]
+    assert "object" in done[0] and done[1]["skipped"] == "its moment has passed"
+    schedule.drop_delay = 0.2
+    oid = _hold(fresh)  # carry 2
+    assert schedule.update(fresh) == [] and schedule.carries == 2
+    fresh.step(250)
+    done = schedule.update(fresh)
+    assert [(r["kind"], r["when"], r["object"]) for r in done] == [("drop", "during carry 2", oid)]
+    assert fresh.grasped is None and schedule.pending == [] and len(schedule.records) == 3
+    for _ in range(150):
+        fresh.step(10)
+        schedule.update(fresh)
+    assert schedule._slipping is None  # contacts with the hand given back once clear
