@@ -459,3 +459,38 @@ class DisturbanceSchedule:
                 out.append(record)
         self.records += out
         return out
+
+
+GRASPED = "grasped"  # the command's object for "the bottle in the hand" (a drop)
+
+
+def command(sim, object_id: str, relative: bool, translation, rotation_xyzw=(0.0, 0.0, 0.0, 1.0)) -> dict[str, Any]:
+    """One disturbance as a transform command (the driver's geometry_msgs/TransformStamped on its disturb topic):
+    object GRASPED: drop the bottle in the hand; `relative` (the transform is in the bottle's own frame): a
+    rotation other than the identity tips the bottle towards where it turns the bottle's axis, else a nudge by
+    the translation's (x, y); absolute (the base frame): move the bottle, upright, to the translation. Returns the
+    record (as `apply`'s); a command that cannot be applied (unknown bottle, no room, nothing in the hand) is
+    recorded as `skipped` with the reason, and changes nothing."""
+    t = [float(v) for v in translation]
+    qx, qy, qz, qw = (float(v) for v in rotation_xyzw)
+    record: dict[str, Any] = {"command": {"object": object_id, "relative": bool(relative), "translation": t,
+                                          "rotation_xyzw": [qx, qy, qz, qw]}}
+    try:
+        if not all(math.isfinite(v) for v in (*t, qx, qy, qz, qw)):
+            raise DisturbanceError("the transform has NaN or Inf")
+        if object_id == GRASPED:
+            done = drop_grasped(sim)
+            if done is None:
+                raise DisturbanceError("nothing in the hand to drop")
+        elif not relative:
+            done = move_to(sim, object_id, t[0], t[1], t[2])
+        elif abs(abs(qw) - 1.0) > 1e-6:  # the bottle's z axis turned by the rotation: the tip's direction
+            ax, ay = 2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx)
+            if math.hypot(ax, ay) < 1e-6:
+                raise DisturbanceError("a rotation about the bottle's own axis does not tip it")
+            done = tip(sim, object_id, math.atan2(ay, ax))
+        else:
+            done = nudge(sim, object_id, t[0], t[1])
+    except (DisturbanceError, KeyError) as e:
+        return {**record, "skipped": str(e.args[0] if isinstance(e, KeyError) and e.args else e)}
+    return {**record, **done.to_dict()}

@@ -217,3 +217,26 @@ def test_schedule_applies_each_disturbance_at_its_moment(fresh):
         fresh.step(10)
         schedule.update(fresh)
     assert schedule._slipping is None  # contacts with the hand given back once clear
+
+
+def test_transform_commands_nudge_tip_move_drop_and_refuse_bad_ones(fresh):
+    oid = _free_bottle(fresh)
+    p0 = _pos(fresh, oid)
+    r = dist.command(fresh, oid, True, (0.0, -0.015, 0.0))
+    assert r["kind"] == "nudge" and r["applied"] == pytest.approx([0.0, -0.015], abs=1e-4)
+    s = math.sin(math.pi / 4)
+    r = dist.command(fresh, oid, True, (0, 0, 0), (s, 0.0, 0.0, s))  # 90 deg about x: the axis turns to -y
+    assert r["kind"] == "tip"  # towards -y, or the next direction with room for it to lie (30 degrees apart)
+    k = (r["direction"] - 3 * math.pi / 2) / (2 * math.pi / dist.TIP_DIRECTIONS)
+    assert abs(k - round(k)) < 1e-3, r
+    fresh.step(1000)
+    assert dist.tilt(fresh, oid) > math.radians(80)
+    r = dist.command(fresh, oid, False, (p0[0], p0[1], TOP))
+    assert r["kind"] == "move"
+    fresh.step(500)
+    assert np.allclose(_pos(fresh, oid), p0, atol=3e-3) and dist.tilt(fresh, oid) < math.radians(2)
+    assert dist.command(fresh, "nope", True, (0.01, 0, 0))["skipped"].startswith("unknown object id 'nope'")
+    assert dist.command(fresh, oid, True, (math.nan, 0, 0))["skipped"] == "the transform has NaN or Inf"
+    assert dist.command(fresh, dist.GRASPED, True, (0, 0, 0))["skipped"] == "nothing in the hand to drop"
+    held = _hold(fresh)
+    assert dist.command(fresh, dist.GRASPED, True, (0, 0, 0))["object"] == held and fresh.grasped is None
