@@ -383,9 +383,12 @@ class ClosedLoopExecutor:
 
     def _run(self, seq: list[str], scene: dict[str, SeenObject], out: ExecutionResult) -> None:
         rp = self._problem(scene, out)
+        assert rp.problem is not None
         why = check_capacity(seq, len(rp.free_slots))
         if why:
             seq = self._replan(f"capacity: {why}", rp, out)
+        elif _invalid(seq, rp.problem):
+            seq = self._replan(f"the sequence does not fit the scene: {_invalid(seq, rp.problem)}", rp, out)
         while True:
             if self.cancelled():
                 raise GiveUp(f"cancelled after relocating {out.relocated}")

@@ -355,3 +355,10 @@ def test_the_cache_keeps_answers_for_unchanged_geometry():
     asked = len(shelf.questions)
     assert replan(rp, (), cache) == (("T",), 0.0, 1)
     assert shelf.questions[asked:] == [("T", frozenset({"b"}))]
+
+
+def test_a_sequence_that_does_not_fit_the_scene_is_replanned_before_the_arm_moves():
+    shelf = FakeShelf()
+    result = executor(shelf).run(("zz", "b", "T"))
+    assert result.success and [o for o, _ in shelf.relocations] == ["b", "T"]
+    assert result.replans[0].reason == "the sequence does not fit the scene: it names zz not on the top shelf"
