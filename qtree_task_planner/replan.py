@@ -52,6 +52,20 @@ class GeometryCache:
                 changed.append(oid)
         return changed
 
+    def adopt(self, table: Mapping[tuple[str, frozenset[str]], FeasibilityAnswer], ids: Iterable[str]) -> int:
+        """Take the answers of a set-keyed table (oracles.CachedOracle.table: (object, removed) -> answer) gathered
+        on the first geometry, before anything moved (ValueError once an object's version changed), over the
+        objects `ids` of that scene. The optimum's and training's answers then serve re-plans. Returns how many."""
+        if any(v > 0 for v in self._version.values()):
+            raise ValueError("adopt answers before any object moved: they were computed on the first geometry")
+        ids = frozenset(ids)
+        n = 0
+        for (obj, removed), answer in table.items():
+            k = self.key(obj, ids - removed)
+            if k not in self.table:
+                self.table[k], n = answer, n + 1
+        return n
+
     def key(self, object_id: str, present: Iterable[str]) -> tuple:
         """The cache key of a question about object_id with `present` (the objects not removed) on the shelf."""
         return object_id, frozenset((p, self._version.get(p, 0)) for p in set(present) | {object_id})

@@ -362,3 +362,21 @@ def test_a_sequence_that_does_not_fit_the_scene_is_replanned_before_the_arm_move
     result = executor(shelf).run(("zz", "b", "T"))
     assert result.success and [o for o, _ in shelf.relocations] == ["b", "T"]
     assert result.replans[0].reason == "the sequence does not fit the scene: it names zz not on the top shelf"
+
+
+def test_the_answers_of_the_first_solve_serve_the_replans():
+    """The node's optimum and training ask through a set-keyed CachedOracle; adopted, its answers are re-used."""
+    from qtree_task_planner.oracles import CachedOracle
+    shelf = FakeShelf()
+    table = CachedOracle(shelf)
+    seq = astar.solve(remaining_problem(SCENARIO, shelf.perceive(), ()).problem, table).sequence
+    cache = GeometryCache(shelf)
+    assert cache.adopt(table.table, SCENARIO.ids) == len(table.table) == 3
+    shelf.relocate(seq[0], [])
+    asked = len(shelf.questions)
+    assert replan(remaining_problem(SCENARIO, shelf.perceive(), [seq[0]]), (), cache) == (("T",), 0.0, 0)
+    assert len(shelf.questions) == asked
+    shelf.put("e", 0.70, 0.15, TOP)
+    cache.observe(remaining_problem(SCENARIO, shelf.perceive(), [seq[0]]).geometry())
+    with pytest.raises(ValueError, match="before any object moved"):
+        cache.adopt(table.table, SCENARIO.ids)
