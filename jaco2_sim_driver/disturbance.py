@@ -227,6 +227,13 @@ def restore_contacts(sim, object_id: str) -> None:
     sim.model.geom_contype[g], sim.model.geom_conaffinity[g] = 1, 3
 
 
+def restore_all_contacts(sim) -> None:
+    """Every bottle's contacts as built (Jaco2Sim.reset restores the data, not these model fields): call it with a
+    scene reset, in case a dropped bottle was still slipping."""
+    for b in sim.scenario.objects:
+        restore_contacts(sim, b.id)
+
+
 class CarryDropper:
     """Drops the carried bottle during some carries, called once per loop of the simulator (`update`).
 

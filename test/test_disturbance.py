@@ -22,8 +22,7 @@ def sim():
 @pytest.fixture
 def fresh(sim):
     sim.reset()
-    for o in SCENARIO.objects:
-        dist.restore_contacts(sim, o.id)
+    dist.restore_all_contacts(sim)
     sim.step(200)
     return sim
 
