@@ -135,16 +135,19 @@ class Verification:
 
 
 def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float], before_scene: Scene,
-                      after_scene: Scene, tolerances: Tolerances = Tolerances()) -> Verification:
+                      after_scene: Scene, tolerances: Tolerances = Tolerances(), bottom_seen: bool = True
+                      ) -> Verification:
     """Check a scene perceived after relocating `planned_object` against the plan: that object upright on the bottom
     shelf at `slot_pose` (x, y, z of the board's surface) within tolerances.slot; every other object of
     `before_scene` where it was (tolerances.still in xy, board in z, still standing); the target present; nothing
-    new. Returns every difference found, one line each."""
+    new. Returns every difference found, one line each. `bottom_seen` False (a camera that does not see the bottom
+    shelf): a bottle not seen there is no difference (the relocated one must only have left the top shelf)."""
     tol, diffs = tolerances, []
     moved = after_scene.get(planned_object)
     sx, sy, sz = slot_pose
     if moved is None:
-        diffs.append(Difference("not_seen", planned_object, f"{planned_object} is not seen after its relocation"))
+        if bottom_seen:
+            diffs.append(Difference("not_seen", planned_object, f"{planned_object} is not seen after its relocation"))
     else:
         off = math.hypot(moved.x - sx, moved.y - sy)
         if abs(_support(moved) - sz) > tol.board or moved.tilt > tol.tilt:
@@ -158,6 +161,8 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
         if oid == planned_object:
             continue
         now = after_scene.get(oid)
+        if now is None and not bottom_seen and abs(_support(was) - sz) <= tol.board:
+            continue  # on the bottom shelf, out of view
         if now is None:
             kind = "target_missing" if was.is_target else "not_seen"
             diffs.append(Difference(kind, oid, f"{'target ' if was.is_target else ''}{oid} is no longer seen "
@@ -219,7 +224,7 @@ def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Ite
     """The retrieval problem left in `perceived_scene`: objects resting on the top shelf (at their perceived poses,
     newly seen ones included with their perceived weight) are in; relocated ones and anything else off the top
     shelf or unseen are out. No problem (reason given) when the target is unseen, off the shelf, or already on the
-    bottom shelf (`target_retrieved`)."""
+    bottom shelf (`target_retrieved`; also when it is in `relocated` and not seen: the bottom shelf out of view)."""
     relocated, tol = tuple(relocated), tolerances
     known = set(scenario.ids)
     top = {oid: o for oid, o in perceived_scene.items() if board_of(o, scenario, tol) == "top"}
@@ -231,6 +236,9 @@ def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Ite
                             tipped=tuple(sorted(oid for oid, o in top.items() if o.tilt > tol.tilt)),
                             free_slots=free_slots(scenario, perceived_scene, tol))
     targets = [o for o in perceived_scene.values() if o.is_target]
+    if not targets and scenario.target_id in relocated:  # relocated, and out of view on the bottom shelf
+        return replace(base, reason=f"target {scenario.target_id} relocated (not seen: the bottom shelf is out of "
+                       "view)", target_retrieved=True)
     if len(targets) != 1:
         return replace(base, reason=f"target {scenario.target_id} is not seen" if not targets else
                        f"{len(targets)} targets seen: {', '.join(sorted(o.id for o in targets))}")
@@ -353,19 +361,23 @@ class ClosedLoopExecutor:
     none: a sequence for the RemainingProblem that uses no banned Option and at most len(problem.free_slots)
     slots. slot_of(problem) -> the slot index the next relocation goes to (default: the first free one, which
     is slot len(removed) while nothing disturbs the bottom shelf). on_step(step) after each relocation (feedback).
+    bottom_seen False: perception does not see the bottom shelf (verify_relocation); a relocated bottle that is
+    not seen counts as relocated. perceive() raising ValueError, TimeoutError or RuntimeError (no scene) ends the
+    run with its message.
     """
 
     def __init__(self, scenario: Scenario, relocate: Callable[[str, list[str]], tuple[bool, str]],
                  perceive: Callable[[], Scene], replan: Replanner, *, tolerances: Tolerances = Tolerances(),
                  max_replans: int = 20, max_attempts: int = 2, cancelled: Callable[[], bool] = lambda: False,
                  on_step: Callable[[Step], None] = lambda step: None,
-                 slot_of: Callable[[RemainingProblem], int] | None = None) -> None:
+                 slot_of: Callable[[RemainingProblem], int] | None = None, bottom_seen: bool = True) -> None:
         if max_replans < 0 or max_attempts < 1:
             raise ValueError(f"need max_replans >= 0 and max_attempts >= 1, got {max_replans}, {max_attempts}")
         self.scenario, self.relocate, self.perceive, self.replan = scenario, relocate, perceive, replan
         self.tol, self.max_replans, self.max_attempts = tolerances, max_replans, max_attempts
         self.cancelled, self.on_step = cancelled, on_step
         self.slot_of = slot_of or (lambda rp: rp.free_slots[0])
+        self.bottom_seen = bottom_seen
 
     def run(self, sequence: Iterable[str], scene: Scene | None = None) -> ExecutionResult:
         """Relocate `sequence` (obstacles, then the target) starting from `scene` (default: perceive()); the
@@ -374,7 +386,7 @@ class ClosedLoopExecutor:
         self._banned: set[Option] = set()
         self._failures: dict[str, int] = {}
         try:
-            self._run(list(sequence), dict(scene if scene is not None else self.perceive()), out)
+            self._run(list(sequence), dict(scene if scene is not None else self._perceive("at the start")), out)
         except _Done:
             pass
         except GiveUp as e:
@@ -398,16 +410,18 @@ class ClosedLoopExecutor:
             slot = self.slot_of(rp)
             removed, gone = tuple(out.relocated), rp.gone
             ok, message = self.relocate(obj, list(removed))
-            after = dict(self.perceive())
+            after = self._perceive(f"after relocating {obj}")
             check = None
             if ok:
                 x, y = self.scenario.slots[slot]
-                check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol)
+                check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
+                                          self.bottom_seen)
             step = Step(len(out.steps), obj, removed, slot, ok, message, check)
             out.steps.append(step)
             self.on_step(step)
             landed = after.get(obj)
-            if landed is not None and board_of(landed, self.scenario, self.tol) == "bottom":
+            if (board_of(landed, self.scenario, self.tol) == "bottom" if landed is not None else
+                    ok and not self.bottom_seen):
                 out.relocated.append(obj)
             scene = after
             rp = self._problem(scene, out)
@@ -420,6 +434,12 @@ class ClosedLoopExecutor:
             else:
                 assert check is not None
                 seq = self._replan(f"the world differs after relocating {obj}: {check.summary()}", rp, out)
+
+    def _perceive(self, when: str) -> dict[str, SeenObject]:
+        try:
+            return dict(self.perceive())
+        except (ValueError, TimeoutError, RuntimeError) as e:
+            raise GiveUp(f"no scene {when}: {e}") from None
 
     def _problem(self, scene: Scene, out: ExecutionResult) -> RemainingProblem:
         """The remaining problem; stops the run when the target is on the bottom shelf (success) or out of reach."""

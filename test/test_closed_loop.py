@@ -51,6 +51,7 @@ class FakeShelf:
         self.relocations: list[tuple[str, tuple[str, ...]]] = []
         self.questions: list[tuple[str, frozenset]] = []
         self.perceived = 0
+        self.hide_bottom = False
 
     def on_top(self):
         return {o for o, s in self.scene.items() if abs(s.z - TOP) < 0.01 and s.tilt < 0.3}
@@ -77,6 +78,8 @@ class FakeShelf:
 
     def perceive(self):
         self.perceived += 1
+        if self.hide_bottom:  # a camera that does not see the bottom shelf
+            return {k: o for k, o in self.scene.items() if abs(o.z - BOTTOM) > 0.05}
         return dict(self.scene)
 
     def blockers(self, obj, removed):
@@ -380,3 +383,35 @@ def test_the_answers_of_the_first_solve_serve_the_replans():
     cache.observe(remaining_problem(SCENARIO, shelf.perceive(), [seq[0]]).geometry())
     with pytest.raises(ValueError, match="before any object moved"):
         cache.adopt(table.table, SCENARIO.ids)
+
+
+@pytest.mark.parametrize("disturbed", [False, True])
+def test_a_camera_that_does_not_see_the_bottom_shelf(disturbed):
+    """bottom_seen=False: relocated bottles vanish from the scene; that is no difference, and the target gone from
+    the top shelf after its relocation is the success. A nudge is still caught."""
+    shelf = FakeShelf()
+    shelf.hide_bottom = True
+    if disturbed:
+        shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
+    result = executor(shelf, bottom_seen=False).run(("b", "T"))
+    assert result.success, result.message
+    assert len(result.replans) == disturbed and result.relocated == (["b", "d", "T"] if disturbed else ["b", "T"])
+    assert result.message.startswith("target T retrieved")
+    shelf = FakeShelf()
+    shelf.hide_bottom = True
+    result = executor(shelf).run(("b", "T"))  # bottom_seen True: a target not seen is never a success
+    assert not result.success and result.message == "target T is not seen"
+
+
+def test_no_scene_ends_the_run_with_the_reason():
+    shelf = FakeShelf()
+
+    def perceive():
+        if shelf.relocations:
+            raise TimeoutError("no scene from /scene/objects within 5 s")
+        return shelf.perceive()
+
+    ex = ClosedLoopExecutor(SCENARIO, shelf.relocate, perceive, lambda rp, banned: "unused")
+    result = ex.run(("b", "T"))
+    assert not result.success and result.message == "no scene after relocating b: no scene from /scene/objects " \
+                                                     "within 5 s"
