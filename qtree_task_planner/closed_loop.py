@@ -333,7 +333,8 @@ class Step:
 
 @dataclass
 class ExecutionResult:
-    """The outcome: success only when the target was seen on the bottom shelf; one-line message; the steps
+    """The outcome: success only when the target was seen on the bottom shelf (or, with a camera that does not see
+    it, relocated and gone from the top shelf); one-line message; the steps
     (relocations tried), the re-plans, and the objects relocated (verified, in order)."""
 
     success: bool = False
@@ -360,7 +361,8 @@ class ClosedLoopExecutor:
     scene perceived after the call. replan(problem, banned) -> (sequence, weight, calls) or the reason there is
     none: a sequence for the RemainingProblem that uses no banned Option and at most len(problem.free_slots)
     slots. slot_of(problem) -> the slot index the next relocation goes to (default: the first free one, which
-    is slot len(removed) while nothing disturbs the bottom shelf). on_step(step) after each relocation (feedback).
+    is slot len(removed) while nothing disturbs the bottom shelf). on_step(step) after each relocation and
+    on_replan(record) after each re-plan (feedback).
     bottom_seen False: perception does not see the bottom shelf (verify_relocation); a relocated bottle that is
     not seen counts as relocated. perceive() raising ValueError, TimeoutError or RuntimeError (no scene) ends the
     run with its message.
@@ -370,12 +372,13 @@ class ClosedLoopExecutor:
                  perceive: Callable[[], Scene], replan: Replanner, *, tolerances: Tolerances = Tolerances(),
                  max_replans: int = 20, max_attempts: int = 2, cancelled: Callable[[], bool] = lambda: False,
                  on_step: Callable[[Step], None] = lambda step: None,
+                 on_replan: Callable[[ReplanRecord], None] = lambda record: None,
                  slot_of: Callable[[RemainingProblem], int] | None = None, bottom_seen: bool = True) -> None:
         if max_replans < 0 or max_attempts < 1:
             raise ValueError(f"need max_replans >= 0 and max_attempts >= 1, got {max_replans}, {max_attempts}")
         self.scenario, self.relocate, self.perceive, self.replan = scenario, relocate, perceive, replan
         self.tol, self.max_replans, self.max_attempts = tolerances, max_replans, max_attempts
-        self.cancelled, self.on_step = cancelled, on_step
+        self.cancelled, self.on_step, self.on_replan = cancelled, on_step, on_replan
         self.slot_of = slot_of or (lambda rp: rp.free_slots[0])
         self.bottom_seen = bottom_seen
 
@@ -466,6 +469,7 @@ class ClosedLoopExecutor:
         answer = self.replan(rp, frozenset(self._banned))
         if isinstance(answer, str):
             out.replans.append(ReplanRecord(reason, None, None, 0, answer))
+            self.on_replan(out.replans[-1])
             raise GiveUp(f"no sequence remains: {answer} (re-planned because {reason})")
         seq, weight, calls = answer
         problem = rp.problem
@@ -474,6 +478,7 @@ class ClosedLoopExecutor:
                or next((f"it relocates {o} again, a failed option" for o, s in _options(seq, rp.gone)
                         if any(b.bans(o, s) for b in self._banned)), None))
         out.replans.append(ReplanRecord(reason, tuple(seq), weight, calls, f"refused: {bad}" if bad else ""))
+        self.on_replan(out.replans[-1])
         if bad:
             raise GiveUp(f"the re-planner proposed a sequence that cannot be executed: {bad}")
         return list(seq)

@@ -216,8 +216,10 @@ def test_a_nudged_neighbour_forces_a_replan_that_recovers():
     cache = GeometryCache(shelf)
     seq, _, calls0 = first_plan(shelf, cache)
     shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
-    result = executor(shelf, cache).run(seq)
+    heard = []
+    result = executor(shelf, cache, on_replan=heard.append, on_step=heard.append).run(seq)
     assert result.success, result.message
+    assert heard == [result.steps[0], result.replans[0], *result.steps[1:]]
     assert [o for o, _ in shelf.relocations] == ["b", "d", "T"]
     assert len(result.replans) == 1 and result.replans[0].sequence == ("d", "T")
     assert result.replans[0].reason.startswith("the world differs after relocating b: d moved by 6.0 cm")
