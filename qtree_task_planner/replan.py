@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping
 
-from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.feasibility import FeasibilityAnswer, Label, ask_many, in_flight
 
 from . import astar
 from .closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances
@@ -102,7 +102,8 @@ class RemainingOracle:
         if rp.problem is None:
             raise ValueError(f"no problem to solve: {rp.reason}")
         self.rp, self.cache, self.banned = rp, cache, tuple(banned)
-        self.slots = len(rp.free_slots) if capacity else math.inf
+        self.slots = len(rp.free_slots) if capacity else None
+        self.target = rp.problem.target
         self.on_shelf = frozenset(rp.problem.ids)
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
@@ -110,16 +111,69 @@ class RemainingOracle:
         full = self.rp.gone | removed
         if any(b.bans(object_id, full) for b in self.banned):
             return FeasibilityAnswer(Label.UNFEASIBLE, message=f"{object_id} failed with these objects removed")
-        target = self.rp.problem is not None and object_id == self.rp.problem.target
-        # an obstacle relocated now takes slot |removed| and must leave one for the target
-        if len(removed) + (1 if target else 2) > self.slots:
-            return FeasibilityAnswer(Label.UNFEASIBLE, message=f"no free slot left for {object_id} and the target")
+        if self.slots is not None and not fits(object_id, removed, self.slots, self.target):
+            return no_slot(object_id, self.slots)
         return self.cache.feasibility(object_id, full, self.on_shelf - removed)
 
     def lane_blockers(self, removed: frozenset[str]):
         """The planner's lane blockers for the objects of the problem (others are not ours to relocate)."""
         lanes = self.cache.lane_blockers(self.rp.gone | removed, self.on_shelf - removed)
         return None if lanes is None else {o: sets for o, sets in lanes.items() if o in self.on_shelf}
+
+
+def fits(object_id: str, removed: frozenset[str], slots: int, target: str) -> bool:
+    """Relocating object_id after `removed` with `slots` free slots at the start: it takes slot |removed| and an
+    obstacle must leave one for the target."""
+    return len(removed) + (1 if object_id == target else 2) <= slots
+
+
+def no_slot(object_id: str, slots: int) -> FeasibilityAnswer:
+    """The g_U of a relocation beyond the free slots (no blockers: a capacity limit, not geometry)."""
+    return FeasibilityAnswer(Label.UNFEASIBLE, message=f"no free slot left for {object_id} and the target "
+                             f"({slots} slots)")
+
+
+class SlotLimit:
+    """Any feasibility oracle with the bottom shelf's capacity as a constraint: with `slots` free slots, relocating
+    an obstacle after `removed` needs |removed| + 2 <= slots (its slot and one left for the target), the target
+    |removed| + 1 <= slots; beyond that the answer is g_U without asking. In front of the oracle of the exact
+    solvers and of the Q-Tree's episodes (oracles.CachedOracle(SlotLimit(service, n, target))), no sequence
+    needing more slots than exist is ever found. Lane blockers and batches pass through."""
+
+    def __init__(self, oracle, slots: int, target: str) -> None:
+        if slots < 1:
+            raise ValueError(f"slots must be >= 1 (the target needs one), got {slots}")
+        self.oracle, self.slots, self.target = oracle, slots, target
+
+    def fits(self, object_id: str, removed: frozenset[str]) -> bool:
+        """True when relocating object_id after `removed` leaves a slot for everything still to come."""
+        return fits(object_id, removed, self.slots, self.target)
+
+    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """g_U beyond the slots, else the oracle's answer."""
+        if self.fits(object_id, removed):
+            return self.oracle.feasibility(object_id, removed)
+        return no_slot(object_id, self.slots)
+
+    @property
+    def in_flight(self) -> int:
+        """As the wrapped oracle (relocation_common.feasibility.BatchOracle)."""
+        return in_flight(self.oracle)
+
+    def feasibility_many(self, queries, on_answer=None) -> list[FeasibilityAnswer]:
+        """The queries that fit go to the wrapped oracle together; the others are g_U."""
+        ask = [q for q in queries if self.fits(*q)]
+        got = dict(zip(ask, ask_many(self.oracle, ask)))
+        out = [got[q] if q in got else no_slot(q[0], self.slots) for q in queries]
+        if on_answer is not None:
+            for q, a in zip(queries, out):
+                on_answer(q, a)
+        return out
+
+    def lane_blockers(self, removed: frozenset[str]):
+        """The wrapped oracle's lane blockers (geometry: capacity does not change them), None if it has none."""
+        lanes = getattr(self.oracle, "lane_blockers", None)
+        return None if lanes is None else lanes(removed)
 
 
 def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache) -> ReplanAnswer | str:

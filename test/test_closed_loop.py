@@ -417,3 +417,22 @@ def test_no_scene_ends_the_run_with_the_reason():
     result = ex.run(("b", "T"))
     assert not result.success and result.message == "no scene after relocating b: no scene from /scene/objects " \
                                                      "within 5 s"
+
+
+def test_slot_limit_bounds_the_exact_search_and_the_q_tree():
+    """blocking_5's optimum o1 o4 T needs 3 slots: with 2 there is no sequence; with 3, the optimum. The Q-Tree over
+    the same limit never learns a sequence longer than the slots (scenario3_15's demo learned 12 + T for 12)."""
+    from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+    from qtree_task_planner.params import TrainingParams
+    from qtree_task_planner.replan import SlotLimit
+    from qtree_task_planner.training import train
+    from relocation_common.scenario import load_scenario
+    sc = load_scenario("blocking_5")
+    assert astar.solve(sc, SlotLimit(BlockingOracle(sc), 2, "T")).sequence is None
+    assert astar.solve(sc, SlotLimit(BlockingOracle(sc), 3, "T")).sequence == ("o1", "o4", "T")
+    oracle = CachedOracle(SlotLimit(BlockingOracle(sc), 3, "T"))
+    r = train(sc, oracle, TrainingParams.defaults().replace(max_episodes=200, seed=1))
+    assert r.found and len(r.sequence) <= 3
+    assert all(len(s) + 2 <= 3 or o == "T" or a.label == Label.UNFEASIBLE for (o, s), a in oracle.table.items())
+    many = SlotLimit(BlockingOracle(sc), 2, "T").feasibility_many([("o1", frozenset()), ("o4", frozenset({"o1"}))])
+    assert [a.label for a in many] == [Label.OBSTACLE, Label.UNFEASIBLE]
