@@ -337,10 +337,12 @@ class DisturbancePlan:
             raise ValueError(f"kinds must be among {', '.join(KINDS)}, got {sorted(unknown) or 'none'}")
         if k < 0 or relocations < 1:
             raise ValueError(f"need k >= 0 and relocations >= 1, got k={k}, relocations={relocations}")
+        if relocations == 1 and k and "drop" not in kinds:
+            raise ValueError("with one relocation only a drop (during its carry) has a moment: add 'drop' to kinds")
         rng = random.Random(seed)
         out = []
         for _ in range(k):
-            kind = rng.choice(kinds if relocations > 1 else tuple(x for x in kinds if x == "drop") or ("drop",))
+            kind = rng.choice(kinds if relocations > 1 else ("drop",))
             moment = "during" if kind == "drop" else "after"
             i = rng.randrange(relocations if kind == "drop" else relocations - 1)
             out.append(Disturbance(kind, moment, i, choice=rng.random(), amount=rng.uniform(*nudge_range),

@@ -164,6 +164,9 @@ def test_seeded_plans_are_reproducible_and_serialise():
     json.dumps(rows)
     with pytest.raises(ValueError, match="kinds"):
         dist.DisturbancePlan.draw(1, 0, 3, kinds=("explode",))
+    assert {d.kind for d in dist.DisturbancePlan.draw(4, 0, 1).disturbances} == {"drop"}
+    with pytest.raises(ValueError, match="only a drop"):
+        dist.DisturbancePlan.draw(1, 0, 1, kinds=("nudge",))
 
 
 def test_applying_a_plan_records_what_was_done(fresh):
