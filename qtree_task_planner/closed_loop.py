@@ -445,7 +445,10 @@ class ClosedLoopExecutor:
             raise GiveUp(f"no scene {when}: {e}") from None
 
     def _problem(self, scene: Scene, out: ExecutionResult) -> RemainingProblem:
-        """The remaining problem; stops the run when the target is on the bottom shelf (success) or out of reach."""
+        """The remaining problem; stops the run when the target is on the bottom shelf (success) or out of reach.
+        A relocated bottle seen back on the top shelf is no longer relocated (the motion planner must see it)."""
+        out.relocated[:] = [o for o in out.relocated
+                            if o not in scene or board_of(scene[o], self.scenario, self.tol) != "top"]
         rp = remaining_problem(self.scenario, scene, out.relocated, self.tol)
         if rp.target_retrieved:
             out.success = True

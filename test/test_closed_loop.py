@@ -436,3 +436,14 @@ def test_slot_limit_bounds_the_exact_search_and_the_q_tree():
     assert all(len(s) + 2 <= 3 or o == "T" or a.label == Label.UNFEASIBLE for (o, s), a in oracle.table.items())
     many = SlotLimit(BlockingOracle(sc), 2, "T").feasibility_many([("o1", frozenset()), ("o4", frozenset({"o1"}))])
     assert [a.label for a in many] == [Label.OBSTACLE, Label.UNFEASIBLE]
+
+
+def test_a_relocated_bottle_put_back_on_the_top_shelf_is_no_longer_removed():
+    """c relocated, then put back on the top shelf during b's relocation: the re-plan sees it there, and the motion
+    planner is no longer told that c is removed (it would plan through it)."""
+    shelf = FakeShelf()
+    shelf.disturb[1] = lambda s: s.put("c", 0.55, 0.12, TOP)
+    result = executor(shelf).run(("c", "b", "T"))
+    assert result.success, result.message
+    assert shelf.relocations == [("c", ()), ("b", ("c",)), ("T", ("b",))]
+    assert result.relocated == ["b", "T"] and "c moved" in result.replans[0].reason
