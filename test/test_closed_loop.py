@@ -220,6 +220,11 @@ def test_a_nudged_neighbour_forces_a_replan_that_recovers():
     result = executor(shelf, cache, on_replan=heard.append, on_step=heard.append).run(seq)
     assert result.success, result.message
     assert heard == [result.steps[0], result.replans[0], *result.steps[1:]]
+    import json
+    report = json.loads(json.dumps(result.to_dict()))  # report.json's `replans`, and the steps' checks
+    assert report["replans"] == [{"reason": result.replans[0].reason, "sequence": ["d", "T"], "weight": 0.1,
+                                  "calls": 3}]
+    assert report["steps"][0]["verification"]["differences"][0].startswith("d moved by 6.0 cm")
     assert [o for o, _ in shelf.relocations] == ["b", "d", "T"]
     assert len(result.replans) == 1 and result.replans[0].sequence == ("d", "T")
     assert result.replans[0].reason.startswith("the world differs after relocating b: d moved by 6.0 cm")
