@@ -1,0 +1,454 @@
+"""Closed-loop retrieval core (qtree_task_planner.closed_loop, qtree_task_planner.replan) with a fake shelf.
+
+The fake shelf is a unit-test double of the other layers: it relocates by moving a bottle to the first free slot
+(or fails when told to), lets the test disturb it after a given relocation, and answers feasibility from its
+current geometry (an object is blocked by the objects standing in front of it in its lane), so that a disturbance
+really changes the answers and the re-planner's cache must notice."""
+import math
+
+import pytest
+
+from qtree_task_planner import astar
+from qtree_task_planner.closed_loop import (
+    ClosedLoopExecutor,
+    Option,
+    SeenObject,
+    Tolerances,
+    check_capacity,
+    free_slots,
+    remaining_problem,
+    scene_from_scenario,
+    tilt_of_quaternion,
+    verify_relocation,
+)
+from qtree_task_planner.replan import GeometryCache, RemainingOracle, replan
+from qtree_task_planner.retrieval import execute_sequence
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
+from relocation_common.scenario import parse_scenario
+
+SHELF = {"x_front": 0.45, "depth": 0.40, "width": 0.80, "y_center": 0.0, "board_thickness": 0.02, "top_z": 0.20,
+         "ceiling_z": 0.46, "bottom_z": -0.15}
+MARKER = {"id": 7, "dictionary": "DICT_4X4_50", "size": 0.07, "position": [0.455, -0.345, 0.27],
+          "rpy": [1.5707963, 0.0, -1.5707963]}
+# front row a b c, second row d e, the target T behind b: T's lane holds b only; optimum b, T (0.5)
+OBJECTS = [{"id": "a", "weight": 0.3, "xy": [0.55, -0.12]}, {"id": "b", "weight": 0.5, "xy": [0.55, 0.0]},
+           {"id": "c", "weight": 0.2, "xy": [0.55, 0.12]}, {"id": "d", "weight": 0.1, "xy": [0.66, -0.08]},
+           {"id": "e", "weight": 0.4, "xy": [0.66, 0.08]}, {"id": "T", "xy": [0.77, 0.0]}]
+SCENARIO = parse_scenario({"name": "lanes", "shelf": SHELF, "marker": MARKER, "target": "T", "objects": OBJECTS})
+TOP, BOTTOM = SHELF["top_z"], SHELF["bottom_z"]
+LANE = 0.05  # m: an object blocks another when in front of it and nearer its lane's axis than this
+
+
+class FakeShelf:
+    """Test double of motion planner + perception + simulator (module doc)."""
+
+    def __init__(self, scenario=SCENARIO, lanes=None):
+        self.scenario = scenario
+        self.scene = dict(scene_from_scenario(scenario))
+        self.lanes = lanes  # object -> [blocker sets] (alternative lanes) instead of the geometric lane
+        self.fail: dict[str, int] = {}  # object -> relocations of it that fail
+        self.disturb: dict[int, object] = {}  # relocation call k -> fn(shelf) run after it
+        self.relocations: list[tuple[str, tuple[str, ...]]] = []
+        self.questions: list[tuple[str, frozenset]] = []
+        self.perceived = 0
+        self.hide_bottom = False
+
+    def on_top(self):
+        return {o for o, s in self.scene.items() if abs(s.z - TOP) < 0.01 and s.tilt < 0.3}
+
+    def relocate(self, obj, removed):
+        self.relocations.append((obj, tuple(removed)))
+        k = len(self.relocations) - 1
+        if self.fail.get(obj, 0) > 0:
+            self.fail[obj] -= 1
+            result = (False, "no grasp found (STPIK)")
+        elif self.blockers(obj, frozenset()):
+            result = (False, f"blocked by {sorted(self.blockers(obj, frozenset())[0])}")
+        else:
+            free = free_slots(self.scenario, self.scene)
+            self.put(obj, *self.scenario.slots[free[0]], BOTTOM)
+            result = (True, "relocated")
+        if k in self.disturb:
+            self.disturb[k](self)
+        return result
+
+    def put(self, obj, x, y, z, tilt=0.0, **kw):
+        s = self.scene.get(obj) or SeenObject(obj, x, y, z, **kw)
+        self.scene[obj] = SeenObject(obj, x, y, z, s.weight, s.is_target, tilt, s.radius, s.height)
+
+    def perceive(self):
+        self.perceived += 1
+        if self.hide_bottom:  # a camera that does not see the bottom shelf
+            return {k: o for k, o in self.scene.items() if abs(o.z - BOTTOM) > 0.05}
+        return dict(self.scene)
+
+    def blockers(self, obj, removed):
+        """The lanes of obj still blocked with `removed` gone, as lists of their present objects; [] when one
+        lane is clear."""
+        present = self.on_top() - set(removed) - {obj}
+        if self.lanes is not None:
+            lanes = [set(b) & present for b in self.lanes.get(obj, [set()])]
+        else:
+            o = self.scene[obj]
+            lanes = [{p for p in present if self.scene[p].x < o.x - 0.02 and abs(self.scene[p].y - o.y) < LANE}]
+        return [] if any(not b for b in lanes) else lanes
+
+    def feasibility(self, obj, removed):
+        self.questions.append((obj, frozenset(removed)))
+        if obj not in self.on_top() or self.scene[obj].tilt > 0.3:
+            return FeasibilityAnswer(Label.UNFEASIBLE, message="not standing on the top shelf")
+        lanes = self.blockers(obj, removed)
+        if lanes:
+            return FeasibilityAnswer(Label.UNFEASIBLE, message="blocked", blockers=tuple(BlockerSet(b) for b in lanes))
+        return FeasibilityAnswer(Label.TARGET if self.scene[obj].is_target else Label.OBSTACLE)
+
+
+def executor(shelf, cache=None, **kw):
+    cache = cache or GeometryCache(shelf)
+    return ClosedLoopExecutor(shelf.scenario, shelf.relocate, shelf.perceive,
+                              lambda rp, banned: replan(rp, banned, cache), **kw)
+
+
+def first_plan(shelf, cache):
+    rp = remaining_problem(shelf.scenario, shelf.perceive(), ())
+    answer = replan(rp, (), cache)
+    assert not isinstance(answer, str), answer
+    return answer
+
+
+# ------------------------------------------------------------------------------------------------ verification
+def slot0():
+    return (*SCENARIO.slots[0], BOTTOM)
+
+
+def test_verification_of_a_relocation_as_planned_is_ok():
+    before = scene_from_scenario(SCENARIO)
+    after = dict(before, b=SeenObject("b", *slot0(), weight=0.5))
+    v = verify_relocation("b", slot0(), before, after)
+    assert v.ok and v.summary() == "b relocated as planned" and v.to_dict()["differences"] == []
+
+
+def test_verification_lists_every_difference_one_line_each():
+    before = scene_from_scenario(SCENARIO)
+    after = dict(before)
+    after["b"] = SeenObject("b", 0.58, 0.02, TOP, 0.5)  # slipped back onto the top shelf
+    after["d"] = SeenObject("d", 0.66, -0.03, TOP, 0.1)  # nudged 5 cm
+    after["e"] = SeenObject("e", 0.66, 0.13, TOP + 0.033, 0.4, tilt=math.pi / 2)  # tipped
+    del after["T"]
+    after["x"] = SeenObject("x", 0.7, 0.3, TOP, 0.2)  # hidden behind, now seen
+    v = verify_relocation("b", slot0(), before, after)
+    kinds = {d.object_id: d.kind for d in v.differences}
+    assert kinds == {"b": "not_at_slot", "d": "moved", "e": "tipped", "T": "target_missing", "x": "new"}
+    assert all("\n" not in d.line for d in v.differences)
+    assert "d moved by 5.0 cm" in v.to_dict()["differences"][3] or any("d moved by 5.0 cm" in d.line
+                                                                         for d in v.differences)
+    assert v.summary().startswith("b is not on the bottom shelf") and "(and 4 more differences)" in v.summary()
+
+
+def test_verification_off_slot_on_the_bottom_shelf():
+    before = scene_from_scenario(SCENARIO)
+    x, y, z = slot0()
+    v = verify_relocation("b", slot0(), before, dict(before, b=SeenObject("b", x + 0.05, y, z)))
+    assert [d.kind for d in v.differences] == ["not_at_slot"] and "5.0 cm from its slot" in v.summary()
+    assert verify_relocation("b", slot0(), before, dict(before, b=SeenObject("b", x + 0.02, y, z))).ok
+
+
+def test_tolerances_are_validated_and_tilt_is_read_from_a_quaternion():
+    with pytest.raises(ValueError, match="slot"):
+        Tolerances(slot=0)
+    assert tilt_of_quaternion(1, 0, 0, 0) == 0.0
+    s = math.sin(math.pi / 4)
+    assert tilt_of_quaternion(s, s, 0, 0) == pytest.approx(math.pi / 2)
+
+
+# ------------------------------------------------------------------------------------------------ remaining problem
+def test_remaining_problem_from_the_perceived_scene():
+    scene = dict(scene_from_scenario(SCENARIO))
+    scene["b"] = SeenObject("b", *slot0(), weight=0.5)  # relocated
+    scene["d"] = SeenObject("d", 0.66, -0.02, TOP, 0.1)  # moved
+    scene["x"] = SeenObject("x", 0.75, 0.3, TOP, 0.25, label="navy")  # newly seen
+    del scene["c"]  # not seen any more
+    rp = remaining_problem(SCENARIO, scene, ["b"])
+    assert rp.problem is not None and set(rp.problem.obstacles) == {"a", "d", "e", "x"}
+    assert rp.problem.weights["x"] == 0.25 and rp.problem.target == "T"
+    assert rp.gone == {"b", "c"} and rp.unseen == ("c",) and rp.new == ("x",) and set(rp.moved) == {"d"}
+    assert {b.id: (b.x, b.y) for b in rp.bottles}["d"] == (0.66, -0.02)
+    assert rp.free_slots == tuple(range(1, len(SCENARIO.slots)))
+    assert rp.to_dict()["gone"] == ["b", "c"]
+
+
+def test_no_remaining_problem_when_the_target_is_gone_or_retrieved():
+    scene = dict(scene_from_scenario(SCENARIO))
+    scene["T"] = SeenObject("T", 0.3, 0.0, BOTTOM - 0.3, is_target=True)  # on the floor
+    rp = remaining_problem(SCENARIO, scene, [])
+    assert rp.problem is None and "off the shelf" in rp.reason and not rp.target_retrieved
+    scene["T"] = SeenObject("T", *slot0(), is_target=True)
+    assert remaining_problem(SCENARIO, scene, []).target_retrieved
+    del scene["T"]
+    assert remaining_problem(SCENARIO, scene, []).reason == "target T is not seen"
+
+
+def test_check_capacity():
+    assert check_capacity(("a", "b", "T"), 3) is None
+    assert check_capacity(("a", "b", "T"), 2) == "the sequence relocates 3 objects but only 2 slots of the bottom " \
+                                                  "shelf are free"
+
+
+# ------------------------------------------------------------------------------------------------ the executor
+def test_undisturbed_run_is_the_open_loop_run():
+    """No disturbance: the same relocations as execute_sequence (open loop), no re-plan, no extra step."""
+    shelf, cache = FakeShelf(), GeometryCache(FakeShelf())
+    cache.oracle = shelf
+    seq, weight, _ = first_plan(shelf, cache)
+    assert seq == ("b", "T") and weight == 0.5
+    result = executor(shelf, cache).run(seq)
+    assert result.success and result.replans == [] and result.relocated == ["b", "T"]
+    assert [s.object_id for s in result.steps] == list(seq) and all(s.verification.ok for s in result.steps)
+    open_loop = FakeShelf()
+    ok, _, relocated = execute_sequence(seq, open_loop.relocate, cancelled=lambda: False)
+    assert ok and open_loop.relocations == shelf.relocations and relocated == result.relocated
+    assert result.message == "target T retrieved after 1 relocations"
+
+
+def test_a_nudged_neighbour_forces_a_replan_that_recovers():
+    """After b is relocated, d is pushed into T's lane: the check sees it, the re-plan relocates d, then T."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, calls0 = first_plan(shelf, cache)
+    shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
+    heard = []
+    result = executor(shelf, cache, on_replan=heard.append, on_step=heard.append).run(seq)
+    assert result.success, result.message
+    assert heard == [result.steps[0], result.replans[0], *result.steps[1:]]
+    import json
+    report = json.loads(json.dumps(result.to_dict()))  # report.json's `replans`, and the steps' checks
+    assert report["replans"] == [{"reason": result.replans[0].reason, "sequence": ["d", "T"], "weight": 0.1,
+                                  "calls": 3}]
+    assert report["steps"][0]["verification"]["differences"][0].startswith("d moved by 6.0 cm")
+    assert [o for o, _ in shelf.relocations] == ["b", "d", "T"]
+    assert len(result.replans) == 1 and result.replans[0].sequence == ("d", "T")
+    assert result.replans[0].reason.startswith("the world differs after relocating b: d moved by 6.0 cm")
+    assert not result.steps[0].verification.ok and result.steps[1].verification.ok
+    # asked again: only questions with the moved d on the shelf (T with d there, d itself, T after d)
+    assert result.replans[0].calls == 3
+    assert shelf.questions[calls0:] == [("T", {"b"}), ("d", {"b"}), ("T", {"b", "d"})]
+    # the open-loop executor on the same disturbed shelf: T is blocked by d, and the goal ends there
+    open_loop = FakeShelf()
+    open_loop.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
+    ok, message, _ = execute_sequence(seq, open_loop.relocate, cancelled=lambda: False)
+    assert not ok and message == "relocating 'T' failed: blocked by ['d']"
+
+
+def test_a_bottle_that_slips_back_onto_the_top_shelf_is_relocated_again():
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.disturb[0] = lambda s: s.put("b", 0.57, 0.01, TOP)  # dropped during the carry, back in T's lane
+    result = executor(shelf, cache).run(seq)
+    assert result.success, result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "b", "T"]
+    assert result.replans[0].sequence == ("b", "T") and "b is not on the bottom shelf" in result.replans[0].reason
+    assert shelf.relocations[1] == ("b", ())  # b was not counted as relocated
+
+
+def test_a_failed_relocation_marks_the_option_and_replans_around_it():
+    """b fails once with nothing removed: that option is banned, the re-plan relocates c first (then b, T; d, which
+    is lighter, stands behind a)."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.fail["b"] = 1
+    result = executor(shelf, cache).run(seq)
+    assert result.success, result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "c", "b", "T"]
+    assert result.replans[0].reason == "relocating b failed: no grasp found (STPIK)"
+    assert result.replans[0].sequence == ("c", "b", "T") and result.replans[0].weight == pytest.approx(0.7)
+    assert not result.steps[0].ok and result.steps[0].verification is None
+
+
+def test_gives_up_with_one_line_when_no_sequence_remains():
+    """b always fails: banned with any set after two attempts; T stays blocked by it: no sequence remains."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.fail["b"] = 99
+    result = executor(shelf, cache).run(seq)
+    assert not result.success and "\n" not in result.message
+    assert result.message.startswith("no sequence remains: T cannot be reached"), result.message
+    assert "failed options: b" in result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "c", "b"]
+    assert result.replans[-1].sequence is None and result.replans[-1].failure
+
+
+def test_a_tipped_target_cannot_be_retrieved_says_why():
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.disturb[0] = lambda s: s.put("T", 0.30, 0.0, BOTTOM - 0.3, tilt=math.pi / 2)  # knocked off the shelf
+    result = executor(shelf, cache).run(seq)
+    assert not result.success and result.message.startswith("target T is off the shelf at (0.300, 0.000")
+    assert len(shelf.relocations) == 1
+
+
+def test_capacity_bounds_every_plan_and_is_checked_before_the_arm_moves():
+    """T has two lanes: {b} (heavy) or {d, e} (light). With 2 free slots (junk on the others) the lighter
+    d, e, T does not fit: the executor re-plans before moving and relocates b, T."""
+    scn = parse_scenario({"name": "two_lanes", "shelf": SHELF, "marker": MARKER, "target": "T",
+                          "objects": [dict(o, weight=0.9) if o["id"] == "b" else o for o in OBJECTS]})
+    shelf = FakeShelf(scn, lanes={"T": [{"b"}, {"d", "e"}]})
+    for k, (x, y) in enumerate(scn.slots[2:]):
+        shelf.scene[f"junk{k}"] = SeenObject(f"junk{k}", x, y, BOTTOM, 0.5)
+    cache = GeometryCache(shelf)
+    rp = remaining_problem(scn, shelf.perceive(), ())
+    assert len(rp.free_slots) == 2
+    unbounded = astar.solve(rp.problem, RemainingOracle(rp, cache, capacity=False))
+    assert unbounded.sequence == ("d", "e", "T")
+    result = executor(shelf, cache).run(unbounded.sequence)
+    assert result.success, result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "T"]
+    assert result.replans[0].reason.startswith("capacity: the sequence relocates 3 objects but only 2 slots")
+    assert result.replans[0].sequence == ("b", "T") and result.replans[0].weight == pytest.approx(0.9)
+
+
+def test_no_sequence_fits_the_slots():
+    shelf = FakeShelf(lanes={"T": [{"d", "e"}]})
+    for k, (x, y) in enumerate(SCENARIO.slots[2:]):
+        shelf.scene[f"junk{k}"] = SeenObject(f"junk{k}", x, y, BOTTOM, 0.5)
+    answer = replan(remaining_problem(SCENARIO, shelf.perceive(), ()), (), GeometryCache(shelf))
+    assert isinstance(answer, str) and "needs 3 slots, 2 free" in answer
+
+
+def test_replan_budget_and_cancel():
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.fail["b"] = 1
+    result = executor(shelf, cache, max_replans=0).run(seq)
+    assert not result.success and result.message.startswith("gave up after 0 re-plans (max_replans)")
+    result = executor(FakeShelf(), cache, cancelled=lambda: True).run(seq)
+    assert not result.success and result.message == "cancelled after relocating []"
+
+
+def test_a_replanner_proposing_a_banned_or_invalid_sequence_is_refused():
+    shelf = FakeShelf()
+    shelf.fail["b"] = 1
+    ex = ClosedLoopExecutor(SCENARIO, shelf.relocate, shelf.perceive, lambda rp, banned: (("b", "T"), 0.5, 0))
+    result = ex.run(("b", "T"))
+    assert not result.success and "a failed option" in result.message
+    assert result.replans[0].failure.startswith("refused")
+    shelf = FakeShelf()
+    shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
+    ex = ClosedLoopExecutor(SCENARIO, shelf.relocate, shelf.perceive, lambda rp, banned: (("zz", "T"), 0.5, 0))
+    assert "zz not on the top shelf" in ex.run(("b", "T")).message
+
+
+def test_options_ban_exactly_their_set():
+    assert Option("b", frozenset()).bans("b", frozenset())
+    assert not Option("b", frozenset()).bans("b", frozenset({"c"}))
+    assert Option("b").bans("b", frozenset({"c"})) and not Option("b").bans("c", frozenset())
+
+
+# ------------------------------------------------------------------------------------------------ the cache
+def test_the_cache_keeps_answers_for_unchanged_geometry():
+    """After relocating b as planned, re-planning asks nothing: (T, {b}) was answered with the same objects on the
+    shelf. After moving e (not in anyone's lane), only questions with e on the shelf are asked again."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, calls = first_plan(shelf, cache)
+    assert calls == len(shelf.questions) == 3  # (T, {}) blocked by b, (b, {}), (T, {b})
+    shelf.relocate("b", [])
+    rp = remaining_problem(SCENARIO, shelf.perceive(), ["b"])
+    assert replan(rp, (), cache) == (("T",), 0.0, 0)
+    shelf.put("e", 0.70, 0.15, TOP)
+    rp = remaining_problem(SCENARIO, shelf.perceive(), ["b"])
+    assert cache.observe(rp.geometry()) == ["e"]
+    asked = len(shelf.questions)
+    assert replan(rp, (), cache) == (("T",), 0.0, 1)
+    assert shelf.questions[asked:] == [("T", frozenset({"b"}))]
+
+
+def test_a_sequence_that_does_not_fit_the_scene_is_replanned_before_the_arm_moves():
+    shelf = FakeShelf()
+    result = executor(shelf).run(("zz", "b", "T"))
+    assert result.success and [o for o, _ in shelf.relocations] == ["b", "T"]
+    assert result.replans[0].reason == "the sequence does not fit the scene: it names zz not on the top shelf"
+
+
+def test_the_answers_of_the_first_solve_serve_the_replans():
+    """The node's optimum and training ask through a set-keyed CachedOracle; adopted, its answers are re-used."""
+    from qtree_task_planner.oracles import CachedOracle
+    shelf = FakeShelf()
+    table = CachedOracle(shelf)
+    seq = astar.solve(remaining_problem(SCENARIO, shelf.perceive(), ()).problem, table).sequence
+    cache = GeometryCache(shelf)
+    assert cache.adopt(table.table, SCENARIO.ids) == len(table.table) == 3
+    shelf.relocate(seq[0], [])
+    asked = len(shelf.questions)
+    assert replan(remaining_problem(SCENARIO, shelf.perceive(), [seq[0]]), (), cache) == (("T",), 0.0, 0)
+    assert len(shelf.questions) == asked
+    shelf.put("e", 0.70, 0.15, TOP)
+    cache.observe(remaining_problem(SCENARIO, shelf.perceive(), [seq[0]]).geometry())
+    with pytest.raises(ValueError, match="before any object moved"):
+        cache.adopt(table.table, SCENARIO.ids)
+
+
+@pytest.mark.parametrize("disturbed", [False, True])
+def test_a_camera_that_does_not_see_the_bottom_shelf(disturbed):
+    """bottom_seen=False: relocated bottles vanish from the scene; that is no difference, and the target gone from
+    the top shelf after its relocation is the success. A nudge is still caught."""
+    shelf = FakeShelf()
+    shelf.hide_bottom = True
+    if disturbed:
+        shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
+    result = executor(shelf, bottom_seen=False).run(("b", "T"))
+    assert result.success, result.message
+    assert len(result.replans) == disturbed and result.relocated == (["b", "d", "T"] if disturbed else ["b", "T"])
+    assert result.message.startswith("target T retrieved")
+    shelf = FakeShelf()
+    shelf.hide_bottom = True
+    result = executor(shelf).run(("b", "T"))  # bottom_seen True: a target not seen is never a success
+    assert not result.success and result.message == "target T is not seen"
+
+
+def test_no_scene_ends_the_run_with_the_reason():
+    shelf = FakeShelf()
+
+    def perceive():
+        if shelf.relocations:
+            raise TimeoutError("no scene from /scene/objects within 5 s")
+        return shelf.perceive()
+
+    ex = ClosedLoopExecutor(SCENARIO, shelf.relocate, perceive, lambda rp, banned: "unused")
+    result = ex.run(("b", "T"))
+    assert not result.success and result.message == "no scene after relocating b: no scene from /scene/objects " \
+                                                     "within 5 s"
+
+
+def test_slot_limit_bounds_the_exact_search_and_the_q_tree():
+    """blocking_5's optimum o1 o4 T needs 3 slots: with 2 there is no sequence; with 3, the optimum. The Q-Tree over
+    the same limit never learns a sequence longer than the slots (scenario3_15's demo learned 12 + T for 12)."""
+    from qtree_task_planner.oracles import BlockingOracle, CachedOracle
+    from qtree_task_planner.params import TrainingParams
+    from qtree_task_planner.replan import SlotLimit
+    from qtree_task_planner.training import train
+    from relocation_common.scenario import load_scenario
+    sc = load_scenario("blocking_5")
+    assert astar.solve(sc, SlotLimit(BlockingOracle(sc), 2, "T")).sequence is None
+    assert astar.solve(sc, SlotLimit(BlockingOracle(sc), 3, "T")).sequence == ("o1", "o4", "T")
+    oracle = CachedOracle(SlotLimit(BlockingOracle(sc), 3, "T"))
+    r = train(sc, oracle, TrainingParams.defaults().replace(max_episodes=200, seed=1))
+    assert r.found and len(r.sequence) <= 3
+    assert all(len(s) + 2 <= 3 or o == "T" or a.label == Label.UNFEASIBLE for (o, s), a in oracle.table.items())
+    many = SlotLimit(BlockingOracle(sc), 2, "T").feasibility_many([("o1", frozenset()), ("o4", frozenset({"o1"}))])
+    assert [a.label for a in many] == [Label.OBSTACLE, Label.UNFEASIBLE]
+
+
+def test_a_relocated_bottle_put_back_on_the_top_shelf_is_no_longer_removed():
+    """c relocated, then put back on the top shelf during b's relocation: the re-plan sees it there, and the motion
+    planner is no longer told that c is removed (it would plan through it)."""
+    shelf = FakeShelf()
+    shelf.disturb[1] = lambda s: s.put("c", 0.55, 0.12, TOP)
+    result = executor(shelf).run(("c", "b", "T"))
+    assert result.success, result.message
+    assert shelf.relocations == [("c", ()), ("b", ("c",)), ("T", ("b",))]
+    assert result.relocated == ["b", "T"] and "c moved" in result.replans[0].reason
