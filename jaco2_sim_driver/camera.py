@@ -1,6 +1,6 @@
 """Offscreen RGB-D camera of the scene (no ROS): images, pinhole intrinsics and the camera pose in the base frame.
 
-Rendering is headless with MUJOCO_GL=egl (set by jaco2_sim_driver.scene before mujoco is imported). An OpenGL
+Rendering is headless with MUJOCO_GL=egl (set by the package's __init__ before mujoco is imported). An OpenGL
 context belongs to the thread that made it: create a CameraRenderer in the thread that renders.
 Depth is the planar (z) distance in metres along the optical axis, as a RealSense publishes it; pixels with no
 surface within the far plane are 0 (invalid).
@@ -10,15 +10,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
+import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
+import numpy as np
 
-from relocation_common.robot_description import JOINT_NAMES, Q_HOME  # noqa: E402
-from relocation_common.scenario import Scenario  # noqa: E402
+from relocation_common.robot_description import JOINT_NAMES, Q_HOME
+from relocation_common.scenario import Scenario
 
-from . import scene  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-from .scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402
-from .sensor_model import SensorModel, SensorSimulator  # noqa: E402
+from .scene import CAMERA_NAME, CameraSpec, build_model
+from .sensor_model import SensorModel, SensorSimulator
 
 # MuJoCo camera frame (x right, y up, looking along -z) -> OpenCV optical frame (x right, y down, z forward)
 MJ_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])

@@ -50,7 +50,9 @@ class PerceptionNode(Node):
     def __init__(self):
         super().__init__("perception")
         declare_parameters(self)  # config/perception.yaml
-        g = lambda n: self.get_parameter(n).value  # noqa: E731
+        def g(n: str):
+            return self.get_parameter(n).value
+
         self.p = g
         for k in ("process_rate", "republish_period", "sync_slop", "max_scene_age", "max_image_pixels"):
             if not g(k) > 0:  # also NaN

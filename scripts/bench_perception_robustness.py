@@ -33,18 +33,18 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node runs (perception_aruco/__init__.py)
 
 import cv2  # noqa: E402  (after the BLAS thread setting, which must precede numpy)
-import numpy as np  # noqa: E402  (same)
+import numpy as np  # noqa: E402  (after the BLAS thread setting, which must precede numpy)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from jaco2_sim_driver import sensor_model as sm  # noqa: E402
-from jaco2_sim_driver.camera import Frame, render_frame  # noqa: E402
-from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402
-from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base, rpy_matrix  # noqa: E402
-from perception_aruco.pipeline import Perception  # noqa: E402
-from relocation_common.paths import scenarios_dir  # noqa: E402
-from relocation_common.robot_description import JOINT_NAMES, Q_HOME, Q_UPRIGHT  # noqa: E402
-from relocation_common.scenario import Scenario, load_scenario  # noqa: E402
+from jaco2_sim_driver import sensor_model as sm  # noqa: E402  (after the sys.path insert of the checkout)
+from jaco2_sim_driver.camera import Frame, render_frame  # noqa: E402  (after the sys.path insert of the checkout)
+from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402  (after the sys.path insert of the checkout)
+from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
+from perception_aruco.pipeline import Perception  # noqa: E402  (after the sys.path insert of the checkout)
+from relocation_common.paths import scenarios_dir  # noqa: E402  (after the sys.path insert of the checkout)
+from relocation_common.robot_description import JOINT_NAMES, Q_HOME, Q_UPRIGHT  # noqa: E402  (after the sys.path insert of the checkout)
+from relocation_common.scenario import Scenario, load_scenario  # noqa: E402  (after the sys.path insert of the checkout)
 
 SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15", "scenario2_10"]
 TOL = 0.010  # m: a published bottle farther than this from its true position is wrong
