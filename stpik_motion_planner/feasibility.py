@@ -89,6 +89,7 @@ class PlannerParams:
     carry_timeout: float = 10.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     seed_per_query: bool = False  # every random draw seeded from the question (rrt.rrt_connect), not OMPL's RNG
+    screen_at_clearance: bool = False  # the grasp screen's hand proxy inflated by at least stpik.clearance
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple = (1.0, 0.55, 0.65, 0.9)
     stpik: StpikParams = field(default_factory=StpikParams)
@@ -136,7 +137,7 @@ class PlannerParams:
         for k in ("max_attempts", "n_yaws", "seed", "rrt_max_checks", "simplify_checks"):  # whole numbers only
             if isinstance(kw.get(k), float) and kw[k].is_integer():
                 kw[k] = int(kw[k])
-        for k in ("direct_first", "seed_per_query"):
+        for k in ("direct_first", "seed_per_query", "screen_at_clearance"):
             if k in kw and not isinstance(kw[k], bool):
                 raise ValueError(f"motion planner parameter {k} must be true or false, got {kw[k]!r}")
         return cls(**kw, stpik=StpikParams(**skw))
@@ -188,7 +189,10 @@ class MotionPlanner:
         self.arm = ArmGeometry(self.kin)
         p = self.params
         self.stpik = Stpik(self.kin, self.arm, p.stpik)
-        self.hand = HandProxy(p.hand_margin)
+        # the screen (and the Cartesian planner) keep STPIK's own bound when screen_at_clearance: a lane reported
+        # clear is then clear for the fingers STPIK drives to the grasp (docs/motion_planner.md, "Blockers")
+        self.hand_margin = max(p.hand_margin, p.stpik.clearance) if p.screen_at_clearance else p.hand_margin
+        self.hand = HandProxy(self.hand_margin)
         self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_checks)
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
