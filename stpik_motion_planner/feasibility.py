@@ -90,6 +90,7 @@ class PlannerParams:
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     seed_per_query: bool = False  # every random draw seeded from the question (rrt.rrt_connect), not OMPL's RNG
     screen_at_clearance: bool = False  # the grasp screen's hand proxy inflated by at least stpik.clearance
+    certify_relocation: bool = False  # a feasible pick counts only if the carry, retreat and way home plan from it
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple = (1.0, 0.55, 0.65, 0.9)
     stpik: StpikParams = field(default_factory=StpikParams)
@@ -137,7 +138,7 @@ class PlannerParams:
         for k in ("max_attempts", "n_yaws", "seed", "rrt_max_checks", "simplify_checks"):  # whole numbers only
             if isinstance(kw.get(k), float) and kw[k].is_integer():
                 kw[k] = int(kw[k])
-        for k in ("direct_first", "seed_per_query", "screen_at_clearance"):
+        for k in ("direct_first", "seed_per_query", "screen_at_clearance", "certify_relocation"):
             if k in kw and not isinstance(kw[k], bool):
                 raise ValueError(f"motion planner parameter {k} must be true or false, got {kw[k]!r}")
         return cls(**kw, stpik=StpikParams(**skw))
@@ -257,6 +258,12 @@ class MotionPlanner:
                     out.append(str(e))
                     break
         return out
+
+    def _placed_key(self, placed) -> str:
+        """The bottles on the bottom shelf as geometry (where, which size), whatever their names: a carry planned
+        for a removed set and the same carry in a relocation order see the same scene, so draw the same samples."""
+        return repr(sorted((round(x, 4), round(y, 4), self.scenario.object(o).radius, self.scenario.object(o).height)
+                           for o, (x, y) in placed))
 
     def question_rng(self, *question) -> np.random.Generator | None:
         """The random generator of one question (seed_per_query): seeded from a hash of the scene (shelf, bottles,
@@ -393,11 +400,29 @@ class MotionPlanner:
             if not r2.ok:
                 last = f"STPIK rejected the approach: {r2.reason}"
                 continue
+            if p.certify_relocation:
+                why = self._certify(object_id, removed, r2.q[-1])
+                if why:
+                    last = f"the rest of the relocation: {why}"
+                    continue
             traj = Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_grasp").then(
                 Trajectory.from_steps(r2.q, r2.qdot, r2.dt, "approach")).resample()
             self._pick_end[(object_id, removed)] = r2.q[-1]
             return traj, attempts, f"yaw {g.yaw:+.2f}, {len(path)} waypoints"
         return None, attempts, f"{attempts} attempts failed; last: {last}"
+
+    def _certify(self, object_id: str, removed: frozenset[str], q_grasp) -> str:
+        """'' if the rest of the relocation from the grasp q_grasp plans (carry to slot len(removed) with the removed
+        bottles in the earlier slots, retreat, way home), else why not (certify_relocation)."""
+        k = len(removed)
+        try:
+            placed = self.placed_default(removed, k)
+            _, retreat = self.plan_carry(object_id, removed, k, q_start=q_grasp, placed=placed)
+            self.plan_home(retreat.trajectory.positions[-1], removed | {object_id},
+                           placed + [(object_id, self.scenario.slot(k))])
+        except (PlanningError, WorkspaceError, ValueError) as e:
+            return str(e)
+        return ""
 
     # ---------------------------------------------------------------- execution: pick, carry, home
     def plan_pick(self, object_id: str, removed: Iterable[str] = frozenset()) -> list[Segment]:
@@ -466,7 +491,7 @@ class MotionPlanner:
         # the bottle and the finger tips in front of the shelf by the arm's clearance (+ activation) before going down
         out = np.array(exit_pose(self.scenario, object_id, lifted,
                                  max(p.hand_margin, p.stpik.clearance + p.stpik.act) + 0.002))
-        rng = self.question_rng("carry", object_id, removed, slot_index, q_start, repr(placed))
+        rng = self.question_rng("carry", object_id, removed, slot_index, q_start, self._placed_key(placed))
         carry = self._carry_legs(up.q[-1], [lifted, out, stage], place, obs, (arm_c, hand_c), deadline, stats, what,
                                  rng)
         scene2 = CollisionScene(self.scenario, placed + [(object_id, slot)])
@@ -551,7 +576,7 @@ class MotionPlanner:
         removed = self.scenario.check_ids(removed)
         placed = self.placed_default(removed, -1) if placed is None else list(placed)
         obs = CollisionScene(self.scenario, placed).obstacles(removed)
-        rng = self.question_rng("home", np.asarray(q_from, float), removed, repr(placed))
+        rng = self.question_rng("home", np.asarray(q_from, float), removed, self._placed_key(placed))
         traj = self.plan_joint(q_from, rd.Q_HOME, obs, 4 * self.params.rrt_max_checks,
                                time.perf_counter() + self.params.carry_timeout, rng=rng)
         if traj is None:
