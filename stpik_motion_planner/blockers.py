@@ -97,9 +97,9 @@ def _name(g: Grasp) -> str:
 def lane_blockers(planner, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
     """Every object still on the shelf -> its lanes' certain blocker sets with `removed` gone (an empty tuple:
     no lane can ever be cleared). No motion planning: the screen only."""
-    removed = planner.scenario.check_ids(removed)
-    return {b.id: tuple(BlockerSet(bl - removed, True, _name(g)) for g, bl in static_lanes(planner, b.id))
-            for b in planner.scenario.objects if b.id not in removed}
+    gone = frozenset(planner.scenario.check_ids(removed))
+    return {b.id: tuple(BlockerSet(bl - gone, True, _name(g)) for g, bl in static_lanes(planner, b.id))
+            for b in planner.scenario.objects if b.id not in gone}
 
 
 def answer_blockers(planner, object_id: str, removed: frozenset[str]) -> tuple[BlockerSet, ...]:

@@ -127,7 +127,8 @@ class PlannerParams:
         """From a flat mapping (ROS parameters); stpik.* keys go to StpikParams. Unknown keys are an error."""
         own = {f.name for f in fields(cls)} - {"stpik"}
         sp = {f.name for f in fields(StpikParams)}
-        kw, skw = {}, {}
+        kw: dict[str, Any] = {}
+        skw: dict[str, Any] = {}
         for k, v in data.items():
             if k.startswith("stpik.") and k[6:] in sp:
                 skw[k[6:]] = v
@@ -517,6 +518,7 @@ class MotionPlanner:
         arm_c, hand_c = carried
         lifted, stage = direct[0], direct[-1]
         last = "no Cartesian path out of the shelf"
+        mid: list | None
         for attempt in range(p.max_attempts):
             if attempt == 0 and p.direct_first and self._path_clear(direct, obs, hand_c):
                 stats.direct_paths += 1
@@ -601,7 +603,7 @@ class MotionPlanner:
         self.set_scenario(dataclasses.replace(self.scenario, objects=objs, _by_id={}))
 
 
-def _mat(pose):
+def _mat(pose) -> tuple[np.ndarray, np.ndarray]:
     from .grasp import pose_matrix
     return pose_matrix(pose)
 

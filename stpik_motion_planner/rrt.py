@@ -44,7 +44,7 @@ def seed_ompl(seed: int) -> int:
     return _seeded[0]
 
 
-def _space(lo: Sequence[float], hi: Sequence[float]) -> ob.RealVectorStateSpace:
+def _space(lo: Sequence[float] | np.ndarray, hi: Sequence[float] | np.ndarray) -> ob.RealVectorStateSpace:
     n = len(lo)
     space = ob.RealVectorStateSpace(n)
     bounds = ob.RealVectorBounds(n)
