@@ -1,7 +1,8 @@
 """Collision scene with python-fcl: arm capsules vs shelf boards vs bottles (the clearance tasks of Eq. 10).
 
 Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel), the floor, the
-pedestal under the robot and the bottles of the scenario as cylinders; bottles already relocated may stand on the bottom shelf (`placed`).
+pedestal under the robot and the bottles of the scenario as cylinders; bottles already relocated may stand on the
+bottom shelf (`placed`).
 The set of removed bottles is a parameter of every query (`CollisionScene.obstacles(removed)`).
 A numpy AABB broad phase keeps only the capsule/obstacle pairs closer than an activation distance; fcl
 computes their exact distances and witness points (in the base frame). fcl returns -1 on penetration.
@@ -23,6 +24,8 @@ PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
 
 @dataclass
 class Obstacle:
+    """One collision object of the scene: a board, the floor, the pedestal or a bottle (object_id)."""
+
     name: str
     object_id: str | None  # bottle id, None for a board
     obj: fcl.CollisionObject
@@ -118,6 +121,8 @@ class CollisionScene:
 
 @dataclass(frozen=True)
 class CapsuleSpec:
+    """A capsule (or cylinder) fixed to an arm link, with its own clearance bound if given."""
+
     name: str
     link: str
     p0: np.ndarray
@@ -132,6 +137,7 @@ class CapsuleSpec:
 
 def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = False,
                  clearance: float | None = None) -> CapsuleSpec:
+    """A CapsuleSpec from two end points on `link` (any sequences) and a radius."""
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     axis = p1 - p0
     length = float(np.linalg.norm(axis))

@@ -5,9 +5,10 @@ approach -> close the gripper -> re-plan the carry from the measured configurati
 that fails) -> carry -> open -> retreat -> re-plan home from the measured configuration (idem) -> home.
 Nothing moves before the whole relocation is planned, so a carry that cannot be planned never leaves the arm
 holding a bottle; and when a motion fails or the goal is cancelled, `recover` brings the arm back to a safe state
-along the motions it made (the bottle set down where it was picked, the arm home). The destination is slot `len(removed)` of the bottom shelf (objects go there in relocation order)
-and the objects already relocated stand in the earlier slots. The arm is anything that implements `Arm`: the
-motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
+along the motions it made (the bottle set down where it was picked, the arm home). The destination is slot
+`len(removed)` of the bottom shelf (objects go there in relocation order) and the objects already relocated stand
+in the earlier slots. The arm is anything that implements `Arm`: the motion_planner node streams over ROS, the
+tests drive the MuJoCo core directly.
 """
 from __future__ import annotations
 
@@ -28,6 +29,8 @@ PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, 
 
 
 class Arm(Protocol):
+    """What a relocation needs of an arm: its joint positions, following a trajectory, the gripper."""
+
     def measured(self) -> np.ndarray:
         """Current joint positions (Q convention, rad); raises if they cannot be had."""
 

@@ -32,6 +32,8 @@ from .grasp import side_rotation
 
 @dataclass
 class StpikParams:
+    """STPIK's gains, bounds and tolerances (Eq. 9, 10; config/motion_planner.yaml stpik.*)."""
+
     dt: float = 0.04  # IK step (s); the output is resampled to 100 Hz
     ee_speed: float = 0.25  # m/s along the reference path
     approach_speed: float = 0.08  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
@@ -76,6 +78,8 @@ class StpikParams:
 
 @dataclass
 class StpikResult:
+    """One STPIK check: accepted or not (reason), the IK steps' configurations and rates."""
+
     ok: bool
     reason: str
     q: np.ndarray  # (N+1) x 7 at times k * dt

@@ -17,6 +17,8 @@ STREAM_RATE = 100.0  # Hz, the rate of kinova's joint velocity commands
 
 @dataclass
 class Trajectory:
+    """A joint trajectory streamed at 100 Hz (docs/motion_planner.md, section Trajectories)."""
+
     times: np.ndarray  # (N,) s, from 0
     positions: np.ndarray  # (N, 7) rad, Q convention
     velocities: np.ndarray  # (N, 7) rad/s, velocities[k] held until times[k+1]; last row 0
@@ -25,6 +27,7 @@ class Trajectory:
 
     @property
     def duration(self) -> float:
+        """Seconds from the first sample to the last."""
         return float(self.times[-1]) if len(self.times) else 0.0
 
     def __len__(self) -> int:
@@ -80,4 +83,5 @@ class Trajectory:
 
     @classmethod
     def empty(cls) -> "Trajectory":
+        """No samples."""
         return cls(np.zeros(0), np.zeros((0, rd.N_JOINTS)), np.zeros((0, rd.N_JOINTS)))
