@@ -89,9 +89,10 @@ def one(path: str, solver: str, sets: list[str]) -> dict:
             reason = f"no sequence; {sc.target_id}: {last[-1] if last else 'never asked'}"
         out["reason"] = reason
         return out
-    checker, rep, done = MotionChecker(sc), Report(), []
+    checker, rep = MotionChecker(sc), Report()
+    done: list[str] = []
     try:
-        for oid in result.sequence:
+        for oid in result.sequence or ():
             plan = plan_relocation(planner, oid, done)
             rep.merge(replay_relocation(checker, plan.pick, [plan.carry, plan.retreat], plan.home, oid))
             done.append(oid)

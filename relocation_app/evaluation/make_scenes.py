@@ -66,7 +66,7 @@ def jitter_scene(data: dict, amplitude: float, seed: int) -> dict:
                 on_shelf = (s.x_front + b.radius <= x <= s.x_back - b.radius
                             and s.y_min + b.radius <= y <= s.y_max - b.radius)
                 if on_shelf and all(math.hypot(x - px, y - py) >= b.radius + sc.object(o).radius
-                                    + gap[tuple(sorted((b.id, o)))] for o, (px, py) in pos.items()):
+                                    + gap[(min(b.id, o), max(b.id, o))] for o, (px, py) in pos.items()):
                     pos[b.id] = (round(x, 4), round(y, 4))
                     break
             else:
