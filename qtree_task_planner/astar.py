@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from relocation_common.feasibility import Label, ask_many, claims, in_flight
 
-from .exact import ExactResult, as_problem
+from .exact import ExactResult, as_problem, why_none
 
 DEPTH = 2  # levels of the blockers' own lanes in the heuristic
 
@@ -118,13 +118,13 @@ def _optimistic(obstacles, phi, target, kb: Knowledge):
     """A* on the optimistic graph: the edges [(object, set)] of a least-weight path ending with the target's,
     ties to fewer unverified edges; None if there is none. Also returns the sets expanded."""
     tie = itertools.count()
-    start: frozenset = frozenset()
+    start: frozenset[str] = frozenset()
     h0 = kb.h(start)
     if math.isinf(h0):
         return None, 0
     # entries: (f, unverified edges, -depth, tie, set, parent set, object)
     heap: list[tuple] = [(h0, 0, 0, next(tie), start, None, None)]
-    closed: dict[frozenset, tuple] = {}
+    closed: dict[frozenset | None, tuple] = {}
     while heap:
         f, unv, _, _, state, parent, obj = heapq.heappop(heap)
         if obj == target:
@@ -167,29 +167,32 @@ def solve(problem, oracle, depth: int = DEPTH) -> AStarResult:
         for o, sets in (lanes(frozenset()) or {}).items():
             kb.lanes_known(o, frozenset(), tuple(sets))
     calls = searches = expanded = 0
+    answers: dict = {}
     while True:
         path, n = _optimistic(obstacles, phi, target, kb)
         searches, expanded = searches + 1, expanded + n
         if path is None:
-            return AStarResult(None, None, calls, expanded, blocker_calls, searches)
-        asked, ok = _verify(path, target, kb, oracle)
+            return AStarResult(None, None, calls, expanded, why_none(target, answers, kb.claims), blocker_calls,
+                               searches)
+        asked, ok = _verify(path, target, kb, oracle, answers)
         calls += asked
         if ok:
             seq = tuple(o for o, _ in path)
-            return AStarResult(seq, problem.weight(seq), calls, expanded, blocker_calls, searches)
+            return AStarResult(seq, problem.weight(seq), calls, expanded, "", blocker_calls, searches)
 
 
-def _verify(path, target: str, kb: Knowledge, oracle) -> tuple[int, bool]:
+def _verify(path, target: str, kb: Knowledge, oracle, answers: dict) -> tuple[int, bool]:
     """Ask the path's unasked edges from the start, up to the oracle's `in_flight` at once (planner replicas;
     one at a time otherwise), the target only from a set known reachable; stop at the first batch with an
-    unfeasible answer. (questions asked, every edge feasible)."""
+    unfeasible answer. (questions asked, every edge feasible); the answers also go to `answers`."""
     todo = [(o, s) for o, s in path if (o, s) not in kb.answers]
     asked = 0
     while todo:
         batch = [e for e in todo[:in_flight(oracle)] if e[0] != target] or todo[:1]
-        answers = ask_many(oracle, batch)
+        got = ask_many(oracle, batch)
+        answers.update(zip(batch, got))
         asked += len(batch)
-        if not all([kb.record(o, s, a) for (o, s), a in zip(batch, answers)]):
+        if not all([kb.record(o, s, a) for (o, s), a in zip(batch, got)]):
             return asked, False
         todo = todo[len(batch):]
     return asked, True

@@ -9,7 +9,9 @@ still queued costs at least as much and costs never decrease along a path. An or
 replicas (docs/architecture.md) is asked the next cheapest queued questions together with the one popped.
 
 `brute_force` enumerates every set reachable by feasible single removals (reachable.py, asking everything) for
-tests.
+tests. When no sequence exists, `why_none` says why in one line from what the search learned (docs/motion_planner.md,
+"Why there is no sequence"): the target's own answer, a blocking cycle of certain lane blockers, the objects no
+grasp ever reached.
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import heapq
 import itertools
 from dataclasses import dataclass
 
-from relocation_common.feasibility import Label, ask_many, in_flight
+from relocation_common.feasibility import Label, ask_many, claims, in_flight
 
 from .oracles import CachedOracle
 from .problem import RelocationProblem
@@ -26,23 +28,80 @@ from .reachable import reachable_sets
 
 @dataclass(frozen=True)
 class ExactResult:
-    """The minimum-weight sequence (Eq. 8) and what finding it cost."""
+    """The minimum-weight sequence (Eq. 8) or None, the oracle calls it took, and why there is none."""
 
     sequence: tuple[str, ...] | None  # obstacles in order, then the target; None if the target cannot be freed
     total_weight: float | None  # Eq. 8
     oracle_calls: int  # distinct (object, removed set) questions asked
     sets_settled: int
+    reason: str = ""  # why there is no sequence (why_none), one line; empty when found
 
     @property
     def found(self) -> bool:
-        """Whether the target can be freed."""
+        """A sequence frees the target."""
         return self.sequence is not None
 
     def to_dict(self) -> dict:
-        """Plain data (JSON)."""
-        return {"found": self.found, "sequence": list(self.sequence) if self.sequence is not None else None,
-                "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
-                "sets_settled": self.sets_settled}
+        """As JSON (`qtree solve`)."""
+        out = {"found": self.found, "sequence": list(self.sequence) if self.sequence is not None else None,
+               "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
+               "sets_settled": self.sets_settled}
+        return out if self.found else {**out, "reason": self.reason}
+
+
+def _set(s) -> str:
+    return "{" + ", ".join(sorted(s)) + "}"
+
+
+def why_none(target: str, asked: dict, lanes: dict | None = None, limit: int = 4) -> str:
+    """One line saying why no sequence frees `target`, from the answers asked ((object, removed) -> answer) and
+    certain lane claims (object -> [(removed, lane sets)], e.g. astar.Knowledge.claims; the answers' own certain
+    blockers are added): the target's answer from the largest set reached; a blocking cycle (every lane of the
+    target needs an object each of whose lanes needs the target moved, or that has no lane at all); the objects
+    never feasible in any set asked, with the planner's reason."""
+    lanes = {o: list(v) for o, v in (lanes or {}).items()}
+    for (o, s), a in asked.items():
+        if Label(a.label) == Label.UNFEASIBLE and claims(a.blockers):
+            lanes.setdefault(o, []).append((s, tuple(b.objects for b in a.blockers)))
+    parts = []
+    mine = [(s, a) for (o, s), a in asked.items() if o == target]
+    if mine:
+        s, a = max(mine, key=lambda x: (len(x[0]), sorted(x[0])))
+        parts.append(f"{target} unfeasible from every set reached (with {_set(s)} removed: {a.message})")
+    elif any(ls == () for _, ls in lanes.get(target, ())):
+        parts.append(f"{target} has no grasp lane that removing bottles can clear (boards or reach)")
+    cycle = _cycle(target, lanes)
+    if cycle:
+        parts.append(cycle)
+    last: dict[str, tuple] = {}  # object -> (largest set asked, its answer), for objects never feasible
+    feasible = {o for (o, _), a in asked.items() if Label(a.label) != Label.UNFEASIBLE}
+    for (o, s), a in asked.items():
+        if o != target and o not in feasible and (o not in last or len(s) > len(last[o][0])):
+            last[o] = (s, a)
+    stuck = [f"{o} ({a.message})" for o, (_, a) in sorted(last.items())]
+    if stuck:
+        more = f"; {len(stuck) - limit} more" if len(stuck) > limit else ""
+        parts.append("never feasible: " + "; ".join(stuck[:limit]) + more)
+    return "no sequence: " + (". ".join(parts) if parts else "nothing was feasible to ask")
+
+
+def _cycle(target: str, lanes: dict) -> str:
+    """'blocking cycle: ...' if every lane of the target (claimed at the empty set) needs an object that cannot
+    leave before the target (each of its lanes needs the target moved, or it has none); '' otherwise."""
+    first = [ls for s, ls in lanes.get(target, ()) if not s]
+    if not first or not first[0]:
+        return ""
+    why = {}
+    for lane in first[0]:
+        for x in sorted(lane):
+            xl = [ls for s, ls in lanes.get(x, ()) if not s]
+            if xl and all(target in b for b in xl[0]):
+                why[_set(lane)] = f"{x} needs {target} moved" if xl[0] else f"{x} has no lane"
+                break
+        else:
+            return ""
+    return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
+        "; ".join(f"lane {k}: {v}" for k, v in why.items()) + ")"
 
 
 def as_problem(problem) -> RelocationProblem:
@@ -63,6 +122,7 @@ def solve(problem, oracle) -> ExactResult:
     tie = itertools.count()
     # entries: (cost, tie, parent set, parent sequence, object)
     queue: list = [(0.0, next(tie), None, (), None)]
+    state: frozenset[str]
     while queue:
         cost, _, parent, seq, obj = heapq.heappop(queue)
         if obj is None:  # the start: the empty set, feasible by definition
@@ -84,7 +144,7 @@ def solve(problem, oracle) -> ExactResult:
         for o in obstacles:
             if o not in state and (state | {o}) not in settled:
                 heapq.heappush(queue, (cost + phi[o], next(tie), state, new_seq, o))
-    return ExactResult(None, None, calls, len(settled))
+    return ExactResult(None, None, calls, len(settled), why_none(target, known))
 
 
 def _ask_next(queue, question, oracle, known, settled, target) -> int:

@@ -185,10 +185,18 @@ def _train(args) -> int:
 
 
 def _solve(args) -> int:
+    from stpik_motion_planner.grasp import WorkspaceError
     scenario, problem, oracle = _load(args)
-    data = {"scenario": scenario.name, "oracle": args.oracle, **_exact(problem, oracle, args.solver)}
+    try:
+        data = {"scenario": scenario.name, "oracle": args.oracle, **_exact(problem, oracle, args.solver)}
+    except WorkspaceError as e:  # a grasp out of the arm's reach (its distance against the arm's)
+        data = {"scenario": scenario.name, "oracle": args.oracle, "solver": args.solver, "found": False,
+                "sequence": None, "reason": f"no sequence: out of reach: {e}"}
     _emit(data, args.json)
-    _report(f"solve {args.solver}", args, data["planner_calls"], data["wall_time_s"])
+    if not data["found"]:
+        print(f"qtree: {' '.join(str(data['reason']).split())}", file=sys.stderr)
+    if "planner_calls" in data:
+        _report(f"solve {args.solver}", args, data["planner_calls"], data["wall_time_s"])
     return 0
 
 

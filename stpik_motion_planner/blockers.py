@@ -79,11 +79,11 @@ def static_lanes(planner, object_id: str, margin: float = 0.0) -> tuple[tuple[Gr
     """(grasp, blockers with every bottle present) of each lane some removal can clear, for the proxy inflated
     by `margin` more than the planner's; cached per scene."""
     p = planner.params
-    key = (object_id, p.n_yaws, p.max_yaw, p.pre_grasp_distance, p.hand_margin, p.resolution, margin)
+    key = (object_id, p.n_yaws, p.max_yaw, p.pre_grasp_distance, planner.hand_margin, p.resolution, margin)
     table = _CACHE.setdefault(planner.scene, {})
     got = table.get(key)
     if got is None:
-        hand = planner.hand if margin == 0.0 else HandProxy(p.hand_margin + margin)
+        hand = planner.hand if margin == 0.0 else HandProxy(planner.hand_margin + margin)
         got = tuple((g, b) for g in _lanes(planner, object_id)
                     for b in [_lane_blockers(planner, hand, g)] if b is not None)
         table[key] = got
@@ -97,7 +97,7 @@ def _name(g: Grasp) -> str:
 def lane_blockers(planner, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
     """Every object still on the shelf -> its lanes' certain blocker sets with `removed` gone (an empty tuple:
     no lane can ever be cleared). No motion planning: the screen only."""
-    gone = planner.scenario.check_ids(removed)
+    gone = frozenset(planner.scenario.check_ids(removed))
     return {b.id: tuple(BlockerSet(bl - gone, True, _name(g)) for g, bl in static_lanes(planner, b.id))
             for b in planner.scenario.objects if b.id not in gone}
 

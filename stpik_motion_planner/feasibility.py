@@ -15,6 +15,8 @@ SafetyNetTimeout (no answer; never g_U, so no cache keeps it).
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 import time
 from dataclasses import dataclass, field, fields
@@ -65,6 +67,8 @@ class PlanningError(RuntimeError):
 
 @dataclass
 class PlannerParams:
+    """The motion planner's settings (config/motion_planner.yaml, docs/motion_planner.md), validated once."""
+
     seed: int = 7
     timeout: float = 10.0  # s: wall-clock safety net per feasibility query (the service may pass its own)
     rrt_max_checks: int = 4000  # validity checks per RRT-Connect attempt (about 80 ms here, idle)
@@ -84,6 +88,9 @@ class PlannerParams:
     stage_distance: float = 0.15  # m, staging pose in front of the slot (at most x_front - 0.07: grasp.place_poses)
     carry_timeout: float = 10.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
+    seed_per_query: bool = False  # every random draw seeded from the question (rrt.rrt_connect), not OMPL's RNG
+    screen_at_clearance: bool = False  # the grasp screen's hand proxy inflated by at least stpik.clearance
+    certify_relocation: bool = False  # a feasible pick counts only if the carry, retreat and way home plan from it
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple = (1.0, 0.55, 0.65, 0.9)
     stpik: StpikParams = field(default_factory=StpikParams)
@@ -120,7 +127,8 @@ class PlannerParams:
         """From a flat mapping (ROS parameters); stpik.* keys go to StpikParams. Unknown keys are an error."""
         own = {f.name for f in fields(cls)} - {"stpik"}
         sp = {f.name for f in fields(StpikParams)}
-        kw, skw = {}, {}
+        kw: dict[str, Any] = {}
+        skw: dict[str, Any] = {}
         for k, v in data.items():
             if k.startswith("stpik.") and k[6:] in sp:
                 skw[k[6:]] = v
@@ -131,8 +139,9 @@ class PlannerParams:
         for k in ("max_attempts", "n_yaws", "seed", "rrt_max_checks", "simplify_checks"):  # whole numbers only
             if isinstance(kw.get(k), float) and kw[k].is_integer():
                 kw[k] = int(kw[k])
-        if "direct_first" in kw and not isinstance(kw["direct_first"], bool):
-            raise ValueError(f"motion planner parameter direct_first must be true or false, got {kw['direct_first']!r}")
+        for k in ("direct_first", "seed_per_query", "screen_at_clearance", "certify_relocation"):
+            if k in kw and not isinstance(kw[k], bool):
+                raise ValueError(f"motion planner parameter {k} must be true or false, got {kw[k]!r}")
         return cls(**kw, stpik=StpikParams(**skw))
 
     @classmethod
@@ -161,6 +170,8 @@ class Segment:
 
 @dataclass
 class QueryStats:
+    """Where one query spent its work (RRT-Connect, STPIK) and STPIK's rejections."""
+
     rrt_time: float = 0.0
     stpik_time: float = 0.0
     rrt_calls: int = 0
@@ -180,7 +191,10 @@ class MotionPlanner:
         self.arm = ArmGeometry(self.kin)
         p = self.params
         self.stpik = Stpik(self.kin, self.arm, p.stpik)
-        self.hand = HandProxy(p.hand_margin)
+        # the screen (and the Cartesian planner) keep STPIK's own bound when screen_at_clearance: a lane reported
+        # clear is then clear for the fingers STPIK drives to the grasp (docs/motion_planner.md, "Blockers")
+        self.hand_margin = max(p.hand_margin, p.stpik.clearance) if p.screen_at_clearance else p.hand_margin
+        self.hand = HandProxy(self.hand_margin)
         self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_checks)
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
@@ -246,6 +260,31 @@ class MotionPlanner:
                     break
         return out
 
+    def _placed_key(self, placed) -> str:
+        """The bottles on the bottom shelf as geometry (where, which size), whatever their names: a carry planned
+        for a removed set and the same carry in a relocation order see the same scene, so draw the same samples."""
+        return repr(sorted((round(x, 4), round(y, 4), self.scenario.object(o).radius, self.scenario.object(o).height)
+                           for o, (x, y) in placed))
+
+    def question_rng(self, *question) -> np.random.Generator | None:
+        """The random generator of one question (seed_per_query): seeded from a hash of the scene (shelf, bottles,
+        slots), the question (object, removed set, and for a carry or home its start and placed bottles) and every
+        planner parameter but the wall-clock safety nets; None (OMPL's process-wide RNG) otherwise."""
+        if not self.params.seed_per_query:
+            return None
+        sc = self.scenario
+        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in ("timeout", "carry_timeout")}
+        parts = [repr(sc.shelf), repr(sc.objects), repr(sc.slots), repr(sorted(params.items()))]
+        for x in question:
+            if isinstance(x, np.ndarray):
+                parts.append(np.round(x, 9).tobytes().hex())
+            elif isinstance(x, (set, frozenset)):
+                parts.append(repr(sorted(x)))
+            else:
+                parts.append(repr(x))
+        digest = hashlib.sha256("\x1f".join(parts).encode()).digest()
+        return np.random.default_rng(int.from_bytes(digest[:16], "little"))
+
     # ---------------------------------------------------------------- Cartesian validity
     def _candidates(self, object_id: str, obs: ObstacleSet) -> list[Grasp]:
         """Grasps whose pre-grasp and straight approach are clear for the hand (the target excluded for the
@@ -274,7 +313,7 @@ class MotionPlanner:
         return np.array([x, pose[1] - (pose[0] - x) * math.tan(pose[3]), pose[2], pose[3]])
 
     def _cartesian_path(self, start, goal, obs: ObstacleSet, hand: HandProxy, max_checks: int, deadline: float,
-                        stats: QueryStats, first: bool) -> list[np.ndarray] | None:
+                        stats: QueryStats, first: bool, rng=None) -> list[np.ndarray] | None:
         """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on
         later attempts RRT-Connect."""
         if first and self.params.direct_first:
@@ -283,7 +322,7 @@ class MotionPlanner:
                 stats.direct_paths += 1
                 return direct
         t = time.perf_counter()
-        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), max_checks, deadline)
+        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), max_checks, deadline, rng)
         stats.rrt_time += time.perf_counter() - t
         stats.rrt_calls += 1
         return path
@@ -315,9 +354,9 @@ class MotionPlanner:
         ok_label = Label.TARGET if object_id == self.scenario.target_id else Label.OBSTACLE
         traj, attempts, msg = self._pick(object_id, removed, deadline, stats)
         dt = time.perf_counter() - t0
-        if traj is None:
+        if traj is None:  # with the lane blockers of the refused pick (docs/motion_planner.md, "Blockers")
             return FeasibilityAnswer(Label.UNFEASIBLE, dt, attempts, msg,
-                                     blockers=answer_blockers(self, object_id, removed))  # issue 14
+                                     blockers=answer_blockers(self, object_id, removed))
         return FeasibilityAnswer(ok_label, dt, attempts, msg, traj)
 
     def _pick(self, object_id, removed, deadline, stats) -> tuple[Trajectory | None, int, str]:
@@ -332,12 +371,13 @@ class MotionPlanner:
             return None, 0, "no collision-free pre-grasp and approach for any yaw"
         skip = {n: frozenset([object_id]) for n in HAND_PARTS}
         attempts, last = 0, ""
+        rng = self.question_rng("pick", object_id, removed)
         while attempts < p.max_attempts:
             g = cands[attempts % len(cands)]
             first = attempts < len(cands)
             attempts += 1
             path = self._cartesian_path(self.home, g.pre_grasp, obs, self.hand, p.rrt_max_checks, deadline, stats,
-                                        first)
+                                        first, rng)
             if path is None:
                 last = f"no Cartesian path to the pre-grasp (yaw {g.yaw:+.2f})"
                 continue
@@ -350,11 +390,29 @@ class MotionPlanner:
             if not r2.ok:
                 last = f"STPIK rejected the approach: {r2.reason}"
                 continue
+            if p.certify_relocation:
+                why = self._certify(object_id, removed, r2.q[-1])
+                if why:
+                    last = f"the rest of the relocation: {why}"
+                    continue
             traj = Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_grasp").then(
                 Trajectory.from_steps(r2.q, r2.qdot, r2.dt, "approach")).resample()
             self._pick_end[(object_id, removed)] = r2.q[-1]
             return traj, attempts, f"yaw {g.yaw:+.2f}, {len(path)} waypoints"
         return None, attempts, f"{attempts} attempts failed; last: {last}"
+
+    def _certify(self, object_id: str, removed: frozenset[str], q_grasp) -> str:
+        """'' if the rest of the relocation from the grasp q_grasp plans (carry to slot len(removed) with the removed
+        bottles in the earlier slots, retreat, way home), else why not (certify_relocation)."""
+        k = len(removed)
+        try:
+            placed = self.placed_default(removed, k)
+            _, retreat = self.plan_carry(object_id, removed, k, q_start=q_grasp, placed=placed)
+            self.plan_home(retreat.trajectory.positions[-1], removed | {object_id},
+                           placed + [(object_id, self.scenario.slot(k))])
+        except (PlanningError, WorkspaceError, ValueError) as e:
+            return str(e)
+        return ""
 
     # ---------------------------------------------------------------- execution: pick, carry, home
     def plan_pick(self, object_id: str, removed: Iterable[str] = frozenset()) -> list[Segment]:
@@ -423,7 +481,9 @@ class MotionPlanner:
         # the bottle and the finger tips in front of the shelf by the arm's clearance (+ activation) before going down
         out = np.array(exit_pose(self.scenario, object_id, lifted,
                                  max(p.hand_margin, p.stpik.clearance + p.stpik.act) + 0.002))
-        carry = self._carry_legs(up.q[-1], [lifted, out, stage], place, obs, (arm_c, hand_c), deadline, stats, what)
+        rng = self.question_rng("carry", object_id, removed, slot_index, q_start, self._placed_key(placed))
+        carry = self._carry_legs(up.q[-1], [lifted, out, stage], place, obs, (arm_c, hand_c), deadline, stats, what,
+                                 rng)
         scene2 = CollisionScene(self.scenario, placed + [(object_id, slot)])
         obs2 = scene2.obstacles(removed | {object_id})
         skip = {n: frozenset([f"placed:{object_id}"]) for n in HAND_PARTS}
@@ -438,7 +498,7 @@ class MotionPlanner:
                 Segment("retreat", Trajectory.from_steps(back.q, back.qdot, back.dt, "retreat").resample(), None)]
 
     def _carry_legs(self, q_lifted, direct: list, place, obs: ObstacleSet, carried: tuple, deadline: float,
-                    stats: QueryStats, what: str):
+                    stats: QueryStats, what: str, rng=None):
         """plan_carry's legs 2-3 with the bottle held (`carried`: its ArmGeometry and HandProxy): from the lifted
         pose out of the shelf to the staging pose (the `direct` poses lifted, out, stage first, then RRT-Connect;
         up to max_attempts), then in to the slot at `place`. (out leg, in leg) of STPIK; PlanningError naming the
@@ -447,6 +507,7 @@ class MotionPlanner:
         arm_c, hand_c = carried
         lifted, stage = direct[0], direct[-1]
         last = "no Cartesian path out of the shelf"
+        mid: list | None
         for attempt in range(p.max_attempts):
             if attempt == 0 and p.direct_first and hand_c.path_clear(direct, obs, p.resolution):
                 stats.direct_paths += 1
@@ -454,7 +515,7 @@ class MotionPlanner:
             else:
                 t = time.perf_counter()
                 mid = self.rrt.plan(lifted, stage, lambda s_: not hand_c.collides(*_mat(s_), obs),
-                                    4 * p.rrt_max_checks, deadline)
+                                    4 * p.rrt_max_checks, deadline, rng)
                 stats.rrt_time += time.perf_counter() - t
                 stats.rrt_calls += 1
                 if mid is None:
@@ -488,13 +549,14 @@ class MotionPlanner:
         return True
 
     def plan_joint(self, q_from, q_to, obs: ObstacleSet, max_checks: int, deadline: float,
-                   margin: float = 0.005) -> Trajectory | None:
-        """RRT-Connect in joint space (same collision checker), timed within Table 7 at 90 %."""
+                   margin: float = 0.005, rng=None) -> Trajectory | None:
+        """RRT-Connect in joint space (same collision checker), timed within Table 7 at 90 %; `rng`: the
+        question's generator (question_rng), None for OMPL's."""
         q_from, q_to = _check_q(q_from), _check_q(q_to)
         lo = np.maximum(rd.Q_LOWER, np.minimum(q_from, q_to) - math.pi)
         hi = np.minimum(rd.Q_UPPER, np.maximum(q_from, q_to) + math.pi)
         rrt = JointRRT(lo, hi, self.params.joint_resolution, self.params.simplify_checks)
-        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), max_checks, deadline)
+        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), max_checks, deadline, rng)
         if path is None:
             return None
         return _time_joint_path(path, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt)
@@ -505,8 +567,9 @@ class MotionPlanner:
         removed = self.scenario.check_ids(removed)
         placed = self.placed_default(removed, -1) if placed is None else list(placed)
         obs = CollisionScene(self.scenario, placed).obstacles(removed)
+        rng = self.question_rng("home", np.asarray(q_from, float), removed, self._placed_key(placed))
         traj = self.plan_joint(q_from, rd.Q_HOME, obs, 4 * self.params.rrt_max_checks,
-                               time.perf_counter() + self.params.carry_timeout)
+                               time.perf_counter() + self.params.carry_timeout, rng=rng)
         if traj is None:
             raise PlanningError("no collision-free joint path back to the home configuration")
         return traj.resample()
@@ -519,8 +582,6 @@ class MotionPlanner:
 
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
-        import dataclasses
-
         b = self.scenario.object(object_id)
         if not (math.isfinite(x) and math.isfinite(y)):
             raise WorkspaceError(f"position of {object_id!r} must be finite, got {(x, y)}")
@@ -531,7 +592,7 @@ class MotionPlanner:
         self.set_scenario(dataclasses.replace(self.scenario, objects=objs, _by_id={}))
 
 
-def _mat(pose):
+def _mat(pose) -> tuple[np.ndarray, np.ndarray]:
     from .grasp import pose_matrix
     return pose_matrix(pose)
 

@@ -4,7 +4,8 @@ Tool frame (DH frame 7): z is the approach direction, x the closing direction of
 centre. A side grasp keeps the hand horizontal: tool z = (cos yaw, sin yaw, 0) points into the shelf from its
 open side (-x), tool y = world z (vertical), tool x = y x z (horizontal). The tool origin is at the bottle's
 mid-height, `grasp_standoff(radius)` short of its axis along the approach, so that the palm stops PALM_GAP from
-the bottle (the palm's front is PALM_REACH behind the grasp centre; the open fingers still surround the bottle). A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction.
+the bottle (the palm's front is PALM_REACH behind the grasp centre; the open fingers still surround the bottle).
+A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction.
 The robot's home pose (Q_HOME) is such a pose with yaw 0.
 """
 from __future__ import annotations
@@ -38,6 +39,7 @@ def side_rotation(yaw: float) -> np.ndarray:
 
 
 def pose_matrix(pose4) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation, position) of an (x, y, z, yaw) side-grasp pose."""
     x, y, z, yaw = pose4
     return side_rotation(yaw), np.array([x, y, z], dtype=float)
 
@@ -58,6 +60,8 @@ def check_pose(pose4, where: str = "pose") -> np.ndarray:
 
 @dataclass(frozen=True)
 class Grasp:
+    """A side grasp of one object: approach yaw, grasp and pre-grasp poses (x, y, z, yaw)."""
+
     object_id: str
     yaw: float
     grasp: tuple[float, float, float, float]
@@ -98,6 +102,7 @@ def home_pose() -> tuple[float, float, float, float]:
 
 
 def lift_pose(grasp: Grasp, lift: float) -> tuple[float, float, float, float]:
+    """The grasp pose raised by `lift`."""
     x, y, z, yaw = grasp.grasp
     return (x, y, z + lift, yaw)
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -33,6 +34,8 @@ from .grasp import side_rotation
 
 @dataclass
 class StpikParams:
+    """STPIK's gains, bounds and tolerances (Eq. 9, 10; config/motion_planner.yaml stpik.*)."""
+
     dt: float = 0.04  # IK step (s); the output is resampled to 100 Hz
     ee_speed: float = 0.25  # m/s along the reference path
     approach_speed: float = 0.08  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
@@ -77,6 +80,8 @@ class StpikParams:
 
 @dataclass
 class StpikResult:
+    """One STPIK check: accepted or not (reason), the IK steps' configurations and rates."""
+
     ok: bool
     reason: str
     q: np.ndarray  # (N+1) x 7 at times k * dt
@@ -90,7 +95,7 @@ class StpikResult:
 try:  # the gufunc behind np.linalg.svd(a, full_matrices=False): the same LAPACK call without its Python wrapper
     from numpy.linalg import _umath_linalg as _ul
 
-    _SVD_S = _ul.svd_s
+    _SVD_S: Any = _ul.svd_s
 except (ImportError, AttributeError):  # pragma: no cover - another numpy layout
     _SVD_S = None
 
@@ -275,7 +280,10 @@ class Stpik:
         for i in np.nonzero((lo < p.joint_buffer) | (hi < p.joint_buffer))[0]:
             for s_, row in ((lo[i], self.eye[i]), (hi[i], -self.eye[i])):
                 if s_ < p.joint_buffer:
-                    grp.append(0), sig.append(s_), rows.append(row), buf.append(p.joint_act)
+                    grp.append(0)
+                    sig.append(s_)
+                    rows.append(row)
+                    buf.append(p.joint_act)
         for i, j, d, pi, pj in arm.self_distances(p.self_clearance + p.buffer):
             run.min_self = min(run.min_self, d)
             n = pi - pj
@@ -283,7 +291,10 @@ class Stpik:
             if nn < 1e-9:
                 raise _Reject("self-collision")
             jac = (n / nn) @ (kin.point_jacobian(arm.fids[i], pi) - kin.point_jacobian(arm.fids[j], pj))
-            grp.append(1), sig.append(d - p.self_clearance), rows.append(jac), buf.append(p.act)
+            grp.append(1)
+            sig.append(d - p.self_clearance)
+            rows.append(jac)
+            buf.append(p.act)
         bound = run.bound
         for ci, o, d, pc, po in arm.obstacle_distances(obs, run.d_act, skip):
             if d == PENETRATION:
@@ -295,7 +306,9 @@ class Stpik:
             nn = math.sqrt(n.dot(n))
             if nn < 1e-9:
                 raise _Reject(f"{arm.specs[ci].name} touches {o.name}", 0.0)
-            grp.append(2), sig.append(d - bound[ci]), buf.append(p.act)
+            grp.append(2)
+            sig.append(d - bound[ci])
+            buf.append(p.act)
             rows.append((n / nn) @ kin.point_jacobian(arm.fids[ci], pc))
         for g, s_ in zip(grp, sig):
             if s_ < -p.violation_tol:
@@ -314,12 +327,12 @@ class Stpik:
         grp, sig, jac, buf = cands
         push = p.k_set * np.maximum(0.0, buf - sig)
         active = np.zeros(len(grp), bool)
-        qdot = None
+        qdot = np.zeros(rd.N_JOINTS)
         for _ in range(6):
             levels = [(jac[m], push[m]) for m in (active & (grp == g) for g in (0, 1, 2)) if m.any()]
             qdot = hierarchy(levels + eq_levels, rd.N_JOINTS, p.damping)
             v = jac @ qdot
-            brake = 0.0
+            brake: float | np.ndarray = 0.0
             if accel > 0.0 and prev is not None:  # the rate it can reach next step, and stop from
                 lim = grp == 0
                 v = np.where(lim, np.maximum(v, jac @ prev - accel * p.dt), v)

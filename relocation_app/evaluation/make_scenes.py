@@ -9,10 +9,15 @@
   search log goes to out/paper_search/.
 - paper_random5/paper_random5_XX (`... make_scenes paper-random`): Table 4's ten random cases at the paper's size,
   drawn with the real planner (paper_random.py).
+- jitter (`... make_scenes jitter SCENE [--amplitude 0.012] [--seeds 0-3]`): perturbed copies of a shipped scene,
+  every bottle moved by a seeded random amount of at most `amplitude` (hand-placed bottles on a real shelf), kept
+  JITTER_GAP apart and on the top shelf (docs/benchmarks.md, "Perturbed layouts"); written to out/jitter/.
 Feasibility comes from the real planner (evaluation parameters, feasibility_cache.planner_params).
 """
 from __future__ import annotations
 
+import math
+import random
 from pathlib import Path
 
 import yaml
@@ -22,7 +27,7 @@ from relocation_common.paths import scenarios_dir
 from .scenarios_gen import RADIUS, accept, evaluate_scene, lattice_scene, write_scene
 
 PAPER_NAMES = {5: "paper1_5", 10: "paper2_10", 15: "paper3_15"}
-PAPER_HEADER = ("# Scene of the paper's size (issue 16, docs/evaluation.md \"Complete trees\"), found with the real "
+PAPER_HEADER = ("# Scene of the paper's size (docs/evaluation.md \"Complete trees\"), found with the real "
                 "motion\n"
                 "# planner by relocation_app/evaluation/make_scenes.py paper on the shelf of paper_experiment_10.\n"
                 "# Format: docs/scenarios.md.")
@@ -31,6 +36,76 @@ SCEN = scenarios_dir()
 RANDOM_SEED0 = 1000
 HEADER = ("# Evaluation scene (docs/evaluation.md), made by relocation_app/evaluation/make_scenes.py on the shelf\n"
           "# of paper_experiment_10. Format: docs/scenarios.md.")
+
+
+JITTER_GAP = 0.005  # m between bottle surfaces after a jitter (the scene's own gap if it was smaller)
+JITTER_TRIES = 200  # draws per bottle before the whole layout is drawn again
+
+
+def jitter_scene(data: dict, amplitude: float, seed: int) -> dict:
+    """A copy of the scene `data` (as read from YAML) with every bottle moved by an offset drawn uniformly in the
+    disc of radius `amplitude` (m), seeded by (scene name, amplitude in mm, seed) only; bottles stay on the top
+    shelf and at least JITTER_GAP (or their original gap, if smaller) apart. Named `<name>_j<mm>_s<seed>`."""
+    import copy
+
+    from relocation_common.scenario import parse_scenario
+    if not (isinstance(amplitude, (int, float)) and 0 < amplitude <= 0.05):
+        raise ValueError(f"jitter amplitude must be in (0, 0.05] m, got {amplitude!r}")
+    sc = parse_scenario(data, str(data.get("name", "scene")))
+    mm = int(round(amplitude * 1000))
+    name = f"{sc.name}_j{mm}_s{seed}"
+    rng = random.Random(f"{sc.name}:{mm}:{seed}")
+    s, objs = sc.shelf, sc.objects
+    gap = {(a.id, b.id): min(JITTER_GAP, math.hypot(a.x - b.x, a.y - b.y) - a.radius - b.radius)
+           for a in objs for b in objs if a.id < b.id}
+    for _ in range(JITTER_TRIES):
+        pos: dict[str, tuple[float, float]] = {}
+        for b in objs:
+            for _ in range(JITTER_TRIES):
+                rho, th = amplitude * math.sqrt(rng.random()), rng.uniform(-math.pi, math.pi)
+                x, y = b.x + rho * math.cos(th), b.y + rho * math.sin(th)
+                on_shelf = (s.x_front + b.radius <= x <= s.x_back - b.radius
+                            and s.y_min + b.radius <= y <= s.y_max - b.radius)
+                if on_shelf and all(math.hypot(x - px, y - py) >= b.radius + sc.object(o).radius
+                                    + gap[(min(b.id, o), max(b.id, o))] for o, (px, py) in pos.items()):
+                    pos[b.id] = (round(x, 4), round(y, 4))
+                    break
+            else:
+                break
+        if len(pos) == len(objs):
+            break
+    else:
+        raise RuntimeError(f"{sc.name}: no layout within {amplitude} m keeps the bottles apart")
+    out = copy.deepcopy(data)
+    for o in out["objects"]:
+        o["xy"] = list(pos[o["id"]])
+    out["name"] = name
+    out["description"] = (f"{sc.name} with every bottle moved by at most {mm} mm (make_scenes jitter, seed {seed}).")
+    return out
+
+
+def make_jitter(scene: str, amplitude: float, seeds, out_dir: str | Path | None = None) -> list[Path]:
+    """`make_scenes jitter`: one perturbed copy of the shipped scene per seed (jitter_scene), as YAML files."""
+    from relocation_common.paths import resolve_scenario, share_dir
+    path = resolve_scenario(scene)
+    data = yaml.safe_load(Path(path).read_text())
+    out = Path(out_dir) if out_dir else share_dir() / "out" / "jitter"
+    header = (f"# Perturbed copy of {Path(path).name} (relocation_app/evaluation/make_scenes.py jitter, "
+              f"{amplitude * 1000:.0f} mm). Format: docs/scenarios.md.")
+    written = []
+    for seed in seeds:
+        d = jitter_scene(data, amplitude, seed)
+        written.append(write_scene(d, out / f"{d['name']}.yaml", header))
+    return written
+
+
+def _seed_range(text: str) -> list[int]:
+    """'0-3' -> [0, 1, 2, 3]; '1,5' -> [1, 5]."""
+    out: list[int] = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+    return out
 
 
 def scenario2_from_3() -> dict:
@@ -132,12 +207,17 @@ def _shipped(out_dir, name: str, radius: float | None = None) -> dict:
 
 def main(argv=None) -> int:
     """`python -m relocation_app.evaluation.make_scenes paper N [--seeds S] [--steps K] [--minutes M]`, or
-    `... paper-random [--cases 1,2] [--seed0 S] [--minutes M]`."""
+    `... paper-random [--cases 1,2] [--seed0 S] [--minutes M]`, or `... jitter SCENE [--amplitude A] [--seeds 0-3]`."""
     import argparse
+    import sys
+    if argv is None:
+        argv = sys.argv[1:]
+    if argv and argv[0] == "jitter":
+        return _jitter_main(argv[1:])
 
     from .feasibility_cache import planner_params
     ap = argparse.ArgumentParser(description="search a scene of the paper's size with the real planner")
-    ap.add_argument("what", choices=("paper", "paper-random"))
+    ap.add_argument("what", choices=("paper", "paper-random", "jitter"))
     ap.add_argument("n", type=int, nargs="?", choices=sorted(PAPER_NAMES), help="obstacles (paper)")
     ap.add_argument("--cases", default=None, help="paper-random: only these Table 4 cases (comma-separated 1-10)")
     ap.add_argument("--seeds", type=int, default=200000, help="layouts proposed (most rejected by the sketch)")
@@ -167,6 +247,26 @@ def main(argv=None) -> int:
     ok = make_paper(a.n, planner_params(), a.data or data_dir() / "feasibility", a.seeds, a.steps, a.minutes,
                     a.scenarios, a.seed0, a.write_best, a.resume, a.strict, a.temperature, a.radius)
     return 0 if ok else 1
+
+
+def _jitter_main(argv) -> int:
+    """`make_scenes jitter SCENE [SCENE ...] [--amplitude 0.012] [--seeds 0-3] [--out DIR]`."""
+    import argparse
+    ap = argparse.ArgumentParser(prog="make_scenes jitter",
+                                 description="perturbed copies of shipped scenes (every bottle moved <= amplitude)")
+    ap.add_argument("scenes", nargs="+", help="scenario names or paths (e.g. paper_experiment_10)")
+    ap.add_argument("--amplitude", type=float, default=0.012, help="largest displacement of a bottle, m")
+    ap.add_argument("--seeds", default="0-3", help="seeds, e.g. 0-3 or 1,5 (default 0-3)")
+    ap.add_argument("--out", default=None, help="directory of the YAML files (default out/jitter)")
+    a = ap.parse_args(argv)
+    try:
+        for scene in a.scenes:
+            for path in make_jitter(scene, a.amplitude, _seed_range(a.seeds), a.out):
+                print(path)
+    except (OSError, ValueError, RuntimeError) as e:
+        print(f"make_scenes jitter: error: {e}")
+        return 2
+    return 0
 
 
 if __name__ == "__main__":
