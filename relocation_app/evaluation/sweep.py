@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -207,7 +208,7 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
         bar = Progress("sweep", "cell", total=total,
                        initial=total - len(cells(1)) - _pending_eg(scenes, algorithms, done, runs))
     ctx = mp.get_context("fork")
-    with ctx.Pool(workers) as pool, out.open("a") as f:
+    with ctx.Pool(workers, initializer=_default_signals) as pool, out.open("a") as f:
         for phase in (1, 2):
             todo = sorted(cells(phase), key=lambda c: -_cost_hint(c))
             for rec in pool.imap_unordered(run_cell, todo):
@@ -219,11 +220,21 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
                 if bar is not None:
                     bar.update(advance=1, postfix=f"{rec['scenario']} {rec['algorithm']} a={rec['alpha']} "
                                                   f"g={rec['gamma']}")
+        pool.close()  # done: the workers end on their own (terminate, on an error only, kills them)
+        pool.join()
     if bar is not None:
         bar.close()
     new = [e for r in records for e in r.get("new_entries", [])]
     return {"cells_run": ran, "seconds": time.perf_counter() - t0, "records": len(records),
             "new_planner_calls": len(new)}
+
+
+def _default_signals() -> None:
+    """Pool workers die on SIGTERM and SIGINT whatever handlers the parent had when it forked (rclpy's, a node's):
+    Pool.terminate() sends SIGTERM, and a worker that survived it while holding the task queue's lock left the
+    sweep (and test_evaluation, after a test that ran a node in the same process) waiting forever."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _pending_eg(scenes, algorithms, done, runs) -> int:
