@@ -30,6 +30,8 @@ from .segmentation import (
 )
 from .shelf import ShelfFit, ShelfParams, corrected_K, fit_shelf
 
+BOARD_APART = 0.05  # m: base heights further apart than this are different boards (top and bottom shelf)
+
 
 @dataclass(frozen=True)
 class PerceptionResult:
@@ -94,8 +96,8 @@ class Perception:
 
     def _locate_all(self, seg: Segmentation, cam: np.ndarray,
                     loc: LocalizeParams) -> tuple[dict[str, Detection], dict[str, str]]:
-        """Fit every bottle; then drop fits outside the shelf and pairs of fits that overlap (an identity in doubt:
-        two colours on one bottle, or one colour on two), with the reason."""
+        """Fit every bottle; then drop fits outside the shelf and pairs of fits on one board that overlap (an identity
+        in doubt: two colours on one bottle, or one colour on two), with the reason."""
         found, missing = {}, {}
         v, u = np.nonzero(seg.labels >= 0)
         lab = seg.labels[v, u]
@@ -128,8 +130,8 @@ class Perception:
         for a, i in enumerate(ids):
             for j in ids[a + 1:]:
                 di, dj = found.get(i), found.get(j)
-                if di is None or dj is None:
-                    continue
+                if di is None or dj is None or abs(di.z - dj.z) > BOARD_APART:
+                    continue  # on different boards (one relocated to the bottom shelf): above each other, not one
                 gap = math.hypot(di.x - dj.x, di.y - dj.y) - self.scenario.object(i).radius - \
                     self.scenario.object(j).radius
                 if gap < -2 * tol:

@@ -120,14 +120,21 @@ def test_the_destination_is_a_free_slot_of_the_scene_and_a_relocated_object_is_r
     """The scene shows o2 in slot 0 of the bottom shelf (the relay says so) and o3 is sent with removed=[]: the old
     node took slot len(removed) = 0, where o2 stands, and shoved it; now o3 goes to slot 1, the first free one."""
     slot0 = SC.slots[0]
+    relayed = []
 
     def o2_in_slot0(msg):
         msg = copy.deepcopy(msg)
         p = next(o for o in msg.objects if o.id == "o2").pose.position
         p.x, p.y, p.z = slot0[0], slot0[1], SC.shelf.bottom_z
+        relayed.append(time.monotonic())
         return msg
 
     graph.mutate = o2_in_slot0
+    deadline = time.monotonic() + 20.0  # the planner must have the changed scene before the goal (a loaded machine)
+    while len(relayed) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert len(relayed) >= 3, "the driver's ground truth stopped coming"
+    time.sleep(0.3)
     before = _truth(graph)
     accepted, res = _relocate(graph, "o3", [])
     assert accepted and res.result.success, res.result.message
