@@ -12,14 +12,16 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable, TypeVar
 
-from relocation_common.scenario import ScenarioError
+from relocation_common.scenario import Scenario, ScenarioError
 
 from . import astar
 from .checkpoint import Checkpoint
+from .closed_loop import ClosedLoopExecutor, ExecutionResult, ReplanRecord, Scene, Step, check_capacity, free_slots
 from .oracles import CachedOracle
 from .outage import PlannerUnavailable
 from .params import TrainingParams
 from .problem import RelocationProblem
+from .replan import GeometryCache, replan
 from .training import train
 
 T = TypeVar("T")
@@ -99,6 +101,34 @@ def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bo
             return False, f"relocating {object_id!r} failed: {message}", removed
         removed.append(object_id)
     return True, f"target {sequence[-1]!r} retrieved after {len(removed) - 1} relocations", removed
+
+
+def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
+            perceive: Callable[[], Scene], oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
+            before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,
+            on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True
+            ) -> ExecutionResult:
+    """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
+    checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
+    with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
+    open-loop execution (execute_sequence) after the same capacity check: a sequence needing more slots than
+    are free is never started."""
+    if closed_loop:
+        cache = GeometryCache(oracle.oracle)
+        cache.adopt(oracle.table, scene)
+
+        def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
+            before_each()
+            return relocate_one(object_id, removed)
+
+        return ClosedLoopExecutor(scenario, relocate, perceive, lambda rp, banned: replan(rp, banned, cache),
+                                  cancelled=cancelled, on_step=on_step, on_replan=on_replan,
+                                  bottom_seen=bottom_seen).run(sequence, scene)
+    why = check_capacity(sequence, len(free_slots(scenario, scene)))
+    if why:
+        return ExecutionResult(False, f"not executed: {why}")
+    ok, message, relocated = execute_sequence(sequence, relocate_one, cancelled, before_each)
+    return ExecutionResult(ok, message, relocated)
 
 
 def relocation_stop(*, shutting_down: bool, server_up: Callable[[], bool], silent_s: float, silence: float,

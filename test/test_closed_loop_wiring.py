@@ -1,0 +1,68 @@
+"""The task planner's closed-loop wiring without ROS processes: the scene watch (a scene received after a
+relocation ended), the scene conversion, and retrieval.execute's capacity check before the arm moves."""
+import threading
+import time
+from dataclasses import replace
+
+import pytest
+from geometry_msgs.msg import Quaternion
+from qtree_relocation_msgs.msg import ObjectArray
+
+from qtree_task_planner.closed_loop import scene_from_scenario
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.retrieval import execute
+from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
+from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import bottle_to_msg
+from relocation_common.scenario import load_scenario
+
+SC = load_scenario(default_scenario())
+
+
+def _msg(scenario=SC, z=None):
+    msg = ObjectArray()
+    for b in scenario.objects:
+        o = bottle_to_msg(b)
+        o.pose.position.z = scenario.shelf.top_z if z is None else z
+        msg.objects.append(o)
+    return msg
+
+
+def test_the_watch_waits_for_a_scene_received_after_the_relocation_ended():
+    watch = SceneWatch()
+    watch.put(_msg())
+    with pytest.raises(TimeoutError, match="scene_after_wait"):
+        watch.after(time.monotonic(), 0.2)
+    since = time.monotonic()
+    threading.Timer(0.1, lambda: watch.put(_msg())).start()
+    assert watch.after(since, 5.0) is watch.latest[0]
+
+
+def test_perceive_waits_until_the_relocated_bottle_left_the_top_shelf_or_the_wait_ends():
+    watch, sent = SceneWatch(), []
+    relocate, perceive = watched(lambda o, removed: (sent.append((o, removed)), (True, "ok"))[1], watch, 0.5,
+                                 SC.shelf.top_z)
+    assert relocate("o2", []) == (True, "ok") and sent == [("o2", [])]
+    watch.put(_msg())  # o2 still held on the top shelf (perception's hold_frames)
+    assert not left_top("o2", SC.shelf.top_z)(watch.latest[0])
+    t0 = time.monotonic()
+    scene = perceive()  # the latest after the wait
+    assert time.monotonic() - t0 >= 0.4 and set(scene) == set(SC.ids)
+    assert scene["o2"].tilt == pytest.approx(0.0) and scene[SC.target_id].is_target
+
+
+def test_seen_scene_reads_the_tilt_from_the_orientation():
+    msg = _msg()
+    msg.objects[0].pose.orientation = Quaternion(w=0.7071068, x=0.7071068, y=0.0, z=0.0)
+    scene = seen_scene(msg)
+    assert scene[msg.objects[0].id].tilt == pytest.approx(1.5707963, abs=1e-5)
+
+
+def test_open_loop_refuses_a_sequence_longer_than_the_free_slots():
+    """Before: the open-loop executor relocated every obstacle, then the motion planner refused the target
+    ("no free slot: 12 objects already relocated"). Now the capacity is checked before the arm moves."""
+    sc = replace(SC, slots=SC.slots[:2])
+    sent = []
+    out = execute(sc, ["o2", "o3", SC.target_id], scene_from_scenario(sc), lambda o, r: sent.append(o) or (True, ""),
+                  lambda: {}, CachedOracle(None), closed_loop=False, cancelled=lambda: False)
+    assert not out.success and not sent and "relocates 3 objects but only 2 slots" in out.message, out.message
