@@ -103,6 +103,20 @@ def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bo
     return True, f"target {sequence[-1]!r} retrieved after {len(removed) - 1} relocations", removed
 
 
+def chosen_sequence(learned, learned_weight: float | None, optimum, optimal_weight: float | None, *,
+                    execute_optimum: bool, execute_learned: bool) -> tuple[list[str], str]:
+    """(the sequence to execute, a note for the user): the learned one only when its weight (Eq. 8) equals the
+    proven optimum's, or when asked for (execute_learned); else the optimum, saying so with both weights."""
+    learned, optimum = list(learned or ()), list(optimum or ())
+    if execute_optimum or not learned:
+        return optimum, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
+    if execute_learned or not optimum or optimal_weight is None or learned_weight is None \
+            or learned_weight <= optimal_weight + 1e-9:
+        return learned, ""
+    return optimum, (f"executed the exact optimum {' '.join(optimum)} (weight {optimal_weight:.2f}) instead of the "
+                     f"learned {' '.join(learned)} (weight {learned_weight:.2f}); execute_learned forces the learned")
+
+
 def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
             perceive: Callable[[], Scene], oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
             before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,

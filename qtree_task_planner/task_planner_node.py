@@ -53,7 +53,7 @@ from .outage import Cancelled, PlannerUnavailable, until_available
 from .params import TrainingParams
 from .problem import RelocationProblem
 from .replicas import ReplicaOracle
-from .retrieval import check_scene, execute, solve_then_train
+from .retrieval import check_scene, chosen_sequence, execute, solve_then_train
 from .ros_clients import Relocator, SceneWatch, ServiceOracle, goal_params, seen_scene, train_goal, watched
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
@@ -242,10 +242,11 @@ class TaskPlannerNode(Node):
             result.success, result.message = True, "trained (not executed)"
             return
         fb.phase = "executing"
-        self._run(goal_handle, fb, result, scene, oracle,
-                  result.optimal_sequence if goal_handle.request.execute_optimum else r.sequence)
+        self._run(goal_handle, fb, result, scene, oracle, *chosen_sequence(
+            r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
+            else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
 
-    def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, sequence) -> None:
+    def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, sequence, note: str) -> None:
         """Execute (retrieval.execute): closed-loop (a scene received after each relocation, checks and re-plans
         in the feedback's phase) or open-loop (`closed_loop` false); the outcome on ~/execution as JSON."""
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
@@ -262,8 +263,8 @@ class TaskPlannerNode(Node):
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()),
                       bottom_seen=self._scene_topic == SCENE_SOURCES["sim"])  # perception sees the top shelf only
-        result.success, result.message = out.success, out.message
-        self._execution.publish(String(data=json.dumps(out.to_dict())))
+        result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
+        self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note})))
 
     def _keep(self, ck) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""

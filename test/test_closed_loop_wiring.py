@@ -66,3 +66,15 @@ def test_open_loop_refuses_a_sequence_longer_than_the_free_slots():
     out = execute(sc, ["o2", "o3", SC.target_id], scene_from_scenario(sc), lambda o, r: sent.append(o) or (True, ""),
                   lambda: {}, CachedOracle(None), closed_loop=False, cancelled=lambda: False)
     assert not out.success and not sent and "relocates 3 objects but only 2 slots" in out.message, out.message
+
+
+def test_the_learned_sequence_is_executed_only_when_it_is_as_good_as_the_optimum():
+    """scenario3_15's demo executed a learned 12-bottle sequence (4.63) beside the proven optimum (2.12)."""
+    from qtree_task_planner.retrieval import chosen_sequence
+    worse = dict(execute_optimum=False, execute_learned=False)
+    seq, note = chosen_sequence(["o1", "o2", "T"], 4.63, ["o3", "T"], 2.12, **worse)
+    assert seq == ["o3", "T"] and "4.63" in note and "2.12" in note and "execute_learned" in note
+    assert chosen_sequence(["o1", "o2", "T"], 4.63, ["o3", "T"], 2.12, execute_optimum=False,
+                           execute_learned=True) == (["o1", "o2", "T"], "")
+    assert chosen_sequence(["o1", "T"], 2.12, ["o3", "T"], 2.12, **worse) == (["o1", "T"], "")
+    assert chosen_sequence([], None, ["o3", "T"], 2.12, **worse)[0] == ["o3", "T"]
