@@ -157,9 +157,9 @@ def _progress_bar(rec: "_Recorder"):
     bar = Progress("training", "ep")
 
     def on_feedback(f) -> None:
-        if f.phase == "executing":
+        if f.phase not in ("exact optimum", "training", "waiting for planner"):  # executing, checks, re-plans
             rec.active = True
-            bar.update(desc="executing")
+            bar.update(desc=f.phase if len(f.phase) < 100 else f.phase[:97] + "...")
             return
         bar.update(f.episode, desc="exact optimum" if f.phase == "exact optimum" else "training",
                    postfix=f"q_sum={f.q_sum:.1f} nodes={f.tree_nodes} mp_q={f.mp_queries} calls={f.planner_calls}")
