@@ -220,19 +220,28 @@ def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[objec
 
 
 def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: SceneWatch, wait: float,
-            top_z: float):
+            top_z: float, unseen_target: str | bool = False):
     """(relocate, perceive) for the closed loop: perceive() is the latest scene received after the last relocation
-    ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top)."""
-    ended: list = [time.monotonic(), ""]  # when the last relocation ended, its object
+    ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top).
+    unseen_target: the target's id (else False) when the camera does not see the bottom shelf; perception then holds the
+    retrieved target at its last pose for a few frames and publishes no scene after that, so after a relocation of
+    the target that the motion planner reports done, the first fresh scene counts, without the target."""
+    ended: list = [time.monotonic(), "", False]  # when the last relocation ended, its object, its success
 
     def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
-        ended[1] = object_id
+        ended[1:] = [object_id, False]
         try:
-            return relocate_one(object_id, removed)
+            ok, message = relocate_one(object_id, removed)
+            ended[2] = ok
+            return ok, message
         finally:
             ended[0] = time.monotonic()
 
     def perceive() -> dict[str, SeenObject]:
-        return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z)))
+        retrieved = ended[2] and ended[1] == unseen_target
+        scene = seen_scene(scenes.after(ended[0], wait, (lambda m: True) if retrieved else left_top(ended[1], top_z)))
+        if retrieved:
+            scene.pop(ended[1], None)
+        return scene
 
     return relocate, perceive

@@ -250,8 +250,9 @@ class TaskPlannerNode(Node):
         """Execute (retrieval.execute): closed-loop (a scene received after each relocation, checks and re-plans
         in the feedback's phase) or open-loop (`closed_loop` false); the outcome on ~/execution as JSON."""
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
-        relocate, perceive = watched(lambda o, removed: self._relocate_one(goal_handle, o, removed), self._scenes,
-                                     self.p("scene_after_wait"), scenario.shelf.top_z)
+        seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
+        relocate, perceive = watched(lambda o, rm: self._relocate_one(goal_handle, o, rm), self._scenes,
+                                     self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id)
 
         def phase(text: str) -> None:
             fb.phase = text
@@ -261,8 +262,7 @@ class TaskPlannerNode(Node):
         out = execute(scenario, sequence, seen_scene(scene), relocate, perceive, oracle,
                       closed_loop=self.p("closed_loop"), cancelled=lambda: goal_handle.is_cancel_requested,
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
-                      on_replan=lambda rr: phase(rr.line()),
-                      bottom_seen=self._scene_topic == SCENE_SOURCES["sim"])  # perception sees the top shelf only
+                      on_replan=lambda rr: phase(rr.line()), bottom_seen=seen)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note})))
 

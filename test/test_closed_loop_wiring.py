@@ -78,3 +78,17 @@ def test_the_learned_sequence_is_executed_only_when_it_is_as_good_as_the_optimum
                            execute_learned=True) == (["o1", "o2", "T"], "")
     assert chosen_sequence(["o1", "T"], 2.12, ["o3", "T"], 2.12, **worse) == (["o1", "T"], "")
     assert chosen_sequence([], None, ["o3", "T"], 2.12, **worse)[0] == ["o3", "T"]
+
+
+def test_a_retrieved_target_that_perception_still_holds_counts_as_gone():
+    """Perception holds the retrieved target at its last pose for hold_frames, then publishes no scene at all: the
+    closed loop would wait, see the target 'on the top shelf' and re-plan it. The first fresh scene counts, without
+    the target, once the motion planner reported the relocation done."""
+    watch = SceneWatch()
+    relocate, perceive = watched(lambda o, removed: (True, "ok"), watch, 5.0, SC.shelf.top_z,
+                                 unseen_target=SC.target_id)
+    relocate(SC.target_id, ["o2"])
+    watch.put(_msg())  # the target still shown on the top shelf (held)
+    t0 = time.monotonic()
+    scene = perceive()
+    assert time.monotonic() - t0 < 1.0 and SC.target_id not in scene and "o2" in scene
