@@ -15,9 +15,12 @@ import argparse
 import json
 import os
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from relocation_app.client import RelocationClient
