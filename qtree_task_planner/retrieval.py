@@ -16,7 +16,16 @@ from relocation_common.scenario import Scenario, ScenarioError
 
 from . import astar
 from .checkpoint import Checkpoint
-from .closed_loop import ClosedLoopExecutor, ExecutionResult, ReplanRecord, Scene, Step, check_capacity, free_slots
+from .closed_loop import (
+    ClosedLoopExecutor,
+    ExecutionResult,
+    GiveUp,
+    ReplanRecord,
+    Scene,
+    Step,
+    check_capacity,
+    free_slots,
+)
 from .oracles import CachedOracle
 from .outage import PlannerUnavailable
 from .params import TrainingParams
@@ -133,7 +142,10 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
             before_each()
-            return relocate_one(object_id, removed)
+            ok, message = relocate_one(object_id, removed)
+            if not ok and any(w in message for w in STOPPED):  # no motion planner to recover with, or a stop
+                raise GiveUp(f"relocating {object_id!r} failed: {message}")
+            return ok, message
 
         return ClosedLoopExecutor(scenario, relocate, perceive, lambda rp, banned: replan(rp, banned, cache),
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
@@ -143,6 +155,10 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
         return ExecutionResult(False, f"not executed: {why}")
     ok, message, relocated = execute_sequence(sequence, relocate_one, cancelled, before_each)
     return ExecutionResult(ok, message, relocated)
+
+
+STOPPED = ("shutting down", "went away", "cancelled", "relocate_timeout", "not available")  # relocation_stop's words
+# (and the Relocator's): the relocation stopped without the motion planner's recovery; the closed loop ends there
 
 
 def relocation_stop(*, shutting_down: bool, server_up: Callable[[], bool], silent_s: float, silence: float,

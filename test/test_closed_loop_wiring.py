@@ -92,3 +92,13 @@ def test_a_retrieved_target_that_perception_still_holds_counts_as_gone():
     t0 = time.monotonic()
     scene = perceive()
     assert time.monotonic() - t0 < 1.0 and SC.target_id not in scene and "o2" in scene
+
+
+def test_a_relocation_stopped_by_a_lost_planner_ends_the_closed_loop_at_once():
+    """Without this the closed loop waited scene_after_wait for a scene, then gave up without the reason (the
+    motion planner killed mid-relocation: 'went away')."""
+    perceived = []
+    out = execute(SC, ["o2", SC.target_id], scene_from_scenario(SC),
+                  lambda o, r: (False, "the motion planner went away (relocate action server gone)"),
+                  lambda: perceived.append(1) or {}, CachedOracle(None), closed_loop=True, cancelled=lambda: False)
+    assert not out.success and not perceived and "went away" in out.message, out.message
