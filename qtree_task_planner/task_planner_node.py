@@ -241,14 +241,13 @@ class TaskPlannerNode(Node):
         if not goal_handle.request.execute:
             result.success, result.message = True, "trained (not executed)"
             return
-        fb.phase = "executing"
+        fb.phase = "executing"  # then each check and re-plan (_run)
         self._run(goal_handle, fb, result, scene, oracle, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
 
     def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, sequence, note: str) -> None:
-        """Execute (retrieval.execute): closed-loop (a scene received after each relocation, checks and re-plans
-        in the feedback's phase) or open-loop (`closed_loop` false); the outcome on ~/execution as JSON."""
+        """Execute (retrieval.execute, `closed_loop`): checks, re-plans in the feedback; the outcome on ~/execution."""
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         relocate, perceive = watched(lambda o, rm: self._relocate_one(goal_handle, o, rm), self._scenes,
@@ -264,7 +263,8 @@ class TaskPlannerNode(Node):
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
-        self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note})))
+        if rclpy.ok():  # a goal ended by the node stopping: its publisher's context is gone
+            self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note})))
 
     def _keep(self, ck) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""
