@@ -219,13 +219,17 @@ def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[objec
     return settled
 
 
+TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
+
+
 def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: SceneWatch, wait: float,
             top_z: float, unseen_target: str | bool = False):
     """(relocate, perceive) for the closed loop: perceive() is the latest scene received after the last relocation
     ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top).
     unseen_target: the target's id (else False) when the camera does not see the bottom shelf; perception then holds the
     retrieved target at its last pose for a few frames and publishes no scene after that, so after a relocation of
-    the target that the motion planner reports done, the first fresh scene counts, without the target."""
+    the target that the motion planner reports done, the first fresh scene counts, without the target (or, when
+    none comes within TARGET_GONE_WAIT s, the last one)."""
     ended: list = [time.monotonic(), "", False]  # when the last relocation ended, its object, its success
 
     def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
@@ -238,10 +242,16 @@ def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: 
             ended[0] = time.monotonic()
 
     def perceive() -> dict[str, SeenObject]:
-        retrieved = ended[2] and ended[1] == unseen_target
-        scene = seen_scene(scenes.after(ended[0], wait, (lambda m: True) if retrieved else left_top(ended[1], top_z)))
-        if retrieved:
-            scene.pop(ended[1], None)
+        if not (ended[2] and ended[1] == unseen_target):
+            return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z)))
+        try:
+            msg = scenes.after(ended[0], min(wait, TARGET_GONE_WAIT))
+        except TimeoutError:  # perception publishes nothing without the target: the last scene, the target gone
+            if scenes.latest is None:
+                raise
+            msg = scenes.latest[0]
+        scene = seen_scene(msg)
+        scene.pop(ended[1], None)
         return scene
 
     return relocate, perceive

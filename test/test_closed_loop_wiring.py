@@ -102,3 +102,16 @@ def test_a_relocation_stopped_by_a_lost_planner_ends_the_closed_loop_at_once():
                   lambda o, r: (False, "the motion planner went away (relocate action server gone)"),
                   lambda: perceived.append(1) or {}, CachedOracle(None), closed_loop=True, cancelled=lambda: False)
     assert not out.success and not perceived and "went away" in out.message, out.message
+
+
+def test_no_scene_after_the_target_left_the_camera_s_view_is_no_failure():
+    """Seen in the demo with perception: 'no scene after relocating T: no scene received within 10 s'. Perception
+    publishes nothing once the target is out of view: the last scene counts, without the target."""
+    watch = SceneWatch()
+    watch.put(_msg())
+    relocate, perceive = watched(lambda o, removed: (True, "ok"), watch, 10.0, SC.shelf.top_z,
+                                 unseen_target=SC.target_id)
+    relocate(SC.target_id, ["o2"])
+    t0 = time.monotonic()
+    scene = perceive()
+    assert time.monotonic() - t0 < 3.0 and SC.target_id not in scene and "o2" in scene
