@@ -280,6 +280,8 @@ def _next_step(message: str, out: Path) -> str:
                 "or raise max_episodes in config/task_planner.yaml; see docs/qtree.md")
     if "cannot be reached" in message or "no sequence remains" in message:
         return "no collision-free way to the target remains on this shelf: see docs/closed_loop.md"
+    if "off the shelf" in message:
+        return "the target fell off the shelf: it cannot be retrieved; run the demo again (a fresh scene)"
     if "scene" in message:
         return f"check the camera and perception (logs in {out}/run/logs); see docs/perception.md"
     return f"read the task planner's and the motion planner's logs in {out}/run/logs; see docs/closed_loop.md"
