@@ -219,6 +219,7 @@ def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[objec
     return settled
 
 
+OUTCOME_UNKNOWN = "outcome unknown"  # the motion planner's result when no scene came after the motion
 TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
 
 
@@ -229,13 +230,16 @@ def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: 
     unseen_target: the target's id (else False) when the camera does not see the bottom shelf; perception then holds the
     retrieved target at its last pose for a few frames and publishes no scene after that, so after a relocation of
     the target that the motion planner reports done, the first fresh scene counts, without the target (or, when
-    none comes within TARGET_GONE_WAIT s, the last one)."""
+    none comes within TARGET_GONE_WAIT s, the last one); the motion planner's "outcome unknown" (it got no scene
+    either) is then no failure."""
     ended: list = [time.monotonic(), "", False]  # when the last relocation ended, its object, its success
 
     def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
         ended[1:] = [object_id, False]
         try:
             ok, message = relocate_one(object_id, removed)
+            if not ok and object_id == unseen_target and message.endswith(OUTCOME_UNKNOWN):
+                ok, message = True, f"{message} (the target left the camera's view: the motion ended as planned)"
             ended[2] = ok
             return ok, message
         finally:
