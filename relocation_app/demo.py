@@ -280,6 +280,9 @@ def _next_step(message: str, out: Path) -> str:
                 "or raise max_episodes in config/task_planner.yaml; see docs/qtree.md")
     if "cannot be reached" in message or "no sequence remains" in message:
         return "no collision-free way to the target remains on this shelf: see docs/closed_loop.md"
+    if "went away" in message:
+        return (f"the motion planner stopped answering during a relocation (its log: {out}/run/logs); run again, or "
+                "raise relocate_silence in config/task_planner.yaml on a loaded machine")
     if "off the shelf" in message:
         return "the target fell off the shelf: it cannot be retrieved; run the demo again (a fresh scene)"
     if "scene" in message:
