@@ -6,6 +6,9 @@
   fingers action as kinova_fingers_action.cpp serves it (`fingers`); the ros2_control gripper command (`gripper`).
 - The surfaces' joint states (`joint_state`): kinova-ros's (fingers as Kinova's joint angle, finger tips at 0) or
   joint_state_broadcaster's.
+- Disturbances (docs/closed_loop.md): seeded drops during carries (`drop_probability`, `drop_seed`), a planned
+  DisturbancePlan (`disturbance_plan`) applied at its moments, and commands (`disturb`) applied at the next step;
+  each record (JSON-ready) comes out in the loop's Tick.
 - The camera's render loop (`camera_loop`, on a snapshot of the simulation, in its own thread and GL context).
 
 Thread-safe: one lock serialises access to `Jaco2Sim`; a velocity command goes through a queue that the loop
@@ -16,17 +19,17 @@ from __future__ import annotations
 import queue
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import mujoco
 import numpy as np
 
 from relocation_common import kinova as units
-from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX
+from relocation_common.robot_description import BASE_LINK, FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX
 from relocation_common.scenario import load_scenario
 
-from . import kinova
+from . import disturbance, kinova
 from .camera import MJ_TO_OPTICAL, CameraRenderer, Frame
 from .scene import CAMERA_NAME, CameraSpec
 from .sensor_model import SensorModel
@@ -77,6 +80,7 @@ class Tick:
     state: Snapshot | None
     tf: tuple[float, np.ndarray, np.ndarray, list[ObjectPose]] | None  # (time, q, finger hinge angles, bottles)
     objects: tuple[float, list[ObjectPose]] | None
+    disturbances: list[dict[str, Any]] = field(default_factory=list)  # records of disturbances applied this tick
 
 
 def joint_names(surface: str) -> list[str]:
@@ -117,6 +121,10 @@ def check_parameters(g: Callable[[str], Any]) -> None:
         raise ValueError(f"parameter command_interface must be one of {', '.join(SURFACES)}, "
                          f"got {str(g('command_interface'))!r}")
     SensorModel.named(str(g("camera_model")))  # camera_model: ideal | realsense_d435 (ValueError naming it)
+    if not 0.0 <= g("drop_probability") <= 1.0:
+        raise ValueError(f"parameter drop_probability must be in [0, 1], got {g('drop_probability')!r}")
+    if g("disturbance_plan"):
+        disturbance.DisturbancePlan.from_json(str(g("disturbance_plan")))  # ValueError naming what is wrong
 
 
 def _check_goal(goal) -> np.ndarray:
@@ -145,6 +153,42 @@ class SimDriver:
         self._tf_period = 1.0 / rates.tf if rates.tf > 0 else float("inf")
         self._obj_period = 1.0 / rates.objects
         self._next_js = self._next_obj = self._next_tf = self._wall0 = self._sim0 = 0.0
+        self._disturb: queue.SimpleQueue = queue.SimpleQueue()  # commands (disturbance.command's arguments)
+        self.disturbances(0.0, 0, None)
+
+    def disturbances(self, drop_probability: float, drop_seed: int, plan: disturbance.DisturbancePlan | None) -> None:
+        """Drop the carried bottle with `drop_probability` per carry (seeded) and apply `plan` at its moments
+        (counted from now: the next grasp is carry 1)."""
+        self._drop = (drop_probability, drop_seed, plan)
+        self.dropper = disturbance.CarryDropper(drop_probability, drop_seed)
+        self.schedule = disturbance.DisturbanceSchedule(plan) if plan is not None else None
+
+    def disturb(self, parent: str, child: str, translation, rotation_xyzw) -> None:
+        """A disturbance command as a transform (the node's /sim/disturb): child `bottle_<id>` or `grasped`;
+        parent the base frame = move the bottle there, `bottle_<id>` = relative (nudge, or tip by the rotation).
+        Applied at the loop's next step; its record (or why it was skipped) comes out in a Tick."""
+        self._disturb.put((parent, child, tuple(translation), tuple(rotation_xyzw)))
+
+    def _apply_disturbances(self) -> list[dict[str, Any]]:
+        """Under the lock after a step: the dropper, the schedule and the queued commands; their records."""
+        s, out = self.sim, []
+        dropped = self.dropper.update(s)
+        if dropped is not None:
+            out.append({"kind": "drop", "when": f"during carry {dropped.detail['carry'] + 1}", **dropped.to_dict()})
+        if self.schedule is not None:
+            out += self.schedule.update(s)
+        while not self._disturb.empty():
+            parent, child, t, r = self._disturb.get_nowait()
+            oid = child.removeprefix("bottle_")
+            relative = parent != BASE_LINK
+            if relative and parent != child and oid != disturbance.GRASPED:
+                out.append({"command": {"object": oid, "parent": parent}, "skipped": f"frame {parent!r}: use "
+                            f"{BASE_LINK} (move) or the bottle's own frame {child} (nudge or tip)"})
+                continue
+            out.append(disturbance.command(s, oid, relative, t, r))
+        for record in out:
+            record.setdefault("sim_time", round(s.time, 3))
+        return out
 
     @classmethod
     def from_parameters(cls, g: Callable[[str], Any], log: Callable[[str], None] = lambda _: None) -> SimDriver:
@@ -161,7 +205,11 @@ class SimDriver:
                       state_on_command=bool(g("state_on_command")))
         fingers = dict(tolerance=float(g("finger_tolerance")), stall_threshold=float(g("finger_stall_threshold")),
                        stall_interval=float(g("finger_stall_interval")))
-        return cls(sim, rates, fingers, log, SensorModel.named(str(g("camera_model"))))
+        driver = cls(sim, rates, fingers, log, SensorModel.named(str(g("camera_model"))))
+        plan = str(g("disturbance_plan"))
+        driver.disturbances(float(g("drop_probability")), int(g("drop_seed")),
+                            disturbance.DisturbancePlan.from_json(plan) if plan else None)
+        return driver
 
     # ------------------------------------------------------------------ commands
     def command(self, v) -> None:
@@ -204,6 +252,8 @@ class SimDriver:
         """The scenario's state, arm home, fingers open, sim time 0, started; the scenario's name."""
         with self.lock:
             self.sim.reset()
+            disturbance.restore_all_contacts(self.sim)
+            self.disturbances(*self._drop)
             self._pace_reset = True
             self.stopped = False
         return self.sim.scenario.name
@@ -310,6 +360,7 @@ class SimDriver:
             n = self._steps_due(s.time)
             if n > 0:
                 s.step(n)
+            records = self._apply_disturbances() if n > 0 or not self._disturb.empty() else []
             t = s.time
             state = tf = objects = None
             if t >= self._next_js or (self._commanded and r.state_on_command and n > 0):
@@ -323,7 +374,7 @@ class SimDriver:
             if t >= self._next_obj:
                 self._next_obj = t + self._obj_period
                 objects = (t, s.object_poses())
-        return Tick(n, t, state, tf, objects)
+        return Tick(n, t, state, tf, objects, records)
 
     def _steps_due(self, t: float) -> int:
         if self.rates.real_time_factor <= 0:

@@ -1,14 +1,12 @@
 """jaco2_sim_driver node: the MuJoCo Jaco2 behind the interface of a real arm, selected by `command_interface`:
-
 - `kinova`: kinova-ros's j2s7s300 driver surface (kinova_msgs; units and sources in docs/kinova.md) under
   `driver_prefix`: in/joint_velocity, out/joint_state, out/joint_angles, out/finger_position, the action
   fingers_action/finger_positions, the services in/home_arm, in/start, in/stop.
 - `ros2_control`: a JointGroupVelocityController (/velocity_controller/commands), the fingers as a
   JointGroupPositionController (/gripper_controller/commands) and a joint_state_broadcaster (/joint_states).
-
 Both: what robot_state_publisher publishes (/robot_description, /tf_static, /tf, plus the bottles' ground truth on
-/tf), the camera, /sim/objects, /clock, and the simulator's own `<driver_prefix>/in/reset_scene`.
-
+/tf), the camera, /sim/objects, /clock, the simulator's own `<driver_prefix>/in/reset_scene`, and disturbances:
+/sim/disturb (TransformStamped) in, /sim/disturbances (String, one JSON record each, transient local) out.
 A shell: parameters, topics, services and the fingers action translated to and from `driver.SimDriver`, where the
 behaviour is (the loop's pacing, the arm services, the fingers protocol, the surfaces' joint states). Threads: the
 executor (commands, services), the simulation loop (`SimDriver.tick`, then publishing), the camera
@@ -17,12 +15,13 @@ executor (a goal waits until the fingers stop). Interface: docs/sim_driver.md.
 """
 from __future__ import annotations
 
+import json
 import threading
 import time
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, TransformStamped
 from kinova_msgs.action import SetFingersPosition
 from kinova_msgs.msg import FingerPosition, JointAngles, JointVelocity
 from kinova_msgs.srv import HomeArm, Start, Stop
@@ -58,6 +57,7 @@ GRIPPER_TOPIC = "/gripper_controller/commands"     # ros2_control JointGroupPosi
 MAX_COMMAND_BYTES = 4096
 COMMAND_QOS = 1  # only the newest command matters: no queue of stale (or huge) ones
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+DISTURBANCES_QOS = QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 TF_QOS = QoSProfile(depth=100)  # tf2_ros TransformBroadcaster's
 
 
@@ -127,6 +127,8 @@ class Jaco2SimDriver(Node):
         """Ground truth, camera, and what robot_state_publisher publishes: the URDF, its fixed joints, the moving
         joints."""
         self.pub_objects = self.create_publisher(ObjectArray, "/sim/objects", LATCHED)
+        self.pub_disturbances = self.create_publisher(String, "/sim/disturbances", DISTURBANCES_QOS)
+        self.create_subscription(TransformStamped, "/sim/disturb", self.on_disturb, 10)
         self.pub_rgb = self.create_publisher(Image, "/camera/color/image_raw", 2)
         self.pub_info = self.create_publisher(CameraInfo, "/camera/color/camera_info", 2)
         self.pub_depth = self.create_publisher(Image, "/camera/depth/image_rect_raw", 2)
@@ -173,6 +175,11 @@ class Jaco2SimDriver(Node):
             self.core.gripper(msg.data)
         except (BadCommandError, ValueError, TypeError) as e:
             self.get_logger().error(f"rejected gripper_controller/commands command: {e}", throttle_duration_sec=1.0)
+
+    def on_disturb(self, m: TransformStamped) -> None:
+        """A disturbance (SimDriver.disturb: frames say move, nudge, tip or drop), applied at the next step."""
+        t, r = m.transform.translation, m.transform.rotation
+        self.core.disturb(m.header.frame_id, m.child_frame_id, (t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
 
     def _command(self, v, source: str) -> None:
         try:
@@ -237,6 +244,8 @@ class Jaco2SimDriver(Node):
             t, q, finger_q, poses = tick.tf
             self.pub_tf.publish(self._tf(t, frames.arm_transforms(q) + frames.finger_transforms(finger_q)
                                          + frames.bottle_transforms(poses)))
+        for record in tick.disturbances:
+            self.pub_disturbances.publish(String(data=json.dumps(record)))
         if tick.objects is not None:
             self.pub_objects.publish(objects_msg(self.sim.scenario, tick.objects[1], self._stamp(tick.objects[0])))
 

@@ -310,6 +310,12 @@ class ReplanRecord:
                              "weight": self.weight, "calls": self.calls}
         return {**d, "failure": self.failure} if self.failure else d
 
+    def line(self) -> str:
+        """One line for the feedback: why, and the new sequence with its weight (or why there is none)."""
+        got = f"{' '.join(self.sequence)} (weight {self.weight:.2f})" if self.sequence and self.weight is not None \
+            else self.failure
+        return f"re-plan: {self.reason} -> {got}"
+
 
 @dataclass(frozen=True)
 class Step:
@@ -329,6 +335,12 @@ class Step:
         return {"index": self.index, "object": self.object_id, "removed": list(self.removed), "slot": self.slot,
                 "ok": self.ok, "message": self.message,
                 "verification": self.verification.to_dict() if self.verification else None}
+
+    def line(self) -> str:
+        """One line for the feedback: the check after this relocation, or why it failed."""
+        what = self.verification.summary() if self.verification else f"relocating {self.object_id} failed: " \
+            f"{self.message}"
+        return f"check {self.index + 1}: {what}"
 
 
 @dataclass

@@ -12,14 +12,25 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable, TypeVar
 
-from relocation_common.scenario import ScenarioError
+from relocation_common.scenario import Scenario, ScenarioError
 
 from . import astar
 from .checkpoint import Checkpoint
+from .closed_loop import (
+    ClosedLoopExecutor,
+    ExecutionResult,
+    GiveUp,
+    ReplanRecord,
+    Scene,
+    Step,
+    check_capacity,
+    free_slots,
+)
 from .oracles import CachedOracle
 from .outage import PlannerUnavailable
 from .params import TrainingParams
 from .problem import RelocationProblem
+from .replan import GeometryCache, replan
 from .training import train
 
 T = TypeVar("T")
@@ -99,6 +110,55 @@ def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bo
             return False, f"relocating {object_id!r} failed: {message}", removed
         removed.append(object_id)
     return True, f"target {sequence[-1]!r} retrieved after {len(removed) - 1} relocations", removed
+
+
+def chosen_sequence(learned, learned_weight: float | None, optimum, optimal_weight: float | None, *,
+                    execute_optimum: bool, execute_learned: bool) -> tuple[list[str], str]:
+    """(the sequence to execute, a note for the user): the learned one only when its weight (Eq. 8) equals the
+    proven optimum's, or when asked for (execute_learned); else the optimum, saying so with both weights."""
+    learned, optimum = list(learned or ()), list(optimum or ())
+    if execute_optimum or not learned:
+        return optimum, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
+    if execute_learned or not optimum or optimal_weight is None or learned_weight is None \
+            or learned_weight <= optimal_weight + 1e-9:
+        return learned, ""
+    return optimum, (f"executed the exact optimum {' '.join(optimum)} (weight {optimal_weight:.2f}) instead of the "
+                     f"learned {' '.join(learned)} (weight {learned_weight:.2f}); execute_learned forces the learned")
+
+
+def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
+            perceive: Callable[[], Scene], oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
+            before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,
+            on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True
+            ) -> ExecutionResult:
+    """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
+    checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
+    with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
+    open-loop execution (execute_sequence) after the same capacity check: a sequence needing more slots than
+    are free is never started."""
+    if closed_loop:
+        cache = GeometryCache(oracle.oracle)
+        cache.adopt(oracle.table, scene)
+
+        def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
+            before_each()
+            ok, message = relocate_one(object_id, removed)
+            if not ok and any(w in message for w in STOPPED):  # no motion planner to recover with, or a stop
+                raise GiveUp(f"relocating {object_id!r} failed: {message}")
+            return ok, message
+
+        return ClosedLoopExecutor(scenario, relocate, perceive, lambda rp, banned: replan(rp, banned, cache),
+                                  cancelled=cancelled, on_step=on_step, on_replan=on_replan,
+                                  bottom_seen=bottom_seen).run(sequence, scene)
+    why = check_capacity(sequence, len(free_slots(scenario, scene)))
+    if why:
+        return ExecutionResult(False, f"not executed: {why}")
+    ok, message, relocated = execute_sequence(sequence, relocate_one, cancelled, before_each)
+    return ExecutionResult(ok, message, relocated)
+
+
+STOPPED = ("shutting down", "went away", "cancelled", "relocate_timeout", "not available")  # relocation_stop's words
+# (and the Relocator's): the relocation stopped without the motion planner's recovery; the closed loop ends there
 
 
 def relocation_stop(*, shutting_down: bool, server_up: Callable[[], bool], silent_s: float, silence: float,

@@ -4,6 +4,8 @@
   outage rules of docs/reliability.md ("Dead planner").
 - Relocator: one RelocateObject goal to the motion planner, watched (shutdown, server gone, silence, cancel,
   timeout: qtree_task_planner.retrieval.relocation_stop).
+- SceneWatch: the latest scene message and when it arrived; `after(t, ...)` waits for one received later
+  (closed-loop execution: a scene perceived after a relocation ended).
 - train_goal / goal_params: a TrainPlanner goal whose numeric fields say "the node's parameter" (negative), and
   the TrainingParams a goal asks for.
 """
@@ -21,6 +23,7 @@ from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.node import ActionClient, call, stop_reason, stopping_as
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs
 
+from .closed_loop import SeenObject, tilt_of_quaternion
 from .outage import Cancelled, PlannerUnavailable
 from .params import TrainingParams
 from .retrieval import relocation_stop
@@ -168,3 +171,91 @@ class Relocator:
             return False, "goal rejected by the motion planner"
         res = box["result"].result
         return res.success, res.message
+
+
+def seen_scene(msg) -> dict[str, SeenObject]:
+    """An ObjectArray as closed_loop's scene (tilt from each pose's orientation)."""
+    out = {}
+    for o in msg.objects:
+        p, q = o.pose.position, o.pose.orientation
+        out[o.id] = SeenObject(o.id, p.x, p.y, p.z, o.weight, o.is_target, tilt_of_quaternion(q.w, q.x, q.y, q.z),
+                               o.radius, o.height, o.label)
+    return out
+
+
+class SceneWatch:
+    """The latest scene message and the monotonic time it arrived (`put` from the subscription)."""
+
+    def __init__(self) -> None:
+        self.latest: tuple | None = None  # (msg, received)
+        self._changed = threading.Condition()
+
+    def put(self, msg) -> None:
+        """A scene arrived."""
+        with self._changed:
+            self.latest = (msg, time.monotonic())
+            self._changed.notify_all()
+
+    def after(self, since: float, timeout: float, settled: Callable[[object], bool] = lambda msg: True):
+        """The latest scene received after `since` (monotonic) for which `settled(msg)` holds; once `timeout` s
+        pass, the latest one received after `since` anyway; TimeoutError when none came."""
+        deadline = time.monotonic() + timeout
+        with self._changed:
+            while True:
+                fresh = self.latest if self.latest is not None and self.latest[1] > since else None
+                left = deadline - time.monotonic()
+                if fresh is not None and (settled(fresh[0]) or left <= 0):
+                    return fresh[0]
+                if left <= 0:
+                    raise TimeoutError(f"no scene received within {timeout:g} s (scene_after_wait)")
+                self._changed.wait(min(left, 0.1))
+
+
+def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[object], bool]:
+    """A scene settled after relocating object_id: it no longer shows the bottle standing on the top shelf
+    (perception holds an unseen bottle at its last pose for hold_frames frames)."""
+    def settled(msg) -> bool:
+        return not any(o.id == object_id and abs(o.pose.position.z - top_z) < tol for o in msg.objects)
+    return settled
+
+
+OUTCOME_UNKNOWN = "outcome unknown"  # the motion planner's result when no scene came after the motion
+TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
+
+
+def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: SceneWatch, wait: float,
+            top_z: float, unseen_target: str | bool = False):
+    """(relocate, perceive) for the closed loop: perceive() is the latest scene received after the last relocation
+    ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top).
+    unseen_target: the target's id (else False) when the camera does not see the bottom shelf; perception then holds the
+    retrieved target at its last pose for a few frames and publishes no scene after that, so after a relocation of
+    the target that the motion planner reports done, the first fresh scene counts, without the target (or, when
+    none comes within TARGET_GONE_WAIT s, the last one); the motion planner's "outcome unknown" (it got no scene
+    either) is then no failure."""
+    ended: list = [time.monotonic(), "", False]  # when the last relocation ended, its object, its success
+
+    def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
+        ended[1:] = [object_id, False]
+        try:
+            ok, message = relocate_one(object_id, removed)
+            if not ok and object_id == unseen_target and message.endswith(OUTCOME_UNKNOWN):
+                ok, message = True, f"{message} (the target left the camera's view: the motion ended as planned)"
+            ended[2] = ok
+            return ok, message
+        finally:
+            ended[0] = time.monotonic()
+
+    def perceive() -> dict[str, SeenObject]:
+        if not (ended[2] and ended[1] == unseen_target):
+            return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z)))
+        try:
+            msg = scenes.after(ended[0], min(wait, TARGET_GONE_WAIT))
+        except TimeoutError:  # perception publishes nothing without the target: the last scene, the target gone
+            if scenes.latest is None:
+                raise
+            msg = scenes.latest[0]
+        scene = seen_scene(msg)
+        scene.pop(ended[1], None)
+        return scene
+
+    return relocate, perceive

@@ -5,26 +5,22 @@ Thin shell: parameters, the scene subscription and the TrainPlanner action in; c
 bookkeeping qtree_task_planner.keeper, the ROS clients (feasibility oracle over PlanFeasibility, the watched
 RelocateObject goal) qtree_task_planner.ros_clients. Eq. 15 is reported as action feedback every few episodes.
 
-Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local);
-publishes ~/markers (visualization_msgs/MarkerArray: the scene, the learned order) and ~/relocating (std_msgs/String,
-latched: the object being relocated); its PlanFeasibility queries and answers are service events (client
-introspection, contents) on <feasibility_service>/_service_event, for recording.
+Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local); publishes
+~/markers (visualization_msgs/MarkerArray: the scene, the learned order), ~/relocating (std_msgs/String, latched: the
+object being relocated) and ~/execution (std_msgs/String, latched: the execution's JSON, closed_loop.ExecutionResult);
+its PlanFeasibility queries and answers are service events on <feasibility_service>/_service_event, for recording.
+Execution: closed-loop (`closed_loop`: a check after every relocation, re-plans; docs/closed_loop.md) or open-loop.
 
-Reliability (docs/reliability.md):
-- Checkpoints: with `checkpoint_path` set, the Q-Tree and the training counters are written there atomically every
-  `checkpoint_every` episodes, when training stops, and when the planner is lost; a goal whose scene and
-  parameters match an existing checkpoint resumes from it; a corrupt or mismatched checkpoint aborts the goal
-  with the reason (never a silent restart from scratch).
-- Dead planner: a query unanswered within feasibility_timeout + feasibility_margin (or a service that vanished)
-  rolls the current episode back, keeps every answer, and waits up to `planner_wait` s for the service to come
-  back, then resumes; after that the goal aborts saying what to do.
-- Stale or empty scene: the goal aborts with the reason before training starts (scene_max_age, by receive time
-  and by header stamp).
-- Bad parameters at start: one line on stderr, exit status 2.
+Reliability (docs/reliability.md): checkpoints (`checkpoint_path`, every `checkpoint_every` episodes, on stop and
+on a lost planner; a matching goal resumes, a corrupt or mismatched one aborts with the reason); a dead planner
+(no answer within feasibility_timeout + feasibility_margin) rolls the episode back, keeps every answer and waits up
+to `planner_wait` s, then the goal aborts saying what to do; a stale or empty scene aborts the goal before training
+(scene_max_age); bad parameters at start: one line on stderr, exit status 2.
 """
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import threading
 import time
@@ -46,7 +42,7 @@ from relocation_common.config import ParameterError
 from relocation_common.feasibility import replica_services
 from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main, stop_reason
 from relocation_common.ros_conversions import msg_to_bottles
-from relocation_common.scenario import ScenarioError
+from relocation_common.scenario import ScenarioError, load_scenario
 from relocation_common.scene_check import foreign_ids
 
 from .checkpoint import CheckpointError
@@ -57,8 +53,8 @@ from .outage import Cancelled, PlannerUnavailable, until_available
 from .params import TrainingParams
 from .problem import RelocationProblem
 from .replicas import ReplicaOracle
-from .retrieval import check_scene, execute_sequence, solve_then_train
-from .ros_clients import Relocator, ServiceOracle, goal_params, train_goal
+from .retrieval import check_scene, chosen_sequence, execute, solve_then_train
+from .ros_clients import Relocator, SceneWatch, ServiceOracle, goal_params, seen_scene, train_goal, watched
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -75,7 +71,7 @@ class TaskPlannerNode(Node):
         declare_parameters(self)  # config/task_planner.yaml: training parameters and the node's own
         self._check_parameters()
 
-        self._scene: tuple[ObjectArray, float] | None = None
+        self._scenes = SceneWatch()  # the latest scene and when it came
         log = self.get_logger()
         self._keeper = CheckpointKeeper(self.p("checkpoint_path"), info=log.info,
                                         error=lambda m: log.error(m, throttle_duration_sec=10.0))
@@ -90,9 +86,10 @@ class TaskPlannerNode(Node):
             ActionClient(self, RelocateObject, self.p("relocate_action"), callback_group=reentrant),
             self.p("planner_wait"), self.p("relocate_timeout"), self.p("relocate_silence"), ok=rclpy.ok)
         self._scene_topic = SCENE_SOURCES.get(self.p("scene_source")) or self.p("scene_topic")
-        self.create_subscription(ObjectArray, self._scene_topic, self._on_scene, SCENE_QOS)
+        self.create_subscription(ObjectArray, self._scene_topic, self._scenes.put, SCENE_QOS)
         self._markers = self.create_publisher(MarkerArray, "~/markers", SCENE_QOS)
         self._relocating = self.create_publisher(String, "~/relocating", SCENE_QOS)
+        self._execution = self.create_publisher(String, "~/execution", SCENE_QOS)  # ExecutionResult.to_dict() JSON
         self._server = ActionServer(self, TrainPlanner, "~/train", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=reentrant)
@@ -108,7 +105,7 @@ class TaskPlannerNode(Node):
         TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
         for name, lo in (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_timeout", 1e-3),
                          ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3),
-                         ("relocate_silence", 1e-3)):
+                         ("relocate_silence", 1e-3), ("scene_after_wait", 0.0)):
             v = self.p(name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
                 raise ParameterError(f"{name} must be a finite number >= {lo:g}, got {v!r}")
@@ -124,15 +121,12 @@ class TaskPlannerNode(Node):
         check_checkpoint_path(self.p("checkpoint_path"))
 
     # -- inputs ---------------------------------------------------------------------------------------------
-    def _on_scene(self, msg: ObjectArray) -> None:
-        self._scene = (msg, time.monotonic())
-
     def _problem(self) -> tuple[RelocationProblem, ObjectArray]:
         """The scene as a problem; ScenarioError when it is missing, stale, empty or invalid (retrieval.check_scene)."""
         deadline = time.monotonic() + self.p("scene_wait")
-        while self._scene is None and time.monotonic() < deadline:  # just started: discovery may still be going on
+        while self._scenes.latest is None and time.monotonic() < deadline:  # just started: discovery may be going on
             time.sleep(0.05)
-        msg, t = self._scene if self._scene is not None else (None, 0.0)
+        msg, t = self._scenes.latest if self._scenes.latest is not None else (None, 0.0)
         stamp = Time.from_msg(msg.header.stamp) if msg is not None else None
         warning = check_scene(self._scene_topic, self.p("scene_max_age"),
                               time.monotonic() - t if msg is not None else None,
@@ -247,11 +241,30 @@ class TaskPlannerNode(Node):
         if not goal_handle.request.execute:
             result.success, result.message = True, "trained (not executed)"
             return
-        fb.phase = "executing"
-        sequence = result.optimal_sequence if goal_handle.request.execute_optimum else r.sequence
-        result.success, result.message, _ = execute_sequence(
-            sequence, lambda i, removed: self._relocate_one(goal_handle, i, removed),
-            cancelled=lambda: goal_handle.is_cancel_requested, before_each=lambda: goal_handle.publish_feedback(fb))
+        fb.phase = "executing"  # then each check and re-plan (_run)
+        self._run(goal_handle, fb, result, scene, oracle, *chosen_sequence(
+            r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
+            else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
+
+    def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, sequence, note: str) -> None:
+        """Execute (retrieval.execute, `closed_loop`): checks, re-plans in the feedback; the outcome on ~/execution."""
+        scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
+        seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
+        relocate, perceive = watched(lambda o, rm: self._relocate_one(goal_handle, o, rm), self._scenes,
+                                     self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id)
+
+        def phase(text: str) -> None:
+            fb.phase = text
+            self.get_logger().info(text)
+            goal_handle.publish_feedback(fb)
+
+        out = execute(scenario, sequence, seen_scene(scene), relocate, perceive, oracle,
+                      closed_loop=self.p("closed_loop"), cancelled=lambda: goal_handle.is_cancel_requested,
+                      before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
+                      on_replan=lambda rr: phase(rr.line()), bottom_seen=seen)
+        result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
+        if rclpy.ok():  # a goal ended by the node stopping: its publisher's context is gone
+            self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note})))
 
     def _keep(self, ck) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""

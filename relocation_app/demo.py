@@ -5,6 +5,10 @@ task planner to train H-eG with depth search against the motion planner's feasib
 the learned sequence on the MuJoCo Jaco2, and writes under out/: report.json, learning_curve.png and
 retrieval_strip.png (camera frames of the retrieval); unless --no-record, also the run as a rosbag2 bag (MCAP) in
 out/bag/ and the retrieval as out/retrieval.mp4 (relocation_app.recording).
+
+Execution is closed-loop (docs/closed_loop.md: a check after every relocation, re-plans) unless --open-loop;
+--disturb K applies K seeded disturbances (the driver's disturbance_plan, drawn with --seed) and report.json lists
+them (`disturbances`) with the re-plans (`replans`); `success` is true only with the target on the bottom shelf.
 """
 from __future__ import annotations
 
@@ -37,6 +41,12 @@ def _args(argv):
     p.add_argument("--no-execute", action="store_true", help="train only, do not move the robot")
     p.add_argument("--execute-optimum", action="store_true",
                    help="relocate the exact optimum (blocker A*) instead of the Q-Tree's learned sequence")
+    p.add_argument("--execute-learned", action="store_true",
+                   help="relocate the learned sequence even when it weighs more than the exact optimum")
+    p.add_argument("--open-loop", action="store_true",
+                   help="the paper's open-loop execution: no check of the scene between relocations, no re-plan")
+    p.add_argument("--disturb", type=int, default=0, metavar="K",
+                   help="K seeded disturbances (nudge, tip, move, drop; seed: --seed) during the execution")
     p.add_argument("--replicas", type=int, default=1, choices=range(1, 9), metavar="N",
                    help="motion planner processes answering feasibility (1-8; the first also moves the arm)")
     p.add_argument("--out", default="out", help="output directory (default: ./out)")
@@ -106,11 +116,22 @@ def _start_graph(g: Graph, a, scene_topic: str) -> None:
     common = {"scenario": a.scenario}
     ckpt = _checkpoint(g.run_dir / "qtree.ckpt")
     print(f"[demo] starting the node graph on ROS_DOMAIN_ID={g.domain_id} (logs: {g.run_dir / 'logs'})")
-    g.start("jaco2_sim_driver", common)
+    plan = _disturbance_plan(a)
+    g.start("jaco2_sim_driver", dict(common, disturbance_plan=f"'{plan.to_json()}'") if plan else common)
     if a.scene_source == "perception":
         g.start("perception", common)
     g.start_planners(a.replicas, dict(common, scene_topic=scene_topic))
-    g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt), replicas=a.replicas))
+    g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt), replicas=a.replicas,
+                                 closed_loop=not a.open_loop, execute_learned=a.execute_learned))
+
+
+def _disturbance_plan(a):
+    """--disturb K: K disturbances drawn with --seed (default 0) at moments of the first two relocations (the
+    sequence is not known before training; every retrieval with an obstacle has two), or None."""
+    if a.disturb <= 0:
+        return None
+    from jaco2_sim_driver.disturbance import DisturbancePlan
+    return DisturbancePlan.draw(a.disturb, a.seed or 0, relocations=2)
 
 
 def _checkpoint(path: Path) -> Path:
@@ -136,9 +157,9 @@ def _progress_bar(rec: "_Recorder"):
     bar = Progress("training", "ep")
 
     def on_feedback(f) -> None:
-        if f.phase == "executing":
+        if f.phase not in ("exact optimum", "training", "waiting for planner"):  # executing, checks, re-plans
             rec.active = True
-            bar.update(desc="executing")
+            bar.update(desc=f.phase if len(f.phase) < 100 else f.phase[:97] + "...")
             return
         bar.update(f.episode, desc="exact optimum" if f.phase == "exact optimum" else "training",
                    postfix=f"q_sum={f.q_sum:.1f} nodes={f.tree_nodes} mp_q={f.mp_queries} calls={f.planner_calls}")
@@ -151,8 +172,13 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import QoSDurabilityPolicy, QoSProfile
     from sensor_msgs.msg import Image
+    from std_msgs.msg import String
 
     latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+    execution, disturbances = _Latest(), []
+    client.node.create_subscription(String, "/task_planner/execution", execution, latched)
+    client.node.create_subscription(String, "/sim/disturbances", lambda m: disturbances.append(json.loads(m.data)),
+                                    QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL))
     client.wait_until_ready(120, check=g.check_alive)
     rec, truth, scene = _Recorder(), _Latest(), _Latest()
     client.node.create_subscription(Image, "/camera/color/image_raw", rec, 2)
@@ -173,7 +199,8 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
         raise ClientError(outcome.message)
     res = outcome.result
     time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
-    return res, before, truth.positions(), rec.frames
+    run = json.loads(execution.msg.data) if execution.msg is not None else {}
+    return res, before, truth.positions(), rec.frames, {**run, "disturbances": list(disturbances)}
 
 
 def _start_recording(g: Graph, a, out: Path):
@@ -197,33 +224,70 @@ def _stop_recording(rec) -> dict | None:
     return s
 
 
-def _report(out: Path, a, used, res, before, after, frames, wall: float, recording: dict | None = None) -> int:
-    """report.json, learning_curve.png, retrieval_strip.png and the summary lines; the exit status."""
+def _report(out: Path, a, used, res, before, after, frames, wall: float, run: dict,
+            recording: dict | None = None) -> int:
+    """report.json, learning_curve.png, retrieval_strip.png and the summary lines; the exit status. Success only
+    with the target on the bottom shelf (when executed); no sentinel values: what is missing is said in words."""
+    executed = run.get("sequence") or list(res.optimal_sequence if a.execute_optimum else res.sequence)
+    fs = _check_scene(a.scenario, before, after, [] if a.no_execute else run.get("relocated", executed))
+    success = bool(res.success and (a.no_execute or fs["target_on_bottom_shelf"]))
+    learned_w = res.total_weight if res.sequence else None
+    optimal_w = res.optimal_weight if res.optimal_sequence else None
     report = {
         "scenario": a.scenario, "policy": used.policy, "search": used.search, "seed": used.seed,
-        "success": res.success, "message": res.message,
-        "learned_sequence": list(res.sequence), "learned_weight": res.total_weight,
-        "optimal_sequence": list(res.optimal_sequence), "optimal_weight": res.optimal_weight,
-        "episodes": res.episodes, "E_ss": res.e_ss, "MP_q": res.mp_q, "E_1st": res.e_first,
+        "success": success, "message": res.message,
+        "learned_sequence": list(res.sequence), "learned_weight": learned_w,
+        "optimal_sequence": list(res.optimal_sequence), "optimal_weight": optimal_w,
+        "episodes": res.episodes, "E_ss": res.e_ss, "MP_q": res.mp_q,
+        "E_1st": res.e_first if res.e_first >= 0 else None,
         "planner_calls": res.planner_calls, "wall_time_s": round(wall, 1),
         "q_sum_history": list(res.q_sum_history),
-        "executed": "optimum" if a.execute_optimum else "learned",
-        "final_scene": _check_scene(a.scenario, before, after, [] if a.no_execute else list(
-            res.optimal_sequence if a.execute_optimum else res.sequence)),
-        "recording": recording,
+        "executed": "optimum" if executed == list(res.optimal_sequence) and executed != list(res.sequence) else
+        "learned", "executed_sequence": executed, "closed_loop": not a.open_loop,
+        "disturbances": run.get("disturbances", []), "replans": run.get("replans", []), "steps": run.get("steps", []),
+        "final_scene": fs, "recording": recording,
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
     _learning_curve(res.q_sum_history, out / "learning_curve.png", f"{used.policy} / {used.search}")
     _strip(frames, out / "retrieval_strip.png")
-    fs = report["final_scene"]
     if not a.no_execute:
         print(f"[demo] target on the bottom shelf: {fs['target_on_bottom_shelf']}; largest displacement of a "
               f"bottle not relocated: {fs['max_displacement_untouched_m'] * 100:.1f} cm")
-    print(f"[demo] learned sequence: {' -> '.join(res.sequence)}  weight {res.total_weight:.2f}")
-    print(f"[demo] exact optimum:    {' -> '.join(res.optimal_sequence)}  weight {res.optimal_weight:.2f}")
-    print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={res.e_first} real planner calls={res.planner_calls}")
-    print(f"[demo] {'SUCCESS' if res.success else 'FAILED'}: {res.message}  ({wall:.0f} s); outputs in {out}/")
-    return 0 if res.success and (a.no_execute or fs["target_on_bottom_shelf"]) else 1
+    print("[demo] learned sequence: " + (f"{' -> '.join(res.sequence)}  weight {learned_w:.2f}" if learned_w
+                                         is not None else "none (training found no sequence to the target)"))
+    print("[demo] exact optimum:    " + (f"{' -> '.join(res.optimal_sequence)}  weight {optimal_w:.2f}" if
+                                         optimal_w is not None else "none (no feasible sequence)"))
+    e_first = str(res.e_first) if res.e_first >= 0 else "not reached"
+    print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={e_first} real planner calls={res.planner_calls}")
+    for d in report["disturbances"]:
+        print(f"[demo] disturbance {d.get('when', '')}: {d.get('kind', 'command')} {d.get('object', '')}"
+              + (f" skipped: {d['skipped']}" if "skipped" in d else ""))
+    for r in report["replans"]:
+        print(f"[demo] re-plan: {r['reason']} -> " + (f"{' '.join(r['sequence'])} ({r['weight']:.2f})"
+                                                      if r.get("sequence") else r.get("failure", "")))
+    message = res.message if success or not res.success else \
+        f"{res.message}; but the simulator does not show the target on the bottom shelf"
+    print(f"[demo] {'SUCCESS' if success else 'FAILED'}: {message}  ({wall:.0f} s); outputs in {out}/")
+    if not success:
+        print(f"[demo] next step: {_next_step(message, out)}")
+    return 0 if success else 1
+
+
+def _next_step(message: str, out: Path) -> str:
+    """One line for the user after a failure: what to try, where to read."""
+    if "did not find a sequence" in message:
+        return ("the Q-Tree stopped before reaching the target: rerun with --execute-optimum (the proven optimum), "
+                "or raise max_episodes in config/task_planner.yaml; see docs/qtree.md")
+    if "cannot be reached" in message or "no sequence remains" in message:
+        return "no collision-free way to the target remains on this shelf: see docs/closed_loop.md"
+    if "went away" in message:
+        return (f"the motion planner stopped answering during a relocation (its log: {out}/run/logs); run again, or "
+                "raise relocate_silence in config/task_planner.yaml on a loaded machine")
+    if "off the shelf" in message:
+        return "the target fell off the shelf: it cannot be retrieved; run the demo again (a fresh scene)"
+    if "scene" in message:
+        return f"check the camera and perception (logs in {out}/run/logs); see docs/perception.md"
+    return f"read the task planner's and the motion planner's logs in {out}/run/logs; see docs/closed_loop.md"
 
 
 def run(argv=None) -> int:
@@ -242,11 +306,11 @@ def run(argv=None) -> int:
         rec = _start_recording(g, a, out)
         client = RelocationClient("qtree_demo")  # its own context, no signal handlers: the signals are ours
         try:
-            res, before, after, frames = _train_and_watch(client, g, a, used, scene_topic, t0)
+            res, before, after, frames, run = _train_and_watch(client, g, a, used, scene_topic, t0)
         finally:
             client.close()
             recording = _stop_recording(rec)  # also on an error or Ctrl-C: the bag so far is a valid bag
-    return _report(out, a, used, res, before, after, frames, time.monotonic() - t0, recording)
+    return _report(out, a, used, res, before, after, frames, time.monotonic() - t0, run, recording)
 
 
 class _Latest:
@@ -264,7 +328,7 @@ class _Latest:
         return {o.id: [o.pose.position.x, o.pose.position.y, o.pose.position.z] for o in self.msg.objects}
 
 
-def _check_scene(scenario_path: str, before: dict, after: dict, relocated: list) -> dict:
+def _check_scene(scenario_path: str, before: dict, after: dict, relocated) -> dict:
     """Where the bottles ended (simulator ground truth): the target on the bottom shelf, the others unmoved."""
     from relocation_common.scenario import load_scenario
     s = load_scenario(scenario_path)

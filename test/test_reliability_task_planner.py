@@ -131,7 +131,7 @@ class Env:
 
     def task_planner(self, **params):
         base = {"scene_topic": SCENE_TOPIC, "feasibility_timeout": 1.0, "feasibility_margin": 0.5,
-                "checkpoint_every": 25}
+                "checkpoint_every": 25, "scenario": str(SCENARIO)}  # its shelf and slots: closed-loop execution
         return self.g.start(MODULE, params_file=PARAMS_FILE, params={**base, **params}, name="task_planner")
 
     def fake(self, die_after=-1, delay=0.0, relocate="none") -> NodeProcess:

@@ -1,0 +1,132 @@
+"""The task planner's closed-loop wiring without ROS processes: the scene watch (a scene received after a
+relocation ended), the scene conversion, and retrieval.execute's capacity check before the arm moves."""
+import threading
+import time
+from dataclasses import replace
+
+import pytest
+from geometry_msgs.msg import Quaternion
+from qtree_relocation_msgs.msg import ObjectArray
+
+from qtree_task_planner.closed_loop import scene_from_scenario
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.retrieval import execute
+from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
+from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import bottle_to_msg
+from relocation_common.scenario import load_scenario
+
+SC = load_scenario(default_scenario())
+
+
+def _msg(scenario=SC, z=None):
+    msg = ObjectArray()
+    for b in scenario.objects:
+        o = bottle_to_msg(b)
+        o.pose.position.z = scenario.shelf.top_z if z is None else z
+        msg.objects.append(o)
+    return msg
+
+
+def test_the_watch_waits_for_a_scene_received_after_the_relocation_ended():
+    watch = SceneWatch()
+    watch.put(_msg())
+    with pytest.raises(TimeoutError, match="scene_after_wait"):
+        watch.after(time.monotonic(), 0.2)
+    since = time.monotonic()
+    threading.Timer(0.1, lambda: watch.put(_msg())).start()
+    assert watch.after(since, 5.0) is watch.latest[0]
+
+
+def test_perceive_waits_until_the_relocated_bottle_left_the_top_shelf_or_the_wait_ends():
+    watch, sent = SceneWatch(), []
+    relocate, perceive = watched(lambda o, removed: (sent.append((o, removed)), (True, "ok"))[1], watch, 0.5,
+                                 SC.shelf.top_z)
+    assert relocate("o2", []) == (True, "ok") and sent == [("o2", [])]
+    watch.put(_msg())  # o2 still held on the top shelf (perception's hold_frames)
+    assert not left_top("o2", SC.shelf.top_z)(watch.latest[0])
+    t0 = time.monotonic()
+    scene = perceive()  # the latest after the wait
+    assert time.monotonic() - t0 >= 0.4 and set(scene) == set(SC.ids)
+    assert scene["o2"].tilt == pytest.approx(0.0) and scene[SC.target_id].is_target
+
+
+def test_seen_scene_reads_the_tilt_from_the_orientation():
+    msg = _msg()
+    msg.objects[0].pose.orientation = Quaternion(w=0.7071068, x=0.7071068, y=0.0, z=0.0)
+    scene = seen_scene(msg)
+    assert scene[msg.objects[0].id].tilt == pytest.approx(1.5707963, abs=1e-5)
+
+
+def test_open_loop_refuses_a_sequence_longer_than_the_free_slots():
+    """Before: the open-loop executor relocated every obstacle, then the motion planner refused the target
+    ("no free slot: 12 objects already relocated"). Now the capacity is checked before the arm moves."""
+    sc = replace(SC, slots=SC.slots[:2])
+    sent = []
+    out = execute(sc, ["o2", "o3", SC.target_id], scene_from_scenario(sc), lambda o, r: sent.append(o) or (True, ""),
+                  lambda: {}, CachedOracle(None), closed_loop=False, cancelled=lambda: False)
+    assert not out.success and not sent and "relocates 3 objects but only 2 slots" in out.message, out.message
+
+
+def test_the_learned_sequence_is_executed_only_when_it_is_as_good_as_the_optimum():
+    """scenario3_15's demo executed a learned 12-bottle sequence (4.63) beside the proven optimum (2.12)."""
+    from qtree_task_planner.retrieval import chosen_sequence
+    worse = dict(execute_optimum=False, execute_learned=False)
+    seq, note = chosen_sequence(["o1", "o2", "T"], 4.63, ["o3", "T"], 2.12, **worse)
+    assert seq == ["o3", "T"] and "4.63" in note and "2.12" in note and "execute_learned" in note
+    assert chosen_sequence(["o1", "o2", "T"], 4.63, ["o3", "T"], 2.12, execute_optimum=False,
+                           execute_learned=True) == (["o1", "o2", "T"], "")
+    assert chosen_sequence(["o1", "T"], 2.12, ["o3", "T"], 2.12, **worse) == (["o1", "T"], "")
+    assert chosen_sequence([], None, ["o3", "T"], 2.12, **worse)[0] == ["o3", "T"]
+
+
+def test_a_retrieved_target_that_perception_still_holds_counts_as_gone():
+    """Perception holds the retrieved target at its last pose for hold_frames, then publishes no scene at all: the
+    closed loop would wait, see the target 'on the top shelf' and re-plan it. The first fresh scene counts, without
+    the target, once the motion planner reported the relocation done."""
+    watch = SceneWatch()
+    relocate, perceive = watched(lambda o, removed: (True, "ok"), watch, 5.0, SC.shelf.top_z,
+                                 unseen_target=SC.target_id)
+    relocate(SC.target_id, ["o2"])
+    watch.put(_msg())  # the target still shown on the top shelf (held)
+    t0 = time.monotonic()
+    scene = perceive()
+    assert time.monotonic() - t0 < 1.0 and SC.target_id not in scene and "o2" in scene
+
+
+def test_a_relocation_stopped_by_a_lost_planner_ends_the_closed_loop_at_once():
+    """Without this the closed loop waited scene_after_wait for a scene, then gave up without the reason (the
+    motion planner killed mid-relocation: 'went away')."""
+    perceived = []
+    out = execute(SC, ["o2", SC.target_id], scene_from_scenario(SC),
+                  lambda o, r: (False, "the motion planner went away (relocate action server gone)"),
+                  lambda: perceived.append(1) or {}, CachedOracle(None), closed_loop=True, cancelled=lambda: False)
+    assert not out.success and not perceived and "went away" in out.message, out.message
+
+
+def test_no_scene_after_the_target_left_the_camera_s_view_is_no_failure():
+    """Seen in the demo with perception: 'no scene after relocating T: no scene received within 10 s'. Perception
+    publishes nothing once the target is out of view: the last scene counts, without the target."""
+    watch = SceneWatch()
+    watch.put(_msg())
+    relocate, perceive = watched(lambda o, removed: (True, "ok"), watch, 10.0, SC.shelf.top_z,
+                                 unseen_target=SC.target_id)
+    relocate(SC.target_id, ["o2"])
+    t0 = time.monotonic()
+    scene = perceive()
+    assert time.monotonic() - t0 < 3.0 and SC.target_id not in scene and "o2" in scene
+
+
+def test_the_motion_planners_outcome_unknown_for_the_unseen_target_is_no_failure():
+    """Seen in the demo with perception: the motion planner got no scene after the target's relocation either and
+    answered 'outcome unknown'; the closed loop then waited 10 s and gave up with the target on the bottom shelf."""
+    watch = SceneWatch()
+    watch.put(_msg())
+    unknown = (False, "relocated T to slot 1, but no scene on /scene/objects within outcome_timeout after the "
+                      "motion: outcome unknown")
+    relocate, perceive = watched(lambda o, removed: unknown, watch, 10.0, SC.shelf.top_z, unseen_target=SC.target_id)
+    ok, message = relocate(SC.target_id, ["o2"])
+    assert ok and "left the camera's view" in message
+    assert SC.target_id not in perceive()
+    relocate, _ = watched(lambda o, removed: unknown, watch, 10.0, SC.shelf.top_z, unseen_target=False)
+    assert relocate(SC.target_id, ["o2"]) == unknown  # ground truth shows the bottom shelf: a failure stays one

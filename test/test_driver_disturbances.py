@@ -1,0 +1,57 @@
+"""The driver's disturbance hook without ROS (jaco2_sim_driver/driver.py over the MuJoCo core; docs/closed_loop.md):
+commands as the node's /sim/disturb transforms, a DisturbancePlan from the parameters, reset undoing them."""
+import numpy as np
+import pytest
+import yaml
+
+import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
+from jaco2_sim_driver.disturbance import DisturbancePlan
+from jaco2_sim_driver.driver import Rates, SimDriver, check_parameters
+from jaco2_sim_driver.sim import Jaco2Sim
+from relocation_common.paths import config_file, default_scenario
+from relocation_common.robot_description import BASE_LINK, Q_HOME
+from relocation_common.scenario import load_scenario
+
+SCENARIO = load_scenario(default_scenario())
+PARAMS = yaml.safe_load(config_file("jaco2_sim_driver.yaml").read_text())["jaco2_sim_driver"]["ros__parameters"]
+
+
+@pytest.fixture(scope="module")
+def core():
+    sim = Jaco2Sim(SCENARIO)
+    sim.q_home = np.asarray(Q_HOME, float)
+    return SimDriver(sim, Rates(real_time_factor=0.0))
+
+
+def _xy(core, oid):
+    return next(np.array(p.position[:2]) for p in core.sim.object_poses() if p.id == oid)
+
+
+def test_commands_nudge_move_and_refuse_with_the_reason_then_reset_undoes_them(core):
+    core.reset()
+    before = _xy(core, "o5")
+    core.disturb("bottle_o5", "bottle_o5", (0.0, 0.02, 0.0), (0.0, 0.0, 0.0, 1.0))  # relative: a nudge
+    core.disturb(BASE_LINK, "grasped", (0, 0, 0), (0, 0, 0, 1))  # nothing in the hand
+    core.disturb("world", "bottle_o5", (0, 0, 0), (0, 0, 0, 1))  # another bottle's frame: refused
+    records = core.tick().disturbances
+    assert [r.get("kind") for r in records] == ["nudge", None, None], records
+    assert "nothing in the hand" in records[1]["skipped"] and "use base_link" in records[2]["skipped"].replace(
+        BASE_LINK, "base_link")
+    for _ in range(200):
+        core.tick()
+    moved = _xy(core, "o5") - before
+    assert 0.0 < moved[1] <= 0.0201 and abs(moved[0]) < 0.003, moved
+    core.reset()
+    assert np.allclose(_xy(core, "o5"), before, atol=1e-6)
+    assert core.tick().disturbances == []
+
+
+def test_the_plan_and_drop_parameters_are_checked_and_taken():
+    plan = DisturbancePlan.draw(2, seed=3, relocations=3)
+    check_parameters({**PARAMS, "disturbance_plan": plan.to_json(), "drop_probability": 0.5}.get)
+    with pytest.raises(ValueError, match="drop_probability"):
+        check_parameters({**PARAMS, "drop_probability": 1.5}.get)
+    with pytest.raises(ValueError, match="not a disturbance plan"):
+        check_parameters({**PARAMS, "disturbance_plan": "{nope"}.get)
+    core = SimDriver.from_parameters({**PARAMS, "disturbance_plan": plan.to_json(), "real_time_factor": 0.0}.get)
+    assert core.schedule is not None and core.schedule.plan == plan and core.dropper.probability == 0.0
