@@ -25,21 +25,27 @@ def test_mypy_reports_nothing(tmp_path):
     assert out.returncode == 0, out.stdout[-6000:] + out.stderr[-2000:]
 
 
+def _source_lines():
+    """(path relative to the checkout, line number, line) of every Python file of the checkout but this one (it
+    names the marker and the pattern it looks for) and the venv / colcon folders."""
+    for path in ROOT.rglob("*.py"):
+        rel = path.relative_to(ROOT)
+        if any(part in (".venv", "build", "install", "log") for part in rel.parts) or path == Path(__file__).resolve():
+            continue
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            yield rel, i, line
+
+
 def test_noqa_lines_say_why():
     """A `noqa` silences a check; the line must say why (a comment after the code, beyond the bare marker)."""
     bare = []
-    for path in ROOT.rglob("*.py"):
-        if any(part in (".venv", "build", "install", "log") for part in path.relative_to(ROOT).parts):
-            continue
-        if path == Path(__file__).resolve():  # this file names the marker and the pattern it looks for
-            continue
-        for i, line in enumerate(path.read_text().splitlines(), 1):
-            if "# noqa" in line:
-                tail = line.split("# noqa", 1)[1]
-                reason = tail.split(":", 1)[1] if ":" in tail else ""
-                words = [w for w in reason.replace(",", " ").split() if not w[:1].isupper() or not w[1:].isdigit()]
-                if len(" ".join(words)) < 8:
-                    bare.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+    for rel, i, line in _source_lines():
+        if "# noqa" in line:
+            tail = line.split("# noqa", 1)[1]
+            reason = tail.split(":", 1)[1] if ":" in tail else ""
+            words = [w for w in reason.replace(",", " ").split() if not w[:1].isupper() or not w[1:].isdigit()]
+            if len(" ".join(words)) < 8:
+                bare.append(f"{rel}:{i}: {line.strip()}")
     assert bare == [], "\n".join(bare[:40])
 
 
@@ -47,13 +53,5 @@ def test_comments_cite_no_tracker_issues():
     """Comments and docstrings cite the docs or the paper, never this project's tracker ("issue 14")."""
     import re
     pat = re.compile(r"\bissues? \d+\b", re.IGNORECASE)
-    hits = []
-    for path in ROOT.rglob("*.py"):
-        if any(part in (".venv", "build", "install", "log") for part in path.relative_to(ROOT).parts):
-            continue
-        if path == Path(__file__).resolve():  # this file names the marker and the pattern it looks for
-            continue
-        for i, line in enumerate(path.read_text().splitlines(), 1):
-            if pat.search(line):
-                hits.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+    hits = [f"{rel}:{i}: {line.strip()}" for rel, i, line in _source_lines() if pat.search(line)]
     assert hits == [], "\n".join(hits[:40])
