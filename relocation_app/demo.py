@@ -49,6 +49,8 @@ def _args(argv):
                    help="K seeded disturbances (nudge, tip, move, drop; seed: --seed) during the execution")
     p.add_argument("--replicas", type=int, default=1, choices=range(1, 9), metavar="N",
                    help="motion planner processes answering feasibility (1-8; the first also moves the arm)")
+    p.add_argument("--camera-model", choices=("ideal", "realsense_d435"),
+                   help="the simulated camera (driver parameter camera_model; default: config/jaco2_sim_driver.yaml)")
     p.add_argument("--out", default="out", help="output directory (default: ./out)")
     p.add_argument("--timeout", type=float, default=900.0, help="give up after this many seconds")
     p.add_argument("--no-record", action="store_true",
@@ -117,7 +119,8 @@ def _start_graph(g: Graph, a, scene_topic: str) -> None:
     ckpt = _checkpoint(g.run_dir / "qtree.ckpt")
     print(f"[demo] starting the node graph on ROS_DOMAIN_ID={g.domain_id} (logs: {g.run_dir / 'logs'})")
     plan = _disturbance_plan(a)
-    g.start("jaco2_sim_driver", dict(common, disturbance_plan=f"'{plan.to_json()}'") if plan else common)
+    driver = dict(common, camera_model=a.camera_model) if a.camera_model else dict(common)
+    g.start("jaco2_sim_driver", dict(driver, disturbance_plan=f"'{plan.to_json()}'") if plan else driver)
     if a.scene_source == "perception":
         g.start("perception", common)
     g.start_planners(a.replicas, dict(common, scene_topic=scene_topic))
