@@ -23,8 +23,13 @@ from relocation_common.robot_description import (
     FINGER_JOINT_NAMES,
     FINGER_LINK_NAMES,
     FINGER_RADIUS,
+    GRIPPER_MARKER_DICTIONARY,
+    GRIPPER_MARKER_ID,
+    GRIPPER_MARKER_SIZE,
     LINK_NAMES,
+    T_TOOL_GRIPPER_MARKER,
     finger_tip,
+    joint_origins,
     mjcf_arm_body,
 )
 from relocation_common.scenario import Marker, Scenario
@@ -147,15 +152,28 @@ def _shelf(world: ET.Element, s) -> None:
     _box(world, "shelf_back_panel", (x1, y0 - t, floor), (x1 + t, y1 + t, s.ceiling_z + t))
 
 
-def _marker(world: ET.Element, m: Marker) -> None:
-    """A thin plate whose front face (+z of the marker frame, OpenCV convention) carries the marker texture."""
-    rot = rpy_matrix(m.rpy)
-    half = m.size * (1 + 2 * MARKER_BORDER) / 2
+def hand_marker() -> Marker:
+    """The calibration marker on the hand (robot_description.GRIPPER_MARKER_*; its pose is in the tool frame,
+    T_TOOL_GRIPPER_MARKER, so `position` / `rpy` here are unused)."""
+    return Marker(GRIPPER_MARKER_ID, GRIPPER_MARKER_DICTIONARY, GRIPPER_MARKER_SIZE, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def _marker_plate(parent: ET.Element, name: str, pose: np.ndarray, size: float, material: str) -> None:
+    """A thin plate (marker + white margin) whose front face is the marker frame's z = 0 plane (OpenCV convention:
+    z out of the face) at `pose` (4x4, in the parent body's frame); no contacts."""
+    rot = pose[:3, :3]
+    half = size * (1 + 2 * MARKER_BORDER) / 2
     thick = 0.002
-    centre = np.asarray(m.position) - rot[:, 2] * thick
-    body = _el(world, "body", name="aruco_marker", pos=centre, quat=quat_wxyz(rot))
-    _el(body, "geom", name="aruco_plate", type="box", size=f"{half:.6g} {half:.6g} {thick}", material="aruco",
+    body = _el(parent, "body", name=name, pos=pose[:3, 3] - rot[:, 2] * thick, quat=quat_wxyz(rot))
+    _el(body, "geom", name=f"{name}_plate", type="box", size=f"{half:.6g} {half:.6g} {thick}", material=material,
         contype="0", conaffinity="0")
+
+
+def _marker(world: ET.Element, m: Marker) -> None:
+    """The scenario's marker on its plate (pose from the scenario, in the base frame)."""
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rpy_matrix(m.rpy), m.position
+    _marker_plate(world, "aruco_marker", pose, m.size, "aruco")
 
 
 def _bottle(world: ET.Element, b, z: float) -> None:
@@ -177,7 +195,7 @@ def _camera(world: ET.Element, c: CameraSpec, shelf) -> None:
         resolution=f"{c.width} {c.height}")
 
 
-def _header(root: ET.Element, camera: CameraSpec) -> None:
+def _header(root: ET.Element, camera: CameraSpec, gripper_marker: bool = False) -> None:
     """Compiler, physics options, visual, the default classes and the assets (materials, marker texture)."""
     _el(root, "compiler", angle="radian", autolimits="true")
     option = _el(root, "option", timestep="0.001", integrator="implicitfast", cone="elliptic", impratio="5")
@@ -199,19 +217,23 @@ def _header(root: ET.Element, camera: CameraSpec) -> None:
     _el(asset, "texture", name="aruco", type="2d", file="aruco.png")
     _el(asset, "material", name="aruco", texture="aruco", texrepeat="1 1", texuniform="false", specular="0",
         shininess="0")
+    if gripper_marker:
+        _el(asset, "texture", name="aruco_gripper", type="2d", file="aruco_gripper.png")
+        _el(asset, "material", name="aruco_gripper", texture="aruco_gripper", specular="0", shininess="0")
     _el(asset, "texture", name="grid", type="2d", builtin="checker", rgb1="0.55 0.55 0.55", rgb2="0.45 0.45 0.45",
         width="256", height="256")
     _el(asset, "material", name="floor", texture="grid", texrepeat="8 8")
 
 
-def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> str:
+def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_marker: bool = False) -> str:
     """MJCF of the whole scene, built with xml.etree.ElementTree (names from a scenario are attribute values,
     escaped, never markup). Physics at 1 kHz (timestep 0.001). The marker texture is the asset 'aruco.png'
-    (see `scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm."""
+    (see `scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm.
+    `gripper_marker`: the calibration marker on the hand (`hand_marker()`, texture 'aruco_gripper.png')."""
     s = scenario.shelf
     floor = s.bottom_z - FLOOR_DROP
     root = ET.Element("mujoco", model=f"jaco2_shelf_{scenario.name}")
-    _header(root, camera)
+    _header(root, camera, gripper_marker)
     world = _el(root, "worldbody")
     for name, pos, direction, diffuse in (("key", "0.0 -0.6 1.6", "0.35 0.35 -1", "0.7 0.7 0.7"),
                                           ("fill", "-0.3 0.5 1.2", "0.5 -0.3 -1", "0.4 0.4 0.4"),
@@ -225,7 +247,11 @@ def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> str:
     _marker(world, scenario.marker)
     _camera(world, camera, s)
     arm = ET.fromstring(mjcf_arm_body())  # the robot description's arm (its own names and numbers only)
-    _hand(next(b for b in arm.iter("body") if b.get("name") == HAND_BODY))
+    hand = next(b for b in arm.iter("body") if b.get("name") == HAND_BODY)
+    _hand(hand)
+    if gripper_marker:
+        _marker_plate(hand, "gripper_marker", joint_origins()[-1] @ T_TOOL_GRIPPER_MARKER, GRIPPER_MARKER_SIZE,
+                      "aruco_gripper")
     world.append(arm)
     for b in scenario.objects:
         _bottle(world, b, s.top_z)
@@ -248,14 +274,22 @@ def _actuators(root: ET.Element, kv: float = 200.0) -> None:
             ctrlrange=f"0 {FINGER_CLOSED}")
 
 
-def scene_assets(scenario: Scenario) -> dict[str, bytes]:
-    """The files the MJCF names: the marker texture 'aruco.png'."""
-    ok, png = cv2.imencode(".png", marker_image(scenario.marker))
+def _png(marker: Marker) -> bytes:
+    ok, png = cv2.imencode(".png", marker_image(marker))
     if not ok:
         raise RuntimeError("could not encode the ArUco marker image")
-    return {"aruco.png": png.tobytes()}
+    return png.tobytes()
 
 
-def build_model(scenario: Scenario, camera: CameraSpec = CameraSpec()) -> mujoco.MjModel:
-    """Compile the scene of a scenario (marker texture built in memory)."""
-    return mujoco.MjModel.from_xml_string(scene_xml(scenario, camera), scene_assets(scenario))
+def scene_assets(scenario: Scenario, gripper_marker: bool = False) -> dict[str, bytes]:
+    """The files the MJCF names: the marker texture 'aruco.png' (and 'aruco_gripper.png' with the hand's marker)."""
+    assets = {"aruco.png": _png(scenario.marker)}
+    if gripper_marker:
+        assets["aruco_gripper.png"] = _png(hand_marker())
+    return assets
+
+
+def build_model(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_marker: bool = False) -> mujoco.MjModel:
+    """Compile the scene of a scenario (marker textures built in memory); `gripper_marker` as in `scene_xml`."""
+    return mujoco.MjModel.from_xml_string(scene_xml(scenario, camera, gripper_marker),
+                                          scene_assets(scenario, gripper_marker))

@@ -163,7 +163,7 @@ class MarkerLocalizer:
         except AttributeError:
             raise ValueError(f"unknown ArUco dictionary {marker.dictionary!r}") from None
         det = cv2.aruco.DetectorParameters()
-        det.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        det.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR
         self.detector = cv2.aruco.ArucoDetector(dictionary, det)
         self.marker = marker
         self.T_base_marker = marker_in_base(marker)

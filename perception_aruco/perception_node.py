@@ -33,6 +33,7 @@ from relocation_common.ros_conversions import bottles_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
 from .aruco import PerceptionError, invert, marker_in_base
+from .calibration import apply_calibration, load_calibration
 from .camera_check import camera_info_problem, image_problem
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
@@ -58,6 +59,9 @@ class PerceptionNode(Node):
             if not g(k) > 0:  # also NaN
                 raise ValueError(f"parameter {k} must be > 0, got {g(k)!r}")
         self.scenario = load_scenario(g("scenario") or None)
+        if g("calibration_file"):  # the marker's pose measured with the robot (`./run calibrate`)
+            self.scenario = apply_calibration(self.scenario, load_calibration(g("calibration_file")))
+            self.get_logger().info(f"marker pose from the calibration {g('calibration_file')}")
         self.perception = Perception(
             self.scenario,
             SegmentationParams(gain_min=g("gain_min"), gain_max=g("gain_max"), max_residual=g("max_residual")),

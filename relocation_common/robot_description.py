@@ -99,6 +99,18 @@ FINGER_CLOSED = 0.5  # rad
 
 FINGER_GEAR = FINGER_CLOSED / FINGER_JOINT_CLOSED  # hinge angle per joint-state angle (both linear in turns)
 
+# Calibration marker on the hand (`./run calibrate`, docs/perception.md "Calibration to the robot"): an ArUco marker
+# on a plate beside the palm, facing the tool frame's +y (up at Q_HOME), its x along the approach (tool z); pose in
+# the tool frame (OpenCV marker convention: z out of the face). Only the scene built for calibration carries it
+# (jaco2_sim_driver.scene, gripper_marker=True): the arm's kinematics and collision model do not include it.
+GRIPPER_MARKER_ID = 3
+GRIPPER_MARKER_DICTIONARY = "DICT_4X4_50"
+GRIPPER_MARKER_SIZE = 0.04   # m, the black square (the white plate around it is 1.5 x as wide)
+T_TOOL_GRIPPER_MARKER = np.array([[0.0, 1.0, 0.0, 0.0],
+                                  [0.0, 0.0, 1.0, 0.058],
+                                  [1.0, 0.0, 0.0, -0.10],
+                                  [0.0, 0.0, 0.0, 1.0]])
+
 
 def finger_tip(k: int) -> tuple[float, float, float]:
     """Tip of finger k in its own (hinge) frame: FINGER_LENGTH along z, bent 5 mm towards the outside."""

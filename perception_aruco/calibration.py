@@ -1,0 +1,183 @@
+"""Calibration of the fixed camera to the robot (eye-to-hand): the camera's pose in the robot base frame from a
+marker on the gripper seen at several arm poses, and from it the shelf marker's pose in the base frame (the
+paper's common frame, Sect. 5, measured instead of taken from the scenario). No rclpy here.
+
+At every arm pose i the forward kinematics give T_base_gripper_i and the camera sees the gripper marker at
+T_camera_marker_i; with X = T_gripper_marker and Z = T_base_camera (both constant)
+
+    T_base_gripper_i @ X = Z @ T_camera_marker_i,
+
+the robot-world / hand-eye problem AX = ZB. Solved here as OpenCV's `calibrateRobotWorldHandEye` does with
+Shah's method (M. Shah, "Solving the robot-world/hand-eye calibration problem using the Kronecker product", 2013):
+the rotations from the null space of the Kronecker system, then the translations by least squares; then refined
+(Gauss-Newton) on the marker's corners, which weighs rotation and translation errors as the image measures them.
+(The OpenCV 5.0 wheels of this project expose the CALIB_HAND_EYE_* constants but not the functions.) The file
+written (`save_calibration`) holds the shelf marker's
+pose in the base frame, which perception uses instead of the scenario's (`apply_calibration`).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+from relocation_common.scenario import Marker, Scenario
+
+from .aruco import PerceptionError, pose_error, transform
+
+MIN_POSES = 6              # fewer arm poses with the marker seen: the calibration is refused
+MAX_RESIDUAL_MM = 3.0      # rms disagreement of the two sides of the equation above at the marker
+MAX_RESIDUAL_DEG = 0.5
+
+
+class CalibrationError(PerceptionError):
+    """The calibration cannot be solved or its observations do not agree (the message says what to do)."""
+
+
+def matrix_rpy(rot: np.ndarray) -> tuple[float, float, float]:
+    """Roll-pitch-yaw (URDF fixed-axis, the scenario's `rpy`) of a rotation matrix: the inverse of `rpy_matrix`."""
+    pitch = math.asin(max(-1.0, min(1.0, -float(rot[2, 0]))))
+    if abs(abs(pitch) - math.pi / 2) < 1e-9:
+        return (math.atan2(-float(rot[1, 2]), float(rot[1, 1])), pitch, 0.0)
+    return (math.atan2(float(rot[2, 1]), float(rot[2, 2])), pitch, math.atan2(float(rot[1, 0]), float(rot[0, 0])))
+
+
+@dataclass(frozen=True)
+class HandEye:
+    """Solution of the eye-to-hand calibration: T_base_camera, T_gripper_marker, the rms residual over the poses
+    (position mm, rotation deg) and the number of poses used."""
+
+    T_base_camera: np.ndarray
+    T_gripper_marker: np.ndarray
+    residual_mm: float
+    residual_deg: float
+    poses: int
+
+
+def solve_hand_eye(T_base_gripper: Sequence[np.ndarray], T_camera_marker: Sequence[np.ndarray]) -> HandEye:
+    """T_base_camera and T_gripper_marker from paired arm poses (forward kinematics) and marker observations
+    (module docstring); CalibrationError when too few poses or when the observations disagree."""
+    if len(T_base_gripper) != len(T_camera_marker):
+        raise CalibrationError("calibration: as many marker observations as arm poses are needed")
+    if len(T_base_gripper) < MIN_POSES:
+        raise CalibrationError(f"calibration: the gripper marker was seen at {len(T_base_gripper)} arm poses, at "
+                               f"least {MIN_POSES} are needed: move the arm where the camera sees the marker")
+    T_gripper_marker, T_base_camera = _refine(T_base_gripper, T_camera_marker,
+                                              *_closed_form(T_base_gripper, T_camera_marker))
+    errs = [pose_error(g @ T_gripper_marker, T_base_camera @ m) for g, m in zip(T_base_gripper, T_camera_marker)]
+    res_mm = 1000 * math.sqrt(float(np.mean([e[0] ** 2 for e in errs])))
+    res_deg = math.degrees(math.sqrt(float(np.mean([e[1] ** 2 for e in errs]))))
+    if res_mm > MAX_RESIDUAL_MM or res_deg > MAX_RESIDUAL_DEG:
+        raise CalibrationError(
+            f"calibration: the arm poses and the marker observations disagree by {res_mm:.1f} mm, {res_deg:.2f} deg "
+            f"rms (bounds {MAX_RESIDUAL_MM:g} mm, {MAX_RESIDUAL_DEG:g} deg): the camera or the marker moved "
+            "during the calibration, or the joint angles are not those of the images")
+    return HandEye(T_base_camera, T_gripper_marker, res_mm, res_deg, len(T_base_gripper))
+
+
+def _so3(m: np.ndarray) -> np.ndarray:
+    u, _, vt = np.linalg.svd(m)
+    return u @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)))]) @ vt
+
+
+def _closed_form(A: Sequence[np.ndarray], B: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(X, Z) of A_i X = Z B_i, Shah's method: R_A R_X = R_Z R_B is, with column-major vec,
+    (I (x) R_A) vec R_X - (R_B^T (x) I) vec R_Z = 0 (null vector by SVD, scaled to det 1, projected on SO(3));
+    then R_A t_X - t_Z = R_Z t_B - t_A by least squares."""
+    eye = np.eye(3)
+    rows = np.vstack([np.hstack([np.kron(eye, a[:3, :3]), -np.kron(b[:3, :3].T, eye)]) for a, b in zip(A, B)])
+    v = np.linalg.svd(rows)[2][-1]
+    rx, rz = v[:9].reshape(3, 3, order="F"), v[9:].reshape(3, 3, order="F")
+    scale = np.cbrt(np.linalg.det(rx))
+    rx, rz = _so3(rx / scale), _so3(rz / scale)
+    lhs = np.vstack([np.hstack([a[:3, :3], -eye]) for a in A])
+    rhs = np.concatenate([rz @ b[:3, 3] - a[:3, 3] for a, b in zip(A, B)])
+    t = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    return transform(rx, t[:3]), transform(rz, t[3:])
+
+
+def _exp(w: np.ndarray) -> np.ndarray:
+    return cv2.Rodrigues(np.asarray(w, float).reshape(3, 1))[0]
+
+
+def _refine(A, B, X: np.ndarray, Z: np.ndarray, iterations: int = 10):
+    """Gauss-Newton on sum |A_i X c - Z B_i c|^2 over the corners c of a 4 cm square in the marker's plane (the
+    hand marker's scale), numeric Jacobian over 12 parameters (rotation vector and translation of X and of Z)."""
+    ch = np.array([[-0.02, 0.02, 0.0, 1.0], [0.02, 0.02, 0.0, 1.0], [0.02, -0.02, 0.0, 1.0],
+                   [-0.02, -0.02, 0.0, 1.0]]).T
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        xx = transform(_exp(x[:3]) @ X[:3, :3], X[:3, 3] + x[3:6])
+        zz = transform(_exp(x[6:9]) @ Z[:3, :3], Z[:3, 3] + x[9:])
+        return np.concatenate([((a @ xx - zz @ b) @ ch)[:3].ravel() for a, b in zip(A, B)])
+
+    for _ in range(iterations):
+        r0 = residual(np.zeros(12))
+        jac = np.stack([(residual(d) - r0) / 1e-7 for d in 1e-7 * np.eye(12)], axis=1)
+        step = np.linalg.lstsq(jac, -r0, rcond=None)[0]
+        X = transform(_exp(step[:3]) @ X[:3, :3], X[:3, 3] + step[3:6])
+        Z = transform(_exp(step[6:9]) @ Z[:3, :3], Z[:3, 3] + step[9:])
+        if np.linalg.norm(step) < 1e-9:
+            break
+    return X, Z
+
+
+def mean_pose(poses: Sequence[np.ndarray]) -> np.ndarray:
+    """Mean of nearby rigid poses: positions averaged, rotation the nearest to the sum of the rotations (SVD)."""
+    return transform(_so3(np.sum([t[:3, :3] for t in poses], axis=0)), np.mean([t[:3, 3] for t in poses], axis=0))
+
+
+def marker_in_base_from(hand_eye: HandEye, T_camera_shelf_marker: Sequence[np.ndarray]) -> np.ndarray:
+    """T_base_marker of the shelf marker: the calibrated camera pose times the marker's pose in the camera (the
+    mean over the frames given)."""
+    if not len(T_camera_shelf_marker):
+        raise CalibrationError("calibration: the shelf marker was not seen: clear the camera's view of it")
+    return hand_eye.T_base_camera @ mean_pose(T_camera_shelf_marker)
+
+
+def save_calibration(path: Path, marker: Marker, T_base_marker: np.ndarray, hand_eye: HandEye, note: str) -> None:
+    """The calibration file (YAML): the shelf marker's pose in the base frame (what perception reads), the
+    camera's, and the hand-eye residuals."""
+    cam = hand_eye.T_base_camera
+
+    def pose(t: np.ndarray) -> dict:
+        return {"position": [round(float(v), 6) for v in t[:3, 3]],
+                "rpy": [round(v, 7) for v in matrix_rpy(t[:3, :3])]}
+    doc = {"marker": {"id": marker.id, "dictionary": marker.dictionary, "size": marker.size, **pose(T_base_marker)},
+           "camera_optical_frame": pose(cam),
+           "hand_eye": {"poses": hand_eye.poses, "residual_mm": round(hand_eye.residual_mm, 3),
+                        "residual_deg": round(hand_eye.residual_deg, 4)}}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f"# {note}\n# Read by perception (parameter calibration_file): the marker's pose replaces the "
+                    "scenario's.\n" + yaml.safe_dump(doc, sort_keys=False))
+
+
+def load_calibration(path: str | Path) -> Marker:
+    """The shelf marker of a calibration file (CalibrationError naming what is wrong with the file)."""
+    p = Path(path)
+    try:
+        m = yaml.safe_load(p.read_text())["marker"]
+        return Marker(int(m["id"]), str(m["dictionary"]), float(m["size"]),
+                      tuple(float(v) for v in m["position"]), tuple(float(v) for v in m["rpy"]))  # type: ignore[arg-type]
+    except FileNotFoundError:
+        raise CalibrationError(f"calibration file {p} not found: run `./run calibrate` or set calibration_file "
+                               "to '' (the scenario's marker pose)") from None
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as e:
+        raise CalibrationError(f"calibration file {p} is not a calibration (marker: id, dictionary, size, "
+                               f"position, rpy): {e}; run `./run calibrate` again") from None
+
+
+def apply_calibration(scenario: Scenario, marker: Marker) -> Scenario:
+    """The scenario with the calibrated marker pose; CalibrationError when the file is for another marker."""
+    m = scenario.marker
+    if (marker.id, marker.dictionary) != (m.id, m.dictionary) or abs(marker.size - m.size) > 1e-6:
+        raise CalibrationError(
+            f"the calibration is for marker id {marker.id} ({marker.dictionary}, {marker.size} m), the scenario's "
+            f"marker is id {m.id} ({m.dictionary}, {m.size} m): calibrate with this scenario")
+    return replace(scenario, marker=replace(m, position=marker.position, rpy=marker.rpy))
+
