@@ -169,11 +169,16 @@ def _marker_plate(parent: ET.Element, name: str, pose: np.ndarray, size: float, 
         contype="0", conaffinity="0")
 
 
-def _marker(world: ET.Element, m: Marker) -> None:
-    """The scenario's marker on its plate (pose from the scenario, in the base frame)."""
+def _marker_name(k: int) -> str:
+    """Body, material and texture name of the scenario's k-th marker ('aruco' for the first)."""
+    return "aruco" if k == 0 else f"aruco_{k}"
+
+
+def _marker(world: ET.Element, k: int, m: Marker) -> None:
+    """The scenario's k-th marker on its plate (pose from the scenario, in the base frame)."""
     pose = np.eye(4)
     pose[:3, :3], pose[:3, 3] = rpy_matrix(m.rpy), m.position
-    _marker_plate(world, "aruco_marker", pose, m.size, "aruco")
+    _marker_plate(world, f"{_marker_name(k)}_marker", pose, m.size, _marker_name(k))
 
 
 def _bottle(world: ET.Element, b, z: float) -> None:
@@ -195,7 +200,7 @@ def _camera(world: ET.Element, c: CameraSpec, shelf) -> None:
         resolution=f"{c.width} {c.height}")
 
 
-def _header(root: ET.Element, camera: CameraSpec, gripper_marker: bool = False) -> None:
+def _header(root: ET.Element, camera: CameraSpec, markers: int = 1, gripper_marker: bool = False) -> None:
     """Compiler, physics options, visual, the default classes and the assets (materials, marker texture)."""
     _el(root, "compiler", angle="radian", autolimits="true")
     option = _el(root, "option", timestep="0.001", integrator="implicitfast", cone="elliptic", impratio="5")
@@ -214,9 +219,11 @@ def _header(root: ET.Element, camera: CameraSpec, gripper_marker: bool = False) 
             ("bottle", dict(contype="1", conaffinity="3", friction="0.8 0.01 0.001", condim="4", solref="0.004 1"))):
         _el(_el(default, "default", class_=cls), "geom", **geom)
     asset = _el(root, "asset")
-    _el(asset, "texture", name="aruco", type="2d", file="aruco.png")
-    _el(asset, "material", name="aruco", texture="aruco", texrepeat="1 1", texuniform="false", specular="0",
-        shininess="0")
+    for k in range(markers):
+        name = _marker_name(k)
+        _el(asset, "texture", name=name, type="2d", file=f"{name}.png")
+        _el(asset, "material", name=name, texture=name, texrepeat="1 1", texuniform="false", specular="0",
+            shininess="0")
     if gripper_marker:
         _el(asset, "texture", name="aruco_gripper", type="2d", file="aruco_gripper.png")
         _el(asset, "material", name="aruco_gripper", texture="aruco_gripper", specular="0", shininess="0")
@@ -227,13 +234,13 @@ def _header(root: ET.Element, camera: CameraSpec, gripper_marker: bool = False) 
 
 def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_marker: bool = False) -> str:
     """MJCF of the whole scene, built with xml.etree.ElementTree (names from a scenario are attribute values,
-    escaped, never markup). Physics at 1 kHz (timestep 0.001). The marker texture is the asset 'aruco.png'
-    (see `scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm.
+    escaped, never markup). Physics at 1 kHz (timestep 0.001). The marker textures are the assets 'aruco.png',
+    'aruco_<k>.png' (`scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm.
     `gripper_marker`: the calibration marker on the hand (`hand_marker()`, texture 'aruco_gripper.png')."""
     s = scenario.shelf
     floor = s.bottom_z - FLOOR_DROP
     root = ET.Element("mujoco", model=f"jaco2_shelf_{scenario.name}")
-    _header(root, camera, gripper_marker)
+    _header(root, camera, len(scenario.markers), gripper_marker)
     world = _el(root, "worldbody")
     for name, pos, direction, diffuse in (("key", "0.0 -0.6 1.6", "0.35 0.35 -1", "0.7 0.7 0.7"),
                                           ("fill", "-0.3 0.5 1.2", "0.5 -0.3 -1", "0.4 0.4 0.4"),
@@ -244,7 +251,8 @@ def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_mar
     _el(world, "geom", name="pedestal", type="box", pos=(-0.02, 0.0, floor / 2), size=(0.09, 0.09, -floor / 2),
         rgba="0.3 0.3 0.3 1", contype="1", conaffinity="1")
     _shelf(world, s)
-    _marker(world, scenario.marker)
+    for k, m in enumerate(scenario.markers):
+        _marker(world, k, m)
     _camera(world, camera, s)
     arm = ET.fromstring(mjcf_arm_body())  # the robot description's arm (its own names and numbers only)
     hand = next(b for b in arm.iter("body") if b.get("name") == HAND_BODY)
@@ -282,8 +290,9 @@ def _png(marker: Marker) -> bytes:
 
 
 def scene_assets(scenario: Scenario, gripper_marker: bool = False) -> dict[str, bytes]:
-    """The files the MJCF names: the marker texture 'aruco.png' (and 'aruco_gripper.png' with the hand's marker)."""
-    assets = {"aruco.png": _png(scenario.marker)}
+    """The files the MJCF names: the marker textures 'aruco.png', 'aruco_1.png', ... (and 'aruco_gripper.png' with
+    the hand's marker)."""
+    assets = {f"{_marker_name(k)}.png": _png(m) for k, m in enumerate(scenario.markers)}
     if gripper_marker:
         assets["aruco_gripper.png"] = _png(hand_marker())
     return assets

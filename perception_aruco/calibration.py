@@ -28,7 +28,7 @@ import yaml
 
 from relocation_common.scenario import Marker, Scenario
 
-from .aruco import PerceptionError, pose_error, transform
+from .aruco import PerceptionError, mean_pose, nearest_rotation, pose_error, transform
 
 MIN_POSES = 6              # fewer arm poses with the marker seen: the calibration is refused
 MAX_RESIDUAL_MM = 3.0      # rms disagreement of the two sides of the equation above at the marker
@@ -80,11 +80,6 @@ def solve_hand_eye(T_base_gripper: Sequence[np.ndarray], T_camera_marker: Sequen
     return HandEye(T_base_camera, T_gripper_marker, res_mm, res_deg, len(T_base_gripper))
 
 
-def _so3(m: np.ndarray) -> np.ndarray:
-    u, _, vt = np.linalg.svd(m)
-    return u @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)))]) @ vt
-
-
 def _closed_form(A: Sequence[np.ndarray], B: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """(X, Z) of A_i X = Z B_i, Shah's method: R_A R_X = R_Z R_B is, with column-major vec,
     (I (x) R_A) vec R_X - (R_B^T (x) I) vec R_Z = 0 (null vector by SVD, scaled to det 1, projected on SO(3));
@@ -94,7 +89,7 @@ def _closed_form(A: Sequence[np.ndarray], B: Sequence[np.ndarray]) -> tuple[np.n
     v = np.linalg.svd(rows)[2][-1]
     rx, rz = v[:9].reshape(3, 3, order="F"), v[9:].reshape(3, 3, order="F")
     scale = np.cbrt(np.linalg.det(rx))
-    rx, rz = _so3(rx / scale), _so3(rz / scale)
+    rx, rz = nearest_rotation(rx / scale), nearest_rotation(rz / scale)
     lhs = np.vstack([np.hstack([a[:3, :3], -eye]) for a in A])
     rhs = np.concatenate([rz @ b[:3, 3] - a[:3, 3] for a, b in zip(A, B)])
     t = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
@@ -125,11 +120,6 @@ def _refine(A, B, X: np.ndarray, Z: np.ndarray, iterations: int = 10):
         if np.linalg.norm(step) < 1e-9:
             break
     return X, Z
-
-
-def mean_pose(poses: Sequence[np.ndarray]) -> np.ndarray:
-    """Mean of nearby rigid poses: positions averaged, rotation the nearest to the sum of the rotations (SVD)."""
-    return transform(_so3(np.sum([t[:3, :3] for t in poses], axis=0)), np.mean([t[:3, 3] for t in poses], axis=0))
 
 
 def marker_in_base_from(hand_eye: HandEye, T_camera_shelf_marker: Sequence[np.ndarray]) -> np.ndarray:

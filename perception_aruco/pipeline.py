@@ -18,7 +18,16 @@ import numpy as np
 
 from relocation_common.scenario import Bottle, Scenario
 
-from .aruco import MarkerLocalizer, MarkerNotFoundError, MarkerObservation, MarkerParams, invert, pose_error
+from .aruco import (
+    MarkerInconsistentError,
+    MarkerLocalizer,
+    MarkerNotFoundError,
+    MarkerObservation,
+    MarkerParams,
+    invert,
+    mean_pose,
+    pose_error,
+)
 from .localize import Detection, FitError, LocalizeParams, locate_bottle
 from .segmentation import (
     Segmentation,
@@ -54,24 +63,18 @@ class Perception:
                  loc: LocalizeParams = LocalizeParams(), refine_with_depth: bool = True,
                  shelf: ShelfParams = ShelfParams(), marker: MarkerParams = MarkerParams()):
         self.scenario, self.seg, self.loc, self.shelf = scenario, seg, loc, shelf
-        self.localizer = MarkerLocalizer(scenario.marker, refine_with_depth=refine_with_depth, params=marker)
+        self.localizers = [MarkerLocalizer(m, refine_with_depth=refine_with_depth, params=marker)
+                           for m in scenario.markers]
+        self.localizer = self.localizers[0]   # the scenario's first marker
 
     def process(self, rgb, depth, K, prior: np.ndarray | None = None) -> PerceptionResult:
         """Bottles of one registered RGB-D frame. `prior`: T_base_camera of earlier frames (the node's fused frame);
         when the marker is not seen now, the prior stands in if the shelf confirms it."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
-        notes = []
-        marker: MarkerObservation | None
-        try:
-            expected = None if prior is None else invert(prior) @ self.localizer.T_base_marker
-            marker = self.localizer.locate(rgb, K, depth, expected)
-            t0, levels = marker.T_base_camera, plate_levels(rgb, marker.corners)
-        except MarkerNotFoundError as e:
-            if prior is None:
-                raise
-            marker, t0, levels = None, np.asarray(prior, float), None
-            notes.append(f"{e}; using the fused frame of earlier frames")
+        notes: list[str] = []
+        marker, t0 = self._marker_frame(rgb, K, depth, prior, notes)
+        levels = None if marker is None else plate_levels(rgb, marker.corners)
         cam = backproject_image(depth, K, np.eye(4))
         r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
         st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
@@ -93,6 +96,33 @@ class Perception:
                       min_inliers=max(10, round(self.loc.min_inliers * area)))
         found, missing = self._locate_all(seg, T[:3, 3], loc)
         return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
+
+    def _marker_frame(self, rgb, K, depth, prior, notes: list[str]) -> tuple[MarkerObservation | None, np.ndarray]:
+        """(the first marker seen, T_base_camera): the mean of the poses of every marker seen (a covered or
+        inconsistent one is left out, its reason in `notes`); none seen: the prior if given and no marker was
+        inconsistent, else the marker's error (all markers' reasons)."""
+        seen, errors = [], []
+        for loc in self.localizers:
+            expected = None if prior is None else invert(prior) @ loc.T_base_marker
+            try:
+                seen.append(loc.locate(rgb, K, depth, expected))
+            except (MarkerNotFoundError, MarkerInconsistentError) as e:
+                errors.append(e)
+        if seen:
+            notes.extend(f"{e}; the frame from the other markers" for e in errors)
+            if len(seen) == 1:
+                return seen[0], seen[0].T_base_camera
+            poses = [o.T_base_camera for o in seen]
+            spread = max(pose_error(t, poses[0]) for t in poses[1:])
+            notes.append(f"{len(seen)} markers agree within {spread[0] * 1000:.1f} mm, {math.degrees(spread[1]):.2f} "
+                         "deg (the shelf fit checks the frame)")
+            return seen[0], mean_pose(poses)
+        if prior is not None and all(isinstance(e, MarkerNotFoundError) for e in errors):
+            notes.append(f"{'; '.join(map(str, errors))}; using the fused frame of earlier frames")
+            return None, np.asarray(prior, float)
+        if len(errors) == 1:
+            raise errors[0]
+        raise type(errors[0])("; ".join(map(str, errors)))
 
     def _locate_all(self, seg: Segmentation, cam: np.ndarray,
                     loc: LocalizeParams) -> tuple[dict[str, Detection], dict[str, str]]:

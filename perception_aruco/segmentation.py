@@ -77,7 +77,7 @@ def backproject_image(depth: np.ndarray, K: np.ndarray, T_base_camera: np.ndarra
 
 
 def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker_margin: float) -> np.ndarray:
-    """HxW bool: the point is inside the top or bottom shelf compartment and not on the marker plate."""
+    """HxW bool: the point is inside the top or bottom shelf compartment and not on a marker plate."""
     s = scenario.shelf
     x, y, z = points[..., 0], points[..., 1], points[..., 2]
     with np.errstate(invalid="ignore"):
@@ -85,11 +85,11 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
         top = (z > s.top_z + margin) & (z < s.ceiling_z - margin)
         bottom = (z > s.bottom_z + margin) & (z < s.top_z - s.board_thickness - margin)
         mask = inside & (top | bottom)
-        m = scenario.marker
-        local = (points[mask] - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
-        half = m.size * 0.75 + marker_margin  # the plate carries a white margin of a quarter side
-        on_marker = (np.abs(local[:, 0]) < half) & (np.abs(local[:, 1]) < half) & (np.abs(local[:, 2]) < 0.02)
-    mask[mask] = ~on_marker
+        for m in scenario.markers:
+            local = (points[mask] - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
+            half = m.size * 0.75 + marker_margin  # the plate carries a white margin of a quarter side
+            on_marker = (np.abs(local[:, 0]) < half) & (np.abs(local[:, 1]) < half) & (np.abs(local[:, 2]) < 0.02)
+            mask[mask] = ~on_marker
     return mask
 
 

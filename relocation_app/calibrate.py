@@ -25,8 +25,8 @@ import numpy as np
 from jaco2_sim_driver.camera import CameraRenderer  # first: sets MUJOCO_GL before mujoco is imported
 from jaco2_sim_driver.scene import CameraSpec, build_model, hand_marker
 from jaco2_sim_driver.sensor_model import CAMERA_MODELS, SensorModel
-from perception_aruco.aruco import MarkerLocalizer, PerceptionError, marker_in_base, pose_error
-from perception_aruco.calibration import HandEye, marker_in_base_from, mean_pose, save_calibration, solve_hand_eye
+from perception_aruco.aruco import MarkerLocalizer, MarkerParams, PerceptionError, marker_in_base, mean_pose, pose_error
+from perception_aruco.calibration import HandEye, marker_in_base_from, save_calibration, solve_hand_eye
 from relocation_common.paths import default_scenario, resolve_scenario
 from relocation_common.robot_description import BASE_LINK, JOINT_NAMES, dh_fk
 from relocation_common.scenario import Scenario, load_scenario
@@ -116,7 +116,8 @@ def calibrate(scenario: Scenario, arm: SimArm, poses=CALIBRATION_POSES, frames_p
     """Observe the hand's marker at `poses` (the mean over `frames_per_pose` frames at each) and the shelf marker in
     the same frames; solve (module docstring). Raises perception_aruco.calibration.CalibrationError (too few poses
     seen, observations that disagree, the shelf marker never seen)."""
-    hand, shelf = MarkerLocalizer(hand_marker()), MarkerLocalizer(scenario.marker)
+    contour = MarkerParams(corner_refinement="contour")  # the marker's in-plane rotation to 0.05 deg (aruco.py)
+    hand, shelf = MarkerLocalizer(hand_marker(), params=contour), MarkerLocalizer(scenario.marker, params=contour)
     gripper, seen, shelf_seen, skipped = [], [], [], {}
     for i, q in enumerate(poses):
         touching = arm.move(q)

@@ -119,6 +119,7 @@ class Scenario:
     blocking: Mapping[str, frozenset[str]] | None = None
     source: str = "<dict>"
     auto_slots: bool = False  # slots from `slots: auto` (AUTO_SLOT_*); the motion planner checks them at start
+    more_markers: tuple[Marker, ...] = ()  # further markers of `markers:` (the first is `marker`)
     _by_id: dict[str, Bottle] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -167,7 +168,12 @@ class Scenario:
         if len(bottles) > len(self.slots) and not self.auto_slots:
             raise ScenarioError(f"{self.name}: {len(bottles)} objects but only {len(self.slots)} slots")
         return Scenario(self.name, self.description, self.shelf, bottles, targets[0], self.slots,
-                        self.marker, None, self.source, self.auto_slots)
+                        self.marker, None, self.source, self.auto_slots, self.more_markers)
+
+    @property
+    def markers(self) -> tuple[Marker, ...]:
+        """Every ArUco marker on the shelf: `marker` first, then the further ones of `markers:`."""
+        return (self.marker, *self.more_markers)
 
     def slot(self, n_relocated: int) -> tuple[float, float]:
         """Destination on the bottom shelf of the object relocated after n_relocated others (fills in order)."""
@@ -292,6 +298,7 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         raise ScenarioError("target: missing; name the id of the object to retrieve")
     objects = _objects(data, shelf, target_id)
     slots, auto = _slots(data.get("slots", "auto"), shelf, len(objects))
+    markers = _markers(data)
     return Scenario(
         name=_name(data, source),
         description=str(data.get("description", "")),
@@ -299,10 +306,11 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         objects=objects,
         target_id=target_id,
         slots=slots,
-        marker=_marker(data.get("marker")),
+        marker=markers[0],
         blocking=_blocking(data, {o.id for o in objects}),
         source=source,
         auto_slots=auto,
+        more_markers=markers[1:],
     )
 
 
@@ -392,6 +400,28 @@ def _slots(raw: Any, shelf: Shelf, n: int) -> tuple[tuple[tuple[float, float], .
     if isinstance(raw, list) and len(raw) >= n:
         return tuple(_vec2({"xy": s}, "xy", f"slots[{k}]") for k, s in enumerate(raw)), False
     raise ScenarioError(f"slots: 'auto' or a list of at least {n} [x, y] positions")
+
+
+def _markers(data: Mapping[str, Any]) -> tuple[Marker, ...]:
+    """`marker:` (one) or `markers:` (a list: several markers across the shelf front, so one covered marker does not
+    lose the frame); ids distinct."""
+    if "markers" not in data:
+        return (_marker(data.get("marker")),)
+    if "marker" in data:
+        raise ScenarioError("give either marker (one) or markers (a list), not both")
+    ms = data["markers"]
+    if not isinstance(ms, list) or not ms:
+        raise ScenarioError("markers: must be a non-empty list of markers (id, dictionary, size, position, rpy)")
+    out = []
+    for k, m in enumerate(ms):
+        try:
+            out.append(_marker(m))
+        except ScenarioError as e:
+            raise ScenarioError(f"markers[{k}]: {e}") from None
+    ids = [(m.dictionary, m.id) for m in out]
+    if len(set(ids)) != len(ids):
+        raise ScenarioError(f"markers: ids must be distinct, got {[m.id for m in out]}")
+    return tuple(out)
 
 
 def _marker(m: Any) -> Marker:
