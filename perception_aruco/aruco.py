@@ -72,6 +72,18 @@ def mean_pose(poses) -> np.ndarray:
                      np.mean([t[:3, 3] for t in poses], axis=0))
 
 
+def fuse_markers(seen) -> tuple[np.ndarray, float]:
+    """(T_base_camera, rms corner residual in m) from several markers seen in one frame, given as (MarkerLocalizer,
+    MarkerObservation) pairs: one rigid fit (Kabsch) of every marker's corners in the camera (its depth-refined
+    pose) to the same corners in the base frame (the scenario's poses); markers far apart constrain the rotation
+    better than any one of them."""
+    cam = np.vstack([loc.object_points @ obs.T_camera_marker[:3, :3].T + obs.T_camera_marker[:3, 3]
+                     for loc, obs in seen])
+    base = np.vstack([loc.object_points @ loc.T_base_marker[:3, :3].T + loc.T_base_marker[:3, 3] for loc, _ in seen])
+    t = kabsch(cam, base)
+    return t, float(np.sqrt(np.mean(np.sum((cam @ t[:3, :3].T + t[:3, 3] - base) ** 2, axis=1))))
+
+
 def marker_in_base(marker: Marker) -> np.ndarray:
     """T_base_marker (4x4) from the scenario."""
     return transform(rpy_matrix(marker.rpy), marker.position)
@@ -134,7 +146,7 @@ def _backproject(K: np.ndarray, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
     return np.stack([x, y, z], axis=1)
 
 
-def _kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Rigid T with dst ~ T src (least squares)."""
     cs, cd = src.mean(0), dst.mean(0)
     u, _, vt = np.linalg.svd((src - cs).T @ (dst - cd))
@@ -281,7 +293,7 @@ class MarkerLocalizer:
                             f"marker id {mid}: corners {CORNER_NAMES[i]}-{CORNER_NAMES[j]} are {got * 1000:.0f} mm "
                             f"apart on the depth plane, expected {want * 1000:.0f} mm (a corner misplaced: partly "
                             f"covered, or the depth not registered to the colour image?)")
-        t = _kabsch(obj[good], cam[good])
+        t = kabsch(obj[good], cam[good])
         dt, dr = pose_error(t, t_pnp)
         bound_mm = p.max_disagreement_mm * max(1.0, 433.0 / K[0, 0])  # the colour-only pose degrades with pixel size
         if dt * 1000 > bound_mm or math.degrees(dr) > p.max_disagreement_deg:

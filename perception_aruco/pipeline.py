@@ -24,8 +24,8 @@ from .aruco import (
     MarkerNotFoundError,
     MarkerObservation,
     MarkerParams,
+    fuse_markers,
     invert,
-    mean_pose,
     pose_error,
 )
 from .localize import Detection, FitError, LocalizeParams, locate_bottle
@@ -98,25 +98,24 @@ class Perception:
         return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
 
     def _marker_frame(self, rgb, K, depth, prior, notes: list[str]) -> tuple[MarkerObservation | None, np.ndarray]:
-        """(the first marker seen, T_base_camera): the mean of the poses of every marker seen (a covered or
-        inconsistent one is left out, its reason in `notes`); none seen: the prior if given and no marker was
-        inconsistent, else the marker's error (all markers' reasons)."""
+        """(the first marker seen, T_base_camera): every marker seen fused (`fuse_markers`; a covered or inconsistent
+        one is left out, its reason in `notes`); none seen: the prior if given and no marker was inconsistent, else
+        the marker's error (all markers' reasons)."""
         seen, errors = [], []
         for loc in self.localizers:
             expected = None if prior is None else invert(prior) @ loc.T_base_marker
             try:
-                seen.append(loc.locate(rgb, K, depth, expected))
+                seen.append((loc, loc.locate(rgb, K, depth, expected)))
             except (MarkerNotFoundError, MarkerInconsistentError) as e:
                 errors.append(e)
         if seen:
             notes.extend(f"{e}; the frame from the other markers" for e in errors)
             if len(seen) == 1:
-                return seen[0], seen[0].T_base_camera
-            poses = [o.T_base_camera for o in seen]
-            spread = max(pose_error(t, poses[0]) for t in poses[1:])
-            notes.append(f"{len(seen)} markers agree within {spread[0] * 1000:.1f} mm, {math.degrees(spread[1]):.2f} "
-                         "deg (the shelf fit checks the frame)")
-            return seen[0], mean_pose(poses)
+                return seen[0][1], seen[0][1].T_base_camera
+            T, rms = fuse_markers(seen)
+            notes.append(f"markers {', '.join(str(loc.marker.id) for loc, _ in seen)} fused (corners {rms * 1000:.1f} "
+                         "mm rms off their scenario poses; the shelf fit checks the frame)")
+            return seen[0][1], T
         if prior is not None and all(isinstance(e, MarkerNotFoundError) for e in errors):
             notes.append(f"{'; '.join(map(str, errors))}; using the fused frame of earlier frames")
             return None, np.asarray(prior, float)

@@ -119,7 +119,7 @@ class Scenario:
     blocking: Mapping[str, frozenset[str]] | None = None
     source: str = "<dict>"
     auto_slots: bool = False  # slots from `slots: auto` (AUTO_SLOT_*); the motion planner checks them at start
-    more_markers: tuple[Marker, ...] = ()  # further markers of `markers:` (the first is `marker`)
+    more_markers: tuple[Marker, ...] = ()  # the further markers of `markers:` (optional)
     _by_id: dict[str, Bottle] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -403,16 +403,12 @@ def _slots(raw: Any, shelf: Shelf, n: int) -> tuple[tuple[tuple[float, float], .
 
 
 def _markers(data: Mapping[str, Any]) -> tuple[Marker, ...]:
-    """`marker:` (one) or `markers:` (a list: several markers across the shelf front, so one covered marker does not
-    lose the frame); ids distinct."""
-    if "markers" not in data:
-        return (_marker(data.get("marker")),)
-    if "marker" in data:
-        raise ScenarioError("give either marker (one) or markers (a list), not both")
-    ms = data["markers"]
-    if not isinstance(ms, list) or not ms:
-        raise ScenarioError("markers: must be a non-empty list of markers (id, dictionary, size, position, rpy)")
-    out = []
+    """`marker:` (the main one) and the optional list `markers:` of further markers (several across the shelf front,
+    so one covered marker does not lose the frame); ids distinct."""
+    ms = data.get("markers", [])
+    if not isinstance(ms, list):
+        raise ScenarioError("markers: must be a list of further markers (id, dictionary, size, position, rpy)")
+    out = [_marker(data.get("marker"))]
     for k, m in enumerate(ms):
         try:
             out.append(_marker(m))
