@@ -200,11 +200,17 @@ class MarkerLocalizer:
         self.refine_with_depth = refine_with_depth
         self.params = params
 
-    def detect(self, rgb: np.ndarray) -> np.ndarray:
-        """Pixel corners (4x2) of the scenario's marker id; MarkerNotFoundError if it is not seen."""
+    def detect_all(self, rgb: np.ndarray) -> tuple[list[np.ndarray], list[int]]:
+        """(pixel corners, ids) of every marker of this dictionary in the image (one detector pass, shared by the
+        localizers of the other markers of the same dictionary)."""
         gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY) if rgb.ndim == 3 else rgb
         corners, ids, _ = self.detector.detectMarkers(gray)
-        seen = [] if ids is None else [int(i) for i in np.asarray(ids).reshape(-1)]
+        return list(corners), ([] if ids is None else [int(i) for i in np.asarray(ids).reshape(-1)])
+
+    def detect(self, rgb: np.ndarray, found: tuple[list[np.ndarray], list[int]] | None = None) -> np.ndarray:
+        """Pixel corners (4x2) of the scenario's marker id; MarkerNotFoundError if it is not seen. `found`: the
+        frame's `detect_all` (same dictionary), else the image is searched here."""
+        corners, seen = self.detect_all(rgb) if found is None else found
         if self.marker.id not in seen:
             raise MarkerNotFoundError(
                 f"ArUco marker id {self.marker.id} ({self.marker.dictionary}) not detected: not in view, covered or "
@@ -212,13 +218,14 @@ class MarkerLocalizer:
         return np.asarray(corners[seen.index(self.marker.id)], float).reshape(4, 2)
 
     def locate(self, rgb: np.ndarray, K: np.ndarray, depth: np.ndarray | None = None,
-               expected: np.ndarray | None = None) -> MarkerObservation:
+               expected: np.ndarray | None = None, found=None) -> MarkerObservation:
         """Camera pose in the base frame from the marker (and depth, when given and valid on the marker).
         `expected`: T_camera_marker of earlier frames (the node's fused frame): when the marker is not decoded,
-        the depth there tells whether it is covered (MarkerOccludedError names how much)."""
+        the depth there tells whether it is covered (MarkerOccludedError names how much). `found`: as in
+        `detect`."""
         K = np.asarray(K, float)
         try:
-            corners = self.detect(rgb)
+            corners = self.detect(rgb, found)
         except MarkerNotFoundError:
             if expected is not None and depth is not None:
                 self.diagnose_cover(K, depth, expected)

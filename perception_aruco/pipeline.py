@@ -101,11 +101,13 @@ class Perception:
         """(the first marker seen, T_base_camera): every marker seen fused (`fuse_markers`; a covered or inconsistent
         one is left out, its reason in `notes`); none seen: the prior if given and no marker was inconsistent, else
         the marker's error (all markers' reasons)."""
-        seen, errors = [], []
+        seen, errors, found = [], [], {}
         for loc in self.localizers:
             expected = None if prior is None else invert(prior) @ loc.T_base_marker
+            if loc.marker.dictionary not in found:  # one detector pass per dictionary
+                found[loc.marker.dictionary] = loc.detect_all(rgb)
             try:
-                seen.append((loc, loc.locate(rgb, K, depth, expected)))
+                seen.append((loc, loc.locate(rgb, K, depth, expected, found[loc.marker.dictionary])))
             except (MarkerNotFoundError, MarkerInconsistentError) as e:
                 errors.append(e)
         if seen:
