@@ -9,7 +9,9 @@ Depth (planar z, metres, 0 = no return):
   stereo shadow: one camera sees what the other does not);
 - flying pixels: on a depth edge, a pixel at a depth between the near and the far surface.
 Colour (RGB uint8): white balance (per-channel gains, warm = more red, less blue), exposure (one gain, clipped
-at 255), noise (Gaussian, per channel) and blur.
+at 255), noise (Gaussian, per channel) and blur; motion blur of what moves during the exposure (`exposure_s`: the
+colour image is the mean of sub-frames rendered over the exposure, jaco2_sim_driver.camera.CameraRenderer; the
+depth stream's short global-shutter exposure is not blurred).
 """
 from __future__ import annotations
 
@@ -101,6 +103,7 @@ class SensorModel:
     drift_sigma: float = 0.0
     drift_max: float = 0.0
     blur_px: float = 0.0
+    exposure_s: float = 0.0        # colour exposure time: motion blur while the arm moves (CameraRenderer)
 
     @classmethod
     def named(cls, name: str) -> SensorModel:
@@ -109,7 +112,7 @@ class SensorModel:
             return cls()
         if name == "realsense_d435":
             return cls(depth_sigma=0.002, hole_fraction=0.01, edge_holes=True, colour_sigma=3.0, drift_sigma=0.01,
-                       drift_max=0.05, blur_px=0.5)
+                       drift_max=0.05, blur_px=0.5, exposure_s=0.02)  # auto exposure indoors: 10-33 ms
         raise ValueError(f"camera_model must be one of {', '.join(CAMERA_MODELS)}, got {name!r}")
 
 
