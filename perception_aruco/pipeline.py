@@ -34,12 +34,16 @@ from .segmentation import (
     SegmentationParams,
     backproject_image,
     check_images,
+    on_marker_plates,
     plate_levels,
     segment_points,
 )
 from .shelf import ShelfFit, ShelfParams, corrected_K, fit_shelf
 
 BOARD_APART = 0.05  # m: base heights further apart than this are different boards (top and bottom shelf)
+# markers whose camera poses differ by more are not fused: the one larger in the image is kept (a small, far
+# marker at a low resolution can be 20 cm off; at 640x480 the shipped scenes' two agree within 12 mm, 0.6 deg)
+MARKERS_AGREE_M, MARKERS_AGREE_DEG = 0.03, 2.0
 
 
 @dataclass(frozen=True)
@@ -78,11 +82,12 @@ class Perception:
         cam = backproject_image(depth, K, np.eye(4))
         r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
         st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
-        first = segment_points(rgb[::st, ::st], cam[::st, ::st] @ r0.T + p0, self.scenario,
-                               replace(self.seg, erode_px=0, median_px=0), levels)
-        bottles = np.zeros(depth.shape, bool)
-        bottles[::st, ::st] = first.labels >= 0
-        fit = fit_shelf(cam, bottles, t0, self.scenario, self.shelf)
+        sampled = cam[::st, ::st] @ r0.T + p0
+        first = segment_points(rgb[::st, ::st], sampled, self.scenario, replace(self.seg, erode_px=0, median_px=0),
+                               levels)
+        not_shelf = np.zeros(depth.shape, bool)   # bottles and marker plates: left out of the shelf fit
+        not_shelf[::st, ::st] = (first.labels >= 0) | on_marker_plates(sampled, self.scenario, self.seg.marker_margin)
+        fit = fit_shelf(cam, not_shelf, t0, self.scenario, self.shelf)
         fit.check(self.shelf)
         T = fit.correction @ t0
         seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
@@ -98,9 +103,9 @@ class Perception:
         return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
 
     def _marker_frame(self, rgb, K, depth, prior, notes: list[str]) -> tuple[MarkerObservation | None, np.ndarray]:
-        """(the first marker seen, T_base_camera): every marker seen fused (`fuse_markers`; a covered or inconsistent
-        one is left out, its reason in `notes`); none seen: the prior if given and no marker was inconsistent, else
-        the marker's error (all markers' reasons)."""
+        """(the marker seen largest in the image, T_base_camera): the markers seen that agree with it fused
+        (`fuse_markers`; a covered, inconsistent or disagreeing one is left out, its reason in `notes`); none seen:
+        the prior if given and no marker was inconsistent, else the marker's error (all markers' reasons)."""
         seen, errors, found = [], [], {}
         for loc in self.localizers:
             expected = None if prior is None else invert(prior) @ loc.T_base_marker
@@ -112,10 +117,21 @@ class Perception:
                 errors.append(e)
         if seen:
             notes.extend(f"{e}; the frame from the other markers" for e in errors)
-            if len(seen) == 1:
-                return seen[0][1], seen[0][1].T_base_camera
-            T, rms = fuse_markers(seen)
-            notes.append(f"markers {', '.join(str(loc.marker.id) for loc, _ in seen)} fused (corners {rms * 1000:.1f} "
+            seen.sort(key=lambda lo: -cv2.contourArea(lo[1].corners.astype(np.float32)))  # largest in the image first
+            best = seen[0][1].T_base_camera
+            agree = []
+            for loc, obs in seen:
+                dt, dr = pose_error(obs.T_base_camera, best)
+                if dt <= MARKERS_AGREE_M and math.degrees(dr) <= MARKERS_AGREE_DEG:
+                    agree.append((loc, obs))
+                else:
+                    notes.append(f"marker id {loc.marker.id} left out: it puts the camera {dt * 1000:.0f} mm, "
+                                 f"{math.degrees(dr):.1f} deg from marker id {seen[0][0].marker.id}, which is larger "
+                                 "in the image")
+            if len(agree) == 1:
+                return seen[0][1], best
+            T, rms = fuse_markers(agree)
+            notes.append(f"markers {', '.join(str(loc.marker.id) for loc, _ in agree)} fused (corners {rms * 1000:.1f} "
                          "mm rms off their scenario poses; the shelf fit checks the frame)")
             return seen[0][1], T
         if prior is not None and all(isinstance(e, MarkerNotFoundError) for e in errors):
