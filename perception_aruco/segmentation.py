@@ -76,11 +76,11 @@ def backproject_image(depth: np.ndarray, K: np.ndarray, T_base_camera: np.ndarra
     return out
 
 
-def on_marker_plates(points: np.ndarray, scenario: Scenario, margin: float) -> np.ndarray:
-    """Bool per point (... x 3, base frame, NaN allowed): on one of the scenario's marker plates (within `margin`)."""
+def on_marker_plates(points: np.ndarray, markers, margin: float) -> np.ndarray:
+    """Bool per point (... x 3, base frame, NaN allowed): on one of the markers' plates (within `margin`)."""
     out = np.zeros(points.shape[:-1], bool)
     with np.errstate(invalid="ignore"):
-        for m in scenario.markers:
+        for m in markers:
             local = (points - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
             half = m.size * 0.75 + margin  # the plate carries a white margin of a quarter side
             out |= (np.abs(local[..., 0]) < half) & (np.abs(local[..., 1]) < half) & (np.abs(local[..., 2]) < 0.02)
@@ -96,7 +96,7 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
         top = (z > s.top_z + margin) & (z < s.ceiling_z - margin)
         bottom = (z > s.bottom_z + margin) & (z < s.top_z - s.board_thickness - margin)
         mask = inside & (top | bottom)
-    mask[mask] = ~on_marker_plates(points[mask], scenario, marker_margin)
+    mask[mask] = ~on_marker_plates(points[mask], scenario.markers, marker_margin)
     return mask
 
 

@@ -101,11 +101,11 @@ def test_bgr8_and_rgb8_decode_to_the_same_image(frames):
 def test_no_marker_in_view_raises(frames):
     s, f, _ = frames["paper_experiment_10"]
     p = Perception(s)
-    corners = p.localizer.detect(f.rgb)
     rgb = f.rgb.copy()
-    (u0, v0), (u1, v1) = corners.min(0).astype(int) - 12, corners.max(0).astype(int) + 12
-    rgb[v0:v1, u0:u1] = (150, 120, 80)  # marker painted over
-    with pytest.raises(MarkerNotFoundError, match="marker id 7"):
+    for corners in p.localizer.detect_all(f.rgb)[0]:   # every marker painted over
+        (u0, v0), (u1, v1) = corners[0].min(0).astype(int) - 12, corners[0].max(0).astype(int) + 12
+        rgb[v0:v1, u0:u1] = (150, 120, 80)
+    with pytest.raises(MarkerNotFoundError, match="marker id 7.*marker id 8"):
         p.process(rgb, f.depth, f.K)
 
 

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from jaco2_sim_driver.camera import render_frame  # first: sets MUJOCO_GL before mujoco is imported
-from perception_aruco.aruco import MarkerNotFoundError, invert, marker_in_base
+from perception_aruco.aruco import MarkerInconsistentError, MarkerNotFoundError, invert, marker_in_base
 from perception_aruco.pipeline import Perception
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import ScenarioError, load_scenario, parse_scenario
@@ -78,3 +78,14 @@ def test_both_markers_fused_and_one_covered_marker_does_not_lose_the_frame():
           f"{covered.notes[0]}")
     assert "marker id 7" in covered.notes[0] and "the frame from the other markers" in covered.notes[0]
     assert set(covered.detections) == set(s.ids) and max(errs) < 3.0
+
+
+def test_markers_that_disagree_refuse_the_frame():
+    """One marker moved after the scenario was written (6 cm along the shelf front, where the shelf fit cannot tell):
+    the two markers put the camera 6 cm apart and the frame is refused, naming both."""
+    s = load_scenario(SCENE)
+    f = render_frame(s)
+    m = s.more_markers[0]
+    moved = replace(s, more_markers=(replace(m, position=(m.position[0], m.position[1] - 0.06, m.position[2])),))
+    with pytest.raises(MarkerInconsistentError, match="markers id 7 and 8 put the camera"):
+        Perception(moved).process(f.rgb, f.depth, f.K)
