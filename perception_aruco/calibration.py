@@ -12,8 +12,8 @@ Shah's method (M. Shah, "Solving the robot-world/hand-eye calibration problem us
 the rotations from the null space of the Kronecker system, then the translations by least squares; then refined
 (Gauss-Newton) on the marker's corners, which weighs rotation and translation errors as the image measures them.
 (The OpenCV 5.0 wheels of this project expose the CALIB_HAND_EYE_* constants but not the functions.) The file
-written (`save_calibration`) holds the shelf marker's
-pose in the base frame, which perception uses instead of the scenario's (`apply_calibration`).
+written (`save_calibration`) holds the shelf markers'
+poses in the base frame, which perception uses instead of the scenario's (`apply_calibration`).
 """
 from __future__ import annotations
 
@@ -122,52 +122,62 @@ def _refine(A, B, X: np.ndarray, Z: np.ndarray, iterations: int = 10):
     return X, Z
 
 
-def marker_in_base_from(hand_eye: HandEye, T_camera_shelf_marker: Sequence[np.ndarray]) -> np.ndarray:
-    """T_base_marker of the shelf marker: the calibrated camera pose times the marker's pose in the camera (the
-    mean over the frames given)."""
-    if not len(T_camera_shelf_marker):
-        raise CalibrationError("calibration: the shelf marker was not seen: clear the camera's view of it")
-    return hand_eye.T_base_camera @ mean_pose(T_camera_shelf_marker)
+def marker_in_base_from(hand_eye: HandEye, marker: Marker, T_camera_marker: Sequence[np.ndarray]) -> Marker:
+    """The shelf marker with its pose in the base frame measured: the calibrated camera pose times the marker's
+    pose in the camera (the mean over the frames given)."""
+    if not len(T_camera_marker):
+        raise CalibrationError(f"calibration: the shelf marker id {marker.id} was not seen: clear the camera's view "
+                               "of it")
+    t = hand_eye.T_base_camera @ mean_pose(T_camera_marker)
+    x, y, z = (float(v) for v in t[:3, 3])
+    return replace(marker, position=(x, y, z), rpy=matrix_rpy(t[:3, :3]))
 
 
-def save_calibration(path: Path, marker: Marker, T_base_marker: np.ndarray, hand_eye: HandEye, note: str) -> None:
-    """The calibration file (YAML): the shelf marker's pose in the base frame (what perception reads), the
-    camera's, and the hand-eye residuals."""
-    cam = hand_eye.T_base_camera
+def _pose(t: np.ndarray) -> dict:
+    return {"position": [round(float(v), 6) for v in t[:3, 3]], "rpy": [round(v, 7) for v in matrix_rpy(t[:3, :3])]}
 
-    def pose(t: np.ndarray) -> dict:
-        return {"position": [round(float(v), 6) for v in t[:3, 3]],
-                "rpy": [round(v, 7) for v in matrix_rpy(t[:3, :3])]}
-    doc = {"marker": {"id": marker.id, "dictionary": marker.dictionary, "size": marker.size, **pose(T_base_marker)},
-           "camera_optical_frame": pose(cam),
+
+def save_calibration(path: Path, markers: Sequence[Marker], hand_eye: HandEye, note: str) -> None:
+    """The calibration file (YAML): the shelf markers' measured poses in the base frame (what perception reads),
+    the camera's, and the hand-eye residuals."""
+    doc = {"markers": [{"id": m.id, "dictionary": m.dictionary, "size": m.size,
+                        "position": [round(float(v), 6) for v in m.position],
+                        "rpy": [round(float(v), 7) for v in m.rpy]} for m in markers],
+           "camera_optical_frame": _pose(hand_eye.T_base_camera),
            "hand_eye": {"poses": hand_eye.poses, "residual_mm": round(hand_eye.residual_mm, 3),
                         "residual_deg": round(hand_eye.residual_deg, 4)}}
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(f"# {note}\n# Read by perception (parameter calibration_file): the marker's pose replaces the "
+    path.write_text(f"# {note}\n# Read by perception (parameter calibration_file): these markers' poses replace the "
                     "scenario's.\n" + yaml.safe_dump(doc, sort_keys=False))
 
 
-def load_calibration(path: str | Path) -> Marker:
-    """The shelf marker of a calibration file (CalibrationError naming what is wrong with the file)."""
+def load_calibration(path: str | Path) -> tuple[Marker, ...]:
+    """The shelf markers of a calibration file (CalibrationError naming what is wrong with the file)."""
     p = Path(path)
     try:
-        m = yaml.safe_load(p.read_text())["marker"]
-        return Marker(int(m["id"]), str(m["dictionary"]), float(m["size"]),
-                      tuple(float(v) for v in m["position"]), tuple(float(v) for v in m["rpy"]))  # type: ignore[arg-type]
+        return tuple(Marker(int(m["id"]), str(m["dictionary"]), float(m["size"]),
+                            tuple(float(v) for v in m["position"]),  # type: ignore[arg-type]
+                            tuple(float(v) for v in m["rpy"]))  # type: ignore[arg-type]
+                     for m in yaml.safe_load(p.read_text())["markers"])
     except FileNotFoundError:
         raise CalibrationError(f"calibration file {p} not found: run `./run calibrate` or set calibration_file "
-                               "to '' (the scenario's marker pose)") from None
+                               "to '' (the scenario's marker poses)") from None
     except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as e:
-        raise CalibrationError(f"calibration file {p} is not a calibration (marker: id, dictionary, size, "
+        raise CalibrationError(f"calibration file {p} is not a calibration (markers: id, dictionary, size, "
                                f"position, rpy): {e}; run `./run calibrate` again") from None
 
 
-def apply_calibration(scenario: Scenario, marker: Marker) -> Scenario:
-    """The scenario with the calibrated marker pose; CalibrationError when the file is for another marker."""
-    m = scenario.marker
-    if (marker.id, marker.dictionary) != (m.id, m.dictionary) or abs(marker.size - m.size) > 1e-6:
+def apply_calibration(scenario: Scenario, markers: Sequence[Marker]) -> Scenario:
+    """The scenario with the calibrated markers' poses (a scenario marker the calibration did not see keeps its
+    pose); CalibrationError when the file has a marker the scenario has not."""
+    mine = {(m.id, m.dictionary, round(m.size, 6)): m for m in markers}
+    known = {(m.id, m.dictionary, round(m.size, 6)) for m in scenario.markers}
+    for key in mine.keys() - known:
         raise CalibrationError(
-            f"the calibration is for marker id {marker.id} ({marker.dictionary}, {marker.size} m), the scenario's "
-            f"marker is id {m.id} ({m.dictionary}, {m.size} m): calibrate with this scenario")
-    return replace(scenario, marker=replace(m, position=marker.position, rpy=marker.rpy))
+            f"the calibration has marker id {key[0]} ({key[1]}, {key[2]} m), which the scenario has not (its markers: "
+            f"{', '.join(str(m.id) for m in scenario.markers)}): calibrate with this scenario")
 
+    def measured(m: Marker) -> Marker:
+        c = mine.get((m.id, m.dictionary, round(m.size, 6)))
+        return m if c is None else replace(m, position=c.position, rpy=c.rpy)
+    return replace(scenario, marker=measured(scenario.marker), more_markers=tuple(map(measured, scenario.more_markers)))

@@ -3,8 +3,8 @@
 
 The arm carries the calibration marker on its hand (robot_description.T_TOOL_GRIPPER_MARKER) and is put at
 CALIBRATION_POSES; at each the camera's image gives the marker's pose in the camera and the forward kinematics the
-hand's pose in the base frame; the hand-eye solution gives the camera in the base frame, and the shelf marker seen
-by the same camera then has its pose in the base frame. The result goes to a calibration file (default
+hand's pose in the base frame; the hand-eye solution gives the camera in the base frame, and the shelf markers
+seen by the same camera then have their poses in the base frame. The result goes to a calibration file (default
 out/calibration.yaml) that perception reads (its parameter `calibration_file`).
 
 The arm is moved in the simulator core (jaco2_sim_driver: joint positions set, the scene rendered through the
@@ -29,7 +29,7 @@ from perception_aruco.aruco import MarkerLocalizer, MarkerParams, PerceptionErro
 from perception_aruco.calibration import HandEye, marker_in_base_from, save_calibration, solve_hand_eye
 from relocation_common.paths import default_scenario, resolve_scenario
 from relocation_common.robot_description import BASE_LINK, JOINT_NAMES, dh_fk
-from relocation_common.scenario import Scenario, load_scenario
+from relocation_common.scenario import Marker, Scenario, load_scenario
 
 import mujoco  # isort: skip  (after jaco2_sim_driver, which sets MUJOCO_GL)
 
@@ -53,13 +53,14 @@ CALIBRATION_POSES = (
 
 @dataclass(frozen=True)
 class Calibration:
-    """What `calibrate` measured: the shelf marker's pose in the base frame, the hand-eye solution, the arm poses
-    at which the hand's marker was not usable (index: reason) and the frames that showed the shelf marker."""
+    """What `calibrate` measured: the shelf markers with their poses in the base frame (those seen), the hand-eye
+    solution, the arm poses at which the hand's marker was not usable (index: reason) and how many arm poses
+    showed each shelf marker (id: count)."""
 
-    T_base_marker: np.ndarray
+    markers: tuple[Marker, ...]
     hand_eye: HandEye
     skipped: dict[int, str]
-    shelf_views: int
+    shelf_views: dict[int, int]
 
 
 class SimArm:
@@ -113,12 +114,15 @@ def _observe(localizer: MarkerLocalizer, frames) -> np.ndarray | str:
 
 
 def calibrate(scenario: Scenario, arm: SimArm, poses=CALIBRATION_POSES, frames_per_pose: int = 3) -> Calibration:
-    """Observe the hand's marker at `poses` (the mean over `frames_per_pose` frames at each) and the shelf marker in
-    the same frames; solve (module docstring). Raises perception_aruco.calibration.CalibrationError (too few poses
-    seen, observations that disagree, the shelf marker never seen)."""
+    """Observe the hand's marker at `poses` (the mean over `frames_per_pose` frames at each) and the shelf markers
+    in the same frames; solve (module docstring). Raises perception_aruco.calibration.CalibrationError (too few
+    poses seen, observations that disagree, the main shelf marker never seen; a further one never seen keeps its
+    scenario pose)."""
     contour = MarkerParams(corner_refinement="contour")  # the marker's in-plane rotation to 0.05 deg (aruco.py)
-    hand, shelf = MarkerLocalizer(hand_marker(), params=contour), MarkerLocalizer(scenario.marker, params=contour)
-    gripper, seen, shelf_seen, skipped = [], [], [], {}
+    hand = MarkerLocalizer(hand_marker(), params=contour)
+    shelf = [MarkerLocalizer(m, params=contour) for m in scenario.markers]
+    gripper, seen, skipped = [], [], {}
+    shelf_seen: list[list[np.ndarray]] = [[] for _ in shelf]
     for i, q in enumerate(poses):
         touching = arm.move(q)
         if touching:
@@ -131,11 +135,15 @@ def calibrate(scenario: Scenario, arm: SimArm, poses=CALIBRATION_POSES, frames_p
             continue
         gripper.append(dh_fk(q)[-1])  # the tool frame: the hand pose the robot reports
         seen.append(obs)
-        obs = _observe(shelf, frames)
-        if not isinstance(obs, str):  # else the arm covers the shelf marker here: the other poses show it
-            shelf_seen.append(obs)
+        for loc, views in zip(shelf, shelf_seen):
+            obs = _observe(loc, frames)
+            if not isinstance(obs, str):  # else the arm covers this marker here: the other poses show it
+                views.append(obs)
     hand_eye = solve_hand_eye(gripper, seen)
-    return Calibration(marker_in_base_from(hand_eye, shelf_seen), hand_eye, skipped, len(shelf_seen))
+    markers = tuple(marker_in_base_from(hand_eye, m, views) for k, (m, views) in enumerate(zip(scenario.markers,
+                                                                                           shelf_seen))
+                    if k == 0 or views)
+    return Calibration(markers, hand_eye, skipped, {m.id: len(v) for m, v in zip(scenario.markers, shelf_seen)})
 
 
 def _args(argv):
@@ -166,14 +174,15 @@ def run(argv=None) -> int:
     for i, why in cal.skipped.items():
         print(f"[calibrate] pose {i} not used: {why}")
     print(f"[calibrate] {he.poses} arm poses, hand-eye residual {he.residual_mm:.2f} mm, {he.residual_deg:.3f} deg "
-          f"rms; shelf marker seen in {cal.shelf_views} frames")
-    dt, dr = pose_error(cal.T_base_marker, marker_in_base(scenario.marker))
-    print(f"[calibrate] shelf marker at {np.round(cal.T_base_marker[:3, 3], 4).tolist()} m: {dt * 1000:.1f} mm, "
-          f"{math.degrees(dr):.2f} deg from the scenario's marker pose")
+          f"rms; shelf markers seen at {cal.shelf_views} arm poses (id: count)")
+    for m, given in zip(cal.markers, [s for s in scenario.markers if s.id in {c.id for c in cal.markers}]):
+        dt, dr = pose_error(marker_in_base(m), marker_in_base(given))
+        print(f"[calibrate] shelf marker id {m.id} at {np.round(m.position, 4).tolist()} m: {dt * 1000:.1f} mm, "
+              f"{math.degrees(dr):.2f} deg from the scenario's pose")
     out = Path(a.out)
     note = (f"./run calibrate --scenario {path.name} --camera-model {a.camera_model} --frames {a.frames}, "
             f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC")
-    save_calibration(out, scenario.marker, cal.T_base_marker, he, note)
+    save_calibration(out, cal.markers, he, note)
     print(f"[calibrate] wrote {out} (perception: -p calibration_file:={out.resolve()})")
     return 0
 
