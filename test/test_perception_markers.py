@@ -82,10 +82,10 @@ def test_both_markers_fused_and_one_covered_marker_does_not_lose_the_frame():
 
 def test_markers_that_disagree_refuse_the_frame():
     """One marker moved after the scenario was written (6 cm along the shelf front, where the shelf fit cannot tell):
-    the two markers put the camera 6 cm apart and the frame is refused, naming both."""
+    marker 8 is seen 6 cm from where marker 7's frame and the scenario put it: the frame is refused, naming both."""
     s = load_scenario(SCENE)
     f = render_frame(s)
     m = s.more_markers[0]
     moved = replace(s, more_markers=(replace(m, position=(m.position[0], m.position[1] - 0.06, m.position[2])),))
-    with pytest.raises(MarkerInconsistentError, match="markers id 7 and 8 put the camera"):
+    with pytest.raises(MarkerInconsistentError, match="marker id 8 is seen 60 mm from where marker id 7"):
         Perception(moved).process(f.rgb, f.depth, f.K)
