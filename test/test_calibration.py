@@ -11,8 +11,6 @@ import pytest
 
 from jaco2_sim_driver.camera import render_frame  # first: sets MUJOCO_GL before mujoco is imported
 from perception_aruco.aruco import (
-    MarkerLocalizer,
-    MarkerParams,
     invert,
     marker_in_base,
     pose_error,
@@ -105,25 +103,15 @@ def test_calibration_poses_touch_nothing_in_the_shipped_scenes():
             assert arm.move(q) == [], (path.name, q)
 
 
-def test_shelf_marker_orientation_from_the_image():
-    """The shelf marker's pose in the camera as the calibration measures it (it carries it into the base frame)
-    within 0.1 deg (CORNER_REFINE_SUBPIX: 0.31 deg about the marker's normal; the contour fit 0.05)."""
-    s = load_scenario(resolve_scenario("paper_experiment_10"))
-    f = render_frame(s)
-    obs = MarkerLocalizer(s.marker, params=MarkerParams(corner_refinement="contour")).locate(f.rgb, f.K, f.depth)
-    dt, dr = pose_error(obs.T_camera_marker, invert(f.T_base_camera) @ marker_in_base(s.marker))
-    assert dt < 0.5e-3 and math.degrees(dr) < 0.1, (dt, math.degrees(dr))
-
-
 def test_calibration_corrects_a_wrong_scenario_marker_pose():
     """The simulator renders the true scene; perception is given the scenario with its markers 2 cm / 2 deg off
-    (both by the same error: a shelf measured by hand in a wrong robot frame): the calibration (8 arm poses) finds
+    (both by the same error: a shelf measured by hand in a wrong robot frame): the calibration (6 arm poses) finds
     the true marker poses to <= 2 mm / 0.2 deg, and with them the marker alone places the camera as well as with
-    the true scenario."""
+    the true scenario. (The contour corners matter: with sub-pixel ones the marker came out 0.32 deg off.)"""
     true = load_scenario(resolve_scenario("paper_experiment_10"))
     arm = SimArm(true)
     try:
-        cal = calibrate(true, arm, CALIBRATION_POSES[:8], frames_per_pose=1)
+        cal = calibrate(true, arm, CALIBRATION_POSES[:6], frames_per_pose=1)
     finally:
         arm.close()
     assert [m.id for m in cal.markers] == [7, 8]
