@@ -158,18 +158,18 @@ def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
 def robust_plane(pts: np.ndarray, tol: float, iterations: int, rng: np.random.Generator) -> tuple[np.ndarray, float]:
     """(unit normal n, offset c) of the plane n.p = c through most of the points: RANSAC on 3-point samples, then
     least squares on the inliers (tolerance raised to 3 x the inliers' robust spread when the depth is noisier)."""
-    best, best_n = None, -1
-    for _ in range(iterations):
-        a, b, c = pts[rng.choice(len(pts), 3, replace=False)]
-        n = np.cross(b - a, c - a)
-        if np.linalg.norm(n) < 1e-12:
-            continue
-        n = n / np.linalg.norm(n)
-        k = int(np.sum(np.abs(pts @ n - n @ a) < tol))
-        if k > best_n:
-            best, best_n = (n, float(n @ a)), k
-    if best is None:
+    idx = rng.integers(0, len(pts), (iterations, 3))          # all samples at once (vectorised scoring)
+    a, b, c = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    ok = length > 1e-12
+    if not ok.any():
         raise MarkerInconsistentError("marker depth is degenerate (no plane)")
+    normals, a = normals[ok] / length[ok, None], a[ok]
+    offsets = np.sum(normals * a, axis=1)
+    scores = np.sum(np.abs(pts @ normals.T - offsets) < tol, axis=0)
+    k = int(np.argmax(scores))
+    best = (normals[k], float(offsets[k]))
     n, off = best
     for _ in range(3):
         r = pts @ n - off

@@ -14,11 +14,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node runs (perception_aruco/__init__.py)
+
+import numpy as np  # noqa: E402  (after the BLAS thread setting, which must precede numpy)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
