@@ -7,7 +7,9 @@ marker pose in the scenario wrong by L cm and L deg; intrinsics (fx, fy off by L
 depth noise (L=1/3/5 mm at 0.75 m, growing with distance squared); depth holes; colour noise; white balance warm
 and cool; exposure; blur; marker occlusion (a small object on the marker, a corner covered, a third covered); bottle
 occlusion (a quarter / half / three quarters of one bottle covered by an object in front); resolution; and the
-simulator's realistic sensor (camera_model realsense_d435, jaco2_sim_driver/sensor_model.py; level = seed).
+simulator's realistic sensor (camera_model realsense_d435, jaco2_sim_driver/sensor_model.py; level = seed); motion
+blur (the arm arriving at its pose with joint speeds of 0.3 / 0.6 / 1.1 rad/s in a random direction, seen through a
+20 ms colour exposure: CameraRenderer.motion_blurred).
 
 Each case is scored against the scenario's ground truth as the node would publish it (a scene is published when
 `process` raises no PerceptionError and the target is among the detections):
@@ -38,7 +40,7 @@ import numpy as np  # noqa: E402  (after the BLAS thread setting, which must pre
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from jaco2_sim_driver import sensor_model as sm  # noqa: E402  (after the sys.path insert of the checkout)
-from jaco2_sim_driver.camera import Frame, render_frame  # noqa: E402  (after the sys.path insert of the checkout)
+from jaco2_sim_driver.camera import CameraRenderer, Frame, render_frame  # noqa: E402  (after the sys.path insert of the checkout)
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.pipeline import Perception  # noqa: E402  (after the sys.path insert of the checkout)
@@ -156,13 +158,32 @@ def perturb(cat: str, level: int, s: Scenario, f: Frame, rng: np.random.Generato
     elif cat == "bottle_occl":
         g = cover_bottle(s, f, level, cover or s.target_id)
         rgb, depth = g.rgb, g.depth
-    elif cat not in ("resolution", "realsense_d435"):
+    elif cat not in ("resolution", "realsense_d435", "motion_blur"):
         raise ValueError(cat)
     return s, K, rgb, depth
 
 
 CATEGORIES = ["marker_pose", "intrinsics", "depth_noise", "depth_holes", "colour_noise", "wb_warm", "wb_cool",
-              "exposure", "blur", "marker_occl", "bottle_occl", "resolution", "realsense_d435"]
+              "exposure", "blur", "marker_occl", "bottle_occl", "resolution", "realsense_d435", "motion_blur"]
+ARM_SPEEDS = {1: 0.3, 2: 0.6, 3: 1.1}   # rad/s, the largest joint speed of a motion_blur case (Table 7: 0.81-1.11)
+
+
+def render_moving(s: Scenario, q, qdot, exposure: float = 0.02) -> Frame:
+    """The frame of the arm arriving at q with joint speeds qdot, through a camera exposing its colour image for
+    `exposure` s (the sensor model's motion blur only)."""
+    import mujoco
+    model = build_model(s, CameraSpec())
+    data = mujoco.MjData(model)
+    adr = [model.joint(j).qposadr[0] for j in JOINT_NAMES]
+    r = CameraRenderer(model, 640, 480, sensor=sm.SensorModel(exposure_s=exposure))
+    try:
+        for t in (0.0, 0.1):   # the previous frame 0.1 s earlier gives the renderer the speeds
+            data.qpos[adr], data.time = np.asarray(q) - (0.1 - t) * np.asarray(qdot), t
+            mujoco.mj_forward(model, data)
+            f = r.render(data)
+        return f
+    finally:
+        r.close()
 
 
 def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str], prior=None) -> dict:
@@ -252,6 +273,9 @@ def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES),
                     g = low[level] if cat == "resolution" else f
                     if cat == "realsense_d435":  # the simulator's realistic sensor, seeded by the level
                         g = render_frame(s, q=q, sensor=sm.SensorModel.named(cat), seed=level + 100 * rep)
+                    if cat == "motion_blur":
+                        d = rng.normal(size=len(JOINT_NAMES))
+                        g = render_moving(s, q, ARM_SPEEDS[level] * d / np.max(np.abs(d)))
                     given, K, rgb, depth = perturb(cat, level, s, g, rng, cover)
                     req = required - {cover} if cat == "bottle_occl" else required
                     c = score(s, given, K, rgb, depth, req, fused if cat != "resolution" else None)
