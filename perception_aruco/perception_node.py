@@ -33,7 +33,7 @@ from relocation_common.ros_conversions import bottles_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
 from .aruco import PerceptionError, invert, marker_in_base
-from .calibration import apply_calibration, load_calibration
+from .calibration import CalibrationError, apply_calibration, load_calibration
 from .camera_check import camera_info_problem, image_problem
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
@@ -260,7 +260,7 @@ class PerceptionNode(Node):
 
 def main(args=None) -> None:
     """Entry point of the perception node."""
-    node_main("perception", PerceptionNode, args)
+    node_main("perception", PerceptionNode, args, errors=(CalibrationError,))  # a bad calibration_file: one line
 
 
 if __name__ == "__main__":

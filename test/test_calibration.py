@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,3 +135,23 @@ def test_calibration_corrects_a_wrong_scenario_marker_pose():
             assert np.median(errs) < 1.0 and max(errs) < 3.0
             assert set(res.detections) == {o.id for o in true.objects}
     assert cam_mm["wrong"] > 10 and cam_mm["calibrated"] < cam_mm["true"] + 0.5
+
+
+def test_node_with_a_missing_calibration_file_says_so_in_one_line(tmp_path):
+    """A calibration_file that is not there: the perception node exits 2 with one line naming what to do (before
+    it joins any ROS graph: the error comes while the node reads its parameters)."""
+    import os
+    import subprocess
+    import sys
+
+    from ros_procs import reserve_domain_id
+    domain, lock = reserve_domain_id()
+    try:
+        r = subprocess.run([sys.executable, "-m", "perception_aruco.perception_node", "--ros-args", "-p",
+                            f"calibration_file:={tmp_path / 'missing.yaml'}"], capture_output=True, text=True,
+                           timeout=60, env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
+                           cwd=str(Path(__file__).resolve().parent.parent))
+    finally:
+        lock.unlink(missing_ok=True)
+    lines = [x for x in r.stderr.splitlines() if x.startswith("perception:")]
+    assert r.returncode == 2 and len(lines) == 1 and "run `./run calibrate`" in lines[0], r.stderr
