@@ -88,7 +88,7 @@ class PlannerParams:
     stage_distance: float = 0.15  # m, staging pose in front of the slot (at most x_front - 0.07: grasp.place_poses)
     carry_timeout: float = 10.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
-    seed_per_query: bool = False  # every random draw seeded from the question (rrt.rrt_connect), not OMPL's RNG
+    seed_per_query: bool = False  # every OMPL solve seeded from the question (question_rng), not process history
     screen_at_clearance: bool = False  # the grasp screen's hand proxy inflated by at least stpik.clearance
     certify_relocation: bool = False  # a feasible pick counts only if the carry, retreat and way home plan from it
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
@@ -322,7 +322,8 @@ class MotionPlanner:
                 stats.direct_paths += 1
                 return direct
         t = time.perf_counter()
-        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), max_checks, deadline, rng)
+        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), max_checks, deadline,
+                             _draw_seed(rng))
         stats.rrt_time += time.perf_counter() - t
         stats.rrt_calls += 1
         return path
@@ -515,7 +516,7 @@ class MotionPlanner:
             else:
                 t = time.perf_counter()
                 mid = self.rrt.plan(lifted, stage, lambda s_: not hand_c.collides(*_mat(s_), obs),
-                                    4 * p.rrt_max_checks, deadline, rng)
+                                    4 * p.rrt_max_checks, deadline, _draw_seed(rng))
                 stats.rrt_time += time.perf_counter() - t
                 stats.rrt_calls += 1
                 if mid is None:
@@ -556,7 +557,8 @@ class MotionPlanner:
         lo = np.maximum(rd.Q_LOWER, np.minimum(q_from, q_to) - math.pi)
         hi = np.minimum(rd.Q_UPPER, np.maximum(q_from, q_to) + math.pi)
         rrt = JointRRT(lo, hi, self.params.joint_resolution, self.params.simplify_checks)
-        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), max_checks, deadline, rng)
+        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), max_checks, deadline,
+                        _draw_seed(rng))
         if path is None:
             return None
         return _time_joint_path(path, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt)
@@ -590,6 +592,11 @@ class MotionPlanner:
             raise WorkspaceError(f"{object_id!r} at {(x, y)} is not on the top shelf")
         objs = tuple(dataclasses.replace(o, x=x, y=y) if o.id == object_id else o for o in self.scenario.objects)
         self.set_scenario(dataclasses.replace(self.scenario, objects=objs, _by_id={}))
+
+
+def _draw_seed(rng: np.random.Generator | None) -> int | None:
+    """The seed of one RRT-Connect solve drawn from the question's generator (None: OMPL's process-wide RNG)."""
+    return None if rng is None else int(rng.integers(1, 2**31))
 
 
 def _mat(pose) -> tuple[np.ndarray, np.ndarray]:
