@@ -145,8 +145,8 @@ def main() -> int:
     scenes = shipped_scenes() if a.all else a.scenes
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for amp in (float(x) for x in a.amplitudes.split(",")):
-            for scene in scenes:
+        for scene in scenes:  # scene by scene, both amplitudes: a run stopped early is still a sample of both
+            for amp in (float(x) for x in a.amplitudes.split(",")):
                 for path in make_jitter(scene, amp, _seed_range(a.seeds), tmp):
                     cmd = [sys.executable, __file__, "--one", str(path), "--solver", a.solver]
                     for kv in a.set:

@@ -199,6 +199,7 @@ class MotionPlanner:
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
         self._pick_end: dict[tuple[str, frozenset], np.ndarray] = {}
+        self._stage_refs: dict[tuple, list[np.ndarray] | None] = {}
         if scenario.auto_slots:  # `slots: auto` must give slots the arm reaches (explicit ones: per relocation)
             bad = self.slot_problems()
             if bad:
@@ -569,6 +570,9 @@ class MotionPlanner:
         removed = self.scenario.check_ids(removed)
         placed = self.placed_default(removed, -1) if placed is None else list(placed)
         obs = CollisionScene(self.scenario, placed).obstacles(removed)
+        via = self._home_via_stage(_check_q(q_from), obs, placed)
+        if via is not None:
+            return _time_joint_path(via, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt).resample()
         rng = self.question_rng("home", np.asarray(q_from, float), removed, self._placed_key(placed))
         traj = self.plan_joint(q_from, rd.Q_HOME, obs, 4 * self.params.rrt_max_checks,
                                time.perf_counter() + self.params.carry_timeout, rng=rng)
@@ -576,11 +580,52 @@ class MotionPlanner:
             raise PlanningError("no collision-free joint path back to the home configuration")
         return traj.resample()
 
+    def _home_via_stage(self, q_from: np.ndarray, obs: ObstacleSet, placed: list) -> list[np.ndarray] | None:
+        """The way home from the staging pose in front of a placed bottle's slot (where every retreat ends) without
+        sampling: the straight joint motion to that pose's reference configuration, then the reference track
+        reversed (`_stage_reference`); None if q_from is at no such pose or that motion is not clear (with the
+        home planner's 5 mm margin)."""
+        p = self.params
+        self.kin.update(q_from, jacobians=False)
+        rot, pos = self.kin.tool_pose()
+        for oid, xy in placed:
+            try:
+                _, release = self._carry_heights(oid)
+                stage = np.array(place_poses(self.scenario, oid, xy, release, p.stage_distance)[0])
+            except WorkspaceError:
+                continue
+            if np.linalg.norm(pos - stage[:3]) > 2 * p.stpik.final_tol_pos or \
+                    abs(math.atan2(rot[1, 2], rot[0, 2]) - stage[3]) > 2 * p.stpik.final_tol_ori:
+                continue
+            ref = self._stage_reference(stage, placed)
+            if ref is None or not self._joint_motion_clear(q_from, ref[-1], obs):
+                return None
+            return [q_from] + ref[::-1]
+        return None
+
+    def _stage_reference(self, stage: np.ndarray, placed: list) -> list[np.ndarray] | None:
+        """STPIK's track of the straight tool path from home to the staging pose `stage` with every bottle of the
+        top shelf present and `placed` on the bottom one (None if rejected): clear for any removed set, so one per
+        (staging pose, bottom shelf's geometry); a function of those only (cached: it is no history)."""
+        key = (tuple(np.round(stage, 6)), self._placed_key(placed))
+        if key not in self._stage_refs:
+            obs = CollisionScene(self.scenario, placed).obstacles(frozenset())
+            r = self._track(rd.Q_HOME, [self.home, stage], obs, time.perf_counter() + self.params.carry_timeout,
+                            QueryStats())
+            self._stage_refs[key] = list(r.q) if r.ok else None
+        return self._stage_refs[key]
+
+    def _joint_motion_clear(self, a: np.ndarray, b: np.ndarray, obs: ObstacleSet, margin: float = 0.005) -> bool:
+        """The straight joint motion a -> b valid (joint_valid) every joint_resolution."""
+        n = max(1, int(math.ceil(float(np.max(np.abs(b - a))) / self.params.joint_resolution)))
+        return all(self.joint_valid(a + (b - a) * (k / n), obs, margin=margin) for k in range(1, n + 1))
+
     def set_scenario(self, scenario: Scenario) -> None:
         """Replace the scene (same shelf; e.g. bottles as perceived). Cached grasp ends are dropped."""
         self.scenario = scenario
         self.scene = CollisionScene(scenario)
         self._pick_end.clear()
+        self._stage_refs.clear()
 
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
