@@ -119,11 +119,12 @@ def summarize(rows: list[dict], label: str) -> str:
         n = len(rs)
         solved = sum(r["found"] for r in rs)
         clean = sum(r["executed"] and r["contacts"] == 0 for r in rs)
-        calls, wall, cpu = [r["calls"] for r in rs], [r["wall"] for r in rs], [r.get("cpu", 0.0) for r in rs]
+        calls, wall = [r["calls"] for r in rs], [r["wall"] for r in rs]
+        cpu = [r["cpu"] for r in rs if "cpu" in r]  # rows of runs before the CPU column have none
         lines.append(f"| {label} | {amp} mm | {n} | {solved}/{n} ({100 * solved / n:.0f} %) | "
                      f"{clean}/{n} ({100 * clean / n:.0f} %) | {statistics.median(calls):.0f} / {_pct(calls, .95)} / "
                      f"{max(calls)} | {statistics.median(wall):.1f} / {_pct(wall, .95):.1f} / {max(wall):.1f} | "
-                     f"{statistics.median(cpu):.1f} / {_pct(cpu, .95):.1f} |")
+                     + (f"{statistics.median(cpu):.1f} / {_pct(cpu, .95):.1f} |" if cpu else "- |"))
     fails = [f"- {r['layout']}: {r['reason']}" for r in rows if r["reason"]]
     return "\n".join(lines + (["", "Failures:"] + fails if fails else []))
 
