@@ -70,8 +70,12 @@ def _lane_blockers(planner, hand: HandProxy, g: Grasp) -> frozenset[str] | None:
     everything = scene.obstacles()
     if not _blocked(planner, hand, g, everything):
         return frozenset()
-    hits = frozenset(o.object_id for o in _near(hand, g, everything)
-                     if o.object_id in scene.bottles and _blocked(planner, hand, g, ObstacleSet([o])))
+    # the proxy's contact with a set of obstacles is the OR of its contacts with each: one pass collects them all
+    skip = {n: frozenset([g.object_id]) for n in HAND_PARTS}
+    near = ObstacleSet([o for o in _near(hand, g, everything) if o.object_id in scene.bottles])
+    met = hand.hits(*pose_matrix(g.pre_grasp), near) | hand.path_hits([g.pre_grasp, g.grasp], near,
+                                                                       planner.params.resolution, skip)
+    hits = frozenset(str(near.items[k].object_id) for k in met)
     return None if g.object_id in hits else hits
 
 

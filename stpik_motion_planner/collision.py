@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import fcl
 import numpy as np
@@ -310,6 +310,13 @@ class HandProxy:
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
                  skip: dict[str, frozenset] | None = None) -> bool:
         """Any shape in contact with an obstacle (not skipped): AABB broad phase, then fcl.collide."""
+        return bool(self.hits(r_tool, p_tool, obs, skip, first=True))
+
+    def hits(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
+             skip: dict[str, frozenset] | None = None, first: bool = False) -> set[int]:
+        """Indices (in obs.items) of the obstacles some shape is in contact with (not skipped); `first`: stop at
+        the first one."""
+        out: set[int] = set()
         p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
         a = self.p0 @ r_tool.T + p7
         b = self.p1 @ r_tool.T + p7
@@ -320,26 +327,42 @@ class HandProxy:
         for c, k in zip(ci, oi):
             o = obs.items[k]
             s = self.specs[c]
-            if skip and _key(o) in skip.get(s.name, ()) or s.name == "forearm_stub" and o.name in self.STUB_IGNORES:
+            if k in out or skip and _key(o) in skip.get(s.name, ()) or \
+                    s.name == "forearm_stub" and o.name in self.STUB_IGNORES:
                 continue
             if c not in posed:
                 self.objs[c].setTransform(fcl.Transform(r_tool @ s.rot, r_tool @ s.centre + p7))
                 posed.add(c)
             if fcl.collide(self.objs[c], o.obj, self.req, fcl.CollisionResult()):
-                return True
-        return False
+                out.add(int(k))
+                if first:
+                    break
+        return out
 
     def path_clear(self, poses, obs: ObstacleSet, resolution: float, skip: dict[str, frozenset] | None = None
                    ) -> bool:
         """The proxy is clear at every pose along the polyline of (x, y, z, yaw) poses (grasp.py), sampled every
         `resolution` m (a yaw change counts 0.25 m per rad): the straight approach of a grasp lane (feasibility's
         candidates, blockers' screen) and a direct Cartesian path."""
-        from .grasp import pose_matrix
+        return all(not self.collides(*m, obs, skip) for m in _path_poses(poses, resolution))
 
-        for a, b in zip(poses[:-1], poses[1:]):
-            a, b = np.asarray(a, float), np.asarray(b, float)
-            n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / resolution)))
-            for k in range(n + 1):
-                if self.collides(*pose_matrix(a + (b - a) * k / n), obs, skip):
-                    return False
-        return True
+    def path_hits(self, poses, obs: ObstacleSet, resolution: float, skip: dict[str, frozenset] | None = None
+                  ) -> set[int]:
+        """Indices (in obs.items) of every obstacle the proxy meets along the polyline (`path_clear`'s poses): the
+        OR of the contacts, so the obstacles each of which alone would block it."""
+        out: set[int] = set()
+        for m in _path_poses(poses, resolution):
+            out |= self.hits(*m, obs, skip)
+        return out
+
+
+def _path_poses(poses, resolution: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses (a yaw change
+    counts 0.25 m per rad), both ends of each segment included."""
+    from .grasp import pose_matrix
+
+    for a, b in zip(poses[:-1], poses[1:]):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / resolution)))
+        for k in range(n + 1):
+            yield pose_matrix(a + (b - a) * k / n)

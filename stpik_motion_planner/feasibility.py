@@ -88,7 +88,7 @@ class PlannerParams:
     stage_distance: float = 0.15  # m, staging pose in front of the slot (at most x_front - 0.07: grasp.place_poses)
     carry_timeout: float = 10.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
-    seed_per_query: bool = False  # every random draw seeded from the question (rrt.rrt_connect), not OMPL's RNG
+    seed_per_query: bool = False  # every OMPL solve seeded from the question (question_rng), not process history
     screen_at_clearance: bool = False  # the grasp screen's hand proxy inflated by at least stpik.clearance
     certify_relocation: bool = False  # a feasible pick counts only if the carry, retreat and way home plan from it
     workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
@@ -199,6 +199,7 @@ class MotionPlanner:
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
         self._pick_end: dict[tuple[str, frozenset], np.ndarray] = {}
+        self._stage_refs: dict[tuple, list[np.ndarray] | None] = {}
         if scenario.auto_slots:  # `slots: auto` must give slots the arm reaches (explicit ones: per relocation)
             bad = self.slot_problems()
             if bad:
@@ -322,7 +323,8 @@ class MotionPlanner:
                 stats.direct_paths += 1
                 return direct
         t = time.perf_counter()
-        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), max_checks, deadline, rng)
+        path = self.rrt.plan(start, goal, lambda s: not hand.collides(*_mat(s), obs), max_checks, deadline,
+                             _draw_seed(rng))
         stats.rrt_time += time.perf_counter() - t
         stats.rrt_calls += 1
         return path
@@ -515,7 +517,7 @@ class MotionPlanner:
             else:
                 t = time.perf_counter()
                 mid = self.rrt.plan(lifted, stage, lambda s_: not hand_c.collides(*_mat(s_), obs),
-                                    4 * p.rrt_max_checks, deadline, rng)
+                                    4 * p.rrt_max_checks, deadline, _draw_seed(rng))
                 stats.rrt_time += time.perf_counter() - t
                 stats.rrt_calls += 1
                 if mid is None:
@@ -556,7 +558,8 @@ class MotionPlanner:
         lo = np.maximum(rd.Q_LOWER, np.minimum(q_from, q_to) - math.pi)
         hi = np.minimum(rd.Q_UPPER, np.maximum(q_from, q_to) + math.pi)
         rrt = JointRRT(lo, hi, self.params.joint_resolution, self.params.simplify_checks)
-        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), max_checks, deadline, rng)
+        path = rrt.plan(q_from, q_to, lambda q: self.joint_valid(q, obs, margin=margin), max_checks, deadline,
+                        _draw_seed(rng))
         if path is None:
             return None
         return _time_joint_path(path, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt)
@@ -567,6 +570,9 @@ class MotionPlanner:
         removed = self.scenario.check_ids(removed)
         placed = self.placed_default(removed, -1) if placed is None else list(placed)
         obs = CollisionScene(self.scenario, placed).obstacles(removed)
+        via = self._home_via_stage(_check_q(q_from), obs, placed)
+        if via is not None:
+            return _time_joint_path(via, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt).resample()
         rng = self.question_rng("home", np.asarray(q_from, float), removed, self._placed_key(placed))
         traj = self.plan_joint(q_from, rd.Q_HOME, obs, 4 * self.params.rrt_max_checks,
                                time.perf_counter() + self.params.carry_timeout, rng=rng)
@@ -574,11 +580,52 @@ class MotionPlanner:
             raise PlanningError("no collision-free joint path back to the home configuration")
         return traj.resample()
 
+    def _home_via_stage(self, q_from: np.ndarray, obs: ObstacleSet, placed: list) -> list[np.ndarray] | None:
+        """The way home from the staging pose in front of a placed bottle's slot (where every retreat ends) without
+        sampling: the straight joint motion to that pose's reference configuration, then the reference track
+        reversed (`_stage_reference`); None if q_from is at no such pose or that motion is not clear (with the
+        home planner's 5 mm margin)."""
+        p = self.params
+        self.kin.update(q_from, jacobians=False)
+        rot, pos = self.kin.tool_pose()
+        for oid, xy in placed:
+            try:
+                _, release = self._carry_heights(oid)
+                stage = np.array(place_poses(self.scenario, oid, xy, release, p.stage_distance)[0])
+            except WorkspaceError:
+                continue
+            if np.linalg.norm(pos - stage[:3]) > 2 * p.stpik.final_tol_pos or \
+                    abs(math.atan2(rot[1, 2], rot[0, 2]) - stage[3]) > 2 * p.stpik.final_tol_ori:
+                continue
+            ref = self._stage_reference(stage, placed)
+            if ref is None or not self._joint_motion_clear(q_from, ref[-1], obs):
+                return None
+            return [q_from] + ref[::-1]
+        return None
+
+    def _stage_reference(self, stage: np.ndarray, placed: list) -> list[np.ndarray] | None:
+        """STPIK's track of the straight tool path from home to the staging pose `stage` with every bottle of the
+        top shelf present and `placed` on the bottom one (None if rejected): clear for any removed set, so one per
+        (staging pose, bottom shelf's geometry); a function of those only (cached: it is no history)."""
+        key = (tuple(np.round(stage, 6)), self._placed_key(placed))
+        if key not in self._stage_refs:
+            obs = CollisionScene(self.scenario, placed).obstacles(frozenset())
+            r = self._track(rd.Q_HOME, [self.home, stage], obs, time.perf_counter() + self.params.carry_timeout,
+                            QueryStats())
+            self._stage_refs[key] = list(r.q) if r.ok else None
+        return self._stage_refs[key]
+
+    def _joint_motion_clear(self, a: np.ndarray, b: np.ndarray, obs: ObstacleSet, margin: float = 0.005) -> bool:
+        """The straight joint motion a -> b valid (joint_valid) every joint_resolution."""
+        n = max(1, int(math.ceil(float(np.max(np.abs(b - a))) / self.params.joint_resolution)))
+        return all(self.joint_valid(a + (b - a) * (k / n), obs, margin=margin) for k in range(1, n + 1))
+
     def set_scenario(self, scenario: Scenario) -> None:
         """Replace the scene (same shelf; e.g. bottles as perceived). Cached grasp ends are dropped."""
         self.scenario = scenario
         self.scene = CollisionScene(scenario)
         self._pick_end.clear()
+        self._stage_refs.clear()
 
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
@@ -590,6 +637,11 @@ class MotionPlanner:
             raise WorkspaceError(f"{object_id!r} at {(x, y)} is not on the top shelf")
         objs = tuple(dataclasses.replace(o, x=x, y=y) if o.id == object_id else o for o in self.scenario.objects)
         self.set_scenario(dataclasses.replace(self.scenario, objects=objs, _by_id={}))
+
+
+def _draw_seed(rng: np.random.Generator | None) -> int | None:
+    """The seed of one RRT-Connect solve drawn from the question's generator (None: OMPL's process-wide RNG)."""
+    return None if rng is None else int(rng.integers(1, 2**31))
 
 
 def _mat(pose) -> tuple[np.ndarray, np.ndarray]:

@@ -184,6 +184,26 @@ def test_pick_carry_home_relocate_for_real(planner):
         planner.plan_pick("B", frozenset())
 
 
+def test_the_way_home_from_a_retreat_needs_no_sampling(planner, monkeypatch):
+    """A retreat ends at the staging pose in front of its slot: the way home is the straight joint motion to that
+    pose's reference configuration and the reference track (home -> staging pose) reversed, no RRT-Connect
+    (docs/motion_planner.md, "Execution"); anywhere else the joint-space RRT-Connect plans it."""
+    planner.plan_pick("C", frozenset())
+    retreat = planner.plan_carry("C", frozenset(), 1)[1].trajectory
+    slot = SMALL.slot(1)
+    sampled = []
+    real = planner.plan_joint
+    monkeypatch.setattr(planner, "plan_joint", lambda *a, **k: sampled.append(1) or real(*a, **k))
+    home = planner.plan_home(retreat.positions[-1], frozenset({"C"}), placed=[("C", slot)])
+    assert not sampled
+    np.testing.assert_allclose(home.positions[0], retreat.positions[-1], atol=1e-9)
+    np.testing.assert_allclose(home.positions[-1], rd.Q_HOME, atol=1e-9)
+    verify(home, SMALL, {"C"})
+    away = home.positions[len(home.positions) // 2]  # on the way, at no staging pose
+    verify(planner.plan_home(away, frozenset({"C"}), placed=[("C", slot)]), SMALL, {"C"})
+    assert sampled
+
+
 def test_default_scenario_target_is_blocked_and_freed_by_o2_o3_o6():
     from relocation_common.paths import default_scenario
     from relocation_common.scenario import load_scenario
