@@ -105,7 +105,7 @@ class Knowledge:
                 if b & chain or obj in b:
                     continue
                 rest = b - free
-                v = sum(self.weights.get(y, math.inf) for y in rest)
+                v = math.fsum(self.weights.get(y, math.inf) for y in rest)
                 if depth and rest and v < low:
                     sub = free | b
                     v += max(self.need(y, removed, sub, chain | {obj}, depth - 1) for y in rest)
@@ -137,7 +137,7 @@ def _optimistic(obstacles, phi, target, kb: Knowledge):
         if state in closed:
             continue
         closed[state] = (parent, obj)
-        g = sum(phi[o] for o in state)
+        g = math.fsum(phi[o] for o in state)  # fsum: exact, in any set order (PYTHONHASHSEED)
         if kb.possible(target, state):
             heapq.heappush(heap, (g, unv + (not kb.verified(target, state)), -len(state), next(tie), state, state,
                                   target))
