@@ -208,8 +208,10 @@ class TaskPlannerNode(Node):
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
         resume = self._keeper.resume_point(problem, params, oracle)
 
+        why_none = [""]  # the exact solver's one-line reason when no sequence exists (exact.why_none)
+
         def on_solved(optimum) -> None:
-            result.optimal_sequence = list(optimum.sequence or ())
+            result.optimal_sequence, why_none[0] = list(optimum.sequence or ()), optimum.reason
             result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
             self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
                                    f"({oracle.calls} planner calls; {service.summary()})")
@@ -230,16 +232,20 @@ class TaskPlannerNode(Node):
         result.e_ss, result.mp_q, result.e_first = r.e_ss, r.mp_q, r.e_1st if r.e_1st is not None else -1
         result.planner_calls, result.episodes = len(oracle.table), r.episodes
         result.q_sum_history = [float(x) for x in r.q_sum_history]
-        if r.cancelled or not r.found:
+        if r.cancelled or not (r.found or result.optimal_sequence):
             result.success = False
-            result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target" + \
-                self._foreign_ids(service, problem)
+            result.message = "cancelled" if r.cancelled else \
+                f"the target cannot be retrieved: {why_none[0] or 'no sequence'}" + self._foreign_ids(service, problem)
             return
         self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
-                               f"({service.summary()})")
-        self._publish_scene(scene, r.sequence, r.tree, problem.ids)
+                               f"({service.summary()})" if r.found else
+                               f"training found no sequence in {r.episodes} episodes; the exact optimum exists")
+        self._publish_scene(scene, r.sequence or result.optimal_sequence, r.tree, problem.ids)
         if not goal_handle.request.execute:
-            result.success, result.message = True, "trained (not executed)"
+            result.success = r.found
+            result.message = "trained (not executed)" if r.found else (
+                f"training did not find a sequence to the target in {r.episodes} episodes (the exact optimum "
+                f"{' '.join(result.optimal_sequence)}, weight {result.optimal_weight:.2f}, exists: execute_optimum)")
             return
         fb.phase = "executing"  # then each check and re-plan (_run)
         self._run(goal_handle, fb, result, scene, oracle, *chosen_sequence(

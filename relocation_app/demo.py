@@ -278,6 +278,9 @@ def _next_step(message: str, out: Path) -> str:
     if "did not find a sequence" in message:
         return ("the Q-Tree stopped before reaching the target: rerun with --execute-optimum (the proven optimum), "
                 "or raise max_episodes in config/task_planner.yaml; see docs/qtree.md")
+    if "cannot be retrieved" in message:
+        return ("no relocation sequence frees the target on this shelf (the reason above, from the exact solver); "
+                "move the bottles named there by hand or check the layout; see docs/motion_planner.md")
     if "cannot be reached" in message or "no sequence remains" in message:
         return "no collision-free way to the target remains on this shelf: see docs/closed_loop.md"
     if "went away" in message:

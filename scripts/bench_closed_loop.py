@@ -5,9 +5,14 @@ driver's `disturbance_plan`) and both executors (task planner `closed_loop` true
 driver, motion planner, task planner on the ground-truth scene /sim/objects) executes the exact optimum
 (`execute_optimum`; training capped at 5 episodes: the executor is measured, not the Q-Tree). Success: the goal
 succeeded AND the simulator shows the target on the bottom shelf; a run that reports success without it is counted
-as `false success`. Printed: success rate, re-plans, extra relocations against the undisturbed optimum, wall time.
+as `false success`. After each run: the arm within 0.05 rad of home (the final joint state) and the gripper empty
+(no bottle within 0.1 m of the tool). Printed: success rate, re-plans, extra relocations against the undisturbed
+optimum, wall time, the failures' reasons. Every run is appended to `--out` (JSON lines) as it ends, so a grid cut
+short keeps its runs; `--table FILE` prints the table of such a file.
 
-    .venv/bin/python scripts/bench_closed_loop.py [--scenes scenario1_5 paper1_5] [--seeds 0 1 2] [--k 0 1 2]
+    nice -n 10 .venv/bin/python scripts/bench_closed_loop.py [--scenes scenario1_5 paper1_5] [--seeds 0 1 2]
+        [--k 0 1 2 3] [--out /tmp/bench_closed_loop.jsonl]
+    .venv/bin/python scripts/bench_closed_loop.py --table /tmp/bench_closed_loop.jsonl
 """
 from __future__ import annotations
 
@@ -20,11 +25,14 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from relocation_app.client import RelocationClient
 from relocation_app.graph import Graph
+from relocation_common import robot_description as rd
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
 
@@ -33,6 +41,7 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
     """One execution in a fresh graph: success, target on the bottom shelf, re-plans, relocations, wall s."""
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import JointState
     from std_msgs.msg import String
 
     latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -45,7 +54,7 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
         g.start("task_planner", dict(common, scene_topic="/sim/objects", closed_loop=closed))
         os.environ.update(g.env)
         client = RelocationClient("bench_closed_loop")
-        box: dict = {"truth": None, "execution": None, "disturbances": []}
+        box: dict = {"truth": None, "execution": None, "disturbances": [], "joints": None}
 
         def on_execution(m: String) -> None:
             box["execution"] = json.loads(m.data)
@@ -55,6 +64,8 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
 
         try:
             client.node.create_subscription(ObjectArray, "/sim/objects", lambda m: box.update(truth=m), latched)
+            client.node.create_subscription(JointState, "/j2s7s300_driver/out/joint_state",
+                                            lambda m: box.update(joints=m), 10)
             client.node.create_subscription(String, "/task_planner/execution", on_execution, latched)
             client.node.create_subscription(String, "/sim/disturbances", on_disturbance,
                                             QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL))
@@ -71,44 +82,88 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
     on_bottom = t is not None and abs(t.z - sc.shelf.bottom_z) < 0.02
     ex = box["execution"] or {}
     res = outcome.result
-    return {"success": bool(res is not None and res.success), "on_bottom": on_bottom,
+    home, empty = arm_home_and_gripper_empty(box["joints"], box["truth"])
+    return {"scene": scene.stem, "seed": seed, "k": k, "closed": closed,
+            "success": bool(res is not None and res.success), "on_bottom": on_bottom, "home": home, "empty": empty,
             "replans": len(ex.get("replans", [])), "relocations": len(ex.get("steps", [])) or len(ex.get(
                 "relocated", [])), "optimum": len(res.optimal_sequence) if res is not None else 0, "wall": wall,
-            "applied": sum("skipped" not in d for d in box["disturbances"]), "message": outcome.message}
+            "applied": sum("skipped" not in d for d in box["disturbances"]), "message": outcome.message,
+            "disturbances": [d.get("kind", "") + " " + str(d.get("object", "")) for d in box["disturbances"]
+                             if "skipped" not in d]}
+
+
+def arm_home_and_gripper_empty(joints, truth) -> tuple[bool, bool]:
+    """(the arm within 0.05 rad of Q_HOME, no bottle within 0.1 m of the tool) from the last joint state and
+    ground truth; (False, False) when either never came."""
+    if joints is None or truth is None:
+        return False, False
+    pos = dict(zip(joints.name, joints.position))
+    q = np.array([pos.get(n, np.nan) for n in rd.JOINT_NAMES])
+    d = np.abs((q - rd.Q_HOME + np.pi) % (2 * np.pi) - np.pi)
+    tool = rd.dh_fk(q)[-1][:3, 3]
+    near = [o.id for o in truth.objects if np.linalg.norm(
+        np.array([o.pose.position.x, o.pose.position.y, o.pose.position.z]) - tool) < 0.1]
+    return bool(np.all(d < 0.05)), not near
+
+
+def table(runs: list[dict]) -> None:
+    """Print the table of docs/benchmarks.md (one row per scene x K x executor) and the failures' reasons."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in runs:
+        groups.setdefault((r["scene"], r["k"], r["closed"]), []).append(r)
+    print("| scene | K | executor | runs | success | false success | arm home, gripper empty | disturbances applied "
+          "| re-plans (mean) | extra relocations (mean) | wall s (mean) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for (name, k, closed), rs in groups.items():
+        ok = sum(r["success"] and r["on_bottom"] for r in rs)
+        false = sum(r["success"] and not r["on_bottom"] for r in rs)
+        safe = sum(r["home"] and r["empty"] for r in rs)
+        extra = statistics.fmean(max(0, r["relocations"] - r["optimum"]) for r in rs)
+        print(f"| {name} | {k} | {'closed' if closed else 'open'} | {len(rs)} | {ok}/{len(rs)} | {false} | "
+              f"{safe}/{len(rs)} | {sum(r['applied'] for r in rs)} | {statistics.fmean(r['replans'] for r in rs):.1f} "
+              f"| {extra:.1f} | {statistics.fmean(r['wall'] for r in rs):.0f} |")
+    print("\nfailures:")
+    for r in runs:
+        if not (r["success"] and r["on_bottom"] and r["home"] and r["empty"]):
+            print(f"- {r['scene']} K={r['k']} {'closed' if r['closed'] else 'open'} seed {r['seed']} "
+                  f"({', '.join(r['disturbances']) or 'undisturbed'}): home {r['home']}, empty {r['empty']}: "
+                  f"{r['message']}")
 
 
 def main() -> None:
-    """Run the grid and print the table (docs/benchmarks.md)."""
+    """Run the grid (appending every run to --out) and print the table (docs/benchmarks.md)."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", nargs="+", default=["scenario1_5", "paper1_5"])
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     p.add_argument("--k", nargs="+", type=int, default=[0, 1, 2])
+    p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "bench_closed_loop.jsonl")
+    p.add_argument("--table", type=Path, help="print the table of this JSON-lines file and exit")
     a = p.parse_args()
-    rows = []
+    if a.table:
+        table([json.loads(line) for line in a.table.read_text().splitlines() if line.strip()])
+        return
+    runs = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in a.scenes:
             scene = resolve_scenario(name).resolve()
             for k in a.k:
-                for closed in (True, False):
-                    runs = []
-                    for seed in a.seeds:
-                        r = run_once(scene, seed, k, closed, Path(tmp) / f"{name}_{k}_{closed}_{seed}")
+                for seed in a.seeds:
+                    for closed in (True, False):
+                        try:
+                            r = run_once(scene, seed, k, closed, Path(tmp) / f"{name}_{k}_{closed}_{seed}")
+                        except Exception as e:  # noqa: BLE001 (a graph that failed is a failed run of the grid)
+                            r = {"scene": scene.stem, "seed": seed, "k": k, "closed": closed, "success": False,
+                                 "on_bottom": False, "home": False, "empty": False, "replans": 0, "relocations": 0,
+                                 "optimum": 0, "wall": 0.0, "applied": 0, "message": f"run error: {e}",
+                                 "disturbances": []}
                         runs.append(r)
+                        with a.out.open("a") as f:
+                            f.write(json.dumps(r) + "\n")
                         print(f"  {name} K={k} {'closed' if closed else 'open'} seed {seed}: "
                               f"{'ok' if r['success'] and r['on_bottom'] else 'FAILED'} ({r['wall']:.0f} s, "
-                              f"{r['applied']} disturbances applied, {r['replans']} re-plans) {r['message']}",
-                              flush=True)
-                    rows.append((name, k, closed, runs))
-    print("\n| scene | K | executor | runs | success | false success | disturbances applied | re-plans (mean) "
-          "| extra relocations (mean) | wall s (mean) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for name, k, closed, runs in rows:
-        ok = sum(r["success"] and r["on_bottom"] for r in runs)
-        false = sum(r["success"] and not r["on_bottom"] for r in runs)
-        extra = statistics.fmean(max(0, r["relocations"] - r["optimum"]) for r in runs)
-        print(f"| {name} | {k} | {'closed' if closed else 'open'} | {len(runs)} | {ok}/{len(runs)} | {false} | "
-              f"{sum(r['applied'] for r in runs)} | {statistics.fmean(r['replans'] for r in runs):.1f} | "
-              f"{extra:.1f} | {statistics.fmean(r['wall'] for r in runs):.0f} |")
+                              f"{r['applied']} disturbances applied, {r['replans']} re-plans, home {r['home']}, "
+                              f"empty {r['empty']}) {r['message']}", flush=True)
+    table(runs)
 
 
 if __name__ == "__main__":
