@@ -4,12 +4,16 @@ One `MotionPlanner` (not thread-safe: a lock) on the scenario as last perceived:
 with every lane's blockers when asked, scene updates from perception (`scene_update.merge_perceived`: the bottle
 being carried and the bottles relocated by this node are not taken from perception until seen back on the top
 shelf), and one relocation at a time (`relocation.relocate` on a `streaming.StreamedArm`, then `relocation.recover`
-after a failure or a cancel). Logging goes to `log(level, text)` (the node's logger).
+after a failure or a cancel). While a relocation runs, its last feedback is sent again every `HEARTBEAT` s when
+nothing new was sent: a plan under load can take the planner's whole wall-clock safety net (carry_timeout, 10 s)
+without a phase change, and the task planner takes `relocate_silence` (10 s) without feedback for a planner that is
+gone. Logging goes to `log(level, text)` (the node's logger).
 """
 from __future__ import annotations
 
 import math
 import threading
+import time
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
@@ -25,6 +29,7 @@ from .scene_update import merge_perceived
 from .streaming import Aborted, Cancelled, StreamedArm
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
+HEARTBEAT = 2.0  # s without feedback after which a running relocation's last feedback is sent again
 
 
 @dataclass(frozen=True)
@@ -110,7 +115,7 @@ class MotionPlannerService:
             self.log("error", f"relocation goal refused: {e}")
             return Outcome("aborted", f"relocation goal refused: {e}")
         progress = Progress()
-        with self._relocating:
+        with self._relocating, _Heartbeat(arm):
             self._held = object_id
             try:
                 arm.wait_for_state(STATE_WAIT)
@@ -150,3 +155,38 @@ class MotionPlannerService:
         if progress.released:
             self.relocated[progress.object_id] = self._slot
         return f"; recovered: {what}"
+
+
+class _Heartbeat:
+    """While a relocation runs: the arm's last feedback (phase, progress) sent again every HEARTBEAT s in which
+    nothing new was sent (the module docstring). A context manager around the relocation and its recovery."""
+
+    def __init__(self, arm: StreamedArm) -> None:
+        self.arm, self.send = arm, arm.feedback
+        self.last: tuple[str, float] | None = None
+        self.sent = time.monotonic()
+        self.lock = threading.Lock()
+        self.done = threading.Event()
+        self.thread = threading.Thread(target=self._beat, name="relocation heartbeat", daemon=True)
+
+    def __call__(self, phase: str, progress: float) -> None:
+        with self.lock:
+            self.last, self.sent = (phase, progress), time.monotonic()
+            self.send(phase, progress)
+
+    def __enter__(self) -> _Heartbeat:
+        self.arm.feedback = self
+        self.thread.start()
+        return self
+
+    def __exit__(self, *_) -> None:
+        self.done.set()
+        self.thread.join()
+        self.arm.feedback = self.send
+
+    def _beat(self) -> None:
+        while not self.done.wait(HEARTBEAT / 4):
+            with self.lock:
+                if self.last is not None and time.monotonic() - self.sent >= HEARTBEAT and self.arm.link.ok():
+                    self.sent = time.monotonic()
+                    self.send(*self.last)
