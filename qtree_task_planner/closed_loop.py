@@ -431,6 +431,7 @@ class ClosedLoopExecutor:
                 x, y = self.scenario.slots[slot]
                 check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
                                           self.bottom_seen)
+            stayed = _stayed(obj, scene, after, self.tol)
             step = Step(len(out.steps), obj, removed, slot, ok, message, check)
             out.steps.append(step)
             self.on_step(step)
@@ -444,7 +445,8 @@ class ClosedLoopExecutor:
                 seq = seq[1:]
                 continue
             if not ok:
-                self._fail(obj, gone)
+                if stayed:  # the option failed; else the bottle was dropped or knocked: the re-plan asks about its
+                    self._fail(obj, gone)  # new pose (a bottle on the bottom shelf is relocated, above)
                 seq = self._replan(f"relocating {obj} failed: {message}", rp, out)
             else:
                 assert check is not None
@@ -501,6 +503,14 @@ class ClosedLoopExecutor:
 
 class _Done(GiveUp):
     """The target is on the bottom shelf."""
+
+
+def _stayed(obj: str, before: Scene, after: Scene, tol: Tolerances) -> bool:
+    """True when `obj` stands where it stood before a failed relocation (within tol.still, not tipped): the failure
+    is the option's (no grasp, no path) and the option is marked; a bottle moved by the attempt is not."""
+    was, now = before.get(obj), after.get(obj)
+    return was is not None and now is not None and now.tilt <= tol.tilt and \
+        math.hypot(now.x - was.x, now.y - was.y) <= tol.still and abs(_support(now) - _support(was)) <= tol.board
 
 
 def _options(seq, gone: frozenset[str]):

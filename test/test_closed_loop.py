@@ -251,6 +251,21 @@ def test_a_bottle_that_slips_back_onto_the_top_shelf_is_relocated_again():
     assert shelf.relocations[1] == ("b", ())  # b was not counted as relocated
 
 
+def test_a_relocation_that_failed_because_the_bottle_dropped_is_not_a_failed_option():
+    """b slips out of the hand during the carry and lands on the top shelf again (the motion planner reports the
+    relocation failed: b is not at its slot). The option (b, nothing removed) did not fail, the world changed: the
+    re-plan asks about b's new pose and relocates it again. Old code: (b, {}) banned, c relocated first."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.fail["b"] = 1
+    shelf.disturb[0] = lambda s: s.put("b", 0.57, 0.01, TOP)
+    result = executor(shelf, cache).run(seq)
+    assert result.success, result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "b", "T"]
+    assert result.replans[0].reason.startswith("relocating b failed") and result.replans[0].sequence == ("b", "T")
+
+
 def test_a_failed_relocation_marks_the_option_and_replans_around_it():
     """b fails once with nothing removed: that option is banned, the re-plan relocates c first (then b, T; d, which
     is lighter, stands behind a)."""
