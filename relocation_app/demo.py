@@ -26,6 +26,7 @@ from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
 from relocation_common.paths import default_scenario, resolve_scenario
 
 from .client import ClientError, RelocationClient
+from .final_state import final_state
 from .graph import Graph
 from .progress import Progress
 
@@ -171,7 +172,7 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     """Wait for the graph and a scene, train (and execute) through the client; (result, before, after, frames)."""
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import QoSDurabilityPolicy, QoSProfile
-    from sensor_msgs.msg import Image
+    from sensor_msgs.msg import Image, JointState
     from std_msgs.msg import String
 
     latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -184,6 +185,8 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     client.node.create_subscription(Image, "/camera/color/image_raw", rec, 2)
     client.node.create_subscription(ObjectArray, "/sim/objects", truth, latched)
     client.node.create_subscription(ObjectArray, scene_topic, scene, latched)
+    joints = _Latest()
+    client.node.create_subscription(JointState, "/j2s7s300_driver/out/joint_state", joints, 10)
     _wait_for(lambda: scene.msg is not None and len(scene.msg.objects) > 0, 90, g, f"no scene on {scene_topic}")
     before = truth.positions()
     print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {used.policy}/{used.search} "
@@ -200,7 +203,8 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     res = outcome.result
     time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
     run = json.loads(execution.msg.data) if execution.msg is not None else {}
-    return res, before, truth.positions(), rec.frames, {**run, "disturbances": list(disturbances)}
+    return res, before, truth.positions(), rec.frames, {**run, "disturbances": list(disturbances),
+                                                        "robot": final_state(joints.msg, truth.msg)}
 
 
 def _start_recording(g: Graph, a, out: Path):
@@ -229,7 +233,8 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
     """report.json, learning_curve.png, retrieval_strip.png and the summary lines; the exit status. Success only
     with the target on the bottom shelf (when executed); no sentinel values: what is missing is said in words."""
     executed = run.get("sequence") or list(res.optimal_sequence if a.execute_optimum else res.sequence)
-    fs = _check_scene(a.scenario, before, after, [] if a.no_execute else run.get("relocated", executed))
+    fs = {**_check_scene(a.scenario, before, after, [] if a.no_execute else run.get("relocated", executed)),
+          **run.get("robot", {})}  # arm_home, gripper_empty (relocation_app.final_state)
     success = bool(res.success and (a.no_execute or fs["target_on_bottom_shelf"]))
     learned_w = res.total_weight if res.sequence else None
     optimal_w = res.optimal_weight if res.optimal_sequence else None
@@ -252,7 +257,8 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
     _strip(frames, out / "retrieval_strip.png")
     if not a.no_execute:
         print(f"[demo] target on the bottom shelf: {fs['target_on_bottom_shelf']}; largest displacement of a "
-              f"bottle not relocated: {fs['max_displacement_untouched_m'] * 100:.1f} cm")
+              f"bottle not relocated: {fs['max_displacement_untouched_m'] * 100:.1f} cm; arm home: "
+              f"{fs.get('arm_home')}; gripper empty: {fs.get('gripper_empty')}")
     print("[demo] learned sequence: " + (f"{' -> '.join(res.sequence)}  weight {learned_w:.2f}" if learned_w
                                          is not None else "none (training found no sequence to the target)"))
     print("[demo] exact optimum:    " + (f"{' -> '.join(res.optimal_sequence)}  weight {optimal_w:.2f}" if
