@@ -116,14 +116,18 @@ class Verification:
 
     object_id: str
     differences: tuple[Difference, ...] = ()
+    unseen_place: bool = False  # the bottle left the top shelf, its place was not seen (bottom shelf out of view)
 
     @property
     def ok(self) -> bool:
-        """True when the world is as planned."""
+        """True when the world is as planned (as far as it was seen: `unseen_place`)."""
         return not self.differences
 
     def summary(self) -> str:
         """One line: 'as planned' or the first difference (and how many more)."""
+        if self.ok and self.unseen_place:
+            return (f"{self.object_id} left the top shelf as planned; its place on the bottom shelf was not seen "
+                    "(unverified)")
         if self.ok:
             return f"{self.object_id} relocated as planned"
         more = len(self.differences) - 1
@@ -131,7 +135,8 @@ class Verification:
 
     def to_dict(self) -> dict[str, Any]:
         """For the feedback and the result (and report.json)."""
-        return {"object": self.object_id, "ok": self.ok, "differences": [d.line for d in self.differences]}
+        return {"object": self.object_id, "ok": self.ok, "differences": [d.line for d in self.differences],
+                "place_seen": not self.unseen_place}
 
 
 def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float], before_scene: Scene,
@@ -176,7 +181,7 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
             diffs.append(Difference("moved", oid, f"{oid} moved by {100 * d:.1f} cm: {_at(was)} -> {_at(now)}"))
     for oid in sorted(set(after_scene) - set(before_scene) - {planned_object}):
         diffs.append(Difference("new", oid, f"{oid} newly seen at {_at(after_scene[oid])}"))
-    return Verification(planned_object, tuple(diffs))
+    return Verification(planned_object, tuple(diffs), unseen_place=moved is None and not bottom_seen)
 
 
 # ------------------------------------------------------------------------------------------------ remaining problem
@@ -354,11 +359,13 @@ class ExecutionResult:
     relocated: list[str] = field(default_factory=list)
     steps: list[Step] = field(default_factory=list)
     replans: list[ReplanRecord] = field(default_factory=list)
+    unverified: list[str] = field(default_factory=list)  # relocated, but no scene showed where they stand
 
     def to_dict(self) -> dict[str, Any]:
-        """For the result and report.json (`replans`)."""
+        """For the result and report.json (`replans`, `unverified`)."""
         return {"success": self.success, "message": self.message, "relocated": list(self.relocated),
-                "steps": [s.to_dict() for s in self.steps], "replans": [r.to_dict() for r in self.replans]}
+                "steps": [s.to_dict() for s in self.steps], "replans": [r.to_dict() for r in self.replans],
+                "unverified": list(self.unverified)}
 
 
 class GiveUp(Exception):
@@ -432,6 +439,8 @@ class ClosedLoopExecutor:
                 check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
                                           self.bottom_seen)
             stayed = _stayed(obj, scene, after, self.tol)
+            if check is not None and check.unseen_place:
+                out.unverified.append(obj)
             step = Step(len(out.steps), obj, removed, slot, ok, message, check)
             out.steps.append(step)
             self.on_step(step)
@@ -468,7 +477,8 @@ class ClosedLoopExecutor:
             out.success = True
             out.message = (f"target {self.scenario.target_id} retrieved after {len(out.relocated) - 1} relocations"
                            + (f" and {len(out.replans)} re-plan{'s' * (len(out.replans) != 1)}" if out.replans
-                              else ""))
+                              else "") + (" (it left the top shelf; its place on the bottom shelf was not seen: "
+                                          "unverified)" if self.scenario.target_id in out.unverified else ""))
             raise _Done
         if rp.problem is None:
             raise GiveUp(rp.reason)

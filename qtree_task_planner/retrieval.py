@@ -153,8 +153,17 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
     why = check_capacity(sequence, len(free_slots(scenario, scene)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")
-    ok, message, relocated = execute_sequence(sequence, relocate_one, cancelled, before_each)
-    return ExecutionResult(ok, message, relocated)
+    unverified: list[str] = []  # the motion planner's success without an outcome check (goal_check.outcome)
+
+    def relocate_noted(object_id: str, removed: list[str]) -> tuple[bool, str]:
+        ok, message = relocate_one(object_id, removed)
+        if ok and "unverified" in message:
+            unverified.append(object_id)
+        return ok, message
+
+    ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each)
+    return ExecutionResult(ok, message + (f" (unverified: {', '.join(unverified)})" if ok and unverified else ""),
+                           relocated, unverified=unverified)
 
 
 STOPPED = ("shutting down", "went away", "cancelled", "relocate_timeout", "not available")  # relocation_stop's words

@@ -257,7 +257,8 @@ class TaskPlannerNode(Node):
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         relocate, perceive = watched(lambda o, rm: self._relocate_one(goal_handle, o, rm), self._scenes,
-                                     self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id)
+                                     self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id,
+                                     scenario.shelf.bottom_z)
 
         def phase(text: str) -> None:
             fb.phase = text

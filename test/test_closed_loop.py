@@ -419,6 +419,10 @@ def test_a_camera_that_does_not_see_the_bottom_shelf(disturbed):
     assert result.success, result.message
     assert len(result.replans) == disturbed and result.relocated == (["b", "d", "T"] if disturbed else ["b", "T"])
     assert result.message.startswith("target T retrieved")
+    # nothing showed where the relocated bottles stand: said so, never counted as verified
+    assert result.unverified == result.relocated and result.message.endswith("was not seen: unverified)")
+    assert result.steps[-1].verification.summary().endswith("(unverified)")
+    assert result.to_dict()["steps"][-1]["verification"]["place_seen"] is False
     shelf = FakeShelf()
     shelf.hide_bottom = True
     result = executor(shelf).run(("b", "T"))  # bottom_seen True: a target not seen is never a success

@@ -90,8 +90,25 @@ def test_a_retrieved_target_that_perception_still_holds_counts_as_gone():
     relocate(SC.target_id, ["o2"])
     watch.put(_msg())  # the target still shown on the top shelf (held)
     t0 = time.monotonic()
+    scene = perceive()  # waited TARGET_GONE_WAIT for a scene with the target on the bottom shelf
+    assert time.monotonic() - t0 < 3.0 and SC.target_id not in scene and "o2" in scene
+
+
+def test_the_target_seen_on_the_bottom_shelf_is_its_verification():
+    """Perception sees a bottle on the bottom shelf when it is in view: the scene with the target there is the
+    check of its relocation (before, the target was dropped from every scene after its relocation and its place
+    never checked)."""
+    watch = SceneWatch()
+    relocate, perceive = watched(lambda o, removed: (True, "ok"), watch, 5.0, SC.shelf.top_z,
+                                 unseen_target=SC.target_id, bottom_z=SC.shelf.bottom_z)
+    relocate(SC.target_id, ["o2"])
+    watch.put(_msg())  # held on the top shelf
+    msg = _msg()
+    t = next(o for o in msg.objects if o.id == SC.target_id)
+    t.pose.position.z = SC.shelf.bottom_z
+    threading.Timer(0.3, lambda: watch.put(msg)).start()
     scene = perceive()
-    assert time.monotonic() - t0 < 1.0 and SC.target_id not in scene and "o2" in scene
+    assert scene[SC.target_id].z == pytest.approx(SC.shelf.bottom_z)
 
 
 def test_a_relocation_stopped_by_a_lost_planner_ends_the_closed_loop_at_once():
