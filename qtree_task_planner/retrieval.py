@@ -95,6 +95,23 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
     return optimum, until_planner(run)
 
 
+def training_outcome(trained, optimum, *, execute: bool) -> tuple[bool, str] | None:
+    """(success, message) when the goal ends after training, None when it goes on to execute. Cancelled; no
+    sequence at all (the exact solver's one-line reason, exact.why_none); not executed (trained; or training found
+    none within E_max while the proven optimum exists: said, with the optimum). Training without a sequence but with
+    an optimum goes on: the optimum is executed (chosen_sequence says so)."""
+    if trained.cancelled:
+        return False, "cancelled"
+    if not (trained.found or optimum.found):
+        return False, f"the target cannot be retrieved: {optimum.reason or 'no sequence'}"
+    if execute:
+        return None
+    if trained.found:
+        return True, "trained (not executed)"
+    return False, (f"training did not find a sequence to the target in {trained.episodes} episodes (the exact "
+                   f"optimum {' '.join(optimum.sequence)}, weight {optimum.total_weight:.2f}, exists: execute_optimum)")
+
+
 def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
                      cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None
                      ) -> tuple[bool, str, list[str]]:
