@@ -407,6 +407,7 @@ class ClosedLoopExecutor:
         out = ExecutionResult()
         self._banned: set[Option] = set()
         self._failures: dict[str, int] = {}
+        self._retried: set[tuple[str, frozenset[str]]] = set()
         try:
             self._run(list(sequence), dict(scene if scene is not None else self._perceive("at the start")), out)
         except _Done:
@@ -455,7 +456,7 @@ class ClosedLoopExecutor:
                 continue
             if not ok:
                 if stayed:  # the option failed; else the bottle was dropped or knocked: the re-plan asks about its
-                    self._fail(obj, gone)  # new pose (a bottle on the bottom shelf is relocated, above)
+                    self._fail(obj, gone, message)  # new pose (a bottle on the bottom shelf is relocated, above)
                 seq = self._replan(f"relocating {obj} failed: {message}", rp, out)
             else:
                 assert check is not None
@@ -484,8 +485,13 @@ class ClosedLoopExecutor:
             raise GiveUp(rp.reason)
         return rp
 
-    def _fail(self, obj: str, removed: frozenset[str]) -> None:
-        """Mark the failed option; an object failing max_attempts times is banned with any set."""
+    def _fail(self, obj: str, removed: frozenset[str], message: str = "") -> None:
+        """Mark the failed option; an object failing max_attempts times is banned with any set. A failure of time
+        (TRANSIENT: the planner's safety net, the follower under load) is tried once more before the option is
+        marked: the same geometry, nothing learned about it."""
+        if any(w in message for w in TRANSIENT) and (obj, removed) not in self._retried:
+            self._retried.add((obj, removed))
+            return
         self._failures[obj] = self._failures.get(obj, 0) + 1
         self._banned.add(Option(obj, None if self._failures[obj] >= self.max_attempts else removed))
 
@@ -509,6 +515,10 @@ class ClosedLoopExecutor:
         if bad:
             raise GiveUp(f"the re-planner proposed a sequence that cannot be executed: {bad}")
         return list(seq)
+
+
+TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at")  # the motion planner's words for a
+# relocation that ran out of time (budget.SafetyNetTimeout, execution.TrajectoryFollower), not one that cannot be done
 
 
 class _Done(GiveUp):

@@ -281,6 +281,32 @@ def test_a_failed_relocation_marks_the_option_and_replans_around_it():
     assert not result.steps[0].ok and result.steps[0].verification is None
 
 
+def test_a_relocation_that_ran_out_of_time_is_tried_once_more_before_its_option_is_marked():
+    """Under load the planner's wall-clock safety net ended b's relocation (the bench, scenario1_5: o4 failed so,
+    then o1 went the same way, and the retrieval went around both: o2 o4 T instead of o4 T). The same option is
+    tried again once; a second failure of time marks it."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.fail["b"] = 1
+    timeout = "internal error: SafetyNetTimeout: wall-clock safety net reached during path simplification"
+    relocate = shelf.relocate
+
+    def timed_out(obj, removed):
+        ok, message = relocate(obj, removed)
+        return ok, message if ok else timeout
+
+    result = ClosedLoopExecutor(shelf.scenario, timed_out, shelf.perceive,
+                                lambda rp, banned: replan(rp, banned, cache)).run(seq)
+    assert result.success and [o for o, _ in shelf.relocations] == ["b", "b", "T"], result.message
+    shelf = FakeShelf()
+    shelf.fail["b"] = 2
+    relocate = shelf.relocate
+    result = ClosedLoopExecutor(shelf.scenario, timed_out, shelf.perceive,
+                                lambda rp, banned: replan(rp, banned, GeometryCache(shelf))).run(seq)
+    assert result.success and [o for o, _ in shelf.relocations] == ["b", "b", "c", "b", "T"], result.message
+
+
 def test_gives_up_with_one_line_when_no_sequence_remains():
     """b always fails: banned with any set after two attempts; T stays blocked by it: no sequence remains."""
     shelf = FakeShelf()
