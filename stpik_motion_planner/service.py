@@ -34,6 +34,7 @@ from .streaming import Aborted, Cancelled, StreamedArm
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
 HEARTBEAT = 2.0  # s without feedback after which a running relocation's last feedback is sent again
 HOME_SETTLE = 0.01  # rad: a relocation or a recovery that ends farther than this from home is brought home
+SETTLE_WAIT = 0.3  # s after the last motion before the arm's place is measured
 
 
 @dataclass(frozen=True)
@@ -168,9 +169,11 @@ class MotionPlannerService:
         recovery's last motion once ended 0.044 rad off). A failure is logged: the arm is near home, and the next
         goal plans its way home first when it is farther than home_tol."""
         try:
+            time.sleep(SETTLE_WAIT)  # commands still on their way to the driver (under load) have played out
             q = arm.measured()
             off = float(np.max(np.abs(q - rd.Q_HOME)))
             if off <= HOME_SETTLE:
+                self.log("info", f"the arm ended {off:.3f} rad from home")
                 return
             self.log("warning", f"the arm ended {off:.3f} rad from home: bringing it home")
             removed = progress.removed + [progress.object_id] * progress.released
