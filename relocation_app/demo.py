@@ -263,8 +263,9 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
                                          is not None else "none (training found no sequence to the target)"))
     print("[demo] exact optimum:    " + (f"{' -> '.join(res.optimal_sequence)}  weight {optimal_w:.2f}" if
                                          optimal_w is not None else "none (no feasible sequence)"))
-    e_first = str(res.e_first) if res.e_first >= 0 else "not reached"
-    print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={e_first} real planner calls={res.planner_calls}")
+    e_first = str(res.e_first) if res.e_first >= 0 and res.episodes else "not reached"
+    print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={e_first} real planner calls={res.planner_calls}"
+          if res.episodes else "[demo] training did not run an episode")
     for d in report["disturbances"]:
         print(f"[demo] disturbance {d.get('when', '')}: {d.get('kind', 'command')} {d.get('object', '')}"
               + (f" skipped: {d['skipped']}" if "skipped" in d else ""))
