@@ -244,7 +244,7 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
         "learned_sequence": list(res.sequence), "learned_weight": learned_w,
         "optimal_sequence": list(res.optimal_sequence), "optimal_weight": optimal_w,
         "episodes": res.episodes, "E_ss": res.e_ss, "MP_q": res.mp_q,
-        "E_1st": res.e_first if res.e_first >= 0 else None,
+        "E_1st": res.e_first if res.e_first >= 0 and res.episodes else None,
         "planner_calls": res.planner_calls, "wall_time_s": round(wall, 1),
         "q_sum_history": list(res.q_sum_history),
         "executed": "optimum" if executed == list(res.optimal_sequence) and executed != list(res.sequence) else
