@@ -52,7 +52,7 @@ def _run(tmp_path, closed_loop: bool):
         client = ActionClient(g.probe.node, TrainPlanner, "/task_planner/train")
         deadline = time.monotonic() + 60
         while not client.wait_for_server(timeout_sec=0.5):
-            assert tp.alive and time.monotonic() < deadline, tp.log()[-3000:]
+            assert tp.alive() and time.monotonic() < deadline, tp.log()[-3000:]
         truth.wait(timeout=30)
         t0 = time.monotonic()
         handle = _wait(client.send_goal_async(train_goal(seed=1, max_episodes=5, execute=True, execute_optimum=True)),
