@@ -407,7 +407,7 @@ class ClosedLoopExecutor:
         out = ExecutionResult()
         self._banned: set[Option] = set()
         self._failures: dict[str, int] = {}
-        self._retried: set[tuple[str, frozenset[str]]] = set()
+        self._retried: dict[tuple[str, frozenset[str]], int] = {}  # failures of time per option
         try:
             self._run(list(sequence), dict(scene if scene is not None else self._perceive("at the start")), out)
         except _Done:
@@ -487,11 +487,12 @@ class ClosedLoopExecutor:
 
     def _fail(self, obj: str, removed: frozenset[str], message: str = "") -> None:
         """Mark the failed option; an object failing max_attempts times is banned with any set. A failure of time
-        (TRANSIENT: the planner's safety net, the follower under load) is tried once more before the option is
-        marked: the same geometry, nothing learned about it."""
-        if any(w in message for w in TRANSIENT) and (obj, removed) not in self._retried:
-            self._retried.add((obj, removed))
-            return
+        (TRANSIENT: the planner's safety net, the follower under load) says nothing about the option: it is tried
+        again, up to TRANSIENT_TRIES times in all, before it is marked."""
+        if any(w in message for w in TRANSIENT):
+            self._retried[(obj, removed)] = tries = self._retried.get((obj, removed), 0) + 1
+            if tries < TRANSIENT_TRIES:
+                return
         self._failures[obj] = self._failures.get(obj, 0) + 1
         self._banned.add(Option(obj, None if self._failures[obj] >= self.max_attempts else removed))
 
@@ -519,6 +520,7 @@ class ClosedLoopExecutor:
 
 TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at")  # the motion planner's words for a
 # relocation that ran out of time (budget.SafetyNetTimeout, execution.TrajectoryFollower), not one that cannot be done
+TRANSIENT_TRIES = 3  # relocations of one option that ran out of time before it is marked (a demo under load: twice)
 
 
 class _Done(GiveUp):
