@@ -285,6 +285,10 @@ def _next_step(message: str, out: Path) -> str:
     if "did not find a sequence" in message:
         return ("the Q-Tree stopped before reaching the target: rerun with --execute-optimum (the proven optimum), "
                 "or raise max_episodes in config/task_planner.yaml; see docs/qtree.md")
+    if "safety net" in message:
+        return ("the motion planner ran out of time planning (its wall-clock safety net, carry_timeout in "
+                "config/motion_planner.yaml) on a loaded machine: run again when it is quieter, or raise "
+                "carry_timeout; see docs/closed_loop.md")
     if "cannot be retrieved" in message:
         return ("no relocation sequence frees the target on this shelf (the reason above, from the exact solver); "
                 "move the bottles named there by hand or check the layout; see docs/motion_planner.md")
