@@ -289,7 +289,7 @@ def _next_step(message: str, out: Path) -> str:
         return ("the motion planner ran out of time planning (its wall-clock safety net, carry_timeout in "
                 "config/motion_planner.yaml) on a loaded machine: run again when it is quieter, or raise "
                 "carry_timeout; see docs/closed_loop.md")
-    if "cannot be retrieved" in message:
+    if message.startswith("the target cannot be retrieved"):
         return ("no relocation sequence frees the target on this shelf (the reason above, from the exact solver); "
                 "move the bottles named there by hand or check the layout; see docs/motion_planner.md")
     if "cannot be reached" in message or "no sequence remains" in message:
