@@ -75,3 +75,32 @@ def test_a_relocation_that_plans_for_long_keeps_sending_its_last_feedback(monkey
     time.sleep(0.2)
     assert n >= 4 and set(sent) == {("plan_home", 0.8)}, sent
     assert len(sent) == n and not any(t.name == "relocation heartbeat" for t in threading.enumerate())
+
+
+def test_a_recovery_that_failed_once_is_tried_again_and_brings_the_arm_home():
+    """The benchmark under load: the fingers' result came too late while the recovery opened the gripper at the
+    grasp; the recovery gave up there, the arm stayed in the shelf with no collision-free way home, and every later
+    goal failed. Now the recovery is tried again from where the arm is."""
+    from test_streaming import FakeLink, arm
+
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.feasibility import PlannerParams
+    from stpik_motion_planner.streaming import Aborted
+
+    class LateFingers(FakeLink):
+        opened = 0
+
+        def finger_goal(self, turns, deadline, cancelled):
+            if turns == 0.0:
+                self.opened += 1
+                if self.opened == 1:
+                    raise Aborted("gripper: no fingers result within gripper_timeout")
+            return super().finger_goal(turns, deadline, cancelled)
+
+    core = service.MotionPlannerService(load_scenario(default_scenario()), PlannerParams.load())
+    link = LateFingers(kinova=True)
+    a, _, _ = arm(link, cancelled=lambda: "approach" in link.paths and len(link.sent) > 50)
+    out = core.relocate(a, core.base.objects[0].id, [])
+    assert out.status == "canceled" and "; recovered: " in out.message and "recovery failed" not in out.message, out
+    assert link.opened == 2 and link.paths[-1] == "recover"
