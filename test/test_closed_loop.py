@@ -266,6 +266,20 @@ def test_a_relocation_that_failed_because_the_bottle_dropped_is_not_a_failed_opt
     assert result.replans[0].reason.startswith("relocating b failed") and result.replans[0].sequence == ("b", "T")
 
 
+def test_a_tipped_bottle_is_never_proposed_for_relocation():
+    """The benchmark: o1 tipped into the target's lane, the re-plan proposed relocating it, and its grasp closed on
+    nothing three times (a lying bottle). Now every re-plan bans relocating a lying bottle (it stays an obstacle)."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.08, TOP + 0.033, tilt=math.pi / 2)  # d lying where it stood
+    asked = []
+    result = ClosedLoopExecutor(shelf.scenario, shelf.relocate, shelf.perceive,
+                                lambda rp, banned: asked.append(banned) or replan(rp, banned, cache)).run(seq)
+    assert result.success and result.replans and "d tipped over" in result.replans[0].reason, result.message
+    assert asked and all(Option("d", None) in banned for banned in asked)
+
+
 def test_a_failed_relocation_marks_the_option_and_replans_around_it():
     """b fails once with nothing removed: that option is banned, the re-plan relocates c first (then b, T; d, which
     is lighter, stands behind a)."""
