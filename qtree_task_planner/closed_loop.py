@@ -116,14 +116,18 @@ class Verification:
 
     object_id: str
     differences: tuple[Difference, ...] = ()
+    unseen_place: bool = False  # the bottle left the top shelf, its place was not seen (bottom shelf out of view)
 
     @property
     def ok(self) -> bool:
-        """True when the world is as planned."""
+        """True when the world is as planned (as far as it was seen: `unseen_place`)."""
         return not self.differences
 
     def summary(self) -> str:
         """One line: 'as planned' or the first difference (and how many more)."""
+        if self.ok and self.unseen_place:
+            return (f"{self.object_id} left the top shelf as planned; its place on the bottom shelf was not seen "
+                    "(unverified)")
         if self.ok:
             return f"{self.object_id} relocated as planned"
         more = len(self.differences) - 1
@@ -131,7 +135,8 @@ class Verification:
 
     def to_dict(self) -> dict[str, Any]:
         """For the feedback and the result (and report.json)."""
-        return {"object": self.object_id, "ok": self.ok, "differences": [d.line for d in self.differences]}
+        return {"object": self.object_id, "ok": self.ok, "differences": [d.line for d in self.differences],
+                "place_seen": not self.unseen_place}
 
 
 def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float], before_scene: Scene,
@@ -176,7 +181,7 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
             diffs.append(Difference("moved", oid, f"{oid} moved by {100 * d:.1f} cm: {_at(was)} -> {_at(now)}"))
     for oid in sorted(set(after_scene) - set(before_scene) - {planned_object}):
         diffs.append(Difference("new", oid, f"{oid} newly seen at {_at(after_scene[oid])}"))
-    return Verification(planned_object, tuple(diffs))
+    return Verification(planned_object, tuple(diffs), unseen_place=moved is None and not bottom_seen)
 
 
 # ------------------------------------------------------------------------------------------------ remaining problem
@@ -354,11 +359,13 @@ class ExecutionResult:
     relocated: list[str] = field(default_factory=list)
     steps: list[Step] = field(default_factory=list)
     replans: list[ReplanRecord] = field(default_factory=list)
+    unverified: list[str] = field(default_factory=list)  # relocated, but no scene showed where they stand
 
     def to_dict(self) -> dict[str, Any]:
-        """For the result and report.json (`replans`)."""
+        """For the result and report.json (`replans`, `unverified`)."""
         return {"success": self.success, "message": self.message, "relocated": list(self.relocated),
-                "steps": [s.to_dict() for s in self.steps], "replans": [r.to_dict() for r in self.replans]}
+                "steps": [s.to_dict() for s in self.steps], "replans": [r.to_dict() for r in self.replans],
+                "unverified": list(self.unverified)}
 
 
 class GiveUp(Exception):
@@ -400,6 +407,7 @@ class ClosedLoopExecutor:
         out = ExecutionResult()
         self._banned: set[Option] = set()
         self._failures: dict[str, int] = {}
+        self._retried: dict[tuple[str, frozenset[str]], int] = {}  # failures of time per option
         try:
             self._run(list(sequence), dict(scene if scene is not None else self._perceive("at the start")), out)
         except _Done:
@@ -431,6 +439,9 @@ class ClosedLoopExecutor:
                 x, y = self.scenario.slots[slot]
                 check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
                                           self.bottom_seen)
+            stayed = _stayed(obj, scene, after, self.tol)
+            if check is not None and check.unseen_place:
+                out.unverified.append(obj)
             step = Step(len(out.steps), obj, removed, slot, ok, message, check)
             out.steps.append(step)
             self.on_step(step)
@@ -444,7 +455,8 @@ class ClosedLoopExecutor:
                 seq = seq[1:]
                 continue
             if not ok:
-                self._fail(obj, gone)
+                if stayed:  # the option failed; else the bottle was dropped or knocked: the re-plan asks about its
+                    self._fail(obj, gone, message)  # new pose (a bottle on the bottom shelf is relocated, above)
                 seq = self._replan(f"relocating {obj} failed: {message}", rp, out)
             else:
                 assert check is not None
@@ -466,14 +478,21 @@ class ClosedLoopExecutor:
             out.success = True
             out.message = (f"target {self.scenario.target_id} retrieved after {len(out.relocated) - 1} relocations"
                            + (f" and {len(out.replans)} re-plan{'s' * (len(out.replans) != 1)}" if out.replans
-                              else ""))
+                              else "") + (" (it left the top shelf; its place on the bottom shelf was not seen: "
+                                          "unverified)" if self.scenario.target_id in out.unverified else ""))
             raise _Done
         if rp.problem is None:
             raise GiveUp(rp.reason)
         return rp
 
-    def _fail(self, obj: str, removed: frozenset[str]) -> None:
-        """Mark the failed option; an object failing max_attempts times is banned with any set."""
+    def _fail(self, obj: str, removed: frozenset[str], message: str = "") -> None:
+        """Mark the failed option; an object failing max_attempts times is banned with any set. A failure of time
+        (TRANSIENT: the planner's safety net, the follower under load) says nothing about the option: it is tried
+        again, up to TRANSIENT_TRIES times in all, before it is marked."""
+        if any(w in message for w in TRANSIENT):
+            self._retried[(obj, removed)] = tries = self._retried.get((obj, removed), 0) + 1
+            if tries < TRANSIENT_TRIES:
+                return
         self._failures[obj] = self._failures.get(obj, 0) + 1
         self._banned.add(Option(obj, None if self._failures[obj] >= self.max_attempts else removed))
 
@@ -481,7 +500,9 @@ class ClosedLoopExecutor:
         """A new sequence for `rp` (recorded in out.replans), or GiveUp with the reason in one line."""
         if len(out.replans) >= self.max_replans:
             raise GiveUp(f"gave up after {len(out.replans)} re-plans (max_replans); last: {reason}")
-        answer = self.replan(rp, frozenset(self._banned))
+        # a bottle lying on the top shelf cannot be grasped (the grasps are for standing bottles: three attempts of
+        # the benchmark closed on nothing): never proposed, it stays an obstacle
+        answer = self.replan(rp, frozenset(self._banned) | {Option(o, None) for o in rp.tipped})
         if isinstance(answer, str):
             out.replans.append(ReplanRecord(reason, None, None, 0, answer))
             self.on_replan(out.replans[-1])
@@ -499,8 +520,21 @@ class ClosedLoopExecutor:
         return list(seq)
 
 
+TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at")  # the motion planner's words for a
+# relocation that ran out of time (budget.SafetyNetTimeout, execution.TrajectoryFollower), not one that cannot be done
+TRANSIENT_TRIES = 3  # relocations of one option that ran out of time before it is marked (a demo under load: twice)
+
+
 class _Done(GiveUp):
     """The target is on the bottom shelf."""
+
+
+def _stayed(obj: str, before: Scene, after: Scene, tol: Tolerances) -> bool:
+    """True when `obj` stands where it stood before a failed relocation (within tol.still, not tipped): the failure
+    is the option's (no grasp, no path) and the option is marked; a bottle moved by the attempt is not."""
+    was, now = before.get(obj), after.get(obj)
+    return was is not None and now is not None and now.tilt <= tol.tilt and \
+        math.hypot(now.x - was.x, now.y - was.y) <= tol.still and abs(_support(now) - _support(was)) <= tol.board
 
 
 def _options(seq, gone: frozenset[str]):

@@ -95,6 +95,23 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
     return optimum, until_planner(run)
 
 
+def training_outcome(trained, optimum, *, execute: bool) -> tuple[bool, str] | None:
+    """(success, message) when the goal ends after training, None when it goes on to execute. Cancelled; no
+    sequence at all (the exact solver's one-line reason, exact.why_none); not executed (trained; or training found
+    none within E_max while the proven optimum exists: said, with the optimum). Training without a sequence but with
+    an optimum goes on: the optimum is executed (chosen_sequence says so)."""
+    if trained.cancelled:
+        return False, "cancelled"
+    if not (trained.found or optimum.found):
+        return False, f"the target cannot be retrieved: {optimum.reason or 'no sequence'}"
+    if execute:
+        return None
+    if trained.found:
+        return True, "trained (not executed)"
+    return False, (f"training did not find a sequence to the target in {trained.episodes} episodes (the exact "
+                   f"optimum {' '.join(optimum.sequence)}, weight {optimum.total_weight:.2f}, exists: execute_optimum)")
+
+
 def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
                      cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None
                      ) -> tuple[bool, str, list[str]]:
@@ -153,8 +170,17 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
     why = check_capacity(sequence, len(free_slots(scenario, scene)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")
-    ok, message, relocated = execute_sequence(sequence, relocate_one, cancelled, before_each)
-    return ExecutionResult(ok, message, relocated)
+    unverified: list[str] = []  # the motion planner's success without an outcome check (goal_check.outcome)
+
+    def relocate_noted(object_id: str, removed: list[str]) -> tuple[bool, str]:
+        ok, message = relocate_one(object_id, removed)
+        if ok and "unverified" in message:
+            unverified.append(object_id)
+        return ok, message
+
+    ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each)
+    return ExecutionResult(ok, message + (f" (unverified: {', '.join(unverified)})" if ok and unverified else ""),
+                           relocated, unverified=unverified)
 
 
 STOPPED = ("shutting down", "went away", "cancelled", "relocate_timeout", "not available")  # relocation_stop's words

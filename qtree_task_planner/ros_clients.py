@@ -219,19 +219,28 @@ def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[objec
     return settled
 
 
+def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[object], bool]:
+    """A scene that shows object_id standing on the board at height z (the target on the bottom shelf)."""
+    def settled(msg) -> bool:
+        return any(o.id == object_id and abs(o.pose.position.z - z) < tol for o in msg.objects)
+    return settled
+
+
 OUTCOME_UNKNOWN = "outcome unknown"  # the motion planner's result when no scene came after the motion
 TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
 
 
 def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: SceneWatch, wait: float,
-            top_z: float, unseen_target: str | bool = False):
+            top_z: float, unseen_target: str | bool = False, bottom_z: float | None = None):
     """(relocate, perceive) for the closed loop: perceive() is the latest scene received after the last relocation
     ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top).
-    unseen_target: the target's id (else False) when the camera does not see the bottom shelf; perception then holds the
-    retrieved target at its last pose for a few frames and publishes no scene after that, so after a relocation of
-    the target that the motion planner reports done, the first fresh scene counts, without the target (or, when
-    none comes within TARGET_GONE_WAIT s, the last one); the motion planner's "outcome unknown" (it got no scene
-    either) is then no failure."""
+    unseen_target: the target's id (else False) when the camera may not see the bottom shelf. After a relocation of
+    the target that the motion planner reports done, perceive() waits up to TARGET_GONE_WAIT s for a scene showing
+    the target on the bottom shelf (`bottom_z`): that is the target's verification. Perception may not see it there:
+    it holds the target at its last pose for a few frames and publishes no scene without it, so the latest fresh
+    scene (or, when none came, the last one) counts without the target, and the executor reports the target's place
+    as unverified (closed_loop.Verification.unseen_place). The motion planner's "outcome unknown" (it got no scene
+    either) is then no failure, and its message says unverified."""
     ended: list = [time.monotonic(), "", False]  # when the last relocation ended, its object, its success
 
     def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
@@ -239,7 +248,8 @@ def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: 
         try:
             ok, message = relocate_one(object_id, removed)
             if not ok and object_id == unseen_target and message.endswith(OUTCOME_UNKNOWN):
-                ok, message = True, f"{message} (the target left the camera's view: the motion ended as planned)"
+                ok, message = True, f"{message} (the target left the camera's view: the motion ended as planned; " \
+                    "its place is unverified unless a scene shows it)"
             ended[2] = ok
             return ok, message
         finally:
@@ -248,14 +258,16 @@ def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: 
     def perceive() -> dict[str, SeenObject]:
         if not (ended[2] and ended[1] == unseen_target):
             return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z)))
+        shown = on_board(ended[1], bottom_z) if bottom_z is not None else (lambda msg: False)
         try:
-            msg = scenes.after(ended[0], min(wait, TARGET_GONE_WAIT))
+            msg = scenes.after(ended[0], min(wait, TARGET_GONE_WAIT), shown)
         except TimeoutError:  # perception publishes nothing without the target: the last scene, the target gone
             if scenes.latest is None:
                 raise
             msg = scenes.latest[0]
         scene = seen_scene(msg)
-        scene.pop(ended[1], None)
+        if not shown(msg):
+            scene.pop(ended[1], None)  # held at its last pose on the top shelf, or not seen: its place unverified
         return scene
 
     return relocate, perceive

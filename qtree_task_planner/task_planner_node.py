@@ -53,7 +53,7 @@ from .outage import Cancelled, PlannerUnavailable, until_available
 from .params import TrainingParams
 from .problem import RelocationProblem
 from .replicas import ReplicaOracle
-from .retrieval import check_scene, chosen_sequence, execute, solve_then_train
+from .retrieval import check_scene, chosen_sequence, execute, solve_then_train, training_outcome
 from .ros_clients import Relocator, SceneWatch, ServiceOracle, goal_params, seen_scene, train_goal, watched
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
@@ -208,10 +208,10 @@ class TaskPlannerNode(Node):
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
         resume = self._keeper.resume_point(problem, params, oracle)
 
-        def on_solved(optimum) -> None:
-            result.optimal_sequence = list(optimum.sequence or ())
-            result.optimal_weight = float(optimum.total_weight if optimum.total_weight is not None else -1.0)
-            self.get_logger().info(f"exact optimum: {optimum.sequence} weight {optimum.total_weight} "
+        def on_solved(exact) -> None:
+            result.optimal_sequence = list(exact.sequence or ())
+            result.optimal_weight = float(exact.total_weight if exact.total_weight is not None else -1.0)
+            self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight} "
                                    f"({oracle.calls} planner calls; {service.summary()})")
             fb.phase = "training"
 
@@ -221,26 +221,25 @@ class TaskPlannerNode(Node):
             goal_handle.publish_feedback(fb)
             return rclpy.ok() and not goal_handle.is_cancel_requested
 
-        _, r = solve_then_train(problem, oracle, params, resume=resume, keep=self._keep, on_episode=on_episode,
-                                until_planner=lambda fn: self._until_planner(fn, goal_handle, service, fb),
-                                checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved,
-                                episode_every=FEEDBACK_EVERY)
+        optimum, r = solve_then_train(problem, oracle, params, resume=resume, keep=self._keep, on_episode=on_episode,
+                                      until_planner=lambda fn: self._until_planner(fn, goal_handle, service, fb),
+                                      checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved,
+                                      episode_every=FEEDBACK_EVERY)
         result.sequence = list(r.sequence or ())
         result.total_weight = float(r.total_weight if r.total_weight is not None else -1.0)
         result.e_ss, result.mp_q, result.e_first = r.e_ss, r.mp_q, r.e_1st if r.e_1st is not None else -1
         result.planner_calls, result.episodes = len(oracle.table), r.episodes
         result.q_sum_history = [float(x) for x in r.q_sum_history]
-        if r.cancelled or not r.found:
-            result.success = False
-            result.message = "cancelled" if r.cancelled else "training did not find a sequence to the target" + \
-                self._foreign_ids(service, problem)
+        stop = training_outcome(r, optimum, execute=goal_handle.request.execute)  # the exact solver's why_none
+        if stop is not None:
+            result.success, result.message = stop
+            if not stop[0] and not r.cancelled and not optimum.found:
+                result.message += self._foreign_ids(service, problem)
             return
         self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
-                               f"({service.summary()})")
-        self._publish_scene(scene, r.sequence, r.tree, problem.ids)
-        if not goal_handle.request.execute:
-            result.success, result.message = True, "trained (not executed)"
-            return
+                               f"({service.summary()})" if r.found else
+                               f"training found no sequence in {r.episodes} episodes; executing the exact optimum")
+        self._publish_scene(scene, r.sequence or result.optimal_sequence, r.tree, problem.ids)
         fb.phase = "executing"  # then each check and re-plan (_run)
         self._run(goal_handle, fb, result, scene, oracle, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
@@ -251,7 +250,8 @@ class TaskPlannerNode(Node):
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         relocate, perceive = watched(lambda o, rm: self._relocate_one(goal_handle, o, rm), self._scenes,
-                                     self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id)
+                                     self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id,
+                                     scenario.shelf.bottom_z)
 
         def phase(text: str) -> None:
             fb.phase = text

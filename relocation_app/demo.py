@@ -26,6 +26,7 @@ from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
 from relocation_common.paths import default_scenario, resolve_scenario
 
 from .client import ClientError, RelocationClient
+from .final_state import final_state
 from .graph import Graph
 from .progress import Progress
 
@@ -174,7 +175,7 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     """Wait for the graph and a scene, train (and execute) through the client; (result, before, after, frames)."""
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import QoSDurabilityPolicy, QoSProfile
-    from sensor_msgs.msg import Image
+    from sensor_msgs.msg import Image, JointState
     from std_msgs.msg import String
 
     latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -187,6 +188,8 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     client.node.create_subscription(Image, "/camera/color/image_raw", rec, 2)
     client.node.create_subscription(ObjectArray, "/sim/objects", truth, latched)
     client.node.create_subscription(ObjectArray, scene_topic, scene, latched)
+    joints = _Latest()
+    client.node.create_subscription(JointState, "/j2s7s300_driver/out/joint_state", joints, 10)
     _wait_for(lambda: scene.msg is not None and len(scene.msg.objects) > 0, 90, g, f"no scene on {scene_topic}")
     before = truth.positions()
     print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {used.policy}/{used.search} "
@@ -203,7 +206,8 @@ def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
     res = outcome.result
     time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
     run = json.loads(execution.msg.data) if execution.msg is not None else {}
-    return res, before, truth.positions(), rec.frames, {**run, "disturbances": list(disturbances)}
+    return res, before, truth.positions(), rec.frames, {**run, "disturbances": list(disturbances),
+                                                        "robot": final_state(joints.msg, truth.msg)}
 
 
 def _start_recording(g: Graph, a, out: Path):
@@ -232,7 +236,8 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
     """report.json, learning_curve.png, retrieval_strip.png and the summary lines; the exit status. Success only
     with the target on the bottom shelf (when executed); no sentinel values: what is missing is said in words."""
     executed = run.get("sequence") or list(res.optimal_sequence if a.execute_optimum else res.sequence)
-    fs = _check_scene(a.scenario, before, after, [] if a.no_execute else run.get("relocated", executed))
+    fs = {**_check_scene(a.scenario, before, after, [] if a.no_execute else run.get("relocated", executed)),
+          **run.get("robot", {})}  # arm_home, gripper_empty (relocation_app.final_state)
     success = bool(res.success and (a.no_execute or fs["target_on_bottom_shelf"]))
     learned_w = res.total_weight if res.sequence else None
     optimal_w = res.optimal_weight if res.optimal_sequence else None
@@ -242,7 +247,7 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
         "learned_sequence": list(res.sequence), "learned_weight": learned_w,
         "optimal_sequence": list(res.optimal_sequence), "optimal_weight": optimal_w,
         "episodes": res.episodes, "E_ss": res.e_ss, "MP_q": res.mp_q,
-        "E_1st": res.e_first if res.e_first >= 0 else None,
+        "E_1st": res.e_first if res.e_first >= 0 and res.episodes else None,
         "planner_calls": res.planner_calls, "wall_time_s": round(wall, 1),
         "q_sum_history": list(res.q_sum_history),
         "executed": "optimum" if executed == list(res.optimal_sequence) and executed != list(res.sequence) else
@@ -255,13 +260,15 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
     _strip(frames, out / "retrieval_strip.png")
     if not a.no_execute:
         print(f"[demo] target on the bottom shelf: {fs['target_on_bottom_shelf']}; largest displacement of a "
-              f"bottle not relocated: {fs['max_displacement_untouched_m'] * 100:.1f} cm")
+              f"bottle not relocated: {fs['max_displacement_untouched_m'] * 100:.1f} cm; arm home: "
+              f"{fs.get('arm_home')}; gripper empty: {fs.get('gripper_empty')}")
     print("[demo] learned sequence: " + (f"{' -> '.join(res.sequence)}  weight {learned_w:.2f}" if learned_w
                                          is not None else "none (training found no sequence to the target)"))
     print("[demo] exact optimum:    " + (f"{' -> '.join(res.optimal_sequence)}  weight {optimal_w:.2f}" if
                                          optimal_w is not None else "none (no feasible sequence)"))
-    e_first = str(res.e_first) if res.e_first >= 0 else "not reached"
-    print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={e_first} real planner calls={res.planner_calls}")
+    e_first = str(res.e_first) if res.e_first >= 0 and res.episodes else "not reached"
+    print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={e_first} real planner calls={res.planner_calls}"
+          if res.episodes else "[demo] training did not run an episode")
     for d in report["disturbances"]:
         print(f"[demo] disturbance {d.get('when', '')}: {d.get('kind', 'command')} {d.get('object', '')}"
               + (f" skipped: {d['skipped']}" if "skipped" in d else ""))
@@ -281,6 +288,13 @@ def _next_step(message: str, out: Path) -> str:
     if "did not find a sequence" in message:
         return ("the Q-Tree stopped before reaching the target: rerun with --execute-optimum (the proven optimum), "
                 "or raise max_episodes in config/task_planner.yaml; see docs/qtree.md")
+    if "safety net" in message:
+        return ("the motion planner ran out of time planning (its wall-clock safety net, carry_timeout in "
+                "config/motion_planner.yaml) on a loaded machine: run again when it is quieter, or raise "
+                "carry_timeout; see docs/closed_loop.md")
+    if message.startswith("the target cannot be retrieved"):
+        return ("no relocation sequence frees the target on this shelf (the reason above, from the exact solver); "
+                "move the bottles named there by hand or check the layout; see docs/motion_planner.md")
     if "cannot be reached" in message or "no sequence remains" in message:
         return "no collision-free way to the target remains on this shelf: see docs/closed_loop.md"
     if "went away" in message:

@@ -3,11 +3,17 @@
 For every scene x seed x K (disturbances drawn by DisturbancePlan.draw(K, seed, relocations=2), applied by the sim
 driver's `disturbance_plan`) and both executors (task planner `closed_loop` true / false), a fresh node graph (sim
 driver, motion planner, task planner on the ground-truth scene /sim/objects) executes the exact optimum
-(`execute_optimum`; training capped at 5 episodes: the executor is measured, not the Q-Tree). Success: the goal
+(`execute_optimum`; training capped at 5 episodes: the executor is measured, not the Q-Tree; the planner's safety
+nets and the follower's settle time raised, `LOADED`). Success: the goal
 succeeded AND the simulator shows the target on the bottom shelf; a run that reports success without it is counted
-as `false success`. Printed: success rate, re-plans, extra relocations against the undisturbed optimum, wall time.
+as `false success`. After each run: the arm within 0.05 rad of home (the final joint state) and the gripper empty
+(no bottle within 0.1 m of the tool). Printed: success rate, re-plans, extra relocations against the undisturbed
+optimum, wall time, the failures' reasons. Every run is appended to `--out` (JSON lines) as it ends, so a grid cut
+short keeps its runs and the same command goes on where it stopped; `--table FILE` prints the table of such a file.
 
-    .venv/bin/python scripts/bench_closed_loop.py [--scenes scenario1_5 paper1_5] [--seeds 0 1 2] [--k 0 1 2]
+    nice -n 10 .venv/bin/python scripts/bench_closed_loop.py [--scenes scenario1_5 paper1_5] [--seeds 0 1 2]
+        [--k 0 1 2 3] [--out /tmp/bench_closed_loop.jsonl]
+    .venv/bin/python scripts/bench_closed_loop.py --table /tmp/bench_closed_loop.jsonl
 """
 from __future__ import annotations
 
@@ -24,15 +30,23 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout
 
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from relocation_app.client import RelocationClient
+from relocation_app.final_state import final_state
 from relocation_app.graph import Graph
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
+
+# the planner's wall-clock safety nets 4-12x the defaults, the follower's settle time 3x: on the shared machine
+# (load 10-25 on 2 cores) the 5 s feasibility and 10 s (then 40 s) planning nets ran out and the follower did not
+# settle within 3 s, ending runs that measure the executor, not the planner's speed
+LOADED = {"motion_planner": {"carry_timeout": 120.0, "follower.settle_timeout": 10.0},
+          "task_planner": {"feasibility_timeout": 20.0}}
 
 
 def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dict:
     """One execution in a fresh graph: success, target on the bottom shelf, re-plans, relocations, wall s."""
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import JointState
     from std_msgs.msg import String
 
     latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -41,11 +55,12 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
     with Graph(run_dir) as g:
         g.start("jaco2_sim_driver", dict(common, camera_rate=0.0, **(
             {"disturbance_plan": f"'{plan.to_json()}'"} if plan else {})))
-        g.start("motion_planner", dict(common, scene_topic="/sim/objects"))
-        g.start("task_planner", dict(common, scene_topic="/sim/objects", closed_loop=closed))
+        g.start("motion_planner", dict(common, scene_topic="/sim/objects", **LOADED["motion_planner"]))
+        g.start("task_planner", dict(common, scene_topic="/sim/objects", closed_loop=closed,
+                                     **LOADED["task_planner"]))
         os.environ.update(g.env)
         client = RelocationClient("bench_closed_loop")
-        box: dict = {"truth": None, "execution": None, "disturbances": []}
+        box: dict = {"truth": None, "execution": None, "disturbances": [], "joints": None}
 
         def on_execution(m: String) -> None:
             box["execution"] = json.loads(m.data)
@@ -55,10 +70,15 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
 
         try:
             client.node.create_subscription(ObjectArray, "/sim/objects", lambda m: box.update(truth=m), latched)
+            client.node.create_subscription(JointState, "/j2s7s300_driver/out/joint_state",
+                                            lambda m: box.update(joints=m), 10)
             client.node.create_subscription(String, "/task_planner/execution", on_execution, latched)
             client.node.create_subscription(String, "/sim/disturbances", on_disturbance,
                                             QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL))
             client.wait_until_ready(120, check=g.check_alive)
+            deadline = time.monotonic() + 60  # the driver's first scene (under load it came after the goal: 1 run)
+            while box["truth"] is None and time.monotonic() < deadline:
+                time.sleep(0.1)
             t0 = time.monotonic()
             client.train(check=g.check_alive, seed=seed, max_episodes=5, execute=True, execute_optimum=True)
             outcome = client.wait(900, check=g.check_alive)
@@ -71,44 +91,86 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
     on_bottom = t is not None and abs(t.z - sc.shelf.bottom_z) < 0.02
     ex = box["execution"] or {}
     res = outcome.result
-    return {"success": bool(res is not None and res.success), "on_bottom": on_bottom,
+    end = final_state(box["joints"], box["truth"])
+    home, empty = end["arm_home"], end["gripper_empty"]
+    return {"scene": scene.stem, "seed": seed, "k": k, "closed": closed,
+            "success": bool(res is not None and res.success), "on_bottom": on_bottom, "home": home, "empty": empty,
             "replans": len(ex.get("replans", [])), "relocations": len(ex.get("steps", [])) or len(ex.get(
                 "relocated", [])), "optimum": len(res.optimal_sequence) if res is not None else 0, "wall": wall,
-            "applied": sum("skipped" not in d for d in box["disturbances"]), "message": outcome.message}
+            "applied": sum("skipped" not in d for d in box["disturbances"]), "message": outcome.message,
+            "disturbances": [d.get("kind", "") + " " + str(d.get("object", "")) for d in box["disturbances"]
+                             if "skipped" not in d]}
+
+
+def table(runs: list[dict]) -> None:
+    """Print the table of docs/benchmarks.md (one row per scene x K x executor) and the failures' reasons."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in runs:
+        groups.setdefault((r["scene"], r["k"], r["closed"]), []).append(r)
+    print("| scene | K | executor | runs | success | false success | arm home, gripper empty | disturbances applied "
+          "| re-plans (mean) | extra relocations (mean) | wall s (mean) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    scenes = list(dict.fromkeys(r["scene"] for r in runs))
+    for (name, k, closed), rs in sorted(groups.items(), key=lambda g: (scenes.index(g[0][0]), g[0][1], not g[0][2])):
+        ok = sum(r["success"] and r["on_bottom"] for r in rs)
+        false = sum(r["success"] and not r["on_bottom"] for r in rs)
+        safe = sum(r["home"] and r["empty"] for r in rs)
+        extra = statistics.fmean(max(0, r["relocations"] - r["optimum"]) for r in rs)
+        print(f"| {name} | {k} | {'closed' if closed else 'open'} | {len(rs)} | {ok}/{len(rs)} | {false} | "
+              f"{safe}/{len(rs)} | {sum(r['applied'] for r in rs)} | {statistics.fmean(r['replans'] for r in rs):.1f} "
+              f"| {extra:.1f} | {statistics.fmean(r['wall'] for r in rs):.0f} |")
+    for name in scenes:  # the loop's cost undisturbed (issue's target: at most 5 % more wall time)
+        closed_s, open_s = ([r["wall"] for r in groups.get((name, 0, c), []) if r["success"] and r["on_bottom"]]
+                            for c in (True, False))
+        if closed_s and open_s:
+            c, o = statistics.fmean(closed_s), statistics.fmean(open_s)
+            print(f"\n{name} undisturbed, successful runs: closed {c:.0f} s (n={len(closed_s)}), open {o:.0f} s "
+                  f"(n={len(open_s)}): ratio {c / o:.2f}")
+    print("\nfailures:")
+    for r in runs:
+        if not (r["success"] and r["on_bottom"] and r["home"] and r["empty"]):
+            print(f"- {r['scene']} K={r['k']} {'closed' if r['closed'] else 'open'} seed {r['seed']} "
+                  f"({', '.join(r['disturbances']) or 'undisturbed'}): home {r['home']}, empty {r['empty']}: "
+                  f"{r['message']}")
 
 
 def main() -> None:
-    """Run the grid and print the table (docs/benchmarks.md)."""
+    """Run the grid (appending every run to --out) and print the table (docs/benchmarks.md)."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", nargs="+", default=["scenario1_5", "paper1_5"])
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     p.add_argument("--k", nargs="+", type=int, default=[0, 1, 2])
+    p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "bench_closed_loop.jsonl")
+    p.add_argument("--table", type=Path, help="print the table of this JSON-lines file and exit")
     a = p.parse_args()
-    rows = []
+    if a.table:
+        table([json.loads(line) for line in a.table.read_text().splitlines() if line.strip()])
+        return
+    runs = [json.loads(line) for line in a.out.read_text().splitlines() if line.strip()] if a.out.exists() else []
+    done = {(r["scene"], r["k"], r["seed"], r["closed"]) for r in runs}  # a grid started again goes on
     with tempfile.TemporaryDirectory() as tmp:
         for name in a.scenes:
             scene = resolve_scenario(name).resolve()
             for k in a.k:
-                for closed in (True, False):
-                    runs = []
-                    for seed in a.seeds:
-                        r = run_once(scene, seed, k, closed, Path(tmp) / f"{name}_{k}_{closed}_{seed}")
+                for seed in a.seeds:
+                    for closed in (True, False):
+                        if (scene.stem, k, seed, closed) in done:
+                            continue
+                        try:
+                            r = run_once(scene, seed, k, closed, Path(tmp) / f"{name}_{k}_{closed}_{seed}")
+                        except Exception as e:  # noqa: BLE001 (a graph that failed is a failed run of the grid)
+                            r = {"scene": scene.stem, "seed": seed, "k": k, "closed": closed, "success": False,
+                                 "on_bottom": False, "home": False, "empty": False, "replans": 0, "relocations": 0,
+                                 "optimum": 0, "wall": 0.0, "applied": 0, "message": f"run error: {e}",
+                                 "disturbances": []}
                         runs.append(r)
+                        with a.out.open("a") as f:
+                            f.write(json.dumps(r) + "\n")
                         print(f"  {name} K={k} {'closed' if closed else 'open'} seed {seed}: "
                               f"{'ok' if r['success'] and r['on_bottom'] else 'FAILED'} ({r['wall']:.0f} s, "
-                              f"{r['applied']} disturbances applied, {r['replans']} re-plans) {r['message']}",
-                              flush=True)
-                    rows.append((name, k, closed, runs))
-    print("\n| scene | K | executor | runs | success | false success | disturbances applied | re-plans (mean) "
-          "| extra relocations (mean) | wall s (mean) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for name, k, closed, runs in rows:
-        ok = sum(r["success"] and r["on_bottom"] for r in runs)
-        false = sum(r["success"] and not r["on_bottom"] for r in runs)
-        extra = statistics.fmean(max(0, r["relocations"] - r["optimum"]) for r in runs)
-        print(f"| {name} | {k} | {'closed' if closed else 'open'} | {len(runs)} | {ok}/{len(runs)} | {false} | "
-              f"{sum(r['applied'] for r in runs)} | {statistics.fmean(r['replans'] for r in runs):.1f} | "
-              f"{extra:.1f} | {statistics.fmean(r['wall'] for r in runs):.0f} |")
+                              f"{r['applied']} disturbances applied, {r['replans']} re-plans, home {r['home']}, "
+                              f"empty {r['empty']}) {r['message']}", flush=True)
+    table(runs)
 
 
 if __name__ == "__main__":

@@ -165,11 +165,12 @@ def check_parameters(values: Mapping[str, float]) -> None:
 def outcome(watch: SceneWatch, before: Mapping[str, SeenBottle], scenario: Scenario, object_id: str, slot: int,
             values: Mapping[str, float], source: str, ok: Callable[[], bool] = lambda: True) -> tuple[bool, str]:
     """(success, result message) of a relocation whose motion just ended: the first scene received OUTCOME_SETTLE s
-    later against `before` (outcome_problems; `values`: the PARAMETERS). A node that never received a scene says
-    the outcome was not checked; a scene that does not come within outcome_timeout leaves it unknown: failed."""
+    later against `before` (outcome_problems; `values`: the PARAMETERS). A node that never received a scene cannot
+    check: the motion succeeded and the message says "outcome unverified" (the task planner checks its own scene
+    and never counts this as verified); a scene that does not come within outcome_timeout leaves it unknown: failed."""
     done = f"relocated {object_id} to slot {slot}"
     if not before:
-        return True, f"{done} (outcome not checked: no scene received on {source})"
+        return True, f"{done} (outcome unverified: no scene received on {source})"
     after = watch.after(time.monotonic() + OUTCOME_SETTLE, float(values["outcome_timeout"]), ok)
     if after is None:
         return False, f"{done}, but no scene on {source} within outcome_timeout after the motion: outcome unknown"

@@ -5,7 +5,8 @@ scenario1_5: after the first relocation of the optimum (o4 T) the driver nudges 
 place, in front of the target again. The plan's moment "after relocation 1" comes when the arm is back home,
 just before the motion planner checks the outcome: its check sees o3 moved and reports o4's relocation as failed.
 The closed loop counts o4 as relocated (seen on the bottom shelf), re-plans (o3 T) and retrieves the target; the
-open-loop baseline ends the goal at that failure. Measured: closed 69 s (3 relocations), open 22 s."""
+open-loop baseline ends the goal at that failure. Measured: closed 69 s (3 relocations), open 22 s. Every run, closed
+or open, successful or not, ends with the arm home and nothing in the gripper (relocation_app.final_state)."""
 import json
 import math
 import time
@@ -15,10 +16,12 @@ from qtree_relocation_msgs.action import TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from ros_procs import REPO, RosGraph
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from jaco2_sim_driver.disturbance import Disturbance, DisturbancePlan
 from qtree_task_planner.ros_clients import train_goal
+from relocation_app.final_state import final_state
 from relocation_common.node import ActionClient
 from relocation_common.scenario import load_scenario
 
@@ -32,7 +35,8 @@ NUDGE = DisturbancePlan(0, (Disturbance("nudge", "after", 0, choice=0.7, amount=
 
 
 def _run(tmp_path, closed_loop: bool):
-    """(TrainPlanner result, ~/execution dict, disturbance records, final ground truth, wall s)."""
+    """(TrainPlanner result, ~/execution dict, disturbance records, final ground truth, wall s, the task planner's log,
+    final_state: arm home, gripper empty)."""
     with RosGraph(tmp_path) as g:
         g.start("jaco2_sim_driver.driver_node", params_file=REPO / "config" / "jaco2_sim_driver.yaml",
                 params={"camera_rate": 0.0, "disturbance_plan": f"'{NUDGE.to_json()}'",
@@ -44,10 +48,11 @@ def _run(tmp_path, closed_loop: bool):
         execution = g.probe.collect("/task_planner/execution", String, LATCHED)
         records = g.probe.collect("/sim/disturbances", String, RECORDS)
         truth = g.probe.collect("/sim/objects", ObjectArray, LATCHED)
+        joints = g.probe.collect("/j2s7s300_driver/out/joint_state", JointState, 10)
         client = ActionClient(g.probe.node, TrainPlanner, "/task_planner/train")
         deadline = time.monotonic() + 60
         while not client.wait_for_server(timeout_sec=0.5):
-            assert tp.alive and time.monotonic() < deadline, tp.log()[-3000:]
+            assert tp.alive() and time.monotonic() < deadline, tp.log()[-3000:]
         truth.wait(timeout=30)
         t0 = time.monotonic()
         handle = _wait(client.send_goal_async(train_goal(seed=1, max_episodes=5, execute=True, execute_optimum=True)),
@@ -56,8 +61,11 @@ def _run(tmp_path, closed_loop: bool):
         wall = time.monotonic() - t0
         out = json.loads(execution.wait(timeout=10)[-1].data)
         truth.clear()
-        final = {o.id: o.pose.position for o in truth.wait(timeout=10)[-1].objects}
-        return result, out, [json.loads(m.data) for m in records.wait(timeout=10)], final, wall, tp.log()
+        joints.clear()
+        last = truth.wait(timeout=10)[-1]
+        end = final_state(joints.wait(timeout=10)[-1], last)
+        final = {o.id: o.pose.position for o in last.objects}
+        return result, out, [json.loads(m.data) for m in records.wait(timeout=10)], final, wall, tp.log(), end
 
 
 def _wait(fut, timeout):
@@ -69,18 +77,20 @@ def _wait(fut, timeout):
 
 
 def test_a_nudge_after_the_first_relocation_is_seen_and_re_planned_around(tmp_path):
-    result, out, records, final, wall, log = _run(tmp_path, closed_loop=True)
+    result, out, records, final, wall, log, end = _run(tmp_path, closed_loop=True)
     print(f"closed loop: {wall:.0f} s; {result.message}; re-plans {[r['reason'] for r in out['replans']]}")
     assert [r["kind"] for r in records] == ["nudge"] and records[0]["object"] == "o3", records
     assert list(result.optimal_sequence) == ["o4", SC.target_id], result.optimal_sequence
     assert result.success and out["success"], (result.message, out, log[-3000:])
     assert out["replans"] and "o3 moved" in out["replans"][0]["reason"], out["replans"]
     assert abs(final[SC.target_id].z - SC.shelf.bottom_z) < 0.02, final[SC.target_id]
+    assert end["arm_home"] and end["gripper_empty"], end
 
 
 def test_the_open_loop_baseline_fails_on_the_same_disturbance(tmp_path):
-    result, out, records, final, wall, log = _run(tmp_path, closed_loop=False)
+    result, out, records, final, wall, log, end = _run(tmp_path, closed_loop=False)
     print(f"open loop: {wall:.0f} s; {result.message}")
     assert [r["kind"] for r in records] == ["nudge"], records
     assert not result.success and not out["replans"], (result.message, out)
     assert abs(final[SC.target_id].z - SC.shelf.top_z) < 0.02  # the target never left the top shelf
+    assert end["arm_home"] and end["gripper_empty"], end  # the failed relocation ended as planned: home, hand empty

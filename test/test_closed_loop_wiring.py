@@ -90,8 +90,25 @@ def test_a_retrieved_target_that_perception_still_holds_counts_as_gone():
     relocate(SC.target_id, ["o2"])
     watch.put(_msg())  # the target still shown on the top shelf (held)
     t0 = time.monotonic()
+    scene = perceive()  # waited TARGET_GONE_WAIT for a scene with the target on the bottom shelf
+    assert time.monotonic() - t0 < 3.0 and SC.target_id not in scene and "o2" in scene
+
+
+def test_the_target_seen_on_the_bottom_shelf_is_its_verification():
+    """Perception sees a bottle on the bottom shelf when it is in view: the scene with the target there is the
+    check of its relocation (before, the target was dropped from every scene after its relocation and its place
+    never checked)."""
+    watch = SceneWatch()
+    relocate, perceive = watched(lambda o, removed: (True, "ok"), watch, 5.0, SC.shelf.top_z,
+                                 unseen_target=SC.target_id, bottom_z=SC.shelf.bottom_z)
+    relocate(SC.target_id, ["o2"])
+    watch.put(_msg())  # held on the top shelf
+    msg = _msg()
+    t = next(o for o in msg.objects if o.id == SC.target_id)
+    t.pose.position.z = SC.shelf.bottom_z
+    threading.Timer(0.3, lambda: watch.put(msg)).start()
     scene = perceive()
-    assert time.monotonic() - t0 < 1.0 and SC.target_id not in scene and "o2" in scene
+    assert scene[SC.target_id].z == pytest.approx(SC.shelf.bottom_z)
 
 
 def test_a_relocation_stopped_by_a_lost_planner_ends_the_closed_loop_at_once():
@@ -130,3 +147,25 @@ def test_the_motion_planners_outcome_unknown_for_the_unseen_target_is_no_failure
     assert SC.target_id not in perceive()
     relocate, _ = watched(lambda o, removed: unknown, watch, 10.0, SC.shelf.top_z, unseen_target=False)
     assert relocate(SC.target_id, ["o2"]) == unknown  # ground truth shows the bottom shelf: a failure stays one
+
+
+def test_training_without_a_sequence_executes_the_optimum_and_no_sequence_at_all_says_why():
+    """scenario3_15 at E_max 2000: training stopped without converging; before, a training without a sequence ended
+    the goal "training did not find a sequence to the target" although the proven optimum existed, and a scene with
+    no sequence at all said no more than that."""
+    from types import SimpleNamespace
+
+    from qtree_task_planner.exact import ExactResult
+    from qtree_task_planner.retrieval import chosen_sequence, training_outcome
+    none = SimpleNamespace(cancelled=False, found=False, episodes=2000, sequence=None, total_weight=None)
+    optimum = ExactResult(("o3", "o4", "T"), 2.12, 5, 3)
+    assert training_outcome(none, optimum, execute=True) is None  # goes on: the optimum is executed, and said
+    seq, note = chosen_sequence(None, None, optimum.sequence, optimum.total_weight, execute_optimum=False,
+                                execute_learned=False)
+    assert seq == ["o3", "o4", "T"] and note == "executed the exact optimum (training found no sequence)"
+    ok, message = training_outcome(none, optimum, execute=False)
+    assert not ok and "2000 episodes" in message and "o3 o4 T, weight 2.12" in message
+    why = "no sequence: T unfeasible from every set reached (with {o1} removed: no grasp lane)"
+    assert training_outcome(none, ExactResult(None, None, 4, 2, why), execute=True) == (
+        False, f"the target cannot be retrieved: {why}")
+    assert training_outcome(SimpleNamespace(cancelled=True), optimum, execute=True) == (False, "cancelled")

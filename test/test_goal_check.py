@@ -129,7 +129,7 @@ VALUES = {"outcome_tolerance": 0.015, "slot_tolerance": 0.02, "outcome_timeout":
 def test_the_outcome_waits_for_a_scene_after_the_motion():
     watch = gc.SceneWatch()
     assert gc.outcome(watch, {}, SC, "o2", 0, VALUES, "/sim/objects") == (
-        True, "relocated o2 to slot 0 (outcome not checked: no scene received on /sim/objects)")
+        True, "relocated o2 to slot 0 (outcome unverified: no scene received on /sim/objects)")
     before = _scene()
     watch.update((b.id, b.x, b.y, b.z) for b in before.values())  # received before the motion ended: not used
     ok, msg = gc.outcome(watch, before, SC, "o2", 0, VALUES, "/sim/objects")

@@ -1,0 +1,106 @@
+"""A relocation under load (stpik_motion_planner/relocation.py, service.py): a re-plan that runs into the planner's
+wall-clock safety net keeps the plan made before (the arm still comes home), and a relocation that plans for long
+keeps sending feedback (the task planner's relocate_silence is for a planner that is gone, not a busy one)."""
+import threading
+import time
+from types import SimpleNamespace
+
+import numpy as np
+
+from relocation_common import robot_description as rd
+from stpik_motion_planner import service
+from stpik_motion_planner.budget import SafetyNetTimeout
+from stpik_motion_planner.relocation import relocate
+
+
+class SlowPlanner:
+    """Plans everything at once from home; every re-plan from the measured configuration hits the safety net."""
+
+    def __init__(self):
+        self.scenario = SimpleNamespace(slots=[(0.5, 0.0), (0.5, 0.1)])
+        self.calls = 0
+
+    def _t(self, name):
+        return SimpleNamespace(positions=[np.array(rd.Q_HOME)], name=name)
+
+    def plan_pick(self, object_id, removed):
+        return (SimpleNamespace(trajectory=self._t("pick")),)
+
+    def plan_carry(self, object_id, removed, k, q_start=None, placed=None):
+        self.calls += 1
+        if self.calls > 1:
+            raise SafetyNetTimeout("wall-clock safety net reached during path simplification")
+        return SimpleNamespace(trajectory=self._t("carry")), SimpleNamespace(trajectory=self._t("retreat"))
+
+    def plan_home(self, q, removed, placed):
+        self.calls += 1
+        if self.calls > 2:
+            raise SafetyNetTimeout("wall-clock safety net reached during path simplification")
+        return self._t("home")
+
+
+class RecordingArm:
+    def __init__(self):
+        self.followed = []
+
+    def measured(self):
+        return np.array(rd.Q_HOME)
+
+    def follow(self, trajectory, phase):
+        self.followed.append((phase, trajectory.name))
+
+    def gripper(self, action, phase):
+        pass
+
+    def phase(self, phase):
+        pass
+
+
+def test_a_re_plan_stopped_by_the_safety_net_keeps_the_plan_made_before():
+    """Old code: SafetyNetTimeout from the home re-plan after the release aborted the relocation ("internal error"),
+    the bottle placed and the arm left at the slot."""
+    arm = RecordingArm()
+    relocate(SlowPlanner(), arm, "o1", [])
+    assert arm.followed == [("approach", "pick"), ("carry", "carry"), ("retreat", "retreat"), ("home", "home")]
+
+
+def test_a_relocation_that_plans_for_long_keeps_sending_its_last_feedback(monkeypatch):
+    monkeypatch.setattr(service, "HEARTBEAT", 0.05)
+    sent = []
+    arm = SimpleNamespace(feedback=lambda phase, p: sent.append((phase, p)), link=SimpleNamespace(ok=lambda: True))
+    with service._Heartbeat(arm):
+        arm.feedback("plan_home", 0.8)
+        time.sleep(0.5)  # planning: no feedback of its own
+    n = len(sent)
+    time.sleep(0.2)
+    assert n >= 4 and set(sent) == {("plan_home", 0.8)}, sent
+    assert len(sent) == n and not any(t.name == "relocation heartbeat" for t in threading.enumerate())
+
+
+def test_a_recovery_that_failed_once_is_tried_again_and_brings_the_arm_home():
+    """The benchmark under load: the fingers' result came too late while the recovery opened the gripper at the
+    grasp; the recovery gave up there, the arm stayed in the shelf with no collision-free way home, and every later
+    goal failed. Now the recovery is tried again from where the arm is."""
+    from test_streaming import FakeLink, arm
+
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.feasibility import PlannerParams
+    from stpik_motion_planner.streaming import Aborted
+
+    class LateFingers(FakeLink):
+        opened = 0
+
+        def finger_goal(self, turns, deadline, cancelled):
+            if turns == 0.0:
+                self.opened += 1
+                if self.opened == 1:
+                    raise Aborted("gripper: no fingers result within gripper_timeout")
+            return super().finger_goal(turns, deadline, cancelled)
+
+    core = service.MotionPlannerService(load_scenario(default_scenario()), PlannerParams.load())
+    link = LateFingers(kinova=True)
+    a, _, _ = arm(link, cancelled=lambda: "approach" in link.paths and len(link.sent) > 50)
+    out = core.relocate(a, core.base.objects[0].id, [])
+    assert out.status == "canceled" and "; recovered: " in out.message and "recovery failed" not in out.message, out
+    assert link.opened == 2 and link.paths[-1] == "recover"
