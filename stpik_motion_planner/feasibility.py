@@ -70,7 +70,7 @@ class PlannerParams:
     """The motion planner's settings (config/motion_planner.yaml, docs/motion_planner.md), validated once."""
 
     seed: int = 7
-    timeout: float = 10.0  # s: wall-clock safety net per feasibility query (the service may pass its own)
+    timeout: float = 30.0  # s: wall-clock safety net per feasibility query (the service may pass its own)
     rrt_max_checks: int = 4000  # validity checks per RRT-Connect attempt (about 80 ms here, idle)
     max_attempts: int = 6  # sampled paths per query before answering g_U
     n_yaws: int = 3  # approach yaws tried: 0, +max_yaw, -max_yaw, ...
@@ -86,7 +86,7 @@ class PlannerParams:
     carry_ramp: float = 0.25  # s to full speed and to a stop at each waypoint of the carry and retreat (0: none)
     carry_accel: float = 3.0  # rad/s^2, joint accelerations while a bottle is held (0: no limit)
     stage_distance: float = 0.15  # m, staging pose in front of the slot (at most x_front - 0.07: grasp.place_poses)
-    carry_timeout: float = 10.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
+    carry_timeout: float = 60.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
     direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     seed_per_query: bool = False  # every OMPL solve seeded from the question (question_rng), not process history
     screen_at_clearance: bool = False  # the grasp screen's hand proxy inflated by at least stpik.clearance

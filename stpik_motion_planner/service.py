@@ -5,7 +5,7 @@ with every lane's blockers when asked, scene updates from perception (`scene_upd
 being carried and the bottles relocated by this node are not taken from perception until seen back on the top
 shelf), and one relocation at a time (`relocation.relocate` on a `streaming.StreamedArm`, then `relocation.recover`
 after a failure or a cancel). While a relocation runs, its last feedback is sent again every `HEARTBEAT` s when
-nothing new was sent: a plan under load can take the planner's whole wall-clock safety net (carry_timeout, 10 s)
+nothing new was sent: a plan under load can take the planner's whole wall-clock safety net (carry_timeout, 60 s)
 without a phase change, and the task planner takes `relocate_silence` (10 s) without feedback for a planner that is
 gone. Logging goes to `log(level, text)` (the node's logger).
 """
