@@ -89,6 +89,8 @@ class SimArm:
         self.arm = {m.geom(n).id for n in ARM}
         self.fingers = {m.geom(n).id for n in FINGERS}
         self.bottle = {m.geom(f"{b.id}_geom").id: b.id for b in sim.scenario.objects}
+        self.geom_of = {oid: g for g, oid in self.bottle.items()}
+        self.body_of = {b.id: m.body(b.id).id for b in sim.scenario.objects}
         self.top = m.geom("shelf_top_board").id
         self.hand = m.body("j2s7s300_link_7").id
         self.unintended: dict[tuple[str, str], float] = {}
@@ -98,9 +100,8 @@ class SimArm:
 
     def _hand_frame(self, oid):
         d = self.sim.data
-        b = self.sim.model.body(oid).id
         r = d.xmat[self.hand].reshape(3, 3)
-        return r.T @ (d.xpos[b] - d.xpos[self.hand])
+        return r.T @ (d.xpos[self.body_of[oid]] - d.xpos[self.hand])
 
     def _watch(self):
         d, held = self.sim.data, self.sim.grasped
@@ -110,19 +111,22 @@ class SimArm:
                 self.current = held
             slip = float(np.linalg.norm(self._hand_frame(held) - self._rel[1]))
             self.slip[held] = max(self.slip.get(held, 0.0), slip)
-        for c in d.contact[:d.ncon]:
-            g1, g2 = int(c.geom1), int(c.geom2)
+        if d.ncon == 0:
+            return
+        watched = self.arm if held is None else self.arm | {self.geom_of[held]}
+        for k, (g1, g2) in enumerate(d.contact.geom.tolist()):
+            if g1 not in watched and g2 not in watched:
+                continue  # only the contacts of the arm or of the held bottle are looked at
             for a, b in ((g1, g2), (g2, g1)):
                 carried = held is not None and self.bottle.get(a) == held
                 if not (a in self.arm or carried):
                     continue
                 if carried and b in self.fingers or a in self.fingers and self.bottle.get(b) == self.current:
                     continue  # the fingers on the bottle they grasp, hold and let go
-                if carried and b == self.top and d.xpos[self.sim.model.body(held).id][2] < \
-                        self.sim.scenario.shelf.top_z + 1e-3:
+                if carried and b == self.top and d.xpos[self.body_of[held]][2] < self.sim.scenario.shelf.top_z + 1e-3:
                     continue  # still standing on the board it is lifted from
                 key = tuple(sorted((self.name(a), self.name(b))))
-                self.unintended[key] = min(self.unintended.get(key, 0.0), float(c.dist))
+                self.unintended[key] = min(self.unintended.get(key, 0.0), float(d.contact.dist[k]))
                 break
 
     def _step(self, n):
