@@ -32,9 +32,10 @@ TOTAL = Report()  # over the module, for the summary line
 
 
 def planner_for(scenario):
-    # answers must not depend on machine load: wall-clock safety nets (reached, the query raises) of 30 s instead of
-    # config/motion_planner.yaml's 10 s; the work budgets, which decide the answers, are the planner's
-    return MotionPlanner(scenario, dataclasses.replace(PARAMS, timeout=30.0, carry_timeout=30.0))
+    # answers must not depend on machine load: wall-clock safety nets (reached, the query raises) of 300 s instead of
+    # config/motion_planner.yaml's 10 s (a home plan took over 30 s next to other jobs); the work budgets, which
+    # decide the answers, are the planner's
+    return MotionPlanner(scenario, dataclasses.replace(PARAMS, timeout=300.0, carry_timeout=300.0))
 
 
 def check_sequence(scenario, planner, sequence) -> Report:
@@ -57,8 +58,8 @@ def assert_clean(rep: Report, what: str) -> None:
     assert rep.support_depth <= 0.001
 
 
-# the default run: the demo scene, the smallest one and a random one; every scene with -m extended
-DEMO_DEFAULT = ("paper_experiment_10", "scenario1_5", "random5_00")
+# the default run: the demo scene and the smallest one; every scene with -m extended
+DEMO_DEFAULT = ("paper_experiment_10", "scenario1_5")
 DEMO_CASES = [p if p.stem in DEMO_DEFAULT else pytest.param(p, marks=pytest.mark.extended) for p in SCENES + RANDOM]
 
 
@@ -79,9 +80,9 @@ PAPER_RANDOM = tuple(f"paper_random5/{p.stem}" for p in sorted((scenarios_dir() 
 # plannings (paper2_10's T at 0.902, before it moved 10 mm forward; here it failed at the 5th) passes 11 in a row
 # 0.3 % of the time
 REPLANS = 10
-# (scene, plannings again): the default run has the smallest paper scene and one random case, planned twice again;
-# -m extended has every paper-size scene with REPLANS and every random case (Table 4's: six plannings in a row)
-OPTIMUM_CASES = [("paper1_5", 2), (PAPER_RANDOM[0], 2),
+# (scene, plannings again): the default run has one random case planned once again; -m extended every paper-size
+# scene with REPLANS and every random case twice (Table 4's random cases: six plannings in a row)
+OPTIMUM_CASES = [(PAPER_RANDOM[0], 1), pytest.param(PAPER_RANDOM[0], 2, marks=pytest.mark.extended),
                  *(pytest.param(n, REPLANS, marks=pytest.mark.extended) for n in PAPER_SIZE),
                  *(pytest.param(n, 2, marks=pytest.mark.extended) for n in PAPER_RANDOM[1:])]
 
@@ -266,7 +267,7 @@ def test_a_relocation_that_cannot_be_planned_never_moves_the_arm():
         plan_relocation(MotionPlanner(big), "T", [f"o{k}" for k in range(1, 13)])
 
 
-OUTER_SLOTS = (4, 5, 10, 11)  # y = -0.30 and +0.30 in both rows: the ones a staging pose put on joint limits
+OUTER_SLOTS = (4, 11)  # y = -0.30 in the back row, +0.30 in the front row: a staging pose put joints on their limits
 
 
 @pytest.mark.parametrize("name, oid, slots", [
@@ -277,7 +278,7 @@ OUTER_SLOTS = (4, 5, 10, 11)  # y = -0.30 and +0.30 in both rows: the ones a sta
 def test_every_slot_takes_a_bottle(name, oid, slots):
     """A front-row bottle carried to each slot in turn (the bottom shelf otherwise empty): the outer slots too
     (a staging pose 0.30 m in front of them put two joints on their limits). The default run carries it to the
-    four outer slots, -m extended to every slot (None)."""
+    two outer slots, -m extended to every slot (None)."""
     scenario = load_scenario(name)
     planner = planner_for(scenario)
     slots = range(len(scenario.slots)) if slots is None else slots
