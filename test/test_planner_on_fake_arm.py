@@ -13,6 +13,7 @@ the joint states on the graph. On the kinova surface the fake's joint states als
 planner holds the arm and goes on (one graph for both checks). Numbers printed (pytest -s).
 """
 import math
+import re
 import signal
 import time
 
@@ -73,7 +74,7 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
                                                            f"largest gaps between joint states here: "
                                                            f"{np.sort(gaps)[-3:]}")
             if kinova:
-                _check_held_in_the_stall(states, commands, planner)
+                _check_held_in_the_stall(states, commands, planner, fake)
             time.sleep(0.3)
             msgs = states.snapshot()[0]
             q = np.array([msgs[-1].position[msgs[-1].name.index(n)] for n in ARM_JOINTS])
@@ -97,10 +98,16 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
             assert fake.stop(signal.SIGINT) == 0, fake.log()[-2000:]
 
 
-def _check_held_in_the_stall(states, commands, planner) -> None:
-    """The arm was moving before the joint states stopped, and held (zero velocity) while they were gone."""
+def _check_held_in_the_stall(states, commands, planner, fake) -> None:
+    """The arm was moving before the joint states stopped, and held (zero velocity) while they were gone. The stall
+    is the gap between joint states around the fake's own record of it (wall times; not merely the largest gap: on
+    a loaded machine a longer one came while the planner was still planning)."""
+    stalled = re.search(r"stalled ([\d.]+) ([\d.]+)", fake.log())
+    assert stalled, fake.log()[-2000:]
+    mid = (float(stalled[1]) + float(stalled[2])) / 2 - (time.time() - time.monotonic())  # CLOCK_MONOTONIC
     times = np.array(states.snapshot()[1])
-    k = int(np.argmax(np.diff(times)))
+    k = int(np.searchsorted(times, mid)) - 1
+    assert 0 <= k < len(times) - 1, (mid, times[0], times[-1])
     gap = (times[k], times[k + 1])
     assert gap[1] - gap[0] > 0.9 * STALL, gap  # the stall happened, while the planner was streaming
     msgs, t_cmd = commands.snapshot()
