@@ -7,8 +7,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def pytest_collection_modifyitems(config, items):
-    """Tests marked `extended` (the longer halves of parametrized sweeps) run only when selected with
-    `-m extended` or QTREE_EXTENDED=1: the default run (`./run test`) keeps a small version of each."""
+    """Tests marked `extended` (the longer variants: the rest of a parametrized sweep, many-round loops) are skipped
+    unless asked for: `-m extended` runs only them (pytest's own selection), QTREE_EXTENDED=1 runs them with the
+    rest. The default run (`./run test`) keeps a small version of each check."""
     import pytest
 
     expr = config.getoption("-m") or ""

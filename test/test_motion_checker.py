@@ -32,8 +32,10 @@ TOTAL = Report()  # over the module, for the summary line
 
 
 def planner_for(scenario):
-    # answers must not depend on machine load: 5 s per query instead of the 0.5 s default
-    return MotionPlanner(scenario, dataclasses.replace(PARAMS, timeout=5.0))
+    # answers must not depend on machine load: wall-clock safety nets (reached, the query raises) of 300 s instead of
+    # config/motion_planner.yaml's 10 s (a home plan took over 30 s next to other jobs); the work budgets, which
+    # decide the answers, are the planner's
+    return MotionPlanner(scenario, dataclasses.replace(PARAMS, timeout=300.0, carry_timeout=300.0))
 
 
 def check_sequence(scenario, planner, sequence) -> Report:
@@ -56,7 +58,12 @@ def assert_clean(rep: Report, what: str) -> None:
     assert rep.support_depth <= 0.001
 
 
-@pytest.mark.parametrize("path", SCENES + RANDOM, ids=lambda p: p.stem)
+# the default run: the demo scene and the smallest one; every scene with -m extended
+DEMO_DEFAULT = ("paper_experiment_10", "scenario1_5")
+DEMO_CASES = [p if p.stem in DEMO_DEFAULT else pytest.param(p, marks=pytest.mark.extended) for p in SCENES + RANDOM]
+
+
+@pytest.mark.parametrize("path", DEMO_CASES, ids=lambda p: p.stem)
 def test_demo_sequence_touches_nothing_but_the_grasped_bottle(path):
     scenario = load_scenario(path)
     planner = planner_for(scenario)
@@ -69,12 +76,19 @@ def test_demo_sequence_touches_nothing_but_the_grasped_bottle(path):
 
 PAPER_SIZE = ("paper1_5", "paper2_10", "paper3_15")  # scenes of the paper's size (docs/evaluation.md)
 PAPER_RANDOM = tuple(f"paper_random5/{p.stem}" for p in sorted((scenarios_dir() / "paper_random5").glob("*.yaml")))
-# three of the ten random cases in the default run; all ten with -m extended
-PAPER_RANDOM_CASES = [n if k < 3 else pytest.param(n, marks=pytest.mark.extended) for k, n in enumerate(PAPER_RANDOM)]
+# Plannings of a paper scene's optimum after the first, in the same process: a pick that fails in 5 of 12
+# plannings (paper2_10's T at 0.902, before it moved 10 mm forward; here it failed at the 5th) passes 11 in a row
+# 0.3 % of the time
+REPLANS = 10
+# (scene, plannings again): the default run has one random case planned once again; -m extended every paper-size
+# scene with REPLANS and every random case twice (Table 4's random cases: six plannings in a row)
+OPTIMUM_CASES = [(PAPER_RANDOM[0], 1), pytest.param(PAPER_RANDOM[0], 2, marks=pytest.mark.extended),
+                 *(pytest.param(n, REPLANS, marks=pytest.mark.extended) for n in PAPER_SIZE),
+                 *(pytest.param(n, 2, marks=pytest.mark.extended) for n in PAPER_RANDOM[1:])]
 
 
-@pytest.mark.parametrize("name", [*PAPER_SIZE, *PAPER_RANDOM_CASES])
-def test_the_optimum_of_each_paper_scene_table_touches_nothing(name):
+@pytest.mark.parametrize("name, replans", OPTIMUM_CASES, ids=lambda v: f"x{v}" if isinstance(v, int) else v)
+def test_the_optimum_of_each_paper_scene_table_touches_nothing(name, replans):
     """The optimum the evaluation reports (exact.solve over the committed feasibility table, the answers of a fill
     in its own process) relocated in order: the demo-sequence test above asks a planner whose OMPL stream depends
     on the queries run before it in this process (stpik_motion_planner/rrt.py), so it may solve another sequence."""
@@ -92,15 +106,8 @@ def test_the_optimum_of_each_paper_scene_table_touches_nothing(name):
     rep = check_sequence(scenario, planner, result.sequence)
     assert rep.segments == 4 * len(result.sequence)
     assert_clean(rep, f"{name} table optimum {'-'.join(result.sequence)}")
-    # the same planner again: its OMPL stream has moved on, as a demo's planner's has (Table 4's random cases,
-    # drawn with six plannings in a row: twice here, for the suite's time)
-    assert paper_scenes.replans(planner, result.sequence, REPLANS if name in PAPER_SIZE else 2) == "", name
-
-
-# Plannings of a paper scene's optimum after the first, in the same process: a pick that fails in 5 of 12
-# plannings (paper2_10's T at 0.902, before it moved 10 mm forward; here it failed at the 5th) passes 11 in a row
-# 0.3 % of the time
-REPLANS = 10
+    # the same planner again: its OMPL stream has moved on, as a demo's planner's has
+    assert paper_scenes.replans(planner, result.sequence, replans) == "", name
 
 
 def test_the_blocking_scenes_are_not_relocation_scenes():
@@ -111,29 +118,31 @@ def test_the_blocking_scenes_are_not_relocation_scenes():
         assert not solve(scenario, planner_for(scenario)).found, scenario.name
 
 
-def test_a_sample_of_feasibility_answers_touches_nothing():
-    """Every object of three scenes asked with no object removed and with each prefix of the demo sequence
-    removed; every feasible answer's trajectory (home -> pre-grasp -> grasp) replayed."""
+@pytest.mark.parametrize("name", ["paper_experiment_10", pytest.param("scenario3_15", marks=pytest.mark.extended),
+                                  pytest.param("random5/random5_04", marks=pytest.mark.extended)])
+def test_a_sample_of_feasibility_answers_touches_nothing(name):
+    """Every object of a scene asked with no object removed and with each prefix of the demo sequence removed;
+    every feasible answer's trajectory (home -> pre-grasp -> grasp) replayed. The default run asks the demo scene;
+    -m extended two more."""
     rep, answers = Report(), 0
-    for name in ("paper_experiment_10", "scenario3_15", "random5/random5_04"):
-        scenario = load_scenario(name)
-        planner = planner_for(scenario)
-        seq = solve(scenario, planner).sequence
-        for k in range(len(seq)):
-            removed = frozenset(seq[:k])
-            for oid in scenario.ids:
-                if oid in removed:
-                    continue
-                ans = planner.feasibility(oid, removed)
-                if ans.label == Label.UNFEASIBLE:
-                    continue
-                answers += 1
-                c = MotionChecker(scenario)
-                _move_to_slots(c, scenario, seq[:k])  # the relocated ones stand in their slots
-                rep.merge(c.check(ans.trajectory, f"{name}:{oid}|{','.join(sorted(removed))}", picking=oid,
-                                  approach_from=dict(ans.trajectory.phases)["approach"]))
-    assert answers >= 20
-    assert_clean(rep, f"{answers} feasibility answers")
+    scenario = load_scenario(name)
+    planner = planner_for(scenario)
+    seq = solve(scenario, planner).sequence
+    for k in range(len(seq)):
+        removed = frozenset(seq[:k])
+        for oid in scenario.ids:
+            if oid in removed:
+                continue
+            ans = planner.feasibility(oid, removed)
+            if ans.label == Label.UNFEASIBLE:
+                continue
+            answers += 1
+            c = MotionChecker(scenario)
+            _move_to_slots(c, scenario, seq[:k])  # the relocated ones stand in their slots
+            rep.merge(c.check(ans.trajectory, f"{name}:{oid}|{','.join(sorted(removed))}", picking=oid,
+                              approach_from=dict(ans.trajectory.phases)["approach"]))
+    assert answers >= 5
+    assert_clean(rep, f"{name}: {answers} feasibility answers")
 
 
 def _move_to_slots(checker, scenario, relocated):
@@ -183,7 +192,8 @@ def sized_scene(sizes, slots="auto"):
 
 
 @pytest.mark.parametrize("sizes", [[(0.025, 0.13), (0.033, 0.16), (0.030, 0.14)],
-                                   [(0.028, 0.15), (0.032, 0.13), (0.026, 0.125)]], ids=["mixed1", "mixed2"])
+                                   pytest.param([(0.028, 0.15), (0.032, 0.13), (0.026, 0.125)],
+                                                marks=pytest.mark.extended)], ids=["mixed1", "mixed2"])
 def test_bottles_of_every_size_are_carried_at_their_size(sizes):
     """Sizes the hand can grasp from the side (mid-height >= 0.065 m keeps the palm 15 mm above the board, radius <=
     0.033 m fits between the open fingers) and the bottom compartment can take (<= 0.162 m here)."""
@@ -257,21 +267,29 @@ def test_a_relocation_that_cannot_be_planned_never_moves_the_arm():
         plan_relocation(MotionPlanner(big), "T", [f"o{k}" for k in range(1, 13)])
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name, oid", [("paper_experiment_10", "o2"), ("scenario3_15", "o3")])
-def test_every_slot_takes_a_bottle(name, oid):
+OUTER_SLOTS = (4, 11)  # y = -0.30 in the back row, +0.30 in the front row: a staging pose put joints on their limits
+
+
+@pytest.mark.parametrize("name, oid, slots", [
+    ("paper_experiment_10", "o2", OUTER_SLOTS),
+    pytest.param("paper_experiment_10", "o2", None, marks=pytest.mark.extended),
+    pytest.param("scenario3_15", "o3", None, marks=pytest.mark.extended)],
+    ids=["paper_experiment_10-outer", "paper_experiment_10-all", "scenario3_15-all"])
+def test_every_slot_takes_a_bottle(name, oid, slots):
     """A front-row bottle carried to each slot in turn (the bottom shelf otherwise empty): the outer slots too
-    (a staging pose 0.30 m in front of them put two joints on their limits)."""
+    (a staging pose 0.30 m in front of them put two joints on their limits). The default run carries it to the
+    two outer slots, -m extended to every slot (None)."""
     scenario = load_scenario(name)
     planner = planner_for(scenario)
+    slots = range(len(scenario.slots)) if slots is None else slots
+    (pick,) = planner.plan_pick(oid, [])  # the same pick for every slot
     rep = Report()
-    for k in range(len(scenario.slots)):
-        (pick,) = planner.plan_pick(oid, [])
+    for k in slots:
         carry, retreat = planner.plan_carry(oid, [], k, q_start=pick.trajectory.positions[-1], placed=[])
         home = planner.plan_home(retreat.trajectory.positions[-1], [oid], [(oid, scenario.slot(k))])
         rep.merge(replay_relocation(MotionChecker(scenario), pick.trajectory, [carry.trajectory, retreat.trajectory],
                                     home, oid))
-    assert_clean(rep, f"{name}: {oid} to each of {len(scenario.slots)} slots")
+    assert_clean(rep, f"{name}: {oid} to each of slots {list(slots)}")
 
 
 def test_summary():

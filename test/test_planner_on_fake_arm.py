@@ -9,9 +9,11 @@ one bottle, on each surface:
 
 So the planner needs nothing of the simulator: what a real kinova driver (or a ros2_control stack) serves is enough.
 The scene comes from the scenario file (scene_topic is a topic nobody publishes). The test watches the commands and
-the joint states on the graph. Numbers printed (pytest -s).
+the joint states on the graph. On the kinova surface the fake's joint states also stop for a second mid-motion: the
+planner holds the arm and goes on (one graph for both checks). Numbers printed (pytest -s).
 """
 import math
+import re
 import signal
 import time
 
@@ -39,12 +41,19 @@ def _rad_s(msg) -> np.ndarray:
     return np.asarray(msg.data, float)
 
 
+STALL = 1.0  # s without joint states mid-motion on the kinova surface (a CI run: 0.9 s, on a loaded machine)
+
+
 @pytest.mark.parametrize("interface", ["kinova", "ros2_control"])
 def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
+    """On the kinova surface the fake's joint states also stop for STALL s mid-motion: that does not end the
+    relocation; the planner, with its default parameters, commands zero velocity until the states return and then
+    goes on; only state_timeout (2 s) of silence aborts (test_motion_planner_node.py: a dead driver)."""
     kinova = interface == "kinova"
+    stall = ["150", repr(STALL)] if kinova else []
     with RosGraph(tmp_path) as g:
         fake = g.start_argv([g.python, str(REPO / "test" / "kinova_outsider.py"), interface,
-                             *[repr(float(x)) for x in Q_HOME]], "fake_arm")
+                             *[repr(float(x)) for x in Q_HOME], *stall], "fake_arm")
         client = Client(g.domain_id, "relocation_client")
         try:
             states = client.collect(JointState, f"{PRE}/out/joint_state" if kinova else "/joint_states", 100)
@@ -64,6 +73,8 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
             assert result is not None and result.success, (result, planner.log()[-3000:], fake.log()[-2000:],
                                                            f"largest gaps between joint states here: "
                                                            f"{np.sort(gaps)[-3:]}")
+            if kinova:
+                _check_held_in_the_stall(states, commands, planner, fake)
             time.sleep(0.3)
             msgs = states.snapshot()[0]
             q = np.array([msgs[-1].position[msgs[-1].name.index(n)] for n in ARM_JOINTS])
@@ -87,40 +98,25 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
             assert fake.stop(signal.SIGINT) == 0, fake.log()[-2000:]
 
 
-def test_the_arm_is_held_while_joint_states_stall(tmp_path):
-    """A driver whose joint states stop for 1 s mid-motion (a CI run: 0.9 s, on a loaded machine) does not end
-    the relocation: the planner, with its default parameters, commands zero velocity until the states return and
-    then goes on; only state_timeout (2 s) of silence aborts (test_motion_planner_node.py: a dead driver)."""
-    stall = 1.0
-    with RosGraph(tmp_path) as g:
-        fake = g.start_argv([g.python, str(REPO / "test" / "kinova_outsider.py"), "kinova",
-                             *[repr(float(x)) for x in Q_HOME], "150", repr(stall)], "fake_arm")
-        client = Client(g.domain_id, "relocation_client")
-        try:
-            states = client.collect(JointState, f"{PRE}/out/joint_state", 100)
-            commands = client.collect(JointVelocity, f"{PRE}/in/joint_velocity", 100)
-            states.wait(timeout=30)
-            planner = g.start("stpik_motion_planner.motion_planner_node",
-                              params_file=REPO / "config" / "motion_planner.yaml",
-                              params={"scene_topic": "/nobody/publishes/this"})
-            ac = client.action(RelocateObject, "/motion_planner/relocate", timeout=60)
-            status, result = client.goal(ac, RelocateObject.Goal(object_id="o2", removed_ids=[]), timeout=120)
-            times = np.array(states.snapshot()[1])
-            k = int(np.argmax(np.diff(times)))
-            gap = (times[k], times[k + 1])
-            assert result is not None and result.success, (result, planner.log()[-3000:], fake.log()[-2000:])
-            assert status == SUCCEEDED
-            assert gap[1] - gap[0] > 0.9 * stall, gap  # the stall happened, while the planner was streaming
-            msgs, t_cmd = commands.snapshot()
-            speed = [(t, float(np.abs(_rad_s(m)).max())) for m, t in zip(msgs, t_cmd)]
-            before = max(v for t, v in speed if gap[0] - 0.3 < t < gap[0])
-            held = [v for t, v in speed if gap[0] + 0.25 < t < gap[1] - 0.05]
-            last = [v for t, v in speed if t < gap[1] - 0.05][-1]
-            print(f"\nstall of {gap[1] - gap[0]:.2f} s: before it {before:.3f} rad/s, in it {len(held)} commands "
-                  f"(largest {max(held, default=0.0):.4f} rad/s), the last one {last} rad/s; {result.message!r}")
-            assert before > 0.01  # it was moving
-            assert last == 0.0 and max(held, default=0.0) == 0.0  # held: zero velocity (then the watchdog's)
-            assert "joint states back after" in planner.log()
-        finally:
-            client.close()
-            assert fake.stop(signal.SIGINT) == 0, fake.log()[-2000:]
+def _check_held_in_the_stall(states, commands, planner, fake) -> None:
+    """The arm was moving before the joint states stopped, and held (zero velocity) while they were gone. The stall
+    is the gap between joint states around the fake's own record of it (wall times; not merely the largest gap: on
+    a loaded machine a longer one came while the planner was still planning)."""
+    stalled = re.search(r"stalled ([\d.]+) ([\d.]+)", fake.log())
+    assert stalled, fake.log()[-2000:]
+    mid = (float(stalled[1]) + float(stalled[2])) / 2 - (time.time() - time.monotonic())  # CLOCK_MONOTONIC
+    times = np.array(states.snapshot()[1])
+    k = int(np.searchsorted(times, mid)) - 1
+    assert 0 <= k < len(times) - 1, (mid, times[0], times[-1])
+    gap = (times[k], times[k + 1])
+    assert gap[1] - gap[0] > 0.9 * STALL, gap  # the stall happened, while the planner was streaming
+    msgs, t_cmd = commands.snapshot()
+    speed = [(t, float(np.abs(_rad_s(m)).max())) for m, t in zip(msgs, t_cmd)]
+    before = max(v for t, v in speed if gap[0] - 0.3 < t < gap[0])
+    held = [v for t, v in speed if gap[0] + 0.25 < t < gap[1] - 0.05]
+    last = [v for t, v in speed if t < gap[1] - 0.05][-1]
+    print(f"\nstall of {gap[1] - gap[0]:.2f} s: before it {before:.3f} rad/s, in it {len(held)} commands "
+          f"(largest {max(held, default=0.0):.4f} rad/s), the last one {last} rad/s")
+    assert before > 0.01  # it was moving
+    assert last == 0.0 and max(held, default=0.0) == 0.0  # held: zero velocity (then the watchdog's)
+    assert "joint states back after" in planner.log()

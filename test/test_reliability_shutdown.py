@@ -4,8 +4,7 @@ and again.
 Each round starts the whole graph at once on a private domain with the real parameter files (so the nodes are
 busy: the driver steps and renders, perception processes the driver's frames), waits until every node has finished
 starting (its ready line in the log), then signals the nodes one at a time and times each exit. The default suite
-runs 3 rounds per signal; the `slow` test runs 20 per signal (docs/reliability.md's figure)."""
-import os
+runs 1 round per signal; `-m extended` runs 20 per signal (docs/reliability.md's figure)."""
 import signal
 import subprocess
 import sys
@@ -67,31 +66,24 @@ def report(times: dict) -> str:
                      f"{sorted(v)[len(v) // 2] * 1e3:6.0f} ms" for (name, sig), v in sorted(times.items()))
 
 
-def test_every_node_exits_0_on_sigint_and_sigterm_3_rounds(tmp_path):
-    times = shutdown_rounds(tmp_path, 3)
+@pytest.mark.parametrize("rounds", [1, pytest.param(20, marks=pytest.mark.extended)])
+def test_every_node_exits_0_on_sigint_and_sigterm(tmp_path, rounds):
+    """1 round per signal in the default run; 20 (2.5 minutes, docs/reliability.md's figure) with -m extended."""
+    times = shutdown_rounds(tmp_path, rounds)
     print("\n" + report(times))
-    assert {n for n, _ in times} == set(NODES) and all(len(v) == 3 for v in times.values())
+    assert {n for n, _ in times} == set(NODES) and all(len(v) == rounds for v in times.values())
 
 
-@pytest.mark.slow
-def test_every_node_exits_0_on_sigint_and_sigterm_20_rounds(tmp_path, request):
-    """2.5 minutes: runs when selected with `-m slow` (or QTREE_SLOW=1), skipped in the default run."""
-    expr = request.config.getoption("-m") or ""
-    if not (("slow" in expr and "not slow" not in expr) or os.environ.get("QTREE_SLOW") == "1"):
-        pytest.skip("20 rounds take minutes: run with -m slow")
-    times = shutdown_rounds(tmp_path, 20)
-    print("\n" + report(times))
-    assert all(len(v) == 20 for v in times.values())
-
-
-def test_motion_planner_exits_0_on_sigint_after_a_client_came_and_went_8_rounds(tmp_path):
+@pytest.mark.parametrize("rounds", [3, pytest.param(8, marks=pytest.mark.extended)])
+def test_motion_planner_exits_0_on_sigint_after_a_client_came_and_went(tmp_path, rounds):
     """The graph launcher's planner, SIGINT just after a feasibility client came and went. Before the nodes handled
     the signals themselves, rclpy's signal thread raced the executors' teardown: exit -11 in 9 of 26 such rounds
-    (core dump: rcl_trigger_guard_condition called from rclpy's signal thread); a CI run failed on it."""
+    (core dump: rcl_trigger_guard_condition called from rclpy's signal thread); a CI run failed on it. 3 rounds in
+    the default run, 8 with -m extended."""
     from relocation_app.graph import Graph
 
     codes = []
-    for r in range(8):
+    for r in range(rounds):
         with Graph(tmp_path / f"r{r}") as g:
             g.start("motion_planner")
             deadline = time.monotonic() + 90
@@ -102,4 +94,4 @@ def test_motion_planner_exits_0_on_sigint_after_a_client_came_and_went_8_rounds(
             subprocess.run([sys.executable, str(REPO / "scripts" / "bench_reliability.py"), "--client", "9", "-n",
                             "5", "--seed", str(r)], env=g.env, capture_output=True, text=True, timeout=120)
             codes.append(g.stop("motion_planner", signal.SIGINT, grace=DEADLINE + 3))
-    assert codes == [0] * 8, codes
+    assert codes == [0] * rounds, codes
