@@ -230,16 +230,17 @@ class TaskPlannerNode(Node):
         result.e_ss, result.mp_q, result.e_first = r.e_ss, r.mp_q, r.e_1st if r.e_1st is not None else -1
         result.planner_calls, result.episodes = len(oracle.table), r.episodes
         result.q_sum_history = [float(x) for x in r.q_sum_history]
+        if not r.cancelled and (r.found or optimum.found):  # the learned path on the markers, executed or not
+            self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
+                                   f"({service.summary()})" if r.found else
+                                   f"training found no sequence in {r.episodes} episodes (the exact optimum exists)")
+            self._publish_scene(scene, r.sequence or result.optimal_sequence, r.tree, problem.ids)
         stop = training_outcome(r, optimum, execute=goal_handle.request.execute)  # the exact solver's why_none
         if stop is not None:
             result.success, result.message = stop
             if not stop[0] and not r.cancelled and not optimum.found:
                 result.message += self._foreign_ids(service, problem)
             return
-        self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
-                               f"({service.summary()})" if r.found else
-                               f"training found no sequence in {r.episodes} episodes; executing the exact optimum")
-        self._publish_scene(scene, r.sequence or result.optimal_sequence, r.tree, problem.ids)
         fb.phase = "executing"  # then each check and re-plan (_run)
         self._run(goal_handle, fb, result, scene, oracle, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
