@@ -8,8 +8,11 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from relocation_common import robot_description as rd
+from relocation_common.config import node_section
+from relocation_common.paths import config_file
 
-HOME_TOL = 0.05  # rad per joint: the motion planner's home_tol (config/motion_planner.yaml)
+# rad per joint: the motion planner's own home_tol, read from its parameters file (one source)
+HOME_TOL = float(node_section(config_file("motion_planner.yaml"), "motion_planner")["home_tol"])
 HAND_REACH = 0.1  # m: a bottle whose centre is this close to the tool is in (or at) the hand
 
 
