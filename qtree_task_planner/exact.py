@@ -10,8 +10,8 @@ replicas (docs/architecture.md) is asked the next cheapest queued questions toge
 
 `brute_force` enumerates every set reachable by feasible single removals (reachable.py, asking everything) for
 tests. When no sequence exists, `why_none` says why in one line from what the search learned (docs/motion_planner.md,
-"Why there is no sequence"): the target's own answer, a blocking cycle of certain lane blockers, the objects no
-grasp ever reached.
+"Why there is no sequence"): the target's own answer, a blocking cycle of certain lane blockers (through the
+target or not), the objects no grasp ever reached.
 """
 from __future__ import annotations
 
@@ -57,7 +57,8 @@ def why_none(target: str, asked: dict, lanes: dict | None = None, limit: int = 4
     """One line saying why no sequence frees `target`, from the answers asked ((object, removed) -> answer) and
     certain lane claims (object -> [(removed, lane sets)], e.g. astar.Knowledge.claims; the answers' own certain
     blockers are added): the target's answer from the largest set reached; a blocking cycle (every lane of the
-    target needs an object each of whose lanes needs the target moved, or that has no lane at all); the objects
+    target needs an object that can never leave first: each of its lanes needs the target or another such object
+    moved, or it has no lane at all); the objects
     never feasible in any set asked, with the planner's reason."""
     lanes = {o: list(v) for o, v in (lanes or {}).items()}
     for (o, s), a in asked.items():
@@ -86,22 +87,44 @@ def why_none(target: str, asked: dict, lanes: dict | None = None, limit: int = 4
 
 
 def _cycle(target: str, lanes: dict) -> str:
-    """'blocking cycle: ...' if every lane of the target (claimed at the empty set) needs an object that cannot
-    leave before the target (each of its lanes needs the target moved, or it has none); '' otherwise."""
-    first = [ls for s, ls in lanes.get(target, ()) if not s]
-    if not first or not first[0]:
+    """'blocking cycle: ...' if no lane of the target (claimed at the empty set) can be cleared: every lane needs an
+    object that can never leave before the target, because each of its lanes needs the target or another such
+    object moved, or it has no lane ('' otherwise). Objects without a claim count as able to leave (optimistic)."""
+    first = {o: v[0] for o, v in ((o, [ls for s, ls in c if not s]) for o, c in lanes.items()) if v}
+    if not first.get(target):
         return ""
-    why = {}
-    for lane in first[0]:
-        for x in sorted(lane):
-            xl = [ls for s, ls in lanes.get(x, ()) if not s]
-            if xl and all(target in b for b in xl[0]):
-                why[_set(lane)] = f"{x} needs {target} moved" if xl[0] else f"{x} has no lane"
-                break
-        else:
-            return ""
+    free = {m for ls in first.values() for lane in ls for m in lane if m not in first} - {target}
+    grown = True
+    while grown:  # the objects that can leave, grown to a fixpoint
+        grown = False
+        for o, ls in first.items():
+            if o != target and o not in free and any(set(lane) <= free for lane in ls):
+                free.add(o)
+                grown = True
+    if any(set(lane) <= free for lane in first[target]):
+        return ""
+    why: dict[str, str] = {}
+    for lane in first[target]:
+        x = next(m for m in sorted(lane) if m not in free)
+        why[f"lane {_set(lane)}"] = _needs(x, first, free)
+    todo = sorted({m for lane in first[target] for m in lane if m not in free})
+    seen = set(todo) | {target}
+    while todo:  # the objects those need moved, each explained once
+        y = todo.pop(0)
+        for m in sorted({m for lane in first[y] for m in lane if m not in free} - seen):
+            seen.add(m)
+            todo.append(m)
+            why[m] = _needs(m, first, free)
     return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
-        "; ".join(f"lane {k}: {v}" for k, v in why.items()) + ")"
+        "; ".join(f"{k}: {v}" if k.startswith("lane") else v for k, v in why.items()) + ")"
+
+
+def _needs(x: str, first: dict, free: set) -> str:
+    """'x needs T moved', 'x needs one of {a, b} moved' (the objects stuck in its lanes) or 'x has no lane'."""
+    stuck = sorted({m for lane in first[x] for m in lane if m not in free})
+    if not first[x]:
+        return f"{x} has no lane"
+    return f"{x} needs {stuck[0]} moved" if len(stuck) == 1 else f"{x} needs one of {_set(stuck)} moved"
 
 
 def as_problem(problem) -> RelocationProblem:

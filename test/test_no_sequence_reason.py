@@ -60,3 +60,12 @@ def test_qtree_solve_prints_the_reason(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "qtree: no sequence: " in err and "blocking cycle" in err
     assert "blocking cycle" in json.loads((tmp_path / "out.json").read_text())["reason"]
+
+
+def test_a_blocking_cycle_not_through_the_target_is_named():
+    """T needs o1 moved, o1 needs o2, o2 needs o1: no lane of T can be cleared, though none needs T moved."""
+    oracle = BlockingOracle.from_relation({"T": ["o1"], "o1": ["o2"], "o2": ["o1"]}, "T", IDS)
+    for solve in (astar.solve, exact.solve):
+        r = solve(problem(), oracle)
+        assert not r.found
+        assert "blocking cycle" in r.reason and "lane {o1}: o1 needs o2 moved; o2 needs o1 moved" in r.reason, r.reason
