@@ -12,6 +12,7 @@ contacts counted. Reported: fraction solved, fraction executed with 0 contacts, 
     .venv/bin/python scripts/bench_perturbed_layouts.py                      # default: 4 scenes x 2 seeds x 12/20 mm
     .venv/bin/python scripts/bench_perturbed_layouts.py --all --seeds 0-3    # every shipped scene, 4 seeds (hours)
     .venv/bin/python scripts/bench_perturbed_layouts.py --set seed_per_query=true   # a planner parameter changed
+    .venv/bin/python scripts/bench_perturbed_layouts.py --all --seeds 0-2 --out rows.jsonl   # resumable
 """
 from __future__ import annotations
 
@@ -139,6 +140,8 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[], help="planner parameter key=value (repeatable)")
     ap.add_argument("--label", default="", help="row label in the table (default: the --set values or 'today')")
     ap.add_argument("--json", default=None, help="write every row here")
+    ap.add_argument("--out", default=None, help="JSON lines: every row appended as it ends; layouts already in it "
+                    "are not run again (a run cut short goes on where it stopped), the table covers them all")
     ap.add_argument("--one", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.one:
@@ -146,11 +149,15 @@ def main() -> int:
         return 0
     from relocation_app.evaluation.make_scenes import _seed_range, make_jitter
     scenes = shipped_scenes() if a.all else a.scenes
-    rows = []
+    out = Path(a.out) if a.out else None
+    rows = [json.loads(x) for x in out.read_text().splitlines() if x.strip()] if out and out.exists() else []
+    done = {(r["layout"], r["amp"]) for r in rows}
     with tempfile.TemporaryDirectory() as tmp:
         for scene in scenes:  # scene by scene, both amplitudes: a run stopped early is still a sample of both
             for amp in (float(x) for x in a.amplitudes.split(",")):
                 for path in make_jitter(scene, amp, _seed_range(a.seeds), tmp):
+                    if (path.stem, int(round(amp * 1000))) in done:
+                        continue
                     cmd = [sys.executable, __file__, "--one", str(path), "--solver", a.solver]
                     for kv in a.set:
                         cmd += ["--set", kv]
@@ -163,6 +170,9 @@ def main() -> int:
                     row["amp"] = int(round(amp * 1000))
                     rows.append(row)
                     print(json.dumps(row), flush=True)
+                    if out:
+                        with out.open("a") as f:
+                            f.write(json.dumps(row) + "\n")
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=1))
     print("\n| code | jitter | layouts | solved | executed, 0 contacts | planner calls p50 / p95 / max | "
