@@ -130,8 +130,11 @@ CASES = load_fixture() if FIXTURE.exists() else []
 def test_training_with_callbacks_reproduces_the_reference(case):
     seen = []
     assert run_case(case, callback=seen.append, callback_every=7) == case["result"]  # batches of 7 episodes
-    assert [s.episode for s in seen][-1] == case["result"]["episodes"]
-    assert all(s.episode % 7 == 0 for s in seen[:-1])
+    episodes = [s.episode for s in seen]
+    assert episodes[-1] == case["result"]["episodes"] and episodes == sorted(set(episodes))
+    # every 7th episode reported; a batch that asked the oracle for over CALLBACK_S (a loaded machine) may end
+    # early with one more report (training.train's docstring), never fewer
+    assert set(range(7, episodes[-1], 7)) <= set(episodes)
 
 
 @pytest.mark.parametrize("case", CASES[::7], ids=case_id)
