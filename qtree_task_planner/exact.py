@@ -86,10 +86,11 @@ def why_none(target: str, asked: dict, lanes: dict | None = None, limit: int = 4
     return "no sequence: " + (". ".join(parts) if parts else "nothing was feasible to ask")
 
 
-def _cycle(target: str, lanes: dict) -> str:
+def _cycle(target: str, lanes: dict, limit: int = 8) -> str:
     """'blocking cycle: ...' if no lane of the target (claimed at the empty set) can be cleared: every lane needs an
     object that can never leave before the target, because each of its lanes needs the target or another such
-    object moved, or it has no lane ('' otherwise). Objects without a claim count as able to leave (optimistic)."""
+    object moved, or it has no lane ('' otherwise; at most `limit` explanations). Objects without a claim count as
+    able to leave (optimistic)."""
     first = {o: v[0] for o, v in ((o, [ls for s, ls in c if not s]) for o, c in lanes.items()) if v}
     if not first.get(target):
         return ""
@@ -103,20 +104,24 @@ def _cycle(target: str, lanes: dict) -> str:
                 grown = True
     if any(set(lane) <= free for lane in first[target]):
         return ""
-    why: dict[str, str] = {}
-    for lane in first[target]:
+    parts, told = [], {target}
+    for lane in sorted({frozenset(lane) for lane in first[target]}, key=lambda ls: (len(ls), sorted(ls))):
         x = next(m for m in sorted(lane) if m not in free)
-        why[f"lane {_set(lane)}"] = _needs(x, first, free)
+        parts.append(f"lane {_set(lane)}: {_needs(x, first, free)}")
+        told.add(x)
     todo = sorted({m for lane in first[target] for m in lane if m not in free})
     seen = set(todo) | {target}
-    while todo:  # the objects those need moved, each explained once
+    while todo:  # every object stuck behind those, each explained once
         y = todo.pop(0)
+        if y not in told:
+            parts.append(_needs(y, first, free))
+            told.add(y)
         for m in sorted({m for lane in first[y] for m in lane if m not in free} - seen):
             seen.add(m)
             todo.append(m)
-            why[m] = _needs(m, first, free)
+    more = f"; {len(parts) - limit} more" if len(parts) > limit else ""
     return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
-        "; ".join(f"{k}: {v}" if k.startswith("lane") else v for k, v in why.items()) + ")"
+        "; ".join(parts[:limit]) + more + ")"
 
 
 def _needs(x: str, first: dict, free: set) -> str:
