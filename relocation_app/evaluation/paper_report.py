@@ -174,6 +174,10 @@ fresh fill gives 353 edges / 24 target leaves. An earlier search (before the pla
 83 edges and 10 target leaves with five obstacles, but no weights gave it one optimum: 10 sequences of one set of
 bottles weigh the same, as two removal chains of 2 and 3 bottles in front of the target would (exactly 83 edges, 10
 leaves); the paper's 84 / 10 / one optimum needs an optimum that Eq. 8 alone does not single out.
+These searches ran with the planner's grasp set of the time, 3 approach yaws up to 0.35 rad. With today's 5 yaws up
+to 0.5 rad, honest lanes and certified relocations (docs/motion_planner.md) the same layouts give the trees of the
+table above: more lanes open, paper3_15 grows past 2x the paper's edges and paper2_10 gains a lighter optimum (o6 o3
+T). A new search with this grasp set (`make_scenes.py paper N --resume --strict`) has not been run.
 """
 
 
