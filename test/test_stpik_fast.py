@@ -6,10 +6,12 @@ test/data/stpik_reference.json was recorded from the planner as it was before th
 benchmark's random workload, queries whose answers need RRT-Connect, and feasible queries asked again with
 RRT-Connect always), each with its label, attempts and the minimum clearances STPIK measured on the accepted
 path (arm to obstacles, self). The replay asks the same queries in the same order in a fresh process (OMPL's RNG
-is process-wide and seeded once) and must give the same labels and never a smaller clearance.
+is process-wide and seeded once), with the parameters of the recording (RECORDED), and must give the same
+labels and never a smaller clearance.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -21,8 +23,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 REFERENCE = REPO / "test" / "data" / "stpik_reference.json"
 CLEARANCE_TOL = 1e-9  # m: float noise only
+# the planner parameters the reference was recorded with (the defaults of the time): 3 approach yaws up to 0.35
+# rad, OMPL's process RNG, the screen at hand_margin, the pick alone certified
+RECORDED = dict(n_yaws=3, max_yaw=0.35, seed_per_query=False, screen_at_clearance=False, certify_relocation=False)
 
-# scenario3_15 queries whose answers need RRT-Connect (test_planner_budget.py)
+# scenario3_15 queries whose answers needed RRT-Connect with the RECORDED parameters
 RRT_QUERIES = [("o15", ["o1", "o10", "o11", "o13", "o14", "o3", "o4", "o7", "o9"]),
                ("o12", ["o14", "o15", "o2", "o4", "o5", "o6", "o7", "o9"]),
                ("o12", ["o14", "o15", "o2", "o3", "o4", "o5", "o7", "o8"]),
@@ -70,7 +75,8 @@ def replay() -> list[dict]:
     planners, out = {}, []
     for name, obj, removed, direct in _queries():
         if name not in planners:
-            planners[name] = MotionPlanner(load_scenario(resolve_scenario(name)), PlannerParams.load())
+            params = dataclasses.replace(PlannerParams.load(), **RECORDED)
+            planners[name] = MotionPlanner(load_scenario(resolve_scenario(name)), params)
         mp = planners[name]
         results = []
         track = type(mp.stpik).track
