@@ -78,11 +78,17 @@ def backproject_image(depth: np.ndarray, K: np.ndarray, T_base_camera: np.ndarra
 
 def on_marker_plates(points: np.ndarray, markers, margin: float) -> np.ndarray:
     """Bool per point (... x 3, base frame, NaN allowed): on one of the markers' plates (within `margin`)."""
+    return on_plates(points, [(marker_in_base(m), m.size) for m in markers], margin)
+
+
+def on_plates(points: np.ndarray, plates, margin: float) -> np.ndarray:
+    """Bool per point (... x 3, NaN allowed): on one of the plates, given as (T_frame_marker 4x4 in the points'
+    frame, marker size), within `margin` of its edge and 2 cm of its face."""
     out = np.zeros(points.shape[:-1], bool)
     with np.errstate(invalid="ignore"):
-        for m in markers:
-            local = (points - np.asarray(m.position, np.float32)) @ marker_in_base(m)[:3, :3].astype(np.float32)
-            half = m.size * 0.75 + margin  # the plate carries a white margin of a quarter side
+        for t, size in plates:
+            local = (points - np.asarray(t[:3, 3], np.float32)) @ np.asarray(t[:3, :3], np.float32)
+            half = size * 0.75 + margin  # the plate carries a white margin of a quarter side
             out |= (np.abs(local[..., 0]) < half) & (np.abs(local[..., 1]) < half) & (np.abs(local[..., 2]) < 0.02)
     return out
 
@@ -167,10 +173,14 @@ def segment(rgb, depth, K, T_base_camera, scenario: Scenario,
 
 
 def segment_points(rgb: np.ndarray, points: np.ndarray, scenario: Scenario,
-                   params: SegmentationParams = SegmentationParams(), levels=None) -> Segmentation:
+                   params: SegmentationParams = SegmentationParams(), levels=None,
+                   exclude: np.ndarray | None = None) -> Segmentation:
     """`segment` on base-frame points already computed (HxWx3, NaN without depth); `levels`: the marker plate's
-    (white, black) for the colour normalisation (None: none)."""
+    (white, black) for the colour normalisation (None: none); `exclude`: HxW bool, pixels never classified (the
+    plates of the markers as seen, wherever the scenario puts them)."""
     gate = workspace_mask(points, scenario, params.wall_margin, params.marker_margin)
+    if exclude is not None:
+        gate &= ~exclude
     if params.median_px > 1:
         rgb = cv2.medianBlur(np.ascontiguousarray(rgb), params.median_px)
     classes = tuple(b.id for b in scenario.objects)
