@@ -101,7 +101,7 @@ class Perception:
             marker, t0, fit, levels, plates = self._shelf_decides(e, rgb, cam, notes)
         T = fit.correction @ t0
         seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
-                             self.seg, levels, plates)
+                             self.seg.for_frame(float(K[1, 1]), levels), levels, plates)
         # noisier depth: wider fit tolerances (the shelf's residual spread is the depth noise at the shelf); fewer
         # pixels: pixel counts scaled with the image area (the axis uncertainty check still bounds the fit)
         area = min(1.0, depth.size / (640 * 480))

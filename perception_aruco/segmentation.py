@@ -20,7 +20,7 @@ No rclpy here.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -30,6 +30,7 @@ from relocation_common.scenario import Scenario
 from .aruco import ImageFormatError, marker_in_base
 
 UNASSIGNED = -1
+NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,18 @@ class SegmentationParams:
     white_level: float = 195.0   # the marker plate's white is scaled to this (0..255; the renderer's at 0.6-0.7 m)
     min_gain: float = 0.5        # bounds of the colour normalisation's per-channel gain
     max_gain: float = 2.5
+    wide_median_noise: float = 14.0  # colour noise (sigma on the marker's white, 0..255) above which the median is 5x5
+    erode_min_focal: float = 400.0   # px: at a shorter focal length (a lower resolution) the masks are not eroded
+
+    def for_frame(self, focal: float, levels: PlateLevels | None) -> SegmentationParams:
+        """These parameters adapted to one frame: the median filter widened to 5x5 when the colour noise measured on
+        the marker's white (`plate_levels`) exceeds `wide_median_noise` (sigma 20 lost the dark bottles' pixels);
+        no erosion when the focal length (px) is below `erode_min_focal` (at 480x360 and less the 1-pixel
+        anti-aliased fringe is a large part of a bottle partly hidden; the fit's inlier test and flying-pixel filter
+        drop the fringe's mixed pixels)."""
+        noisy = levels is not None and levels.noise > self.wide_median_noise and self.median_px > 1
+        return replace(self, median_px=max(self.median_px, 5) if noisy else self.median_px,
+                       erode_px=self.erode_px if focal >= self.erode_min_focal else 0)
 
 
 def check_images(rgb, depth) -> tuple[np.ndarray, np.ndarray]:
@@ -124,14 +137,29 @@ def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: Segmentat
     return best
 
 
-def plate_levels(rgb: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """(white, black) RGB of the marker plate (its white margin and bits, its black square), or None when the
-    plate is too small or has no contrast. The two groups are split at the middle of the plate's grey levels."""
+@dataclass(frozen=True)
+class PlateLevels:
+    """The marker plate as seen: its white and black (RGB, 0..255) and the colour noise on its white (robust sigma,
+    0..255), which sets the median filter's size (`SegmentationParams.for_frame`)."""
+
+    white: np.ndarray
+    black: np.ndarray
+    noise: float
+
+
+def plate_levels(rgb: np.ndarray, corners: np.ndarray) -> PlateLevels | None:
+    """The marker plate's white (its margin and bits) and black (its square) and the noise on the white, or None
+    when the plate is too small or has no contrast. The two groups are split at the middle of the plate's grey
+    levels; the noise is the median absolute deviation of the white pixels (x 1.4826: sigma of a Gaussian)."""
     h, w = rgb.shape[:2]
-    mask = np.zeros((h, w), np.uint8)
     centre = corners.mean(0)
-    cv2.fillConvexPoly(mask, np.round(centre + 1.3 * (corners - centre)).astype(np.int32), 1)
-    px = rgb[mask > 0].astype(np.float32)
+    quad = np.round(centre + 1.3 * (corners - centre)).astype(np.int32)
+    c0, r0 = np.maximum(quad.min(0) - 2, 0)
+    c1, r1 = np.minimum(quad.max(0) + 3, (w, h))
+    crop = rgb[r0:r1, c0:c1].astype(np.float32)
+    mask = np.zeros(crop.shape[:2], np.uint8)
+    cv2.fillConvexPoly(mask, quad - (c0, r0), 1)
+    px = crop[mask > 0]
     if len(px) < 50:
         return None
     g = px.mean(1)
@@ -139,16 +167,20 @@ def plate_levels(rgb: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.n
     if hi - lo < 30:
         return None
     mid = (lo + hi) / 2
-    return np.median(px[g > mid], axis=0), np.median(px[g <= mid], axis=0)
+    # noise: the response of the 3x3 Laplacian-difference kernel (std 6 sigma on flat Gaussian noise; Immerkaer
+    # 1996) on the white pixels whose 3x3 neighbourhood is all white (edges and shading gradients left out)
+    flat = cv2.erode(((crop.mean(2) > mid) & (mask > 0)).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    resp = cv2.filter2D(crop, -1, NOISE_KERNEL)[flat]
+    noise = 1.4826 * float(np.median(np.abs(resp))) / 6.0 if resp.size else 0.0
+    return PlateLevels(np.median(px[g > mid], axis=0), np.median(px[g <= mid], axis=0), noise)
 
 
-def normalise_colours(pixels: np.ndarray, levels, params: SegmentationParams) -> np.ndarray:
+def normalise_colours(pixels: np.ndarray, levels: PlateLevels | None, params: SegmentationParams) -> np.ndarray:
     """Pixels (N x 3) with the plate's black subtracted and its white scaled to `white_level` per channel."""
     if levels is None:
         return pixels
-    white, black = levels
-    gain = np.clip(params.white_level / np.maximum(white - black, 1.0), params.min_gain, params.max_gain)
-    return np.clip((pixels.astype(np.float32) - black) * gain, 0, 255)
+    gain = np.clip(params.white_level / np.maximum(levels.white - levels.black, 1.0), params.min_gain, params.max_gain)
+    return np.clip((pixels.astype(np.float32) - levels.black) * gain, 0, 255)
 
 
 @dataclass(frozen=True)
