@@ -138,7 +138,11 @@ class Perception:
         not_shelf = np.zeros(cam.shape[:2], bool)
         not_shelf[::st, ::st] = (first.labels >= 0) | on_marker_plates(sampled, self.scenario.more_markers,
                                                                          self.seg.marker_margin)
-        return fit_shelf(cam, not_shelf, t0, self.scenario, self.shelf)
+        # a plane's pixel bound scaled with the image area (at 424x240 the side panels fell under it: nothing held
+        # the frame along the shelf front, the bottles were 3-9 mm off)
+        area = min(1.0, cam.shape[0] * cam.shape[1] / (640 * 480))
+        return fit_shelf(cam, not_shelf, t0, self.scenario,
+                         replace(self.shelf, min_points=max(100, round(self.shelf.min_points * area))))
 
     def _shelf_decides(self, err: MarkersDisagreeError, rgb, cam: np.ndarray, notes: list[str]):
         """Markers seen that disagree: each one's own frame is fitted to the shelf; the one the shelf confirms (its
