@@ -34,6 +34,7 @@ from .segmentation import (
     SegmentationParams,
     backproject_image,
     check_images,
+    deblur,
     on_marker_plates,
     on_plates,
     plate_levels,
@@ -100,8 +101,11 @@ class Perception:
         except MarkersDisagreeError as e:
             marker, t0, fit, levels, plates = self._shelf_decides(e, rgb, cam, notes)
         T = fit.correction @ t0
-        seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
-                             self.seg.for_frame(float(K[1, 1]), levels), levels, plates)
+        points = backproject_image(depth, corrected_K(K, fit.intrinsics), T)
+        sharp = deblur(rgb, levels, self.seg)
+        if sharp is not rgb and marker is not None:  # the plate's white and black as the sharpened image shows them
+            levels = plate_levels(sharp, marker.corners)
+        seg = segment_points(sharp, points, self.scenario, self.seg.for_frame(float(K[1, 1]), levels), levels, plates)
         # noisier depth: wider fit tolerances (the shelf's residual spread is the depth noise at the shelf); fewer
         # pixels: pixel counts scaled with the image area (the axis uncertainty check still bounds the fit)
         area = min(1.0, depth.size / (640 * 480))
