@@ -53,6 +53,8 @@ class SegmentationParams:
     erode_min_focal: float = 400.0   # px: at a shorter focal length (a lower resolution) the masks are not eroded
     sharp_blur: float = 0.65         # px: the blur `plate_levels` measures on a sharp frame (anti-aliasing)
     deblur_min: float = 1.0          # px: blur beyond the sharp frame's above which the colour image is deconvolved
+    clip_level: int = 254            # a channel at or above this is saturated (`classify_colours`)
+    clipped_gain: float = 2.0        # the shading gain of a pixel with a saturated channel may reach gain_max x this
 
     def for_frame(self, focal: float, levels: PlateLevels | None) -> SegmentationParams:
         """These parameters adapted to one frame: the median filter widened to 5x5 when the colour noise measured on
@@ -122,13 +124,26 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
     return mask
 
 
-def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams) -> np.ndarray:
+def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams,
+                     clipped: np.ndarray | None = None) -> np.ndarray:
     """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits
-    within `max_residual` or the best is not clearly better than the second best (`max_ratio`)."""
+    within `max_residual` or the best is not clearly better than the second best (`max_ratio`). `clipped` (N x 3
+    bool): channels the camera saturated; their value is a lower bound (a residual only where the class predicts
+    less), the shading gain is fitted on the other channels and may reach `gain_max` x `clipped_gain` (the pixel was
+    brighter than the camera's range: over-exposed orange is not yellow)."""
     p = rgb_pixels.astype(np.float32)
     a = refs.astype(np.float32)
     s = np.clip(p @ a.T / np.sum(a * a, axis=1), params.gain_min, params.gain_max)       # N x C
     res = np.linalg.norm(p[:, None, :] - s[..., None] * a[None, :, :], axis=2)             # N x C
+    sat = np.nonzero(clipped.any(axis=1))[0] if clipped is not None else np.zeros(0, int)
+    if clipped is not None and len(sat):  # the few saturated pixels: censored channels
+        q, c = p[sat], clipped[sat]
+        u = (~c).astype(np.float32)
+        num, den = (q * u) @ a.T, u @ (a * a).T
+        top = params.gain_max * params.clipped_gain
+        s = np.clip(np.where(den > 0, num / np.maximum(den, 1e-6), top), params.gain_min, top)
+        diff = q[:, None, :] - s[..., None] * a[None, :, :]
+        res[sat] = np.linalg.norm(np.where(c[:, None, :], np.maximum(diff, 0.0), diff), axis=2)
     rows = np.arange(len(p))
     best = np.argmin(res, axis=1)
     first = res[rows, best].copy()
@@ -245,7 +260,8 @@ def segment_points(rgb: np.ndarray, points: np.ndarray, scenario: Scenario,
     classes = tuple(b.id for b in scenario.objects)
     refs = np.array([b.rgb for b in scenario.objects]) * 255.0
     labels = np.full(points.shape[:2], UNASSIGNED, np.int32)
-    labels[gate] = classify_colours(normalise_colours(rgb[gate], levels, params), refs, params)
+    px = rgb[gate]
+    labels[gate] = classify_colours(normalise_colours(px, levels, params), refs, params, px >= params.clip_level)
     if params.erode_px > 0:
         kernel = np.ones((2 * params.erode_px + 1,) * 2, np.uint8)
         no_depth = ~np.isfinite(points[..., 2])
