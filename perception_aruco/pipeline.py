@@ -43,8 +43,8 @@ from .segmentation import (
 from .shelf import InconsistentFrameError, ShelfFit, ShelfParams, corrected_K, fit_shelf
 
 BOARD_APART = 0.05  # m: base heights further apart than this are different boards (top and bottom shelf)
-# a marker seen farther than this from where the largest one's frame and the scenario put it refuses the frame:
-# one of them is not where the scenario says (the shelf fit cannot see a shift along the shelf front)
+# a marker seen farther than this from where the largest one's frame and the scenario put it: one of them is not
+# where the scenario says (the shelf fit corrects a shift along the shelf front poorly); the shelf decides which
 MARKERS_AGREE_M = 0.03  # depth-refined poses; colour-only: twice the colour-only check
 # markers that disagree: the shelf decides when it confirms one marker's own frame within this (the correction at the
 # shelf's centre) and every other marker's frame needs SHELF_REJECTS times as much (docs/perception.md)

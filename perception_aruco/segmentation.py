@@ -3,19 +3,23 @@ weights cannot be downloaded here; the paper's bottles were told apart by colour
 
 1. Every pixel with a depth return is back-projected into the robot base frame (camera pose from the marker).
 2. Workspace gate: only points inside a shelf compartment (above a board, inside the side and back panels,
-   under the board above, off the marker plate) can belong to a bottle; boards, arm, floor, marker drop out.
+   under the board above, off the marker plates where the scenario puts them and where they are seen) can belong
+   to a bottle; boards, arm, floor, markers drop out.
 3. Colour class: a pixel p (RGB, 0..255) belongs to the class c whose reference colour a_c explains it best under
    a shading gain s in [gain_min, gain_max]:  residual_c(p) = || p - s* a_c ||,  s* = clip(p.a_c / |a_c|^2).
    Colours that are not scalar multiples of each other (orange / brown, yellow / olive) are told apart by their
    chromaticity; scalar multiples (black / white / gray) by their brightness range. Pixels with no class within
    `max_residual` are left unassigned, and so are ambiguous pixels: the best class must explain the pixel clearly
    better than the second best (residual ratio <= `max_ratio`); an ambiguous pixel is never given the nearest,
-   possibly wrong, class.
-   The colour image is median-filtered first (3x3: sensor noise; edges stay sharp).
+   possibly wrong, class. A saturated channel (>= `clip_level`) is a lower bound: a residual only where the
+   class predicts less, the gain fitted on the other channels (over-exposed orange, red clipped, is not yellow).
+   The colour image is median-filtered first (3x3, 5x5 when the noise measured on the marker's white exceeds
+   `wide_median_noise`: sensor noise; edges stay sharp), and deconvolved when the marker's edges show blur
+   (`deblur`).
 4. Colour constancy: before classifying, the image is normalised by the marker's own white and black (its plate
    is a known neutral: a warm or cool white balance, or an exposure change, is undone), see `plate_levels`.
-5. Each class mask is eroded by `erode_px` (anti-aliased silhouette pixels) without growing depth holes: a pixel
-   without depth does not erode its neighbours.
+5. Each class mask is eroded by `erode_px` (anti-aliased silhouette pixels; not below `erode_min_focal`) without
+   growing depth holes: a pixel without depth does not erode its neighbours.
 No rclpy here.
 """
 from __future__ import annotations
@@ -168,9 +172,9 @@ class PlateLevels:
 
 
 def plate_levels(rgb: np.ndarray, corners: np.ndarray) -> PlateLevels | None:
-    """The marker plate's white (its margin and bits) and black (its square) and the noise on the white, or None
-    when the plate is too small or has no contrast. The two groups are split at the middle of the plate's grey
-    levels; the noise is the median absolute deviation of the white pixels (x 1.4826: sigma of a Gaussian)."""
+    """The marker plate's white (its margin and bits) and black (its square), the noise on the white and the blur
+    of the edges, or None when the plate is too small or has no contrast. The two groups are split at the middle
+    of the plate's grey levels."""
     h, w = rgb.shape[:2]
     centre = corners.mean(0)
     quad = np.round(centre + 1.3 * (corners - centre)).astype(np.int32)
@@ -249,8 +253,8 @@ def segment(rgb, depth, K, T_base_camera, scenario: Scenario,
 def segment_points(rgb: np.ndarray, points: np.ndarray, scenario: Scenario,
                    params: SegmentationParams = SegmentationParams(), levels=None,
                    exclude: np.ndarray | None = None) -> Segmentation:
-    """`segment` on base-frame points already computed (HxWx3, NaN without depth); `levels`: the marker plate's
-    (white, black) for the colour normalisation (None: none); `exclude`: HxW bool, pixels never classified (the
+    """`segment` on base-frame points already computed (HxWx3, NaN without depth); `levels`: the marker plate
+    (`plate_levels`) for the colour normalisation (None: none); `exclude`: HxW bool, pixels never classified (the
     plates of the markers as seen, wherever the scenario puts them)."""
     gate = workspace_mask(points, scenario, params.wall_margin, params.marker_margin)
     if exclude is not None:
