@@ -34,16 +34,30 @@ from .segmentation import (
     SegmentationParams,
     backproject_image,
     check_images,
+    deblur,
     on_marker_plates,
+    on_plates,
     plate_levels,
     segment_points,
 )
-from .shelf import ShelfFit, ShelfParams, corrected_K, fit_shelf
+from .shelf import InconsistentFrameError, ShelfFit, ShelfParams, corrected_K, fit_shelf
 
 BOARD_APART = 0.05  # m: base heights further apart than this are different boards (top and bottom shelf)
-# a marker seen farther than this from where the largest one's frame and the scenario put it refuses the frame:
-# one of them is not where the scenario says (the shelf fit cannot see a shift along the shelf front)
+# a marker seen farther than this from where the largest one's frame and the scenario put it: one of them is not
+# where the scenario says (the shelf fit corrects a shift along the shelf front poorly); the shelf decides which
 MARKERS_AGREE_M = 0.03  # depth-refined poses; colour-only: twice the colour-only check
+# markers that disagree: the shelf decides when it confirms one marker's own frame within this (the correction at the
+# shelf's centre) and every other marker's frame needs SHELF_REJECTS times as much (docs/perception.md)
+SHELF_CONFIRMS_M = 0.01   # a single correct marker's frame needs up to 5.3 mm (far, small marker 8)
+SHELF_REJECTS = 3.0
+
+
+class MarkersDisagreeError(MarkerInconsistentError):
+    """Two markers seen where their scenario poses cannot both be; `seen`: the (localizer, observation) pairs."""
+
+    def __init__(self, message: str, seen: list):
+        super().__init__(message)
+        self.seen = seen
 
 
 @dataclass(frozen=True)
@@ -77,24 +91,21 @@ class Perception:
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
         notes: list[str] = []
-        marker, t0 = self._marker_frame(rgb, K, depth, prior, notes)
-        levels = None if marker is None else plate_levels(rgb, marker.corners)
         cam = backproject_image(depth, K, np.eye(4))
-        r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
-        st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
-        sampled = cam[::st, ::st] @ r0.T + p0
-        first = segment_points(rgb[::st, ::st], sampled, self.scenario, replace(self.seg, erode_px=0, median_px=0),
-                               levels)
-        # out of the shelf fit: bottles and the further markers' plates (a far one at a low resolution pulled the
-        # fit 20 cm off; the main marker's plate, 5 mm before the top board's front, has always been in it)
-        not_shelf = np.zeros(depth.shape, bool)
-        not_shelf[::st, ::st] = (first.labels >= 0) | on_marker_plates(sampled, self.scenario.more_markers,
-                                                                         self.seg.marker_margin)
-        fit = fit_shelf(cam, not_shelf, t0, self.scenario, self.shelf)
-        fit.check(self.shelf)
+        try:
+            marker, t0, seen = self._marker_frame(rgb, K, depth, prior, notes)
+            levels = None if marker is None else plate_levels(rgb, marker.corners)
+            plates = self._seen_plates(cam, seen)
+            fit = self._fit_shelf(rgb, cam, t0, levels, plates)
+            fit.check(self.shelf)
+        except MarkersDisagreeError as e:
+            marker, t0, fit, levels, plates = self._shelf_decides(e, rgb, cam, notes)
         T = fit.correction @ t0
-        seg = segment_points(rgb, backproject_image(depth, corrected_K(K, fit.intrinsics), T), self.scenario,
-                             self.seg, levels)
+        points = backproject_image(depth, corrected_K(K, fit.intrinsics), T)
+        sharp = deblur(rgb, levels, self.seg)
+        if sharp is not rgb and marker is not None:  # the plate's white and black as the sharpened image shows them
+            levels = plate_levels(sharp, marker.corners)
+        seg = segment_points(sharp, points, self.scenario, self.seg.for_frame(float(K[1, 1]), levels), levels, plates)
         # noisier depth: wider fit tolerances (the shelf's residual spread is the depth noise at the shelf); fewer
         # pixels: pixel counts scaled with the image area (the axis uncertainty check still bounds the fit)
         area = min(1.0, depth.size / (640 * 480))
@@ -105,10 +116,70 @@ class Perception:
         found, missing = self._locate_all(seg, T[:3, 3], loc)
         return PerceptionResult(marker, found, missing, seg, T, fit, tuple(notes))
 
-    def _marker_frame(self, rgb, K, depth, prior, notes: list[str]) -> tuple[MarkerObservation | None, np.ndarray]:
-        """(the marker seen largest in the image, T_base_camera): the markers seen fused (`fuse_markers`; a covered
-        or inconsistent one is left out, its reason in `notes`; markers that disagree refuse the frame); none seen:
-        the prior if given and no marker was inconsistent, else the marker's error (all markers' reasons)."""
+    def _seen_plates(self, cam: np.ndarray, seen) -> np.ndarray:
+        """HxW bool: pixels on the plates of the markers as seen (camera-frame points `cam`), never bottles: a
+        plate the scenario puts centimetres off would otherwise pass the workspace gate as black and white."""
+        h, w = cam.shape[:2]
+        out = np.zeros((h, w), bool)
+        for loc, obs in seen:
+            c = obs.corners
+            lo = np.floor(np.maximum(c.mean(0) - 1.2 * np.ptp(c, axis=0), 0)).astype(int)
+            hi = np.ceil(np.minimum(c.mean(0) + 1.2 * np.ptp(c, axis=0), (w, h))).astype(int)
+            out[lo[1]:hi[1], lo[0]:hi[0]] |= on_plates(cam[lo[1]:hi[1], lo[0]:hi[0]],
+                                                       [(obs.T_camera_marker, loc.marker.size)],
+                                                       self.seg.marker_margin)
+        return out
+
+    def _fit_shelf(self, rgb, cam: np.ndarray, t0: np.ndarray, levels, plates: np.ndarray) -> ShelfFit:
+        """The shelf fit (`fit_shelf`) of the frame `t0`, bottles and the further markers' plates left out."""
+        r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
+        st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
+        sampled = cam[::st, ::st] @ r0.T + p0
+        first = segment_points(rgb[::st, ::st], sampled, self.scenario, replace(self.seg, erode_px=0, median_px=0),
+                               levels, plates[::st, ::st])
+        # out of the shelf fit: bottles and the further markers' plates (a far one at a low resolution pulled the
+        # fit 20 cm off; the main marker's plate, 5 mm before the top board's front, has always been in it)
+        not_shelf = np.zeros(cam.shape[:2], bool)
+        not_shelf[::st, ::st] = (first.labels >= 0) | on_marker_plates(sampled, self.scenario.more_markers,
+                                                                         self.seg.marker_margin)
+        # a plane's pixel bound scaled with the image area (at 424x240 the side panels fell under it: nothing held
+        # the frame along the shelf front, the bottles were 3-9 mm off)
+        area = min(1.0, cam.shape[0] * cam.shape[1] / (640 * 480))
+        return fit_shelf(cam, not_shelf, t0, self.scenario,
+                         replace(self.shelf, min_points=max(100, round(self.shelf.min_points * area))))
+
+    def _shelf_decides(self, err: MarkersDisagreeError, rgb, cam: np.ndarray, notes: list[str]):
+        """Markers seen that disagree: each one's own frame is fitted to the shelf; the one the shelf confirms (its
+        correction <= SHELF_CONFIRMS_M) while every other needs SHELF_REJECTS times as much and more than
+        MARKERS_AGREE_M / 3 is taken, the others named in the notes ("run ./run calibrate"). Otherwise `err` (the
+        shelf cannot tell, e.g. a marker moved along the shelf front): the frame is refused.
+        Returns (marker, T_base_camera, shelf fit, colour levels, seen plates)."""
+        plates = self._seen_plates(cam, err.seen)
+        tried = []
+        for loc, obs in err.seen:
+            levels = plate_levels(rgb, obs.corners)
+            tried.append((loc, obs, self._fit_shelf(rgb, cam, obs.T_base_camera, levels, plates), levels))
+        tried.sort(key=lambda x: x[2].shift)
+        loc, obs, fit, levels = tried[0]
+        said = ", ".join(f"marker id {lo.marker.id}'s frame {f.shift * 1000:.0f} mm" for lo, _, f, _ in tried)
+        if fit.shift > SHELF_CONFIRMS_M or any(f.shift < max(SHELF_REJECTS * fit.shift, MARKERS_AGREE_M / 3)
+                                               for _, _, f, _ in tried[1:]):
+            raise MarkerInconsistentError(f"{err}; the shelf cannot tell which ({said} from it)")
+        try:
+            fit.check(self.shelf)
+        except InconsistentFrameError as e:
+            raise MarkerInconsistentError(f"{err}; the shelf confirms none ({e})") from None
+        others = ", ".join(str(lo.marker.id) for lo, _, _, _ in tried[1:])
+        notes.append(f"{err}: the shelf confirms marker id {loc.marker.id} ({said} from it): marker id(s) {others} "
+                     "not used, their scenario pose is off: run ./run calibrate")
+        return obs, obs.T_base_camera, fit, levels, plates
+
+    def _marker_frame(self, rgb, K, depth, prior, notes: list[str]) -> tuple[MarkerObservation | None, np.ndarray,
+                                                                              list]:
+        """(the marker seen largest in the image, T_base_camera, the (localizer, observation) pairs seen): the
+        markers seen fused (`fuse_markers`; a covered or inconsistent one is left out, its reason in `notes`;
+        markers that disagree raise MarkersDisagreeError, `_shelf_decides`); none seen: the prior if given and no
+        marker was inconsistent, else the marker's error (all markers' reasons)."""
         seen, errors, found = [], [], {}
         for loc in self.localizers:
             expected = None if prior is None else invert(prior) @ loc.T_base_marker
@@ -131,19 +202,19 @@ class Perception:
                 bound = MARKERS_AGREE_M if obs.refined and seen[0][1].refined else \
                     2e-3 * p.max_disagreement_mm * max(1.0, 433.0 / K[0, 0])
                 if dt > bound:
-                    raise MarkerInconsistentError(
+                    raise MarkersDisagreeError(
                         f"marker id {loc.marker.id} is seen {dt * 1000:.0f} mm from where marker id "
                         f"{seen[0][0].marker.id} and the scenario put it (bound {bound * 1000:.0f} mm): check the "
-                        "scenario's marker poses (one was moved?)")
+                        "scenario's marker poses (one was moved?)", seen)
             if len(seen) == 1:
-                return seen[0][1], best
+                return seen[0][1], best, seen
             T, rms = fuse_markers(seen)
             notes.append(f"markers {', '.join(str(loc.marker.id) for loc, _ in seen)} fused (corners {rms * 1000:.1f} "
                          "mm rms off their scenario poses; the shelf fit checks the frame)")
-            return seen[0][1], T
+            return seen[0][1], T, seen
         if prior is not None and all(isinstance(e, MarkerNotFoundError) for e in errors):
             notes.append(f"{'; '.join(map(str, errors))}; using the fused frame of earlier frames")
-            return None, np.asarray(prior, float)
+            return None, np.asarray(prior, float), []
         if len(errors) == 1:
             raise errors[0]
         raise type(errors[0])("; ".join(map(str, errors)))

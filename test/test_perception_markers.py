@@ -80,12 +80,31 @@ def test_both_markers_fused_and_one_covered_marker_does_not_lose_the_frame():
     assert set(covered.detections) == set(s.ids) and max(errs) < 3.0
 
 
-def test_markers_that_disagree_refuse_the_frame():
-    """One marker moved after the scenario was written (6 cm along the shelf front, where the shelf fit cannot tell):
-    marker 8 is seen 6 cm from where marker 7's frame and the scenario put it: the frame is refused, naming both."""
+def _moved(m, dy: float):
+    return replace(m, position=(m.position[0], m.position[1] + dy, m.position[2]))
+
+
+def test_markers_that_disagree_the_shelf_decides():
+    """One marker moved after the scenario was written (6 cm along the shelf front): marker 8 is seen 6 cm from where
+    marker 7's frame and the scenario put it. Each marker's own frame is fitted to the shelf: marker 7's is confirmed
+    (2 mm), marker 8's needs 22 mm: marker 7 is used, marker 8 named ("run ./run calibrate"). The code before refused
+    the frame."""
     s = load_scenario(SCENE)
     f = render_frame(s)
-    m = s.more_markers[0]
-    moved = replace(s, more_markers=(replace(m, position=(m.position[0], m.position[1] - 0.06, m.position[2])),))
-    with pytest.raises(MarkerInconsistentError, match="marker id 8 is seen 60 mm from where marker id 7"):
+    moved = replace(s, more_markers=(_moved(s.more_markers[0], -0.06),))
+    r = Perception(moved).process(f.rgb, f.depth, f.K)
+    assert any("marker id 8 is seen 60 mm from where marker id 7" in n and "the shelf confirms marker id 7" in n
+               and "calibrate" in n for n in r.notes), r.notes
+    assert set(r.detections) == set(s.ids)
+    assert max(math.hypot(d.x - s.object(i).x, d.y - s.object(i).y) for i, d in r.detections.items()) < 0.002
+
+
+def test_markers_that_disagree_refuse_the_frame_when_the_shelf_cannot_tell():
+    """Both markers 3 cm off along the shelf front, in opposite directions: neither frame fits the shelf, so the
+    frame is refused, naming both markers and what the shelf said."""
+    s = load_scenario(SCENE)
+    f = render_frame(s)
+    moved = replace(s, marker=_moved(s.marker, 0.03), more_markers=(_moved(s.more_markers[0], -0.03),))
+    with pytest.raises(MarkerInconsistentError, match="marker id 8 is seen 60 mm from where marker id 7.*the shelf "
+                       "cannot tell which"):
         Perception(moved).process(f.rgb, f.depth, f.K)
