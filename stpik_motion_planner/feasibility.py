@@ -60,6 +60,9 @@ from .rrt import CartesianRRT, JointRRT, seed_ompl
 from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory
 
+START_RELIEF = 0.0005  # m: margin under a tight start's distance (_carried_models, _carried_hand)
+MIN_START_BOUND = 0.002  # m: the least bound of a carried bottle lifted from a tight start
+
 
 class PlanningError(RuntimeError):
     """A pick, carry or home motion that could not be planned (the message says which stage failed)."""
@@ -223,6 +226,40 @@ class MotionPlanner:
         it is too tall for the compartments."""
         p = self.params
         return carry_heights(self.scenario, object_id, p.carried_clearance + p.stpik.act, p.lift, p.drop)
+
+    def _carried_models(self, b, q_start, obs: ObstacleSet, support: dict):
+        """(carried bottle, arm holding it out of the shelf, arm holding it in to the slot). The bottle is modelled
+        on the hand where the tool stopped at the grasp (STPIK's final tolerance, up to 4 mm from the bottle's
+        perceived place); where that model stands closer to a neighbour than `carried_clearance`, the lift and
+        the way out keep that start distance less START_RELIEF as the bound (never under MIN_START_BOUND): lifted
+        straight up and then drawn back, the bottle only moves away. Otherwise the start would fail the bound
+        at once and the pick would be refused for the model's offset."""
+        p = self.params
+        carried = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), p.carried_clearance)
+        arm_c = ArmGeometry(self.kin, [carried])
+        self.kin.update(q_start, jacobians=False)
+        arm_c.pose()
+        near = [d for i, _, d, _, _ in arm_c.obstacle_distances(obs, p.carried_clearance, support)
+                if arm_c.specs[i].name == CARRIED]
+        gap = min(near, default=math.inf)
+        if gap >= p.carried_clearance or gap - START_RELIEF < MIN_START_BOUND:
+            return carried, arm_c, arm_c
+        start = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), gap - START_RELIEF)
+        return carried, ArmGeometry(self.kin, [start]), arm_c
+
+    def _carried_hand(self, carried, lifted, obs: ObstacleSet, floor: float) -> HandProxy:
+        """The Cartesian planner's hand proxy holding the bottle, inflated by its clearance bound plus STPIK's
+        activation band, or less where the lifted start is closer than that to a neighbour (in steps of
+        START_RELIEF, down to `floor`, the bound STPIK keeps on the way out): a start inside the inflation left
+        RRT-Connect and the direct path no valid start ("no Cartesian path out of the shelf") although the
+        bottle then moves away."""
+        p = self.params
+        full = p.carried_clearance + p.stpik.act
+        for m in np.arange(full, floor - 1e-9, -START_RELIEF):
+            hand = HandProxy(p.hand_margin, [carried], attached_margin=float(m))
+            if not hand.collides(*_mat(lifted), obs):
+                return hand
+        return HandProxy(p.hand_margin, [carried], attached_margin=full)
 
     def lane_blockers(self, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
         """Every object's grasp-lane blockers at once (blockers.lane_blockers: the screen only, no planning)."""
@@ -465,16 +502,15 @@ class MotionPlanner:
         placed = self.placed_default(removed, slot_index) if placed is None else list(placed)
         scene = CollisionScene(self.scenario, placed)
         obs = scene.obstacles(removed | {object_id})
-        carried = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), p.carried_clearance)
-        arm_c = ArmGeometry(self.kin, [carried])
-        hand_c = HandProxy(p.hand_margin, [carried], attached_margin=p.carried_clearance + p.stpik.act)
+        support = {CARRIED: frozenset(["board:top_shelf"])}
+        carried, arm_start, arm_c = self._carried_models(b, q_start, obs, support)
         self.kin.update(q_start, jacobians=False)
         rot, pos = self.kin.tool_pose()
         start = np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
         lifted = start + np.array([0.0, 0.0, lift, 0.0])
+        hand_c = self._carried_hand(carried, lifted, obs, arm_start.specs[-1].clearance or p.carried_clearance)
         # 1. lift straight up: the only leg where the bottle may touch a board, the one it stands on
-        support = {CARRIED: frozenset(["board:top_shelf"])}
-        up = self._track(q_start, [start, lifted], obs, deadline, stats, skip=support, arm=arm_c,
+        up = self._track(q_start, [start, lifted], obs, deadline, stats, skip=support, arm=arm_start,
                          speed=p.stpik.approach_speed, ramp=p.carry_ramp,
                          accel=p.carry_accel)
         if not up.ok:
@@ -484,8 +520,8 @@ class MotionPlanner:
         out = np.array(exit_pose(self.scenario, object_id, lifted,
                                  max(p.hand_margin, p.stpik.clearance + p.stpik.act) + 0.002))
         rng = self.question_rng("carry", object_id, removed, slot_index, q_start, self._placed_key(placed))
-        carry = self._carry_legs(up.q[-1], [lifted, out, stage], place, obs, (arm_c, hand_c), deadline, stats, what,
-                                 rng)
+        carry = self._carry_legs(up.q[-1], [lifted, out, stage], place, obs, (arm_start, arm_c, hand_c), deadline,
+                                 stats, what, rng)
         scene2 = CollisionScene(self.scenario, placed + [(object_id, slot)])
         obs2 = scene2.obstacles(removed | {object_id})
         skip = {n: frozenset([f"placed:{object_id}"]) for n in HAND_PARTS}
@@ -501,12 +537,13 @@ class MotionPlanner:
 
     def _carry_legs(self, q_lifted, direct: list, place, obs: ObstacleSet, carried: tuple, deadline: float,
                     stats: QueryStats, what: str, rng=None):
-        """plan_carry's legs 2-3 with the bottle held (`carried`: its ArmGeometry and HandProxy): from the lifted
+        """plan_carry's legs 2-3 with the bottle held (`carried`: its ArmGeometry out of the shelf and in to the
+        slot, and its HandProxy): from the lifted
         pose out of the shelf to the staging pose (the `direct` poses lifted, out, stage first, then RRT-Connect;
         up to max_attempts), then in to the slot at `place`. (out leg, in leg) of STPIK; PlanningError naming the
         last leg that failed."""
         p = self.params
-        arm_c, hand_c = carried
+        arm_out, arm_c, hand_c = carried
         lifted, stage = direct[0], direct[-1]
         last = "no Cartesian path out of the shelf"
         mid: list | None
@@ -522,7 +559,7 @@ class MotionPlanner:
                 stats.rrt_calls += 1
                 if mid is None:
                     continue
-            r = self._track(q_lifted, mid, obs, deadline, stats, arm=arm_c, ramp=p.carry_ramp, accel=p.carry_accel)
+            r = self._track(q_lifted, mid, obs, deadline, stats, arm=arm_out, ramp=p.carry_ramp, accel=p.carry_accel)
             if not r.ok:
                 last = f"out of the shelf: {r.reason}"
                 continue
