@@ -99,7 +99,19 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
                 "relocated", [])), "optimum": len(res.optimal_sequence) if res is not None else 0, "wall": wall,
             "applied": sum("skipped" not in d for d in box["disturbances"]), "message": outcome.message,
             "disturbances": [d.get("kind", "") + " " + str(d.get("object", "")) for d in box["disturbances"]
-                             if "skipped" not in d]}
+                             if "skipped" not in d],
+            "steps": ex.get("steps", []), "replan_records": ex.get("replans", []),
+            "final_scene": _scene_record(box["truth"])}
+
+
+def _scene_record(truth) -> list[dict]:
+    """The simulator's last scene, one dict per bottle (id, weight, pose, radius, height): the proof's input."""
+    if truth is None:
+        return []
+    return [{"id": o.id, "weight": o.weight, "is_target": o.is_target, "radius": o.radius, "height": o.height,
+             "position": [o.pose.position.x, o.pose.position.y, o.pose.position.z],
+             "orientation": [o.pose.orientation.x, o.pose.orientation.y, o.pose.orientation.z, o.pose.orientation.w]}
+            for o in truth.objects]
 
 
 def table(runs: list[dict]) -> None:
@@ -140,6 +152,7 @@ def main() -> None:
     p.add_argument("--scenes", nargs="+", default=["scenario1_5", "paper1_5"])
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     p.add_argument("--k", nargs="+", type=int, default=[0, 1, 2])
+    p.add_argument("--executors", nargs="+", choices=["closed", "open"], default=["closed", "open"])
     p.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "bench_closed_loop.jsonl")
     p.add_argument("--table", type=Path, help="print the table of this JSON-lines file and exit")
     a = p.parse_args()
@@ -153,7 +166,7 @@ def main() -> None:
             scene = resolve_scenario(name).resolve()
             for k in a.k:
                 for seed in a.seeds:
-                    for closed in (True, False):
+                    for closed in (e == "closed" for e in a.executors):
                         if (scene.stem, k, seed, closed) in done:
                             continue
                         try:
