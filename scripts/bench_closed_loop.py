@@ -119,6 +119,7 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
             "applied": sum("skipped" not in d for d in box["disturbances"]), "message": outcome.message,
             "disturbances": [d.get("kind", "") + " " + str(d.get("object", "")) for d in box["disturbances"]
                              if "skipped" not in d],
+            "execution_s": ex.get("execution_s"), "relocate_s": ex.get("relocate_s"),
             "steps": ex.get("steps", []), "replan_records": ex.get("replans", []),
             "final_scene": _scene_record(box["truth"])}
 
@@ -253,6 +254,14 @@ def table(runs: list[dict], proofs: dict[str, str]) -> None:
             c, o = statistics.fmean(p[0] for p in pairs), statistics.fmean(p[1] for p in pairs)
             print(f"\n{name} undisturbed, same seed both successful: closed {c:.1f} s, open {o:.1f} s (n={len(pairs)}):"
                   f" ratio {c / o:.3f} (per seed: {', '.join(f'{a / b:.3f}' for a, b in pairs)})")
+    for name in scenes[:-1]:  # the executor's own seconds: the execution less its relocations (node's ~/execution)
+        for closed in (True, False):
+            own = [r["execution_s"] - r["relocate_s"] for r in groups.get((name, 0, closed), [])
+                   if r.get("execution_s") is not None and _ok(r)]
+            if own:
+                run = statistics.fmean(r["execution_s"] for r in groups[(name, 0, closed)] if r.get("execution_s"))
+                print(f"{name} undisturbed, {'closed' if closed else 'open'}: execution {run:.1f} s, of which the "
+                      f"executor's own (scene waits, checks, re-plans) {statistics.fmean(own):.2f} s (n={len(own)})")
     print("\nfailures:")
     for r in runs:
         if not (_ok(r) and r["home"] and r["empty"]):
