@@ -431,7 +431,10 @@ class ClosedLoopExecutor:
             if not rp.free_slots:
                 raise GiveUp(f"no free slot on the bottom shelf for {obj}")
             slot = self.slot_of(rp)
-            removed, gone = tuple(out.relocated), rp.gone
+            # the relocated bottles, then those seen off the top shelf otherwise (dropped to the floor): the motion
+            # planner keeps an unseen bottle at its last pose, and the re-plan's answers had them gone (rp.gone)
+            removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and
+                                                                o not in out.relocated)), rp.gone
             ok, message = self.relocate(obj, list(removed))
             after = self._perceive(f"after relocating {obj}")
             check = None

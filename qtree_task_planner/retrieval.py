@@ -25,6 +25,7 @@ from .closed_loop import (
     Step,
     check_capacity,
     free_slots,
+    remaining_problem,
 )
 from .oracles import CachedOracle
 from .outage import PlannerUnavailable
@@ -155,7 +156,7 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
     are free is never started."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
-        cache.adopt(oracle.table, scene)
+        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry())
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
             before_each()
