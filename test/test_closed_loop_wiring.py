@@ -121,6 +121,37 @@ def test_a_relocation_stopped_by_a_lost_planner_ends_the_closed_loop_at_once():
     assert not out.success and not perceived and "went away" in out.message, out.message
 
 
+class _NoAnswer:
+    """A feasibility service whose safety net runs out `outages` times (PlannerUnavailable), then says g_U."""
+
+    def __init__(self, outages):
+        self.outages, self.asked = outages, 0
+
+    def feasibility(self, object_id, removed):
+        from qtree_task_planner.outage import PlannerUnavailable
+        from relocation_common.feasibility import FeasibilityAnswer, Label
+        self.asked += 1
+        if self.outages:
+            self.outages -= 1
+            raise PlannerUnavailable(f"no feasibility answer for {object_id!r}: wall-clock safety net reached")
+        return FeasibilityAnswer(Label.UNFEASIBLE, message="blocked")
+
+
+@pytest.mark.parametrize("outages", [1, 10])
+def test_a_replan_without_a_feasibility_answer_is_retried_then_ends_the_run_with_the_reason(outages):
+    """Before, the planner's safety net during a re-plan (load) escaped the executor: the goal ended on the
+    exception, without the execution's record (paper_experiment_10, K = 3, seed 1 of the closed-loop benchmark)."""
+    oracle = _NoAnswer(outages)
+    out = execute(SC, ["o2", SC.target_id], scene_from_scenario(SC), lambda o, r: (False, "pick of 'o2': no grasp"),
+                  lambda: scene_from_scenario(SC), CachedOracle(oracle), closed_loop=True, cancelled=lambda: False)
+    assert not out.success
+    if outages == 1:  # asked again: the answers say there is no sequence
+        assert out.message.startswith("no sequence remains"), out.message
+    else:
+        assert out.message.startswith("re-plan failed 3 times without a feasibility answer"), out.message
+        assert oracle.asked == 3
+
+
 def test_no_scene_after_the_target_left_the_camera_s_view_is_no_failure():
     """Seen in the demo with perception: 'no scene after relocating T: no scene received within 10 s'. Perception
     publishes nothing once the target is out of view: the last scene counts, without the target."""
