@@ -523,8 +523,9 @@ class ClosedLoopExecutor:
         return list(seq)
 
 
-TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at")  # the motion planner's words for a
-# relocation that ran out of time (budget.SafetyNetTimeout, execution.TrajectoryFollower), not one that cannot be done
+TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at", "no joint state from the driver")  # the
+# motion planner's words for a relocation that ran out of time (budget.SafetyNetTimeout, execution.TrajectoryFollower,
+# a driver starved under load), not one that cannot be done
 TRANSIENT_TRIES = 3  # relocations of one option that ran out of time before it is marked (a demo under load: twice)
 
 

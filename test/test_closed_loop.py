@@ -308,7 +308,11 @@ def test_a_failed_relocation_marks_the_option_and_replans_around_it():
     assert not result.steps[0].ok and result.steps[0].verification is None
 
 
-def test_a_relocation_that_ran_out_of_time_is_tried_again_before_its_option_is_marked():
+@pytest.mark.parametrize("timeout", [
+    "internal error: SafetyNetTimeout: wall-clock safety net reached during path simplification",
+    # the driver starved (the closed-loop benchmark at load 15, scenario2_10 K = 3: o7 and o1 marked so)
+    "no joint state from the driver for 2.1 s (> state_timeout): is jaco2_sim_driver (or the Kinova driver) running?"])
+def test_a_relocation_that_ran_out_of_time_is_tried_again_before_its_option_is_marked(timeout):
     """Under load the planner's wall-clock safety net ended b's relocation (the bench, scenario1_5: o4 failed so,
     then o1 went the same way, and the retrieval went around both: o2 o4 T instead of o4 T; the default demo: T
     twice). The same option is tried again; the third failure of time marks it."""
@@ -316,7 +320,6 @@ def test_a_relocation_that_ran_out_of_time_is_tried_again_before_its_option_is_m
     cache = GeometryCache(shelf)
     seq, _, _ = first_plan(shelf, cache)
     shelf.fail["b"] = 1
-    timeout = "internal error: SafetyNetTimeout: wall-clock safety net reached during path simplification"
     relocate = shelf.relocate
 
     def timed_out(obj, removed):
