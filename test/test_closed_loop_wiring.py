@@ -200,3 +200,64 @@ def test_training_without_a_sequence_executes_the_optimum_and_no_sequence_at_all
     assert training_outcome(none, ExactResult(None, None, 4, 2, why), execute=True) == (
         False, f"the target cannot be retrieved: {why}")
     assert training_outcome(SimpleNamespace(cancelled=True), optimum, execute=True) == (False, "cancelled")
+
+
+class _Future:
+    def __init__(self, value=None):
+        self.value, self.callbacks = value, []
+
+    def done(self):
+        return self.value is not None
+
+    def result(self):
+        return self.value
+
+    def add_done_callback(self, cb):
+        self.callbacks.append(cb)
+        if self.done():
+            cb(self)
+
+    def set(self, value):
+        self.value = value
+        for cb in self.callbacks:
+            cb(self)
+
+
+class _SilentPlanner:
+    """A RelocateObject server that sends no feedback (starved under load); cancelled, it ends the goal after its
+    recovery."""
+
+    def __init__(self):
+        self.result = _Future()
+
+    def wait_for_server(self, timeout_sec):
+        return True
+
+    def server_is_ready(self):
+        return True
+
+    def send_goal_async(self, goal, feedback_callback):
+        from types import SimpleNamespace
+        planner = self
+
+        class Handle:
+            accepted = True
+
+            def get_result_async(self):
+                return planner.result
+
+            def cancel_goal_async(self):
+                threading.Timer(0.2, planner.result.set, [SimpleNamespace(result=SimpleNamespace(
+                    success=False, message="cancelled: arm stopped; recovered: arm back home"))]).start()
+        return _Future(Handle())
+
+
+def test_a_silent_relocation_is_cancelled_and_its_recovery_waited_for():
+    """The motion planner silent for relocate_silence (starved at load 15: paper_experiment_10, K = 3, seeds 0-1 of
+    the closed-loop benchmark): the task planner cancelled and returned at once, leaving the arm where it stood.
+    Now it waits up to relocate_silence for the cancelled goal's result (the recovery brings the arm home)."""
+    from qtree_task_planner.ros_clients import Relocator
+    relocator = Relocator(_SilentPlanner(), server_wait=1.0, limit=60.0, silence=0.3, ok=lambda: True)
+    ok, message = relocator.relocate("o2", [], cancelled=lambda: False)
+    assert not ok and message.startswith("the motion planner went away (no feedback")
+    assert message.endswith("after the cancel: cancelled: arm stopped; recovered: arm back home"), message
