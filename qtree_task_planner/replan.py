@@ -52,13 +52,20 @@ class GeometryCache:
                 changed.append(oid)
         return changed
 
-    def adopt(self, table: Mapping[tuple[str, frozenset[str]], FeasibilityAnswer], ids: Iterable[str]) -> int:
+    def adopt(self, table: Mapping[tuple[str, frozenset[str]], FeasibilityAnswer],
+              geometry: Mapping[str, Pose]) -> int:
         """Take the answers of a set-keyed table (oracles.CachedOracle.table: (object, removed) -> answer) gathered
-        on the first geometry, before anything moved (ValueError once an object's version changed), over the
-        objects `ids` of that scene. The optimum's and training's answers then serve re-plans. Returns how many."""
+        on `geometry` (id -> (x, y, tilt) of the objects on the top shelf when they were asked: the first scene),
+        before anything moved (ValueError once an object's version changed). The optimum's and training's answers
+        then serve re-plans on that geometry; a later `observe` of a bottle elsewhere makes them about the old
+        pose (without the geometry, the first re-plan's scene became version 0, disturbed or not). Returns how
+        many."""
         if any(v > 0 for v in self._version.values()):
             raise ValueError("adopt answers before any object moved: they were computed on the first geometry")
-        ids = frozenset(ids)
+        self.observe(geometry)
+        if any(v > 0 for v in self._version.values()):
+            raise ValueError("adopt answers on the geometry they were computed on: this cache saw another one")
+        ids = frozenset(geometry)
         n = 0
         for (obj, removed), answer in table.items():
             k = self.key(obj, ids - removed)

@@ -25,6 +25,7 @@ from .closed_loop import (
     Step,
     check_capacity,
     free_slots,
+    remaining_problem,
 )
 from .oracles import CachedOracle
 from .outage import PlannerUnavailable
@@ -155,7 +156,7 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
     are free is never started."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
-        cache.adopt(oracle.table, scene)
+        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry())
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
             before_each()
@@ -164,7 +165,19 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
                 raise GiveUp(f"relocating {object_id!r} failed: {message}")
             return ok, message
 
-        return ClosedLoopExecutor(scenario, relocate, perceive, lambda rp, banned: replan(rp, banned, cache),
+        def replan_through(rp, banned):
+            """replan; a feasibility question with no answer (the planner's safety net under load, PlannerUnavailable)
+            is asked again, up to REPLAN_TRIES re-plans (the answers already given are kept), then the run ends
+            with the reason (before, it escaped the executor: the goal ended with no execution record)."""
+            for attempt in range(1, REPLAN_TRIES + 1):
+                try:
+                    return replan(rp, banned, cache)
+                except PlannerUnavailable as e:
+                    if attempt == REPLAN_TRIES:
+                        raise GiveUp(f"re-plan failed {REPLAN_TRIES} times without a feasibility answer: {e}") from None
+            raise AssertionError("unreachable")
+
+        return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen).run(sequence, scene)
     why = check_capacity(sequence, len(free_slots(scenario, scene)))
@@ -183,6 +196,7 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
                            relocated, unverified=unverified)
 
 
+REPLAN_TRIES = 3  # re-plans cut short by a missing feasibility answer before the closed loop gives up
 STOPPED = ("shutting down", "went away", "cancelled", "relocate_timeout", "not available")  # relocation_stop's words
 # (and the Relocator's): the relocation stopped without the motion planner's recovery; the closed loop ends there
 

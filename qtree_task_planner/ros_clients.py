@@ -166,6 +166,10 @@ class Relocator:
             if why is not None:
                 if sent.done() and sent.result() is not None and sent.result().accepted and self.ok():
                     sent.result().cancel_goal_async()  # the arm stops (the motion planner's cancel)
+                    # a silent planner may be a starved one (load): its cancelled goal ends after the recovery that
+                    # brings the arm home; waited for up to `silence` s (before, the arm was left where it stood)
+                    if why.startswith(SILENT) and done.wait(self.silence) and "result" in box:
+                        return False, f"{why}; after the cancel: {box['result'].result.message}"
                 return False, why
         if box.get("rejected"):
             return False, "goal rejected by the motion planner"
@@ -226,6 +230,7 @@ def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[object], 
     return settled
 
 
+SILENT = "the motion planner went away (no feedback"  # retrieval.relocation_stop's words for relocate_silence
 OUTCOME_UNKNOWN = "outcome unknown"  # the motion planner's result when no scene came after the motion
 TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
 

@@ -7,7 +7,8 @@ RelocateObject goal) qtree_task_planner.ros_clients. Eq. 15 is reported as actio
 
 Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local); publishes
 ~/markers (visualization_msgs/MarkerArray: the scene, the learned order), ~/relocating (std_msgs/String, latched: the
-object being relocated) and ~/execution (std_msgs/String, latched: the execution's JSON, closed_loop.ExecutionResult);
+object being relocated) and ~/execution (std_msgs/String, latched: the execution's JSON, closed_loop.ExecutionResult
+with `execution_s` and `relocate_s`, the seconds of the whole execution and of its relocations);
 its PlanFeasibility queries and answers are service events on <feasibility_service>/_service_event, for recording.
 Execution: closed-loop (`closed_loop`: a check after every relocation, re-plans; docs/closed_loop.md) or open-loop.
 
@@ -247,10 +248,21 @@ class TaskPlannerNode(Node):
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
 
     def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, sequence, note: str) -> None:
-        """Execute (retrieval.execute, `closed_loop`): checks, re-plans in the feedback; the outcome on ~/execution."""
+        """Execute (retrieval.execute, `closed_loop`): checks, re-plans in the feedback; the outcome on ~/execution
+        with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
+        executor's: for the closed loop, its scene waits, checks and re-plans)."""
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
-        relocate, perceive = watched(lambda o, rm: self._relocate_one(goal_handle, o, rm), self._scenes,
+        spent = {"relocate_s": 0.0}  # the relocations' own time: the rest of the execution is the executor's
+
+        def relocate_timed(object_id: str, removed: list[str]) -> tuple[bool, str]:
+            t = time.monotonic()
+            try:
+                return self._relocate_one(goal_handle, object_id, removed)
+            finally:
+                spent["relocate_s"] += time.monotonic() - t
+
+        relocate, perceive = watched(relocate_timed, self._scenes,
                                      self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id,
                                      scenario.shelf.bottom_z)
 
@@ -259,13 +271,15 @@ class TaskPlannerNode(Node):
             self.get_logger().info(text)
             goal_handle.publish_feedback(fb)
 
+        t0 = time.monotonic()
         out = execute(scenario, sequence, seen_scene(scene), relocate, perceive, oracle,
                       closed_loop=self.p("closed_loop"), cancelled=lambda: goal_handle.is_cancel_requested,
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         if rclpy.ok():  # a goal ended by the node stopping: its publisher's context is gone
-            self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note})))
+            self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note,
+                                                            "execution_s": time.monotonic() - t0, **spent})))
 
     def _keep(self, ck) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""

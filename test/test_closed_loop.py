@@ -266,6 +266,19 @@ def test_a_relocation_that_failed_because_the_bottle_dropped_is_not_a_failed_opt
     assert result.replans[0].reason.startswith("relocating b failed") and result.replans[0].sequence == ("b", "T")
 
 
+def test_a_bottle_dropped_off_the_shelf_is_sent_as_removed():
+    """b slips from the hand during its carry and falls to the floor: the re-plan has it gone, and the target's
+    relocation must say so to the motion planner, which keeps a bottle it no longer sees at its last pose (before,
+    T was sent with no removed bottle: the planner saw b in T's lane and T failed twice; paper1_5, one disturbance,
+    seed 2 of the closed-loop benchmark)."""
+    shelf = FakeShelf()
+    shelf.fail["b"] = 1
+    shelf.disturb[0] = lambda s: s.put("b", 0.30, 0.0, -0.6)
+    result = executor(shelf).run(("b", "T"))
+    assert result.success, result.message
+    assert shelf.relocations == [("b", ()), ("T", ("b",))]
+
+
 def test_a_tipped_bottle_is_never_proposed_for_relocation():
     """The benchmark: o1 tipped into the target's lane, the re-plan proposed relocating it, and its grasp closed on
     nothing three times (a lying bottle). Now every re-plan bans relocating a lying bottle (it stays an obstacle)."""
@@ -295,7 +308,11 @@ def test_a_failed_relocation_marks_the_option_and_replans_around_it():
     assert not result.steps[0].ok and result.steps[0].verification is None
 
 
-def test_a_relocation_that_ran_out_of_time_is_tried_again_before_its_option_is_marked():
+@pytest.mark.parametrize("timeout", [
+    "internal error: SafetyNetTimeout: wall-clock safety net reached during path simplification",
+    # the driver starved (the closed-loop benchmark at load 15, scenario2_10 K = 3: o7 and o1 marked so)
+    "no joint state from the driver for 2.1 s (> state_timeout): is jaco2_sim_driver (or the Kinova driver) running?"])
+def test_a_relocation_that_ran_out_of_time_is_tried_again_before_its_option_is_marked(timeout):
     """Under load the planner's wall-clock safety net ended b's relocation (the bench, scenario1_5: o4 failed so,
     then o1 went the same way, and the retrieval went around both: o2 o4 T instead of o4 T; the default demo: T
     twice). The same option is tried again; the third failure of time marks it."""
@@ -303,7 +320,6 @@ def test_a_relocation_that_ran_out_of_time_is_tried_again_before_its_option_is_m
     cache = GeometryCache(shelf)
     seq, _, _ = first_plan(shelf, cache)
     shelf.fail["b"] = 1
-    timeout = "internal error: SafetyNetTimeout: wall-clock safety net reached during path simplification"
     relocate = shelf.relocate
 
     def timed_out(obj, removed):
@@ -436,7 +452,8 @@ def test_the_answers_of_the_first_solve_serve_the_replans():
     table = CachedOracle(shelf)
     seq = astar.solve(remaining_problem(SCENARIO, shelf.perceive(), ()).problem, table).sequence
     cache = GeometryCache(shelf)
-    assert cache.adopt(table.table, SCENARIO.ids) == len(table.table) == 3
+    first = remaining_problem(SCENARIO, shelf.perceive(), ()).geometry()
+    assert cache.adopt(table.table, first) == len(table.table) == 3
     shelf.relocate(seq[0], [])
     asked = len(shelf.questions)
     assert replan(remaining_problem(SCENARIO, shelf.perceive(), [seq[0]]), (), cache) == (("T",), 0.0, 0)
@@ -444,7 +461,26 @@ def test_the_answers_of_the_first_solve_serve_the_replans():
     shelf.put("e", 0.70, 0.15, TOP)
     cache.observe(remaining_problem(SCENARIO, shelf.perceive(), [seq[0]]).geometry())
     with pytest.raises(ValueError, match="before any object moved"):
-        cache.adopt(table.table, SCENARIO.ids)
+        cache.adopt(table.table, first)
+
+
+def test_adopted_answers_are_not_used_for_a_bottle_moved_before_the_first_replan():
+    """The first solve's answers are about the first scene. A bottle nudged during the first relocation (before any
+    re-plan) is at a new pose at the first re-plan: the questions with it on the shelf are asked again. (Before,
+    the first re-plan's scene became the cache's version 0 whatever it showed: T's stale answer sent the arm to a
+    target whose lanes the nudge had blocked; paper1_5, one disturbance, seed 2 of the closed-loop benchmark.)"""
+    from qtree_task_planner.oracles import CachedOracle
+    shelf = FakeShelf()
+    table = CachedOracle(shelf)
+    first = remaining_problem(SCENARIO, shelf.perceive(), ())
+    assert astar.solve(first.problem, table).sequence == ("b", "T")
+    cache = GeometryCache(shelf)
+    cache.adopt(table.table, first.geometry())
+    shelf.relocate("b", [])
+    shelf.put("d", 0.66, 0.0, TOP)  # nudged into T's lane
+    asked = len(shelf.questions)
+    seq, weight, calls = replan(remaining_problem(SCENARIO, shelf.perceive(), ["b"]), (), cache)
+    assert (seq, weight) == (("d", "T"), 0.1) and calls == len(shelf.questions) - asked > 0
 
 
 @pytest.mark.parametrize("disturbed", [False, True])

@@ -121,6 +121,37 @@ def test_a_relocation_stopped_by_a_lost_planner_ends_the_closed_loop_at_once():
     assert not out.success and not perceived and "went away" in out.message, out.message
 
 
+class _NoAnswer:
+    """A feasibility service whose safety net runs out `outages` times (PlannerUnavailable), then says g_U."""
+
+    def __init__(self, outages):
+        self.outages, self.asked = outages, 0
+
+    def feasibility(self, object_id, removed):
+        from qtree_task_planner.outage import PlannerUnavailable
+        from relocation_common.feasibility import FeasibilityAnswer, Label
+        self.asked += 1
+        if self.outages:
+            self.outages -= 1
+            raise PlannerUnavailable(f"no feasibility answer for {object_id!r}: wall-clock safety net reached")
+        return FeasibilityAnswer(Label.UNFEASIBLE, message="blocked")
+
+
+@pytest.mark.parametrize("outages", [1, 10])
+def test_a_replan_without_a_feasibility_answer_is_retried_then_ends_the_run_with_the_reason(outages):
+    """Before, the planner's safety net during a re-plan (load) escaped the executor: the goal ended on the
+    exception, without the execution's record (paper_experiment_10, K = 3, seed 1 of the closed-loop benchmark)."""
+    oracle = _NoAnswer(outages)
+    out = execute(SC, ["o2", SC.target_id], scene_from_scenario(SC), lambda o, r: (False, "pick of 'o2': no grasp"),
+                  lambda: scene_from_scenario(SC), CachedOracle(oracle), closed_loop=True, cancelled=lambda: False)
+    assert not out.success
+    if outages == 1:  # asked again: the answers say there is no sequence
+        assert out.message.startswith("no sequence remains"), out.message
+    else:
+        assert out.message.startswith("re-plan failed 3 times without a feasibility answer"), out.message
+        assert oracle.asked == 3
+
+
 def test_no_scene_after_the_target_left_the_camera_s_view_is_no_failure():
     """Seen in the demo with perception: 'no scene after relocating T: no scene received within 10 s'. Perception
     publishes nothing once the target is out of view: the last scene counts, without the target."""
@@ -169,3 +200,64 @@ def test_training_without_a_sequence_executes_the_optimum_and_no_sequence_at_all
     assert training_outcome(none, ExactResult(None, None, 4, 2, why), execute=True) == (
         False, f"the target cannot be retrieved: {why}")
     assert training_outcome(SimpleNamespace(cancelled=True), optimum, execute=True) == (False, "cancelled")
+
+
+class _Future:
+    def __init__(self, value=None):
+        self.value, self.callbacks = value, []
+
+    def done(self):
+        return self.value is not None
+
+    def result(self):
+        return self.value
+
+    def add_done_callback(self, cb):
+        self.callbacks.append(cb)
+        if self.done():
+            cb(self)
+
+    def set(self, value):
+        self.value = value
+        for cb in self.callbacks:
+            cb(self)
+
+
+class _SilentPlanner:
+    """A RelocateObject server that sends no feedback (starved under load); cancelled, it ends the goal after its
+    recovery."""
+
+    def __init__(self):
+        self.result = _Future()
+
+    def wait_for_server(self, timeout_sec):
+        return True
+
+    def server_is_ready(self):
+        return True
+
+    def send_goal_async(self, goal, feedback_callback):
+        from types import SimpleNamespace
+        planner = self
+
+        class Handle:
+            accepted = True
+
+            def get_result_async(self):
+                return planner.result
+
+            def cancel_goal_async(self):
+                threading.Timer(0.2, planner.result.set, [SimpleNamespace(result=SimpleNamespace(
+                    success=False, message="cancelled: arm stopped; recovered: arm back home"))]).start()
+        return _Future(Handle())
+
+
+def test_a_silent_relocation_is_cancelled_and_its_recovery_waited_for():
+    """The motion planner silent for relocate_silence (starved at load 15: paper_experiment_10, K = 3, seeds 0-1 of
+    the closed-loop benchmark): the task planner cancelled and returned at once, leaving the arm where it stood.
+    Now it waits up to relocate_silence for the cancelled goal's result (the recovery brings the arm home)."""
+    from qtree_task_planner.ros_clients import Relocator
+    relocator = Relocator(_SilentPlanner(), server_wait=1.0, limit=60.0, silence=0.3, ok=lambda: True)
+    ok, message = relocator.relocate("o2", [], cancelled=lambda: False)
+    assert not ok and message.startswith("the motion planner went away (no feedback")
+    assert message.endswith("after the cancel: cancelled: arm stopped; recovered: arm back home"), message
