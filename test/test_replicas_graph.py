@@ -27,9 +27,11 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
     from relocation_common.ros_conversions import bottles_to_msg
 
     scenario = load_scenario(SCENARIO)
+    # feasibility_timeout: a certified answer (pick, carry, way home) of paper_experiment_10 can take over 2 s of
+    # wall on this shared machine; at 2 s one question ran into the safety net again and again (no answer)
     with Graph(tmp_path) as g:
         g.start_planners(2, {"scenario": str(SCENARIO), "scene_topic": TOPIC})
-        g.start("task_planner", {"scene_topic": TOPIC, "replicas": 2, "feasibility_timeout": 2.0,
+        g.start("task_planner", {"scene_topic": TOPIC, "replicas": 2, "feasibility_timeout": 15.0,
                                  "feasibility_margin": 1.0, "planner_wait": 5.0})
         for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
             monkeypatch.setenv(k, g.env[k])
