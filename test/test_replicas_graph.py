@@ -15,7 +15,7 @@ from relocation_common.scenario import load_scenario
 
 pytestmark = pytest.mark.graph
 
-SCENARIO = scenarios_dir() / "paper_experiment_10.yaml"
+SCENARIO = scenarios_dir() / "scenario1_5.yaml"  # its 84 questions keep the test short
 TOPIC = "/test/objects"
 
 
@@ -27,8 +27,8 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
     from relocation_common.ros_conversions import bottles_to_msg
 
     scenario = load_scenario(SCENARIO)
-    # feasibility_timeout: a certified answer (pick, carry, way home) of paper_experiment_10 can take over 2 s of
-    # wall on this shared machine; at 2 s one question ran into the safety net again and again (no answer)
+    # feasibility_timeout: a certified answer (pick, carry, way home) can take over 2 s of wall on this shared
+    # machine; at 2 s one question ran into the safety net again and again (no answer)
     with Graph(tmp_path) as g:
         g.start_planners(2, {"scenario": str(SCENARIO), "scene_topic": TOPIC})
         g.start("task_planner", {"scene_topic": TOPIC, "replicas": 2, "feasibility_timeout": 15.0,
@@ -48,7 +48,7 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
                 time.sleep(0.1)
             episodes = []
             client.train(on_feedback=lambda f: episodes.append(f.episode), check=g.check_alive, execute=False,
-                         max_episodes=300, seed=0)
+                         max_episodes=100, seed=0)
             while not episodes or max(episodes) < 3:
                 assert not client.is_done(), client.result()
                 time.sleep(0.02)
@@ -60,7 +60,7 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
         log = g.log("task_planner")
     assert result.success, result.message
     assert result.sequence[-1] == scenario.target_id and result.episodes > killed_at
-    assert result.optimal_weight == pytest.approx(1.14, abs=1e-6)  # o2 o3 o6 (docs/qtree.md)
+    assert result.optimal_weight == pytest.approx(0.62, abs=1e-6)  # o4 T (`qtree solve --scenario scenario1_5`)
     learned = [line for line in log.splitlines() if "learned" in line][-1]
     answers = dict(re.findall(r"(/\S*plan_feasibility): (\d+) answers", learned))
     assert int(answers["/replica_1/motion_planner/plan_feasibility"]) > 0, learned
