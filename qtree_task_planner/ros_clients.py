@@ -165,16 +165,27 @@ class Relocator:
                                   elapsed_s=now - start, limit=self.limit)
             if why is not None:
                 if sent.done() and sent.result() is not None and sent.result().accepted and self.ok():
-                    sent.result().cancel_goal_async()  # the arm stops (the motion planner's cancel)
-                    # a silent planner may be a starved one (load): its cancelled goal ends after the recovery that
-                    # brings the arm home; waited for up to `silence` s (before, the arm was left where it stood)
-                    if why.startswith(SILENT) and done.wait(self.silence) and "result" in box:
+                    cancel = sent.result().cancel_goal_async()  # the arm stops (the motion planner's cancel)
+                    if why.startswith(SILENT) and self._recovered(cancel, done) and "result" in box:
                         return False, f"{why}; after the cancel: {box['result'].result.message}"
                 return False, why
         if box.get("rejected"):
             return False, "goal rejected by the motion planner"
         res = box["result"].result
         return res.success, res.message
+
+    def _recovered(self, cancel, done: threading.Event) -> bool:
+        """After cancelling a silent relocation: True once its result came. A silent planner may be a starved one
+        (load): its cancelled goal ends after the recovery that brings the arm home, waited for up to `silence` s.
+        A dead one never acknowledges the cancel: given up after CANCEL_ACK_WAIT s without the acknowledgement."""
+        start = time.monotonic()
+        while not done.wait(0.1):
+            waited = time.monotonic() - start
+            if waited > self.silence or not self.ok() or not self.client.server_is_ready():
+                return False
+            if not cancel.done() and waited > CANCEL_ACK_WAIT:
+                return False
+        return True
 
 
 def seen_scene(msg) -> dict[str, SeenObject]:
@@ -232,6 +243,7 @@ def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[object], 
 
 SILENT = "the motion planner went away (no feedback"  # retrieval.relocation_stop's words for relocate_silence
 OUTCOME_UNKNOWN = "outcome unknown"  # the motion planner's result when no scene came after the motion
+CANCEL_ACK_WAIT = 3.0  # s: a live (even starved) motion planner acknowledges a cancel within it; a dead one never
 TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
 
 

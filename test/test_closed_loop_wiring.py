@@ -224,11 +224,11 @@ class _Future:
 
 
 class _SilentPlanner:
-    """A RelocateObject server that sends no feedback (starved under load); cancelled, it ends the goal after its
-    recovery."""
+    """A RelocateObject server that sends no feedback (starved under load); cancelled, it acknowledges and ends the
+    goal after its recovery. dead=True: a killed one, that never acknowledges nor ends the goal."""
 
-    def __init__(self):
-        self.result = _Future()
+    def __init__(self, dead=False):
+        self.result, self.dead = _Future(), dead
 
     def wait_for_server(self, timeout_sec):
         return True
@@ -247,8 +247,11 @@ class _SilentPlanner:
                 return planner.result
 
             def cancel_goal_async(self):
+                if planner.dead:
+                    return _Future()
                 threading.Timer(0.2, planner.result.set, [SimpleNamespace(result=SimpleNamespace(
                     success=False, message="cancelled: arm stopped; recovered: arm back home"))]).start()
+                return _Future(SimpleNamespace(goals_canceling=[object()]))
         return _Future(Handle())
 
 
@@ -261,3 +264,17 @@ def test_a_silent_relocation_is_cancelled_and_its_recovery_waited_for():
     ok, message = relocator.relocate("o2", [], cancelled=lambda: False)
     assert not ok and message.startswith("the motion planner went away (no feedback")
     assert message.endswith("after the cancel: cancelled: arm stopped; recovered: arm back home"), message
+
+
+def test_a_dead_planner_is_not_waited_for_after_the_cancel(monkeypatch):
+    """A killed motion planner never acknowledges the cancel: the task planner waited relocate_silence again for a
+    recovery that could not come (the goal ended after two silences). Now it gives up after CANCEL_ACK_WAIT."""
+    from qtree_task_planner import ros_clients
+    monkeypatch.setattr(ros_clients, "CANCEL_ACK_WAIT", 0.2, raising=False)
+    relocator = ros_clients.Relocator(_SilentPlanner(dead=True), server_wait=1.0, limit=60.0, silence=1.5,
+                                      ok=lambda: True)
+    t0 = time.monotonic()
+    ok, message = relocator.relocate("o2", [], cancelled=lambda: False)
+    took = time.monotonic() - t0
+    assert not ok and message.startswith("the motion planner went away (no feedback") and "after" not in message
+    assert took < 2.5, took  # one silence (1.5 s) and the acknowledgement's 0.2 s, not two silences (3 s)
