@@ -61,7 +61,6 @@ from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory
 
 START_RELIEF = 0.0005  # m: margin under a tight start's distance (_carried_models, _carried_hand)
-MIN_START_BOUND = 0.002  # m: the least bound of a carried bottle lifted from a tight start
 
 
 class PlanningError(RuntimeError):
@@ -231,9 +230,11 @@ class MotionPlanner:
         """(carried bottle, arm holding it out of the shelf, arm holding it in to the slot). The bottle is modelled
         on the hand where the tool stopped at the grasp (STPIK's final tolerance, up to 4 mm from the bottle's
         perceived place); where that model stands closer to a neighbour than `carried_clearance`, the lift and
-        the way out keep that start distance less START_RELIEF as the bound (never under MIN_START_BOUND): lifted
-        straight up and then drawn back, the bottle only moves away. Otherwise the start would fail the bound
-        at once and the pick would be refused for the model's offset."""
+        the way out keep that start distance less START_RELIEF as the bound, whatever it is (a model in contact
+        within the perception and STPIK tolerances included): lifted straight up and then drawn back, the bottle
+        may never come closer to anything than it already stood, and STPIK checks that it does not. Otherwise the
+        start would fail the bound at once and the pick would be refused for the model's offset. A model that
+        penetrates a neighbour at the start (no distance to keep) keeps the full bound: refused."""
         p = self.params
         carried = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), p.carried_clearance)
         arm_c = ArmGeometry(self.kin, [carried])
@@ -242,7 +243,7 @@ class MotionPlanner:
         near = [d for i, _, d, _, _ in arm_c.obstacle_distances(obs, p.carried_clearance, support)
                 if arm_c.specs[i].name == CARRIED]
         gap = min(near, default=math.inf)
-        if gap >= p.carried_clearance or gap - START_RELIEF < MIN_START_BOUND:
+        if gap >= p.carried_clearance or gap == PENETRATION:
             return carried, arm_c, arm_c
         start = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), gap - START_RELIEF)
         return carried, ArmGeometry(self.kin, [start]), arm_c
@@ -508,7 +509,8 @@ class MotionPlanner:
         rot, pos = self.kin.tool_pose()
         start = np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
         lifted = start + np.array([0.0, 0.0, lift, 0.0])
-        hand_c = self._carried_hand(carried, lifted, obs, arm_start.specs[-1].clearance or p.carried_clearance)
+        bound = arm_start.specs[-1].clearance
+        hand_c = self._carried_hand(carried, lifted, obs, p.carried_clearance if bound is None else bound)
         # 1. lift straight up: the only leg where the bottle may touch a board, the one it stands on
         up = self._track(q_start, [start, lifted], obs, deadline, stats, skip=support, arm=arm_start,
                          speed=p.stpik.approach_speed, ramp=p.carry_ramp,
