@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Mapping
 
+from relocation_common.feasibility import destination_slot
 from relocation_common.scenario import PALETTE, TARGET_RGB, Bottle, Scenario
 
 from .problem import ProblemError, RelocationProblem
@@ -379,8 +380,9 @@ class ClosedLoopExecutor:
     the motion planner's recovery brings the arm home and the bottle back on a failure). perceive() -> scene: a
     scene perceived after the call. replan(problem, banned) -> (sequence, weight, calls) or the reason there is
     none: a sequence for the RemainingProblem that uses no banned Option and at most len(problem.free_slots)
-    slots. slot_of(problem) -> the slot index the next relocation goes to (default: the first free one, which
-    is slot len(removed) while nothing disturbs the bottom shelf). on_step(step) after each relocation and
+    slots. slot_of(problem) -> the slot index the next relocation goes to (default: the motion planner's rule,
+    relocation_common.feasibility.destination_slot: slot len(removed), the one its certified answer planned the
+    carry to, when it is free, else the first free one). on_step(step) after each relocation and
     on_replan(record) after each re-plan (feedback).
     bottom_seen False: perception does not see the bottom shelf (verify_relocation); a relocated bottle that is
     not seen counts as relocated. perceive() raising ValueError, TimeoutError or RuntimeError (no scene) ends the
@@ -398,7 +400,7 @@ class ClosedLoopExecutor:
         self.scenario, self.relocate, self.perceive, self.replan = scenario, relocate, perceive, replan
         self.tol, self.max_replans, self.max_attempts = tolerances, max_replans, max_attempts
         self.cancelled, self.on_step, self.on_replan = cancelled, on_step, on_replan
-        self.slot_of = slot_of or (lambda rp: rp.free_slots[0])
+        self.slot_of = slot_of
         self.bottom_seen = bottom_seen
 
     def run(self, sequence: Iterable[str], scene: Scene | None = None) -> ExecutionResult:
@@ -430,11 +432,11 @@ class ClosedLoopExecutor:
             obj = seq[0]
             if not rp.free_slots:
                 raise GiveUp(f"no free slot on the bottom shelf for {obj}")
-            slot = self.slot_of(rp)
             # the relocated bottles, then those seen off the top shelf otherwise (dropped to the floor): the motion
             # planner keeps an unseen bottle at its last pose, and the re-plan's answers had them gone (rp.gone)
             removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and
                                                                 o not in out.relocated)), rp.gone
+            slot = self.slot_of(rp) if self.slot_of else destination_slot(len(removed), rp.free_slots)
             ok, message = self.relocate(obj, list(removed))
             after = self._perceive(f"after relocating {obj}")
             check = None

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Mapping, Protocol
+from typing import Any, Mapping, Protocol, Sequence
 
 
 class Label(IntEnum):
@@ -107,6 +107,16 @@ def ask_many(oracle, queries: list[Query], on_answer=None) -> list[FeasibilityAn
         if on_answer is not None:
             on_answer(q, out[-1])
     return out
+
+
+def destination_slot(n_removed: int, free: Sequence[int]) -> int:
+    """The bottom-shelf slot a relocation sent with `n_removed` objects removed goes to, from the `free` slot
+    indices of the scene: slot n_removed, the one a certified feasible answer planned the carry to (the removed
+    objects in the other slots: docs/motion_planner.md, "The certified slot"), when it is free; else the first free
+    one (its carry planned at execution, not certified). ValueError when no slot is free."""
+    if not free:
+        raise ValueError("no free slot on the bottom shelf")
+    return n_removed if n_removed in free else min(free)
 
 
 def replica_namespace(k: int) -> str:

@@ -4,7 +4,9 @@ The task planner's `removed_ids` is what it believes (Sect. 4.2: the objects rel
 driver's ground truth or perception) is what is. Before the motion: a removed bottle that still stands on the top
 shelf, or a goal object that already stands on the bottom shelf, refuses the goal with the reason (planning with a
 bottle that is there as if it were gone knocks it over). The destination is a free slot of the bottom shelf: slots
-occupied by a bottle of the scene, or by one this node placed and the scene does not show, are skipped. After the
+occupied by a bottle of the scene, or by one this node placed and the scene does not show, are skipped; slot
+len(removed), the one a certified feasible answer planned the carry to, when it is free (docs/motion_planner.md,
+"The certified slot"). After the
 motion: the moved bottle stands at its slot (when the scene shows it; perception sees the top shelf only) and no
 other bottle moved more than the tolerance; otherwise the relocation is not a success and the result says what
 moved (docs/reliability.md, "What a relocation reports").
@@ -16,6 +18,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping, Sequence
 
+from relocation_common.feasibility import destination_slot
 from relocation_common.scenario import Scenario, ScenarioError, Shelf, UnknownObjectError
 
 ON_BOARD = 0.01  # m: a bottle whose base is this close to a board's surface stands on it (scene_update.ON_SHELF)
@@ -94,18 +97,22 @@ def goal_refusal(scenario: Scenario, object_id: str, removed: Sequence[str], see
         scenario.object(object_id)
         if object_id in scenario.check_ids(removed):
             return f"{object_id!r} is in its own removed set"
-        destination(scenario, seen, relocated)
+        destination(scenario, seen, relocated, len(removed))
     except (UnknownObjectError, ScenarioError, ValueError) as e:
         return str(e)
     return refusal(scenario.shelf, object_id, removed, seen, relocated)
 
 
-def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: Mapping[str, int]
-                ) -> tuple[int, list[tuple[str, tuple[float, float]]]]:
-    """(a free slot, the bottles on the bottom shelf) from the scene and what the node placed; ValueError when
-    every slot is taken."""
+def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: Mapping[str, int],
+                n_removed: int) -> tuple[int, list[tuple[str, tuple[float, float]]]]:
+    """(the slot, the bottles on the bottom shelf) from the scene and what the node placed: slot `n_removed` (the
+    goal's len(removed_ids): the slot a certified answer planned the carry to) when it is free, else the first
+    free one (relocation_common.feasibility.destination_slot). ValueError when every slot is taken."""
     placed = placed_bottles(scenario.shelf, scenario.slots, seen, relocated)
-    return free_slot(scenario.slots, placed, 2 * max(b.radius for b in scenario.objects)), placed
+    free = free_slots(scenario.slots, placed, 2 * max(b.radius for b in scenario.objects))
+    if not free:
+        raise _no_free_slot(len(scenario.slots), placed)
+    return destination_slot(n_removed, free), placed
 
 
 def placed_bottles(shelf: Shelf, slots: Sequence[tuple[float, float]], seen: Mapping[str, SeenBottle],
@@ -117,15 +124,24 @@ def placed_bottles(shelf: Shelf, slots: Sequence[tuple[float, float]], seen: Map
     return sorted(placed)
 
 
+def free_slots(slots: Sequence[tuple[float, float]], placed: Sequence[tuple[str, tuple[float, float]]],
+               clearance: float) -> list[int]:
+    """The slots with no placed bottle's axis within `clearance` (two radii: the bottles would touch)."""
+    return [k for k, (x, y) in enumerate(slots)
+            if all(math.hypot(x - px, y - py) >= clearance for _, (px, py) in placed)]
+
+
 def free_slot(slots: Sequence[tuple[float, float]], placed: Sequence[tuple[str, tuple[float, float]]],
               clearance: float) -> int:
-    """The first slot with no placed bottle's axis within `clearance` (two radii: the bottles would touch).
-    ValueError when every slot is taken."""
-    for k, (x, y) in enumerate(slots):
-        if all(math.hypot(x - px, y - py) >= clearance for _, (px, py) in placed):
-            return k
-    taken = ", ".join(i for i, _ in placed)
-    raise ValueError(f"no free slot on the bottom shelf: all {len(slots)} slots are taken ({taken})")
+    """The first of `free_slots`. ValueError when every slot is taken."""
+    free = free_slots(slots, placed, clearance)
+    if not free:
+        raise _no_free_slot(len(slots), placed)
+    return free[0]
+
+
+def _no_free_slot(n: int, placed: Sequence[tuple[str, tuple[float, float]]]) -> ValueError:
+    return ValueError(f"no free slot on the bottom shelf: all {n} slots are taken ({', '.join(i for i, _ in placed)})")
 
 
 def outcome_problems(shelf: Shelf, before: Mapping[str, SeenBottle], after: Mapping[str, SeenBottle],

@@ -111,7 +111,8 @@ class MotionPlannerService:
 
     def relocate(self, arm: StreamedArm, object_id: str, removed_ids: Iterable[str], source: str = "the scene",
                  ok: Callable[[], bool] = lambda: True) -> Outcome:
-        """Relocate `object_id` to a free slot of the scene (goal_check.destination) with `arm`; after a failure or
+        """Relocate `object_id` to a free slot of the scene (goal_check.destination: slot len(removed_ids), the one
+        a certified answer planned, when it is free) with `arm`; after a failure or
         a cancel, recover (the result message says what was done). A goal that contradicts the scene (a removed
         bottle still on the top shelf, the object already relocated: goal_check.goal_refusal) is aborted with the
         reason; after the motion, success only if the scene from `source` shows the bottle at its slot and no
@@ -128,7 +129,8 @@ class MotionPlannerService:
             try:
                 arm.wait_for_state(STATE_WAIT)
                 before = dict(self.scene.seen)
-                self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated)
+                self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated,
+                                                            len(removed_ids))
                 relocate(self.planner, arm, object_id, removed_ids, home_tol=self.home_tol, lock=self.plan_lock,
                          progress=progress, slot=self._slot, placed=placed)
                 self.relocated[object_id] = self._slot

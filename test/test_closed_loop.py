@@ -23,7 +23,7 @@ from qtree_task_planner.closed_loop import (
 )
 from qtree_task_planner.replan import GeometryCache, RemainingOracle, replan
 from qtree_task_planner.retrieval import execute_sequence
-from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
+from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label, destination_slot
 from relocation_common.scenario import parse_scenario
 
 SHELF = {"x_front": 0.45, "depth": 0.40, "width": 0.80, "y_center": 0.0, "board_thickness": 0.02, "top_z": 0.20,
@@ -65,8 +65,8 @@ class FakeShelf:
         elif self.blockers(obj, frozenset()):
             result = (False, f"blocked by {sorted(self.blockers(obj, frozenset())[0])}")
         else:
-            free = free_slots(self.scenario, self.scene)
-            self.put(obj, *self.scenario.slots[free[0]], BOTTOM)
+            free = free_slots(self.scenario, self.scene)  # the motion planner's choice (goal_check.destination)
+            self.put(obj, *self.scenario.slots[destination_slot(len(removed), free)], BOTTOM)
             result = (True, "relocated")
         if k in self.disturb:
             self.disturb[k](self)
@@ -277,6 +277,20 @@ def test_a_bottle_dropped_off_the_shelf_is_sent_as_removed():
     result = executor(shelf).run(("b", "T"))
     assert result.success, result.message
     assert shelf.relocations == [("b", ()), ("T", ("b",))]
+
+
+def test_the_executor_expects_the_certified_slot_the_motion_planner_uses():
+    """b falls to the floor during its carry; T is sent with b removed, so the motion planner's certified answer
+    planned T's carry to slot 1 (len(removed)), and the planner puts T there while it is free. The executor checks
+    T at that slot: before, it expected the first free slot (0), found T "not at its slot" and re-planned."""
+    shelf = FakeShelf()
+    shelf.fail["b"] = 1
+    shelf.disturb[0] = lambda s: s.put("b", 0.30, 0.0, -0.6)
+    result = executor(shelf).run(("b", "T"))
+    assert result.success, result.message
+    t = result.steps[-1]
+    assert (t.object_id, t.slot) == ("T", 1) and t.verification is not None and t.verification.ok, t
+    assert len(result.replans) == 1, [r.reason for r in result.replans]  # b's failure only
 
 
 def test_a_tipped_bottle_is_never_proposed_for_relocation():

@@ -51,6 +51,19 @@ def test_the_destination_is_a_free_slot_of_the_scene_not_the_count_of_removed():
         gc.free_slot(SLOTS, full, CLEAR)
 
 
+def test_the_destination_is_the_certified_slot_when_it_is_free():
+    """A certified feasible answer for (o6, removed) planned the carry to slot len(removed) (feasibility._certify).
+    o2 in slot 0 and o3 dropped to the floor, o6 sent with both removed: slot 2 is free, so o6 goes there, as
+    certified (before: the first free slot, 1, a carry nobody certified); with slot 2 taken, the first free one."""
+    floor = (0.3, 0.0, SHELF.bottom_z - 0.3)
+    scene = _scene(o2=(*SLOTS[0], SHELF.bottom_z), o3=floor)
+    slot, placed = gc.destination(SC, scene, {}, 2)
+    assert slot == 2 and placed == [("o2", SLOTS[0])]
+    scene = _scene(o2=(*SLOTS[0], SHELF.bottom_z), o3=floor, o4=(*SLOTS[2], SHELF.bottom_z))
+    assert gc.destination(SC, scene, {}, 2)[0] == 1
+    assert gc.goal_refusal(SC, "o6", ["o2", "o3"], scene, {}) is None
+
+
 def test_plan_relocation_goes_to_the_slot_given_with_the_bottles_placed():
     from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
 
