@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Mapping
 
 from relocation_common.feasibility import destination_slot
+from relocation_common.orientation import UPRIGHT_TILT, support_height
 from relocation_common.scenario import PALETTE, TARGET_RGB, Bottle, Scenario
 
 from .problem import ProblemError, RelocationProblem
@@ -58,13 +59,6 @@ def scene_from_scenario(scenario: Scenario) -> dict[str, SeenObject]:
                     for b in scenario.objects)
 
 
-def tilt_of_quaternion(w: float, x: float, y: float, z: float) -> float:
-    """Angle (rad) between a body's z axis and the vertical, from its orientation (ObjectState.pose)."""
-    n = w * w + x * x + y * y + z * z
-    c = 1.0 - 2.0 * (x * x + y * y) / n if n > 0 else 1.0
-    return math.acos(max(-1.0, min(1.0, c)))
-
-
 @dataclass(frozen=True)
 class Tolerances:
     """How far the perceived world may be from the planned one and still be "as planned"."""
@@ -72,7 +66,7 @@ class Tolerances:
     slot: float = 0.03  # m in xy: the relocated bottle from its slot
     still: float = 0.015  # m in xy: every other bottle from where it was
     board: float = 0.025  # m in z: a bottle's support from a board's surface
-    tilt: float = math.radians(20)  # rad: standing upright
+    tilt: float = UPRIGHT_TILT  # rad: standing upright
 
     def __post_init__(self) -> None:
         for name in ("slot", "still", "board", "tilt"):
@@ -82,8 +76,8 @@ class Tolerances:
 
 
 def _support(o: SeenObject) -> float:
-    """Height of the surface the object rests on (a lying bottle's base centre is one radius above it)."""
-    return o.z - o.radius * math.sin(min(o.tilt, math.pi / 2))
+    """Height of the surface the object rests on (relocation_common.orientation.support_height)."""
+    return support_height(o.z, o.radius, o.tilt)
 
 
 def board_of(o: SeenObject, scenario: Scenario, tol: Tolerances) -> str | None:

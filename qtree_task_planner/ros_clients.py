@@ -21,9 +21,10 @@ from qtree_relocation_msgs.srv import PlanFeasibility
 
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.node import ActionClient, call, stop_reason, stopping_as
+from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs
 
-from .closed_loop import SeenObject, tilt_of_quaternion
+from .closed_loop import SeenObject
 from .outage import Cancelled, PlannerUnavailable
 from .params import TrainingParams
 from .retrieval import relocation_stop

@@ -32,10 +32,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
-import fcl
-import mujoco
-import numpy as np
-
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from qtree_task_planner.closed_loop import (
     Option,
@@ -43,15 +39,15 @@ from qtree_task_planner.closed_loop import (
     Tolerances,
     board_of,
     remaining_problem,
-    tilt_of_quaternion,
 )
 from qtree_task_planner.replan import GeometryCache, replan
 from relocation_app.client import RelocationClient
 from relocation_app.final_state import final_state
 from relocation_app.graph import Graph
+from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.collision import Obstacle
+from stpik_motion_planner.collision import Lying
 from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
 
 # the planner's wall-clock safety nets 4-12x the defaults, the follower's settle time 3x: on the shared machine
@@ -156,18 +152,11 @@ def _seen(o: dict) -> SeenObject:
                       tilt=tilt_of_quaternion(w, x, y, z), radius=o["radius"], height=o["height"])
 
 
-def _lying(o: dict) -> Obstacle:
-    """A bottle lying on the board as the simulator has it: a cylinder along its own z axis from its base centre."""
+def _lying(o: dict) -> Lying:
+    """A bottle lying on the board as the simulator left it (the planner models it: collision.lying_cylinder)."""
     x, y, z, w = o["orientation"]
-    flat = np.zeros(9)
-    mujoco.mju_quat2Mat(flat, np.array([w, x, y, z], float))
-    rot = flat.reshape(3, 3)
-    base = np.asarray(o["position"], float)
-    top = base + rot[:, 2] * o["height"]
-    r = o["radius"]
-    shape = fcl.Cylinder(r, o["height"])
-    return Obstacle(f"bottle:{o['id']}", o["id"], fcl.CollisionObject(shape, fcl.Transform(rot, (base + top) / 2)),
-                    np.minimum(base, top) - r, np.maximum(base, top) + r)
+    px, py, pz = o["position"]
+    return Lying((px, py, pz), (w, x, y, z))
 
 
 def prove(row: dict) -> str:
@@ -194,8 +183,7 @@ def prove(row: dict) -> str:
     for b in rp.bottles:
         if b.id not in rp.tipped:
             mp.update_object(b.id, b.x, b.y)
-    lying = {o["id"]: _lying(o) for o in row["final_scene"] if o["id"] in rp.tipped}
-    mp.scene.bottles.update(lying)
+    mp.set_scenario(mp.scenario, {o["id"]: _lying(o) for o in row["final_scene"] if o["id"] in rp.tipped})
     answer = replan(rp, {Option(i, None) for i in rp.tipped}, GeometryCache(Patient(mp)))
     if isinstance(answer, str):
         return f"no retrieval exists (proven: {answer}" + (

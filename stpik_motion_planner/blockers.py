@@ -100,15 +100,18 @@ def _name(g: Grasp) -> str:
 
 def lane_blockers(planner, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
     """Every object still on the shelf -> its lanes' certain blocker sets with `removed` gone (an empty tuple:
-    no lane can ever be cleared). No motion planning: the screen only."""
+    no lane can ever be cleared, as for a lying bottle). No motion planning: the screen only."""
     gone = frozenset(planner.scenario.check_ids(removed))
-    return {b.id: tuple(BlockerSet(bl - gone, True, _name(g)) for g, bl in static_lanes(planner, b.id))
+    return {b.id: () if planner.not_graspable(b.id) else
+            tuple(BlockerSet(bl - gone, True, _name(g)) for g, bl in static_lanes(planner, b.id))
             for b in planner.scenario.objects if b.id not in gone}
 
 
 def answer_blockers(planner, object_id: str, removed: frozenset[str]) -> tuple[BlockerSet, ...]:
     """The blockers of an unfeasible answer: certain sets for the lanes the screen rejects; for a lane it passes
     (so STPIK or RRT-Connect failed there), an uncertain set of the bottles near it. Empty: no lane at all."""
+    if planner.not_graspable(object_id):  # lying or off the shelf: no lane at all
+        return ()
     suspects = {g.yaw: bl for g, bl in static_lanes(planner, object_id, SUSPECT_MARGIN)}
     out = []
     for g, bl in static_lanes(planner, object_id):

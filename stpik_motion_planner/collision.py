@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Iterable, Iterator, Sequence
+from typing import Iterable, Iterator, Mapping, Sequence
 
 import fcl
 import numpy as np
 
 from relocation_common import robot_description as rd
+from relocation_common.orientation import quaternion_matrix
 from relocation_common.scenario import Scenario
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
@@ -65,6 +66,24 @@ def cylinder(name: str, object_id: str | None, x: float, y: float, z0: float, ra
                     np.array([x + radius, y + radius, z0 + height]))
 
 
+@dataclass(frozen=True)
+class Lying:
+    """A bottle that does not stand (tipped over, lying on the top board): the centre of its base (base frame, m)
+    and its orientation as a quaternion (w, x, y, z), as ObjectState's pose carries them."""
+
+    base: tuple[float, float, float]
+    quat: tuple[float, float, float, float]
+
+
+def lying_cylinder(name: str, object_id: str | None, pose: Lying, radius: float, height: float) -> Obstacle:
+    """A bottle at any orientation, as the simulator has it: a cylinder along its own z axis from its base centre."""
+    rot = quaternion_matrix(*pose.quat)
+    base = np.asarray(pose.base, float)
+    top = base + rot[:, 2] * height
+    obj = fcl.CollisionObject(fcl.Cylinder(radius, height), fcl.Transform(rot, (base + top) / 2))
+    return Obstacle(name, object_id, obj, np.minimum(base, top) - radius, np.maximum(base, top) + radius)
+
+
 # The rest of the world of the simulator's scene (jaco2_sim_driver/scene.py, which this layer cannot import; the
 # independent motion checker in the tests replays plans in that scene and finds any difference): the floor
 # FLOOR_DROP below the bottom board, the shelf's side and back panels down to it, the pedestal under the robot base.
@@ -92,14 +111,19 @@ def shelf_boards(scenario: Scenario) -> list[Obstacle]:
 
 
 class CollisionScene:
-    """Boards and bottles of a scenario. `placed`: (id, (x, y)) of bottles standing on the bottom shelf."""
+    """Boards and bottles of a scenario. `placed`: (id, (x, y)) of bottles standing on the bottom shelf; `lying`:
+    bottles of the top shelf that do not stand, as the cylinders they are; `gone`: bottles that left the shelf
+    (on the floor), no obstacle."""
 
-    def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = ()) -> None:
+    def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = (),
+                 lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> None:
         self.scenario = scenario
         self.boards = shelf_boards(scenario)
         z0 = scenario.shelf.top_z
-        self.bottles = {b.id: cylinder(f"bottle:{b.id}", b.id, b.x, b.y, z0, b.radius, b.height)
-                        for b in scenario.objects}
+        lying, gone = lying or {}, frozenset(gone)
+        self.bottles = {b.id: lying_cylinder(f"bottle:{b.id}", b.id, lying[b.id], b.radius, b.height)
+                        if b.id in lying else cylinder(f"bottle:{b.id}", b.id, b.x, b.y, z0, b.radius, b.height)
+                        for b in scenario.objects if b.id not in gone}
         zb = scenario.shelf.bottom_z
         self.placed = []
         for oid, (x, y) in placed:

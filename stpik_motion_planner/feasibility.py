@@ -21,7 +21,7 @@ import math
 import time
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from .collision import (
     ArmGeometry,
     CollisionScene,
     HandProxy,
+    Lying,
     ObstacleSet,
     carried_bottle,
 )
@@ -189,7 +190,9 @@ class MotionPlanner:
         self.params = params or PlannerParams()
         seed_ompl(self.params.seed)
         self.kin = Kinematics()
-        self.scene = CollisionScene(scenario)
+        self.lying: dict[str, Lying] = {}  # bottles of the top shelf that do not stand (set_scenario)
+        self.gone: frozenset[str] = frozenset()  # bottles that left the shelf
+        self.scene = self._collision_scene()
         self.arm = ArmGeometry(self.kin)
         p = self.params
         self.stpik = Stpik(self.kin, self.arm, p.stpik)
@@ -314,6 +317,8 @@ class MotionPlanner:
         sc = self.scenario
         params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in ("timeout", "carry_timeout")}
         parts = [repr(sc.shelf), repr(sc.objects), repr(sc.slots), repr(sorted(params.items()))]
+        if self.lying or self.gone:  # a standing scene's questions keep their seeds (the committed caches)
+            parts += [repr(sorted(self.lying.items())), repr(sorted(self.gone))]
         for x in question:
             if isinstance(x, np.ndarray):
                 parts.append(np.round(x, 9).tobytes().hex())
@@ -401,6 +406,9 @@ class MotionPlanner:
 
     def _pick(self, object_id, removed, deadline, stats) -> tuple[Trajectory | None, int, str]:
         p = self.params
+        why = self.not_graspable(object_id)
+        if why:
+            return None, 0, why
         try:
             self._carry_heights(object_id)
         except WorkspaceError as e:  # it could be grasped but not carried away: not a relocation
@@ -501,7 +509,7 @@ class MotionPlanner:
         stats = QueryStats()
         b = self.scenario.object(object_id)
         placed = self.placed_default(removed, slot_index) if placed is None else list(placed)
-        scene = CollisionScene(self.scenario, placed)
+        scene = self._collision_scene(placed)
         obs = scene.obstacles(removed | {object_id})
         support = {CARRIED: frozenset(["board:top_shelf"])}
         carried, arm_start, arm_c = self._carried_models(b, q_start, obs, support)
@@ -524,7 +532,7 @@ class MotionPlanner:
         rng = self.question_rng("carry", object_id, removed, slot_index, q_start, self._placed_key(placed))
         carry = self._carry_legs(up.q[-1], [lifted, out, stage], place, obs, (arm_start, arm_c, hand_c), deadline,
                                  stats, what, rng)
-        scene2 = CollisionScene(self.scenario, placed + [(object_id, slot)])
+        scene2 = self._collision_scene(placed + [(object_id, slot)])
         obs2 = scene2.obstacles(removed | {object_id})
         skip = {n: frozenset([f"placed:{object_id}"]) for n in HAND_PARTS}
         back = self._track(carry[1].q[-1], [place, stage], obs2, time.perf_counter() + p.carry_timeout, stats,
@@ -608,7 +616,7 @@ class MotionPlanner:
         """From q_from back to Q_HOME (joint-space RRT-Connect with the scene's clearance)."""
         removed = self.scenario.check_ids(removed)
         placed = self.placed_default(removed, -1) if placed is None else list(placed)
-        obs = CollisionScene(self.scenario, placed).obstacles(removed)
+        obs = self._collision_scene(placed).obstacles(removed)
         via = self._home_via_stage(_check_q(q_from), obs, placed)
         if via is not None:
             return _time_joint_path(via, 0.9 * self.params.stpik.qdot_max, self.params.stpik.dt).resample()
@@ -648,7 +656,7 @@ class MotionPlanner:
         (staging pose, bottom shelf's geometry); a function of those only (cached: it is no history)."""
         key = (tuple(np.round(stage, 6)), self._placed_key(placed))
         if key not in self._stage_refs:
-            obs = CollisionScene(self.scenario, placed).obstacles(frozenset())
+            obs = self._collision_scene(placed).obstacles(frozenset())
             r = self._track(rd.Q_HOME, [self.home, stage], obs, time.perf_counter() + self.params.carry_timeout,
                             QueryStats())
             self._stage_refs[key] = list(r.q) if r.ok else None
@@ -659,12 +667,29 @@ class MotionPlanner:
         n = max(1, int(math.ceil(float(np.max(np.abs(b - a))) / self.params.joint_resolution)))
         return all(self.joint_valid(a + (b - a) * (k / n), obs, margin=margin) for k in range(1, n + 1))
 
-    def set_scenario(self, scenario: Scenario) -> None:
-        """Replace the scene (same shelf; e.g. bottles as perceived). Cached grasp ends are dropped."""
+    def set_scenario(self, scenario: Scenario, lying: Mapping[str, Lying] | None = None,
+                     gone: Iterable[str] = ()) -> None:
+        """Replace the scene (same shelf; e.g. bottles as perceived): `lying`, the bottles of the top shelf that do
+        not stand (obstacles as the cylinders they are, never graspable); `gone`, those that left the shelf (no
+        obstacle, never graspable). Cached grasp ends are dropped."""
         self.scenario = scenario
-        self.scene = CollisionScene(scenario)
+        self.lying, self.gone = dict(lying or {}), frozenset(gone)
+        self.scene = self._collision_scene()
         self._pick_end.clear()
         self._stage_refs.clear()
+
+    def _collision_scene(self, placed: Sequence[tuple[str, tuple[float, float]]] = ()) -> CollisionScene:
+        """The scenario's collision scene with `placed` on the bottom shelf, the lying bottles as they lie and the
+        gone ones left out."""
+        return CollisionScene(self.scenario, placed, self.lying, self.gone)
+
+    def not_graspable(self, object_id: str) -> str:
+        """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): lying, or off the shelf."""
+        if object_id in self.lying:
+            return f"{object_id} is lying: no side grasp"
+        if object_id in self.gone:
+            return f"{object_id} left the shelf: nothing to grasp"
+        return ""
 
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
@@ -675,7 +700,7 @@ class MotionPlanner:
         if not (s.x_front + b.radius <= x <= s.x_back - b.radius and s.y_min + b.radius <= y <= s.y_max - b.radius):
             raise WorkspaceError(f"{object_id!r} at {(x, y)} is not on the top shelf")
         objs = tuple(dataclasses.replace(o, x=x, y=y) if o.id == object_id else o for o in self.scenario.objects)
-        self.set_scenario(dataclasses.replace(self.scenario, objects=objs, _by_id={}))
+        self.set_scenario(dataclasses.replace(self.scenario, objects=objs, _by_id={}), self.lying, self.gone)
 
 
 def _draw_seed(rng: np.random.Generator | None) -> int | None:

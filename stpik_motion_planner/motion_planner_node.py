@@ -93,10 +93,13 @@ class MotionPlannerNode(Node):
             self.link.close()
 
     def _on_scene(self, msg: ObjectArray) -> None:
-        """Bottles standing on the top shelf replace the planner's; the rest of the scene stays."""
+        """Bottles on the top shelf (standing or lying) replace the planner's, bottles off the shelf leave it; the
+        rest of the scene stays (service.update_scene)."""
         try:
-            changed = self.core.update_scene([(b, o.pose.position.z) for b, o in zip(msg_to_bottles(msg), msg.objects)],
-                                             f"scene on {self.scene_topic}")
+            changed = self.core.update_scene(
+                [(b, o.pose.position.z, (o.pose.orientation.w, o.pose.orientation.x, o.pose.orientation.y,
+                                         o.pose.orientation.z)) for b, o in zip(msg_to_bottles(msg), msg.objects)],
+                f"scene on {self.scene_topic}")
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return

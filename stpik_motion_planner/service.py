@@ -1,13 +1,14 @@
 """What the motion_planner node serves, without ROS (the node only translates messages to and from these calls).
 
 One `MotionPlanner` (not thread-safe: a lock) on the scenario as last perceived: feasibility questions (Eq. 11)
-with every lane's blockers when asked, scene updates from perception (`scene_update.merge_perceived`: the bottle
-being carried and the bottles relocated by this node are not taken from perception until seen back on the top
-shelf), and one relocation at a time (`relocation.relocate` on a `streaming.StreamedArm`, then `relocation.recover`
-after a failure or a cancel). While a relocation runs, its last feedback is sent again every `HEARTBEAT` s when
-nothing new was sent: a plan under load can take the planner's whole wall-clock safety net (carry_timeout, 60 s)
-without a phase change, and the task planner takes `relocate_silence` (10 s) without feedback for a planner that is
-gone. Logging goes to `log(level, text)` (the node's logger).
+with every lane's blockers when asked, scene updates from perception (`scene_update.merge_perceived`: standing and
+lying bottles of the top shelf, bottles gone from it; the bottle being carried and the bottles relocated by this
+node are not taken from perception until seen back on the top shelf), and one relocation at a time
+(`relocation.relocate` on a `streaming.StreamedArm`, then `relocation.recover` after a failure or a cancel). While
+a relocation runs, its last feedback is sent again every `HEARTBEAT` s when nothing new was sent: a plan under
+load can take the planner's whole wall-clock safety net (carry_timeout, 60 s) without a phase change, and the task
+planner takes `relocate_silence` (10 s) without feedback for a planner that is gone. Logging goes to
+`log(level, text)` (the node's logger).
 """
 from __future__ import annotations
 
@@ -21,14 +22,14 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
-from relocation_common.scenario import Bottle, Scenario, UnknownObjectError
+from relocation_common.scenario import Scenario, ScenarioError, UnknownObjectError
 from relocation_common.scene_check import check_scene
 
 from . import goal_check
 from .blockers import lane_blockers
 from .feasibility import MotionPlanner, PlannerParams, PlanningError
 from .relocation import Progress, recover, relocate
-from .scene_update import merge_perceived
+from .scene_update import Perceived, merge_perceived
 from .streaming import Aborted, Cancelled, StreamedArm
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
@@ -65,22 +66,28 @@ class MotionPlannerService:
         self.checks: dict[str, float] = dict(goal_check.DEFAULTS)  # the node sets the parameters'
 
     # -- the scene ------------------------------------------------------------------------------------------
-    def update_scene(self, perceived: Iterable[tuple[Bottle, float]], source: str = "the scene") -> list[str]:
-        """Bottles standing on the top shelf, as (bottle, base height) pairs, replace the planner's; the rest of the
-        scene stays. The ids that changed; ScenarioError for a scene that cannot be (scene_check: unknown or
-        duplicate ids, poses not finite or far from the shelf): the whole message is dropped, nothing changes."""
-        perceived = list(perceived)
-        check_scene(self.base, [(b.id, b.x, b.y, z) for b, z in perceived], source)
-        self.scene.update((b.id, b.x, b.y, z) for b, z in perceived)
-        merged, changed, seen = merge_perceived(self.base.shelf, self.bottles, perceived, self._held)
-        for i in seen:  # seen back on the top shelf (a reset scene): it can be relocated again
+    def update_scene(self, perceived: Iterable[tuple], source: str = "the scene") -> list[str]:
+        """Bottles resting on the top shelf, as (bottle, base height[, orientation (w, x, y, z)]) tuples, replace
+        the planner's: standing, or lying (an obstacle as it lies, never graspable); bottles seen off the shelf
+        leave the planner's scene; the rest stays (scene_update.merge_perceived). The ids that changed;
+        ScenarioError for a scene that cannot be (scene_check: unknown or duplicate ids, poses not finite or far
+        from the shelf; an orientation not finite): the whole message is dropped, nothing changes."""
+        bottles = [Perceived(*p) for p in perceived]
+        check_scene(self.base, [(p.bottle.id, p.bottle.x, p.bottle.y, p.z) for p in bottles], source)
+        bad = next((p.bottle.id for p in bottles if not all(math.isfinite(c) for c in p.quat)), None)
+        if bad is not None:
+            raise ScenarioError(f"{source}: the orientation of {bad} is not finite")
+        self.scene.update((p.bottle.id, p.bottle.x, p.bottle.y, p.z) for p in bottles)
+        m = merge_perceived(self.base.shelf, self.bottles, bottles, self._held, self.planner.lying,
+                            self.planner.gone)
+        for i in m.seen:  # seen back on the top shelf (a reset scene): it can be relocated again
             self.relocated.pop(i, None)
-        if changed:
-            scenario = self.base.with_objects(merged.values())
+        if m.changed:
+            scenario = self.base.with_objects(m.bottles.values())
             with self.plan_lock:
-                self.planner.set_scenario(scenario)
-                self.bottles = merged
-        return changed
+                self.planner.set_scenario(scenario, m.lying, m.gone)
+                self.bottles = m.bottles
+        return m.changed
 
     # -- feasibility (Eq. 11) -------------------------------------------------------------------------------
     def feasibility(self, object_id: str, removed: Iterable[str], timeout: float = 0.0,

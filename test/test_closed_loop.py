@@ -18,12 +18,12 @@ from qtree_task_planner.closed_loop import (
     free_slots,
     remaining_problem,
     scene_from_scenario,
-    tilt_of_quaternion,
     verify_relocation,
 )
 from qtree_task_planner.replan import GeometryCache, RemainingOracle, replan
 from qtree_task_planner.retrieval import execute_sequence
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label, destination_slot
+from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.scenario import parse_scenario
 
 SHELF = {"x_front": 0.45, "depth": 0.40, "width": 0.80, "y_center": 0.0, "board_thickness": 0.02, "top_z": 0.20,
