@@ -1,13 +1,13 @@
 """Which bottles block each grasp lane: the grasp/approach screen of feasibility (paper Sect. 4.1,
 step 1) asked per bottle instead of once for all.
 
-A lane is one approach yaw of `grasp.grasp_yaws`. `MotionPlanner._candidates` keeps a lane when the hand proxy is
-clear at its pre-grasp and along the straight approach (the grasped bottle ignored for palm and fingers on the
-approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each of them, so the
+A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `MotionPlanner._candidates` keeps a lane when the hand
+proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for palm and fingers on
+the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each of them, so the
 lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the screen with
 `removed` gone exactly when all of its blockers are in `removed` (a *certain* BlockerSet). A lane the proxy cannot
-use whatever is removed (out of the planner's workspace or reach, a board, the grasped bottle itself in the
-way) is no lane. Computed once per (scene, object) with every bottle present; a query subtracts its removed set.
+use whatever is removed (out of the planner's workspace or reach, a board, the grasped bottle itself in the way) is
+no lane. Computed once per (scene, object) with every bottle present; a query subtracts its removed set.
 
 When the screen passes and STPIK or RRT-Connect still fail, the lane gets an *uncertain* set: the bottles within
 SUSPECT_MARGIN of the proxy along it (suspects, not a claim).
@@ -23,7 +23,7 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet
 
 from .collision import HAND_PARTS, HandProxy, ObstacleSet
-from .grasp import Grasp, WorkspaceError, grasp_yaws, pose_matrix, side_grasp
+from .grasp import Grasp, WorkspaceError, pose_matrix, side_grasp
 
 SUSPECT_MARGIN = 0.03  # m added to the hand proxy's inflation to name the suspects of an STPIK/RRT failure
 
@@ -35,7 +35,7 @@ def _lanes(planner, object_id: str) -> list[Grasp]:
     """The object's grasps for every yaw inside the arm's reach and the Cartesian planner's box."""
     p = planner.params
     out = []
-    for yaw in grasp_yaws(p.n_yaws, p.max_yaw):
+    for yaw in [y for tier in planner.yaw_tiers() for y in tier]:
         try:
             g = side_grasp(planner.scenario, object_id, yaw, p.pre_grasp_distance)
         except WorkspaceError:
@@ -83,7 +83,8 @@ def static_lanes(planner, object_id: str, margin: float = 0.0) -> tuple[tuple[Gr
     """(grasp, blockers with every bottle present) of each lane some removal can clear, for the proxy inflated
     by `margin` more than the planner's; cached per scene."""
     p = planner.params
-    key = (object_id, p.n_yaws, p.max_yaw, p.pre_grasp_distance, planner.hand_margin, p.resolution, margin)
+    key = (object_id, p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw, p.pre_grasp_distance, planner.hand_margin,
+           p.resolution, margin)
     table = _CACHE.setdefault(planner.scene, {})
     got = table.get(key)
     if got is None:

@@ -51,10 +51,10 @@ from .grasp import (
     check_pose,
     exit_pose,
     grasp_standoff,
-    grasp_yaws,
     home_pose,
     place_poses,
     side_grasp,
+    yaw_tiers,
 )
 from .kinematics import Kinematics
 from .rrt import CartesianRRT, JointRRT, seed_ompl
@@ -62,6 +62,10 @@ from .stpik import Stpik, StpikParams, StpikResult
 from .trajectory import Trajectory
 
 START_RELIEF = 0.0005  # m: margin under a tight start's distance (_carried_models, _carried_hand)
+WHOLE_NUMBERS = ("max_attempts", "n_yaws", "wide_yaws", "seed", "rrt_max_checks", "simplify_checks")
+# left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
+# first tier's draws, and every answer it gives, are those of a planner without the second tier
+UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw")
 
 
 class PlanningError(RuntimeError):
@@ -78,6 +82,8 @@ class PlannerParams:
     max_attempts: int = 6  # sampled paths per query before answering g_U
     n_yaws: int = 3  # approach yaws tried: 0, +max_yaw, -max_yaw, ...
     max_yaw: float = 0.35  # rad
+    wide_yaws: int = 0  # the second tier (grasp.yaw_tiers), tried when the first found nothing; 0: none
+    wide_max_yaw: float = 0.8  # rad
     pre_grasp_distance: float = 0.11  # m back along the approach
     hand_margin: float = 0.012  # m: inflation of the hand proxy in the Cartesian planner
     resolution: float = 0.01  # m: motion checking resolution of the Cartesian planner
@@ -102,15 +108,15 @@ class PlannerParams:
         """Every setting checked once, with its name in the error (ValueError)."""
         positive = ("timeout", "pre_grasp_distance", "resolution", "joint_resolution",
                     "stage_distance", "carry_timeout", "carried_clearance")
-        non_negative = ("max_yaw", "hand_margin", "lift", "drop", "carry_ramp", "carry_accel")
+        non_negative = ("max_yaw", "wide_max_yaw", "hand_margin", "lift", "drop", "carry_ramp", "carry_accel")
         for k in positive + non_negative:
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v < 0 or (v == 0 and k in positive):
                 raise ValueError(f"motion planner parameter {k} must be a finite number "
                                  f"{'> 0' if k in positive else '>= 0'}, got {v!r}")
-        for k in ("max_attempts", "n_yaws", "seed", "rrt_max_checks", "simplify_checks"):
-            v, least = getattr(self, k), {"seed": None, "simplify_checks": 0}.get(k, 1)
+        for k in WHOLE_NUMBERS:
+            v, least = getattr(self, k), {"seed": None, "simplify_checks": 0, "wide_yaws": 0}.get(k, 1)
             if isinstance(v, bool) or not isinstance(v, int) or (least is not None and v < least):
                 raise ValueError(f"motion planner parameter {k} must be an integer"
                                  f"{'' if least is None else f' >= {least}'}, got {v!r}")
@@ -139,7 +145,7 @@ class PlannerParams:
                 kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
             else:
                 raise ValueError(f"motion planner parameter {k!r} is unknown; known: {sorted(own)} and stpik.*")
-        for k in ("max_attempts", "n_yaws", "seed", "rrt_max_checks", "simplify_checks"):  # whole numbers only
+        for k in WHOLE_NUMBERS:  # whole numbers only
             if isinstance(kw.get(k), float) and kw[k].is_integer():
                 kw[k] = int(kw[k])
         for k in ("direct_first", "seed_per_query", "screen_at_clearance", "certify_relocation"):
@@ -315,7 +321,7 @@ class MotionPlanner:
         if not self.params.seed_per_query:
             return None
         sc = self.scenario
-        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in ("timeout", "carry_timeout")}
+        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED}
         parts = [repr(sc.shelf), repr(sc.objects), repr(sc.slots), repr(sorted(params.items()))]
         if self.lying or self.gone:  # a standing scene's questions keep their seeds (the committed caches)
             parts += [repr(sorted(self.lying.items())), repr(sorted(self.gone))]
@@ -330,15 +336,19 @@ class MotionPlanner:
         return np.random.default_rng(int.from_bytes(digest[:16], "little"))
 
     # ---------------------------------------------------------------- Cartesian validity
-    def _candidates(self, object_id: str, obs: ObstacleSet) -> list[Grasp]:
-        """Grasps whose pre-grasp and straight approach are clear for the hand (the target excluded for the
-        palm and fingers on the approach only)."""
+    def yaw_tiers(self) -> list[list[float]]:
+        """The approach yaws, tier by tier (grasp.yaw_tiers)."""
         p = self.params
+        return yaw_tiers(p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw)
+
+    def _candidates(self, object_id: str, obs: ObstacleSet, yaws: list[float] | None = None) -> list[Grasp]:
+        """Grasps (of `yaws`, default every tier's) whose pre-grasp and straight approach are clear for the hand
+        (the target excluded for the palm and fingers on the approach only)."""
         skip = {n: frozenset([object_id]) for n in HAND_PARTS}
         out = []
-        for yaw in grasp_yaws(p.n_yaws, p.max_yaw):
+        for yaw in [y for tier in self.yaw_tiers() for y in tier] if yaws is None else yaws:
             try:
-                g = side_grasp(self.scenario, object_id, yaw, p.pre_grasp_distance)
+                g = side_grasp(self.scenario, object_id, yaw, self.params.pre_grasp_distance)
             except WorkspaceError:
                 if yaw == 0.0:
                     raise
@@ -405,7 +415,8 @@ class MotionPlanner:
         return FeasibilityAnswer(ok_label, dt, attempts, msg, traj)
 
     def _pick(self, object_id, removed, deadline, stats) -> tuple[Trajectory | None, int, str]:
-        p = self.params
+        """Home -> pre-grasp -> grasp for the yaws of the first tier; if none gave one, for the second
+        (yaw_tiers): (trajectory or None, attempts, message). A lying or gone bottle: none (not_graspable)."""
         why = self.not_graspable(object_id)
         if why:
             return None, 0, why
@@ -414,13 +425,30 @@ class MotionPlanner:
         except WorkspaceError as e:  # it could be grasped but not carried away: not a relocation
             return None, 0, str(e)
         obs = self.scene.obstacles(removed)
-        cands = self._candidates(object_id, obs)
-        if not cands:
+        attempts, last = 0, ""
+        for tier, yaws in enumerate(self.yaw_tiers()):
+            cands = self._candidates(object_id, obs, yaws)
+            if not cands:
+                continue
+            # the first tier's draws are those of a planner without the second (UNSEEDED)
+            rng = self.question_rng("pick", object_id, removed, *(["wide"] if tier else []))
+            budget = self.params.max_attempts if tier == 0 else max(self.params.max_attempts, len(cands))
+            traj, n, last = self._pick_lanes(object_id, removed, obs, cands, budget, rng, deadline, stats)
+            attempts += n
+            if traj is not None:
+                return traj, attempts, last
+        if not attempts:
             return None, 0, "no collision-free pre-grasp and approach for any yaw"
+        return None, attempts, f"{attempts} attempts failed; last: {last}"
+
+    def _pick_lanes(self, object_id, removed, obs, cands: list[Grasp], budget: int, rng, deadline,
+                    stats) -> tuple[Trajectory | None, int, str]:
+        """Up to `budget` sampled paths over the grasps `cands` in turn (each one's direct path first):
+        (trajectory or None, attempts, the grasp used or the last failure)."""
+        p = self.params
         skip = {n: frozenset([object_id]) for n in HAND_PARTS}
         attempts, last = 0, ""
-        rng = self.question_rng("pick", object_id, removed)
-        while attempts < p.max_attempts:
+        while attempts < budget:
             g = cands[attempts % len(cands)]
             first = attempts < len(cands)
             attempts += 1
@@ -447,7 +475,7 @@ class MotionPlanner:
                 Trajectory.from_steps(r2.q, r2.qdot, r2.dt, "approach")).resample()
             self._pick_end[(object_id, removed)] = r2.q[-1]
             return traj, attempts, f"yaw {g.yaw:+.2f}, {len(path)} waypoints"
-        return None, attempts, f"{attempts} attempts failed; last: {last}"
+        return None, attempts, last
 
     def _certify(self, object_id: str, removed: frozenset[str], q_grasp) -> str:
         """'' if the rest of the relocation from the grasp q_grasp plans (carry to slot len(removed) with the removed

@@ -83,6 +83,14 @@ def grasp_yaws(n: int, max_yaw: float) -> list[float]:
     return out
 
 
+def yaw_tiers(n: int, max_yaw: float, wide_n: int = 0, wide_max_yaw: float = 0.0) -> list[list[float]]:
+    """The approach yaws in the order they are tried: grasp_yaws(n, max_yaw) first; then, only for a question none
+    of those answered, the yaws of grasp_yaws(wide_n, wide_max_yaw) not already tried (the wider grasp set)."""
+    first = grasp_yaws(n, max_yaw)
+    wide = [y for y in grasp_yaws(wide_n, wide_max_yaw) if all(abs(y - f) > 1e-9 for f in first)] if wide_n else []
+    return [first, wide] if wide else [first]
+
+
 def side_grasp(scenario: Scenario, object_id: str, yaw: float, pre_grasp_distance: float) -> Grasp:
     """Grasp and pre-grasp poses of a bottle on the top shelf for one approach yaw."""
     b = scenario.object(object_id)

@@ -87,6 +87,7 @@ def test_a_nudge_after_the_first_relocation_is_seen_and_re_planned_around(tmp_pa
     assert end["arm_home"] and end["gripper_empty"], end
 
 
+@pytest.mark.extended  # 30 s: the open-loop executor's failure is also checked without processes (test_closed_loop)
 def test_the_open_loop_baseline_fails_on_the_same_disturbance(tmp_path):
     result, out, records, final, wall, log, end = _run(tmp_path, closed_loop=False)
     print(f"open loop: {wall:.0f} s; {result.message}")

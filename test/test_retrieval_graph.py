@@ -19,7 +19,7 @@ def test_demo_retrieves_the_target_of_a_five_obstacle_scene(tmp_path):
     domain, lock = reserve_domain_id()
     try:
         cmd = [sys.executable, "-m", "relocation_app.demo", "--scenario", str(SCENARIO),
-               "--out", str(tmp_path), "--seed", "1", "--timeout", "600"]
+               "--out", str(tmp_path), "--seed", "1", "--timeout", "600", "--no-record"]  # test_recording records
         env = dict(os.environ, QTREE_DOMAIN_ID=str(domain))
         proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
     finally:

@@ -20,7 +20,7 @@ pytestmark = pytest.mark.graph
 SRV = "/motion_planner/plan_feasibility"
 
 
-@pytest.mark.parametrize("burst", [50, 200])
+@pytest.mark.parametrize("burst", [50, pytest.param(200, marks=pytest.mark.extended)])
 def test_a_burst_of_concurrent_requests_is_answered_in_full(tmp_path, burst):
     with RosGraph(tmp_path) as g:
         planner = g.start("stpik_motion_planner.motion_planner_node",
