@@ -119,7 +119,7 @@ def test_small_sweep_resume_and_report(tmp_path, params):
     assert (tmp_path / "docs" / "figures" / "tree_scenario1_5.png").stat().st_size > 1000
     assert "| scenario1_5 | 5 |" in md
     # the paper's numbers beside ours, the complete tree, findings judged on both
-    assert "| scenario1_5 | 5 | 84 / 357 (4.2) | 10 / 155 |" in md
+    assert "| scenario1_5 | 5 | 84 / 442 (5.3) | 10 / 203 |" in md
     beside = md.split("## Table 1 beside the paper: scenario1_5")[1].split("**MP_q**")[0]
     assert re.search(r"\| LRND_b \| 511 / \d+ \([\d.e+]+\) \|", beside)
     assert "| finding | the paper's numbers | ours: this project's geometry |" in md
