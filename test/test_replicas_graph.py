@@ -69,7 +69,7 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
 
 
 def test_a_table_filled_through_two_replicas_equals_the_committed_one(tmp_path):
-    """`python -m relocation_app.evaluation fill --replicas 2`: scenario1_5's 84 answers asked of two planner
+    """`python -m relocation_app.evaluation fill --replicas 2`: scenario1_5's 96 answers asked of two planner
     processes over ROS, one in flight each, equal the committed table (filled in-process)."""
     from relocation_app.evaluation.__main__ import planner_params
     from relocation_app.evaluation.feasibility_cache import fill_reachable, open_table
@@ -81,8 +81,8 @@ def test_a_table_filled_through_two_replicas_equals_the_committed_one(tmp_path):
     table, _ = open_table(scenario, params, tmp_path / "feasibility")
     with replica_oracle(path, 2, params.timeout, tmp_path / "run") as oracle:
         st = fill_reachable(scenario, params, table, progress=False, oracle=oracle)
-    assert st["real_calls"] == len(table.entries) == len(committed.entries) == 84
-    assert all(oracle.answers) and sum(oracle.answers) == 84, oracle.summary()
+    assert st["real_calls"] == len(table.entries) == len(committed.entries) == 96
+    assert all(oracle.answers) and sum(oracle.answers) == 96, oracle.summary()
     assert {k: v[0] for k, v in table.entries.items()} == {k: v[0] for k, v in committed.entries.items()}
 
 
@@ -118,5 +118,5 @@ def test_the_example_script_finds_the_optimum_over_two_running_planners(tmp_path
         out = subprocess.run([sys.executable, str(script), "--scenario", str(default_scenario()), "--replicas", "2"],
                              env=g.env, capture_output=True, text=True, timeout=180)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert "optimum o2 -> o3 -> o6 -> T (weight 1.14" in out.stdout, out.stdout
+    assert "optimum o2 -> o6 -> T (weight 0.91" in out.stdout, out.stdout  # a second-tier lane of T
     assert re.search(r"/replica_1/motion_planner/plan_feasibility: [1-9]\d* answers", out.stdout), out.stdout
