@@ -39,11 +39,11 @@ def test_complete_tree_matches_the_definition_on_a_blocking_scene():
 
 
 def test_complete_tree_of_scenario1_is_lrnd_mpq():
-    """scenario1_5's LRND MP_q is 357 at alpha < 1 (LRND completes the tree; docs/evaluation.md quotes 357)."""
+    """scenario1_5's LRND MP_q is 442 at alpha < 1 (LRND completes the tree; docs/evaluation.md quotes 442)."""
     sc = load_scenario(SCEN_DIR / "scenario1_5.yaml")
     table, _ = open_table(sc, planner_params(), data_dir() / "feasibility")
     size = complete_tree.of_table(table, sc)
-    assert size.edges == 357
+    assert size.edges == 442
     partial = FeasibilityTable("k")
     partial.put("T", frozenset(), Label.UNFEASIBLE)
     with pytest.raises(ValueError, match="no answer"):
@@ -87,5 +87,5 @@ def test_closing_note_names_sizes_and_both_verdicts():
     table, _ = open_table(sc, planner_params(), data_dir() / "feasibility")
     found = [("the paper's numbers", [("claim A", "reproduced", "")]), ("ours", [])]
     note = paper_report.closing_note({"scenario1_5": (sc, table, None)}, [], ["scenario1_5"], found)
-    assert "scenario1_5 357 edges / 155 target leaves / 1 optimal (paper 84 / 10 / 1)" in note
+    assert "scenario1_5 442 edges / 203 target leaves / 1 optimal (paper 84 / 10 / 1)" in note
     assert "- claim A: the paper's numbers **reproduced**; ours **not checked**." in note

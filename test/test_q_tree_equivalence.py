@@ -4,8 +4,9 @@ test/data/qtree_reference.json was recorded with the pure-dict implementation of
 training.py as it was before the speed-up (commit 54e462d), by running this file as a script:
     PYTHONPATH=. .venv/bin/python test/test_q_tree_equivalence.py --record
 Each case is a full TrainingParams (explicit, independent of config/task_planner.yaml) on a scene with a
-deterministic oracle (blocking_5/10/15 with BlockingOracle; scenario1_5 and scenario2_10 with the cached real
-planner answers of data/feasibility/). Compared exactly: sequence, total_weight, episodes, converged, E_ss,
+deterministic oracle (blocking_5/10/15 with BlockingOracle; scenario1_5 and scenario2_10 with the real planner's
+answers of the committed caches it was recorded with, kept in test/data/qtree_reference_tables/: the planner's
+parameters have changed since, and with them data/feasibility/). Compared exactly: sequence, total_weight, episodes, converged, E_ss,
 MP_q, planner calls, E_1st, tree size, the Eq. 15 history (every float, by its IEEE bits) and the whole tree
 (QTree.to_state(), every Q by its bits). The one engine (the C kernel, qtree_task_planner/kernel.py, through
 training.train) is checked against it in one batch, in batches between callbacks and with checkpoints; the
@@ -32,6 +33,7 @@ from relocation_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "test" / "data" / "qtree_reference.json"
+TABLES = ROOT / "test" / "data" / "qtree_reference_tables"  # the committed feasibility caches of the recording
 ALGORITHMS = [(p, s) for p in ("lrnd", "h-lrnd", "h-eg") for s in ("breadth", "depth")]
 BASE = dict(alpha=0.5, gamma=1.0, epsilon0=1.0, epsilon_min=1e-3, max_episodes=1500, max_steps=100, beta=0.01,
             quiet_episodes=20)
@@ -83,14 +85,9 @@ def setting(scene: str):
         sc = load_scenario(scenarios_dir() / f"{scene}.yaml")
         if scene.startswith("blocking"):
             oracle = BlockingOracle(sc)
-        else:
-            from relocation_app.evaluation.__main__ import planner_params
-            from relocation_app.evaluation.feasibility_cache import PlannerOracle, cache_key, cache_path, load_table
-            params = planner_params()
-            path = cache_path(sc, params)
-            if not path.exists():
-                pytest.skip(f"no feasibility cache {path.name}")
-            oracle = PlannerOracle(sc, None, load_table(path, cache_key(sc, params)))
+        else:  # the tables the fixture was recorded with, whatever the planner's parameters are today
+            from relocation_app.evaluation.feasibility_cache import PlannerOracle, load_table
+            oracle = PlannerOracle(sc, None, load_table(TABLES / f"{scene}.json"))
         problem = RelocationProblem.from_scenario(sc)
         _SCENES[scene] = (problem, oracle, exact.solve(problem, oracle).total_weight)
     return _SCENES[scene]

@@ -24,8 +24,9 @@ REPO = Path(__file__).resolve().parent.parent
 REFERENCE = REPO / "test" / "data" / "stpik_reference.json"
 CLEARANCE_TOL = 1e-9  # m: float noise only
 # the planner parameters the reference was recorded with (the defaults of the time): 3 approach yaws up to 0.35
-# rad, OMPL's process RNG, the screen at hand_margin, the pick alone certified
-RECORDED = dict(n_yaws=3, max_yaw=0.35, seed_per_query=False, screen_at_clearance=False, certify_relocation=False)
+# rad and no second tier, OMPL's process RNG, the screen at hand_margin, the pick alone certified
+RECORDED = dict(n_yaws=3, max_yaw=0.35, wide_yaws=0, seed_per_query=False, screen_at_clearance=False,
+                certify_relocation=False)
 
 # scenario3_15 queries whose answers needed RRT-Connect with the RECORDED parameters
 RRT_QUERIES = [("o15", ["o1", "o10", "o11", "o13", "o14", "o3", "o4", "o7", "o9"]),
