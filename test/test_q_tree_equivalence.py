@@ -6,10 +6,10 @@ training.py as it was before the speed-up (commit 54e462d), by running this file
 Each case is a full TrainingParams (explicit, independent of config/task_planner.yaml) on a scene with a
 deterministic oracle (blocking_5/10/15 with BlockingOracle; scenario1_5 and scenario2_10 with the real planner's
 answers of the committed caches it was recorded with, kept in test/data/qtree_reference_tables/: the planner's
-parameters have changed since, and with them data/feasibility/). Compared exactly: sequence, total_weight, episodes, converged, E_ss,
-MP_q, planner calls, E_1st, tree size, the Eq. 15 history (every float, by its IEEE bits) and the whole tree
-(QTree.to_state(), every Q by its bits). The one engine (the C kernel, qtree_task_planner/kernel.py, through
-training.train) is checked against it in one batch, in batches between callbacks and with checkpoints; the
+parameters have changed since, and with them data/feasibility/). Compared exactly: sequence, total_weight, episodes,
+converged, E_ss, MP_q, planner calls, E_1st, tree size, the Eq. 15 history (every float, by its IEEE bits) and the
+whole tree (QTree.to_state(), every Q by its bits). The one engine (the C kernel, qtree_task_planner/kernel.py,
+through training.train) is checked against it in one batch, in batches between callbacks and with checkpoints; the
 reference loop (policies.py + QTree.step, test/qtree_reference.py) is checked against it too.
 """
 from __future__ import annotations
