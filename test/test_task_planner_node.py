@@ -90,7 +90,7 @@ def _train_goal(node, g, **fields):
             return [m.feedback for m in raw if bytes(m.goal_id.uuid) == bytes(handle.goal_id.uuid)]
 
         deadline = time.monotonic() + 5  # feedback published before the result may still be on its way
-        while not any(f.phase == "training" and f.episode > result.episodes - FEEDBACK_EVERY for f in mine()) \
+        while result.episodes > 0 and not any(f.phase == "training" and f.episode > result.episodes - FEEDBACK_EVERY for f in mine()) \
                 and time.monotonic() < deadline:
             time.sleep(0.05)
         return result, mine()
