@@ -90,8 +90,11 @@ def _train_goal(node, g, **fields):
             return [m.feedback for m in raw if bytes(m.goal_id.uuid) == bytes(handle.goal_id.uuid)]
 
         deadline = time.monotonic() + 5  # feedback published before the result may still be on its way
-        while result.episodes > 0 and not any(f.phase == "training" and f.episode > result.episodes - FEEDBACK_EVERY for f in mine()) \
-                and time.monotonic() < deadline:
+        def fed() -> bool:  # a goal that never trained (refused) sends no training feedback
+            last = result.episodes - FEEDBACK_EVERY
+            return result.episodes == 0 or any(f.phase == "training" and f.episode > last for f in mine())
+
+        while not fed() and time.monotonic() < deadline:
             time.sleep(0.05)
         return result, mine()
     finally:
