@@ -35,7 +35,7 @@ def _lanes(planner, object_id: str) -> list[Grasp]:
     """The object's grasps for every yaw inside the arm's reach and the Cartesian planner's box."""
     p = planner.params
     out = []
-    for yaw in [y for tier in planner.yaw_tiers() for y in tier]:
+    for yaw in planner.all_yaws():
         try:
             g = side_grasp(planner.scenario, object_id, yaw, p.pre_grasp_distance)
         except WorkspaceError:

@@ -239,8 +239,9 @@ class MotionPlanner:
         """(carried bottle, arm holding it out of the shelf, arm holding it in to the slot). The bottle is modelled
         on the hand where the tool stopped at the grasp (STPIK's final tolerance, up to 4 mm from the bottle's
         perceived place); where that model stands closer to a neighbour than `carried_clearance`, the lift and
-        the way out keep that start distance less START_RELIEF as the bound, whatever it is (a model in contact
-        within the perception and STPIK tolerances included): lifted straight up and then drawn back, the bottle
+        the way out keep that start distance less START_RELIEF (less half of it under 2 x START_RELIEF: the bound
+        never allows contact) as the bound, whatever it is (a model in contact within the perception and STPIK
+        tolerances included): lifted straight up and then drawn back, the bottle
         may never come closer to anything than it already stood, and STPIK checks that it does not. Otherwise the
         start would fail the bound at once and the pick would be refused for the model's offset. A model that
         penetrates a neighbour at the start (no distance to keep) keeps the full bound: refused."""
@@ -254,7 +255,7 @@ class MotionPlanner:
         gap = min(near, default=math.inf)
         if gap >= p.carried_clearance or gap == PENETRATION:
             return carried, arm_c, arm_c
-        start = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), gap - START_RELIEF)
+        start = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), gap - min(START_RELIEF, gap / 2))
         return carried, ArmGeometry(self.kin, [start]), arm_c
 
     def _carried_hand(self, carried, lifted, obs: ObstacleSet, floor: float) -> HandProxy:
@@ -341,12 +342,16 @@ class MotionPlanner:
         p = self.params
         return yaw_tiers(p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw)
 
+    def all_yaws(self) -> list[float]:
+        """Every approach yaw of both tiers, in the order they are tried (the lanes of blockers.py)."""
+        return [y for tier in self.yaw_tiers() for y in tier]
+
     def _candidates(self, object_id: str, obs: ObstacleSet, yaws: list[float] | None = None) -> list[Grasp]:
         """Grasps (of `yaws`, default every tier's) whose pre-grasp and straight approach are clear for the hand
         (the target excluded for the palm and fingers on the approach only)."""
         skip = {n: frozenset([object_id]) for n in HAND_PARTS}
         out = []
-        for yaw in [y for tier in self.yaw_tiers() for y in tier] if yaws is None else yaws:
+        for yaw in self.all_yaws() if yaws is None else yaws:
             try:
                 g = side_grasp(self.scenario, object_id, yaw, self.params.pre_grasp_distance)
             except WorkspaceError:

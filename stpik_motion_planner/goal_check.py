@@ -111,7 +111,8 @@ def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: M
     placed = placed_bottles(scenario.shelf, scenario.slots, seen, relocated)
     free = free_slots(scenario.slots, placed, 2 * max(b.radius for b in scenario.objects))
     if not free:
-        raise _no_free_slot(len(scenario.slots), placed)
+        taken = ", ".join(i for i, _ in placed)
+        raise ValueError(f"no free slot on the bottom shelf: all {len(scenario.slots)} slots are taken ({taken})")
     return destination_slot(n_removed, free), placed
 
 
@@ -129,19 +130,6 @@ def free_slots(slots: Sequence[tuple[float, float]], placed: Sequence[tuple[str,
     """The slots with no placed bottle's axis within `clearance` (two radii: the bottles would touch)."""
     return [k for k, (x, y) in enumerate(slots)
             if all(math.hypot(x - px, y - py) >= clearance for _, (px, py) in placed)]
-
-
-def free_slot(slots: Sequence[tuple[float, float]], placed: Sequence[tuple[str, tuple[float, float]]],
-              clearance: float) -> int:
-    """The first of `free_slots`. ValueError when every slot is taken."""
-    free = free_slots(slots, placed, clearance)
-    if not free:
-        raise _no_free_slot(len(slots), placed)
-    return free[0]
-
-
-def _no_free_slot(n: int, placed: Sequence[tuple[str, tuple[float, float]]]) -> ValueError:
-    return ValueError(f"no free slot on the bottom shelf: all {n} slots are taken ({', '.join(i for i, _ in placed)})")
 
 
 def outcome_problems(shelf: Shelf, before: Mapping[str, SeenBottle], after: Mapping[str, SeenBottle],

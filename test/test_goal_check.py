@@ -42,13 +42,14 @@ def test_the_destination_is_a_free_slot_of_the_scene_not_the_count_of_removed():
     scene = _scene(o2=(*SLOTS[0], SHELF.bottom_z))
     placed = gc.placed_bottles(SHELF, SLOTS, scene, {})
     assert placed == [("o2", SLOTS[0])]
-    assert gc.free_slot(SLOTS, placed, CLEAR) == 1
+    assert gc.free_slots(SLOTS, placed, CLEAR)[0] == 1
     # this node placed o5 in slot 1 and the scene (perception: top shelf only) does not show it
     placed = gc.placed_bottles(SHELF, SLOTS, {k: v for k, v in scene.items() if k != "o5"}, {"o5": 1})
-    assert gc.free_slot(SLOTS, placed, CLEAR) == 2
+    assert gc.free_slots(SLOTS, placed, CLEAR)[0] == 2
     full = [(f"b{k}", xy) for k, xy in enumerate(SLOTS)]
-    with pytest.raises(ValueError, match="no free slot"):
-        gc.free_slot(SLOTS, full, CLEAR)
+    assert gc.free_slots(SLOTS, full, CLEAR) == []
+    with pytest.raises(ValueError, match="no free slot"):  # every slot taken by bottles this node placed
+        gc.destination(SC, {}, {f"b{k}": k for k in range(len(SLOTS))}, 0)
 
 
 def test_the_destination_is_the_certified_slot_when_it_is_free():
