@@ -57,13 +57,18 @@ def default_scenario() -> Path:
 
 def resolve_scenario(name: str | Path) -> Path:
     """A scenario given as a path (absolute, or relative to the working directory) or as a name under
-    config/scenarios (with or without `.yaml`, e.g. 'random5/random5_00')."""
+    config/scenarios (with or without `.yaml`, e.g. 'random5/random5_00', or 'random5_00' when one file of the
+    tree has that name)."""
     p = Path(name)
     if p.is_file() or p.is_absolute():
         return p
     for cand in (scenarios_dir() / p, scenarios_dir() / p.with_suffix(".yaml"), share_dir() / p):
         if cand.is_file():
             return cand
+    if len(p.parts) == 1:
+        found = sorted(scenarios_dir().rglob(p.with_suffix(".yaml").name))
+        if len(found) == 1:
+            return found[0]
     return p  # let the loader say it cannot be read, naming what was given
 
 
