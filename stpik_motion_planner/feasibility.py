@@ -64,8 +64,10 @@ from .trajectory import Trajectory
 START_RELIEF = 0.0005  # m: margin under a tight start's distance (_carried_models, _carried_hand)
 WHOLE_NUMBERS = ("max_attempts", "n_yaws", "wide_yaws", "seed", "rrt_max_checks", "simplify_checks")
 # left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
-# first tier's draws, and every answer it gives, are those of a planner without the second tier
+# first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
+# tolerance (stpik.*), so that every path that converged without it is drawn and ends as before
 UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw")
+UNSEEDED_STPIK = ("grasp_yaw_tol",)
 
 
 class PlanningError(RuntimeError):
@@ -323,6 +325,7 @@ class MotionPlanner:
             return None
         sc = self.scenario
         params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED}
+        params["stpik"] = {k: v for k, v in params["stpik"].items() if k not in UNSEEDED_STPIK}
         parts = [repr(sc.shelf), repr(sc.objects), repr(sc.slots), repr(sorted(params.items()))]
         if self.lying or self.gone:  # a standing scene's questions keep their seeds (the committed caches)
             parts += [repr(sorted(self.lying.items())), repr(sorted(self.gone))]
@@ -388,10 +391,11 @@ class MotionPlanner:
         return path
 
     def _track(self, q0, path, obs, deadline, stats, skip=None, arm: ArmGeometry | None = None,
-               speed: float | None = None, ramp: float = 0.0, accel: float = 0.0) -> StpikResult:
+               speed: float | None = None, ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0
+               ) -> StpikResult:
         t = time.perf_counter()
         stpik = self.stpik if arm is None else Stpik(self.kin, arm, self.params.stpik)
-        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel)
+        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel, yaw_tol=yaw_tol)
         stats.stpik_time += time.perf_counter() - t
         if not r.ok:
             stats.stpik_reject.append(r.reason)
@@ -467,7 +471,7 @@ class MotionPlanner:
                 last = f"STPIK rejected the path to the pre-grasp: {r1.reason}"
                 continue
             r2 = self._track(r1.q[-1], [np.array(g.pre_grasp), np.array(g.grasp)], obs, deadline, stats, skip,
-                             speed=p.stpik.approach_speed)
+                             speed=p.stpik.approach_speed, yaw_tol=p.stpik.grasp_yaw_tol)
             if not r2.ok:
                 last = f"STPIK rejected the approach: {r2.reason}"
                 continue

@@ -55,6 +55,7 @@ class StpikParams:
     track_tol: float = 0.03  # m along the path
     final_tol_pos: float = 0.004  # m at the end of the path
     final_tol_ori: float = 0.03  # rad
+    grasp_yaw_tol: float = 0.06  # rad about the vertical, at a grasp that did not converge within final_tol_ori
     settle_time: float = 1.0  # s allowed after the reference ends
     step_budget: float = 3.0  # IK steps allowed, in multiples of the reference's nominal steps (accepted: <= 1.22)
     damping: float = 0.05
@@ -148,6 +149,7 @@ class _Run:
     rate: float = 0.0  # speed of the reference as a fraction of its nominal speed (ramp > 0)
     min_clear: float = math.inf
     min_self: float = math.inf
+    yaw_tol: float = 0.0  # > 0: the goal's yaw tolerance once the settle time is spent (Stpik.track)
 
 
 class _Reject(Exception):
@@ -179,8 +181,12 @@ class Stpik:
 
     def track(self, q0, path: list[np.ndarray], obs: ObstacleSet, deadline: float,
               skip: dict[str, frozenset] | None = None, posture=None, speed: float | None = None,
-              ramp: float = 0.0, accel: float = 0.0) -> StpikResult:
+              ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0) -> StpikResult:
         """Closed-loop IK (Eq. 9) with the hierarchy of Eq. 10 along `path`, from q0.
+        `yaw_tol` > 0 (rad): a goal not reached within final_tol_ori when the settle time is spent is still
+        reached if the tool is within final_tol_pos, its tilt within final_tol_ori and its rotation about the
+        vertical within yaw_tol (a side grasp of a cylinder: `grasp_yaw_tol`). Every path that converged before
+        converges as before, on the same steps.
         `ramp` > 0 (s): the reference accelerates from rest to its speed in `ramp` and decelerates to stop at
         every waypoint (trapezoidal in each segment) instead of starting at full speed and turning each corner at
         once. `accel` > 0 (rad/s^2): no joint velocity changes faster, also when a set-based task enters (a task
@@ -193,7 +199,7 @@ class Stpik:
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
         # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
         bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
-        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer)
+        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol)
         run.qs.append(run.q.copy())
         nominal = times[-1] + ramp * (len(path) - 1)  # a ramp adds about `ramp` s per segment
         max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
@@ -251,6 +257,9 @@ class Stpik:
         if run.tau >= t_end:
             run.settle += p.dt
             if run.settle > p.settle_time:
+                if run.yaw_tol > 0.0 and ep_n < p.final_tol_pos and math.hypot(e_o[0], e_o[1]) < p.final_tol_ori \
+                        and abs(e_o[2]) < run.yaw_tol:
+                    raise _Reject("reached")  # e_o is in the world frame: e_o[2] is the error about the vertical
                 raise _Reject("did not converge at the goal")
         cands = self._set_tasks(run, obs, skip)
         # Eq. 9 references of the equality tasks
