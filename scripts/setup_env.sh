@@ -57,7 +57,11 @@ step requirements requirements.txt requirements-build.txt -- pip_install -r requ
 install_project() {
   pip_install --no-deps -e . > "$STAMPS/project.log" 2>&1 || { tail -30 "$STAMPS/project.log"; exit 1; }
 }
+# The stamp holds the checkout the install points to: a venv shared with a git worktree (a symlink) that `./run`
+# repointed there is pointed back at this checkout by its next `./run`.
+[ "$(cat "$STAMPS/project" 2>/dev/null)" = "$ROOT" ] || rm -f "$STAMPS/project"
 step project setup.py setup.cfg -- install_project
+echo "$ROOT" > "$STAMPS/project"
 
 # Interface packages under msg_defs/, each built with plain cmake (build dir build/<pkg>) and installed
 # into the venv itself, so no environment setup is needed to import them:
