@@ -209,4 +209,23 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
             return (f"{t} cannot be reached: every sequence left needs a failed option or more slots than are free "
                     f"(the best without those limits, {' '.join(free.sequence)}, {'; '.join(why)})")
     return (f"{t} cannot be reached: no feasible relocation sequence over the {n} obstacle{'s' * (n != 1)} "
-            f"on the top shelf ({cache.calls - calls0} planner calls)")
+            f"on the top shelf ({cache.calls - calls0} planner calls){lying_reason(rp, cache)}")
+
+
+def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
+    """What the bottles lying on the top shelf have to do with a failed re-plan, for its one line ("" without
+    any): the target lying, every lane of the target holding a lying bottle (the planner's lane screen: no
+    planner call), or only their names. The side grasp takes standing bottles only (closed_loop.RemainingProblem.
+    tipped are banned options), so a lying bottle stays where it is."""
+    if not rp.tipped or rp.problem is None:
+        return ""
+    t, lying = rp.problem.target, frozenset(rp.tipped)
+    if t in lying:
+        return f"; {t} itself lies on its side, and the side grasp takes standing bottles only"
+    lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset())
+    t_lanes = None if lanes is None else lanes.get(t)
+    if t_lanes and all(b.certain and b.objects & lying for b in t_lanes):
+        inside = sorted(frozenset().union(*(b.objects for b in t_lanes)) & lying)
+        return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(inside)}), and the side grasp "
+                "takes standing bottles only")
+    return f"; lying on its side, not graspable: {', '.join(sorted(lying))}"

@@ -197,8 +197,7 @@ def prove(row: dict, draws: int = 1) -> str:
         else:
             found.append(answer)
     if not found:
-        return f"no retrieval exists (proven: {why}" + (f" in {draws} planner draws" if draws > 1 else "") + (
-            f"; lying, not graspable: {', '.join(rp.tipped)})" if rp.tipped else ")")
+        return f"no retrieval exists (proven: {why}" + (f" in {draws} planner draws)" if draws > 1 else ")")
     best = min(found, key=lambda a: a[1])
     return f"a retrieval existed: {' '.join(best[0])} (weight {best[1]:.2f})" + (
         f" in {len(found)}/{draws} planner draws" if draws > 1 else "")
