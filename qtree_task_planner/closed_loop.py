@@ -290,7 +290,8 @@ class Option:
         return object_id == self.object_id and (self.removed is None or self.removed == frozenset(removed))
 
 
-ReplanAnswer = tuple[tuple[str, ...], float, int]  # (sequence, weight (Eq. 8), planner calls it cost)
+ReplanAnswer = tuple[tuple[str, ...], float, int] | tuple[tuple[str, ...], float, int, str]  # (sequence, weight
+# (Eq. 8), planner calls it cost[, a note: how the Q-Tree retrained on the remaining problem did, replan.relearn])
 Replanner = Callable[[RemainingProblem, frozenset[Option]], "ReplanAnswer | str"]
 
 
@@ -303,18 +304,19 @@ class ReplanRecord:
     weight: float | None
     calls: int
     failure: str = ""
+    note: str = ""  # the retrained Q-Tree's outcome (replan.relearn), when asked for
 
     def to_dict(self) -> dict[str, Any]:
         """An entry of the result's (and report.json's) `replans`."""
         d: dict[str, Any] = {"reason": self.reason, "sequence": list(self.sequence) if self.sequence else None,
                              "weight": self.weight, "calls": self.calls}
-        return {**d, "failure": self.failure} if self.failure else d
+        return {**d, **{k: v for k, v in (("failure", self.failure), ("note", self.note)) if v}}
 
     def line(self) -> str:
         """One line for the feedback: why, and the new sequence with its weight (or why there is none)."""
         got = f"{' '.join(self.sequence)} (weight {self.weight:.2f})" if self.sequence and self.weight is not None \
             else self.failure
-        return f"re-plan: {self.reason} -> {got}"
+        return f"re-plan: {self.reason} -> {got}" + (f" ({self.note})" if self.note else "")
 
 
 @dataclass(frozen=True)
@@ -506,13 +508,14 @@ class ClosedLoopExecutor:
             out.replans.append(ReplanRecord(reason, None, None, 0, answer))
             self.on_replan(out.replans[-1])
             raise GiveUp(f"no sequence remains: {answer} (re-planned because {reason})")
-        seq, weight, calls = answer
+        seq, weight, calls, *note = answer
         problem = rp.problem
         assert problem is not None
         bad = (check_capacity(seq, len(rp.free_slots)) or _invalid(seq, problem)
                or next((f"it relocates {o} again, a failed option" for o, s in _options(seq, rp.gone)
                         if any(b.bans(o, s) for b in self._banned)), None))
-        out.replans.append(ReplanRecord(reason, tuple(seq), weight, calls, f"refused: {bad}" if bad else ""))
+        out.replans.append(ReplanRecord(reason, tuple(seq), weight, calls, f"refused: {bad}" if bad else "",
+                                        note[0] if note else ""))
         self.on_replan(out.replans[-1])
         if bad:
             raise GiveUp(f"the re-planner proposed a sequence that cannot be executed: {bad}")

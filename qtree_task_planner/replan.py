@@ -13,16 +13,21 @@ object removed.
 answers g_U, without asking, for a failed option (closed_loop.Option) and for a relocation that would need more
 slots than are free: the A* then returns the least-weight sequence that fits the bottom shelf, still proven
 optimal under that constraint, or none.
+
+`relearn` trains the Q-Tree again on a remaining problem (Eq. 7), over the same oracle, when the user asks for it
+(the task planner's `replan_q_tree`); otherwise a re-plan is the A* alone.
 """
 from __future__ import annotations
 
 import math
-from typing import Iterable, Mapping
+from typing import Callable, Iterable, Mapping
 
 from relocation_common.feasibility import FeasibilityAnswer, Label, ask_many, in_flight
 
 from . import astar
 from .closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances
+from .params import TrainingParams
+from .training import train
 
 Pose = tuple[float, float, float]  # x, y, tilt
 
@@ -229,3 +234,27 @@ def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
         return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(inside)}), and the side grasp "
                 "takes standing bottles only")
     return f"; lying on its side, not graspable: {', '.join(sorted(lying))}"
+
+
+def relearn(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache, params: TrainingParams,
+            exact: ReplanAnswer, keep_going: Callable[[], bool] = lambda: True) -> ReplanAnswer:
+    """The Q-Tree trained again on the remaining problem (Eq. 7, `params`: policy, search, E_max, Eq. 16), asking
+    the re-plan's own oracle (failed options and slots beyond the free ones g_U, answers of unchanged geometry
+    reused), after the A* found `exact` (its optimum: the E_1st reference). The learned sequence is kept when it
+    weighs no more than the A*'s (as retrieval.chosen_sequence), else the A*'s, and the note says which, with
+    both weights, the episodes and whether Eq. 16 was met. keep_going() False stops training (a cancelled goal).
+    The calls are the A*'s and training's together."""
+    if rp.problem is None:
+        raise ValueError(f"no problem to train on: {rp.reason}")
+    seq, weight, calls = exact[:3]
+    calls0 = cache.calls
+    r = train(rp.problem, RemainingOracle(rp, cache, tuple(banned)), params, optimal_weight=weight,
+              callback=lambda stats: keep_going(), callback_every=50)
+    calls += cache.calls - calls0
+    steady = f"{r.e_ss} episodes" + ("" if r.converged else " (E_max or stopped, Eq. 16 not met)")
+    if not r.found or r.total_weight is None:
+        return seq, weight, calls, f"Q-Tree retrained: no sequence in {steady}; executing the A*'s optimum"
+    learned = f"learned {' '.join(r.sequence or ())} (weight {r.total_weight:.2f}) in {steady}"
+    if r.total_weight <= weight + 1e-9:
+        return tuple(r.sequence or ()), r.total_weight, calls, f"Q-Tree retrained: {learned}, executed"
+    return seq, weight, calls, f"Q-Tree retrained: {learned}; executing the A*'s optimum ({weight:.2f}) instead"

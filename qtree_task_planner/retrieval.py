@@ -31,7 +31,7 @@ from .oracles import CachedOracle
 from .outage import PlannerUnavailable
 from .params import TrainingParams
 from .problem import RelocationProblem
-from .replan import GeometryCache, replan
+from .replan import GeometryCache, relearn, replan
 from .training import train
 
 T = TypeVar("T")
@@ -147,13 +147,14 @@ def chosen_sequence(learned, learned_weight: float | None, optimum, optimal_weig
 def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
             perceive: Callable[[], Scene], oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
             before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,
-            on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True
-            ) -> ExecutionResult:
+            on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True,
+            retrain: TrainingParams | None = None) -> ExecutionResult:
     """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
     checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
     with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
     open-loop execution (execute_sequence) after the same capacity check: a sequence needing more slots than
-    are free is never started."""
+    are free is never started. retrain: each re-plan also trains the Q-Tree on the remaining problem with these
+    params (replan.relearn; the user's `replan_q_tree`), else the A* alone."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
         cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry())
@@ -171,7 +172,10 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
             with the reason (before, it escaped the executor: the goal ended with no execution record)."""
             for attempt in range(1, REPLAN_TRIES + 1):
                 try:
-                    return replan(rp, banned, cache)
+                    answer = replan(rp, banned, cache)
+                    if retrain is None or isinstance(answer, str):
+                        return answer
+                    return relearn(rp, banned, cache, retrain, answer, keep_going=lambda: not cancelled())
                 except PlannerUnavailable as e:
                     if attempt == REPLAN_TRIES:
                         raise GiveUp(f"re-plan failed {REPLAN_TRIES} times without a feasibility answer: {e}") from None

@@ -243,12 +243,14 @@ class TaskPlannerNode(Node):
                 result.message += self._foreign_ids(service, problem)
             return
         fb.phase = "executing"  # then each check and re-plan (_run)
-        self._run(goal_handle, fb, result, scene, oracle, *chosen_sequence(
+        self._run(goal_handle, fb, result, scene, oracle, params, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
 
-    def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, sequence, note: str) -> None:
-        """Execute (retrieval.execute, `closed_loop`): checks, re-plans in the feedback; the outcome on ~/execution
+    def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, params, sequence,
+             note: str) -> None:
+        """Execute (retrieval.execute, `closed_loop`; `replan_q_tree`: each re-plan also retrains the Q-Tree with the
+        goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
         executor's: for the closed loop, its scene waits, checks and re-plans)."""
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
@@ -275,7 +277,8 @@ class TaskPlannerNode(Node):
         out = execute(scenario, sequence, seen_scene(scene), relocate, perceive, oracle,
                       closed_loop=self.p("closed_loop"), cancelled=lambda: goal_handle.is_cancel_requested,
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
-                      on_replan=lambda rr: phase(rr.line()), bottom_seen=seen)
+                      on_replan=lambda rr: phase(rr.line()), bottom_seen=seen,
+                      retrain=params if self.p("replan_q_tree") else None)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         if rclpy.ok():  # a goal ended by the node stopping: its publisher's context is gone
             self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note,

@@ -44,6 +44,8 @@ def _args(argv):
                    help="relocate the exact optimum (blocker A*) instead of the Q-Tree's learned sequence")
     p.add_argument("--execute-learned", action="store_true",
                    help="relocate the learned sequence even when it weighs more than the exact optimum")
+    p.add_argument("--replan-q-tree", action="store_true",
+                   help="each re-plan also trains the Q-Tree on the remaining problem (default: the exact A* alone)")
     p.add_argument("--open-loop", action="store_true",
                    help="the paper's open-loop execution: no check of the scene between relocations, no re-plan")
     p.add_argument("--disturb", type=int, default=0, metavar="K",
@@ -126,7 +128,8 @@ def _start_graph(g: Graph, a, scene_topic: str) -> None:
         g.start("perception", common)
     g.start_planners(a.replicas, dict(common, scene_topic=scene_topic))
     g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt), replicas=a.replicas,
-                                 closed_loop=not a.open_loop, execute_learned=a.execute_learned))
+                                 closed_loop=not a.open_loop, execute_learned=a.execute_learned,
+                                 replan_q_tree=a.replan_q_tree))
 
 
 def _disturbance_plan(a):

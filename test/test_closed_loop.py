@@ -20,8 +20,10 @@ from qtree_task_planner.closed_loop import (
     scene_from_scenario,
     verify_relocation,
 )
-from qtree_task_planner.replan import GeometryCache, RemainingOracle, replan
-from qtree_task_planner.retrieval import execute_sequence
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.replan import GeometryCache, RemainingOracle, relearn, replan
+from qtree_task_planner.retrieval import execute, execute_sequence
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label, destination_slot
 from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.scenario import parse_scenario
@@ -305,6 +307,45 @@ def test_a_tipped_bottle_is_never_proposed_for_relocation():
                                 lambda rp, banned: asked.append(banned) or replan(rp, banned, cache)).run(seq)
     assert result.success and result.replans and "d tipped over" in result.replans[0].reason, result.message
     assert asked and all(Option("d", None) in banned for banned in asked)
+
+
+def test_the_q_tree_is_retrained_on_a_replan_only_when_asked():
+    """replan_q_tree (replan.relearn): the re-plan of the nudged-neighbour case trains the Q-Tree on the remaining
+    problem over the re-plan's own oracle and executes its sequence (as light as the A*'s); the record says so.
+    Without it the re-plan is the A* alone (no note), and a training that finds nothing leaves the A*'s."""
+    params = TrainingParams.defaults().replace(policy="h-eg", max_episodes=300, seed=3)
+    runs = {}
+    for name, train_with in (("a_star", None), ("q_tree", params), ("short", params.replace(max_steps=1))):
+        shelf = FakeShelf()
+        cache = GeometryCache(shelf)
+        seq, _, _ = first_plan(shelf, cache)
+        shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
+
+        def again(rp, banned, cache=cache, train_with=train_with):
+            answer = replan(rp, banned, cache)
+            return answer if train_with is None or isinstance(answer, str) else \
+                relearn(rp, banned, cache, train_with, answer)
+        runs[name] = ClosedLoopExecutor(shelf.scenario, shelf.relocate, shelf.perceive, again).run(seq)
+        assert runs[name].success and [o for o, _ in shelf.relocations] == ["b", "d", "T"], runs[name].message
+    a_star, q_tree, short = (runs[k].replans[0] for k in ("a_star", "q_tree", "short"))
+    assert a_star.note == "" and "note" not in a_star.to_dict()
+    assert q_tree.sequence == ("d", "T") and q_tree.weight == pytest.approx(0.1) and q_tree.calls >= a_star.calls
+    assert q_tree.note.startswith("Q-Tree retrained: learned d T (weight 0.10) in ") and \
+        q_tree.note.endswith(", executed"), q_tree.note
+    assert q_tree.to_dict()["note"] == q_tree.note and q_tree.line().endswith(f"({q_tree.note})")
+    assert short.sequence == ("d", "T") and short.note.startswith("Q-Tree retrained: no sequence in "), short.note
+
+
+def test_execute_retrains_on_a_replan_with_the_params_it_is_given():
+    """retrieval.execute(retrain=params) (the node's `replan_q_tree`): its re-plans carry the retrained note."""
+    for params in (None, TrainingParams.defaults().replace(max_episodes=200, seed=5)):
+        shelf = FakeShelf()
+        seq, _, _ = first_plan(shelf, GeometryCache(shelf))
+        shelf.disturb[0] = lambda s: s.put("d", 0.66, -0.02, TOP)
+        out = execute(shelf.scenario, list(seq), shelf.perceive(), shelf.relocate, shelf.perceive,
+                      CachedOracle(shelf), closed_loop=True, cancelled=lambda: False, retrain=params)
+        assert out.success and len(out.replans) == 1, out.message
+        assert out.replans[0].note.startswith("Q-Tree retrained") == (params is not None), out.replans[0]
 
 
 def test_a_failed_relocation_marks_the_option_and_replans_around_it():
