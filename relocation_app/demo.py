@@ -277,7 +277,8 @@ def _report(out: Path, a, used, res, before, after, frames, wall: float, run: di
               + (f" skipped: {d['skipped']}" if "skipped" in d else ""))
     for r in report["replans"]:
         print(f"[demo] re-plan: {r['reason']} -> " + (f"{' '.join(r['sequence'])} ({r['weight']:.2f})"
-                                                      if r.get("sequence") else r.get("failure", "")))
+                                                      if r.get("sequence") else r.get("failure", ""))
+              + (f"; {r['note']}" if r.get("note") else ""))
     message = res.message if success or not res.success else \
         f"{res.message}; but the simulator does not show the target on the bottom shelf"
     print(f"[demo] {'SUCCESS' if success else 'FAILED'}: {message}  ({wall:.0f} s); outputs in {out}/")
