@@ -20,7 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
-from relocation_common.paths import scenarios_dir  # noqa: E402
+from relocation_common.paths import scenarios_dir
 
 HEADER = ("| scene | result | learned (weight) | exact optimum (weight) | executed | target on the bottom shelf, "
           "arm home, gripper empty | wall s |\n|---|---|---|---|---|---|---|")
