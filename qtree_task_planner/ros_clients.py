@@ -223,8 +223,19 @@ class SceneWatch:
                 if fresh is not None and (settled(fresh[0]) or left <= 0):
                     return fresh[0]
                 if left <= 0:
-                    raise TimeoutError(f"no scene received within {timeout:g} s (scene_after_wait)")
+                    raise TimeoutError(f"no scene received within {timeout:g} s (scene_after_wait){self._last()}")
                 self._changed.wait(min(left, 0.1))
+
+
+    def _last(self) -> str:
+        """Why a scene may not come, for the timeout's line: perception publishes none while it does not see the
+        target (docs/perception.md, "Hidden objects"): a target tipped over (a lying bottle fits no standing
+        cylinder) or fallen is the usual cause after a relocation."""
+        if self.latest is None:
+            return "; none at all on this topic"
+        return (f"; the last one came {time.monotonic() - self.latest[1]:.0f} s ago. Perception publishes no scene "
+                "while it does not see the target (tipped over, fallen or hidden: /diagnostics names the missing "
+                "bottles and why)")
 
 
 def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[object], bool]:

@@ -309,6 +309,10 @@ def _next_step(message: str, out: Path) -> str:
                 "raise relocate_silence in config/task_planner.yaml on a loaded machine")
     if "off the shelf" in message:
         return "the target fell off the shelf: it cannot be retrieved; run the demo again (a fresh scene)"
+    if "does not see the target" in message:
+        return ("the target may lie on its side or have fallen (/perception/debug_image shows the shelf): stand it "
+                f"up by hand and run the demo again; otherwise check the camera and perception (logs in "
+                f"{out}/run/logs); see docs/perception.md")
     if "scene" in message:
         return f"check the camera and perception (logs in {out}/run/logs); see docs/perception.md"
     return f"read the task planner's and the motion planner's logs in {out}/run/logs; see docs/closed_loop.md"

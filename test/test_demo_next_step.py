@@ -30,3 +30,13 @@ def test_a_lying_bottle_in_the_way_is_to_be_stood_up():
     assert "stand it up by hand" in _next_step(message, OUT)
     assert "stand it up" not in _next_step("no sequence remains: T cannot be reached: no feasible relocation "
                                            "sequence over the 4 obstacles on the top shelf (3 planner calls)", OUT)
+
+
+def test_no_scene_while_the_target_is_not_seen_suggests_a_tipped_target():
+    """The demo with the RealSense model, T tipped after the first relocation: perception stopped publishing (no
+    bottle fit for a lying target) and the next step said only to check the camera."""
+    message = ("no scene after relocating o1: no scene received within 10 s (scene_after_wait); the last one came "
+               "12 s ago. Perception publishes no scene while it does not see the target (tipped over, fallen or "
+               "hidden: /diagnostics names the missing bottles and why)")
+    assert "stand it up by hand" in _next_step(message, OUT)
+    assert "stand it up" not in _next_step("no scene after relocating o1: the scene is empty", OUT)
