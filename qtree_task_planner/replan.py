@@ -219,21 +219,43 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
 
 def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
     """What the bottles lying on the top shelf have to do with a failed re-plan, for its one line ("" without
-    any): the target lying, every lane of the target holding a lying bottle (the planner's lane screen: no
-    planner call), or only their names. The side grasp takes standing bottles only (closed_loop.RemainingProblem.
-    tipped are banned options), so a lying bottle stays where it is."""
+    any): the target lying; every lane of the target holding a lying bottle; every lane of the target holding a
+    bottle that can never be moved because of them (`never_free`); or only their names. From the planner's lane
+    screen (no planner call). The side grasp takes standing bottles only (closed_loop.RemainingProblem.tipped are
+    banned options), so a lying bottle stays where it is."""
     if not rp.tipped or rp.problem is None:
         return ""
     t, lying = rp.problem.target, frozenset(rp.tipped)
     if t in lying:
         return f"; {t} itself lies on its side, and the side grasp takes standing bottles only"
-    lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset())
-    t_lanes = None if lanes is None else lanes.get(t)
+    lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset()) or {}
+    t_lanes = lanes.get(t)
     if t_lanes and all(b.certain and b.objects & lying for b in t_lanes):
         inside = sorted(frozenset().union(*(b.objects for b in t_lanes)) & lying)
         return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(inside)}), and the side grasp "
                 "takes standing bottles only")
+    stuck = never_free(lanes, lying)
+    if t in stuck:
+        held = ", ".join(sorted(stuck - lying - {t}))
+        return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(sorted(lying))}) or one that can "
+                f"never be moved because each of its lanes holds such a bottle ({held}), and the side grasp takes "
+                "standing bottles only")
     return f"; lying on its side, not graspable: {', '.join(sorted(lying))}"
+
+
+def never_free(lanes: Mapping, lying: frozenset[str]) -> frozenset[str]:
+    """The objects that can never be relocated because of the lying ones: those, and (to a fixpoint) every object
+    each of whose lanes holds one of them (lanes: LaneOracle.lane_blockers; only certain blocker sets count: such
+    a lane is clear exactly when all its blockers are gone, and a lying bottle never goes)."""
+    stuck = set(lying)
+    grew = True
+    while grew:
+        grew = False
+        for obj, sets in lanes.items():
+            if obj not in stuck and sets and all(b.certain and b.objects & stuck for b in sets):
+                stuck.add(obj)
+                grew = True
+    return frozenset(stuck)
 
 
 def relearn(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache, params: TrainingParams,

@@ -309,6 +309,21 @@ def test_a_tipped_bottle_is_never_proposed_for_relocation():
     assert asked and all(Option("d", None) in banned for banned in asked)
 
 
+def test_a_give_up_names_the_bottles_a_lying_one_holds_for_good():
+    """The benchmark's scenario2_10 and paper_random5_04: the lying bottle is not in T's lanes but in every lane of
+    the bottles there, and the line gave only its name. T's lane holds b, b's holds c, c's holds a: after a is
+    relocated c tips over, so b can never be moved, nor T."""
+    shelf = LyingBlocks(lanes={"T": [{"b"}], "b": [{"c"}], "c": [{"a"}]})
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    assert tuple(seq) == ("a", "c", "b", "T")
+    shelf.disturb[0] = lambda s: s.put("c", 0.55, 0.12, TOP + 0.033, tilt=math.pi / 2)
+    result = executor(shelf, cache).run(seq)
+    assert not result.success and ("every lane of T holds a bottle lying on its side (c) or one that can never be "
+                                   "moved because each of its lanes holds such a bottle (b)") in result.message, \
+        result.message
+
+
 def test_the_q_tree_is_retrained_on_a_replan_only_when_asked():
     """replan_q_tree (replan.relearn): the re-plan of the nudged-neighbour case trains the Q-Tree on the remaining
     problem over the re-plan's own oracle and executes its sequence (as light as the A*'s); the record says so.
@@ -425,6 +440,9 @@ class LyingBlocks(FakeShelf):
 
     def lane_blockers(self, removed):
         present = self.on_top() - set(removed)
+        if self.lanes is not None:
+            return {o: tuple(BlockerSet(frozenset(set(b) & present)) for b in self.lanes.get(o, [set()]))
+                    for o in present}
         return {o: (BlockerSet(frozenset(p for p in present - {o} if self.scene[p].x < self.scene[o].x - 0.02 and
                                          abs(self.scene[p].y - self.scene[o].y) < LANE)),) for o in present}
 
