@@ -190,8 +190,10 @@ class SlotLimit:
 
 def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache) -> ReplanAnswer | str:
     """The least-weight sequence (Eq. 8) for the remaining problem that avoids failed options and fits the free
-    slots: (sequence, weight, planner calls it cost), or the reason there is none in one line. The cache first
-    takes the perceived geometry, so answers about moved objects are asked again and the others reused."""
+    slots: (sequence, weight, planner calls it cost), or the reason there is none in one line (the lying bottles'
+    part, `lying_reason`, else the A*'s own, exact.why_none: the target without a lane, a blocking cycle). The
+    cache first takes the perceived geometry, so answers about moved objects are asked again and the others
+    reused."""
     if rp.problem is None:
         return rp.reason
     banned = tuple(banned)
@@ -213,8 +215,9 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
                 why.append(f"failed options: {', '.join(sorted(b.object_id for b in banned))}")
             return (f"{t} cannot be reached: every sequence left needs a failed option or more slots than are free "
                     f"(the best without those limits, {' '.join(free.sequence)}, {'; '.join(why)})")
+    because = lying_reason(rp, cache) or (f"; {r.reason.removeprefix('no sequence: ')}" if r.reason else "")
     return (f"{t} cannot be reached: no feasible relocation sequence over the {n} obstacle{'s' * (n != 1)} "
-            f"on the top shelf ({cache.calls - calls0} planner calls){lying_reason(rp, cache)}")
+            f"on the top shelf ({cache.calls - calls0} planner calls){because}")
 
 
 def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:

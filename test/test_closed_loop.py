@@ -309,6 +309,18 @@ def test_a_tipped_bottle_is_never_proposed_for_relocation():
     assert asked and all(Option("d", None) in banned for banned in asked)
 
 
+def test_a_give_up_without_a_lying_bottle_gives_the_solver_s_reason():
+    """The benchmark's moved bottles (random5_03, paper_random5_04, paper_random5_06: a bottle moved next to T) ended
+    "no feasible relocation sequence over the 4 obstacles (0 planner calls)" and no more, though the A* knew the
+    blocking cycle (exact.why_none). Here T's lane needs b gone and b's needs T gone."""
+    shelf = FakeShelf(lanes={"T": [{"b"}], "b": [{"T"}]})
+    answer = replan(remaining_problem(shelf.scenario, shelf.perceive(), ()), (), GeometryCache(shelf))
+    assert isinstance(answer, str) and answer.startswith(
+        "T cannot be reached: no feasible relocation sequence over the 5 obstacles on the top shelf (2 planner calls); "
+        "T unfeasible from every set reached") and \
+        "blocking cycle: every lane of T needs an object that cannot leave first (lane {b}: b needs T moved)" in answer
+
+
 def test_a_give_up_names_the_bottles_a_lying_one_holds_for_good():
     """The benchmark's scenario2_10 and paper_random5_04: the lying bottle is not in T's lanes but in every lane of
     the bottles there, and the line gave only its name. T's lane holds b, b's holds c, c's holds a: after a is
