@@ -1,7 +1,7 @@
 """The demo's one-line next step after a failure (relocation_app.demo._next_step): the reason decides it."""
 from pathlib import Path
 
-from relocation_app.demo import _next_step
+from relocation_app.demo import _next_step, _timeout_hint
 
 OUT = Path("/tmp/out")
 
@@ -40,3 +40,11 @@ def test_no_scene_while_the_target_is_not_seen_suggests_a_tipped_target():
                "hidden: /diagnostics names the missing bottles and why)")
     assert "stand it up by hand" in _next_step(message, OUT)
     assert "stand it up" not in _next_step("no scene after relocating o1: the scene is empty", OUT)
+
+
+def test_a_demo_out_of_time_says_that_the_same_command_resumes_it():
+    """scenario3_15 with perception at load 7 ended "[demo] error: no result within 900 s" and nothing else, with its
+    training in the checkpoint that the same command resumes."""
+    hint = _timeout_hint("no result within 900 s", OUT / "run" / "qtree.ckpt")
+    assert "/tmp/out/run/qtree.ckpt: the same command resumes it" in hint and "--timeout" in hint
+    assert _timeout_hint("the train goal was rejected: bad policy", OUT) == ""
