@@ -503,7 +503,15 @@ class ClosedLoopExecutor:
             raise GiveUp(f"gave up after {len(out.replans)} re-plans (max_replans); last: {reason}")
         # a bottle lying on the top shelf cannot be grasped (the grasps are for standing bottles: three attempts of
         # the benchmark closed on nothing): never proposed, it stays an obstacle
-        answer = self.replan(rp, frozenset(self._banned) | {Option(o, None) for o in rp.tipped})
+        lying = {Option(o, None) for o in rp.tipped}
+        answer = self.replan(rp, frozenset(self._banned) | lying)
+        again = {b for b in self._banned if self._failures.get(b.object_id, 0) < self.max_attempts}
+        if isinstance(answer, str) and again:  # no sequence avoids them: give up only when none remains at all
+            retry = self.replan(rp, frozenset(self._banned - again) | lying)
+            if not isinstance(retry, str):
+                self._banned -= again
+                answer, reason = retry, f"{reason}; no sequence avoids the failed option" + \
+                    f"{'s' * (len(again) != 1)} of {', '.join(sorted({b.object_id for b in again}))}: tried again"
         if isinstance(answer, str):
             out.replans.append(ReplanRecord(reason, None, None, 0, answer))
             self.on_replan(out.replans[-1])

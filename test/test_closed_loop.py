@@ -419,6 +419,27 @@ def test_a_relocation_that_ran_out_of_time_is_tried_again_before_its_option_is_m
     assert result.success and [o for o, _ in shelf.relocations] == ["b", "b", "b", "c", "b", "T"], result.message
 
 
+def test_a_failed_option_that_every_sequence_needs_is_tried_again_before_giving_up():
+    """The benchmark's paper_random5_07 (K = 3): o2, the only bottle reachable first, was dropped at its grasp (the
+    fingers closed on nothing, o2 back where it stood); its option was marked failed and the loop gave up "every
+    sequence left needs a failed option" after one attempt. Now such an option is tried again, up to max_attempts
+    failures of its object. Here every bottle's lane holds b."""
+    lanes = {o: [{"b"}] for o in ("T", "a", "c", "d", "e")}
+    shelf = FakeShelf(lanes=lanes)
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    assert tuple(seq) == ("b", "T")
+    shelf.fail["b"] = 1
+    result = executor(shelf, cache).run(seq)
+    assert result.success and [o for o, _ in shelf.relocations] == ["b", "b", "T"], result.message
+    assert result.replans[0].reason.endswith("no sequence avoids the failed option of b: tried again")
+    shelf = FakeShelf(lanes=lanes)  # b fails max_attempts (2) times: then no sequence remains
+    shelf.fail["b"] = 2
+    result = executor(shelf, GeometryCache(shelf)).run(seq)
+    assert not result.success and result.message.startswith("no sequence remains"), result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "b"]
+
+
 def test_gives_up_with_one_line_when_no_sequence_remains():
     """b always fails: banned with any set after two attempts; T stays blocked by it: no sequence remains."""
     shelf = FakeShelf()
