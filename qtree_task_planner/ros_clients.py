@@ -228,14 +228,10 @@ class SceneWatch:
 
 
     def _last(self) -> str:
-        """Why a scene may not come, for the timeout's line: perception publishes none while it does not see the
-        target (docs/perception.md, "Hidden objects"): a target tipped over (a lying bottle fits no standing
-        cylinder) or fallen is the usual cause after a relocation."""
+        """When the last scene came, for the timeout's line."""
         if self.latest is None:
             return "; none at all on this topic"
-        return (f"; the last one came {time.monotonic() - self.latest[1]:.0f} s ago. Perception publishes no scene "
-                "while it does not see the target (tipped over, fallen or hidden: /diagnostics names the missing "
-                "bottles and why)")
+        return f"; the last one came {time.monotonic() - self.latest[1]:.0f} s ago"
 
 
 def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[object], bool]:
@@ -256,6 +252,9 @@ def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[object], 
 SILENT = "the motion planner went away (no feedback"  # retrieval.relocation_stop's words for relocate_silence
 OUTCOME_UNKNOWN = "outcome unknown"  # the motion planner's result when no scene came after the motion
 CANCEL_ACK_WAIT = 3.0  # s: a live (even starved) motion planner acknowledges a cancel within it; a dead one never
+UNSEEN_TARGET = (". Perception publishes no scene while it does not see the target (tipped over, fallen or hidden: "
+                 "/diagnostics names the missing bottles and why)")  # docs/perception.md, "Hidden objects": a
+# lying bottle fits no standing cylinder, so a tipped target is the usual cause after a relocation
 TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
 
 
@@ -286,7 +285,10 @@ def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: 
 
     def perceive() -> dict[str, SeenObject]:
         if not (ended[2] and ended[1] == unseen_target):
-            return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z)))
+            try:
+                return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z)))
+            except TimeoutError as e:
+                raise TimeoutError(f"{e}{UNSEEN_TARGET if unseen_target else ''}") from None
         shown = on_board(ended[1], bottom_z) if bottom_z is not None else (lambda msg: False)
         try:
             msg = scenes.after(ended[0], min(wait, TARGET_GONE_WAIT), shown)
