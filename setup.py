@@ -2,16 +2,16 @@
 and the application (relocation_app: graph launcher, demo, evaluation, qtree CLI)."""
 from glob import glob
 
-from setuptools import setup
+from setuptools import find_packages, setup
 
 PACKAGE = "qtree_relocation"
 
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=["relocation_common", "qtree_task_planner", "stpik_motion_planner", "jaco2_sim_driver", "perception_aruco",
-              "relocation_app", "relocation_app.evaluation"],
-    package_data={"qtree_task_planner": ["_kernel.c"]},
+    packages=find_packages(include=["relocation_common*", "qtree_task_planner*", "stpik_motion_planner*",
+                                    "jaco2_sim_driver*", "perception_aruco*", "relocation_app*"]),
+    package_data={"qtree_task_planner.learning": ["_kernel.c"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -3,7 +3,7 @@
 - ServiceOracle: the feasibility oracle (Eq. 11) over the motion planner's PlanFeasibility service, with the
   outage rules of docs/reliability.md ("Dead planner").
 - Relocator: one RelocateObject goal to the motion planner, watched (shutdown, server gone, silence, cancel,
-  timeout: qtree_task_planner.retrieval.relocation_stop).
+  timeout: qtree_task_planner.executive.retrieval.relocation_stop).
 - SceneWatch: the latest scene message and when it arrived; `after(t, ...)` waits for one received later
   (closed-loop execution: a scene perceived after a relocation ended).
 - train_goal / goal_params: a TrainPlanner goal whose numeric fields say "the node's parameter" (negative), and
@@ -19,15 +19,14 @@ import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
 
+from qtree_task_planner.executive.closed_loop import SeenObject
+from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
+from qtree_task_planner.executive.retrieval import relocation_stop
+from qtree_task_planner.learning.params import TrainingParams
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.node import ActionClient, call, stop_reason, stopping_as
 from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs
-
-from .closed_loop import SeenObject
-from .outage import Cancelled, PlannerUnavailable
-from .params import TrainingParams
-from .retrieval import relocation_stop
 
 
 class ServiceOracle:

@@ -1,8 +1,8 @@
 """task_planner node: the Q-Tree training action over the motion planner's feasibility service, then execution.
 
 Thin shell: parameters, the scene subscription and the TrainPlanner action in; calls to the core out. The job
-(exact optimum, training, relocations in order, scene checks) is qtree_task_planner.retrieval, the checkpoint
-bookkeeping qtree_task_planner.keeper, the ROS clients (feasibility oracle over PlanFeasibility, the watched
+(exact optimum, training, relocations in order, scene checks) is qtree_task_planner.executive.retrieval, the checkpoint
+bookkeeping qtree_task_planner.executive.keeper, the ROS clients (feasibility oracle over PlanFeasibility, the watched
 RelocateObject goal) qtree_task_planner.ros_clients. Eq. 15 is reported as action feedback every few episodes.
 
 Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local); publishes
@@ -39,23 +39,36 @@ from rclpy.time import Time
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
+from qtree_task_planner.executive.keeper import CheckpointKeeper, check_checkpoint_path
+from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, until_available
+from qtree_task_planner.executive.replicas import ReplicaOracle
+from qtree_task_planner.executive.retrieval import (
+    check_scene,
+    chosen_sequence,
+    execute,
+    solve_then_train,
+    training_outcome,
+)
+from qtree_task_planner.learning.checkpoint import CheckpointError
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.markers import scene_markers
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.ros_clients import (
+    Relocator,
+    SceneWatch,
+    ServiceOracle,
+    goal_params,
+    seen_scene,
+    train_goal,
+    watched,
+)
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import replica_services
 from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main, stop_reason
 from relocation_common.ros_conversions import msg_to_bottles
 from relocation_common.scenario import ScenarioError, load_scenario
 from relocation_common.scene_check import foreign_ids
-
-from .checkpoint import CheckpointError
-from .keeper import CheckpointKeeper, check_checkpoint_path
-from .markers import scene_markers
-from .oracles import CachedOracle
-from .outage import Cancelled, PlannerUnavailable, until_available
-from .params import TrainingParams
-from .problem import RelocationProblem
-from .replicas import ReplicaOracle
-from .retrieval import check_scene, chosen_sequence, execute, solve_then_train, training_outcome
-from .ros_clients import Relocator, SceneWatch, ServiceOracle, goal_params, seen_scene, train_goal, watched
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -167,7 +180,7 @@ class TaskPlannerNode(Node):
 
     # -- a lost planner ---------------------------------------------------------------------------------
     def _until_planner(self, fn, goal_handle, oracle: ReplicaOracle, fb):
-        """fn() through planner outages (qtree_task_planner.outage), with feedback while waiting."""
+        """fn() through planner outages (qtree_task_planner.executive.outage), with feedback while waiting."""
         phase = fb.phase
 
         def on_outage(message: str) -> None:

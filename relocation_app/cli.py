@@ -7,9 +7,11 @@ Defaults come from config/task_planner.yaml (or --params FILE). Bad input: one l
 Feasibility oracles are built by ORACLES[name](scenario, args): `blocking` (the scenario's declared relation, a
 test double) or `planner` (the real motion planner in this process, config/motion_planner.yaml, with its lane
 blockers) or `replicas` (N motion planner processes started over ROS, asked one question each at once by the
-exact solvers: qtree_task_planner.replicas); the default is `blocking` for a scenario with a `blocking:` section,
+exact solvers: qtree_task_planner.executive.replicas); the default is `blocking` for a scenario with a `blocking:`
+section,
 `planner` otherwise. Exact solvers:
-`astar` (qtree_task_planner.astar, blockers) or `ucs` (qtree_task_planner.exact, the uniform-cost reference). The
+`astar` (qtree_task_planner.search.astar, blockers) or `ucs` (qtree_task_planner.search.exact, the uniform-cost
+reference). The
 real oracle calls and the wall time go into the JSON and, as one line, to stderr.
 """
 from __future__ import annotations
@@ -22,15 +24,14 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Callable
 
-from qtree_task_planner import astar, exact
+from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
 from qtree_task_planner.problem import ProblemError, RelocationProblem
-from qtree_task_planner.training import train
+from qtree_task_planner.search import astar, exact
+from relocation_app.progress import Progress
 from relocation_common.config import ParameterError
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
-
-from .progress import Progress
 
 
 class CliError(Exception):
@@ -42,8 +43,8 @@ def _blocking_oracle(scenario, args):
 
 
 def _planner_oracle(scenario, args):
-    from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
-    from stpik_motion_planner.grasp import WorkspaceError
+    from stpik_motion_planner.model.grasp import WorkspaceError
+    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
     try:
         return MotionPlanner(scenario, PlannerParams.load())  # a LaneOracle: lane_blockers too
@@ -53,9 +54,8 @@ def _planner_oracle(scenario, args):
 
 def _replicas_oracle(scenario, args):
     """N motion planner processes over ROS, one question in flight each (stopped when qtree exits)."""
+    from relocation_app.evaluation.replica_fill import replica_oracle
     from relocation_common.paths import resolve_scenario
-
-    from .evaluation.replica_fill import replica_oracle
     if not 1 <= args.replicas <= 16:
         raise CliError(f"--replicas must be in 1..16, got {args.replicas}")
     return args.stack.enter_context(replica_oracle(resolve_scenario(args.scenario), args.replicas))
@@ -185,7 +185,7 @@ def _train(args) -> int:
 
 
 def _solve(args) -> int:
-    from stpik_motion_planner.grasp import WorkspaceError
+    from stpik_motion_planner.model.grasp import WorkspaceError
     scenario, problem, oracle = _load(args)
     try:
         data = {"scenario": scenario.name, "oracle": args.oracle, **_exact(problem, oracle, args.solver)}

@@ -36,12 +36,11 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from qtree_task_planner.replicas import ReplicaOracle
+from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
+from relocation_app.graph import wait_for_interfaces
 from relocation_common.feasibility import Label, replica_services
 from relocation_common.node import ActionClient, call
-
-from .graph import wait_for_interfaces
 
 FEASIBILITY = "/motion_planner/plan_feasibility"
 TRAIN = "/task_planner/train"
@@ -148,7 +147,7 @@ class RelocationClient:
     def feasibility_oracle(self, replicas: int = 1, timeout: float = 5.0, margin: float = 2.0) -> ReplicaOracle:
         """The task planner's view of feasibility, for your own search: a FeasibilityOracle and BatchOracle
         (relocation_common.feasibility) over the motion planner and its replicas (/replica_<k>), label only, one
-        question in flight per replica, failover when one dies (qtree_task_planner.replicas)."""
+        question in flight per replica, failover when one dies (qtree_task_planner.executive.replicas)."""
         return ReplicaOracle([ServiceOracle(self.node.create_client(PlanFeasibility, name,
                                                                     qos_profile=QoSProfile(depth=1000)),
                                             timeout, margin, connect_wait=timeout)

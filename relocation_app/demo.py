@@ -22,13 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
+from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
+from relocation_app.client import ClientError, RelocationClient
+from relocation_app.final_state import final_state
+from relocation_app.graph import Graph
+from relocation_app.progress import Progress
 from relocation_common.paths import default_scenario, resolve_scenario
-
-from .client import ClientError, RelocationClient
-from .final_state import final_state
-from .graph import Graph
-from .progress import Progress
 
 
 def _args(argv):
@@ -145,7 +144,7 @@ def _disturbance_plan(a):
 def _checkpoint(path: Path) -> Path:
     """The demo's checkpoint: an unfinished one (stopped by a signal or the time limit) is resumed by the task
     planner; a finished or unreadable one is removed, so a rerun trains afresh."""
-    from qtree_task_planner.checkpoint import CheckpointError, load_checkpoint
+    from qtree_task_planner.learning.checkpoint import CheckpointError, load_checkpoint
 
     if path.exists():
         try:
@@ -220,7 +219,7 @@ def _start_recording(g: Graph, a, out: Path):
     """The bag of the whole run and the video of the retrieval (from the first 'executing' feedback)."""
     if a.no_record:
         return None
-    from .recording import RunRecorder
+    from relocation_app.recording import RunRecorder
     return RunRecorder(out / "bag", video=out / "retrieval.mp4", domain_id=g.domain_id,
                        video_from_phase=None if a.no_execute else "executing").start()
 

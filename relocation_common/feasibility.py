@@ -2,7 +2,7 @@
 
 "Is relocating object i feasible once the objects in `removed` are gone?" The answer is a label g_U
 (unfeasible), g_O (a feasible obstacle) or g_T (the feasible target), and from the real motion planner a
-trajectory. Implementations: the motion planner core (stpik_motion_planner.feasibility.MotionPlanner), the
+trajectory. Implementations: the motion planner core (stpik_motion_planner.planning.planner.MotionPlanner), the
 task planner node's service client, and the adapters of qtree_task_planner.oracles.
 
 Blockers (docs/motion_planner.md, "Blockers"). An unfeasible answer may name, per candidate grasp lane (approach yaw),

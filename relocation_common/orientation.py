@@ -1,6 +1,7 @@
 """A bottle's orientation as ObjectState carries it (pose.orientation, a unit quaternion): how far it is tipped,
-its axis, the surface it rests on. One place for the task planner's checks (qtree_task_planner.closed_loop) and
-the motion planner's scene (stpik_motion_planner.scene_update, collision.lying_cylinder)."""
+its axis, the surface it rests on. One place for the task planner's checks (qtree_task_planner.executive.closed_loop)
+and
+the motion planner's scene (stpik_motion_planner.model.scene_update, collision.lying_cylinder)."""
 from __future__ import annotations
 
 import math

@@ -21,9 +21,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from qtree_task_planner import astar, exact
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.search import astar, exact
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 

@@ -34,22 +34,22 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
 from jaco2_sim_driver.disturbance import DisturbancePlan
-from qtree_task_planner.closed_loop import (
+from qtree_task_planner.executive.closed_loop import (
     Option,
     SeenObject,
     Tolerances,
     board_of,
     remaining_problem,
 )
-from qtree_task_planner.replan import GeometryCache, replan
+from qtree_task_planner.executive.replan import GeometryCache, replan
 from relocation_app.client import RelocationClient
 from relocation_app.final_state import final_state
 from relocation_app.graph import Graph
 from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.collision import Lying
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+from stpik_motion_planner.model.collision import Lying
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
 # the planner's wall-clock safety nets 4-12x the defaults, the follower's settle time 3x: on the shared machine
 # (load 10-25 on 2 cores) the 5 s feasibility and 10 s (then 40 s) planning nets ran out and the follower did not

@@ -36,7 +36,7 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -2,7 +2,7 @@
 """The task_planner node's training, old engine vs this tree's, side by side in one run.
 
 The node trains with a per-episode callback (action feedback) and checkpoints every `checkpoint_every` episodes
-(config/task_planner.yaml), after the exact solve (qtree_task_planner.retrieval.solve_then_train). This runs
+(config/task_planner.yaml), after the exact solve (qtree_task_planner.executive.retrieval.solve_then_train). This runs
 that same call (same scene, seeds, parameters, feasibility answers) in two subprocesses: one on another checkout
 (--old DIR, e.g. `git worktree add /tmp/old <commit>` or `git archive <commit> | tar -x -C /tmp/old`) and one on
 this tree. Feasibility comes from the committed planner answers (data/feasibility/), so what is timed is the
@@ -24,10 +24,10 @@ HERE = Path(__file__).resolve().parent.parent
 CHILD = r"""
 import inspect, json, sys, time
 from qtree_task_planner.oracles import CachedOracle
-from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.retrieval import solve_then_train
-from qtree_task_planner.training import train
+from qtree_task_planner.executive.retrieval import solve_then_train
+from qtree_task_planner.learning.training import train
 from relocation_app.evaluation.__main__ import planner_params
 from relocation_app.evaluation.feasibility_cache import PlannerOracle, cache_key, cache_path, load_table
 from relocation_common.scenario import load_scenario

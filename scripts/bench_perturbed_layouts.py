@@ -46,7 +46,7 @@ def _params(sets: list[str]):
     """config/motion_planner.yaml with the `key=value` changes, the safety nets at SAFETY_NET."""
     import dataclasses
 
-    from stpik_motion_planner.feasibility import PlannerParams
+    from stpik_motion_planner.planning.planner import PlannerParams
     base = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
     if not sets:
         return base
@@ -66,13 +66,13 @@ def one(path: str, solver: str, sets: list[str]) -> dict:
     """Solve one layout and replay its optimum (run in its own process)."""
     from motion_checker import MotionChecker, Report, replay_relocation
 
-    from qtree_task_planner import astar, exact
     from qtree_task_planner.oracles import CachedOracle
     from qtree_task_planner.problem import RelocationProblem
+    from qtree_task_planner.search import astar, exact
     from relocation_common.feasibility import Label
     from relocation_common.scenario import load_scenario
-    from stpik_motion_planner.feasibility import MotionPlanner, PlanningError
-    from stpik_motion_planner.relocation import plan_relocation
+    from stpik_motion_planner.execution.relocation import plan_relocation
+    from stpik_motion_planner.planning.planner import MotionPlanner, PlanningError
 
     sc = load_scenario(path)
     planner = MotionPlanner(sc, _params(sets))
@@ -154,7 +154,7 @@ def main() -> int:
     if a.one:
         print(json.dumps(one(a.one, a.solver, a.set)))
         return 0
-    from relocation_app.evaluation.make_scenes import _seed_range, make_jitter
+    from relocation_app.evaluation.scenes.make_scenes import _seed_range, make_jitter
     scenes = shipped_scenes() if a.all else a.scenes
     out = Path(a.out) if a.out else None
     rows = [json.loads(x) for x in out.read_text().splitlines() if x.strip()] if out and out.exists() else []

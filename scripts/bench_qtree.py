@@ -5,7 +5,7 @@ Prints: training throughput (episodes per CPU second of this process, so that ot
 distort it less) for each policy x search, with a cold cache (BlockingOracle behind a
 fresh CachedOracle) and a warm shared cache (the evaluation sweeps' case); the exact solver's oracle calls and
 time; and a sweep of quiet_episodes (Eq. 16) behind the default in config/task_planner.yaml.
-Training runs on the C kernel (qtree_task_planner/kernel.py), the one engine; on a checkout from before it
+Training runs on the C kernel (qtree_task_planner/learning/kernel.py), the one engine; on a checkout from before it
 (no kernel module) the script measures that checkout's loop (before/after comparisons).
 Usage: .venv/bin/python scripts/bench_qtree.py [--seeds N] [--episodes E] [--no-sweep]
 """
@@ -20,10 +20,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from qtree_task_planner.exact import brute_force, solve
+from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.params import POLICIES, SEARCHES, TrainingParams
-from qtree_task_planner.training import train
+from qtree_task_planner.search.exact import brute_force, solve
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 
@@ -87,7 +87,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-sweep", action="store_true")
     a = ap.parse_args(argv)
     try:
-        from qtree_task_planner import kernel
+        from qtree_task_planner.learning import kernel
     except ImportError:  # a tree from before the kernel (for before/after comparisons)
         kernel = None
     engine = "none (reference loop)" if kernel is None else "C kernel" if kernel.available() else \

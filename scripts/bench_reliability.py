@@ -160,10 +160,10 @@ def bench(n: int, clients: int, seed: int, answer_timeout: float, run_dir: Path)
 
 def bench_checkpoint(scenarios=("blocking_10", "blocking_15", "scenario3_15"), repeats: int = 5) -> list[dict]:
     """Checkpoint size and save/load time of the final Q-Tree of a default training (BlockingOracle, seed 0)."""
-    from qtree_task_planner.checkpoint import load_checkpoint, save_checkpoint
+    from qtree_task_planner.learning.checkpoint import load_checkpoint, save_checkpoint
+    from qtree_task_planner.learning.params import TrainingParams
+    from qtree_task_planner.learning.training import train
     from qtree_task_planner.oracles import BlockingOracle
-    from qtree_task_planner.params import TrainingParams
-    from qtree_task_planner.training import train
     from relocation_common.paths import scenarios_dir
     from relocation_common.scenario import load_scenario
 

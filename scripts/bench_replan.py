@@ -1,4 +1,5 @@
-"""Benchmark of re-planning with the geometry-keyed cache (qtree_task_planner.replan) on the real motion planner.
+"""Benchmark of re-planning with the geometry-keyed cache (qtree_task_planner.executive.replan) on the real motion
+planner.
 
 For every shipped scene, with the motion planner core in-process (no ROS) as the oracle:
 1. cold: the exact optimum of the whole scene (the blocker A* over a fresh GeometryCache): planner calls, seconds;
@@ -19,11 +20,11 @@ import math
 import statistics
 import time
 
-from qtree_task_planner.closed_loop import SeenObject, remaining_problem, scene_from_scenario
-from qtree_task_planner.replan import GeometryCache, replan
+from qtree_task_planner.executive.closed_loop import SeenObject, remaining_problem, scene_from_scenario
+from qtree_task_planner.executive.replan import GeometryCache, replan
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
 
 def shipped_scenes() -> list[str]:

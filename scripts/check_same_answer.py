@@ -24,7 +24,7 @@ SCENES = (("paper_experiment_10", 0.0), ("scenario3_15", 0.0), ("paper3_15", 0.0
 
 def questions(n: int, tmp: str) -> list[tuple[str, str, list[str]]]:
     """n questions (scene file, object, removed) spread over SCENES, seeded."""
-    from relocation_app.evaluation.make_scenes import make_jitter
+    from relocation_app.evaluation.scenes.make_scenes import make_jitter
     from relocation_common.paths import resolve_scenario
     from relocation_common.scenario import load_scenario
     rng, out = random.Random(0), []
@@ -44,7 +44,7 @@ def ask(qs, sets: list[str]) -> dict:
     from test_question_seeded import digest
 
     from relocation_common.scenario import load_scenario
-    from stpik_motion_planner.feasibility import MotionPlanner
+    from stpik_motion_planner.planning.planner import MotionPlanner
     planners: dict = {}
     out = {}
     for path, obj, removed in qs:

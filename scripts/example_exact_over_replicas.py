@@ -8,9 +8,9 @@ Start the planners first on your ROS_DOMAIN_ID: `motion_planner` and, for replic
 """
 import argparse
 
-from qtree_task_planner import astar
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.search import astar
 from relocation_app.client import RelocationClient
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario

@@ -9,7 +9,7 @@ PY=${PYTHON:-python3}
 STAMPS=$VENV/.stamps
 
 # System packages (Debian 12): compilers and cmake for the interface build (gcc also for the Q-Tree C kernel,
-# qtree_task_planner/kernel.py, which falls back to Python without it), Mesa EGL for
+# qtree_task_planner/learning/kernel.py, which falls back to Python without it), Mesa EGL for
 # MuJoCo's headless renderer (MUJOCO_GL=egl). Installed only when missing.
 SYS_PKGS="cmake gcc g++ libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 graphviz"  # graphviz: dot draws Fig. 3
 missing=$(for p in $SYS_PKGS; do dpkg -s "$p" >/dev/null 2>&1 || echo "$p"; done | tr '\n' ' ')

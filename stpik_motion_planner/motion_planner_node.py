@@ -27,12 +27,11 @@ from visualization_msgs.msg import Marker
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
-
-from . import goal_check
-from .feasibility import PlannerParams, SafetyNetTimeout
-from .ros_interface import SURFACES, RosArmLink, trajectory_to_msg
-from .service import MotionPlannerService
-from .streaming import StreamedArm, StreamParams
+from stpik_motion_planner.execution import goal_check
+from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
+from stpik_motion_planner.planning.planner import PlannerParams, SafetyNetTimeout
+from stpik_motion_planner.ros_interface import SURFACES, RosArmLink, trajectory_to_msg
+from stpik_motion_planner.service import MotionPlannerService
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 # Requests queue here while one is planned: the default depth 10 dropped all but 11 of 50 concurrent requests

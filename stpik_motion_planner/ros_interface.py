@@ -30,9 +30,8 @@ from visualization_msgs.msg import Marker
 from relocation_common import robot_description as rd
 from relocation_common.node import ActionClient, SideNode
 from relocation_common.ros_conversions import BASE_FRAME
-
-from .streaming import Aborted, Cancelled
-from .trajectory import Trajectory
+from stpik_motion_planner.execution.streaming import Aborted, Cancelled
+from stpik_motion_planner.planning.trajectory import Trajectory
 
 SURFACES = ("kinova", "ros2_control")  # command_interface: the driver's surface (docs/kinova.md)
 VELOCITY_TOPIC = "/velocity_controller/commands"  # ros2_control JointGroupVelocityController (rad/s)

@@ -24,13 +24,12 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
 from relocation_common.scenario import Scenario, ScenarioError, UnknownObjectError
 from relocation_common.scene_check import check_scene
-
-from . import goal_check
-from .blockers import lane_blockers
-from .feasibility import MotionPlanner, PlannerParams, PlanningError
-from .relocation import Progress, recover, relocate
-from .scene_update import Perceived, merge_perceived
-from .streaming import Aborted, Cancelled, StreamedArm
+from stpik_motion_planner.execution import goal_check
+from stpik_motion_planner.execution.relocation import Progress, recover, relocate
+from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm
+from stpik_motion_planner.model.blockers import lane_blockers
+from stpik_motion_planner.model.scene_update import Perceived, merge_perceived
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, PlanningError
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
 HEARTBEAT = 2.0  # s without feedback after which a running relocation's last feedback is sent again

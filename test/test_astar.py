@@ -1,4 +1,4 @@
-"""Blocker A* (qtree_task_planner.astar) against brute force and uniform-cost search (hypothesis), on random
+"""Blocker A* (qtree_task_planner.search.astar) against brute force and uniform-cost search (hypothesis), on random
 instances whose objects have several grasp lanes (an object is reachable once all objects of one of its lanes are
 removed), with blockers reported exactly, only as answers, as subsets, partly uncertain, or not at all, and with
 failures no blocker explains (as STPIK's)."""
@@ -11,10 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from qtree_task_planner import astar, exact
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.reachable import reachable_sets
+from qtree_task_planner.search import astar, exact
+from qtree_task_planner.search.reachable import reachable_sets
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # but 0.1 + 0.2 + 0.3 != 0.3 + 0.2 + 0.1 in floating point. The A* prefers the deeper of two equal sets.
 SCRIPT = r"""
 import json
-from qtree_task_planner import astar
+from qtree_task_planner.search import astar
 from qtree_task_planner.problem import RelocationProblem
 from relocation_common.feasibility import FeasibilityAnswer, Label
 

@@ -1,4 +1,4 @@
-"""The motion planner's lane blockers (stpik_motion_planner.blockers) and the blocker A* on the real planner:
+"""The motion planner's lane blockers (stpik_motion_planner.model.blockers) and the blocker A* on the real planner:
 the blockers are the grasp/approach screen exactly, and the A* proves the same optimum as uniform-cost search in
 far fewer planner calls (docs/motion_planner.md, "Blockers")."""
 import json
@@ -8,13 +8,13 @@ import sys
 
 import pytest
 
-from qtree_task_planner import astar, exact
 from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.search import astar, exact
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner import blockers
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+from stpik_motion_planner.model import blockers
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
 
 @pytest.fixture(scope="module")

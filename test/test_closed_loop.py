@@ -1,4 +1,5 @@
-"""Closed-loop retrieval core (qtree_task_planner.closed_loop, qtree_task_planner.replan) with a fake shelf.
+"""Closed-loop retrieval core (qtree_task_planner.executive.closed_loop, qtree_task_planner.executive.replan) with a
+fake shelf.
 
 The fake shelf is a unit-test double of the other layers: it relocates by moving a bottle to the first free slot
 (or fails when told to), lets the test disturb it after a given relocation, and answers feasibility from its
@@ -8,8 +9,7 @@ import math
 
 import pytest
 
-from qtree_task_planner import astar
-from qtree_task_planner.closed_loop import (
+from qtree_task_planner.executive.closed_loop import (
     ClosedLoopExecutor,
     Option,
     SeenObject,
@@ -20,10 +20,11 @@ from qtree_task_planner.closed_loop import (
     scene_from_scenario,
     verify_relocation,
 )
+from qtree_task_planner.executive.replan import GeometryCache, RemainingOracle, relearn, replan
+from qtree_task_planner.executive.retrieval import execute, execute_sequence
+from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
-from qtree_task_planner.params import TrainingParams
-from qtree_task_planner.replan import GeometryCache, RemainingOracle, relearn, replan
-from qtree_task_planner.retrieval import execute, execute_sequence
+from qtree_task_planner.search import astar
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label, destination_slot
 from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.scenario import parse_scenario
@@ -685,10 +686,10 @@ def test_no_scene_ends_the_run_with_the_reason():
 def test_slot_limit_bounds_the_exact_search_and_the_q_tree():
     """blocking_5's optimum o1 o4 T needs 3 slots: with 2 there is no sequence; with 3, the optimum. The Q-Tree over
     the same limit never learns a sequence longer than the slots (scenario3_15's demo learned 12 + T for 12)."""
+    from qtree_task_planner.executive.replan import SlotLimit
+    from qtree_task_planner.learning.params import TrainingParams
+    from qtree_task_planner.learning.training import train
     from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-    from qtree_task_planner.params import TrainingParams
-    from qtree_task_planner.replan import SlotLimit
-    from qtree_task_planner.training import train
     from relocation_common.scenario import load_scenario
     sc = load_scenario("blocking_5")
     assert astar.solve(sc, SlotLimit(BlockingOracle(sc), 2, "T")).sequence is None

@@ -8,9 +8,9 @@ import pytest
 from geometry_msgs.msg import Quaternion
 from qtree_relocation_msgs.msg import ObjectArray
 
-from qtree_task_planner.closed_loop import scene_from_scenario
+from qtree_task_planner.executive.closed_loop import scene_from_scenario
+from qtree_task_planner.executive.retrieval import execute
 from qtree_task_planner.oracles import CachedOracle
-from qtree_task_planner.retrieval import execute
 from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
 from relocation_common.paths import default_scenario
 from relocation_common.ros_conversions import bottle_to_msg
@@ -86,7 +86,7 @@ def test_open_loop_refuses_a_sequence_longer_than_the_free_slots():
 
 def test_the_learned_sequence_is_executed_only_when_it_is_as_good_as_the_optimum():
     """scenario3_15's demo executed a learned 12-bottle sequence (4.63) beside the proven optimum (2.12)."""
-    from qtree_task_planner.retrieval import chosen_sequence
+    from qtree_task_planner.executive.retrieval import chosen_sequence
     worse = dict(execute_optimum=False, execute_learned=False)
     seq, note = chosen_sequence(["o1", "o2", "T"], 4.63, ["o3", "T"], 2.12, **worse)
     assert seq == ["o3", "T"] and "4.63" in note and "2.12" in note and "execute_learned" in note
@@ -144,7 +144,7 @@ class _NoAnswer:
         self.outages, self.asked = outages, 0
 
     def feasibility(self, object_id, removed):
-        from qtree_task_planner.outage import PlannerUnavailable
+        from qtree_task_planner.executive.outage import PlannerUnavailable
         from relocation_common.feasibility import FeasibilityAnswer, Label
         self.asked += 1
         if self.outages:
@@ -202,8 +202,8 @@ def test_training_without_a_sequence_executes_the_optimum_and_no_sequence_at_all
     no sequence at all said no more than that."""
     from types import SimpleNamespace
 
-    from qtree_task_planner.exact import ExactResult
-    from qtree_task_planner.retrieval import chosen_sequence, training_outcome
+    from qtree_task_planner.executive.retrieval import chosen_sequence, training_outcome
+    from qtree_task_planner.search.exact import ExactResult
     none = SimpleNamespace(cancelled=False, found=False, episodes=2000, sequence=None, total_weight=None)
     optimum = ExactResult(("o3", "o4", "T"), 2.12, 5, 3)
     assert training_outcome(none, optimum, execute=True) is None  # goes on: the optimum is executed, and said

@@ -16,7 +16,7 @@ from relocation_app.evaluation.feasibility_cache import (
     load_table,
     open_table,
 )
-from relocation_app.evaluation.report import write_report
+from relocation_app.evaluation.reports.report import write_report
 from relocation_app.evaluation.sequences import analyse
 from relocation_app.evaluation.sweep import read_results, sweep
 from relocation_common.feasibility import Label
@@ -147,7 +147,7 @@ def test_report_puts_the_random_cases_of_the_paper_size_beside_table_4(tmp_path,
 def test_committed_cache_agrees_with_the_planner(params):
     """Recompute a handful of the committed answers of scenario 1 live (answers reached without RRT-Connect,
     which are deterministic: attempts <= 1)."""
-    from stpik_motion_planner.feasibility import MotionPlanner
+    from stpik_motion_planner.planning.planner import MotionPlanner
     sc = load_scenario(S1)
     table, path = open_table(sc, params)
     assert path.exists() and len(table) > 0

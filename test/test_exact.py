@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from qtree_task_planner.exact import brute_force, solve
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.search.exact import brute_force, solve
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import ScenarioError, load_scenario

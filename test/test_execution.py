@@ -9,10 +9,10 @@ from jaco2_sim_driver.sim import Jaco2Sim
 from relocation_common import robot_description as rd
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.execution import FollowerParams, TrajectoryFollower
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
-from stpik_motion_planner.relocation import PHASES, relocate
-from stpik_motion_planner.trajectory import Trajectory
+from stpik_motion_planner.execution.follower import FollowerParams, TrajectoryFollower
+from stpik_motion_planner.execution.relocation import PHASES, relocate
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.trajectory import Trajectory
 
 DT = 0.01
 # wall-clock safety nets (reached, a plan raises) of 300 s instead of config/motion_planner.yaml's 10 s: a plan next to
@@ -227,7 +227,7 @@ def test_recover_after_a_failed_motion_leaves_the_bottle_standing_and_the_arm_ho
     and on its way out) is recovered in MuJoCo: back along the motions made, the bottle let go where it was picked,
     the arm home with the gripper open; no bottle moved more than 5 mm, no unintended contact; the next
     relocation works."""
-    from stpik_motion_planner.relocation import Progress, recover
+    from stpik_motion_planner.execution.relocation import Progress, recover
     scenario = load_scenario(default_scenario())
     planner, sim = MotionPlanner(scenario, PARAMS), Jaco2Sim(scenario)
     start = {p.id: np.array(p.position) for p in sim.object_poses()}

@@ -10,11 +10,11 @@ import dataclasses
 
 import yaml
 
-from relocation_app.evaluation.make_scenes import jitter_scene
+from relocation_app.evaluation.scenes.make_scenes import jitter_scene
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import parse_scenario
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
-from stpik_motion_planner.relocation import plan_relocation
+from stpik_motion_planner.execution.relocation import plan_relocation
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
 SAMPLE = [("o3", []), ("T", ["o2", "o3", "o6"])]
 

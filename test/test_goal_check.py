@@ -1,5 +1,6 @@
 """RelocateObject goals against the scene, the destination slot from the scene's occupancy, the outcome after the
-motion (stpik_motion_planner.goal_check), and scene updates against the scenario (relocation_common.scene_check)."""
+motion (stpik_motion_planner.execution.goal_check), and scene updates against the scenario
+(relocation_common.scene_check)."""
 import math
 
 import pytest
@@ -7,8 +8,8 @@ import pytest
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import ScenarioError, load_scenario
 from relocation_common.scene_check import check_scene, foreign_ids
-from stpik_motion_planner import goal_check as gc
-from stpik_motion_planner.relocation import plan_relocation
+from stpik_motion_planner.execution import goal_check as gc
+from stpik_motion_planner.execution.relocation import plan_relocation
 
 SC = load_scenario(default_scenario())
 SHELF, SLOTS = SC.shelf, SC.slots
@@ -66,7 +67,7 @@ def test_the_destination_is_the_certified_slot_when_it_is_free():
 
 
 def test_plan_relocation_goes_to_the_slot_given_with_the_bottles_placed():
-    from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
     planner = MotionPlanner(SC, PlannerParams())
     plan = plan_relocation(planner, "o2", [], slot=1, placed=[("o1", SLOTS[0])])

@@ -6,7 +6,7 @@ import math
 import pytest
 import yaml
 
-from relocation_app.evaluation.make_scenes import _seed_range, jitter_scene, main
+from relocation_app.evaluation.scenes.make_scenes import _seed_range, jitter_scene, main
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario, parse_scenario
 

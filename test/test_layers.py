@@ -66,13 +66,13 @@ def test_the_check_catches_imports_against_the_order(tmp_path):
     (tmp_path / "stpik_motion_planner").mkdir()
     (tmp_path / "relocation_common").mkdir()
     bad = tmp_path / "stpik_motion_planner" / "probe.py"
-    bad.write_text("def f():\n    from qtree_task_planner.params import TrainingParams\n")
-    assert violations(tmp_path) == ["stpik_motion_planner/probe.py:2 imports qtree_task_planner.params"]
+    bad.write_text("def f():\n    from qtree_task_planner.learning.params import TrainingParams\n")
+    assert violations(tmp_path) == ["stpik_motion_planner/probe.py:2 imports qtree_task_planner.learning.params"]
     bad.write_text("from ..relocation_app import demo\n")
     assert violations(tmp_path) == ["stpik_motion_planner/probe.py:1 imports relocation_app"]
     bad.write_text("from relocation_common.scenario import Scenario\nfrom . import rrt\n")
-    (tmp_path / "relocation_common" / "probe.py").write_text("import stpik_motion_planner.rrt\n")
-    assert violations(tmp_path) == ["relocation_common/probe.py:1 imports stpik_motion_planner.rrt"]
+    (tmp_path / "relocation_common" / "probe.py").write_text("import stpik_motion_planner.planning.rrt\n")
+    assert violations(tmp_path) == ["relocation_common/probe.py:1 imports stpik_motion_planner.planning.rrt"]
 
 
 @pytest.mark.parametrize("package", PACKAGES)
@@ -80,7 +80,7 @@ def test_file_paths_come_from_one_helper(package):
     """Only relocation_common/paths.py turns __file__ into a path to config or data (the kernel's C source sits
     next to its module and is package data)."""
     users = [p.relative_to(ROOT).as_posix() for p in (ROOT / package).rglob("*.py") if "__file__" in p.read_text()]
-    assert set(users) <= {"relocation_common/paths.py", "qtree_task_planner/kernel.py"}
+    assert set(users) <= {"relocation_common/paths.py", "qtree_task_planner/learning/kernel.py"}
 
 
 # ---------------------------------------------------------------------------------------------------------- cycles

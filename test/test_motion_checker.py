@@ -1,7 +1,7 @@
 """Every planned motion of the demo sequence of every shipped scene, replayed in the project's MuJoCo model by an
 independent checker (test/motion_checker.py): nothing touches anything it is not meant to touch.
 
-The demo sequence of a scene is its exact optimum (qtree_task_planner.exact.solve with the real planner as the
+The demo sequence of a scene is its exact optimum (qtree_task_planner.search.exact.solve with the real planner as the
 oracle): each obstacle of it, then the target, relocated in that order with relocation.plan_relocation (pick,
 carry, retreat, home planned before the arm would move). Also: a sample of feasibility answers (picks), scenes with
 bottles of other sizes, and the slots and planning errors of the carried bottle
@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 from motion_checker import MotionChecker, Report, replay_relocation
 
-from qtree_task_planner.exact import solve
+from qtree_task_planner.search.exact import solve
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario, parse_scenario
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
-from stpik_motion_planner.grasp import WorkspaceError
-from stpik_motion_planner.relocation import plan_relocation, relocate
+from stpik_motion_planner.execution.relocation import plan_relocation, relocate
+from stpik_motion_planner.model.grasp import WorkspaceError
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, PlanningError
 
 PARAMS = PlannerParams.load()
 ARM_CLEARANCE = PARAMS.stpik.clearance - 0.002  # the planner's bound less the interpolation between IK samples
@@ -91,10 +91,11 @@ OPTIMUM_CASES = [(PAPER_RANDOM[0], 1), pytest.param(PAPER_RANDOM[0], 2, marks=py
 def test_the_optimum_of_each_paper_scene_table_touches_nothing(name, replans):
     """The optimum the evaluation reports (exact.solve over the committed feasibility table, the answers of a fill
     in its own process) relocated in order: the demo-sequence test above asks a planner whose OMPL stream depends
-    on the queries run before it in this process (stpik_motion_planner/rrt.py), so it may solve another sequence."""
-    from relocation_app.evaluation import paper_scenes
+    on the queries run before it in this process (stpik_motion_planner/planning/rrt.py), so it may solve another
+    sequence."""
     from relocation_app.evaluation.__main__ import planner_params
     from relocation_app.evaluation.feasibility_cache import PlannerOracle, open_table
+    from relocation_app.evaluation.scenes import paper_scenes
     from relocation_common.paths import data_dir
     scenario = load_scenario(name)
     table, path = open_table(scenario, planner_params(), data_dir() / "feasibility")
@@ -167,7 +168,7 @@ def test_the_checker_sees_a_bottle_pushed_into_its_board():
     obs = planner.scene.obstacles({"o2"})
     down = planner.stpik.track(q, [start, start - [0, 0, 0.01, 0]], obs, math.inf, speed=0.05)
     assert down.ok, down.reason
-    from stpik_motion_planner.trajectory import Trajectory
+    from stpik_motion_planner.planning.trajectory import Trajectory
     checker = MotionChecker(scenario)
     checker.check(pick.trajectory, "pick", picking="o2", approach_from=dict(pick.trajectory.phases)["approach"])
     checker.grasp("o2")

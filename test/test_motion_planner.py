@@ -14,8 +14,8 @@ from jaco2_sim_driver.sim import GRASP_RADIAL_TOL
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.scenario import UnknownObjectError, parse_scenario
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams, PlanningError
-from stpik_motion_planner.grasp import PALM_GAP, PALM_REACH, WorkspaceError
+from stpik_motion_planner.model.grasp import PALM_GAP, PALM_REACH, WorkspaceError
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, PlanningError
 
 SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
          "ceiling_z": 0.28, "bottom_z": -0.18}
@@ -128,7 +128,7 @@ def test_bottle_behind_another_is_unfeasible_until_the_front_one_is_removed(plan
 
 def test_timeout_is_a_safety_net_and_no_answer(planner):
     """The wall-clock timeout only stops a query (SafetyNetTimeout: no answer), it never makes it UNFEASIBLE."""
-    from stpik_motion_planner.feasibility import SafetyNetTimeout
+    from stpik_motion_planner.planning.planner import SafetyNetTimeout
     t = time.perf_counter()
     with pytest.raises(SafetyNetTimeout):
         planner.feasibility("A", frozenset(), timeout=0.005)

@@ -5,9 +5,9 @@ import json
 
 import yaml
 
-from qtree_task_planner import astar, exact
 from qtree_task_planner.oracles import BlockingOracle
 from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.search import astar, exact
 from relocation_app.cli import main
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.paths import resolve_scenario

@@ -1,7 +1,7 @@
-"""qtree_task_planner.outage: training through a planner that goes away (ROS-free, on a fake clock)."""
+"""qtree_task_planner.executive.outage: training through a planner that goes away (ROS-free, on a fake clock)."""
 import pytest
 
-from qtree_task_planner.outage import PlannerGone, PlannerUnavailable, until_available
+from qtree_task_planner.executive.outage import PlannerGone, PlannerUnavailable, until_available
 
 
 class World:

@@ -7,9 +7,9 @@ import re
 
 import pytest
 
-from relocation_app.evaluation import complete_tree, paper_scenes
 from relocation_app.evaluation.__main__ import PAPER, SCEN_DIR, planner_params
 from relocation_app.evaluation.feasibility_cache import open_table
+from relocation_app.evaluation.scenes import complete_tree, paper_scenes
 from relocation_common.paths import data_dir
 from relocation_common.scenario import load_scenario
 
@@ -32,7 +32,7 @@ def test_shipped_scene_has_the_stated_tree(name):
 def test_the_random_cases_at_the_paper_size_match_table_4():
     """paper_random5_XX is Table 4's case XX+1: within 2x of its complete tree, one optimum (committed table),
     the description true."""
-    from relocation_app.evaluation import paper_random
+    from relocation_app.evaluation.scenes import paper_random
     paths = sorted((SCEN_DIR / paper_random.DIR).glob("*.yaml"))
     assert [p.stem for p in paths] == [paper_random.name(c) for c in range(1, len(paths) + 1)]
     edges_of = paper_random.case_edges()
@@ -85,7 +85,7 @@ def test_free_scene_of_another_bottle_radius(radius):
 
 def test_resume_with_another_radius_keeps_the_layout():
     """`make_scenes paper 15 --resume --radius 0.025`: the climb starts from the shipped layout, smaller bottles."""
-    from relocation_app.evaluation.make_scenes import _shipped
+    from relocation_app.evaluation.scenes.make_scenes import _shipped
     d = _shipped(None, SHIPPED[-1], 0.025)
     assert d["defaults"]["radius"] == 0.025 and d["description"] == ""
     assert [o["xy"] for o in d["objects"]] == [o["xy"] for o in _shipped(None, SHIPPED[-1])["objects"]]

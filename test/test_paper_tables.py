@@ -6,9 +6,11 @@ import itertools
 import pytest
 
 from qtree_task_planner.oracles import BlockingOracle
-from relocation_app.evaluation import claims, complete_tree, paper, paper_report
+from relocation_app.evaluation import paper
 from relocation_app.evaluation.__main__ import SCEN_DIR, planner_params
 from relocation_app.evaluation.feasibility_cache import FeasibilityTable, open_table
+from relocation_app.evaluation.reports import claims, paper_report
+from relocation_app.evaluation.scenes import complete_tree
 from relocation_common.feasibility import Label
 from relocation_common.paths import data_dir
 from relocation_common.scenario import load_scenario

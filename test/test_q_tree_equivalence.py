@@ -8,7 +8,7 @@ deterministic oracle (blocking_5/10/15 with BlockingOracle; scenario1_5 and scen
 answers of the committed caches it was recorded with, kept in test/data/qtree_reference_tables/: the planner's
 parameters have changed since, and with them data/feasibility/). Compared exactly: sequence, total_weight, episodes,
 converged, E_ss, MP_q, planner calls, E_1st, tree size, the Eq. 15 history (every float, by its IEEE bits) and the
-whole tree (QTree.to_state(), every Q by its bits). The one engine (the C kernel, qtree_task_planner/kernel.py,
+whole tree (QTree.to_state(), every Q by its bits). The one engine (the C kernel, qtree_task_planner/learning/kernel.py,
 through training.train) is checked against it in one batch, in batches between callbacks and with checkpoints; the
 reference loop (policies.py + QTree.step, test/qtree_reference.py) is checked against it too.
 """
@@ -23,11 +23,12 @@ from pathlib import Path
 import pytest
 from qtree_reference import reference_train
 
-from qtree_task_planner import exact, kernel
+from qtree_task_planner.learning import kernel
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle
-from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.training import train
+from qtree_task_planner.search import exact
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 

@@ -1,13 +1,13 @@
 """The task planner's ROS-free pieces that the node shell calls: scene checks, the relocation watchdog's
-reasons, checkpoint bookkeeping (qtree_task_planner.retrieval, .keeper, .problem)."""
+reasons, checkpoint bookkeeping (qtree_task_planner.executive.retrieval, .keeper, .problem)."""
 import pytest
 
-from qtree_task_planner.checkpoint import Checkpoint, CheckpointError
-from qtree_task_planner.keeper import CheckpointKeeper, check_checkpoint_path
+from qtree_task_planner.executive.keeper import CheckpointKeeper, check_checkpoint_path
+from qtree_task_planner.executive.retrieval import check_scene, relocation_stop
+from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
+from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.retrieval import check_scene, relocation_stop
 from relocation_common.config import ParameterError
 from relocation_common.scenario import ScenarioError, load_scenario
 

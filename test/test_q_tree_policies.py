@@ -4,10 +4,11 @@ import random
 from collections import Counter
 
 import pytest
+from qtree_reference import epsilon_greedy, h_lrnd, lrnd
 
-from qtree_task_planner.params import TrainingParams
-from qtree_task_planner.policies import epsilon_greedy, epsilon_schedule, h_lrnd, lrnd
-from qtree_task_planner.q_tree import Node
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.policies import epsilon_schedule
+from qtree_task_planner.learning.q_tree import Node
 from relocation_common.config import ParameterError, node_section
 from relocation_common.paths import config_file
 

@@ -3,16 +3,16 @@ Q-Tree against the exact optimum on random small instances."""
 import random
 
 import pytest
+import qtree_reference
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from qtree_reference import reference_train
 
-from qtree_task_planner.exact import solve
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.q_tree import QTree
-from qtree_task_planner.training import train
+from qtree_task_planner.search.exact import solve
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
@@ -56,14 +56,14 @@ def test_breadth_ends_at_the_first_unfeasible_action_depth_goes_on():
 
 def test_pruned_actions_are_never_chosen_again(monkeypatch):
     chosen_pruned = []
-    original = QTree.step
+    original = qtree_reference.step
 
-    def spy(self, node, a):
+    def spy(tree, node, a):
         if node.label.get(a) == Label.UNFEASIBLE:
             chosen_pruned.append((node.seq, a))
-        return original(self, node, a)
+        return original(tree, node, a)
 
-    monkeypatch.setattr(QTree, "step", spy)
+    monkeypatch.setattr(qtree_reference, "step", spy)
     for policy in ("lrnd", "h-lrnd", "h-eg"):
         for search in ("breadth", "depth"):  # the reference loop (the engine equals it: test_q_tree_equivalence)
             r = reference_train(SC10, BlockingOracle(SC10), params(policy=policy, search=search, max_episodes=300))

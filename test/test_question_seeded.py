@@ -14,8 +14,8 @@ from pathlib import Path
 
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
-from stpik_motion_planner.relocation import plan_relocation
+from stpik_motion_planner.execution.relocation import plan_relocation
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = "paper_experiment_10"

@@ -6,12 +6,18 @@ import os
 
 import pytest
 
-from qtree_task_planner.checkpoint import Checkpoint, CheckpointError, load_checkpoint, problem_hash, save_checkpoint
-from qtree_task_planner.exact import solve
+from qtree_task_planner.learning.checkpoint import (
+    Checkpoint,
+    CheckpointError,
+    load_checkpoint,
+    problem_hash,
+    save_checkpoint,
+)
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.training import train
+from qtree_task_planner.search.exact import solve
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 

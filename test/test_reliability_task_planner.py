@@ -16,10 +16,10 @@ from pathlib import Path
 import pytest
 from ros_procs import REPO, NodeProcess, RosGraph
 
-from qtree_task_planner import astar
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.params import TrainingParams
-from qtree_task_planner.training import train
+from qtree_task_planner.search import astar
 from relocation_common.scenario import load_scenario
 
 SCENARIO = REPO / "config" / "scenarios" / "blocking_10.yaml"
@@ -464,7 +464,7 @@ def test_an_unusable_checkpoint_path_is_refused_at_start(env, tmp_path, where):
 
 def test_the_message_never_claims_a_checkpoint_that_was_not_written():
     """kept_where from what was really written (a full disk: the file holds an older episode than memory)."""
-    from qtree_task_planner.keeper import CheckpointKeeper
+    from qtree_task_planner.executive.keeper import CheckpointKeeper
 
     k = CheckpointKeeper("/data/ck.json")
     k.memory = type("Ck", (), {"episode": 120})()

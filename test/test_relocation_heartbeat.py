@@ -1,4 +1,5 @@
-"""A relocation under load (stpik_motion_planner/relocation.py, service.py): a re-plan that runs into the planner's
+"""A relocation under load (stpik_motion_planner/execution/relocation.py, service.py): a re-plan that runs into the
+planner's
 wall-clock safety net keeps the plan made before (the arm still comes home), and a relocation that plans for long
 keeps sending feedback (the task planner's relocate_silence is for a planner that is gone, not a busy one)."""
 import threading
@@ -9,8 +10,8 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from stpik_motion_planner import service
-from stpik_motion_planner.budget import SafetyNetTimeout
-from stpik_motion_planner.relocation import relocate
+from stpik_motion_planner.execution.relocation import relocate
+from stpik_motion_planner.planning.budget import SafetyNetTimeout
 
 
 class SlowPlanner:
@@ -85,8 +86,8 @@ def test_a_recovery_that_failed_once_is_tried_again_and_brings_the_arm_home():
 
     from relocation_common.paths import default_scenario
     from relocation_common.scenario import load_scenario
-    from stpik_motion_planner.feasibility import PlannerParams
-    from stpik_motion_planner.streaming import Aborted
+    from stpik_motion_planner.execution.streaming import Aborted
+    from stpik_motion_planner.planning.planner import PlannerParams
 
     class LateFingers(FakeLink):
         opened = 0

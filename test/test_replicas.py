@@ -1,4 +1,4 @@
-"""ReplicaOracle (qtree_task_planner.replicas): several feasibility questions in flight over planner replicas,
+"""ReplicaOracle (qtree_task_planner.executive.replicas): several feasibility questions in flight over planner replicas,
 failover when one dies, and the exact planners asking through it (same optimum as with one planner)."""
 import random
 import threading
@@ -9,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_astar import lane_instance
 
-from qtree_task_planner import astar, exact
+from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
+from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.outage import Cancelled, PlannerUnavailable
-from qtree_task_planner.replicas import ReplicaOracle
+from qtree_task_planner.search import astar, exact
 from relocation_common.feasibility import Label
 
 

@@ -1,9 +1,10 @@
-"""qtree_task_planner.retrieval: exact optimum then training through an oracle that goes away; execution order."""
+"""qtree_task_planner.executive.retrieval: exact optimum then training through an oracle that goes away; execution
+order."""
+from qtree_task_planner.executive.outage import PlannerUnavailable
+from qtree_task_planner.executive.retrieval import execute_sequence, solve_then_train
+from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.outage import PlannerUnavailable
-from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.retrieval import execute_sequence, solve_then_train
 from relocation_common.scenario import load_scenario
 
 SC = load_scenario("blocking_5")

@@ -9,9 +9,9 @@ import pytest
 from relocation_common import robot_description as rd
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.collision import ArmGeometry, CollisionScene, segment_distance
-from stpik_motion_planner.feasibility import PlannerParams
-from stpik_motion_planner.kinematics import Kinematics
+from stpik_motion_planner.model.collision import ArmGeometry, CollisionScene, segment_distance
+from stpik_motion_planner.model.kinematics import Kinematics
+from stpik_motion_planner.planning.planner import PlannerParams
 
 MJCF = f"""<mujoco><compiler angle="radian"/>\
 <default><default class="arm_collision"><geom contype="1" conaffinity="1"/></default></default>

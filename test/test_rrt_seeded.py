@@ -1,4 +1,5 @@
-"""OMPL's RRT-Connect seeded per solve (stpik_motion_planner/rrt.py, docs/motion_planner.md "Determinism"): with a
+"""OMPL's RRT-Connect seeded per solve (stpik_motion_planner/planning/rrt.py, docs/motion_planner.md "Determinism"):
+with a
 seed, the path (OMPL's simplification included) is a function of the seed and the problem, whatever OMPL sampled
 before in this process and whichever thread asks."""
 from __future__ import annotations
@@ -8,7 +9,7 @@ import time
 
 import numpy as np
 
-from stpik_motion_planner.rrt import JointRRT
+from stpik_motion_planner.planning.rrt import JointRRT
 
 
 def _valid(q: np.ndarray) -> bool:

@@ -1,4 +1,4 @@
-"""stpik_motion_planner.scene_update: which perceived bottles replace the planner's (ROS-free); a lying bottle in
+"""stpik_motion_planner.model.scene_update: which perceived bottles replace the planner's (ROS-free); a lying bottle in
 the planner's scene and service (collision.lying_cylinder), a dropped one gone from it."""
 import math
 from dataclasses import replace
@@ -7,8 +7,8 @@ import numpy as np
 
 from relocation_common.feasibility import Label
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.feasibility import PlannerParams
-from stpik_motion_planner.scene_update import MOVED, merge_perceived
+from stpik_motion_planner.model.scene_update import MOVED, merge_perceived
+from stpik_motion_planner.planning.planner import PlannerParams
 from stpik_motion_planner.service import MotionPlannerService
 
 SC = load_scenario("scenario1_5")

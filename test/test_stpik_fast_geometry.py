@@ -8,10 +8,10 @@ import numpy as np
 from relocation_common import robot_description as rd
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.collision import HAND_PARTS, ArmGeometry, CollisionScene, HandProxy, _key
-from stpik_motion_planner.grasp import pose_matrix
-from stpik_motion_planner.kinematics import Kinematics
-from stpik_motion_planner.stpik import hierarchy
+from stpik_motion_planner.model.collision import HAND_PARTS, ArmGeometry, CollisionScene, HandProxy, _key
+from stpik_motion_planner.model.grasp import pose_matrix
+from stpik_motion_planner.model.kinematics import Kinematics
+from stpik_motion_planner.planning.stpik import hierarchy
 
 
 def _brute_collides(hand: HandProxy, r, p, obs, skip) -> bool:

@@ -1,4 +1,5 @@
-"""The motion planner node's behaviour without ROS: stpik_motion_planner/streaming.py (streaming a motion from the
+"""The motion planner node's behaviour without ROS: stpik_motion_planner/execution/streaming.py (streaming a motion
+from the
 joint states, holding the arm while they are late, the gripper protocol on either surface) over a fake arm link,
 and stpik_motion_planner/service.py (scene updates, goal checks, a relocation's outcome and recovery) on the real
 planner. The node over DDS: test_motion_planner_node.py, test_planner_on_fake_arm.py."""
@@ -12,10 +13,10 @@ from relocation_common import robot_description as rd
 from relocation_common.kinova import joint_to_turns, turns_to_joint
 from relocation_common.paths import config_file, default_scenario
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.feasibility import PlannerParams
+from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm, StreamParams, progress
+from stpik_motion_planner.planning.planner import PlannerParams
+from stpik_motion_planner.planning.trajectory import Trajectory
 from stpik_motion_planner.service import MotionPlannerService
-from stpik_motion_planner.streaming import Aborted, Cancelled, StreamedArm, StreamParams, progress
-from stpik_motion_planner.trajectory import Trajectory
 
 FAST = dict(gripper_settle=0.0, finger_stall_interval=0.1, state_timeout=0.5)
 

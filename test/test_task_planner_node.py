@@ -7,10 +7,10 @@ import time
 
 import pytest
 
-from qtree_task_planner import exact
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle
-from qtree_task_planner.params import TrainingParams
-from qtree_task_planner.training import train
+from qtree_task_planner.search import exact
 from relocation_app.graph import Graph
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario

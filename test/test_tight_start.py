@@ -11,11 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from relocation_app.evaluation.make_scenes import make_jitter
+from relocation_app.evaluation.scenes.make_scenes import make_jitter
 from relocation_common.feasibility import Label
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.collision import CARRIED
-from stpik_motion_planner.feasibility import START_RELIEF, MotionPlanner, PlannerParams
+from stpik_motion_planner.model.collision import CARRIED
+from stpik_motion_planner.planning.planner import START_RELIEF, MotionPlanner, PlannerParams
 
 
 @pytest.fixture(scope="module")

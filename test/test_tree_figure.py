@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from relocation_app.evaluation import figures
+from relocation_app.evaluation.reports import figures
 
 DOT = Path(__file__).resolve().parent.parent / "docs" / "figures" / "tree_scenario1_5.dot"
 

@@ -3,11 +3,11 @@ import pytest
 
 pytest.importorskip("visualization_msgs")
 
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
 from qtree_task_planner.markers import tree_markers
 from qtree_task_planner.oracles import BlockingOracle
-from qtree_task_planner.params import TrainingParams
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.training import train
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 import yaml
 
-from relocation_app.evaluation.make_scenes import jitter_scene
+from relocation_app.evaluation.scenes.make_scenes import jitter_scene
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import parse_scenario
-from stpik_motion_planner.blockers import lane_blockers
-from stpik_motion_planner.feasibility import MotionPlanner, PlannerParams
-from stpik_motion_planner.grasp import yaw_tiers
+from stpik_motion_planner.model.blockers import lane_blockers
+from stpik_motion_planner.model.grasp import yaw_tiers
+from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
 
 def test_the_tiers_list_each_yaw_once_straight_in_first():

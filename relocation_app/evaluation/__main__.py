@@ -6,7 +6,7 @@ complete), run the missing sweep cells (the scenes of the paper's size paper1_5/
 1-3 of this project's geometry, the Sect. 5.2 scene paper_experiment_10, the 10 random scenes of each set), regenerate
 docs/evaluation.md (the paper's Tables 1-4 beside ours, data/paper/) and docs/figures/.
 --only a,b: fill/sweep only those scenes. Scenes of the paper's size:
-python -m relocation_app.evaluation.make_scenes paper N.
+python -m relocation_app.evaluation.scenes.make_scenes paper N.
 --quick: 3 runs per cell, two (alpha, gamma) pairs, two random scenes per set, output under out/evaluation-quick/.
 """
 from __future__ import annotations
@@ -17,9 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+from relocation_app.evaluation.feasibility_cache import planner_params
 from relocation_common.paths import data_dir, scenarios_dir, share_dir
-
-from .feasibility_cache import planner_params
 
 ROOT = share_dir()  # the checkout: the evaluation writes docs/ and data/ of the source tree
 SCEN_DIR = scenarios_dir()
@@ -40,10 +39,9 @@ def scene_paths(quick: bool = False) -> tuple[list[Path], list[Path], list[Path]
 
 def scenes(paths, params, data_dir, grid=None):
     """The sweep's scenes (sweep.Scene) of the scenario files `paths`, each with its feasibility cache file."""
+    from relocation_app.evaluation.feasibility_cache import cache_key, cache_path
+    from relocation_app.evaluation.sweep import GRID, Scene
     from relocation_common.scenario import load_scenario
-
-    from .feasibility_cache import cache_key, cache_path
-    from .sweep import GRID, Scene
     out = []
     for p in paths:
         sc = load_scenario(p)
@@ -57,10 +55,9 @@ def cmd_fill(paths, params, data_dir, workers, replicas: int = 0) -> dict:
     processes over ROS (replica_fill)."""
     from contextlib import nullcontext
 
+    from relocation_app.evaluation.feasibility_cache import fill_reachable, open_table
+    from relocation_app.evaluation.replica_fill import replica_oracle
     from relocation_common.scenario import load_scenario
-
-    from .feasibility_cache import fill_reachable, open_table
-    from .replica_fill import replica_oracle
     stats = {}
     for p in paths:
         sc = load_scenario(p)
@@ -105,7 +102,7 @@ def main(argv=None) -> int:
         rnd_p, prnd_p = [], []
     exp_p = [] if a.quick or a.no_experiment else [SCEN_DIR / f"{EXPERIMENT}.yaml"]
     if a.command == "scenes":
-        from .make_scenes import make_all
+        from relocation_app.evaluation.scenes.make_scenes import make_all
         make_all(params, a.data)
         return 0
     import os
@@ -115,20 +112,20 @@ def main(argv=None) -> int:
         cmd_fill(_only(main_p + rnd_p + prnd_p + [SCEN_DIR / f"{EXPERIMENT}.yaml"], only), params, a.data, workers,
                  a.replicas)
     if a.command in ("all", "sweep"):
-        from .sweep import sweep
+        from relocation_app.evaluation.sweep import sweep
         grid = QUICK_GRID if a.quick else None
         sc = scenes(_only(main_p + exp_p + rnd_p + prnd_p, only), params, a.data, grid)
         t = time.perf_counter()
         res = sweep(sc, runs, out / "sweep.jsonl", workers=workers, progress=not a.no_progress)
         res["wall_s"] = round(time.perf_counter() - t, 1)
-        from qtree_task_planner import kernel
+        from qtree_task_planner.learning import kernel
         res |= {"runs": runs, "workers": workers, "cells": len(sc) * len(sc[0].grid) * 6, "time": time.time(),
                 "engine": "C kernel" if kernel.available() else f"Python loop ({kernel.build_error})"}
         with (out / "timing.jsonl").open("a") as f:
             f.write(json.dumps(res) + "\n")
         print(f"sweep: {res['cells_run']} cells run in {res['wall_s']} s on {workers} workers", flush=True)
     if a.command in ("all", "report"):
-        from .report import write_report
+        from relocation_app.evaluation.reports.report import write_report
         path = write_report(out, docs, params, a.data, [p.stem for p in main_p if p.stem in MAIN],
                             [p.stem for p in rnd_p], quick=a.quick, experiment=[p.stem for p in exp_p],
                             paper_set=[p.stem for p in main_p if p.stem in PAPER],

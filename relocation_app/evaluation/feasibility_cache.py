@@ -15,7 +15,7 @@ scene. A file that is not valid JSON, has another key or malformed entries raise
 
 `PlannerOracle` is the FeasibilityOracle the trainings use: a table hit answers at once; a miss runs the real
 MotionPlanner (created lazily, so a complete table never loads Pinocchio/OMPL) and records the answer.
-`fill_reachable` computes the complete table: breadth-first (qtree_task_planner/reachable.py) over every set
+`fill_reachable` computes the complete table: breadth-first (qtree_task_planner/search/reachable.py) over every set
 reachable by feasible removals, which is exactly the set of questions any training (or the exact solver) can
 ask; level by level over a process pool.
 """
@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from qtree_task_planner import reachable
+from qtree_task_planner.search import reachable
 from relocation_common.feasibility import FeasibilityAnswer, Label, ask_many
 from relocation_common.paths import data_dir
 
@@ -47,7 +47,7 @@ class FeasibilityCacheError(ValueError):
 def planner_params():
     """The evaluation's planner parameters: config/motion_planner.yaml's, with the safety net EVAL_TIMEOUT (not part
     of the cache key). Shared by the evaluation's commands, the scene search and the tests."""
-    from stpik_motion_planner.feasibility import PlannerParams
+    from stpik_motion_planner.planning.planner import PlannerParams
     p = PlannerParams.load()
     p.timeout = EVAL_TIMEOUT
     return p
@@ -206,7 +206,7 @@ class PlannerOracle:
     def planner(self):
         """The real MotionPlanner, created on the first table miss."""
         if self._planner is None:
-            from stpik_motion_planner.feasibility import MotionPlanner
+            from stpik_motion_planner.planning.planner import MotionPlanner
             self._planner = MotionPlanner(self.scenario, self.params)
         return self._planner
 
@@ -228,7 +228,7 @@ _WORKER: dict = {}
 
 
 def _init_worker(scenario, params) -> None:
-    from stpik_motion_planner.feasibility import MotionPlanner
+    from stpik_motion_planner.planning.planner import MotionPlanner
     _WORKER["mp"] = MotionPlanner(scenario, params)
 
 

@@ -13,9 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from itertools import combinations
 
+from relocation_app.evaluation.feasibility_cache import FeasibilityTable, reachable_sets
 from relocation_common.feasibility import Label
-
-from .feasibility_cache import FeasibilityTable, reachable_sets
 
 WEIGHT_TOL = 1e-9
 

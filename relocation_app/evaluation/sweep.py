@@ -18,13 +18,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from qtree_task_planner import exact
-from qtree_task_planner.params import TrainingParams
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import WEIGHT_TOL, train
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.training import WEIGHT_TOL, train
-
-from ..progress import Progress
-from .feasibility_cache import PlannerOracle, load_table
+from qtree_task_planner.search import exact
+from relocation_app.evaluation.feasibility_cache import PlannerOracle, load_table
+from relocation_app.progress import Progress
 
 ALGORITHMS = (("lrnd", "breadth"), ("lrnd", "depth"), ("h-lrnd", "breadth"), ("h-lrnd", "depth"),
               ("h-eg", "breadth"), ("h-eg", "depth"))

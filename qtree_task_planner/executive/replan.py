@@ -1,0 +1,284 @@
+"""Re-planning the remaining retrieval over the exact blocker A* (astar.py, Eq. 8), keeping what is still true.
+
+A feasibility answer (relocate o with a set removed, from home) depends on the geometry of the objects still on
+the top shelf: o and every object not removed. `GeometryCache` keys each answer by those objects and the
+*version* of each one's pose; a version changes only when the object is perceived to have moved (more than
+`tol` m, by default the tolerance within which closed_loop.verify_relocation says a bottle stayed) or tipped.
+So after a disturbance only the answers in which a moved object was still present are asked again; those
+where it was already removed, and everything about undisturbed parts of the shelf, stay.
+Relocating an object does not change anyone's answers: a question after it is the old question with one more
+object removed.
+
+`RemainingOracle` poses the RemainingProblem's questions (object, S) to the planner as (object, gone | S) and
+answers g_U, without asking, for a failed option (closed_loop.Option) and for a relocation that would need more
+slots than are free: the A* then returns the least-weight sequence that fits the bottom shelf, still proven
+optimal under that constraint, or none.
+
+`relearn` trains the Q-Tree again on a remaining problem (Eq. 7), over the same oracle, when the user asks for it
+(the task planner's `replan_q_tree`); otherwise a re-plan is the A* alone.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, Iterable, Mapping
+
+from qtree_task_planner.executive.closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
+from qtree_task_planner.search import astar
+from relocation_common.feasibility import FeasibilityAnswer, Label, ask_many, in_flight
+
+Pose = tuple[float, float, float]  # x, y, tilt
+
+
+class GeometryCache:
+    """Feasibility answers kept while the geometry they were computed on is unchanged (module doc). `calls`: real
+    planner calls; `hits`: questions answered from the cache."""
+
+    def __init__(self, oracle, tol: float = Tolerances().still, tilt_tol: float = Tolerances().tilt) -> None:
+        self.oracle, self.tol, self.tilt_tol = oracle, tol, tilt_tol
+        self._ref: dict[str, Pose] = {}
+        self._version: dict[str, int] = {}
+        self.table: dict[tuple, FeasibilityAnswer] = {}
+        self._lanes: dict[tuple, Mapping | None] = {}
+        self.calls = self.hits = 0
+
+    def observe(self, geometry: Mapping[str, Pose]) -> list[str]:
+        """Take a perceived geometry (id -> (x, y, tilt) of the objects on the top shelf); returns the ids whose
+        version changed (new ones, or moved by more than tol, or tipped by more than tilt_tol)."""
+        changed = []
+        for oid, pose in sorted(geometry.items()):
+            ref = self._ref.get(oid)
+            if ref is None or math.hypot(pose[0] - ref[0], pose[1] - ref[1]) > self.tol or \
+                    abs(pose[2] - ref[2]) > self.tilt_tol:
+                self._ref[oid] = pose
+                self._version[oid] = self._version.get(oid, -1) + 1
+                changed.append(oid)
+        return changed
+
+    def adopt(self, table: Mapping[tuple[str, frozenset[str]], FeasibilityAnswer],
+              geometry: Mapping[str, Pose]) -> int:
+        """Take the answers of a set-keyed table (oracles.CachedOracle.table: (object, removed) -> answer) gathered
+        on `geometry` (id -> (x, y, tilt) of the objects on the top shelf when they were asked: the first scene),
+        before anything moved (ValueError once an object's version changed). The optimum's and training's answers
+        then serve re-plans on that geometry; a later `observe` of a bottle elsewhere makes them about the old
+        pose (without the geometry, the first re-plan's scene became version 0, disturbed or not). Returns how
+        many."""
+        if any(v > 0 for v in self._version.values()):
+            raise ValueError("adopt answers before any object moved: they were computed on the first geometry")
+        self.observe(geometry)
+        if any(v > 0 for v in self._version.values()):
+            raise ValueError("adopt answers on the geometry they were computed on: this cache saw another one")
+        ids = frozenset(geometry)
+        n = 0
+        for (obj, removed), answer in table.items():
+            k = self.key(obj, ids - removed)
+            if k not in self.table:
+                self.table[k], n = answer, n + 1
+        return n
+
+    def key(self, object_id: str, present: Iterable[str]) -> tuple:
+        """The cache key of a question about object_id with `present` (the objects not removed) on the shelf."""
+        return object_id, frozenset((p, self._version.get(p, 0)) for p in set(present) | {object_id})
+
+    def feasibility(self, object_id: str, removed: frozenset[str], present: Iterable[str]) -> FeasibilityAnswer:
+        """The planner's answer for (object_id, removed), from the cache when `present`'s geometry is unchanged."""
+        k = self.key(object_id, present)
+        answer = self.table.get(k)
+        if answer is None:
+            answer = self.table[k] = self.oracle.feasibility(object_id, frozenset(removed))
+            self.calls += 1
+        else:
+            self.hits += 1
+        return answer
+
+    def lane_blockers(self, removed: frozenset[str], present: Iterable[str]):
+        """The planner's lane blockers with `removed` gone (None if it has none), cached like the answers."""
+        ask = getattr(self.oracle, "lane_blockers", None)
+        if ask is None:
+            return None
+        k = self.key("", present)
+        if k not in self._lanes:
+            self._lanes[k] = ask(frozenset(removed))
+        return self._lanes[k]
+
+
+class RemainingOracle:
+    """The feasibility oracle of a RemainingProblem (module doc): questions over its obstacles, asked of the
+    GeometryCache with the objects already gone removed; banned options and relocations beyond the free slots
+    answer g_U without asking."""
+
+    def __init__(self, rp: RemainingProblem, cache: GeometryCache, banned: Iterable[Option] = (),
+                 capacity: bool = True) -> None:
+        if rp.problem is None:
+            raise ValueError(f"no problem to solve: {rp.reason}")
+        self.rp, self.cache, self.banned = rp, cache, tuple(banned)
+        self.slots = len(rp.free_slots) if capacity else None
+        self.target = rp.problem.target
+        self.on_shelf = frozenset(rp.problem.ids)
+
+    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """g_U for a banned option or a slot too many; else the (cached) planner answer."""
+        full = self.rp.gone | removed
+        if any(b.bans(object_id, full) for b in self.banned):
+            return FeasibilityAnswer(Label.UNFEASIBLE, message=f"{object_id} failed with these objects removed")
+        if self.slots is not None and not fits(object_id, removed, self.slots, self.target):
+            return no_slot(object_id, self.slots)
+        return self.cache.feasibility(object_id, full, self.on_shelf - removed)
+
+    def lane_blockers(self, removed: frozenset[str]):
+        """The planner's lane blockers for the objects of the problem (others are not ours to relocate)."""
+        lanes = self.cache.lane_blockers(self.rp.gone | removed, self.on_shelf - removed)
+        return None if lanes is None else {o: sets for o, sets in lanes.items() if o in self.on_shelf}
+
+
+def fits(object_id: str, removed: frozenset[str], slots: int, target: str) -> bool:
+    """Relocating object_id after `removed` with `slots` free slots at the start: it takes slot |removed| and an
+    obstacle must leave one for the target."""
+    return len(removed) + (1 if object_id == target else 2) <= slots
+
+
+def no_slot(object_id: str, slots: int) -> FeasibilityAnswer:
+    """The g_U of a relocation beyond the free slots (no blockers: a capacity limit, not geometry)."""
+    return FeasibilityAnswer(Label.UNFEASIBLE, message=f"no free slot left for {object_id} and the target "
+                             f"({slots} slots)")
+
+
+class SlotLimit:
+    """Any feasibility oracle with the bottom shelf's capacity as a constraint: with `slots` free slots, relocating
+    an obstacle after `removed` needs |removed| + 2 <= slots (its slot and one left for the target), the target
+    |removed| + 1 <= slots; beyond that the answer is g_U without asking. In front of the oracle of the exact
+    solvers and of the Q-Tree's episodes (oracles.CachedOracle(SlotLimit(service, n, target))), no sequence
+    needing more slots than exist is ever found. Lane blockers and batches pass through."""
+
+    def __init__(self, oracle, slots: int, target: str) -> None:
+        if slots < 1:
+            raise ValueError(f"slots must be >= 1 (the target needs one), got {slots}")
+        self.oracle, self.slots, self.target = oracle, slots, target
+
+    def fits(self, object_id: str, removed: frozenset[str]) -> bool:
+        """True when relocating object_id after `removed` leaves a slot for everything still to come."""
+        return fits(object_id, removed, self.slots, self.target)
+
+    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """g_U beyond the slots, else the oracle's answer."""
+        if self.fits(object_id, removed):
+            return self.oracle.feasibility(object_id, removed)
+        return no_slot(object_id, self.slots)
+
+    @property
+    def in_flight(self) -> int:
+        """As the wrapped oracle (relocation_common.feasibility.BatchOracle)."""
+        return in_flight(self.oracle)
+
+    def feasibility_many(self, queries, on_answer=None) -> list[FeasibilityAnswer]:
+        """The queries that fit go to the wrapped oracle together; the others are g_U."""
+        ask = [q for q in queries if self.fits(*q)]
+        got = dict(zip(ask, ask_many(self.oracle, ask)))
+        out = [got[q] if q in got else no_slot(q[0], self.slots) for q in queries]
+        if on_answer is not None:
+            for q, a in zip(queries, out):
+                on_answer(q, a)
+        return out
+
+    def lane_blockers(self, removed: frozenset[str]):
+        """The wrapped oracle's lane blockers (geometry: capacity does not change them), None if it has none."""
+        lanes = getattr(self.oracle, "lane_blockers", None)
+        return None if lanes is None else lanes(removed)
+
+
+def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache) -> ReplanAnswer | str:
+    """The least-weight sequence (Eq. 8) for the remaining problem that avoids failed options and fits the free
+    slots: (sequence, weight, planner calls it cost), or the reason there is none in one line (the lying bottles'
+    part, `lying_reason`, else the A*'s own, exact.why_none: the target without a lane, a blocking cycle). The
+    cache first takes the perceived geometry, so answers about moved objects are asked again and the others
+    reused."""
+    if rp.problem is None:
+        return rp.reason
+    banned = tuple(banned)
+    cache.observe(rp.geometry())
+    calls0 = cache.calls
+    r = astar.solve(rp.problem, RemainingOracle(rp, cache, banned))
+    if r.found:
+        assert r.sequence is not None and r.total_weight is not None
+        return r.sequence, r.total_weight, cache.calls - calls0
+    t, n = rp.problem.target, len(rp.problem.obstacles)
+    if banned or len(rp.free_slots) < n + 1:  # would it be reachable without the failed options and the slot limit?
+        free = astar.solve(rp.problem, RemainingOracle(rp, cache, (), capacity=False))
+        if free.found:
+            assert free.sequence is not None
+            why = []
+            if len(free.sequence) > len(rp.free_slots):
+                why.append(f"needs {len(free.sequence)} slots, {len(rp.free_slots)} free")
+            if banned:
+                why.append(f"failed options: {', '.join(sorted(b.object_id for b in banned))}")
+            return (f"{t} cannot be reached: every sequence left needs a failed option or more slots than are free "
+                    f"(the best without those limits, {' '.join(free.sequence)}, {'; '.join(why)})")
+    because = lying_reason(rp, cache) or (f"; {r.reason.removeprefix('no sequence: ')}" if r.reason else "")
+    return (f"{t} cannot be reached: no feasible relocation sequence over the {n} obstacle{'s' * (n != 1)} "
+            f"on the top shelf ({cache.calls - calls0} planner calls){because}")
+
+
+def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
+    """What the bottles lying on the top shelf have to do with a failed re-plan, for its one line ("" without
+    any): the target lying; every lane of the target holding a lying bottle; every lane of the target holding a
+    bottle that can never be moved because of them (`never_free`); or only their names. From the planner's lane
+    screen (no planner call). The side grasp takes standing bottles only (closed_loop.RemainingProblem.tipped are
+    banned options), so a lying bottle stays where it is."""
+    if not rp.tipped or rp.problem is None:
+        return ""
+    t, lying = rp.problem.target, frozenset(rp.tipped)
+    if t in lying:
+        return f"; {t} itself lies on its side, and the side grasp takes standing bottles only"
+    lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset()) or {}
+    t_lanes = lanes.get(t)
+    if t_lanes and all(b.certain and b.objects & lying for b in t_lanes):
+        inside = sorted(frozenset().union(*(b.objects for b in t_lanes)) & lying)
+        return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(inside)}), and the side grasp "
+                "takes standing bottles only")
+    stuck = never_free(lanes, lying)
+    if t in stuck:
+        held = ", ".join(sorted(stuck - lying - {t}))
+        return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(sorted(lying))}) or one that can "
+                f"never be moved because each of its lanes holds such a bottle ({held}), and the side grasp takes "
+                "standing bottles only")
+    return f"; lying on its side, not graspable: {', '.join(sorted(lying))}"
+
+
+def never_free(lanes: Mapping, lying: frozenset[str]) -> frozenset[str]:
+    """The objects that can never be relocated because of the lying ones: those, and (to a fixpoint) every object
+    each of whose lanes holds one of them (lanes: LaneOracle.lane_blockers; only certain blocker sets count: such
+    a lane is clear exactly when all its blockers are gone, and a lying bottle never goes)."""
+    stuck = set(lying)
+    grew = True
+    while grew:
+        grew = False
+        for obj, sets in lanes.items():
+            if obj not in stuck and sets and all(b.certain and b.objects & stuck for b in sets):
+                stuck.add(obj)
+                grew = True
+    return frozenset(stuck)
+
+
+def relearn(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache, params: TrainingParams,
+            exact: ReplanAnswer, keep_going: Callable[[], bool] = lambda: True) -> ReplanAnswer:
+    """The Q-Tree trained again on the remaining problem (Eq. 7, `params`: policy, search, E_max, Eq. 16), asking
+    the re-plan's own oracle (failed options and slots beyond the free ones g_U, answers of unchanged geometry
+    reused), after the A* found `exact` (its optimum: the E_1st reference). The learned sequence is kept when it
+    weighs no more than the A*'s (as retrieval.chosen_sequence), else the A*'s, and the note says which, with
+    both weights, the episodes and whether Eq. 16 was met. keep_going() False stops training (a cancelled goal).
+    The calls are the A*'s and training's together."""
+    if rp.problem is None:
+        raise ValueError(f"no problem to train on: {rp.reason}")
+    seq, weight, calls = exact[:3]
+    calls0 = cache.calls
+    r = train(rp.problem, RemainingOracle(rp, cache, tuple(banned)), params, optimal_weight=weight,
+              callback=lambda stats: keep_going(), callback_every=50)
+    calls += cache.calls - calls0
+    steady = f"{r.e_ss} episodes" + ("" if r.converged else " (E_max or stopped, Eq. 16 not met)")
+    if not r.found or r.total_weight is None:
+        return seq, weight, calls, f"Q-Tree retrained: no sequence in {steady}; executing the A*'s optimum"
+    learned = f"learned {' '.join(r.sequence or ())} (weight {r.total_weight:.2f}) in {steady}"
+    if r.total_weight <= weight + 1e-9:
+        return tuple(r.sequence or ()), r.total_weight, calls, f"Q-Tree retrained: {learned}, executed"
+    return seq, weight, calls, f"Q-Tree retrained: {learned}; executing the A*'s optimum ({weight:.2f}) instead"

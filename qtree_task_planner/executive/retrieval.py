@@ -1,0 +1,224 @@
+"""The task planner's job, ROS-free: the exact optimum, then Q-Tree training (Sect. 4.2), then the relocations.
+
+The exact optimum comes from the blocker A* (astar.py: the planner's lane blockers bound the search, the optimum
+still proven, Eq. 8) in a handful of planner calls; exact.py's uniform-cost search stays the tested reference.
+
+The node supplies the oracle (its feasibility service behind a CachedOracle), how to get through planner outages
+(`until_planner`, qtree_task_planner.executive.outage), where to keep checkpoints, per-episode feedback and how to
+relocate
+one object; everything else (order, what is kept when the planner goes away, when execution stops) is here.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable, TypeVar
+
+from qtree_task_planner.executive.closed_loop import (
+    ClosedLoopExecutor,
+    ExecutionResult,
+    GiveUp,
+    ReplanRecord,
+    Scene,
+    Step,
+    check_capacity,
+    free_slots,
+    remaining_problem,
+)
+from qtree_task_planner.executive.outage import PlannerUnavailable
+from qtree_task_planner.executive.replan import GeometryCache, relearn, replan
+from qtree_task_planner.learning.checkpoint import Checkpoint
+from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import train
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.search import astar
+from relocation_common.scenario import Scenario, ScenarioError
+
+T = TypeVar("T")
+STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from the node's clock is on another clock
+
+
+def check_scene(topic: str, max_age: float, received_s: float | None, stamp_age_s: float | None,
+                n_objects: int) -> str | None:
+    """ScenarioError for a scene a goal must not train on: none received, stale (received longer than max_age
+    ago, or stamped longer ago than that: an old scene handed over by transient-local durability from a
+    perception that stopped; max_age 0: no check), or empty. received_s: seconds since it arrived (None: never);
+    stamp_age_s: the node's clock minus the header stamp (None: unstamped). Returns a warning when the stamp is
+    on another clock (simulated vs wall time: only the receive time counts then)."""
+    if received_s is None:
+        raise ScenarioError(f"no scene received on {topic}: is perception (or the driver) up?")
+    stale = f"the scene on {topic} is stale: %s > scene_max_age {max_age:g} s; is perception still running?"
+    if max_age > 0 and received_s > max_age:
+        raise ScenarioError(stale % f"received {received_s:.1f} s ago")
+    warning = None
+    if max_age > 0 and stamp_age_s is not None:
+        if not -1.0 < stamp_age_s < STAMP_PLAUSIBLE:
+            warning = (f"scene stamp {stamp_age_s:.0f} s away from this node's clock: is one of them on use_sim_time? "
+                       "Checking the scene's age by receive time only")
+        elif stamp_age_s > max_age:
+            raise ScenarioError(stale % f"stamped {stamp_age_s:.1f} s ago")
+    if not n_objects:
+        raise ScenarioError(f"the scene on {topic} is empty: perception sees no objects (camera, marker, lighting?)")
+    return warning
+
+
+def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: TrainingParams, *,
+                     resume: Checkpoint | None, until_planner: Callable[[Callable[[], T]], T],
+                     keep: Callable[[Checkpoint], None], on_episode: Callable, checkpoint_every: int,
+                     on_solved: Callable = lambda optimum: None, episode_every: int = 1):
+    """(exact optimum, training result). The answers the exact solve gathered before an outage are kept in a
+    checkpoint (`keep`), so nothing asked is asked again; training checkpoints every `checkpoint_every` episodes,
+    calls `on_episode(stats)` every `episode_every` episodes (training.train's callback) and stops when it
+    returns False (cancel, shutdown)."""
+    state = {"ck": resume}
+
+    def solve():
+        try:
+            return astar.solve(problem, oracle)
+        except PlannerUnavailable as e:
+            ck = state["ck"] or Checkpoint.initial(problem, params)
+            state["ck"] = dataclasses.replace(ck, feasibility=Checkpoint.table_of(oracle), reason=f"interrupted: {e}")
+            keep(state["ck"])
+            raise
+
+    optimum = until_planner(solve)
+    on_solved(optimum)
+
+    def on_checkpoint(ck: Checkpoint) -> None:
+        state["ck"] = ck
+        keep(ck)
+
+    def run():
+        return train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode,
+                     callback_every=episode_every, resume=state["ck"], checkpoint_every=checkpoint_every,
+                     on_checkpoint=on_checkpoint)
+
+    return optimum, until_planner(run)
+
+
+def training_outcome(trained, optimum, *, execute: bool) -> tuple[bool, str] | None:
+    """(success, message) when the goal ends after training, None when it goes on to execute. Cancelled; no
+    sequence at all (the exact solver's one-line reason, exact.why_none); not executed (trained; or training found
+    none within E_max while the proven optimum exists: said, with the optimum). Training without a sequence but with
+    an optimum goes on: the optimum is executed (chosen_sequence says so)."""
+    if trained.cancelled:
+        return False, "cancelled"
+    if not (trained.found or optimum.found):
+        return False, f"the target cannot be retrieved: {optimum.reason or 'no sequence'}"
+    if execute:
+        return None
+    if trained.found:
+        return True, "trained (not executed)"
+    return False, (f"training did not find a sequence to the target in {trained.episodes} episodes (the exact "
+                   f"optimum {' '.join(optimum.sequence)}, weight {optimum.total_weight:.2f}, exists: execute_optimum)")
+
+
+def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
+                     cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None
+                     ) -> tuple[bool, str, list[str]]:
+    """Relocate the learned sequence in order (the target last): (success, message, relocated ids). Stops at the
+    first failure or on cancel, saying which object and why."""
+    removed: list[str] = []
+    for object_id in sequence:
+        before_each()
+        if cancelled():
+            return False, f"cancelled after relocating {removed}", removed
+        ok, message = relocate_one(object_id, list(removed))
+        if not ok:
+            return False, f"relocating {object_id!r} failed: {message}", removed
+        removed.append(object_id)
+    return True, f"target {sequence[-1]!r} retrieved after {len(removed) - 1} relocations", removed
+
+
+def chosen_sequence(learned, learned_weight: float | None, optimum, optimal_weight: float | None, *,
+                    execute_optimum: bool, execute_learned: bool) -> tuple[list[str], str]:
+    """(the sequence to execute, a note for the user): the learned one only when its weight (Eq. 8) equals the
+    proven optimum's, or when asked for (execute_learned); else the optimum, saying so with both weights."""
+    learned, optimum = list(learned or ()), list(optimum or ())
+    if execute_optimum or not learned:
+        return optimum, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
+    if execute_learned or not optimum or optimal_weight is None or learned_weight is None \
+            or learned_weight <= optimal_weight + 1e-9:
+        return learned, ""
+    return optimum, (f"executed the exact optimum {' '.join(optimum)} (weight {optimal_weight:.2f}) instead of the "
+                     f"learned {' '.join(learned)} (weight {learned_weight:.2f}); execute_learned forces the learned")
+
+
+def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
+            perceive: Callable[[], Scene], oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
+            before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,
+            on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True,
+            retrain: TrainingParams | None = None) -> ExecutionResult:
+    """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
+    checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
+    with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
+    open-loop execution (execute_sequence) after the same capacity check: a sequence needing more slots than
+    are free is never started. retrain: each re-plan also trains the Q-Tree on the remaining problem with these
+    params (replan.relearn; the user's `replan_q_tree`), else the A* alone."""
+    if closed_loop:
+        cache = GeometryCache(oracle.oracle)
+        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry())
+
+        def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
+            before_each()
+            ok, message = relocate_one(object_id, removed)
+            if not ok and any(w in message for w in STOPPED):  # no motion planner to recover with, or a stop
+                raise GiveUp(f"relocating {object_id!r} failed: {message}")
+            return ok, message
+
+        def replan_through(rp, banned):
+            """replan; a feasibility question with no answer (the planner's safety net under load, PlannerUnavailable)
+            is asked again, up to REPLAN_TRIES re-plans (the answers already given are kept), then the run ends
+            with the reason (before, it escaped the executor: the goal ended with no execution record)."""
+            for attempt in range(1, REPLAN_TRIES + 1):
+                try:
+                    answer = replan(rp, banned, cache)
+                    if retrain is None or isinstance(answer, str):
+                        return answer
+                    return relearn(rp, banned, cache, retrain, answer, keep_going=lambda: not cancelled())
+                except PlannerUnavailable as e:
+                    if attempt == REPLAN_TRIES:
+                        raise GiveUp(f"re-plan failed {REPLAN_TRIES} times without a feasibility answer: {e}") from None
+            raise AssertionError("unreachable")
+
+        return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
+                                  cancelled=cancelled, on_step=on_step, on_replan=on_replan,
+                                  bottom_seen=bottom_seen).run(sequence, scene)
+    why = check_capacity(sequence, len(free_slots(scenario, scene)))
+    if why:
+        return ExecutionResult(False, f"not executed: {why}")
+    unverified: list[str] = []  # the motion planner's success without an outcome check (goal_check.outcome)
+
+    def relocate_noted(object_id: str, removed: list[str]) -> tuple[bool, str]:
+        ok, message = relocate_one(object_id, removed)
+        if ok and "unverified" in message:
+            unverified.append(object_id)
+        return ok, message
+
+    ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each)
+    return ExecutionResult(ok, message + (f" (unverified: {', '.join(unverified)})" if ok and unverified else ""),
+                           relocated, unverified=unverified)
+
+
+REPLAN_TRIES = 3  # re-plans cut short by a missing feasibility answer before the closed loop gives up
+STOPPED = ("shutting down", "went away", "cancelled", "relocate_timeout", "not available")  # relocation_stop's words
+# (and the Relocator's): the relocation stopped without the motion planner's recovery; the closed loop ends there
+
+
+def relocation_stop(*, shutting_down: bool, server_up: Callable[[], bool], silent_s: float, silence: float,
+                    cancelled: bool, elapsed_s: float, limit: float) -> str | None:
+    """Why a running relocation must stop now, or None (checked in this order): the task planner shutting down,
+    the relocate action server gone (`server_up()`, asked only while the node runs: it needs a valid context), no
+    feedback for more than `silence` s (relocate_silence), the goal cancelled, no result within `limit` s
+    (relocate_timeout)."""
+    if shutting_down:
+        return "the task planner is shutting down"
+    if not server_up():
+        return "the motion planner went away (relocate action server gone)"
+    if silent_s > silence:
+        return f"the motion planner went away (no feedback for {silent_s:.0f} s > relocate_silence)"
+    if cancelled:
+        return "cancelled"
+    if elapsed_s > limit:
+        return f"no result within {limit:g} s (relocate_timeout)"
+    return None

@@ -1,0 +1,212 @@
+"""The exact minimum-weight answer: the relocation sequence of least total weight (Eq. 8) that frees the target.
+
+Feasibility depends only on the set of removed objects, so the search runs over removed sets. `solve` is a
+uniform-cost search (Dijkstra; weights phi_i > 0) with lazy edge evaluation in the spirit of Lazy Shortest
+Path: an edge "remove object o from set S" enters the queue with its cost g(S) + phi_o unchecked, and the oracle
+is asked only when that entry is popped and its head set S + {o} is not settled yet. "Relocate the target from
+S" enters at cost g(S) and is checked when popped; the first feasible one popped is optimal, since every entry
+still queued costs at least as much and costs never decrease along a path. An oracle with several planner
+replicas (docs/architecture.md) is asked the next cheapest queued questions together with the one popped.
+
+`brute_force` enumerates every set reachable by feasible single removals (reachable.py, asking everything) for
+tests. When no sequence exists, `why_none` says why in one line from what the search learned (docs/motion_planner.md,
+"Why there is no sequence"): the target's own answer, a blocking cycle of certain lane blockers (through the
+target or not), the objects no grasp ever reached.
+"""
+from __future__ import annotations
+
+import heapq
+import itertools
+from dataclasses import dataclass
+
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.search.reachable import reachable_sets
+from relocation_common.feasibility import Label, ask_many, claims, in_flight
+
+
+@dataclass(frozen=True)
+class ExactResult:
+    """The minimum-weight sequence (Eq. 8) or None, the oracle calls it took, and why there is none."""
+
+    sequence: tuple[str, ...] | None  # obstacles in order, then the target; None if the target cannot be freed
+    total_weight: float | None  # Eq. 8
+    oracle_calls: int  # distinct (object, removed set) questions asked
+    sets_settled: int
+    reason: str = ""  # why there is no sequence (why_none), one line; empty when found
+
+    @property
+    def found(self) -> bool:
+        """A sequence frees the target."""
+        return self.sequence is not None
+
+    def to_dict(self) -> dict:
+        """As JSON (`qtree solve`)."""
+        out = {"found": self.found, "sequence": list(self.sequence) if self.sequence is not None else None,
+               "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
+               "sets_settled": self.sets_settled}
+        return out if self.found else {**out, "reason": self.reason}
+
+
+def _set(s) -> str:
+    return "{" + ", ".join(sorted(s)) + "}"
+
+
+def why_none(target: str, asked: dict, lanes: dict | None = None, limit: int = 4) -> str:
+    """One line saying why no sequence frees `target`, from the answers asked ((object, removed) -> answer) and
+    certain lane claims (object -> [(removed, lane sets)], e.g. astar.Knowledge.claims; the answers' own certain
+    blockers are added): the target's answer from the largest set reached; a blocking cycle (every lane of the
+    target needs an object that can never leave first: each of its lanes needs the target or another such object
+    moved, or it has no lane at all); the objects
+    never feasible in any set asked, with the planner's reason."""
+    lanes = {o: list(v) for o, v in (lanes or {}).items()}
+    for (o, s), a in asked.items():
+        if Label(a.label) == Label.UNFEASIBLE and claims(a.blockers):
+            lanes.setdefault(o, []).append((s, tuple(b.objects for b in a.blockers)))
+    parts = []
+    mine = [(s, a) for (o, s), a in asked.items() if o == target]
+    if mine:
+        s, a = max(mine, key=lambda x: (len(x[0]), sorted(x[0])))
+        parts.append(f"{target} unfeasible from every set reached (with {_set(s)} removed: {a.message})")
+    elif any(ls == () for _, ls in lanes.get(target, ())):
+        parts.append(f"{target} has no grasp lane that removing bottles can clear (boards or reach)")
+    cycle = _cycle(target, lanes)
+    if cycle:
+        parts.append(cycle)
+    last: dict[str, tuple] = {}  # object -> (largest set asked, its answer), for objects never feasible
+    feasible = {o for (o, _), a in asked.items() if Label(a.label) != Label.UNFEASIBLE}
+    for (o, s), a in asked.items():
+        if o != target and o not in feasible and (o not in last or len(s) > len(last[o][0])):
+            last[o] = (s, a)
+    stuck = [f"{o} ({a.message})" for o, (_, a) in sorted(last.items())]
+    if stuck:
+        more = f"; {len(stuck) - limit} more" if len(stuck) > limit else ""
+        parts.append("never feasible: " + "; ".join(stuck[:limit]) + more)
+    return "no sequence: " + (". ".join(parts) if parts else "nothing was feasible to ask")
+
+
+def _cycle(target: str, lanes: dict, limit: int = 8) -> str:
+    """'blocking cycle: ...' if no lane of the target (claimed at the empty set) can be cleared: every lane needs an
+    object that can never leave before the target, because each of its lanes needs the target or another such
+    object moved, or it has no lane ('' otherwise; at most `limit` explanations). Objects without a claim count as
+    able to leave (optimistic)."""
+    first = {o: v[0] for o, v in ((o, [ls for s, ls in c if not s]) for o, c in lanes.items()) if v}
+    if not first.get(target):
+        return ""
+    free = {m for ls in first.values() for lane in ls for m in lane if m not in first} - {target}
+    grown = True
+    while grown:  # the objects that can leave, grown to a fixpoint
+        grown = False
+        for o, ls in first.items():
+            if o != target and o not in free and any(set(lane) <= free for lane in ls):
+                free.add(o)
+                grown = True
+    if any(set(lane) <= free for lane in first[target]):
+        return ""
+    parts, told = [], {target}
+    for lane in sorted({frozenset(lane) for lane in first[target]}, key=lambda ls: (len(ls), sorted(ls))):
+        x = next(m for m in sorted(lane) if m not in free)
+        parts.append(f"lane {_set(lane)}: {_needs(x, first, free)}")
+        told.add(x)
+    todo = sorted({m for lane in first[target] for m in lane if m not in free})
+    seen = set(todo) | {target}
+    while todo:  # every object stuck behind those, each explained once
+        y = todo.pop(0)
+        if y not in told:
+            parts.append(_needs(y, first, free))
+            told.add(y)
+        for m in sorted({m for lane in first[y] for m in lane if m not in free} - seen):
+            seen.add(m)
+            todo.append(m)
+    more = f"; {len(parts) - limit} more" if len(parts) > limit else ""
+    return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
+        "; ".join(parts[:limit]) + more + ")"
+
+
+def _needs(x: str, first: dict, free: set) -> str:
+    """'x needs T moved', 'x needs one of {a, b} moved' (the objects stuck in its lanes) or 'x has no lane'."""
+    stuck = sorted({m for lane in first[x] for m in lane if m not in free})
+    if not first[x]:
+        return f"{x} has no lane"
+    return f"{x} needs {stuck[0]} moved" if len(stuck) == 1 else f"{x} needs one of {_set(stuck)} moved"
+
+
+def as_problem(problem) -> RelocationProblem:
+    """`problem` itself if it is a RelocationProblem, else the problem of that scenario."""
+    return problem if isinstance(problem, RelocationProblem) else RelocationProblem.from_scenario(problem)
+
+
+def solve(problem, oracle) -> ExactResult:
+    """Minimum-weight feasible relocation sequence by lazy uniform-cost search over removed sets.
+
+    oracle: feasibility(object_id, removed: frozenset) -> FeasibilityAnswer. oracle_calls counts the questions
+    this search asks (each (object, set) at most once, so a CachedOracle in front changes nothing here)."""
+    problem = as_problem(problem)
+    obstacles, target, phi = problem.obstacles, problem.target, problem.weights
+    calls = 0
+    known: dict = {}  # (object, set) -> answer
+    settled: dict[frozenset[str], tuple[float, tuple[str, ...]]] = {}
+    tie = itertools.count()
+    # entries: (cost, tie, parent set, parent sequence, object)
+    queue: list = [(0.0, next(tie), None, (), None)]
+    state: frozenset[str]
+    while queue:
+        cost, _, parent, seq, obj = heapq.heappop(queue)
+        if obj is None:  # the start: the empty set, feasible by definition
+            state, new_seq = frozenset[str](), ()
+        else:
+            state = parent if obj == target else parent | {obj}
+            if obj != target and state in settled:
+                continue
+            if (obj, parent) not in known:
+                calls += _ask_next(queue, (obj, parent), oracle, known, settled, target)
+            label = Label(known[(obj, parent)].label)
+            if label == Label.UNFEASIBLE:
+                continue
+            if obj == target:
+                return ExactResult(seq + (target,), problem.weight(seq), calls, len(settled))
+            new_seq = seq + (obj,)
+        settled[state] = (cost, new_seq)
+        heapq.heappush(queue, (cost, next(tie), state, new_seq, target))
+        for o in obstacles:
+            if o not in state and (state | {o}) not in settled:
+                heapq.heappush(queue, (cost + phi[o], next(tie), state, new_seq, o))
+    return ExactResult(None, None, calls, len(settled), why_none(target, known))
+
+
+def _ask_next(queue, question, oracle, known, settled, target) -> int:
+    """Ask `question` and, for an oracle with several questions in flight (planner replicas), the
+    next cheapest ones still queued whose sets are not settled, together; the answers go to `known`. Returns the
+    number of questions asked (1 for a plain oracle: the search asks exactly what it pops)."""
+    batch, popped, k = [question], [], in_flight(oracle)
+    while queue and len(batch) < k:
+        entry = heapq.heappop(queue)
+        popped.append(entry)
+        _, _, parent, _, obj = entry
+        if obj is None or (obj, parent) in known or (obj, parent) in batch:
+            continue
+        if obj == target or (parent | {obj}) not in settled:
+            batch.append((obj, parent))
+    for entry in popped:
+        heapq.heappush(queue, entry)
+    known.update(zip(batch, ask_many(oracle, batch)))
+    return len(batch)
+
+
+def brute_force(problem, oracle) -> ExactResult:
+    """Test reference: every removed set reachable by feasible single removals, asking the oracle about every
+    (object, reachable set) pair, then the lightest set from which the target is feasible."""
+    problem = as_problem(problem)
+    cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
+    calls0 = cache.calls
+    reachable = reachable_sets(problem.obstacles, lambda o, s: cache.feasibility(o, s).label != Label.UNFEASIBLE)
+    best = None
+    for s, seq in reachable.items():
+        if cache.feasibility(problem.target, s).label == Label.TARGET:
+            w = problem.weight(seq)
+            if best is None or w < best[0]:
+                best = (w, seq + (problem.target,))
+    calls = cache.calls - calls0
+    if best is None:
+        return ExactResult(None, None, calls, len(reachable))
+    return ExactResult(best[1], best[0], calls, len(reachable))

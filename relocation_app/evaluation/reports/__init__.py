@@ -1,0 +1,1 @@
+"""The evaluation's tables, figures and the comparison with the paper's numbers."""

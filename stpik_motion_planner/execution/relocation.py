@@ -1,0 +1,177 @@
+"""One relocation on a real or simulated arm (ROS-free): the sequence the RelocateObject action carries out.
+
+plan the whole relocation (pick, carry, retreat, home) -> [the way home first, if the arm is away from it] ->
+approach -> close the gripper -> re-plan the carry from the measured configuration (the plan made before is kept if
+that fails) -> carry -> open -> retreat -> re-plan home from the measured configuration (idem) -> home.
+Nothing moves before the whole relocation is planned, so a carry that cannot be planned never leaves the arm
+holding a bottle; and when a motion fails or the goal is cancelled, `recover` brings the arm back to a safe state
+along the motions it made (the bottle set down where it was picked, the arm home). The destination is the slot the
+caller chose (the motion_planner node: a free one of the scene, goal_check.destination) with the bottles placed so far
+where they stand; by default slot `len(removed)`, the objects already relocated in the earlier slots. The arm is
+anything that implements `Arm`: the motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
+"""
+from __future__ import annotations
+
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from relocation_common import robot_description as rd
+from stpik_motion_planner.model.grasp import WorkspaceError
+from stpik_motion_planner.planning.budget import SafetyNetTimeout
+from stpik_motion_planner.planning.planner import MotionPlanner, PlanningError
+from stpik_motion_planner.planning.trajectory import Trajectory
+
+# progress (0..1) of the whole relocation at the start of each phase, in order
+PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, "carry": 0.45, "release": 0.7,
+          "retreat": 0.72, "plan_home": 0.8, "home": 0.82, "done": 1.0, "recover": 1.0}
+
+
+class Arm(Protocol):
+    """The arm a relocation runs on: measured joints, motion, gripper and phase reports."""
+
+    def measured(self) -> np.ndarray:
+        """Current joint positions (Q convention, rad); raises if they cannot be had."""
+
+    def follow(self, trajectory: Trajectory, phase: str) -> None:
+        """Execute a planned motion until it settles; raises on failure."""
+
+    def gripper(self, action: str, phase: str) -> None:
+        """'close' (must grasp) or 'open'; returns once the fingers may be moved away; raises on failure."""
+
+    def phase(self, phase: str) -> None:
+        """A planning phase starts (progress reporting)."""
+
+
+@dataclass
+class Progress:
+    """What a relocation has done so far, for `recover`: the motions followed (the current one included)."""
+
+    object_id: str = ""
+    removed: list = field(default_factory=list)
+    placed: list = field(default_factory=list)  # (bottle, slot xy) on the bottom shelf, this one once released
+    moves: list = field(default_factory=list)  # (phase, Trajectory), oldest first
+    released: bool = False
+
+
+@dataclass
+class RelocationPlan:
+    """Every motion of one relocation, planned from the home configuration before the arm moves."""
+
+    object_id: str
+    slot_index: int
+    placed: list  # (id, slot xy) of the objects on the bottom shelf before this one
+    pick: Trajectory  # home -> pre-grasp -> grasp, then close
+    carry: Trajectory  # lift, out of the shelf, in to the slot, then open
+    retreat: Trajectory  # back to the staging pose
+    home: Trajectory  # staging pose -> home
+
+
+def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str], slot: int | None = None,
+                    placed: list | None = None) -> RelocationPlan:
+    """The whole relocation of object_id to slot `slot` with the bottles `placed` ((id, (x, y))) on the bottom
+    shelf; by default slot len(removed), the objects of `removed` (in relocation order) in the earlier slots.
+    PlanningError names the stage that failed (an unreachable pose or slot included)."""
+    removed = list(removed)
+    slots = planner.scenario.slots
+    k = len(removed) if slot is None else slot
+    if k >= len(slots):
+        raise PlanningError(f"no free slot for {object_id!r}: {k} objects relocated, the scenario has "
+                            f"{len(slots)} slots")
+    placed = [(r, slots[j]) for j, r in enumerate(removed)] if placed is None else list(placed)
+    try:
+        (pick,) = planner.plan_pick(object_id, removed)
+    except WorkspaceError as e:
+        raise PlanningError(f"pick of {object_id!r}: {e}") from None
+    carry, retreat = planner.plan_carry(object_id, removed, k, q_start=pick.trajectory.positions[-1], placed=placed)
+    home = planner.plan_home(retreat.trajectory.positions[-1], removed + [object_id],
+                             placed + [(object_id, slots[k])])
+    return RelocationPlan(object_id, k, placed, pick.trajectory, carry.trajectory, retreat.trajectory, home)
+
+
+def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float = 0.05,
+             lock=None, progress: Progress | None = None, slot: int | None = None,
+             placed: list | None = None) -> RelocationPlan:
+    """Relocate object_id to its slot (`slot` and `placed` as plan_relocation); PlanningError (or the arm's error)
+    names the failed stage. `lock` guards the planner (not thread-safe) while it plans, not while the arm moves.
+    `progress` records what was done (for `recover` after a failure). Returns the plan made before moving."""
+    lock = lock if lock is not None else nullcontext()
+    removed = list(removed)
+    arm.phase("plan_pick")
+    with lock:
+        plan = plan_relocation(planner, object_id, removed, slot, placed)
+    slot_xy = planner.scenario.slots[plan.slot_index]
+    progress = progress if progress is not None else Progress()
+    progress.object_id, progress.removed, progress.placed = object_id, removed, list(plan.placed)
+    arm = _Recorded(arm, progress)
+    q = arm.measured()
+    if float(np.max(np.abs(q - rd.Q_HOME))) > home_tol:
+        arm.phase("plan_home")
+        with lock:
+            home = planner.plan_home(q, removed, plan.placed)
+        arm.follow(home, "home")
+    arm.follow(plan.pick, "approach")
+    arm.gripper("close", "grasp")
+    arm.phase("plan_carry")
+    carry, retreat = plan.carry, plan.retreat
+    q = arm.measured()
+    with lock:
+        try:  # from where the arm really is; the plan made before is within the follower's settling tolerance
+            c, r = planner.plan_carry(object_id, removed, plan.slot_index, q_start=q, placed=plan.placed)
+            carry, retreat = c.trajectory, r.trajectory
+        except (PlanningError, SafetyNetTimeout):  # the safety net under load: the plan made before is as good
+            pass
+    arm.follow(carry, "carry")
+    arm.gripper("open", "release")
+    progress.released = True
+    progress.placed.append((object_id, slot_xy))
+    arm.follow(retreat, "retreat")
+    arm.phase("plan_home")
+    home = plan.home
+    q = arm.measured()
+    with lock:
+        try:
+            home = planner.plan_home(q, removed + [object_id], plan.placed + [(object_id, slot_xy)])
+        except (PlanningError, SafetyNetTimeout):  # idem: a bottle released, the arm must still come home
+            pass
+    arm.follow(home, "home")
+    arm.phase("done")
+    return plan
+
+
+class _Recorded:
+    """An Arm that records each motion in a Progress before following it."""
+
+    def __init__(self, arm: Arm, progress: Progress) -> None:
+        self.arm, self.progress = arm, progress
+        self.measured, self.gripper, self.phase = arm.measured, arm.gripper, arm.phase
+
+    def follow(self, trajectory: Trajectory, phase: str) -> None:
+        self.progress.moves.append((phase, trajectory))
+        self.arm.follow(trajectory, phase)
+
+
+def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock=None) -> str:
+    """A safe state after a failed or cancelled relocation (the next goal starts from home, nothing held).
+
+    Before the release: back along the motions made, newest first (the same paths, as clear as on the way there);
+    the way back along the carry ends at the grasp, where a held bottle is let go, standing where it was picked; then
+    back along the approach to home. After the release: a fresh path home. Returns what was done; raises (the arm's
+    or PlanningError) if it could not."""
+    lock = lock if lock is not None else nullcontext()
+    if progress.released:
+        with lock:
+            home = planner.plan_home(arm.measured(), progress.removed + [progress.object_id], progress.placed)
+        arm.follow(home, "recover")
+        return f"{progress.object_id} was placed; arm back home"
+    moves = [(phase, t) for phase, t in progress.moves if phase in ("approach", "carry")]
+    if not moves:
+        return "arm stopped (it had not moved towards the bottle)"
+    for phase, traj in reversed(moves):
+        if phase == "approach":  # at the grasp: let go of the bottle (if held) where it was picked
+            arm.gripper("open", "recover")
+        arm.follow(traj.back_from(arm.measured()), "recover")
+    return (f"{progress.object_id} set down where it was picked; arm back home" if moves[-1][0] == "carry" else
+            "arm back home along its approach, gripper open")

@@ -1,0 +1,123 @@
+"""Which bottles block each grasp lane: the grasp/approach screen of feasibility (paper Sect. 4.1,
+step 1) asked per bottle instead of once for all.
+
+A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `MotionPlanner._candidates` keeps a lane when the hand
+proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for palm and fingers on
+the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each of them, so the
+lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the screen with
+`removed` gone exactly when all of its blockers are in `removed` (a *certain* BlockerSet). A lane the proxy cannot
+use whatever is removed (out of the planner's workspace or reach, a board, the grasped bottle itself in the way) is
+no lane. Computed once per (scene, object) with every bottle present; a query subtracts its removed set.
+
+When the screen passes and STPIK or RRT-Connect still fail, the lane gets an *uncertain* set: the bottles within
+SUSPECT_MARGIN of the proxy along it (suspects, not a claim).
+"""
+from __future__ import annotations
+
+import weakref
+from typing import Iterable
+
+import numpy as np
+
+from relocation_common import robot_description as rd
+from relocation_common.feasibility import BlockerSet
+from stpik_motion_planner.model.collision import HAND_PARTS, HandProxy, ObstacleSet
+from stpik_motion_planner.model.grasp import Grasp, WorkspaceError, pose_matrix, side_grasp
+
+SUSPECT_MARGIN = 0.03  # m added to the hand proxy's inflation to name the suspects of an STPIK/RRT failure
+
+# scene (replaced when the planner's scenario changes) -> {(object, screen parameters, margin): lanes}
+_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _lanes(planner, object_id: str) -> list[Grasp]:
+    """The object's grasps for every yaw inside the arm's reach and the Cartesian planner's box."""
+    p = planner.params
+    out = []
+    for yaw in planner.all_yaws():
+        try:
+            g = side_grasp(planner.scenario, object_id, yaw, p.pre_grasp_distance)
+        except WorkspaceError:
+            continue
+        if planner.rrt.contains(g.pre_grasp):
+            out.append(g)
+    return out
+
+
+def _blocked(planner, hand: HandProxy, g: Grasp, obs: ObstacleSet) -> bool:
+    """The screen of one lane against `obs`: the proxy meets it at the pre-grasp or along the approach."""
+    skip = {n: frozenset([g.object_id]) for n in HAND_PARTS}
+    return hand.collides(*pose_matrix(g.pre_grasp), obs) or not hand.path_clear([g.pre_grasp, g.grasp], obs,
+                                                                                planner.params.resolution, skip)
+
+
+def _near(hand: HandProxy, g: Grasp, obs: ObstacleSet) -> list:
+    """Obstacles whose box is within the proxy's reach of the lane (broad phase)."""
+    ends = np.array([g.pre_grasp[:3], g.grasp[:3]])
+    reach = float(np.max(np.linalg.norm(np.vstack([hand.p0, hand.p1]), axis=1)) + np.max(hand.reach)) + rd.D67
+    lo, hi = ends.min(axis=0) - reach, ends.max(axis=0) + reach
+    keep = np.all((obs.lo <= hi) & (obs.hi >= lo), axis=1)
+    return [o for o, k in zip(obs.items, keep) if k]
+
+
+def _lane_blockers(planner, hand: HandProxy, g: Grasp) -> frozenset[str] | None:
+    """The bottles the proxy meets on this lane with every bottle present; None if no removal can clear it."""
+    scene = planner.scene
+    fixed = ObstacleSet(scene.boards + scene.placed)
+    if _blocked(planner, hand, g, fixed):
+        return None
+    everything = scene.obstacles()
+    if not _blocked(planner, hand, g, everything):
+        return frozenset()
+    # the proxy's contact with a set of obstacles is the OR of its contacts with each: one pass collects them all
+    skip = {n: frozenset([g.object_id]) for n in HAND_PARTS}
+    near = ObstacleSet([o for o in _near(hand, g, everything) if o.object_id in scene.bottles])
+    met = hand.hits(*pose_matrix(g.pre_grasp), near) | hand.path_hits([g.pre_grasp, g.grasp], near,
+                                                                       planner.params.resolution, skip)
+    hits = frozenset(str(near.items[k].object_id) for k in met)
+    return None if g.object_id in hits else hits
+
+
+def static_lanes(planner, object_id: str, margin: float = 0.0) -> tuple[tuple[Grasp, frozenset[str]], ...]:
+    """(grasp, blockers with every bottle present) of each lane some removal can clear, for the proxy inflated
+    by `margin` more than the planner's; cached per scene."""
+    p = planner.params
+    key = (object_id, p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw, p.pre_grasp_distance, planner.hand_margin,
+           p.resolution, margin)
+    table = _CACHE.setdefault(planner.scene, {})
+    got = table.get(key)
+    if got is None:
+        hand = planner.hand if margin == 0.0 else HandProxy(planner.hand_margin + margin)
+        got = tuple((g, b) for g in _lanes(planner, object_id)
+                    for b in [_lane_blockers(planner, hand, g)] if b is not None)
+        table[key] = got
+    return got
+
+
+def _name(g: Grasp) -> str:
+    return f"yaw {g.yaw:+.2f}"
+
+
+def lane_blockers(planner, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
+    """Every object still on the shelf -> its lanes' certain blocker sets with `removed` gone (an empty tuple:
+    no lane can ever be cleared, as for a lying bottle). No motion planning: the screen only."""
+    gone = frozenset(planner.scenario.check_ids(removed))
+    return {b.id: () if planner.not_graspable(b.id) else
+            tuple(BlockerSet(bl - gone, True, _name(g)) for g, bl in static_lanes(planner, b.id))
+            for b in planner.scenario.objects if b.id not in gone}
+
+
+def answer_blockers(planner, object_id: str, removed: frozenset[str]) -> tuple[BlockerSet, ...]:
+    """The blockers of an unfeasible answer: certain sets for the lanes the screen rejects; for a lane it passes
+    (so STPIK or RRT-Connect failed there), an uncertain set of the bottles near it. Empty: no lane at all."""
+    if planner.not_graspable(object_id):  # lying or off the shelf: no lane at all
+        return ()
+    suspects = {g.yaw: bl for g, bl in static_lanes(planner, object_id, SUSPECT_MARGIN)}
+    out = []
+    for g, bl in static_lanes(planner, object_id):
+        left = bl - removed
+        if left:
+            out.append(BlockerSet(left, True, _name(g)))
+        else:
+            out.append(BlockerSet(suspects.get(g.yaw, frozenset()) - removed, False, _name(g)))
+    return tuple(out)

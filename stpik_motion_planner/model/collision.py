@@ -1,0 +1,392 @@
+"""Collision scene with python-fcl: arm capsules vs shelf boards vs bottles (the clearance tasks of Eq. 10).
+
+Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel), the floor, the
+pedestal under the robot and the bottles of the scenario as cylinders; bottles already relocated may stand on the bottom
+shelf (`placed`). The set of removed bottles is a parameter of every query (`CollisionScene.obstacles(removed)`).
+A numpy AABB broad phase keeps only the capsule/obstacle pairs closer than an activation distance; fcl
+computes their exact distances and witness points (in the base frame). fcl returns -1 on penetration.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterable, Iterator, Mapping, Sequence
+
+import fcl
+import numpy as np
+
+from relocation_common import robot_description as rd
+from relocation_common.orientation import quaternion_matrix
+from relocation_common.scenario import Scenario
+
+PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
+
+
+@dataclass
+class Obstacle:
+    """One collision object of the scene: a shelf board or a bottle, with its axis-aligned bounding box."""
+
+    name: str
+    object_id: str | None  # bottle id, None for a board
+    obj: fcl.CollisionObject
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+@dataclass
+class ObstacleSet:
+    """The obstacles present in one query (boards + bottles not removed)."""
+
+    items: list[Obstacle]
+    lo: np.ndarray = field(init=False)
+    hi: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.lo = np.array([o.lo for o in self.items]).reshape(-1, 3)
+        self.hi = np.array([o.hi for o in self.items]).reshape(-1, 3)
+        self.lo_neg_hi = np.hstack([self.lo, -self.hi])  # AABB overlap in one comparison (HandProxy.collides)
+
+
+def _key(o: Obstacle) -> str:
+    """What a query's `skip` names an obstacle by: the bottle id, or the board's name (e.g. "board:top_shelf")."""
+    return o.object_id if o.object_id is not None else o.name
+
+
+def _box(name: str, lo, hi) -> Obstacle:
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(np.eye(3), (lo + hi) / 2))
+    return Obstacle(name, None, obj, lo, hi)
+
+
+def cylinder(name: str, object_id: str | None, x: float, y: float, z0: float, radius: float,
+             height: float) -> Obstacle:
+    """A vertical cylinder (bottle) standing at z0."""
+    obj = fcl.CollisionObject(fcl.Cylinder(radius, height), fcl.Transform(np.eye(3), np.array([x, y, z0 + height / 2])))
+    return Obstacle(name, object_id, obj, np.array([x - radius, y - radius, z0]),
+                    np.array([x + radius, y + radius, z0 + height]))
+
+
+@dataclass(frozen=True)
+class Lying:
+    """A bottle that does not stand (tipped over, lying on the top board): the centre of its base (base frame, m)
+    and its orientation as a quaternion (w, x, y, z), as ObjectState's pose carries them."""
+
+    base: tuple[float, float, float]
+    quat: tuple[float, float, float, float]
+
+
+def lying_cylinder(name: str, object_id: str | None, pose: Lying, radius: float, height: float) -> Obstacle:
+    """A bottle at any orientation, as the simulator has it: a cylinder along its own z axis from its base centre."""
+    rot = quaternion_matrix(*pose.quat)
+    base = np.asarray(pose.base, float)
+    top = base + rot[:, 2] * height
+    obj = fcl.CollisionObject(fcl.Cylinder(radius, height), fcl.Transform(rot, (base + top) / 2))
+    return Obstacle(name, object_id, obj, np.minimum(base, top) - radius, np.maximum(base, top) + radius)
+
+
+# The rest of the world of the simulator's scene (jaco2_sim_driver/scene.py, which this layer cannot import; the
+# independent motion checker in the tests replays plans in that scene and finds any difference): the floor
+# FLOOR_DROP below the bottom board, the shelf's side and back panels down to it, the pedestal under the robot base.
+FLOOR_DROP = 0.30
+PEDESTAL = ((-0.11, -0.09), (0.07, 0.09))  # (x, y) of its lower and upper corners; its top is the base frame z = 0
+
+
+def shelf_boards(scenario: Scenario) -> list[Obstacle]:
+    """The boards, the floor and the pedestal (named board:*: a query's `skip` may name them)."""
+    s = scenario.shelf
+    t = s.board_thickness
+    x0, x1, y0, y1 = s.x_front, s.x_back, s.y_min, s.y_max
+    floor = s.bottom_z - FLOOR_DROP
+    (px0, py0), (px1, py1) = PEDESTAL
+    return [
+        _box("board:top_shelf", (x0, y0, s.top_z - t), (x1, y1, s.top_z)),
+        _box("board:ceiling", (x0, y0, s.ceiling_z), (x1, y1, s.ceiling_z + t)),
+        _box("board:bottom_shelf", (x0, y0, s.bottom_z - t), (x1, y1, s.bottom_z)),
+        _box("board:side_right", (x0, y0 - t, floor), (x1, y0, s.ceiling_z + t)),
+        _box("board:side_left", (x0, y1, floor), (x1, y1 + t, s.ceiling_z + t)),
+        _box("board:back", (x1, y0 - t, floor), (x1 + t, y1 + t, s.ceiling_z + t)),
+        _box("board:floor", (-1.5, -1.5, floor - 0.1), (1.5, 1.5, floor)),
+        _box("board:pedestal", (px0, py0, floor), (px1, py1, 0.0)),
+    ]
+
+
+class CollisionScene:
+    """Boards and bottles of a scenario. `placed`: (id, (x, y)) of bottles standing on the bottom shelf; `lying`:
+    bottles of the top shelf that do not stand, as the cylinders they are; `gone`: bottles that left the shelf
+    (on the floor), no obstacle."""
+
+    def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = (),
+                 lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> None:
+        self.scenario = scenario
+        self.boards = shelf_boards(scenario)
+        z0 = scenario.shelf.top_z
+        lying, gone = lying or {}, frozenset(gone)
+        self.bottles = {b.id: lying_cylinder(f"bottle:{b.id}", b.id, lying[b.id], b.radius, b.height)
+                        if b.id in lying else cylinder(f"bottle:{b.id}", b.id, b.x, b.y, z0, b.radius, b.height)
+                        for b in scenario.objects if b.id not in gone}
+        zb = scenario.shelf.bottom_z
+        self.placed = []
+        for oid, (x, y) in placed:
+            b = scenario.object(oid)
+            self.placed.append(cylinder(f"placed:{oid}", f"placed:{oid}", x, y, zb, b.radius, b.height))
+        self._cache: dict[tuple[frozenset, frozenset], ObstacleSet] = {}
+
+    def obstacles(self, removed: Iterable[str] = frozenset(), exclude: Iterable[str] = frozenset()) -> ObstacleSet:
+        """Boards, placed bottles and the top-shelf bottles that are neither removed nor excluded."""
+        key = (frozenset(removed), frozenset(exclude))
+        got = self._cache.get(key)
+        if got is None:
+            gone = key[0] | key[1]
+            got = ObstacleSet(self.boards + self.placed + [o for i, o in self.bottles.items() if i not in gone])
+            self._cache[key] = got
+        return got
+
+
+@dataclass(frozen=True)
+class CapsuleSpec:
+    """A capsule (or cylinder) of the collision model in its link's frame, with fcl's frame of it."""
+
+    name: str
+    link: str
+    p0: np.ndarray
+    p1: np.ndarray
+    radius: float
+    rot: np.ndarray  # fcl capsule frame (z along p0->p1) in the link frame
+    centre: np.ndarray
+    length: float
+    cylinder: bool = False  # a cylinder between p0 and p1 instead of a capsule (for obstacles)
+    clearance: float | None = None  # its own clearance bound to obstacles (None: the planner's)
+
+
+def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = False,
+                 clearance: float | None = None) -> CapsuleSpec:
+    """CapsuleSpec of the segment p0-p1 of radius `radius` in `link`'s frame."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    axis = p1 - p0
+    length = float(np.linalg.norm(axis))
+    z = axis / length
+    x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return CapsuleSpec(name, link, p0, p1, radius, np.column_stack([x, np.cross(z, x), z]), (p0 + p1) / 2, length,
+                       cylinder, clearance)
+
+
+def carried_bottle(radius: float, height: float, standoff: float = 0.0,
+                   clearance: float | None = None) -> CapsuleSpec:
+    """The grasped bottle at its real size: a cylinder on link 7 (tool y is vertical, the bottle's centre `standoff`
+    beyond the tool origin along tool z, the tool at its mid-height, as `grasp.side_grasp` places it).
+    `clearance`: its bound to obstacles (None: the arm's). Contact where it is intended (the board the bottle stands
+    on while it is lifted) is exempted by the caller with the `skip` of a query, never by shrinking the model."""
+    half = height / 2
+    z = rd.D67 + standoff
+    return capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -half, z), (0, half, z), radius, cylinder=True,
+                        clearance=clearance)
+
+
+def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0):
+    if s.cylinder:
+        return fcl.Cylinder(s.radius + inflate, s.length + 2 * inflate)
+    return fcl.Capsule(s.radius + inflate, s.length)
+
+
+HAND_PARTS = ("palm", "finger_1", "finger_2", "finger_3")
+CARRIED = "carried"  # name of the attached bottle's shape
+
+
+class ArmGeometry:
+    """The arm's capsules (plus attached ones, e.g. a carried bottle), posed from a Kinematics update."""
+
+    def __init__(self, kin, attached: Sequence[CapsuleSpec] = ()) -> None:
+        self.kin = kin
+        self.specs = [capsule_spec(c.name, c.link, c.p0, c.p1, c.radius) for c in rd.CAPSULES] + list(attached)
+        self.n = len(self.specs)
+        self.fids = [kin.fid[s.link] for s in self.specs]
+        self.radius = np.array([s.radius for s in self.specs])
+        self.objs = [fcl.CollisionObject(_fcl_shape(s), fcl.Transform()) for s in self.specs]
+        names = [s.name for s in self.specs]
+        self.index = {n: i for i, n in enumerate(names)}
+        # base and shoulder never leave the robot's pedestal: not checked against the shelf
+        self.moving = np.array([i for i, s in enumerate(self.specs) if s.name not in ("base", "shoulder")])
+        hand = set(HAND_PARTS) | {"wrist", CARRIED}
+        # forearm-palm: the wrist capsule lies between them; within joint 6's limits (Table 6) they stay more
+        # than 0.02 m apart, so the pair is left out like the adjacent ones. The carried bottle and the hand holding
+        # it: fixed to each other (the fingers touch it by design).
+        adjacent = set(rd.ADJACENT) | {frozenset((CARRIED, h)) for h in hand} | {frozenset(("forearm", "palm"))}
+        self.self_pairs = [(i, j) for i in range(self.n) for j in range(i + 1, self.n)
+                           if frozenset((names[i], names[j])) not in adjacent]
+        self._si = np.array([i for i, _ in self.self_pairs])
+        self._sj = np.array([j for _, j in self.self_pairs])
+        self._l0 = np.array([s.p0 for s in self.specs])
+        self._l1 = np.array([s.p1 for s in self.specs])
+        self._links = sorted(set(self.fids))
+        self._li = np.array([self._links.index(f) for f in self.fids])  # capsule -> row of the link arrays
+        self._rot = np.zeros((len(self._links), 3, 3))
+        self._pos = np.zeros((len(self._links), 3))
+        self._dirty = [True] * self.n
+        self._names = names
+        self.p0 = np.zeros((self.n, 3))
+        self.p1 = np.zeros((self.n, 3))
+
+    def pose(self) -> None:
+        """Place every capsule from the current Kinematics data (call after kin.update): all links at once."""
+        omf = self.kin.data.oMf
+        rot, pos = self._rot, self._pos
+        for k, fid in enumerate(self._links):
+            m = omf[fid]
+            rot[k] = m.rotation
+            pos[k] = m.translation
+        r, p = rot[self._li], pos[self._li]
+        self.p0 = np.einsum("nij,nj->ni", r, self._l0) + p
+        self.p1 = np.einsum("nij,nj->ni", r, self._l1) + p
+        rad = self.radius[:, None]
+        self._lo = np.minimum(self.p0, self.p1) - rad  # AABBs for both broad phases
+        self._hi = np.maximum(self.p0, self.p1) + rad
+        self._dirty = [True] * self.n
+
+    def _fcl(self, i: int):
+        """The fcl object of capsule i at its current pose (transforms are set lazily)."""
+        if self._dirty[i]:
+            k = self._li[i]
+            r, p = self._rot[k], self._pos[k]
+            s = self.specs[i]
+            self.objs[i].setTransform(fcl.Transform(r @ s.rot, r @ s.centre + p))
+            self._dirty[i] = False
+        return self.objs[i]
+
+    def near_pairs(self, obs: ObstacleSet, d_act: float) -> tuple[np.ndarray, np.ndarray]:
+        """Broad phase: (capsule, obstacle) index pairs whose AABBs are closer than d_act."""
+        idx = self.moving
+        lo, hi = self._lo[idx], self._hi[idx]
+        gap = np.maximum(np.maximum(obs.lo[None] - hi[:, None], lo[:, None] - obs.hi[None]), 0.0)
+        ci, oi = np.nonzero(np.einsum("ijk,ijk->ij", gap, gap) < d_act * d_act)
+        return idx[ci], oi
+
+    def obstacle_distances(self, obs: ObstacleSet, d_act: float, skip: dict[str, frozenset] | None = None):
+        """[(capsule index, obstacle, distance, point on capsule, point on obstacle)] for pairs nearer than d_act
+        (by AABB). Distance PENETRATION (-1) means intersecting. `skip`: capsule name -> object ids (bottles) or
+        board names ("board:top_shelf") to ignore."""
+        out = []
+        req = fcl.DistanceRequest(enable_nearest_points=True)
+        for ci, oi in zip(*self.near_pairs(obs, d_act)):
+            o = obs.items[oi]
+            if skip and _key(o) in skip.get(self._names[ci], ()):
+                continue
+            res = fcl.DistanceResult()
+            d = fcl.distance(self._fcl(ci), o.obj, req, res)
+            out.append((int(ci), o, float(d), res.nearest_points[0], res.nearest_points[1]))
+        return out
+
+    def self_distances(self, d_act: float):
+        """[(i, j, distance, point on i, point on j)] of non-adjacent capsule pairs nearer than d_act."""
+        out = []
+        lo, hi = self._lo, self._hi
+        gap = np.maximum(np.maximum(lo[self._si] - hi[self._sj], lo[self._sj] - hi[self._si]), 0.0)
+        for k in np.nonzero(np.einsum("ij,ij->i", gap, gap) < d_act * d_act)[0]:
+            i, j = self.self_pairs[k]
+            d, pi, pj = segment_distance(self.p0[i], self.p1[i], self.p0[j], self.p1[j])
+            d -= self.radius[i] + self.radius[j]
+            if d < d_act:
+                out.append((i, j, d, pi, pj))
+        return out
+
+
+def segment_distance(a0, a1, b0, b1) -> tuple[float, np.ndarray, np.ndarray]:
+    """Closest points of segments a0-a1 and b0-b1 (Ericson, Real-Time Collision Detection 5.1.9)."""
+    d1, d2, r = a1 - a0, b1 - b0, a0 - b0
+    a, e, f = d1 @ d1, d2 @ d2, d2 @ r
+    c, b = d1 @ r, d1 @ d2
+    den = a * e - b * b
+    s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 1e-12 else 0.0
+    t = (b * s + f) / e
+    if t < 0.0:
+        t, s = 0.0, min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
+    pa, pb = a0 + d1 * s, b0 + d2 * t
+    return float(np.linalg.norm(pa - pb)), pa, pb
+
+
+class HandProxy:
+    """The hand (wrist, palm, fingers), an optional carried bottle and a stub of the forearm, rigidly placed at
+    a tool pose, inflated by `margin`: the validity check of the Cartesian RRT-Connect (no IK needed)."""
+
+    FOREARM_STUB = 0.12
+    # the stub stands for the forearm near the hand; at a staging pose low in front of the bottom shelf it points
+    # back at the pedestal, which the real forearm (rising to the elbow) stays far above: STPIK checks the arm
+    STUB_IGNORES = ("board:pedestal",)
+
+    def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = (), attached_margin: float | None = None
+                 ) -> None:
+        """`attached_margin`: inflation of the attached shapes (default `margin`)."""
+        by = {c.name: c for c in rd.CAPSULES}
+        specs = [capsule_spec(n, by[n].link, by[n].p0, by[n].p1, by[n].radius) for n in ("wrist",) + HAND_PARTS]
+        specs.append(capsule_spec("forearm_stub", rd.LINK_NAMES[6], (0, 0, 0), (0, 0, -self.FOREARM_STUB), 0.04))
+        am = margin if attached_margin is None else attached_margin
+        margins = [margin] * len(specs) + [am] * len(attached)
+        self.specs = specs + list(attached)
+        self.objs = [fcl.CollisionObject(_fcl_shape(s, m), fcl.Transform()) for s, m in zip(self.specs, margins)]
+        self.reach = np.array([s.radius + m for s, m in zip(self.specs, margins)])
+        self.p0 = np.array([s.p0 for s in self.specs])
+        self.p1 = np.array([s.p1 for s in self.specs])
+        self._reach = np.hstack([self.reach[:, None].repeat(3, 1), self.reach[:, None].repeat(3, 1)])
+        self.req = fcl.CollisionRequest()
+
+    def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
+                 skip: dict[str, frozenset] | None = None) -> bool:
+        """Any shape in contact with an obstacle (not skipped): AABB broad phase, then fcl.collide."""
+        return bool(self.hits(r_tool, p_tool, obs, skip, first=True))
+
+    def hits(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
+             skip: dict[str, frozenset] | None = None, first: bool = False) -> set[int]:
+        """Indices (in obs.items) of the obstacles some shape is in contact with (not skipped); `first`: stop at
+        the first one."""
+        out: set[int] = set()
+        p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
+        a = self.p0 @ r_tool.T + p7
+        b = self.p1 @ r_tool.T + p7
+        # (hi, -lo) of each shape's AABB against (lo, -hi) of each obstacle's: they overlap where all six hold
+        box = np.hstack([np.maximum(a, b), -np.minimum(a, b)]) + self._reach
+        ci, oi = np.nonzero(np.all(obs.lo_neg_hi[None] <= box[:, None], axis=2))
+        posed = set()
+        for c, k in zip(ci, oi):
+            o = obs.items[k]
+            s = self.specs[c]
+            if k in out or skip and _key(o) in skip.get(s.name, ()) or \
+                    s.name == "forearm_stub" and o.name in self.STUB_IGNORES:
+                continue
+            if c not in posed:
+                self.objs[c].setTransform(fcl.Transform(r_tool @ s.rot, r_tool @ s.centre + p7))
+                posed.add(c)
+            if fcl.collide(self.objs[c], o.obj, self.req, fcl.CollisionResult()):
+                out.add(int(k))
+                if first:
+                    break
+        return out
+
+    def path_clear(self, poses, obs: ObstacleSet, resolution: float, skip: dict[str, frozenset] | None = None
+                   ) -> bool:
+        """The proxy is clear at every pose along the polyline of (x, y, z, yaw) poses (grasp.py), sampled every
+        `resolution` m (a yaw change counts 0.25 m per rad): the straight approach of a grasp lane (feasibility's
+        candidates, blockers' screen) and a direct Cartesian path."""
+        return all(not self.collides(*m, obs, skip) for m in _path_poses(poses, resolution))
+
+    def path_hits(self, poses, obs: ObstacleSet, resolution: float, skip: dict[str, frozenset] | None = None
+                  ) -> set[int]:
+        """Indices (in obs.items) of every obstacle the proxy meets along the polyline (`path_clear`'s poses): the
+        OR of the contacts, so the obstacles each of which alone would block it."""
+        out: set[int] = set()
+        for m in _path_poses(poses, resolution):
+            out |= self.hits(*m, obs, skip)
+        return out
+
+
+def _path_poses(poses, resolution: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses (a yaw change
+    counts 0.25 m per rad), both ends of each segment included."""
+    from stpik_motion_planner.model.grasp import pose_matrix
+
+    for a, b in zip(poses[:-1], poses[1:]):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / resolution)))
+        for k in range(n + 1):
+            yield pose_matrix(a + (b - a) * k / n)

@@ -1,0 +1,356 @@
+"""Set-based Task-Priority Inverse Kinematics (paper Sect. 4.1, step 3; Eq. 9 and 10).
+
+Closed-loop IK (Eq. 9): qdot = J# (xdot_d + K e), with the task hierarchy of Eq. 10 solved by recursive null-space
+projection, highest priority first:
+  1. joint limits (set-based: q_i in [Q_LOWER + margin, Q_UPPER - margin], Table 6, Q convention),
+  2. self-collision avoidance (set-based: distance of non-adjacent capsules >= self_clearance),
+  3. obstacle clearance (set-based: distance of arm capsules to bottles and boards >= clearance; a shape with its
+     own bound, the carried bottle, >= that bound),
+  4. end-effector position, 5. end-effector orientation, then a posture task towards Q_HOME (lowest).
+A set-based task sigma >= 0 enters the hierarchy only when its bound is active (Moe et al. 2016, Di Lillo et al.):
+it is a candidate while sigma is inside a buffer, and it is activated (as an equality task that freezes sigma,
+or pushes it back up to the activation threshold `act`) when the solution without it would bring sigma below
+`act`. Activation is iterated until no further task needs to enter.
+The path is rejected if any bound is violated (sigma < -tol), if tracking error exceeds its tolerance, or when the
+step budget is spent (step_budget times the reference's nominal steps, plus settle_time): IK steps, not seconds,
+so the answer is the same on a loaded machine. The wall-clock deadline is only a safety net (SafetyNetTimeout: no
+answer). Joint velocities are scaled to Table 7; the reference slows down by the same factor.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from relocation_common import robot_description as rd
+from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, ObstacleSet
+from stpik_motion_planner.model.grasp import side_rotation
+from stpik_motion_planner.planning.budget import check_deadline
+
+
+@dataclass
+class StpikParams:
+    """STPIK's gains, bounds and tolerances (Eq. 9, 10; config/motion_planner.yaml stpik.*)."""
+
+    dt: float = 0.04  # IK step (s); the output is resampled to 100 Hz
+    ee_speed: float = 0.25  # m/s along the reference path
+    approach_speed: float = 0.08  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
+    yaw_speed: float = 0.8  # rad/s
+    k_pos: float = 8.0  # Eq. 9 gain K, position
+    k_ori: float = 8.0  # orientation
+    k_set: float = 8.0  # set-based tasks pushing back into their set
+    k_posture: float = 0.3
+    joint_margin: float = 0.05  # rad inside Table 6
+    joint_buffer: float = 0.15  # rad: joint-limit tasks are candidates inside this band
+    joint_act: float = 0.02  # rad: ... and enter when the next step would bring them this close to the limit
+    self_clearance: float = 0.01  # m
+    clearance: float = 0.015  # m, arm capsules to bottles and boards (the verified bound)
+    buffer: float = 0.03  # m: distance tasks are candidates inside this band
+    act: float = 0.004  # m: ... and enter when the next step would bring them this close to the bound
+    violation_tol: float = 1e-3  # m or rad below a bound at an IK sample: reject
+    track_tol: float = 0.03  # m along the path
+    final_tol_pos: float = 0.004  # m at the end of the path
+    final_tol_ori: float = 0.03  # rad
+    grasp_yaw_tol: float = 0.06  # rad about the vertical, at a grasp that did not converge within final_tol_ori
+    settle_time: float = 1.0  # s allowed after the reference ends
+    step_budget: float = 3.0  # IK steps allowed, in multiples of the reference's nominal steps (accepted: <= 1.22)
+    damping: float = 0.05
+    qdot_max: np.ndarray = field(default_factory=lambda: rd.QDOT_MAX.copy())
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.name == "qdot_max":
+                continue
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"motion planner parameter stpik.{f.name} must be a finite number >= 0, got {v!r}")
+            setattr(self, f.name, float(v))
+        try:
+            q = np.array(self.qdot_max, dtype=float)
+        except (TypeError, ValueError):
+            q = np.zeros(0)
+        if q.shape != (rd.N_JOINTS,) or not np.all(np.isfinite(q) & (q > 0)):
+            raise ValueError(f"motion planner parameter stpik.qdot_max must be {rd.N_JOINTS} positive numbers "
+                             f"(rad/s, Table 7), got {self.qdot_max!r}")
+        self.qdot_max = q
+
+
+@dataclass
+class StpikResult:
+    """One STPIK check: accepted or not (reason), the IK steps' configurations and rates."""
+
+    ok: bool
+    reason: str
+    q: np.ndarray  # (N+1) x 7 at times k * dt
+    qdot: np.ndarray  # N x 7, constant over [k dt, (k+1) dt]
+    dt: float
+    min_clearance: float
+    min_self_clearance: float
+    steps: int
+
+
+try:  # the gufunc behind np.linalg.svd(a, full_matrices=False): the same LAPACK call without its Python wrapper
+    from numpy.linalg import _umath_linalg as _ul
+
+    _SVD_S: Any = _ul.svd_s
+except (ImportError, AttributeError):  # pragma: no cover - another numpy layout
+    _SVD_S = None
+
+
+def _svd(a: np.ndarray):
+    """Thin SVD of a small matrix (bit-identical to np.linalg.svd(a, full_matrices=False), less overhead)."""
+    if _SVD_S is not None:
+        with np.errstate(invalid="ignore"):
+            u, s, vt = _SVD_S(a, signature="d->ddd")
+        if np.isfinite(s).all():
+            return u, s, vt
+    return np.linalg.svd(a, full_matrices=False)  # raises LinAlgError where it did not converge
+
+
+def hierarchy(levels, n: int, damping: float) -> np.ndarray:
+    """Recursive null-space projection (Eq. 10): qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
+    damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last).
+    The first level skips its products with N_0 = I and qdot_0 = 0 (exact in floating point)."""
+    qdot = proj = None
+    for jac, xd in levels:
+        if jac is None:  # identity task (posture): its projection needs no decomposition
+            return np.array(xd, float) if qdot is None else qdot + proj @ (xd - qdot)
+        u, s, vt = _svd(jac if proj is None else jac @ proj)
+        keep = s > 1e-6
+        if not keep.all():
+            if not keep.any():
+                continue
+            u, s, vt = u[:, keep], s[keep], vt[keep]
+        smin = s[-1]
+        lam2 = damping ** 2 * (1.0 - (smin / damping) ** 2) if smin < damping else 0.0
+        pinv = vt.T @ ((s / (s * s + lam2))[:, None] * u.T)
+        qdot = pinv @ xd if qdot is None else qdot + pinv @ (xd - jac @ qdot)
+        vv = vt.T @ vt
+        proj = np.eye(n) - vv if proj is None else proj - vv
+    return np.zeros(n) if qdot is None else qdot
+
+
+@dataclass
+class _Run:
+    """The state of one STPIK check (Stpik.track)."""
+
+    q: np.ndarray
+    bound: np.ndarray  # each shape's clearance bound to obstacles
+    d_act: float  # broad-phase distance: the largest bound + buffer
+    qs: list = field(default_factory=list)
+    qdots: list = field(default_factory=list)
+    tau: float = 0.0  # reference time (slows down when joint velocities are scaled)
+    settle: float = 0.0
+    seg: int = 0
+    rate: float = 0.0  # speed of the reference as a fraction of its nominal speed (ramp > 0)
+    min_clear: float = math.inf
+    min_self: float = math.inf
+    yaw_tol: float = 0.0  # > 0: the goal's yaw tolerance once the settle time is spent (Stpik.track)
+
+
+class _Reject(Exception):
+    """A rejected path inside a step: the reason, and the minimum clearance to report if it overrides."""
+
+    def __init__(self, reason: str, min_clear: float | None = None) -> None:
+        super().__init__(reason)
+        self.reason, self.min_clear = reason, min_clear
+
+
+class Stpik:
+    """Tracks a Cartesian path [(x, y, z, yaw), ...] from a start configuration; see the module docstring."""
+
+    def __init__(self, kin, arm: ArmGeometry, params: StpikParams) -> None:
+        self.kin, self.arm, self.p = kin, arm, params
+        self.lower = rd.Q_LOWER + params.joint_margin
+        self.upper = rd.Q_UPPER - params.joint_margin
+        self.eye = np.eye(rd.N_JOINTS)
+
+    def _reference(self, path: list[np.ndarray], speed: float | None = None):
+        """Piecewise-linear reference: cumulative times of the waypoints (at `speed`, default ee_speed)."""
+        p = self.p
+        speed = speed or p.ee_speed
+        times = [0.0]
+        for a, b in zip(path[:-1], path[1:]):
+            dur = max(np.linalg.norm(b[:3] - a[:3]) / speed, abs(b[3] - a[3]) / p.yaw_speed, 1e-6)
+            times.append(times[-1] + dur)
+        return np.array(times)
+
+    def track(self, q0, path: list[np.ndarray], obs: ObstacleSet, deadline: float,
+              skip: dict[str, frozenset] | None = None, posture=None, speed: float | None = None,
+              ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0) -> StpikResult:
+        """Closed-loop IK (Eq. 9) with the hierarchy of Eq. 10 along `path`, from q0.
+        `yaw_tol` > 0 (rad): a goal not reached within final_tol_ori when the settle time is spent is still
+        reached if the tool is within final_tol_pos, its tilt within final_tol_ori and its rotation about the
+        vertical within yaw_tol (a side grasp of a cylinder: `grasp_yaw_tol`). Every path that converged before
+        converges as before, on the same steps.
+        `ramp` > 0 (s): the reference accelerates from rest to its speed in `ramp` and decelerates to stop at
+        every waypoint (trapezoidal in each segment) instead of starting at full speed and turning each corner at
+        once. `accel` > 0 (rad/s^2): no joint velocity changes faster, also when a set-based task enters (a task
+        entering changed the wrist's speed by 0.85 rad/s within one step: in the simulator the fingers then hit the
+        bottle they held, 200-350 N, and it moved 18-25 mm in the hand for a few ms); the joint-limit tasks then
+        enter early enough to stop within that acceleration. Both for a hand holding a bottle."""
+        p = self.p
+        path = [np.asarray(w, float) for w in path]
+        times = self._reference(path, speed)
+        posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
+        # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
+        bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
+        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol)
+        run.qs.append(run.q.copy())
+        nominal = times[-1] + ramp * (len(path) - 1)  # a ramp adds about `ramp` s per segment
+        max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
+        while True:
+            check_deadline(deadline, "the STPIK check")
+            if len(run.qdots) >= max_steps:
+                return self._result(False, f"step budget spent ({max_steps} IK steps)", run)
+            ref, vel, t1 = self._reference_at(path, times, run, ramp)
+            try:
+                scale = self._step(run, ref, vel, times[-1], obs, skip, posture, accel)
+            except _Reject as e:
+                if e.min_clear is not None:
+                    run.min_clear = e.min_clear
+                return self._result(e.reason == "reached", e.reason, run)
+            if ramp > 0.0:  # each waypoint is reached, at the slowest rate, before the next segment starts
+                run.tau = min(run.tau + p.dt * scale * run.rate, t1)
+            else:
+                run.tau = min(run.tau + p.dt * scale, times[-1])
+
+    def _reference_at(self, path, times, run: _Run, ramp: float):
+        """Reference pose and velocity at run.tau (piecewise linear; trapezoidal speed with a ramp), segment end."""
+        p = self.p
+        while run.seg < len(path) - 2 and run.tau >= times[run.seg + 1]:
+            run.seg += 1
+        last = len(path) - 1
+        a, b = path[run.seg], path[min(run.seg + 1, last)]
+        t0, t1 = times[run.seg], times[min(run.seg + 1, last)]
+        if run.tau >= times[-1]:
+            ref, vel = path[-1], np.zeros(4)
+        else:
+            f = (run.tau - t0) / (t1 - t0)
+            ref, vel = a + f * (b - a), (b - a) / (t1 - t0)
+        if ramp > 0.0:
+            run.rate = max(min(run.rate + p.dt / ramp, 1.0, math.sqrt(2.0 * max(t1 - run.tau, 0.0) / ramp)),
+                           p.dt / ramp)
+            vel = vel * run.rate
+        return ref, vel, t1
+
+    def _step(self, run: _Run, ref, vel, t_end: float, obs, skip, posture, accel: float) -> float:
+        """One IK step (Eq. 9-10) from run.q; returns the velocity scale of Table 7; raises _Reject to stop
+        (reason "reached" when the goal is reached)."""
+        p, kin = self.p, self.kin
+        q = run.q
+        kin.update(q)
+        self.arm.pose()
+        rot, pos = kin.tool_pose()
+        jt = kin.frame_jacobian(kin.tool_fid)
+        e_p = ref[:3] - pos
+        e_o = pin.log3(side_rotation(ref[3]) @ rot.T)
+        ep_n, eo_n = math.sqrt(e_p.dot(e_p)), math.sqrt(e_o.dot(e_o))  # np.linalg.norm's own formula
+        if run.tau >= t_end and ep_n < p.final_tol_pos and eo_n < p.final_tol_ori:
+            raise _Reject("reached")
+        if ep_n > p.track_tol or eo_n > 10 * p.final_tol_ori + 0.2:
+            raise _Reject(f"tracking failed (position error {ep_n:.3f} m)")
+        if run.tau >= t_end:
+            run.settle += p.dt
+            if run.settle > p.settle_time:
+                if run.yaw_tol > 0.0 and ep_n < p.final_tol_pos and math.hypot(e_o[0], e_o[1]) < p.final_tol_ori \
+                        and abs(e_o[2]) < run.yaw_tol:
+                    raise _Reject("reached")  # e_o is in the world frame: e_o[2] is the error about the vertical
+                raise _Reject("did not converge at the goal")
+        cands = self._set_tasks(run, obs, skip)
+        # Eq. 9 references of the equality tasks
+        w_d = np.array([0.0, 0.0, vel[3]])
+        eq_levels = [(jt[:3], vel[:3] + p.k_pos * e_p), (jt[3:], w_d + p.k_ori * e_o),
+                     (None, p.k_posture * (posture - q))]
+        prev = run.qdots[-1] if run.qdots else None
+        qdot = self._solve(cands, eq_levels, prev, accel)
+        ratio = float(np.max(np.abs(qdot) / p.qdot_max))
+        scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
+        qdot = qdot * scale
+        if accel > 0.0 and prev is not None and run.tau < t_end:  # not while settling on the goal (slow by then)
+            qdot = prev + np.clip(qdot - prev, -accel * p.dt, accel * p.dt)
+        run.q = q + qdot * p.dt
+        run.qs.append(run.q.copy())
+        run.qdots.append(qdot)
+        return scale
+
+    def _set_tasks(self, run: _Run, obs, skip):
+        """Set-based candidates of Eq. 10 at run.q as arrays (group, sigma, jacobian rows, activation threshold):
+        joint limits (0), self-collision (1), obstacle clearance (2). Raises _Reject on a collision or a violated
+        bound."""
+        p, kin, arm = self.p, self.kin, self.arm
+        q = run.q
+        grp, sig, rows, buf = [], [], [], []
+        lo, hi = q - self.lower, self.upper - q
+        for i in np.nonzero((lo < p.joint_buffer) | (hi < p.joint_buffer))[0]:
+            for s_, row in ((lo[i], self.eye[i]), (hi[i], -self.eye[i])):
+                if s_ < p.joint_buffer:
+                    grp.append(0)
+                    sig.append(s_)
+                    rows.append(row)
+                    buf.append(p.joint_act)
+        for i, j, d, pi, pj in arm.self_distances(p.self_clearance + p.buffer):
+            run.min_self = min(run.min_self, d)
+            n = pi - pj
+            nn = math.sqrt(n.dot(n))
+            if nn < 1e-9:
+                raise _Reject("self-collision")
+            jac = (n / nn) @ (kin.point_jacobian(arm.fids[i], pi) - kin.point_jacobian(arm.fids[j], pj))
+            grp.append(1)
+            sig.append(d - p.self_clearance)
+            rows.append(jac)
+            buf.append(p.act)
+        bound = run.bound
+        for ci, o, d, pc, po in arm.obstacle_distances(obs, run.d_act, skip):
+            if d == PENETRATION:
+                raise _Reject(f"{arm.specs[ci].name} collides with {o.name}", -1.0)
+            run.min_clear = min(run.min_clear, d)
+            if d >= bound[ci] + p.buffer:
+                continue
+            n = pc - po
+            nn = math.sqrt(n.dot(n))
+            if nn < 1e-9:
+                raise _Reject(f"{arm.specs[ci].name} touches {o.name}", 0.0)
+            grp.append(2)
+            sig.append(d - bound[ci])
+            buf.append(p.act)
+            rows.append((n / nn) @ kin.point_jacobian(arm.fids[ci], pc))
+        for g, s_ in zip(grp, sig):
+            if s_ < -p.violation_tol:
+                what = ("joint limit", "self-collision bound", "clearance bound")[g]
+                raise _Reject(f"{what} violated ({s_:.4f})")
+        if not grp:
+            return None
+        return np.array(grp), np.array(sig, float), np.array(rows), np.array(buf)
+
+    def _solve(self, cands, eq_levels, prev, accel: float) -> np.ndarray:
+        """Eq. 10 with the set-based tasks that must enter: a candidate is activated when the step without it would
+        bring it within its threshold (with `accel`, joint limits early enough to stop); iterated."""
+        p = self.p
+        if cands is None:
+            return hierarchy(eq_levels, rd.N_JOINTS, p.damping)
+        grp, sig, jac, buf = cands
+        push = p.k_set * np.maximum(0.0, buf - sig)
+        active = np.zeros(len(grp), bool)
+        qdot = np.zeros(rd.N_JOINTS)
+        for _ in range(6):
+            levels = [(jac[m], push[m]) for m in (active & (grp == g) for g in (0, 1, 2)) if m.any()]
+            qdot = hierarchy(levels + eq_levels, rd.N_JOINTS, p.damping)
+            v = jac @ qdot
+            brake: float | np.ndarray = 0.0
+            if accel > 0.0 and prev is not None:  # the rate it can reach next step, and stop from
+                lim = grp == 0
+                v = np.where(lim, np.maximum(v, jac @ prev - accel * p.dt), v)
+                brake = np.where(lim, v * v / (2.0 * accel), 0.0)
+            new = ~active & (v < 0.0) & (sig + v * p.dt - brake < buf)
+            if not new.any():
+                break
+            active |= new
+        return qdot
+
+    def _result(self, ok: bool, reason: str, run: _Run) -> StpikResult:
+        return StpikResult(ok, reason, np.array(run.qs), np.array(run.qdots).reshape(-1, rd.N_JOINTS), self.p.dt,
+                           run.min_clear, run.min_self, len(run.qdots))
