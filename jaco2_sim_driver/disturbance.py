@@ -27,6 +27,8 @@ from typing import Any, Iterable
 import mujoco
 import numpy as np
 
+from relocation_common import geometry
+
 MARGIN = 0.003  # m left between a disturbed bottle and its neighbours or the shelf's sides
 SLIP_CLEAR = 0.01  # m: a dropped bottle touches the hand again once this far from every finger and arm geom
 PUSH_STEP = 0.001  # m: resolution of the slide of a nudge
@@ -80,8 +82,7 @@ def _pose(sim, object_id: str) -> tuple[np.ndarray, np.ndarray]:
 
 def tilt(sim, object_id: str) -> float:
     """Angle (rad) between the bottle's axis and the vertical: 0 standing, pi/2 lying."""
-    axis = sim.data.xmat[_body(sim, object_id)].reshape(3, 3)[:, 2]
-    return float(math.acos(max(-1.0, min(1.0, float(axis[2])))))
+    return geometry.tilt(sim.data.xmat[_body(sim, object_id)].reshape(3, 3))
 
 
 def _footprint(sim, object_id: str) -> tuple[np.ndarray, np.ndarray, float]:
@@ -494,7 +495,7 @@ def command(sim, object_id: str, relative: bool, translation, rotation_xyzw=(0.0
         elif not relative:
             done = move_to(sim, object_id, t[0], t[1], t[2])
         elif abs(abs(qw) - 1.0) > 1e-6:  # the bottle's z axis turned by the rotation: the tip's direction
-            ax, ay = 2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx)
+            ax, ay, _ = geometry.xyzw_matrix((qx, qy, qz, qw))[:, 2]
             if math.hypot(ax, ay) < 1e-6:
                 raise DisturbanceError("a rotation about the bottle's own axis does not tip it")
             done = tip(sim, object_id, math.atan2(ay, ax))

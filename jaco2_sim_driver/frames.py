@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 
-import mujoco
 import numpy as np
 
+from relocation_common.geometry import transform, wxyz_matrix
 from relocation_common.robot_description import (
     BASE_LINK,
     EE_LINK,
@@ -98,8 +98,5 @@ def bottle_transforms(poses) -> list[tuple[str, str, np.ndarray]]:
     quaternion): the bottles' TF frames."""
     out = []
     for p in poses:
-        t, r = np.eye(4), np.zeros(9)
-        mujoco.mju_quat2Mat(r, np.asarray(p.quat_wxyz, float))
-        t[:3, :3], t[:3, 3] = r.reshape(3, 3), p.position
-        out.append((BASE_LINK, BOTTLE_FRAME.format(p.id), t))
+        out.append((BASE_LINK, BOTTLE_FRAME.format(p.id), transform(wxyz_matrix(p.quat_wxyz), p.position)))
     return out

@@ -5,7 +5,6 @@ ObjectArray, and a rendered camera frame (camera.Frame) as the topics of a RealS
 """
 from __future__ import annotations
 
-import mujoco
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
@@ -13,6 +12,7 @@ from kinova_msgs.msg import FingerPosition, JointAngles
 from qtree_relocation_msgs.msg import ObjectArray
 from sensor_msgs.msg import CameraInfo, Image
 
+from relocation_common.geometry import quat_xyzw
 from relocation_common.ros_conversions import BASE_FRAME, bottle_to_msg
 
 from .camera import Frame
@@ -68,8 +68,6 @@ def camera_msgs(f: Frame, stamp) -> tuple[Image, Image, CameraInfo, PoseStamped]
     pose.header.stamp, pose.header.frame_id = stamp, BASE_FRAME
     t = f.T_base_camera
     pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, t[:3, 3])
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, t[:3, :3].reshape(9))
-    pose.pose.orientation.w, pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z = \
-        map(float, q)
+    o = pose.pose.orientation
+    o.x, o.y, o.z, o.w = quat_xyzw(t[:3, :3])
     return rgb, depth, info, pose

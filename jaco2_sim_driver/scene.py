@@ -8,7 +8,6 @@ obstacles and the target, bottom shelf where relocated objects go, board above t
 """
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
@@ -16,6 +15,7 @@ import cv2
 import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
 import numpy as np
 
+from relocation_common.geometry import quat_wxyz, rpy_matrix, transform
 from relocation_common.robot_description import (
     FINGER_BASE_Z,
     FINGER_CLOSED,
@@ -82,22 +82,6 @@ class CameraSpec:
 
 def _f(v) -> str:
     return " ".join(f"{float(x):.6g}" for x in v)
-
-
-def rpy_matrix(rpy) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll) (URDF / ROS fixed-axis roll-pitch-yaw)."""
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def quat_wxyz(rot: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (MuJoCo's mju_mat2Quat)."""
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, np.asarray(rot, float).reshape(9))
-    return q
 
 
 def marker_image(marker: Marker, pixels_per_bit: int = 20) -> np.ndarray:
@@ -176,8 +160,7 @@ def _marker_name(k: int) -> str:
 
 def _marker(world: ET.Element, k: int, m: Marker) -> None:
     """The scenario's k-th marker on its plate (pose from the scenario, in the base frame)."""
-    pose = np.eye(4)
-    pose[:3, :3], pose[:3, 3] = rpy_matrix(m.rpy), m.position
+    pose = transform(rpy_matrix(m.rpy), m.position)
     _marker_plate(world, f"{_marker_name(k)}_marker", pose, m.size, _marker_name(k))
 
 

@@ -27,12 +27,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from tf2_msgs.msg import TFMessage
 
+from relocation_common.geometry import invert
 from relocation_common.node import declare_parameters, node_main
 from relocation_common.paths import config_file
 from relocation_common.ros_conversions import bottles_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
-from .aruco import PerceptionError, invert, marker_in_base
+from .aruco import PerceptionError, marker_in_base
 from .calibration import CalibrationError, apply_calibration, load_calibration
 from .camera_check import camera_info_problem, image_problem
 from .images import decode_color, decode_depth, encode_color

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
+from relocation_common.geometry import invert, mean_pose, pose_error
 from relocation_common.scenario import Bottle, Scenario
 
 from .aruco import (
@@ -25,8 +26,6 @@ from .aruco import (
     MarkerObservation,
     MarkerParams,
     fuse_markers,
-    invert,
-    pose_error,
 )
 from .localize import Detection, FitError, LocalizeParams, locate_bottle
 from .segmentation import (
@@ -329,12 +328,7 @@ class FrameFusion:
         """T_base_camera averaged over the consistent frames, or None before the first."""
         if not self.poses:
             return None
-        m = np.mean([p[:3, :3] for p in self.poses], axis=0)
-        u, _, vt = np.linalg.svd(m)
-        out = np.eye(4)
-        out[:3, :3] = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
-        out[:3, 3] = np.mean([p[:3, 3] for p in self.poses], axis=0)
-        return out
+        return mean_pose(self.poses)
 
     def update(self, T: np.ndarray) -> str | None:
         """Add one frame's pose; None when it agrees (or restarts the fusion), else the reason to refuse it."""

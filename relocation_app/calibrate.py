@@ -25,8 +25,9 @@ import numpy as np
 from jaco2_sim_driver.camera import CameraRenderer  # first: sets MUJOCO_GL before mujoco is imported
 from jaco2_sim_driver.scene import CameraSpec, build_model, hand_marker
 from jaco2_sim_driver.sensor_model import CAMERA_MODELS, SensorModel
-from perception_aruco.aruco import MarkerLocalizer, MarkerParams, PerceptionError, marker_in_base, mean_pose, pose_error
+from perception_aruco.aruco import MarkerLocalizer, MarkerParams, PerceptionError, marker_in_base
 from perception_aruco.calibration import HandEye, marker_in_base_from, save_calibration, solve_hand_eye
+from relocation_common.geometry import mean_pose, pose_error
 from relocation_common.paths import default_scenario, resolve_scenario
 from relocation_common.robot_description import BASE_LINK, JOINT_NAMES, dh_fk
 from relocation_common.scenario import Marker, Scenario, load_scenario

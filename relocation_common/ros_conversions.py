@@ -12,6 +12,7 @@ from qtree_relocation_msgs.msg import BlockerSet as BlockerSetMsg
 from qtree_relocation_msgs.msg import LaneBlockers, ObjectArray, ObjectState
 
 from .feasibility import BlockerSet
+from .geometry import quat_xyzw
 from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle, ScenarioError
 
 BASE_FRAME = "j2s7s300_link_base"
@@ -63,28 +64,6 @@ def msg_to_bottles(msg: ObjectArray) -> tuple[Bottle, ...]:
     if sum(b.is_target for b in out) != 1:
         raise ScenarioError("the scene must contain exactly one target")
     return tuple(out)
-
-
-def quat_xyzw(rot) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of a 3x3 rotation matrix (Shepperd's method, w >= 0)."""
-    r = np.asarray(rot, float)[:3, :3]
-    tr = r[0, 0] + r[1, 1] + r[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = ((r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s)
-    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        q = (0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s)
-    elif r[1, 1] > r[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-        q = ((r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-        q = ((r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s)
-    n = math.sqrt(sum(c * c for c in q))
-    sign = -1.0 if q[3] < 0 else 1.0
-    x, y, z, w = (float(sign * c / n) for c in q)
-    return x, y, z, w
 
 
 def transform_msg(t, parent: str, child: str, stamp=None):

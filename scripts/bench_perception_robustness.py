@@ -42,8 +42,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from jaco2_sim_driver import sensor_model as sm  # noqa: E402  (after the sys.path insert of the checkout)
 from jaco2_sim_driver.camera import CameraRenderer, Frame, render_frame  # noqa: E402  (after the sys.path insert of the checkout)
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402  (after the sys.path insert of the checkout)
-from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
+from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.pipeline import Perception  # noqa: E402  (after the sys.path insert of the checkout)
+from relocation_common.geometry import matrix_rpy, rotvec_matrix, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.paths import scenarios_dir  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.robot_description import JOINT_NAMES, Q_HOME, Q_UPRIGHT  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.scenario import Scenario, load_scenario  # noqa: E402  (after the sys.path insert of the checkout)
@@ -53,10 +54,6 @@ TOL = 0.010  # m: a published bottle farther than this from its true position is
 VISIBLE_PIXELS = 300  # a bottle showing this many pixels at 640x480 (test_perception.py's bound) must be found
 RESOLUTIONS = {1: (480, 360), 2: (424, 240), 3: (320, 240)}
 OCCLUDER_RGB = (185, 150, 130)   # a hand / a tool: matches no bottle colour of the palette
-
-
-def rotvec_matrix(v) -> np.ndarray:
-    return cv2.Rodrigues(np.asarray(v, float).reshape(3, 1))[0]
 
 
 def random_unit(rng: np.random.Generator) -> np.ndarray:
@@ -69,9 +66,7 @@ def wrong_marker(s: Scenario, level: int, rng: np.random.Generator) -> Scenario:
     m = s.marker
     x, y, z = (float(v) for v in np.asarray(m.position) + 0.01 * level * random_unit(rng))
     rot = rotvec_matrix(math.radians(level) * random_unit(rng)) @ rpy_matrix(m.rpy)
-    rpy = (math.atan2(rot[2, 1], rot[2, 2]), -math.asin(max(-1.0, min(1.0, rot[2, 0]))), math.atan2(rot[1, 0],
-                                                                                                   rot[0, 0]))
-    return replace(s, marker=replace(m, position=(x, y, z), rpy=rpy))
+    return replace(s, marker=replace(m, position=(x, y, z), rpy=matrix_rpy(rot)))
 
 
 def project(K: np.ndarray, T_base_camera: np.ndarray, pts_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

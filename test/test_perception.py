@@ -9,9 +9,10 @@ import pytest
 
 from jaco2_sim_driver.camera import render_frame
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model
-from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError, pose_error
+from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError
 from perception_aruco.images import decode_color, decode_depth, encode_color, encode_depth
 from perception_aruco.pipeline import Perception
+from relocation_common.geometry import pose_error
 from relocation_common.paths import scenarios_dir
 from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.scenario import load_scenario, parse_scenario

@@ -8,8 +8,9 @@ import pinocchio as pin
 import pytest
 
 from jaco2_sim_driver.camera import intrinsics, render_frame
-from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, rpy_matrix
+from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
+from relocation_common.geometry import rpy_matrix
 from relocation_common.paths import default_scenario
 from relocation_common.robot_description import EE_LINK, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX, urdf
 from relocation_common.scenario import load_scenario

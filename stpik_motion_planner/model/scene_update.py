@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping, NamedTuple
 
-from relocation_common.orientation import UPRIGHT_TILT, quaternion_matrix, support_height, tilt_of_quaternion
+from relocation_common.geometry import wxyz_matrix
+from relocation_common.orientation import UPRIGHT_TILT, support_height, tilt_of_quaternion
 from relocation_common.scenario import Bottle, Shelf
 from stpik_motion_planner.model.collision import Lying
 
@@ -101,5 +102,5 @@ def _differs(was: Bottle | None, now: Bottle, was_lying: Lying | None, now_lying
 
 def _top(pose: Lying, height: float) -> tuple[float, ...]:
     """The centre of a lying bottle's top face."""
-    axis = quaternion_matrix(*pose.quat)[:, 2]
+    axis = wxyz_matrix(pose.quat)[:, 2]
     return tuple(float(c + a * height) for c, a in zip(pose.base, axis))
