@@ -198,7 +198,7 @@ class SimDriver:
         cam_kw: dict[str, Any] = dict(fovy_deg=float(g("camera_fovy")), width=int(g("camera_width")),
                                       height=int(g("camera_height")))
         camera = CameraSpec.for_shelf(**cam_kw) if g("camera_relative_to_shelf") else CameraSpec(**cam_kw)
-        sim = Jaco2Sim(load_scenario(g("scenario") or None), camera=camera, qdot_max=np.asarray(g("qdot_max"), float),
+        sim = Jaco2Sim(load_scenario(g("scenario") or None), camera=camera,
                        watchdog_timeout=float(g("watchdog_timeout")))
         rates = Rates(joint_states=float(g("joint_state_rate")), tf=float(g("tf_rate")),
                       objects=float(g("objects_rate")), real_time_factor=float(g("real_time_factor")),

@@ -71,15 +71,13 @@ def check_velocity_command(qdot, n: int = N_JOINTS) -> np.ndarray:
 class Jaco2Sim:
     """Scenario scene + arm; not thread-safe (the node serialises access with a lock)."""
 
-    def __init__(self, scenario: Scenario, *, camera: CameraSpec = CameraSpec(), qdot_max=QDOT_MAX,
+    def __init__(self, scenario: Scenario, *, camera: CameraSpec = CameraSpec(),
                  watchdog_timeout: float = 0.05, q_home=Q_HOME):
         self.scenario = scenario
         self.camera = camera
         self.model = build_model(scenario, camera)
         self.data = mujoco.MjData(self.model)
-        self.qdot_max = np.asarray(qdot_max, float)
-        if self.qdot_max.shape != (N_JOINTS,) or np.any(self.qdot_max <= 0):
-            raise ValueError(f"qdot_max must be {N_JOINTS} positive numbers, got {qdot_max!r}")
+        self.qdot_max = QDOT_MAX.copy()  # Table 7, from the robot description (its one place)
         if watchdog_timeout <= 0:
             raise ValueError(f"watchdog_timeout must be positive, got {watchdog_timeout}")
         self.watchdog_timeout = float(watchdog_timeout)

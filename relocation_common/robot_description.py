@@ -48,8 +48,9 @@ Q_OFFSET = (0.0, -PI, 0.0, 0.0, 0.0, -PI, -PI / 2)
 Q_LOWER = np.array([-PI, 0.82, -PI, 0.52, -PI, 1.13, -PI])
 Q_UPPER = np.array([3 * PI, 5.46, 3 * PI, 5.76, 3 * PI, 5.14, 3 * PI])
 CONTINUOUS = (True, False, True, False, True, False, True)
-# Table 7 (rad/s). Kinova's own files use 0.628 and 0.838: configurable as the driver's qdot_max and the planner's
-# stpik.qdot_max parameters.
+# Table 7 (rad/s): the one place of the joint speed limits. The simulator clamps its commands to them, the planner
+# times its paths and the follower clamps its commands to them, the URDF carries them. Kinova's own files use 0.628
+# and 0.838 (docs/kinova.md): to run with those, change them here.
 QDOT_MAX = np.array([0.81, 0.81, 0.81, 0.81, 1.11, 1.11, 1.11])
 
 # Home: hand horizontal (tool y up), pointing at the shelf (+x), in front of the shelf above its ceiling board,

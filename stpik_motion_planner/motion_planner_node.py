@@ -24,6 +24,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from visualization_msgs.msg import Marker
 
+from relocation_common import robot_description as rd
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
@@ -55,7 +56,7 @@ class MotionPlannerNode(Node):
         if params["serve_relocation"]:
             goal_check.check_parameters({k: params[k] for k in goal_check.PARAMETERS})
             self.core.checks = {k: float(params[k]) for k in goal_check.PARAMETERS}
-            self.stream_params = StreamParams.from_mapping(params, planner_params.stpik.qdot_max)
+            self.stream_params = StreamParams.from_mapping(params, rd.QDOT_MAX)  # Table 7: the robot's
             self.link = RosArmLink(self, surface, str(params["driver_prefix"]),
                                    self.create_publisher(Marker, "~/path", SCENE_QOS))
         self.create_subscription(ObjectArray, params["scene_topic"], self._on_scene, SCENE_QOS,
