@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 
 from relocation_common import kinova as units
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.robot_description import BASE_LINK, FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX
 from relocation_common.scenario import load_scenario
 
@@ -35,7 +36,6 @@ from .scene import CAMERA_NAME, CameraSpec
 from .sensor_model import SensorModel
 from .sim import BadCommandError, Jaco2Sim, ObjectPose, check_velocity_command
 
-SURFACES = ("kinova", "ros2_control")  # the node's command_interface
 FINGER_TIP_NAMES = tuple(f"{PREFIX}_joint_finger_tip_{i}" for i in range(1, 4))  # kinova-ros publishes them at 0
 HOMED = "KINOVA ARM HAS BEEN RETURNED HOME"  # kinova-ros's HomeArm answer
 HOME_SPEED = 0.5  # HomeArm: fraction of Table 7's joint speeds
@@ -108,8 +108,7 @@ def check_parameters(g: Callable[[str], Any]) -> None:
     """The node's parameters (config/jaco2_sim_driver.yaml) as `g(name)` gives them: ValueError naming the first
     unusable one (the node's main() prints it as one line, exit 2)."""
     for k, lo in (("joint_state_rate", 0.0), ("objects_rate", 0.0), ("watchdog_timeout", 0.0),
-                  ("camera_width", 0), ("camera_height", 0), ("camera_fovy", 0.0), ("finger_tolerance", 0.0),
-                  ("finger_stall_threshold", 0.0), ("finger_stall_interval", 0.0)):
+                  ("camera_width", 0), ("camera_height", 0), ("camera_fovy", 0.0)):
         if not g(k) > lo:  # also NaN
             raise ValueError(f"parameter {k} must be > {lo}, got {g(k)!r}")
     if not (g("camera_rate") >= 0 and g("camera_fovy") < 180):
@@ -117,9 +116,6 @@ def check_parameters(g: Callable[[str], Any]) -> None:
                          f"{g('camera_fovy')!r}")
     if not g("tf_rate") >= 0:
         raise ValueError(f"parameter tf_rate must be >= 0, got {g('tf_rate')!r}")
-    if str(g("command_interface")) not in SURFACES:
-        raise ValueError(f"parameter command_interface must be one of {', '.join(SURFACES)}, "
-                         f"got {str(g('command_interface'))!r}")
     SensorModel.named(str(g("camera_model")))  # camera_model: ideal | realsense_d435 (ValueError naming it)
     if not 0.0 <= g("drop_probability") <= 1.0:
         raise ValueError(f"parameter drop_probability must be in [0, 1], got {g('drop_probability')!r}")
@@ -191,9 +187,11 @@ class SimDriver:
         return out
 
     @classmethod
-    def from_parameters(cls, g: Callable[[str], Any], log: Callable[[str], None] = lambda _: None) -> SimDriver:
-        """The driver of the node's parameters (config/jaco2_sim_driver.yaml; `g(name)` -> value): the scenario,
-        camera, limits, rates and finger protocol. ValueError naming the first unusable parameter."""
+    def from_parameters(cls, g: Callable[[str], Any], arm: ArmInterface,
+                        log: Callable[[str], None] = lambda _: None) -> SimDriver:
+        """The driver of the node's parameters (config/jaco2_sim_driver.yaml; `g(name)` -> value) and the arm
+        interface's finger rule: the scenario, camera, rates and finger protocol. ValueError naming the first
+        unusable parameter."""
         check_parameters(g)
         cam_kw: dict[str, Any] = dict(fovy_deg=float(g("camera_fovy")), width=int(g("camera_width")),
                                       height=int(g("camera_height")))
@@ -203,9 +201,7 @@ class SimDriver:
         rates = Rates(joint_states=float(g("joint_state_rate")), tf=float(g("tf_rate")),
                       objects=float(g("objects_rate")), real_time_factor=float(g("real_time_factor")),
                       state_on_command=bool(g("state_on_command")))
-        fingers = dict(tolerance=float(g("finger_tolerance")), stall_threshold=float(g("finger_stall_threshold")),
-                       stall_interval=float(g("finger_stall_interval")))
-        driver = cls(sim, rates, fingers, log, SensorModel.named(str(g("camera_model"))))
+        driver = cls(sim, rates, arm.finger_rule(), log, SensorModel.named(str(g("camera_model"))))
         plan = str(g("disturbance_plan"))
         driver.disturbances(float(g("drop_probability")), int(g("drop_seed")),
                             disturbance.DisturbancePlan.from_json(plan) if plan else None)

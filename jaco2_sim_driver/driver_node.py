@@ -11,7 +11,9 @@ A shell: parameters, topics, services and the fingers action translated to and f
 behaviour is (the loop's pacing, the arm services, the fingers protocol, the surfaces' joint states). Threads: the
 executor (commands, services), the simulation loop (`SimDriver.tick`, then publishing), the camera
 (`SimDriver.camera_loop`, publishing in `publish_camera_frame`) and, on the kinova surface, the fingers action's own
-executor (a goal waits until the fingers stop). Interface: docs/sim_driver.md.
+executor (a goal waits until the fingers stop). Interface: docs/sim_driver.md; the arm interface's settings, shared
+with the motion planner: config/arm_interface.yaml (relocation_common.arm_interface; a planner on another surface is
+logged).
 """
 from __future__ import annotations
 
@@ -39,6 +41,8 @@ from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
+from relocation_common import arm_interface
+from relocation_common.arm_interface import GRIPPER_TOPIC, VELOCITY_TOPIC, ArmInterface, MismatchWatch
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.robot_description import BASE_LINK, urdf
 from relocation_common.ros_conversions import transform_msg
@@ -50,8 +54,6 @@ from .messages import OPTICAL_FRAME, camera_msgs, finger_msg, joint_angles_msg, 
 from .sim import BadCommandError
 
 BASE_FRAME = BASE_LINK
-VELOCITY_TOPIC = "/velocity_controller/commands"   # ros2_control JointGroupVelocityController, rad/s
-GRIPPER_TOPIC = "/gripper_controller/commands"     # ros2_control JointGroupPositionController, finger joints rad
 # a Float64MultiArray command of 7 values serializes to ~100 bytes; bigger ones are refused before deserialization
 # (8 MB arrays deserialized on every message took the driver from 245 to 351 MiB and halved its joint-state rate)
 MAX_COMMAND_BYTES = 4096
@@ -66,20 +68,18 @@ class Jaco2SimDriver(Node):
 
     def __init__(self) -> None:
         super().__init__("jaco2_sim_driver")
-        declare_parameters(self)  # config/jaco2_sim_driver.yaml
-        g = lambda k: self.get_parameter(k).value  # noqa: E731  (a short reader of the declared parameters)
-        self.core = SimDriver.from_parameters(g, log=self.get_logger().info)  # checks them: ValueError
+        params = declare_parameters(self, shared=(arm_interface.FILE,))  # config/jaco2_sim_driver.yaml, arm_interface
+        g, self.arm = params.__getitem__, ArmInterface.from_mapping(params)
+        self.core = SimDriver.from_parameters(g, self.arm, log=self.get_logger().info)  # checks them: ValueError
         self.sim, rates, camera, scenario = self.core.sim, self.core.rates, self.core.sim.camera, self.core.sim.scenario
-        self.interface, cam_rate = str(g("command_interface")), float(g("camera_rate"))
+        self.interface, cam_rate = self.arm.command_interface, float(g("camera_rate"))
         # use_sim_time (rclpy's own parameter): stamp everything with the simulated time, as Gazebo and ros2_control
         # in simulation do; otherwise with the system clock, as kinova-ros does (ros::Time::now())
         self.sim_stamps = bool(g("sim_time_stamps")) or bool(self.get_parameter("use_sim_time").value)
         self._running = True
         self._stopping = threading.Event()  # wakes the camera thread at once on shutdown (exit within 2 s)
         self._fingers: SideNode | None = None  # serves the fingers action and in/home_arm (kinova surface)
-
-        pre = str(g("driver_prefix")).rstrip("/")
-        self.kinova = self.interface == "kinova"
+        pre, self.kinova = self.arm.driver_prefix, self.arm.kinova
         self.names = joint_names(self.interface)
         self.pub_clock = self.create_publisher(Clock, "/clock", 10)  # simulated time, as simulators publish it
         if self.kinova:
@@ -88,7 +88,7 @@ class Jaco2SimDriver(Node):
             self._ros2_control_surface()
         self.create_service(Trigger, f"{pre}/in/reset_scene", self.srv_reset)  # the simulator's own
         self._sensor_publishers()
-
+        self._watch = MismatchWatch(self, self.arm, "driver", self.resolve_topic_name(self.arm.velocity_topic))
         self._sim_thread = threading.Thread(target=self._sim_loop, name="sim", daemon=True)
         self._sim_thread.start()
         self._cam_thread = None
@@ -103,8 +103,8 @@ class Jaco2SimDriver(Node):
 
     def _kinova_surface(self, pre: str) -> None:
         """kinova-ros (kinova_arm.cpp): the topics, services and fingers action of the j2s7s300 driver."""
-        self.create_subscription(JointVelocity, f"{pre}/in/joint_velocity", self.on_kinova_velocity, COMMAND_QOS)
-        self.pub_js = self.create_publisher(JointState, f"{pre}/out/joint_state", 10)
+        self.create_subscription(JointVelocity, self.arm.velocity_topic, self.on_kinova_velocity, COMMAND_QOS)
+        self.pub_js = self.create_publisher(JointState, self.arm.state_topic, 10)
         self.pub_angles = self.create_publisher(JointAngles, f"{pre}/out/joint_angles", 10)
         self.pub_finger_pos = self.create_publisher(FingerPosition, f"{pre}/out/finger_position", 10)
         self.create_service(Start, f"{pre}/in/start", self.srv_start)
@@ -113,7 +113,7 @@ class Jaco2SimDriver(Node):
         self._fingers.node.create_service(HomeArm, f"{pre}/in/home_arm", self.srv_home_arm,
                                           callback_group=ReentrantCallbackGroup())
         self._finger_server = ActionServer(
-            self._fingers.node, SetFingersPosition, f"{pre}/fingers_action/finger_positions",
+            self._fingers.node, SetFingersPosition, pre + arm_interface.KINOVA_FINGERS,
             execute_callback=self.execute_fingers, goal_callback=lambda _: GoalResponse.ACCEPT,
             cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup())
 
@@ -121,7 +121,7 @@ class Jaco2SimDriver(Node):
         """ros2_control: forward command controllers and joint_state_broadcaster."""
         for topic, callback in ((VELOCITY_TOPIC, self.on_velocity), (GRIPPER_TOPIC, self.on_gripper)):
             self.create_subscription(Float64MultiArray, topic, self._bounded(topic, callback), COMMAND_QOS, raw=True)
-        self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
+        self.pub_js = self.create_publisher(JointState, self.arm.state_topic, 10)
 
     def _sensor_publishers(self) -> None:
         """Ground truth, camera, and what robot_state_publisher publishes: the URDF, its fixed joints, the moving

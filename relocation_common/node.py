@@ -48,16 +48,25 @@ def stopping_as(exc_type: Callable[[str], Exception]) -> Iterator[None]:
         raise exc_type(stop_reason()) from None
 
 
-def declare_parameters(node) -> dict[str, Any]:
+def declare_parameters(node, shared: tuple[str, ...] = ()) -> dict[str, Any]:
     """Declare every parameter of `config/<node name>.yaml` with that file's value as its default: the one place a
-    node's parameters and defaults are written. ParameterError for an override (-p, --params-file) that names a
-    parameter the node does not have (a typo is never silently ignored). Returns {name: value}.
+    node's parameters and defaults are written; and those of the `/**` section of each `shared` file under config/
+    (settings several nodes must agree on, e.g. arm_interface.yaml). ParameterError for a key in two of these files,
+    and for an override (-p, --params-file) that names a parameter the node does not have (a typo is never silently
+    ignored). Returns {name: value}.
 
     Read-only (ParameterDescriptor.read_only): a node checks its parameters once, at start, and some are read again
     while it runs; `ros2 param set` is refused ("parameter is read-only") instead of bypassing those checks. Set
     them with -p or --params-file and restart the node."""
     name = node.get_name()
     defaults = node_section(config_file(f"{name}.yaml"), name)
+    for f in shared:
+        more = node_section(config_file(f), "/**")
+        twice = sorted(set(more) & set(defaults))
+        if twice:
+            raise ParameterError(f"parameter(s) {', '.join(twice)} in both config/{name}.yaml and config/{f}: "
+                                 f"keep them in config/{f} only")
+        defaults.update(more)
     for k, v in defaults.items():
         node.declare_parameter(k, v, ParameterDescriptor(read_only=True))
     unknown = sorted(set(node._parameter_overrides) - set(node._parameters))

@@ -8,6 +8,7 @@ import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from jaco2_sim_driver.driver import Rates, SimDriver, check_parameters
 from jaco2_sim_driver.sim import Jaco2Sim
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.paths import config_file, default_scenario
 from relocation_common.robot_description import BASE_LINK, Q_HOME
 from relocation_common.scenario import load_scenario
@@ -53,5 +54,6 @@ def test_the_plan_and_drop_parameters_are_checked_and_taken():
         check_parameters({**PARAMS, "drop_probability": 1.5}.get)
     with pytest.raises(ValueError, match="not a disturbance plan"):
         check_parameters({**PARAMS, "disturbance_plan": "{nope"}.get)
-    core = SimDriver.from_parameters({**PARAMS, "disturbance_plan": plan.to_json(), "real_time_factor": 0.0}.get)
+    core = SimDriver.from_parameters({**PARAMS, "disturbance_plan": plan.to_json(), "real_time_factor": 0.0}.get,
+                                     ArmInterface.load())
     assert core.schedule is not None and core.schedule.plan == plan and core.dropper.probability == 0.0

@@ -18,6 +18,7 @@ from jaco2_sim_driver.driver import (
     joint_state,
 )
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.kinova import FINGER_MAX_TURN, turns_to_joint
 from relocation_common.paths import config_file, default_scenario
 from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, N_JOINTS, Q_HOME
@@ -180,10 +181,15 @@ def test_the_parameter_check_names_the_bad_parameter():
     check_parameters(params.get)
     for key, value, words in (("joint_state_rate", 0.0, "joint_state_rate must be > 0"),
                               ("camera_fovy", 180.0, "camera_fovy < 180"), ("tf_rate", -1.0, "tf_rate must be >= 0"),
-                              ("finger_tolerance", float("nan"), "finger_tolerance"),
-                              ("command_interface", "can", "command_interface must be one of kinova, ros2_control")):
+                              ("camera_height", float("nan"), "camera_height")):
         with pytest.raises(ValueError, match=words):
             check_parameters({**params, key: value}.get)
+    arm = ArmInterface.load().to_dict()  # the settings shared with the planner (config/arm_interface.yaml)
+    for key, value, words in (("finger_tolerance", float("nan"), "finger_tolerance"),
+                              ("command_interface", "can", "command_interface must be one of kinova, ros2_control"),
+                              ("driver_prefix", "/j2s7s300 driver", "driver_prefix must be a ROS namespace")):
+        with pytest.raises(ValueError, match=words):
+            ArmInterface(**{**arm, key: value})
 
 
 def test_the_camera_loop_hands_over_frames_until_told_to_stop(sim):
