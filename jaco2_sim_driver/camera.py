@@ -138,10 +138,11 @@ class CameraRenderer:
         self._renderer.close()
 
 
-def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec = CameraSpec(), sensor: SensorModel = SensorModel(),
-                 seed: int = 0) -> Frame:
+def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec | None = None,
+                 sensor: SensorModel = SensorModel(), seed: int = 0) -> Frame:
     """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception;
-    `sensor` / `seed` as in CameraRenderer."""
+    `camera` None: the driver's (CameraSpec.configured()); `sensor` / `seed` as in CameraRenderer."""
+    camera = camera if camera is not None else CameraSpec.configured()
     model = build_model(scenario, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):

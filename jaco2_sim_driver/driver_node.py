@@ -11,9 +11,8 @@ A shell: parameters, topics, services and the fingers action translated to and f
 behaviour is (the loop's pacing, the arm services, the fingers protocol, the surfaces' joint states). Threads: the
 executor (commands, services), the simulation loop (`SimDriver.tick`, then publishing), the camera
 (`SimDriver.camera_loop`, publishing in `publish_camera_frame`) and, on the kinova surface, the fingers action's own
-executor (a goal waits until the fingers stop). Interface: docs/sim_driver.md; the arm interface's settings, shared
-with the motion planner: config/arm_interface.yaml (relocation_common.arm_interface; a planner on another surface is
-logged).
+executor (a goal waits until the fingers stop). Interface: docs/sim_driver.md; the settings shared with the motion
+planner: config/arm_interface.yaml (relocation_common.arm_interface; a planner on another surface is logged).
 """
 from __future__ import annotations
 
@@ -41,8 +40,7 @@ from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
-from relocation_common import arm_interface
-from relocation_common.arm_interface import GRIPPER_TOPIC, VELOCITY_TOPIC, ArmInterface, MismatchWatch
+from relocation_common.arm_interface import FILE, GRIPPER_TOPIC, VELOCITY_TOPIC, ArmInterface, MismatchWatch
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.robot_description import BASE_LINK, urdf
 from relocation_common.ros_conversions import transform_msg
@@ -51,6 +49,7 @@ from . import frames
 from .camera import Frame
 from .driver import SimDriver, Snapshot, Tick, joint_names, joint_state
 from .messages import OPTICAL_FRAME, camera_msgs, finger_msg, joint_angles_msg, objects_msg, time_msg
+from .params import DriverParams
 from .sim import BadCommandError
 
 BASE_FRAME = BASE_LINK
@@ -68,14 +67,14 @@ class Jaco2SimDriver(Node):
 
     def __init__(self) -> None:
         super().__init__("jaco2_sim_driver")
-        params = declare_parameters(self, shared=(arm_interface.FILE,))  # config/jaco2_sim_driver.yaml, arm_interface
-        g, self.arm = params.__getitem__, ArmInterface.from_mapping(params)
-        self.core = SimDriver.from_parameters(g, self.arm, log=self.get_logger().info)  # checks them: ValueError
-        self.sim, rates, camera, scenario = self.core.sim, self.core.rates, self.core.sim.camera, self.core.sim.scenario
-        self.interface, cam_rate = self.arm.command_interface, float(g("camera_rate"))
+        params = declare_parameters(self, shared=(FILE,))  # config/jaco2_sim_driver.yaml, arm_interface
+        p, self.arm = DriverParams.from_mapping(params), ArmInterface.from_mapping(params)  # checked: ValueError
+        self.core = SimDriver.from_params(p, self.arm, log=self.get_logger().info)
+        self.sim, camera, scenario = self.core.sim, self.core.sim.camera, self.core.sim.scenario
+        self.interface, cam_rate = self.arm.command_interface, p.camera_rate
         # use_sim_time (rclpy's own parameter): stamp everything with the simulated time, as Gazebo and ros2_control
         # in simulation do; otherwise with the system clock, as kinova-ros does (ros::Time::now())
-        self.sim_stamps = bool(g("sim_time_stamps")) or bool(self.get_parameter("use_sim_time").value)
+        self.sim_stamps = p.sim_time_stamps or bool(self.get_parameter("use_sim_time").value)
         self._running = True
         self._stopping = threading.Event()  # wakes the camera thread at once on shutdown (exit within 2 s)
         self._fingers: SideNode | None = None  # serves the fingers action and in/home_arm (kinova surface)
@@ -98,7 +97,7 @@ class Jaco2SimDriver(Node):
             self._cam_thread.start()
         self.get_logger().info(
             f"{self.interface} surface, scenario {scenario.name} ({len(scenario.objects)} bottles), real_time_factor "
-            f"{rates.real_time_factor:g}, joint states {rates.joint_states:g} Hz, camera {cam_rate:g} Hz "
+            f"{p.real_time_factor:g}, joint states {p.joint_state_rate:g} Hz, camera {cam_rate:g} Hz "
             f"{camera.width}x{camera.height}")
 
     def _kinova_surface(self, pre: str) -> None:
@@ -113,7 +112,7 @@ class Jaco2SimDriver(Node):
         self._fingers.node.create_service(HomeArm, f"{pre}/in/home_arm", self.srv_home_arm,
                                           callback_group=ReentrantCallbackGroup())
         self._finger_server = ActionServer(
-            self._fingers.node, SetFingersPosition, pre + arm_interface.KINOVA_FINGERS,
+            self._fingers.node, SetFingersPosition, self.arm.fingers_action,
             execute_callback=self.execute_fingers, goal_callback=lambda _: GoalResponse.ACCEPT,
             cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup())
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 
 import cv2
 import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
@@ -34,6 +33,8 @@ from relocation_common.robot_description import (
 )
 from relocation_common.scenario import Marker, Scenario
 
+from .params import CameraSpec
+
 CAMERA_NAME = "camera_color"
 HAND_BODY = LINK_NAMES[-1]
 FINGER_BODY_NAMES = FINGER_LINK_NAMES  # the description's moving fingers (FINGER_HINGES), as MuJoCo bodies
@@ -42,42 +43,6 @@ FINGER_BODY_NAMES = FINGER_LINK_NAMES  # the description's moving fingers (FINGE
 DESCRIPTION_FINGER_GEOMS = ("finger_1", "finger_2", "finger_3")
 MARKER_BORDER = 0.25       # white margin around the marker, as a fraction of the marker side
 FLOOR_DROP = 0.30          # floor this far below the bottom shelf board
-
-
-# Default camera: fixed in the base frame, front right of the shelf (as the robot sees it), above the top shelf.
-# With the arm at Q_HOME every bottle of paper_experiment_10 shows (>= 250 px each at 640x480; test_sim_core checks
-# it); perception's tests are tuned on this view.
-CAMERA_POSITION = (0.0, -0.35, 0.55)
-CAMERA_TARGET = (0.62, 0.0, 0.26)
-# Alternative placement relative to the shelf (CameraSpec.for_shelf): chosen with segmentation renders; shows more
-# of every bottle of config/scenarios/*.yaml (paper_experiment_10: >= 1100 px each).
-CAMERA_OFFSET = (-0.30, -0.30, 0.38)       # from (x_front, y_center, top_z)
-CAMERA_LOOK_AT = (0.45, 0.0, 0.06)         # (fraction of the depth, y from y_center, z above top_z)
-
-
-@dataclass(frozen=True)
-class CameraSpec:
-    """Pinhole camera of the scene (RealSense-like). position / look_at in the base frame; None = placed from the
-    scenario's shelf (CAMERA_OFFSET, CAMERA_LOOK_AT), see `for_shelf`."""
-
-    position: tuple[float, float, float] | None = CAMERA_POSITION
-    look_at: tuple[float, float, float] | None = CAMERA_TARGET
-    fovy_deg: float = 58.0
-    width: int = 640
-    height: int = 480
-
-    @classmethod
-    def for_shelf(cls, **kw) -> "CameraSpec":
-        """The shelf-relative placement (position and look_at from the scenario's shelf)."""
-        return cls(position=None, look_at=None, **kw)
-
-    def placed(self, shelf) -> tuple[np.ndarray, np.ndarray]:
-        """(position, look_at) for this shelf."""
-        p = self.position or (shelf.x_front + CAMERA_OFFSET[0], shelf.y_center + CAMERA_OFFSET[1],
-                              shelf.top_z + CAMERA_OFFSET[2])
-        t = self.look_at or (shelf.x_front + CAMERA_LOOK_AT[0] * shelf.depth, shelf.y_center + CAMERA_LOOK_AT[1],
-                             shelf.top_z + CAMERA_LOOK_AT[2])
-        return np.asarray(p, float), np.asarray(t, float)
 
 
 def _f(v) -> str:
@@ -232,14 +197,16 @@ def _header(root: ET.Element, camera: CameraSpec, markers: int = 1, gripper_mark
     _el(asset, "material", name="floor", texture="grid", texrepeat="8 8")
 
 
-def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_marker: bool = False) -> str:
+def scene_xml(scenario: Scenario, camera: CameraSpec | None = None, gripper_marker: bool = False) -> str:
     """MJCF of the whole scene, built with xml.etree.ElementTree (names from a scenario are attribute values,
     escaped, never markup). Physics at 1 kHz (timestep 0.001). The marker textures are the assets 'aruco.png',
     'aruco_<k>.png' (`scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm.
-    `gripper_marker`: the calibration marker on the hand (`hand_marker()`, texture 'aruco_gripper.png')."""
+    `gripper_marker`: the calibration marker on the hand (`hand_marker()`, texture 'aruco_gripper.png'). `camera`
+    None: CameraSpec.configured()."""
     s = scenario.shelf
     floor = s.bottom_z - FLOOR_DROP
     root = ET.Element("mujoco", model=f"jaco2_shelf_{scenario.name}")
+    camera = camera if camera is not None else CameraSpec.configured()
     _header(root, camera, len(scenario.markers), gripper_marker)
     world = _el(root, "worldbody")
     for name, pos, direction, diffuse in (("key", "0.0 -0.6 1.6", "0.35 0.35 -1", "0.7 0.7 0.7"),
@@ -298,7 +265,8 @@ def scene_assets(scenario: Scenario, gripper_marker: bool = False) -> dict[str, 
     return assets
 
 
-def build_model(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_marker: bool = False) -> mujoco.MjModel:
-    """Compile the scene of a scenario (marker textures built in memory); `gripper_marker` as in `scene_xml`."""
+def build_model(scenario: Scenario, camera: CameraSpec | None = None, gripper_marker: bool = False) -> mujoco.MjModel:
+    """Compile the scene of a scenario (marker textures built in memory); `camera`, `gripper_marker` as in
+    `scene_xml`."""
     return mujoco.MjModel.from_xml_string(scene_xml(scenario, camera, gripper_marker),
                                           scene_assets(scenario, gripper_marker))

@@ -33,6 +33,7 @@ from relocation_common.robot_description import (
 )
 from relocation_common.scenario import Scenario
 
+from .params import DriverParams
 from .scene import DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model
 
 LIMIT_BRAKE_TIME = 0.02     # s: near a limit the allowed speed towards it is distance / LIMIT_BRAKE_TIME
@@ -69,10 +70,15 @@ def check_velocity_command(qdot, n: int = N_JOINTS) -> np.ndarray:
 
 
 class Jaco2Sim:
-    """Scenario scene + arm; not thread-safe (the node serialises access with a lock)."""
+    """Scenario scene + arm; not thread-safe (the node serialises access with a lock). `camera` and
+    `watchdog_timeout` None: the driver's parameters (config/jaco2_sim_driver.yaml, params.DriverParams)."""
 
-    def __init__(self, scenario: Scenario, *, camera: CameraSpec = CameraSpec(),
-                 watchdog_timeout: float = 0.05, q_home=Q_HOME):
+    def __init__(self, scenario: Scenario, *, camera: CameraSpec | None = None,
+                 watchdog_timeout: float | None = None, q_home=Q_HOME):
+        if camera is None or watchdog_timeout is None:
+            configured = DriverParams.load()
+            camera = camera if camera is not None else configured.camera()
+            watchdog_timeout = watchdog_timeout if watchdog_timeout is not None else configured.watchdog_timeout
         self.scenario = scenario
         self.camera = camera
         self.model = build_model(scenario, camera)

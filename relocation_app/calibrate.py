@@ -67,8 +67,9 @@ class SimArm:
     """The simulator core's scene with the calibration marker on the hand: joint positions set, frames rendered
     through the camera model (the driver's camera, CameraSpec and SensorModel as in its parameters)."""
 
-    def __init__(self, scenario: Scenario, camera: CameraSpec = CameraSpec(), sensor: SensorModel = SensorModel(),
+    def __init__(self, scenario: Scenario, camera: CameraSpec | None = None, sensor: SensorModel = SensorModel(),
                  seed: int = 0):
+        camera = camera if camera is not None else CameraSpec.configured()
         self.model = build_model(scenario, camera, gripper_marker=True)
         self.data = mujoco.MjData(self.model)
         self._camera, self._sensor, self._seed = camera, sensor, seed

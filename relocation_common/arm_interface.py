@@ -104,6 +104,11 @@ class ArmInterface:
         """Where the driver publishes joint states and the planner reads them."""
         return self.driver_prefix + KINOVA_STATE if self.kinova else JOINT_STATES_TOPIC
 
+    @property
+    def fingers_action(self) -> str:
+        """kinova: the SetFingersPosition action the driver serves and the planner calls."""
+        return self.driver_prefix + KINOVA_FINGERS
+
     def finger_rule(self) -> dict[str, float]:
         """FingerMonitor's keyword arguments: tolerance, stall_threshold, stall_interval."""
         return dict(tolerance=self.finger_tolerance, stall_threshold=self.finger_stall_threshold,

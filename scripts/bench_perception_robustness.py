@@ -172,7 +172,7 @@ def render_moving(s: Scenario, q, qdot, exposure: float = 0.02) -> Frame:
     """The frame of the arm arriving at q with joint speeds qdot, through a camera exposing its colour image for
     `exposure` s (the sensor model's motion blur only)."""
     import mujoco
-    model = build_model(s, CameraSpec())
+    model = build_model(s, CameraSpec.configured())
     data = mujoco.MjData(model)
     adr = [model.joint(j).qposadr[0] for j in JOINT_NAMES]
     r = CameraRenderer(model, 640, 480, sensor=sm.SensorModel(exposure_s=exposure))
@@ -218,7 +218,7 @@ def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str], p
 def visible_pixels(s: Scenario, q) -> dict[str, int]:
     """Pixels of each bottle in the 640x480 image (MuJoCo segmentation rendering of the same scene)."""
     import mujoco
-    camera = CameraSpec()
+    camera = CameraSpec.configured()
     model = build_model(s, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, q):
@@ -262,7 +262,8 @@ def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES),
         rendered.append((s, f))
         required = {i for i, n in visible_pixels(s, q).items() if n >= VISIBLE_PIXELS}
         fused = Perception(s).process(f.rgb, f.depth, f.K).T_base_camera if prior else None
-        low = {lv: render_frame(s, q=q, camera=CameraSpec(width=w, height=h)) for lv, (w, h) in RESOLUTIONS.items()}
+        low = {lv: render_frame(s, q=q, camera=replace(CameraSpec.configured(), width=w, height=h))
+               for lv, (w, h) in RESOLUTIONS.items()}
         for ci, cat in enumerate(CATEGORIES):
             if cat not in categories:
                 continue

@@ -30,7 +30,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
 from relocation_common import robot_description as rd
-from relocation_common.arm_interface import GRIPPER_TOPIC, KINOVA_FINGERS, ArmInterface, MismatchWatch
+from relocation_common.arm_interface import GRIPPER_TOPIC, ArmInterface, MismatchWatch
 from relocation_common.node import ActionClient, SideNode
 from relocation_common.ros_conversions import BASE_FRAME
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled
@@ -87,7 +87,7 @@ class RosArmLink:
         self._fingers_q: tuple[np.ndarray, float] | None = None  # finger joint angles (rad), time received
         if self.kinova:  # kinova-ros's j2s7s300 driver surface: kinova_msgs, deg/s, fingers action
             self._cmd = node.create_publisher(JointVelocity, arm.velocity_topic, 10)
-            self._fingers = ActionClient(node, SetFingersPosition, arm.driver_prefix + KINOVA_FINGERS,
+            self._fingers = ActionClient(node, SetFingersPosition, arm.fingers_action,
                                          callback_group=ReentrantCallbackGroup())
         else:  # ros2_control: JointGroupVelocityController, the fingers as a JointGroupPositionController
             self._cmd = node.create_publisher(Float64MultiArray, arm.velocity_topic, 10)

@@ -20,9 +20,11 @@ SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15"]
 VISIBLE_PIXELS = 300  # a bottle with this many pixels in view (~10 % of an unoccluded one) must be found
 
 
-def visible_pixels(scenario, camera=CameraSpec()) -> dict[str, int]:
-    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene)."""
+def visible_pixels(scenario, camera: CameraSpec | None = None) -> dict[str, int]:
+    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene; `camera` None:
+    the driver's)."""
     import mujoco
+    camera = camera if camera is not None else CameraSpec.configured()
     model = build_model(scenario, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, Q_HOME):

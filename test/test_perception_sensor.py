@@ -19,7 +19,7 @@ import mujoco  # isort: skip  (after jaco2_sim_driver, which sets MUJOCO_GL)
 
 def test_motion_blur_while_the_arm_moves():
     s = load_scenario(resolve_scenario("paper_experiment_10"))
-    model = build_model(s, CameraSpec())
+    model = build_model(s, CameraSpec.configured())
     data = mujoco.MjData(model)
     adr = [model.joint(j).qposadr[0] for j in JOINT_NAMES]
     blurred = CameraRenderer(model, 640, 480, sensor=SensorModel(exposure_s=0.02))
