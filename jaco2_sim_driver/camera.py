@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.scenario import Scenario
@@ -138,7 +139,7 @@ class CameraRenderer:
         self._renderer.close()
 
 
-def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec | None = None,
+def render_frame(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec | None = None,
                  sensor: SensorModel = SensorModel(), seed: int = 0) -> Frame:
     """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception;
     `camera` None: the driver's (CameraSpec.configured()); `sensor` / `seed` as in CameraRenderer."""

@@ -20,10 +20,11 @@ import queue
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common import kinova as units
 from relocation_common.arm_interface import ArmInterface
@@ -94,7 +95,7 @@ def joint_state(surface: str, s: Snapshot) -> tuple[list[float], list[float], li
     return position.tolist(), velocity.tolist(), np.concatenate([s.effort, zeros]).tolist()
 
 
-def _check_goal(goal) -> np.ndarray:
+def _check_goal(goal: ArrayLike) -> np.ndarray:
     g = np.asarray(goal, float)
     if g.shape != (len(FINGER_JOINT_NAMES),) or not np.all(np.isfinite(g)):
         raise ValueError(f"not finite {g.tolist()}")
@@ -140,7 +141,7 @@ class SimDriver:
         self.dropper = disturbance.CarryDropper(drop_probability, drop_seed)
         self.schedule = disturbance.DisturbanceSchedule(plan) if plan is not None else None
 
-    def disturb(self, parent: str, child: str, translation, rotation_xyzw) -> None:
+    def disturb(self, parent: str, child: str, translation: Iterable[float], rotation_xyzw: Iterable[float]) -> None:
         """A disturbance command as a transform (the node's /sim/disturb): child `bottle_<id>` or `grasped`;
         parent the base frame = move the bottle there, `bottle_<id>` = relative (nudge, or tip by the rotation).
         Applied at the loop's next step; its record (or why it was skipped) comes out in a Tick."""
@@ -168,7 +169,7 @@ class SimDriver:
         return out
 
     # ------------------------------------------------------------------ commands
-    def command(self, v) -> None:
+    def command(self, v: ArrayLike) -> None:
         """A joint-velocity command (rad/s), applied at the loop's next step. BadCommandError for a bad one: the arm
         holds still."""
         try:
@@ -182,7 +183,7 @@ class SimDriver:
         """Zero velocity at the loop's next step."""
         self._commands.put(None)
 
-    def gripper(self, joint_angles) -> str | None:
+    def gripper(self, joint_angles: ArrayLike) -> str | None:
         """ros2_control's gripper command: the finger joints' angles as Kinova reports them (rad, 0 open .. 1.396
         closed); the bottle grasped or released, or None. BadCommandError, ValueError or TypeError for bad input."""
         target = kinova.turns_to_sim(units.joint_to_turns(np.asarray(joint_angles, float)))
@@ -254,7 +255,8 @@ class SimDriver:
         with self.lock:
             return self.sim.time, kinova.sim_to_turns(self.sim.finger_q)
 
-    def fingers(self, goal, cancelled: Callable[[], bool] = lambda: False, ok: Callable[[], bool] = lambda: True,
+    def fingers(self, goal: ArrayLike, cancelled: Callable[[], bool] = lambda: False,
+                ok: Callable[[], bool] = lambda: True,
                 feedback: Callable[[np.ndarray], None] = lambda _: None) -> tuple[str, np.ndarray]:
         """SetFingersPosition as kinova_fingers_action.cpp serves it, for `goal` (turns of the three fingers):
         ("succeed", turns) when the fingers are within the tolerance of the goal; ("abort", turns) when they stall

@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -29,6 +30,7 @@ from kinova_msgs.srv import HomeArm, Start, Stop
 from qtree_relocation_msgs.msg import ObjectArray
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
@@ -52,7 +54,6 @@ from .messages import OPTICAL_FRAME, camera_msgs, finger_msg, joint_angles_msg, 
 from .params import DriverParams
 from .sim import BadCommandError
 
-BASE_FRAME = BASE_LINK
 # a Float64MultiArray command of 7 values serializes to ~100 bytes; bigger ones are refused before deserialization
 # (8 MB arrays deserialized on every message took the driver from 245 to 351 MiB and halved its joint-state rate)
 MAX_COMMAND_BYTES = 4096
@@ -137,7 +138,7 @@ class Jaco2SimDriver(Node):
         self.pub_tf = self.create_publisher(TFMessage, "/tf", TF_QOS)
         self.pub_description.publish(String(data=urdf(hand=True)))
         t, t_cam = self.core.camera_transform()
-        static = frames.fixed_transforms() + [(BASE_FRAME, OPTICAL_FRAME, t_cam)]
+        static = frames.fixed_transforms() + [(BASE_LINK, OPTICAL_FRAME, t_cam)]
         self.pub_tf_static.publish(self._tf(t, static))
 
     # ------------------------------------------------------------------ commands
@@ -150,7 +151,7 @@ class Jaco2SimDriver(Node):
         v = [msg.joint1, msg.joint2, msg.joint3, msg.joint4, msg.joint5, msg.joint6, msg.joint7]
         self._command(np.radians(np.asarray(v, float)), "joint_velocity")
 
-    def _bounded(self, topic: str, callback):
+    def _bounded(self, topic: str, callback: Callable[[Float64MultiArray], None]) -> Callable[[bytes], None]:
         """A raw-subscription callback: a serialized command over MAX_COMMAND_BYTES is refused (the arm holds
         still) without being deserialized; a smaller one is deserialized and passed to `callback`."""
         def on_raw(data: bytes) -> None:
@@ -180,37 +181,37 @@ class Jaco2SimDriver(Node):
         t, r = m.transform.translation, m.transform.rotation
         self.core.disturb(m.header.frame_id, m.child_frame_id, (t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
 
-    def _command(self, v, source: str) -> None:
+    def _command(self, v: Sequence[float] | np.ndarray, source: str) -> None:
         try:
             self.core.command(v)  # applied by the simulation loop at its next step (no lock wait here)
         except BadCommandError as e:  # the arm holds still
             self.get_logger().error(f"rejected {source} command: {e}", throttle_duration_sec=1.0)
 
     # ------------------------------------------------------------------ services and the fingers action
-    def srv_home_arm(self, req, res):
+    def srv_home_arm(self, req: HomeArm.Request, res: HomeArm.Response) -> HomeArm.Response:
         """kinova_msgs/HomeArm (SimDriver.home). Served on the fingers' side executor: the main one keeps serving
         in/stop."""
         res.homearm_result = self.core.home(self.context.ok)
         return res
 
-    def srv_stop(self, req, res):
+    def srv_stop(self, req: Stop.Request, res: Stop.Response) -> Stop.Response:
         """kinova_msgs/Stop: the arm stops at once; commands (velocities, finger goals) are ignored until Start."""
         self.core.stop()
         res.stop_result = "Arm stopped"
         return res
 
-    def srv_start(self, req, res):
+    def srv_start(self, req: Start.Request, res: Start.Response) -> Start.Response:
         """kinova_msgs/Start."""
         self.core.start()
         res.start_result = "Arm started"
         return res
 
-    def srv_reset(self, req, res):
+    def srv_reset(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         """The simulator's own: scenario state, arm home, fingers open, sim time 0, started (not stopped)."""
         res.success, res.message = True, f"scene reset to scenario {self.core.reset()}"
         return res
 
-    def execute_fingers(self, gh):
+    def execute_fingers(self, gh: ServerGoalHandle) -> SetFingersPosition.Result:
         """kinova_msgs/action/SetFingersPosition (SimDriver.fingers); the result holds the finger positions."""
         f = gh.request.fingers
         outcome, turns = self.core.fingers(
@@ -261,7 +262,7 @@ class Jaco2SimDriver(Node):
             self.pub_angles.publish(joint_angles_msg(s.q))
             self.pub_finger_pos.publish(finger_msg(s.turns))
 
-    def _tf(self, sim_t: float, transforms) -> TFMessage:
+    def _tf(self, sim_t: float, transforms: Iterable[tuple[str, str, np.ndarray]]) -> TFMessage:
         stamp = self._stamp(sim_t)
         return TFMessage(transforms=[transform_msg(t, parent, child, stamp) for parent, child, t in transforms])
 
@@ -290,7 +291,7 @@ class Jaco2SimDriver(Node):
             self._fingers.close()
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """The jaco2_sim_driver executable."""
     node_main("jaco2_sim_driver", Jaco2SimDriver, args, threads=1)
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from relocation_common.config import ParameterError, node_section
 from relocation_common.paths import config_file
+from relocation_common.scenario import Shelf
 
 from .disturbance import DisturbancePlan
 from .sensor_model import SensorModel
@@ -53,7 +54,7 @@ class CameraSpec:
         """The driver's camera as config/jaco2_sim_driver.yaml describes it (DriverParams.camera)."""
         return DriverParams.load().camera()
 
-    def placed(self, shelf) -> tuple[np.ndarray, np.ndarray]:
+    def placed(self, shelf: Shelf) -> tuple[np.ndarray, np.ndarray]:
         """(position, look_at) for this shelf."""
         p = self.position or (shelf.x_front + CAMERA_OFFSET[0], shelf.y_center + CAMERA_OFFSET[1],
                               shelf.top_z + CAMERA_OFFSET[2])

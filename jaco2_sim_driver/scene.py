@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from typing import Any, Iterable
 
 import cv2
 import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common.robot_description import (
     FINGER_BASE_Z,
@@ -31,7 +33,7 @@ from relocation_common.robot_description import (
     joint_origins,
     mjcf_arm_body,
 )
-from relocation_common.scenario import Marker, Scenario
+from relocation_common.scenario import Bottle, Marker, Scenario, Shelf
 
 from .params import CameraSpec
 
@@ -45,11 +47,11 @@ MARKER_BORDER = 0.25       # white margin around the marker, as a fraction of th
 FLOOR_DROP = 0.30          # floor this far below the bottom shelf board
 
 
-def _f(v) -> str:
+def _f(v: Iterable[float]) -> str:
     return " ".join(f"{float(x):.6g}" for x in v)
 
 
-def rpy_matrix(rpy) -> np.ndarray:
+def rpy_matrix(rpy: Iterable[float]) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll) (URDF / ROS fixed-axis roll-pitch-yaw)."""
     r, p, y = rpy
     cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
@@ -78,9 +80,9 @@ def marker_image(marker: Marker, pixels_per_bit: int = 20) -> np.ndarray:
     return cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
 
 
-def _el(parent: ET.Element, tag: str, **attrs) -> ET.Element:
+def _el(parent: ET.Element, tag: str, **attrs: Any) -> ET.Element:
     """A child element; attribute values as text (numbers %.6g, sequences space-separated); `class_` is `class`."""
-    def text(v) -> str:
+    def text(v: Any) -> str:
         if isinstance(v, str):
             return v
         if isinstance(v, (list, tuple, np.ndarray)):
@@ -101,12 +103,12 @@ def _hand(last_link: ET.Element) -> None:
             size=f"{FINGER_RADIUS}", mass="0.03", class_="finger")
 
 
-def _box(parent: ET.Element, name: str, lo, hi, cls: str = "shelf") -> None:
+def _box(parent: ET.Element, name: str, lo: ArrayLike, hi: ArrayLike, cls: str = "shelf") -> None:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     _el(parent, "geom", name=name, type="box", pos=(lo + hi) / 2, size=(hi - lo) / 2, class_=cls)
 
 
-def _shelf(world: ET.Element, s) -> None:
+def _shelf(world: ET.Element, s: Shelf) -> None:
     t, x0, x1, y0, y1 = s.board_thickness, s.x_front, s.x_back, s.y_min, s.y_max
     floor = s.bottom_z - FLOOR_DROP
     _box(world, "shelf_top_board", (x0, y0, s.top_z - t), (x1, y1, s.top_z))
@@ -146,7 +148,7 @@ def _marker(world: ET.Element, k: int, m: Marker) -> None:
     _marker_plate(world, f"{_marker_name(k)}_marker", pose, m.size, _marker_name(k))
 
 
-def _bottle(world: ET.Element, b, z: float) -> None:
+def _bottle(world: ET.Element, b: Bottle, z: float) -> None:
     """A bottle: free body whose frame is the centre of its base circle (as ObjectState.pose), mass = weight (kg)."""
     body = _el(world, "body", name=b.id, pos=(b.x, b.y, z))
     _el(body, "freejoint", name=f"{b.id}_free")
@@ -154,7 +156,7 @@ def _bottle(world: ET.Element, b, z: float) -> None:
         size=(b.radius, b.height / 2), mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
 
 
-def _camera(world: ET.Element, c: CameraSpec, shelf) -> None:
+def _camera(world: ET.Element, c: CameraSpec, shelf: Shelf) -> None:
     """MuJoCo camera looking from `position` to `look_at` (MuJoCo cameras look along -z with y up)."""
     p, t = c.placed(shelf)
     fwd = (t - p) / np.linalg.norm(t - p)

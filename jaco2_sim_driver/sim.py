@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common.robot_description import (
     CONTINUOUS,
@@ -56,7 +57,7 @@ class ObjectPose:
     quat_wxyz: tuple[float, float, float, float]
 
 
-def check_velocity_command(qdot, n: int = N_JOINTS) -> np.ndarray:
+def check_velocity_command(qdot: ArrayLike, n: int = N_JOINTS) -> np.ndarray:
     """Validate a joint-velocity command (rad/s); BadCommandError with the reason otherwise."""
     try:
         v = np.asarray(qdot, dtype=float).reshape(-1)
@@ -74,7 +75,7 @@ class Jaco2Sim:
     `watchdog_timeout` None: the driver's parameters (config/jaco2_sim_driver.yaml, params.DriverParams)."""
 
     def __init__(self, scenario: Scenario, *, camera: CameraSpec | None = None,
-                 watchdog_timeout: float | None = None, q_home=Q_HOME):
+                 watchdog_timeout: float | None = None, q_home: ArrayLike = Q_HOME) -> None:
         if camera is None or watchdog_timeout is None:
             configured = DriverParams.load()
             camera = camera if camera is not None else configured.camera()
@@ -162,7 +163,7 @@ class Jaco2Sim:
                 for oid, b in self._bodies.items()]
 
     # ---------------------------------------------------------------- commands
-    def set_velocity(self, qdot) -> np.ndarray:
+    def set_velocity(self, qdot: ArrayLike) -> np.ndarray:
         """Command joint velocities (rad/s, order JOINT_NAMES); returns the clamped command. Feeds the watchdog.
         A bad command raises BadCommandError and changes nothing."""
         v = np.clip(check_velocity_command(qdot), -self.qdot_max, self.qdot_max)
@@ -287,7 +288,7 @@ class Jaco2Sim:
             self._release = (oid, self.data.time + RELEASE_DELAY)
         return oid
 
-    def set_fingers(self, targets) -> str | None:
+    def set_fingers(self, targets: ArrayLike) -> str | None:
         """Drive the three fingers to hinge angles `targets` (rad, 0 open .. FINGER_CLOSED, clamped). A target past
         half-closed (mean over the fingers) closes the hand as `gripper_close` does (a bottle between the fingers
         is grasped), one below it opens it as `gripper_open` does (a held bottle is released). Returns the bottle

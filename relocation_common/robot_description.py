@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .kinova import FINGER_JOINT_CLOSED
 
@@ -128,7 +130,7 @@ ADJACENT = frozenset(
 )
 
 
-def dh_theta(q) -> np.ndarray:
+def dh_theta(q: ArrayLike) -> np.ndarray:
     """Kinova physical angles Q -> DH angles theta of Table 5."""
     return np.asarray(Q_SIGN) * np.asarray(q, dtype=float) + np.asarray(Q_OFFSET)
 
@@ -141,7 +143,7 @@ def _dh(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
                      [0.0, 0.0, 0.0, 1.0]])
 
 
-def dh_fk(q) -> list[np.ndarray]:
+def dh_fk(q: ArrayLike) -> list[np.ndarray]:
     """Forward kinematics straight from the DH table: the 4x4 poses of DH frames 1..7 in the base frame."""
     out, m = [], np.eye(4)
     for th, d, a, al in zip(dh_theta(q), DH_D, DH_A, DH_ALPHA):
@@ -173,7 +175,7 @@ def joint_origins() -> list[np.ndarray]:
     return out
 
 
-def _fmt(v) -> str:
+def _fmt(v: Iterable[float]) -> str:
     return " ".join(f"{float(x):.10g}" for x in v)
 
 
