@@ -32,6 +32,21 @@ def test_the_file_is_the_source_and_every_key_is_checked(tmp_path):
     assert ArmInterface(**{**KINOVA.to_dict(), "driver_prefix": "/j2s7s300_driver/"}) == KINOVA
 
 
+def test_a_key_in_a_node_file_and_in_the_shared_file_is_refused(tmp_path, monkeypatch):
+    import relocation_common.node as node
+
+    (tmp_path / "x.yaml").write_text("x:\n  ros__parameters:\n    driver_prefix: /a\n    rate: 1.0\n")
+    (tmp_path / "arm_interface.yaml").write_text(config_file("arm_interface.yaml").read_text())
+    monkeypatch.setattr(node, "config_file", lambda name: tmp_path / name)
+
+    class Named:
+        def get_name(self):
+            return "x"
+
+    with pytest.raises(ParameterError, match="driver_prefix in both config/x.yaml and config/arm_interface.yaml"):
+        node.declare_parameters(Named(), shared=("arm_interface.yaml",))
+
+
 def test_mismatch_names_what_the_other_side_runs():
     # the planner reads joint states; the driver publishes them on another surface's topic
     found = mismatch(KINOVA, "planner", KINOVA.state_topic, {"/joint_states": 1, KINOVA.state_topic: 0})
