@@ -22,18 +22,42 @@ import json
 import math
 import random
 from dataclasses import dataclass, field
-from typing import Any, Iterable
+from typing import Any, Iterable, Protocol
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common import geometry
+from relocation_common.scenario import Scenario
 
 MARGIN = 0.003  # m left between a disturbed bottle and its neighbours or the shelf's sides
 SLIP_CLEAR = 0.01  # m: a dropped bottle touches the hand again once this far from every finger and arm geom
 PUSH_STEP = 0.001  # m: resolution of the slide of a nudge
 TIP_DIRECTIONS = 12  # directions tried (evenly spaced from the asked one) for room to lie down
 KINDS = ("nudge", "tip", "move", "drop")
+
+
+class SimState(Protocol):
+    """What a disturbance reads and changes of the simulation (sim.Jaco2Sim; named here, not imported: sim.py reads
+    the driver's parameters, which read this module's plans)."""
+
+    model: Any  # mujoco.MjModel
+    data: Any  # mujoco.MjData
+    scenario: Scenario
+    grasped: str | None  # the bottle welded to the hand
+    q_home: np.ndarray
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s)."""
+
+    @property
+    def q(self) -> np.ndarray:
+        """The arm's joint angles (rad)."""
+
+    def object_poses(self) -> list[Any]:
+        """Every bottle's pose (sim.ObjectPose)."""
 
 
 class DisturbanceError(ValueError):
@@ -55,17 +79,17 @@ class Applied:
 
 
 # ------------------------------------------------------------------------------------------------ geometry helpers
-def _body(sim, object_id: str) -> int:
+def _body(sim: SimState, object_id: str) -> int:
     sim.scenario.object(object_id)  # UnknownObjectError naming the known ids
     return int(sim.model.body(object_id).id)
 
 
-def _free_adr(sim, body: int) -> tuple[int, int]:
+def _free_adr(sim: SimState, body: int) -> tuple[int, int]:
     j = sim.model.body_jntadr[body]
     return int(sim.model.jnt_qposadr[j]), int(sim.model.jnt_dofadr[j])
 
 
-def _set_pose(sim, object_id: str, position, quat_wxyz) -> None:
+def _set_pose(sim: SimState, object_id: str, position: ArrayLike, quat_wxyz: ArrayLike) -> None:
     """Teleport a bottle (base centre, orientation), at rest but awake (a sleeping body would hang where put)."""
     adr, vadr = _free_adr(sim, _body(sim, object_id))
     sim.data.qpos[adr:adr + 3] = position
@@ -75,17 +99,17 @@ def _set_pose(sim, object_id: str, position, quat_wxyz) -> None:
     mujoco.mj_forward(sim.model, sim.data)
 
 
-def _pose(sim, object_id: str) -> tuple[np.ndarray, np.ndarray]:
+def _pose(sim: SimState, object_id: str) -> tuple[np.ndarray, np.ndarray]:
     b = _body(sim, object_id)
     return sim.data.xpos[b].copy(), sim.data.xquat[b].copy()
 
 
-def tilt(sim, object_id: str) -> float:
+def tilt(sim: SimState, object_id: str) -> float:
     """Angle (rad) between the bottle's axis and the vertical: 0 standing, pi/2 lying."""
     return geometry.tilt(sim.data.xmat[_body(sim, object_id)].reshape(3, 3))
 
 
-def _footprint(sim, object_id: str) -> tuple[np.ndarray, np.ndarray, float]:
+def _footprint(sim: SimState, object_id: str) -> tuple[np.ndarray, np.ndarray, float]:
     """The bottle's horizontal footprint as a segment (xy ends) with a radius: its axis projected on the board."""
     b = sim.scenario.object(object_id)
     p = sim.data.xpos[_body(sim, object_id)]
@@ -93,9 +117,9 @@ def _footprint(sim, object_id: str) -> tuple[np.ndarray, np.ndarray, float]:
     return p[:2].copy(), (p + b.height * axis)[:2].copy(), b.radius
 
 
-def _segment_distance(a0, a1, b0, b1) -> float:
+def _segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
     """Distance between two 2-D segments (sampled ends against the other segment: exact for non-crossing ones)."""
-    def point_seg(p, s0, s1) -> float:
+    def point_seg(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> float:
         d = s1 - s0
         n = float(d @ d)
         t = 0.0 if n == 0 else min(1.0, max(0.0, float((p - s0) @ d) / n))
@@ -105,15 +129,15 @@ def _segment_distance(a0, a1, b0, b1) -> float:
     return min(point_seg(a0, b0, b1), point_seg(a1, b0, b1), point_seg(b0, a0, a1), point_seg(b1, a0, a1))
 
 
-def _crosses(a0, a1, b0, b1) -> bool:
-    def cross(o, p, q) -> float:
+def _crosses(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> bool:
+    def cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> float:
         return float((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0]))
     d1, d2 = cross(b0, b1, a0), cross(b0, b1, a1)
     d3, d4 = cross(a0, a1, b0), cross(a0, a1, b1)
     return d1 * d2 < 0 and d3 * d4 < 0
 
 
-def _room(sim, object_id: str, s0, s1, radius: float, z: float) -> str | None:
+def _room(sim: SimState, object_id: str, s0: np.ndarray, s1: np.ndarray, radius: float, z: float) -> str | None:
     """Why a footprint (segment s0-s1, radius) at height z does not fit, or None: it must stay within the shelf's
     sides and depth and keep MARGIN from every other bottle near that height."""
     sh = sim.scenario.shelf
@@ -132,13 +156,13 @@ def _room(sim, object_id: str, s0, s1, radius: float, z: float) -> str | None:
     return None
 
 
-def _not_grasped(sim, object_id: str, kind: str) -> None:
+def _not_grasped(sim: SimState, object_id: str, kind: str) -> None:
     if sim.grasped == object_id:
         raise DisturbanceError(f"cannot {kind} {object_id}: it is in the hand (use drop_grasped)")
 
 
 # ------------------------------------------------------------------------------------------------ disturbances
-def nudge(sim, object_id: str, dx: float, dy: float) -> Applied:
+def nudge(sim: SimState, object_id: str, dx: float, dy: float) -> Applied:
     """Push a standing bottle horizontally by (dx, dy) m: it slides along the push, in PUSH_STEP increments, as far
     as it goes without touching another bottle or leaving the shelf. `detail`: asked and applied displacement."""
     _not_grasped(sim, object_id, "nudge")
@@ -160,7 +184,7 @@ def nudge(sim, object_id: str, dx: float, dy: float) -> Applied:
                                                   "applied": [round(float(done[0]), 4), round(float(done[1]), 4)]})
 
 
-def tip(sim, object_id: str, direction: float = 0.0) -> Applied:
+def tip(sim: SimState, object_id: str, direction: float = 0.0) -> Applied:
     """Tip a bottle over: it lies on its side on its board, base where it stood, top towards `direction` (rad, in
     the base frame's xy plane) or the next of TIP_DIRECTIONS directions with room. DisturbanceError if none."""
     _not_grasped(sim, object_id, "tip")
@@ -180,7 +204,7 @@ def tip(sim, object_id: str, direction: float = 0.0) -> Applied:
     raise DisturbanceError(f"cannot tip {object_id}: no room to lie down ({why} in every direction)")
 
 
-def move_to(sim, object_id: str, x: float, y: float, z: float | None = None) -> Applied:
+def move_to(sim: SimState, object_id: str, x: float, y: float, z: float | None = None) -> Applied:
     """Stand a bottle upright at (x, y) on the board at height z (default: the top shelf, where bottles stand).
     DisturbanceError when it would overlap another bottle or leave the shelf."""
     _not_grasped(sim, object_id, "move")
@@ -195,14 +219,14 @@ def move_to(sim, object_id: str, x: float, y: float, z: float | None = None) -> 
                                                  "to": [round(float(x), 4), round(float(y), 4), round(z, 4)]})
 
 
-def clear_of_hand(sim, object_id: str) -> bool:
+def clear_of_hand(sim: SimState, object_id: str) -> bool:
     """True when the bottle is SLIP_CLEAR from every geom of the arm and the fingers (contype 2)."""
     m, g = sim.model, int(sim.model.geom(f"{object_id}_geom").id)
     hand = [k for k in range(m.ngeom) if m.geom_contype[k] & 2]
     return all(mujoco.mj_geomDistance(m, sim.data, g, k, SLIP_CLEAR, None) >= SLIP_CLEAR for k in hand)
 
 
-def drop_grasped(sim) -> Applied | None:
+def drop_grasped(sim: SimState) -> Applied | None:
     """The carried bottle slips out of the hand now (None when nothing is grasped): the grasp weld is switched off,
     its weight comes back, and it stops touching the fingers (it would stay wedged between them) until
     `CarryDropper.update` (or `restore_contacts`, once `clear_of_hand`) gives the contacts back. The fingers stay
@@ -222,13 +246,13 @@ def drop_grasped(sim) -> Applied | None:
     return Applied("drop", oid, sim.time, {"at": [round(float(v), 4) for v in p]})
 
 
-def restore_contacts(sim, object_id: str) -> None:
+def restore_contacts(sim: SimState, object_id: str) -> None:
     """Give a dropped bottle its contacts with the fingers back (the bottle class: contype 1, conaffinity 3)."""
     g = int(sim.model.geom(f"{object_id}_geom").id)
     sim.model.geom_contype[g], sim.model.geom_conaffinity[g] = 1, 3
 
 
-def restore_all_contacts(sim) -> None:
+def restore_all_contacts(sim: SimState) -> None:
     """Every bottle's contacts as built (Jaco2Sim.reset restores the data, not these model fields): call it with a
     scene reset, in case a dropped bottle was still slipping."""
     for b in sim.scenario.objects:
@@ -256,7 +280,7 @@ class CarryDropper:
         self._slipping: str | None = None  # a dropped bottle without contacts with the hand yet
         self.applied: list[Applied] = []
 
-    def update(self, sim) -> Applied | None:
+    def update(self, sim: SimState) -> Applied | None:
         """Count grasps, drop when due, give contacts back; returns the drop made now, if any."""
         if self._slipping is not None and clear_of_hand(sim, self._slipping):
             restore_contacts(sim, self._slipping)
@@ -378,14 +402,14 @@ class DisturbancePlan:
         return plan
 
 
-def on_top_shelf(sim, tol: float = 0.02) -> list[str]:
+def on_top_shelf(sim: SimState, tol: float = 0.02) -> list[str]:
     """Ids of the bottles standing on the top shelf (base within tol of top_z, upright), not in the hand."""
     top = sim.scenario.shelf.top_z
     return [p.id for p in sim.object_poses()
             if p.id != sim.grasped and abs(p.position[2] - top) < tol and tilt(sim, p.id) < math.radians(20)]
 
 
-def apply(sim, d: Disturbance) -> dict[str, Any]:
+def apply(sim: SimState, d: Disturbance) -> dict[str, Any]:
     """Apply a planned disturbance now; the report record: the plan's entry plus what was done (`object`,
     `sim_time` and the numbers) or `skipped` with the reason (nothing in the hand to drop, no bottle, no room)."""
     record = d.to_dict()
@@ -409,7 +433,7 @@ def apply(sim, d: Disturbance) -> dict[str, Any]:
         return {**record, "skipped": str(e)}
 
 
-def _move_somewhere(sim, object_id: str, where: tuple[float, float]) -> Applied:
+def _move_somewhere(sim: SimState, object_id: str, where: tuple[float, float]) -> Applied:
     """move_to the first free spot of a 1 cm grid on the top shelf, nearest to the fractions `where`."""
     sh, r = sim.scenario.shelf, sim.scenario.object(object_id).radius
     x0, x1 = sh.x_front + r, sh.x_back - r - MARGIN
@@ -437,12 +461,12 @@ class DisturbanceSchedule:
         self._grasped_at = 0.0
         self._slipping: str | None = None
 
-    def at_home(self, sim) -> bool:
+    def at_home(self, sim: SimState) -> bool:
         """The arm within home_tol of its home angles (continuous joints compared modulo 2 pi)."""
         d = (np.asarray(sim.q) - np.asarray(sim.q_home) + math.pi) % (2 * math.pi) - math.pi
         return float(np.max(np.abs(d))) < self.home_tol
 
-    def update(self, sim) -> list[dict[str, Any]]:
+    def update(self, sim: SimState) -> list[dict[str, Any]]:
         """Track grasps and releases, apply what is due; returns the records made now."""
         if self._slipping is not None and clear_of_hand(sim, self._slipping):
             restore_contacts(sim, self._slipping)
@@ -474,7 +498,8 @@ class DisturbanceSchedule:
 GRASPED = "grasped"  # the command's object for "the bottle in the hand" (a drop)
 
 
-def command(sim, object_id: str, relative: bool, translation, rotation_xyzw=(0.0, 0.0, 0.0, 1.0)) -> dict[str, Any]:
+def command(sim: SimState, object_id: str, relative: bool, translation: Iterable[float],
+            rotation_xyzw: Iterable[float] = (0.0, 0.0, 0.0, 1.0)) -> dict[str, Any]:
     """One disturbance as a transform command (the driver's geometry_msgs/TransformStamped on its disturb topic):
     object GRASPED: drop the bottle in the hand; `relative` (the transform is in the bottle's own frame): a
     rotation other than the identity tips the bottle towards where it turns the bottle's axis, else a nudge by

@@ -5,17 +5,22 @@ ObjectArray, and a rendered camera frame (camera.Frame) as the topics of a RealS
 """
 from __future__ import annotations
 
+from typing import Iterable, Sequence
+
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from kinova_msgs.msg import FingerPosition, JointAngles
+from numpy.typing import ArrayLike
 from qtree_relocation_msgs.msg import ObjectArray
 from sensor_msgs.msg import CameraInfo, Image
 
 from relocation_common.geometry import quat_xyzw
 from relocation_common.ros_conversions import BASE_FRAME, bottle_to_msg
+from relocation_common.scenario import Scenario
 
 from .camera import Frame
+from .sim import ObjectPose
 
 OPTICAL_FRAME = "camera_color_optical_frame"
 
@@ -26,18 +31,18 @@ def time_msg(t: float) -> Time:
     return Time(sec=sec, nanosec=int((t - sec) * 1e9))
 
 
-def finger_msg(turns) -> FingerPosition:
+def finger_msg(turns: Sequence[float] | np.ndarray) -> FingerPosition:
     """The three fingers in Kinova's turns (0 open .. 6800 closed)."""
     return FingerPosition(finger1=float(turns[0]), finger2=float(turns[1]), finger3=float(turns[2]))
 
 
-def joint_angles_msg(q) -> JointAngles:
+def joint_angles_msg(q: ArrayLike) -> JointAngles:
     """Joint angles (rad, Kinova's Q) as kinova-ros's out/joint_angles: degrees."""
     d = np.degrees(np.asarray(q, float))
     return JointAngles(**{f"joint{i + 1}": float(d[i]) for i in range(len(d))})
 
 
-def objects_msg(scenario, poses, stamp) -> ObjectArray:
+def objects_msg(scenario: Scenario, poses: Iterable[ObjectPose], stamp: Time) -> ObjectArray:
     """The bottles of `scenario` at their ground-truth poses (sim.ObjectPose) in the base frame."""
     msg = ObjectArray()
     msg.header.stamp, msg.header.frame_id = stamp, BASE_FRAME
@@ -50,7 +55,7 @@ def objects_msg(scenario, poses, stamp) -> ObjectArray:
     return msg
 
 
-def camera_msgs(f: Frame, stamp) -> tuple[Image, Image, CameraInfo, PoseStamped]:
+def camera_msgs(f: Frame, stamp: Time) -> tuple[Image, Image, CameraInfo, PoseStamped]:
     """(RGB, depth in m as 32FC1, camera info, camera pose in the base frame) of one rendered frame."""
     rgb = Image(height=f.height, width=f.width, encoding="rgb8", step=3 * f.width)
     rgb.data = f.rgb.tobytes()

@@ -5,9 +5,12 @@ Imports message types only (no rclpy): the node shells call these; the cores nev
 from __future__ import annotations
 
 import math
+from typing import Iterable, Mapping
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, TransformStamped
+from numpy.typing import ArrayLike
 from qtree_relocation_msgs.msg import BlockerSet as BlockerSetMsg
 from qtree_relocation_msgs.msg import LaneBlockers, ObjectArray, ObjectState
 
@@ -31,7 +34,8 @@ def bottle_to_msg(b: Bottle, z: float = 0.0) -> ObjectState:
     return m
 
 
-def bottles_to_msg(bottles, z: float, stamp=None, frame_id: str = BASE_FRAME) -> ObjectArray:
+def bottles_to_msg(bottles: Iterable[Bottle], z: float, stamp: Time | None = None,
+                   frame_id: str = BASE_FRAME) -> ObjectArray:
     """ObjectArray of `bottles` standing at height `z` in `frame_id`."""
     msg = ObjectArray()
     msg.header.frame_id = frame_id
@@ -66,7 +70,7 @@ def msg_to_bottles(msg: ObjectArray) -> tuple[Bottle, ...]:
     return tuple(out)
 
 
-def transform_msg(t, parent: str, child: str, stamp=None):
+def transform_msg(t: ArrayLike, parent: str, child: str, stamp: Time | None = None) -> TransformStamped:
     """geometry_msgs/TransformStamped of the 4x4 pose `t` of `child` in `parent` (as tf2 publishes it)."""
     m = TransformStamped()
     if stamp is not None:
@@ -80,21 +84,21 @@ def transform_msg(t, parent: str, child: str, stamp=None):
     return m
 
 
-def blockers_to_msgs(blockers) -> list[BlockerSetMsg]:
+def blockers_to_msgs(blockers: Iterable[BlockerSet]) -> list[BlockerSetMsg]:
     """FeasibilityAnswer.blockers -> PlanFeasibility's `blockers` (ids sorted)."""
     return [BlockerSetMsg(lane=b.lane, object_ids=sorted(b.objects), certain=bool(b.certain)) for b in blockers]
 
 
-def blockers_from_msgs(msgs) -> tuple[BlockerSet, ...]:
+def blockers_from_msgs(msgs: Iterable[BlockerSetMsg]) -> tuple[BlockerSet, ...]:
     """PlanFeasibility's `blockers` -> FeasibilityAnswer.blockers."""
     return tuple(BlockerSet(frozenset(m.object_ids), bool(m.certain), m.lane) for m in msgs)
 
 
-def lanes_to_msgs(lanes) -> list[LaneBlockers]:
+def lanes_to_msgs(lanes: Mapping[str, Iterable[BlockerSet]]) -> list[LaneBlockers]:
     """object -> its lanes' BlockerSets (MotionPlanner.lane_blockers) -> PlanFeasibility's `lanes`."""
     return [LaneBlockers(object_id=o, lanes=blockers_to_msgs(sets)) for o, sets in sorted(lanes.items())]
 
 
-def lanes_from_msgs(msgs) -> dict[str, tuple[BlockerSet, ...]]:
+def lanes_from_msgs(msgs: Iterable[LaneBlockers]) -> dict[str, tuple[BlockerSet, ...]]:
     """PlanFeasibility's `lanes` -> object -> its lanes' BlockerSets."""
     return {m.object_id: blockers_from_msgs(m.lanes) for m in msgs}

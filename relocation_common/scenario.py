@@ -10,7 +10,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Iterator, Mapping
 
 from .config import ConfigError, read_yaml, short
 from .paths import default_scenario, resolve_scenario
@@ -149,14 +149,14 @@ class Scenario:
                 f"unknown object id {object_id!r} in scenario {self.name!r}; known ids: {', '.join(self.ids)}"
             ) from None
 
-    def check_ids(self, ids) -> frozenset[str]:
+    def check_ids(self, ids: Iterable[str]) -> frozenset[str]:
         """Return ids as a frozenset, raising UnknownObjectError naming the first id not in the scenario."""
         ids = frozenset(ids)
         for i in sorted(ids):
             self.object(i)
         return ids
 
-    def with_objects(self, bottles) -> "Scenario":
+    def with_objects(self, bottles: Iterable[Bottle]) -> "Scenario":
         """The same shelf, slots and marker with another set of bottles (e.g. as perceived); validated."""
         bottles = tuple(bottles)
         targets = [b.id for b in bottles if b.is_target]
@@ -216,7 +216,7 @@ def _dictionary(m: Mapping[str, Any]) -> str:
     return d
 
 
-def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default=None) -> tuple[float, ...]:
+def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default: Any = None) -> tuple[float, ...]:
     v = d.get(key, default)
     if v is None:
         raise ScenarioError(f"{where}: missing required key {key!r}")
@@ -355,7 +355,8 @@ def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bot
     return tuple(objects)
 
 
-def _bottle(o: Any, where: str, shelf: Shelf, target_id: str, size: tuple[float, float], palette) -> Bottle:
+def _bottle(o: Any, where: str, shelf: Shelf, target_id: str, size: tuple[float, float],
+            palette: Iterator[tuple[str, tuple[float, float, float]]]) -> Bottle:
     if not isinstance(o, Mapping):
         raise ScenarioError(f"{where}: must be a mapping")
     oid = o.get("id")

@@ -41,7 +41,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from jaco2_sim_driver import sensor_model as sm  # noqa: E402  (after the sys.path insert of the checkout)
 from jaco2_sim_driver.camera import CameraRenderer, Frame, render_frame  # noqa: E402  (after the sys.path insert of the checkout)
-from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402  (after the sys.path insert of the checkout)
+from jaco2_sim_driver.params import CameraSpec
+from jaco2_sim_driver.scene import CAMERA_NAME, build_model  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.pipeline import Perception  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.geometry import matrix_rpy, rotvec_matrix, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
@@ -167,7 +168,7 @@ def render_moving(s: Scenario, q, qdot, exposure: float = 0.02) -> Frame:
     """The frame of the arm arriving at q with joint speeds qdot, through a camera exposing its colour image for
     `exposure` s (the sensor model's motion blur only)."""
     import mujoco
-    model = build_model(s, CameraSpec())
+    model = build_model(s, CameraSpec.configured())
     data = mujoco.MjData(model)
     adr = [model.joint(j).qposadr[0] for j in JOINT_NAMES]
     r = CameraRenderer(model, 640, 480, sensor=sm.SensorModel(exposure_s=exposure))
@@ -213,7 +214,7 @@ def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str], p
 def visible_pixels(s: Scenario, q) -> dict[str, int]:
     """Pixels of each bottle in the 640x480 image (MuJoCo segmentation rendering of the same scene)."""
     import mujoco
-    camera = CameraSpec()
+    camera = CameraSpec.configured()
     model = build_model(s, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, q):
@@ -257,7 +258,8 @@ def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES),
         rendered.append((s, f))
         required = {i for i, n in visible_pixels(s, q).items() if n >= VISIBLE_PIXELS}
         fused = Perception(s).process(f.rgb, f.depth, f.K).T_base_camera if prior else None
-        low = {lv: render_frame(s, q=q, camera=CameraSpec(width=w, height=h)) for lv, (w, h) in RESOLUTIONS.items()}
+        low = {lv: render_frame(s, q=q, camera=replace(CameraSpec.configured(), width=w, height=h))
+               for lv, (w, h) in RESOLUTIONS.items()}
         for ci, cat in enumerate(CATEGORIES):
             if cat not in categories:
                 continue

@@ -46,7 +46,7 @@ def test_ros2_run_layout(install):
         assert os.access(install / "lib" / "qtree_relocation" / exe, os.X_OK), exe
     assert (install / "share" / "ament_index" / "resource_index" / "packages" / "qtree_relocation").is_file()
     assert (install / "share" / "qtree_relocation" / "package.xml").is_file()
-    for cfg in ("task_planner", "motion_planner", "jaco2_sim_driver", "perception"):
+    for cfg in ("task_planner", "motion_planner", "jaco2_sim_driver", "perception", "arm_interface"):
         assert (install / "share" / "qtree_relocation" / "config" / f"{cfg}.yaml").is_file()
     assert (install / "share" / "qtree_relocation" / "config" / "fastdds.xml").is_file()  # the graph's DDS profile
     scen = install / "share" / "qtree_relocation" / "config" / "scenarios"

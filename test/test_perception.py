@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from jaco2_sim_driver.camera import render_frame
-from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model
+from jaco2_sim_driver.params import CameraSpec
+from jaco2_sim_driver.scene import CAMERA_NAME, build_model
 from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError
 from perception_aruco.images import decode_color, decode_depth, encode_color, encode_depth
 from perception_aruco.pipeline import Perception
@@ -21,9 +22,11 @@ SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15"]
 VISIBLE_PIXELS = 300  # a bottle with this many pixels in view (~10 % of an unoccluded one) must be found
 
 
-def visible_pixels(scenario, camera=CameraSpec()) -> dict[str, int]:
-    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene)."""
+def visible_pixels(scenario, camera: CameraSpec | None = None) -> dict[str, int]:
+    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene; `camera` None:
+    the driver's)."""
     import mujoco
+    camera = camera if camera is not None else CameraSpec.configured()
     model = build_model(scenario, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, Q_HOME):
