@@ -33,7 +33,7 @@ from relocation_common.robot_description import (
     joint_origins,
     mjcf_arm_body,
 )
-from relocation_common.scenario import Bottle, Marker, Scenario, Shelf
+from relocation_common.scenario import Marker, Scenario, Shelf, ShelfObject
 
 from .params import CameraSpec
 
@@ -131,7 +131,7 @@ def _marker(world: ET.Element, k: int, m: Marker) -> None:
     _marker_plate(world, f"{_marker_name(k)}_marker", pose, m.size, _marker_name(k))
 
 
-def _bottle(world: ET.Element, b: Bottle, z: float) -> None:
+def _bottle(world: ET.Element, b: ShelfObject, z: float) -> None:
     """A bottle: free body whose frame is the centre of its base circle (as ObjectState.pose), mass = weight (kg)."""
     body = _el(world, "body", name=b.id, pos=(b.x, b.y, z))
     _el(body, "freejoint", name=f"{b.id}_free")

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from relocation_common.scenario import Bottle, Scenario
+from relocation_common.scenario import Scenario, ShelfObject
 
 from .aruco import PerceptionError
 
@@ -94,7 +94,7 @@ def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray, params: Local
     return centre, keep
 
 
-def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario: Scenario,
+def locate_bottle(bottle: ShelfObject, mask: np.ndarray, points: np.ndarray, scenario: Scenario,
                   camera_position: np.ndarray, params: LocalizeParams = LocalizeParams(),
                   offset: tuple[int, int] = (0, 0)) -> Detection:
     """Place one bottle from its class mask; FitError when it is not visible enough. `offset`: (row, column) of
@@ -158,7 +158,7 @@ def locate_bottle(bottle: Bottle, mask: np.ndarray, points: np.ndarray, scenario
                      None if elsewhere is None else (float(elsewhere[0]), float(elsewhere[1])))
 
 
-def _another_bottle(q: np.ndarray, bottle: Bottle, centre: np.ndarray, camera_position: np.ndarray,
+def _another_bottle(q: np.ndarray, bottle: ShelfObject, centre: np.ndarray, camera_position: np.ndarray,
                     params: LocalizeParams) -> np.ndarray | None:
     """The axis of a second blob of the bottle's colour when it lies away from the fitted bottle and its points fit
     a circle of the bottle's radius too (another bottle-like object of this colour), else None."""

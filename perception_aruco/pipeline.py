@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from relocation_common.geometry import invert, mean_pose, pose_error
-from relocation_common.scenario import Bottle, Scenario
+from relocation_common.scenario import Scenario, ShelfObject
 
 from .aruco import (
     MarkerInconsistentError,
@@ -264,7 +264,7 @@ class Perception:
                     del found[i], found[j]
         return found, missing
 
-    def bottles(self, detections) -> list[Bottle]:
+    def bottles(self, detections) -> list[ShelfObject]:
         """Scenario bottles moved to their perceived (x, y): id, label, weight, size from the colour class."""
         return [replace(self.scenario.object(d.id), x=d.x, y=d.y) for d in detections]
 

@@ -16,7 +16,7 @@ from qtree_relocation_msgs.msg import LaneBlockers, ObjectArray, ObjectState
 
 from .feasibility import BlockerSet
 from .geometry import quat_xyzw
-from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle, ScenarioError
+from .scenario import PALETTE, TARGET_COLOR, TARGET_RGB, ScenarioError, ShelfObject
 
 BASE_FRAME = "j2s7s300_link_base"
 # PlanFeasibility: ok=false with a message starting so means the planner's wall-clock safety net ran out before its
@@ -24,7 +24,7 @@ BASE_FRAME = "j2s7s300_link_base"
 NO_ANSWER = "no answer: "
 
 
-def bottle_to_msg(b: Bottle, z: float = 0.0) -> ObjectState:
+def bottle_to_msg(b: ShelfObject, z: float = 0.0) -> ObjectState:
     """A bottle standing upright; `z` is the height of its base (the shelf surface)."""
     m = ObjectState(id=b.id, label=b.label, weight=float(b.weight), is_target=b.is_target,
                     radius=float(b.radius), height=float(b.height))
@@ -34,7 +34,7 @@ def bottle_to_msg(b: Bottle, z: float = 0.0) -> ObjectState:
     return m
 
 
-def bottles_to_msg(bottles: Iterable[Bottle], z: float, stamp: Time | None = None,
+def bottles_to_msg(bottles: Iterable[ShelfObject], z: float, stamp: Time | None = None,
                    frame_id: str = BASE_FRAME) -> ObjectArray:
     """ObjectArray of `bottles` standing at height `z` in `frame_id`."""
     msg = ObjectArray()
@@ -45,7 +45,7 @@ def bottles_to_msg(bottles: Iterable[Bottle], z: float, stamp: Time | None = Non
     return msg
 
 
-def msg_to_bottles(msg: ObjectArray) -> tuple[Bottle, ...]:
+def msg_to_bottles(msg: ObjectArray) -> tuple[ShelfObject, ...]:
     """Bottles from a message; ScenarioError on NaN/Inf, empty or duplicate ids, or a bad weight."""
     out, seen = [], set()
     for k, o in enumerate(msg.objects):
@@ -63,7 +63,7 @@ def msg_to_bottles(msg: ObjectArray) -> tuple[Bottle, ...]:
         if not o.is_target and not 0.0 < o.weight <= 1.0:
             raise ScenarioError(f"object {o.id!r}: weight must be in (0, 1], got {o.weight}")
         rgb = TARGET_RGB if o.label == TARGET_COLOR else PALETTE.get(o.label, (0.5, 0.5, 0.5))
-        out.append(Bottle(o.id, o.label, rgb, o.weight if not o.is_target else 1.0,
+        out.append(ShelfObject(o.id, o.label, rgb, o.weight if not o.is_target else 1.0,
                           p.x, p.y, o.radius, o.height, o.is_target))
     if sum(b.is_target for b in out) != 1:
         raise ScenarioError("the scene must contain exactly one target")

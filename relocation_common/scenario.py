@@ -51,7 +51,7 @@ class UnknownObjectError(KeyError):
 
 
 @dataclass(frozen=True)
-class Bottle:
+class ShelfObject:
     """A bottle (cylinder) standing on the top shelf: (x, y) of its axis, base on the shelf surface."""
 
     id: str
@@ -112,7 +112,7 @@ class Scenario:
     name: str
     description: str
     shelf: Shelf
-    objects: tuple[Bottle, ...]
+    objects: tuple[ShelfObject, ...]
     target_id: str
     slots: tuple[tuple[float, float], ...]
     marker: Marker
@@ -120,7 +120,7 @@ class Scenario:
     source: str = "<dict>"
     auto_slots: bool = False  # slots from `slots: auto` (AUTO_SLOT_*); the motion planner checks them at start
     more_markers: tuple[Marker, ...] = ()  # the further markers of `markers:` (optional)
-    _by_id: dict[str, Bottle] = field(default_factory=dict, repr=False, compare=False)
+    _by_id: dict[str, ShelfObject] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self._by_id.update({o.id: o for o in self.objects})
@@ -140,7 +140,7 @@ class Scenario:
         """phi_i of every obstacle (Eq. 8, 13). The target's weight does not enter the reward."""
         return {o.id: o.weight for o in self.objects if not o.is_target}
 
-    def object(self, object_id: str) -> Bottle:
+    def object(self, object_id: str) -> ShelfObject:
         """The bottle `object_id`; UnknownObjectError names the known ids."""
         try:
             return self._by_id[object_id]
@@ -156,7 +156,7 @@ class Scenario:
             self.object(i)
         return ids
 
-    def with_objects(self, bottles: Iterable[Bottle]) -> "Scenario":
+    def with_objects(self, bottles: Iterable[ShelfObject]) -> "Scenario":
         """The same shelf, slots and marker with another set of bottles (e.g. as perceived); validated."""
         bottles = tuple(bottles)
         targets = [b.id for b in bottles if b.is_target]
@@ -326,7 +326,7 @@ def _name(data: Mapping[str, Any], source: str) -> str:
     return name
 
 
-def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bottle, ...]:
+def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[ShelfObject, ...]:
     """The bottles: ids, weights, sizes (or `defaults`), colours; on the top shelf, under the ceiling, apart."""
     defaults = data.get("defaults", {}) or {}
     if not isinstance(defaults, Mapping):
@@ -339,7 +339,7 @@ def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bot
     if target_id not in raw_ids:
         raise ScenarioError(f"target: {target_id!r} is not among the objects ({', '.join(map(str, raw_ids))})")
     palette = iter(PALETTE.items())
-    objects: list[Bottle] = []
+    objects: list[ShelfObject] = []
     for k, o in enumerate(raw):
         b = _bottle(o, f"objects[{k}]", shelf, target_id, size, palette)
         if any(b.id == other.id for other in objects):
@@ -356,7 +356,7 @@ def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bot
 
 
 def _bottle(o: Any, where: str, shelf: Shelf, target_id: str, size: tuple[float, float],
-            palette: Iterator[tuple[str, tuple[float, float, float]]]) -> Bottle:
+            palette: Iterator[tuple[str, tuple[float, float, float]]]) -> ShelfObject:
     if not isinstance(o, Mapping):
         raise ScenarioError(f"{where}: must be a mapping")
     oid = o.get("id")
@@ -388,7 +388,7 @@ def _bottle(o: Any, where: str, shelf: Shelf, target_id: str, size: tuple[float,
         raise ScenarioError(f"{where} ({oid}): xy {x, y} is not on the top shelf")
     if height >= shelf.ceiling_z - shelf.top_z:
         raise ScenarioError(f"{where} ({oid}): height {height} does not fit under the ceiling board")
-    return Bottle(oid, label, rgb, weight, x, y, radius, height, is_target)
+    return ShelfObject(oid, label, rgb, weight, x, y, radius, height, is_target)
 
 
 def _slots(raw: Any, shelf: Shelf, n: int) -> tuple[tuple[tuple[float, float], ...], bool]:

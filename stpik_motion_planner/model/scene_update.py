@@ -15,7 +15,7 @@ from typing import Iterable, Mapping, NamedTuple
 
 from relocation_common.geometry import wxyz_matrix
 from relocation_common.orientation import UPRIGHT_TILT, support_height, tilt_of_quaternion
-from relocation_common.scenario import Bottle, Shelf
+from relocation_common.scenario import Shelf, ShelfObject
 from stpik_motion_planner.model.collision import Lying
 
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
@@ -27,7 +27,7 @@ class Perceived(NamedTuple):
     """A bottle as perceived: its base centre's height `z` and its orientation (w, x, y, z) besides the bottle's
     (x, y) and size."""
 
-    bottle: Bottle
+    bottle: ShelfObject
     z: float
     quat: tuple[float, float, float, float] = UPRIGHT
 
@@ -36,31 +36,32 @@ class Merged(NamedTuple):
     """The planner's scene after a perceived one: every bottle (the scenario's objects), the lying ones, the ones
     gone from the shelf, the ids that changed, the ids seen resting on the top shelf."""
 
-    bottles: dict[str, Bottle]
+    bottles: dict[str, ShelfObject]
     lying: dict[str, Lying]
     gone: frozenset[str]
     changed: list[str]
     seen: set[str]
 
 
-def _inside(shelf: Shelf, bottle: Bottle) -> bool:
+def _inside(shelf: Shelf, bottle: ShelfObject) -> bool:
     return shelf.x_front < bottle.x < shelf.x_back and shelf.y_min < bottle.y < shelf.y_max
 
 
-def on_top_shelf(shelf: Shelf, bottle: Bottle, base_z: float, tilt: float = 0.0) -> bool:
+def on_top_shelf(shelf: Shelf, bottle: ShelfObject, base_z: float, tilt: float = 0.0) -> bool:
     """True if `bottle` (its base centre at `base_z`, its axis `tilt` rad from the vertical) rests on the top shelf,
     within its edges (standing or lying)."""
     return abs(support_height(base_z, bottle.radius, tilt) - shelf.top_z) < ON_SHELF and _inside(shelf, bottle)
 
 
-def left_the_shelf(shelf: Shelf, bottle: Bottle, base_z: float, tilt: float = 0.0) -> bool:
+def left_the_shelf(shelf: Shelf, bottle: ShelfObject, base_z: float, tilt: float = 0.0) -> bool:
     """True if `bottle` rests below the bottom board, or outside the shelf below the top board: dropped."""
     s = support_height(base_z, bottle.radius, tilt)
     return s < shelf.bottom_z - ON_SHELF or (not _inside(shelf, bottle) and s < shelf.top_z - ON_SHELF)
 
 
-def merge_perceived(shelf: Shelf, current: Mapping[str, Bottle], perceived: Iterable[tuple], held: str | None = None,
-                    lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> Merged:
+def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: Iterable[tuple],
+                    held: str | None = None, lying: Mapping[str, Lying] | None = None,
+                    gone: Iterable[str] = ()) -> Merged:
     """The planner's scene (`current` bottles, the `lying` and `gone` ones) after `perceived` = Perceived or
     (bottle, base z[, quaternion]) tuples; `held`: the bottle being carried, ignored (module docstring)."""
     bottles, lying, gone = dict(current), dict(lying or {}), set(gone)
@@ -89,7 +90,7 @@ def merge_perceived(shelf: Shelf, current: Mapping[str, Bottle], perceived: Iter
     return Merged(bottles, lying, frozenset(gone), sorted(changed), seen)
 
 
-def _differs(was: Bottle | None, now: Bottle, was_lying: Lying | None, now_lying: Lying | None) -> bool:
+def _differs(was: ShelfObject | None, now: ShelfObject, was_lying: Lying | None, now_lying: Lying | None) -> bool:
     """A perceived bottle differs from the planner's: new, moved more than MOVED, or standing <-> lying, or lying
     otherwise (its top moved more than MOVED)."""
     if was is None or (was_lying is None) != (now_lying is None):
