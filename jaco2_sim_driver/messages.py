@@ -5,6 +5,7 @@ ObjectArray, and a rendered camera frame (camera.Frame) as the topics of a RealS
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -15,9 +16,10 @@ from numpy.typing import ArrayLike
 from qtree_relocation_msgs.msg import ObjectArray
 from sensor_msgs.msg import CameraInfo, Image
 
-from relocation_common.geometry import quat_xyzw
-from relocation_common.ros_conversions import BASE_FRAME, bottle_to_msg
-from relocation_common.scenario import Scenario
+from relocation_common.geometry import quat_xyzw, wxyz_matrix
+from relocation_common.ros_conversions import BASE_FRAME, objects_to_msg
+from relocation_common.scenario import Scenario, ShelfObject
+from relocation_common.shelf_object import at_pose, estimated_weight, unlisted_density
 
 from .camera import Frame
 from .sim import ObjectPose
@@ -42,17 +44,25 @@ def joint_angles_msg(q: ArrayLike) -> JointAngles:
     return JointAngles(**{f"joint{i + 1}": float(d[i]) for i in range(len(d))})
 
 
-def objects_msg(scenario: Scenario, poses: Iterable[ObjectPose], stamp: Time) -> ObjectArray:
-    """The bottles of `scenario` at their ground-truth poses (sim.ObjectPose) in the base frame."""
-    msg = ObjectArray()
-    msg.header.stamp, msg.header.frame_id = stamp, BASE_FRAME
-    for pose in poses:
-        o = bottle_to_msg(scenario.object(pose.id))
-        o.pose.position.x, o.pose.position.y, o.pose.position.z = map(float, pose.position)
-        (o.pose.orientation.w, o.pose.orientation.x, o.pose.orientation.y,
-         o.pose.orientation.z) = map(float, pose.quat_wxyz)
-        msg.objects.append(o)
-    return msg
+def ground_truth(scenario: Scenario, pose: ObjectPose, density: float) -> ShelfObject:
+    """The object `pose.id` of the simulator's world (listed or unlisted) where it is (sim.ObjectPose: the centre of
+    its base as built and its orientation): its primitive placed there (shelf_object.at_pose). An unlisted one
+    carries the weight perception would estimate (volume x `density`, clipped to (0, 1]) with the note saying so,
+    whatever the file gave it (that is its mass in the simulation)."""
+    o = scenario.world_object(pose.id)
+    if not o.listed:
+        w, note = estimated_weight(o, density)
+        o = replace(o, weight=w, weight_note=note)
+    rot = wxyz_matrix(pose.quat_wxyz)
+    return at_pose(o, np.asarray(pose.position, float) + rot[:, 2] * o.size[2] / 2, rot)
+
+
+def objects_msg(scenario: Scenario, poses: Iterable[ObjectPose], stamp: Time,
+                density: float | None = None) -> ObjectArray:
+    """Every object of the simulator's world at its ground-truth pose (`ground_truth`) in the base frame; `density`
+    None: config/perception.yaml's unlisted_density."""
+    rho = unlisted_density() if density is None else density
+    return objects_to_msg([ground_truth(scenario, p, rho) for p in poses], stamp, BASE_FRAME)
 
 
 def camera_msgs(f: Frame, stamp: Time) -> tuple[Image, Image, CameraInfo, PoseStamped]:

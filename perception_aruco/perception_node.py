@@ -30,7 +30,7 @@ from tf2_msgs.msg import TFMessage
 from relocation_common.geometry import invert
 from relocation_common.node import declare_parameters, node_main
 from relocation_common.paths import config_file
-from relocation_common.ros_conversions import bottles_to_msg, transform_msg
+from relocation_common.ros_conversions import objects_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
 from .aruco import PerceptionError, marker_in_base
@@ -236,10 +236,7 @@ class PerceptionNode(Node):
         if self.scenario.target_id not in {d.id for d in dets}:
             log.error(f"target {self.scenario.target_id!r} not seen: no scene published", throttle_duration_sec=2.0)
             return
-        msg = bottles_to_msg(self.perception.bottles(dets), self.scenario.shelf.top_z, color.header.stamp,
-                             self.p("frame_id"))
-        for m, d in zip(msg.objects, dets):
-            m.pose.position.z = d.z
+        msg = objects_to_msg(self.perception.bottles(dets), color.header.stamp, self.p("frame_id"))
         self._scene, self._scene_time = msg, time.monotonic()
         self._previous = {d.id: d for d in dets}
         self.pub.publish(msg)

@@ -265,8 +265,9 @@ class Perception:
         return found, missing
 
     def bottles(self, detections) -> list[ShelfObject]:
-        """Scenario bottles moved to their perceived (x, y): id, label, weight, size from the colour class."""
-        return [replace(self.scenario.object(d.id), x=d.x, y=d.y) for d in detections]
+        """Scenario bottles moved to their perceived (x, y) on the board at their perceived base height: id, label,
+        weight, size from the colour class."""
+        return [replace(self.scenario.object(d.id), x=d.x, y=d.y, support_z=d.z) for d in detections]
 
     def annotate(self, rgb: np.ndarray, result: PerceptionResult | None, K=None, note: str = "") -> np.ndarray:
         """Debug image (RGB): marker outline and axes, each located bottle's id at its pixel, missing ids."""

@@ -28,7 +28,7 @@ from relocation_common import arm_interface
 from relocation_common import robot_description as rd
 from relocation_common.arm_interface import ArmInterface
 from relocation_common.node import SideNode, declare_parameters, node_main
-from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
+from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_objects
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 from stpik_motion_planner.execution import goal_check
 from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
@@ -96,10 +96,7 @@ class MotionPlannerNode(Node):
         """Bottles on the top shelf (standing or lying) replace the planner's, bottles off the shelf leave it; the
         rest of the scene stays (service.update_scene)."""
         try:
-            changed = self.core.update_scene(
-                [(b, o.pose.position.z, (o.pose.orientation.w, o.pose.orientation.x, o.pose.orientation.y,
-                                         o.pose.orientation.z)) for b, o in zip(msg_to_bottles(msg), msg.objects)],
-                f"scene on {self.scene_topic}")
+            changed = self.core.update_scene(msg_to_objects(msg), f"scene on {self.scene_topic}")
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return

@@ -52,6 +52,13 @@ def scene_of(objects: Iterable[SeenObject]) -> dict[str, SeenObject]:
     return {o.id: o for o in objects}
 
 
+def seen_object(o: ShelfObject) -> SeenObject:
+    """An object as perceived (ros_conversions.msg_to_objects) as the closed loop's SeenObject: its base centre
+    (a lying cylinder's lower end face), the tilt of its axis."""
+    x, y, z = (float(v) for v in o.base())
+    return SeenObject(o.id, x, y, z, o.weight, o.is_target, o.axis_tilt, o.radius, o.height, o.label)
+
+
 def scene_from_scenario(scenario: Scenario) -> dict[str, SeenObject]:
     """The scenario's bottles where it puts them: upright on the top shelf (the world the first plan assumes)."""
     z = scenario.shelf.top_z
@@ -263,7 +270,7 @@ def _bottle(o: SeenObject, scenario: Scenario) -> ShelfObject:
     label = scenario.object(o.id).label if known else (o.label or "gray")
     rgb = scenario.object(o.id).rgb if known else TARGET_RGB if o.is_target else PALETTE.get(label, (0.5, 0.5, 0.5))
     weight = 1.0 if o.is_target else min(1.0, max(1e-3, o.weight))
-    return ShelfObject(o.id, label, rgb, weight, o.x, o.y, o.radius, o.height, o.is_target)
+    return ShelfObject(o.id, label, rgb, weight, o.x, o.y, o.radius, o.height, o.is_target, support_z=_support(o))
 
 
 def check_capacity(sequence: Iterable[str], free: int) -> str | None:
