@@ -21,7 +21,7 @@ import dataclasses
 import json
 import math
 import random
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterable, Protocol
 
 import mujoco
@@ -29,7 +29,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from relocation_common import geometry
-from relocation_common.scenario import Scenario
+from relocation_common.scenario import Scenario, ShelfObject
+from relocation_common.shelf_object import at_pose
 
 MARGIN = 0.003  # m left between a disturbed bottle and its neighbours or the shelf's sides
 SLIP_CLEAR = 0.01  # m: a dropped bottle touches the hand again once this far from every finger and arm geom
@@ -80,7 +81,7 @@ class Applied:
 
 # ------------------------------------------------------------------------------------------------ geometry helpers
 def _body(sim: SimState, object_id: str) -> int:
-    sim.scenario.object(object_id)  # UnknownObjectError naming the known ids
+    sim.scenario.world_object(object_id)  # UnknownObjectError naming the known ids
     return int(sim.model.body(object_id).id)
 
 
@@ -90,7 +91,8 @@ def _free_adr(sim: SimState, body: int) -> tuple[int, int]:
 
 
 def _set_pose(sim: SimState, object_id: str, position: ArrayLike, quat_wxyz: ArrayLike) -> None:
-    """Teleport a bottle (base centre, orientation), at rest but awake (a sleeping body would hang where put)."""
+    """Teleport an object (its body frame: base centre as built, orientation), at rest but awake (a sleeping body
+    would hang where put)."""
     adr, vadr = _free_adr(sim, _body(sim, object_id))
     sim.data.qpos[adr:adr + 3] = position
     sim.data.qpos[adr + 3:adr + 7] = quat_wxyz
@@ -105,53 +107,43 @@ def _pose(sim: SimState, object_id: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def tilt(sim: SimState, object_id: str) -> float:
-    """Angle (rad) between the bottle's axis and the vertical: 0 standing, pi/2 lying."""
+    """Angle (rad) between the object's body z axis (a cylinder's axis) and the vertical: 0 standing, pi/2 lying."""
     return geometry.tilt(sim.data.xmat[_body(sim, object_id)].reshape(3, 3))
 
 
-def _footprint(sim: SimState, object_id: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """The bottle's horizontal footprint as a segment (xy ends) with a radius: its axis projected on the board."""
-    b = sim.scenario.object(object_id)
-    p = sim.data.xpos[_body(sim, object_id)]
-    axis = sim.data.xmat[_body(sim, object_id)].reshape(3, 3)[:, 2]
-    return p[:2].copy(), (p + b.height * axis)[:2].copy(), b.radius
+def _rotation(sim: SimState, object_id: str) -> np.ndarray:
+    return np.asarray(sim.data.xmat[_body(sim, object_id)], float).reshape(3, 3).copy()
 
 
-def _segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
-    """Distance between two 2-D segments (sampled ends against the other segment: exact for non-crossing ones)."""
-    def point_seg(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> float:
-        d = s1 - s0
-        n = float(d @ d)
-        t = 0.0 if n == 0 else min(1.0, max(0.0, float((p - s0) @ d) / n))
-        return float(np.linalg.norm(p - (s0 + t * d)))
-    if _crosses(a0, a1, b0, b1):
-        return 0.0
-    return min(point_seg(a0, b0, b1), point_seg(a1, b0, b1), point_seg(b0, a0, a1), point_seg(b1, a0, a1))
+def current(sim: SimState, object_id: str) -> ShelfObject:
+    """The object as it is now (its primitive at the simulated pose: shelf_object.at_pose)."""
+    o = sim.scenario.world_object(object_id)
+    rot = _rotation(sim, object_id)
+    return at_pose(o, sim.data.xpos[_body(sim, object_id)] + rot[:, 2] * o.size[2] / 2, rot)
 
 
-def _crosses(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> bool:
-    def cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> float:
-        return float((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0]))
-    d1, d2 = cross(b0, b1, a0), cross(b0, b1, a1)
-    d3, d4 = cross(a0, a1, b0), cross(a0, a1, b1)
-    return d1 * d2 < 0 and d3 * d4 < 0
+def _half_extent(o: ShelfObject, rot: np.ndarray, u: np.ndarray) -> float:
+    """Half the extent along the unit vector u of the object's primitive (as built) turned by rot."""
+    if o.shape == "box":
+        return float(sum(o.size[i] / 2 * abs(float(rot[:, i] @ u)) for i in range(3)))
+    c = abs(float(rot[:, 2] @ u))
+    return o.height / 2 * c + o.radius * math.sqrt(max(0.0, 1.0 - c * c))
 
 
-def _room(sim: SimState, object_id: str, s0: np.ndarray, s1: np.ndarray, radius: float, z: float) -> str | None:
-    """Why a footprint (segment s0-s1, radius) at height z does not fit, or None: it must stay within the shelf's
-    sides and depth and keep MARGIN from every other bottle near that height."""
+def _room(sim: SimState, candidate: ShelfObject) -> str | None:
+    """Why `candidate` (an object at a pose it may be put at) does not fit, or None: its footprint must stay within
+    the shelf's sides and depth and keep MARGIN from every other object resting near its height."""
     sh = sim.scenario.shelf
-    for p in (s0, s1):
-        if not (sh.x_front + radius <= p[0] <= sh.x_back - radius - MARGIN
-                and sh.y_min + radius + MARGIN <= p[1] <= sh.y_max - radius - MARGIN):
-            return "it would leave the shelf"
-    for other in sim.scenario.objects:
-        if other.id == object_id or other.id == sim.grasped:
+    if not candidate.footprint().inside(sh.x_front, sh.x_back - MARGIN, sh.y_min + MARGIN, sh.y_max - MARGIN):
+        return "it would leave the shelf"
+    grown = candidate.footprint(MARGIN)
+    for other in sim.scenario.world:
+        if other.id == candidate.id or other.id == sim.grasped:
             continue
-        o0, o1, r = _footprint(sim, other.id)
-        if abs(float(sim.data.xpos[_body(sim, other.id)][2]) - z) > 0.05:
+        now = current(sim, other.id)
+        if abs(float(now.support_z or 0.0) - float(candidate.support_z or 0.0)) > 0.05:
             continue  # on another board, or in the air
-        if _segment_distance(np.asarray(s0), np.asarray(s1), o0, o1) < radius + r + MARGIN:
+        if grown.overlaps(now.footprint()):
             return f"it would overlap {other.id}"
     return None
 
@@ -163,11 +155,11 @@ def _not_grasped(sim: SimState, object_id: str, kind: str) -> None:
 
 # ------------------------------------------------------------------------------------------------ disturbances
 def nudge(sim: SimState, object_id: str, dx: float, dy: float) -> Applied:
-    """Push a standing bottle horizontally by (dx, dy) m: it slides along the push, in PUSH_STEP increments, as far
-    as it goes without touching another bottle or leaving the shelf. `detail`: asked and applied displacement."""
+    """Push an object horizontally by (dx, dy) m: it slides along the push, in PUSH_STEP increments, as far as it
+    goes without touching another object or leaving the shelf. `detail`: asked and applied displacement."""
     _not_grasped(sim, object_id, "nudge")
     p, q = _pose(sim, object_id)
-    r = sim.scenario.object(object_id).radius
+    now = current(sim, object_id)
     push = np.array([dx, dy], float)
     length = float(np.linalg.norm(push))
     if not math.isfinite(length):
@@ -175,46 +167,58 @@ def nudge(sim: SimState, object_id: str, dx: float, dy: float) -> Applied:
     steps = max(1, math.ceil(length / PUSH_STEP))
     done = np.zeros(2)
     for k in range(1, steps + 1):
-        xy = p[:2] + push * k / steps
-        if _room(sim, object_id, xy, xy, r, float(p[2])) is not None:
+        d = push * k / steps
+        if _room(sim, replace(now, x=now.x + float(d[0]), y=now.y + float(d[1]))) is not None:
             break
-        done = xy - p[:2]
+        done = d
     _set_pose(sim, object_id, (p[0] + done[0], p[1] + done[1], p[2]), q)
     return Applied("nudge", object_id, sim.time, {"asked": [float(dx), float(dy)],
                                                   "applied": [round(float(done[0]), 4), round(float(done[1]), 4)]})
 
 
+def _tip_directions(now: ShelfObject, direction: float) -> list[float]:
+    """The directions a tip tries, the asked one first: a cylinder, TIP_DIRECTIONS evenly spaced; a box, the normals
+    of its four side faces (it falls over an edge onto a face), nearest the asked one first."""
+    if now.shape != "box":
+        return [direction + 2 * math.pi * k / TIP_DIRECTIONS for k in range(TIP_DIRECTIONS)]
+    faces = [now.yaw + k * math.pi / 2 for k in range(4)]
+    return sorted(faces, key=lambda a: abs(math.remainder(a - direction, 2 * math.pi)))
+
+
 def tip(sim: SimState, object_id: str, direction: float = 0.0) -> Applied:
-    """Tip a bottle over: it lies on its side on its board, base where it stood, top towards `direction` (rad, in
-    the base frame's xy plane) or the next of TIP_DIRECTIONS directions with room. DisturbanceError if none."""
+    """Tip an object over: it turns a quarter turn over its edge towards `direction` (rad, in the base frame's xy
+    plane) and lies on its side on its board, beside where it stood; or towards the next direction with room
+    (`_tip_directions`). DisturbanceError if none."""
     _not_grasped(sim, object_id, "tip")
-    b = sim.scenario.object(object_id)
-    p, _ = _pose(sim, object_id)
+    o, now, rot = sim.scenario.world_object(object_id), current(sim, object_id), _rotation(sim, object_id)
+    centre = np.array([now.x, now.y]) if now.lying or now.shape == "box" else \
+        np.asarray(sim.data.xpos[_body(sim, object_id)][:2], float)
     why = "no direction tried"
-    for k in range(TIP_DIRECTIONS):
-        a = direction + 2 * math.pi * k / TIP_DIRECTIONS
-        d = np.array([math.cos(a), math.sin(a)])
-        base = p[:2] + d * (b.radius + MARGIN)  # rolled over its base edge
-        why = _room(sim, object_id, base, base + b.height * d, b.radius, float(p[2])) or ""
+    for a in _tip_directions(now, direction):
+        d = np.array([math.cos(a), math.sin(a), 0.0])
+        turned = geometry.rotvec_matrix(np.cross([0.0, 0.0, 1.0], d) * math.pi / 2) @ rot
+        xy = centre + d[:2] * (_half_extent(o, rot, d) + MARGIN + _half_extent(o, turned, d))
+        c = np.array([xy[0], xy[1], float(now.support_z or 0.0) + _half_extent(o, turned, np.array([0, 0, 1.0]))])
+        why = _room(sim, at_pose(o, c, turned)) or ""
         if not why:
-            s, c = math.sin(math.pi / 4), math.cos(math.pi / 4)
-            quat = (c, -s * d[1], s * d[0], 0.0)  # z axis turned onto (d, 0) about (-dy, dx, 0)
-            _set_pose(sim, object_id, (base[0], base[1], p[2] + b.radius), quat)
+            _set_pose(sim, object_id, c - turned[:, 2] * o.size[2] / 2, geometry.quat_wxyz(turned))
             return Applied("tip", object_id, sim.time, {"direction": round(a % (2 * math.pi), 4)})
     raise DisturbanceError(f"cannot tip {object_id}: no room to lie down ({why} in every direction)")
 
 
 def move_to(sim: SimState, object_id: str, x: float, y: float, z: float | None = None) -> Applied:
-    """Stand a bottle upright at (x, y) on the board at height z (default: the top shelf, where bottles stand).
-    DisturbanceError when it would overlap another bottle or leave the shelf."""
+    """Stand an object at (x, y) on the board at height z (default: the top shelf, where objects stand): a
+    cylinder upright, a box as built. DisturbanceError when it would overlap another object or leave the shelf."""
     _not_grasped(sim, object_id, "move")
     z = sim.scenario.shelf.top_z if z is None else float(z)
-    xy = np.array([x, y], float)
-    why = _room(sim, object_id, xy, xy, sim.scenario.object(object_id).radius, z)
+    o = sim.scenario.world_object(object_id)
+    upright = replace(o, x=float(x), y=float(y), support_z=z, lying=False, tilt=None,
+                      yaw=o.yaw if o.shape == "box" else 0.0)
+    why = _room(sim, upright)
     if why:
         raise DisturbanceError(f"cannot move {object_id} to ({x:.3f}, {y:.3f}, {z:.3f}): {why}")
     before, _ = _pose(sim, object_id)
-    _set_pose(sim, object_id, (x, y, z), (1.0, 0.0, 0.0, 0.0))
+    _set_pose(sim, object_id, (x, y, z), geometry.quat_wxyz(upright.rotation()))
     return Applied("move", object_id, sim.time, {"from": [round(float(v), 4) for v in before],
                                                  "to": [round(float(x), 4), round(float(y), 4), round(z, 4)]})
 
@@ -255,7 +259,7 @@ def restore_contacts(sim: SimState, object_id: str) -> None:
 def restore_all_contacts(sim: SimState) -> None:
     """Every bottle's contacts as built (Jaco2Sim.reset restores the data, not these model fields): call it with a
     scene reset, in case a dropped bottle was still slipping."""
-    for b in sim.scenario.objects:
+    for b in sim.scenario.world:
         restore_contacts(sim, b.id)
 
 
@@ -403,10 +407,10 @@ class DisturbancePlan:
 
 
 def on_top_shelf(sim: SimState, tol: float = 0.02) -> list[str]:
-    """Ids of the bottles standing on the top shelf (base within tol of top_z, upright), not in the hand."""
+    """Ids of the objects standing on the top shelf (support within tol of top_z, not lying), not in the hand."""
     top = sim.scenario.shelf.top_z
-    return [p.id for p in sim.object_poses()
-            if p.id != sim.grasped and abs(p.position[2] - top) < tol and tilt(sim, p.id) < math.radians(20)]
+    return [p.id for p in sim.object_poses() if p.id != sim.grasped and
+            abs(float(current(sim, p.id).support_z or 0.0) - top) < tol and tilt(sim, p.id) < math.radians(20)]
 
 
 def apply(sim: SimState, d: Disturbance) -> dict[str, Any]:
@@ -435,13 +439,16 @@ def apply(sim: SimState, d: Disturbance) -> dict[str, Any]:
 
 def _move_somewhere(sim: SimState, object_id: str, where: tuple[float, float]) -> Applied:
     """move_to the first free spot of a 1 cm grid on the top shelf, nearest to the fractions `where`."""
-    sh, r = sim.scenario.shelf, sim.scenario.object(object_id).radius
+    sh, o = sim.scenario.shelf, sim.scenario.world_object(object_id)
+    r = max(o.size[0], o.size[1]) / 2  # the grid's margin from the edges: move_to checks the footprint itself
     x0, x1 = sh.x_front + r, sh.x_back - r - MARGIN
     y0, y1 = sh.y_min + r + MARGIN, sh.y_max - r - MARGIN
     want = np.array([x0 + where[0] * (x1 - x0), y0 + where[1] * (y1 - y0)])
     grid = [np.array([x, y]) for x in np.arange(x0, x1 + 1e-9, 0.01) for y in np.arange(y0, y1 + 1e-9, 0.01)]
+    yaw = o.yaw if o.shape == "box" else 0.0
     for xy in sorted(grid, key=lambda g: float(np.linalg.norm(g - want))):
-        if _room(sim, object_id, xy, xy, r, sh.top_z) is None:
+        spot = replace(o, x=float(xy[0]), y=float(xy[1]), support_z=sh.top_z, lying=False, tilt=None, yaw=yaw)
+        if _room(sim, spot) is None:
             return move_to(sim, object_id, float(xy[0]), float(xy[1]))
     raise DisturbanceError(f"cannot move {object_id}: no free spot on the top shelf")
 

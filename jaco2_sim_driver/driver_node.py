@@ -97,7 +97,8 @@ class Jaco2SimDriver(Node):
                                                 args=(1.0 / cam_rate, self.publish_camera_frame, self._stopping))
             self._cam_thread.start()
         self.get_logger().info(
-            f"{self.interface} surface, scenario {scenario.name} ({len(scenario.objects)} bottles), real_time_factor "
+            f"{self.interface} surface, scenario {scenario.name} ({len(scenario.objects)} objects, "
+            f"{len(scenario.unlisted)} unlisted), real_time_factor "
             f"{p.real_time_factor:g}, joint states {p.joint_state_rate:g} Hz, camera {cam_rate:g} Hz "
             f"{camera.width}x{camera.height}")
 

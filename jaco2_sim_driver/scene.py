@@ -1,5 +1,6 @@
-"""MuJoCo scene of the experiment: the Jaco2 arm (from the one robot description), the shelf unit, the bottles of
-a scenario as free bodies, the ArUco marker as a texture, the camera and lights. No ROS here.
+"""MuJoCo scene of the experiment: the Jaco2 arm (from the one robot description), the shelf unit, every object of
+a scenario's world (listed and unlisted; cylinders standing or lying, boxes) as free bodies, the ArUco marker as a
+texture, the camera and lights. No ROS here.
 
 Frames: the MuJoCo world frame is the robot base frame of the scenario (x towards the shelf, z up, metres).
 Everything is generated from `relocation_common.robot_description` and `relocation_common.scenario`, so
@@ -131,12 +132,19 @@ def _marker(world: ET.Element, k: int, m: Marker) -> None:
     _marker_plate(world, f"{_marker_name(k)}_marker", pose, m.size, _marker_name(k))
 
 
-def _bottle(world: ET.Element, b: ShelfObject, z: float) -> None:
-    """A bottle: free body whose frame is the centre of its base circle (as ObjectState.pose), mass = weight (kg)."""
-    body = _el(world, "body", name=b.id, pos=(b.x, b.y, z))
+def _object(world: ET.Element, b: ShelfObject) -> None:
+    """An object: a free body whose frame is the centre of its base as built (a cylinder's lower end face, a box's
+    bottom face: shelf_object.ShelfObject.base), its z axis the primitive's (a lying cylinder's along its axis);
+    the geom `<id>_geom` (cylinder or box) above it along z; mass = weight (kg), colour = rgb."""
+    body = _el(world, "body", name=b.id, pos=b.base(), quat=quat_wxyz(b.rotation()))
     _el(body, "freejoint", name=f"{b.id}_free")
-    _el(body, "geom", name=f"{b.id}_geom", type="cylinder", pos=(0.0, 0.0, b.height / 2),
-        size=(b.radius, b.height / 2), mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
+    if b.shape == "box":
+        sx, sy, sz = b.size
+        _el(body, "geom", name=f"{b.id}_geom", type="box", pos=(0.0, 0.0, sz / 2), size=(sx / 2, sy / 2, sz / 2),
+            mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
+    else:
+        _el(body, "geom", name=f"{b.id}_geom", type="cylinder", pos=(0.0, 0.0, b.height / 2),
+            size=(b.radius, b.height / 2), mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
 
 
 def _camera(world: ET.Element, c: CameraSpec, shelf: Shelf) -> None:
@@ -213,10 +221,10 @@ def scene_xml(scenario: Scenario, camera: CameraSpec | None = None, gripper_mark
         _marker_plate(hand, "gripper_marker", joint_origins()[-1] @ T_TOOL_GRIPPER_MARKER, GRIPPER_MARKER_SIZE,
                       "aruco_gripper")
     world.append(arm)
-    for b in scenario.objects:
-        _bottle(world, b, s.top_z)
+    for b in scenario.world:
+        _object(world, b)
     equality = _el(root, "equality")
-    for b in scenario.objects:
+    for b in scenario.world:
         _el(equality, "weld", name=f"grasp_{b.id}", body1=HAND_BODY, body2=b.id, active="false", solref="0.004 1")
     _actuators(root)
     return ET.tostring(root, encoding="unicode")

@@ -50,7 +50,9 @@ class BadCommandError(ValueError):
 
 @dataclass(frozen=True)
 class ObjectPose:
-    """Ground truth of one bottle: centre of its base circle and orientation (w, x, y, z) in the base frame."""
+    """Ground truth of one object: the centre of its base as built (scene._object: a cylinder's lower end face, a
+    box's bottom face) and its body's orientation (w, x, y, z) in the base frame; the primitive's centre is half its
+    size z along the body's z axis (messages.ground_truth)."""
 
     id: str
     position: tuple[float, float, float]
@@ -99,8 +101,8 @@ class Jaco2Sim:
         self._limited = ~np.asarray(CONTINUOUS)
         self._hand = m.body(HAND_BODY).id
         self._site = m.site("end_effector").id
-        self._bodies = {b.id: m.body(b.id).id for b in scenario.objects}
-        self._welds = {b.id: m.equality(f"grasp_{b.id}").id for b in scenario.objects}
+        self._bodies = {b.id: m.body(b.id).id for b in scenario.world}  # listed and unlisted
+        self._welds = {b.id: m.equality(f"grasp_{b.id}").id for b in scenario.world}
         self._release: tuple[str, float] | None = None  # (bottle, sim time) of a pending release
         for g in DESCRIPTION_FINGER_GEOMS:  # the moving finger bodies replace the description's static capsules
             gid = m.geom(g).id
@@ -158,7 +160,7 @@ class Jaco2Sim:
         return t
 
     def object_poses(self) -> list[ObjectPose]:
-        """Ground-truth bottle poses in scenario order."""
+        """Ground-truth poses of every object, listed then unlisted, in file order."""
         return [ObjectPose(oid, tuple(self.data.xpos[b]), tuple(self.data.xquat[b]))
                 for oid, b in self._bodies.items()]
 
@@ -210,7 +212,7 @@ class Jaco2Sim:
 
     # ---------------------------------------------------------------- scene
     def reset(self) -> None:
-        """Scenario state: bottles where the scenario puts them, arm at home, gripper open, no grasp."""
+        """Scenario state: objects where the scenario puts them, arm at home, gripper open, no grasp."""
         mujoco.mj_resetData(self.model, self.data)
         self.data.eq_active[:] = 0
         for b in self._bodies.values():
@@ -233,12 +235,14 @@ class Jaco2Sim:
         mujoco.mj_forward(self.model, self.data)
 
     def bottle_between_fingers(self) -> str | None:
-        """Id of the bottle whose axis passes through the grasp centre (within GRASP_RADIAL_TOL across it, the
-        grasp centre within its height) with the hand's finger-spread axis along the bottle axis, or None."""
+        """Id of the bottle (a cylinder) whose axis passes through the grasp centre (within GRASP_RADIAL_TOL across
+        it, the grasp centre within its height) with the hand's finger-spread axis along the bottle axis, or None."""
         c, r = self.data.site_xpos[self._site], self.data.site_xmat[self._site].reshape(3, 3)
         best, best_d = None, GRASP_RADIAL_TOL
         for oid, b in self._bodies.items():
-            obj = self.scenario.object(oid)
+            obj = self.scenario.world_object(oid)
+            if obj.shape != "cylinder":
+                continue
             axis = self.data.xmat[b].reshape(3, 3)[:, 2]
             if abs(float(axis @ r[:, 1])) < GRASP_TILT_COS:
                 continue
