@@ -155,3 +155,23 @@ def render_frame(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec |
         return r.render(data)
     finally:
         r.close()
+
+
+def visible_pixels(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec | None = None) -> dict[str, int]:
+    """Pixels of each object of the scenario's world (listed and unlisted) in the camera's image at its initial
+    state with the arm at q (MuJoCo's segmentation rendering): 0 for an object the camera cannot see."""
+    camera = camera if camera is not None else CameraSpec.configured()
+    model = build_model(scenario, camera)
+    data = mujoco.MjData(model)
+    for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
+        data.qpos[model.joint(j).qposadr[0]] = qj
+    mujoco.mj_forward(model, data)
+    r = mujoco.Renderer(model, camera.height, camera.width)
+    try:
+        r.enable_segmentation_rendering()
+        r.update_scene(data, camera=CAMERA_NAME)
+        seg = r.render()
+    finally:
+        r.close()
+    geoms = np.where(seg[:, :, 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[:, :, 0], -1)
+    return {o.id: int((geoms == model.geom(f"{o.id}_geom").id).sum()) for o in scenario.world}

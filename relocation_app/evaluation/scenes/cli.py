@@ -4,6 +4,7 @@
   paper N [--seeds S] [--steps K] ...    a scene of the paper's size with N obstacles, searched (paper_size.py)
   paper-random [--cases 1,2] ...         Table 4's random cases at the paper's size (paper_random.py)
   jitter SCENE... [--amplitude A]        perturbed copies of shipped scenes, to out/jitter/ (jitter.py)
+  world [--only NAME,...]                the shelf as it is: unlisted, lying, boxes, 20 / 30 objects (world.py)
 Scenes go to config/scenarios/ (--scenarios), feasibility tables to data/feasibility/ (--data); feasibility comes from
 the real planner with the evaluation's parameters (feasibility_cache.planner_params).
 """
@@ -51,6 +52,9 @@ def parser() -> argparse.ArgumentParser:
     for p in (gen, paper, rnd):
         p.add_argument("--data", default=None, help="feasibility cache directory (default data/feasibility)")
         p.add_argument("--scenarios", default=None, help="where the YAML goes (default config/scenarios)")
+    world = sub.add_parser("world", help="unlisted objects, boxes, lying bottles, 20 / 30 objects (world/)")
+    world.add_argument("--only", default=None, help="only these scenes (comma-separated names)")
+    world.add_argument("--scenarios", default=None, help="where the YAML goes (default config/scenarios)")
     jit = sub.add_parser("jitter", help="perturbed copies of shipped scenes (every bottle moved <= amplitude)")
     jit.add_argument("scenes", nargs="+", help="scenario names or paths (e.g. paper_experiment_10)")
     jit.add_argument("--amplitude", type=float, default=0.012, help="largest displacement of a bottle, m")
@@ -64,6 +68,8 @@ def main(argv=None) -> int:
     a = parser().parse_args(argv)
     if a.kind == "jitter":
         return _jitter(a)
+    if a.kind == "world":
+        return _world(a)
     from relocation_app.evaluation.feasibility_cache import planner_params
     from relocation_common.paths import data_dir, scenarios_dir
     params = planner_params()
@@ -94,4 +100,21 @@ def _jitter(a: argparse.Namespace) -> int:
     except (OSError, ValueError, RuntimeError) as e:
         print(f"scenes jitter: error: {e}")
         return 2
+    return 0
+
+
+def _world(a: argparse.Namespace) -> int:
+    from relocation_app.evaluation.scenes import world
+    from relocation_common.paths import scenarios_dir
+    out = (Path(a.scenarios) if a.scenarios else scenarios_dir()) / world.DIR
+    names = tuple(a.only.split(",")) if a.only else world.ORDER
+    unknown = sorted(set(names) - set(world.ORDER))
+    if unknown:
+        print(f"scenes world: error: unknown scene(s) {', '.join(unknown)}; known: {', '.join(world.ORDER)}")
+        return 2
+    try:
+        world.make_world(out, names)
+    except RuntimeError as e:
+        print(f"scenes world: error: {e}")
+        return 1
     return 0
