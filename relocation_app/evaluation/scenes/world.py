@@ -222,9 +222,9 @@ def make_world(out: Path, names: tuple[str, ...] = ORDER, log: Callable[[str], N
                 break
         else:
             raise RuntimeError(f"{name}: no layout in seeds {SEED0 + 100 * k}+{SEEDS_PER_SCENE}")
-        header = (f"# Test and benchmark scene (docs/scenarios.md, \"The shelf as it is\"), made by "
-                  f"{made_by('world')}\n# (relocation_app/evaluation/scenes/world.py): seed {seed}, the first from "
-                  f"{SEED0 + 100 * k} whose layout fits{' and hides the unlisted bottle' if k == 6 else ''}.")
+        header = (f"# Test and benchmark scene (docs/scenarios.md), made by {made_by('world')}\n"
+                  f"# (relocation_app/evaluation/scenes/world.py): seed {seed}, the first from {SEED0 + 100 * k} whose "
+                  f"layout fits{' and hides the unlisted bottle' if k == 6 else ''}. Format: docs/scenarios.md.")
         written.append(write_scene(data, out / f"{name}.yaml", header))
         log(f"{name}: seed {seed}")
     return written
