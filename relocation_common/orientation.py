@@ -1,6 +1,6 @@
-"""A bottle's orientation as ObjectState carries it (pose.orientation, a unit quaternion): how far it is tipped and
-the surface it rests on. One place for the task planner's checks (qtree_task_planner.executive.closed_loop) and the
-motion planner's scene (stpik_motion_planner.model.scene_update); the rotations themselves are
+"""A bottle's orientation: UPRIGHT_TILT, the one bound between standing and lying (the object model's `lying`,
+shelf_object.at_pose), how far a pose is tipped, and the surface a bottle rests on from its base centre (the closed
+loop's SeenObject). Messages are read through relocation_common.ros_conversions only; the rotations themselves are
 relocation_common.geometry's."""
 from __future__ import annotations
 

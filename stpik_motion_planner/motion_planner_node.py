@@ -73,9 +73,11 @@ class MotionPlannerNode(Node):
         self.scene_topic = params["scene_topic"]
         base = self.core.base
         driver = arm.driver_prefix if arm.kinova else "ros2_control"
-        self.get_logger().info(f"ready: scenario {base.name} ({len(base.objects)} bottles), service "
+        self.get_logger().info(f"ready: scenario {base.name} ({len(base.objects)} objects), service "
                                f"{self.resolve_service_name('~/plan_feasibility')}, scene from {self.scene_topic}, "
                                + (f"driver {driver}" if self.link else "feasibility only (serve_relocation false)"))
+        if base.slot_note:
+            self.get_logger().warning(base.slot_note)
 
     def _log(self, level: str, text: str) -> None:
         """The cores' log lines. One call site per severity: rclpy refuses a call site whose severity changes."""
