@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike
 
 from relocation_common import geometry
 from relocation_common.scenario import Scenario, ShelfObject
-from relocation_common.shelf_object import at_pose
+from relocation_common.shelf_object import Footprint, at_pose
 
 MARGIN = 0.003  # m left between a disturbed bottle and its neighbours or the shelf's sides
 SLIP_CLEAR = 0.01  # m: a dropped bottle touches the hand again once this far from every finger and arm geom
@@ -130,21 +130,32 @@ def _half_extent(o: ShelfObject, rot: np.ndarray, u: np.ndarray) -> float:
     return o.height / 2 * c + o.radius * math.sqrt(max(0.0, 1.0 - c * c))
 
 
-def _room(sim: SimState, candidate: ShelfObject) -> str | None:
+Others = list[tuple[str, float, Footprint]]  # (id, support height, footprint) of the objects around one
+
+
+def _others(sim: SimState, object_id: str) -> Others:
+    """Every other object not in the hand, as it is now: its support height and footprint."""
+    out = []
+    for other in sim.scenario.world:
+        if other.id != object_id and other.id != sim.grasped:
+            now = current(sim, other.id)
+            out.append((other.id, float(now.support_z or 0.0), now.footprint()))
+    return out
+
+
+def _room(sim: SimState, candidate: ShelfObject, others: Others | None = None) -> str | None:
     """Why `candidate` (an object at a pose it may be put at) does not fit, or None: its footprint must stay within
-    the shelf's sides and depth and keep MARGIN from every other object resting near its height."""
+    the shelf's sides and depth and keep MARGIN from every other object resting near its height (`others`: those
+    objects, `_others`, when a caller tries many poses)."""
     sh = sim.scenario.shelf
     if not candidate.footprint().inside(sh.x_front, sh.x_back - MARGIN, sh.y_min + MARGIN, sh.y_max - MARGIN):
         return "it would leave the shelf"
     grown = candidate.footprint(MARGIN)
-    for other in sim.scenario.world:
-        if other.id == candidate.id or other.id == sim.grasped:
-            continue
-        now = current(sim, other.id)
-        if abs(float(now.support_z or 0.0) - float(candidate.support_z or 0.0)) > 0.05:
+    for oid, support, footprint in _others(sim, candidate.id) if others is None else others:
+        if abs(support - float(candidate.support_z or 0.0)) > 0.05:
             continue  # on another board, or in the air
-        if grown.overlaps(now.footprint()):
-            return f"it would overlap {other.id}"
+        if grown.overlaps(footprint):
+            return f"it would overlap {oid}"
     return None
 
 
@@ -166,9 +177,10 @@ def nudge(sim: SimState, object_id: str, dx: float, dy: float) -> Applied:
         raise DisturbanceError(f"nudge of {object_id}: dx, dy must be finite, got {dx}, {dy}")
     steps = max(1, math.ceil(length / PUSH_STEP))
     done = np.zeros(2)
+    others = _others(sim, object_id)
     for k in range(1, steps + 1):
         d = push * k / steps
-        if _room(sim, replace(now, x=now.x + float(d[0]), y=now.y + float(d[1]))) is not None:
+        if _room(sim, replace(now, x=now.x + float(d[0]), y=now.y + float(d[1])), others) is not None:
             break
         done = d
     _set_pose(sim, object_id, (p[0] + done[0], p[1] + done[1], p[2]), q)
@@ -193,13 +205,13 @@ def tip(sim: SimState, object_id: str, direction: float = 0.0) -> Applied:
     o, now, rot = sim.scenario.world_object(object_id), current(sim, object_id), _rotation(sim, object_id)
     centre = np.array([now.x, now.y]) if now.lying or now.shape == "box" else \
         np.asarray(sim.data.xpos[_body(sim, object_id)][:2], float)
-    why = "no direction tried"
+    why, others = "no direction tried", _others(sim, object_id)
     for a in _tip_directions(now, direction):
         d = np.array([math.cos(a), math.sin(a), 0.0])
         turned = geometry.rotvec_matrix(np.cross([0.0, 0.0, 1.0], d) * math.pi / 2) @ rot
         xy = centre + d[:2] * (_half_extent(o, rot, d) + MARGIN + _half_extent(o, turned, d))
         c = np.array([xy[0], xy[1], float(now.support_z or 0.0) + _half_extent(o, turned, np.array([0, 0, 1.0]))])
-        why = _room(sim, at_pose(o, c, turned)) or ""
+        why = _room(sim, at_pose(o, c, turned), others) or ""
         if not why:
             _set_pose(sim, object_id, c - turned[:, 2] * o.size[2] / 2, geometry.quat_wxyz(turned))
             return Applied("tip", object_id, sim.time, {"direction": round(a % (2 * math.pi), 4)})
@@ -446,9 +458,10 @@ def _move_somewhere(sim: SimState, object_id: str, where: tuple[float, float]) -
     want = np.array([x0 + where[0] * (x1 - x0), y0 + where[1] * (y1 - y0)])
     grid = [np.array([x, y]) for x in np.arange(x0, x1 + 1e-9, 0.01) for y in np.arange(y0, y1 + 1e-9, 0.01)]
     yaw = o.yaw if o.shape == "box" else 0.0
+    others = _others(sim, object_id)
     for xy in sorted(grid, key=lambda g: float(np.linalg.norm(g - want))):
         spot = replace(o, x=float(xy[0]), y=float(xy[1]), support_z=sh.top_z, lying=False, tilt=None, yaw=yaw)
-        if _room(sim, spot) is None:
+        if _room(sim, spot, others) is None:
             return move_to(sim, object_id, float(xy[0]), float(xy[1]))
     raise DisturbanceError(f"cannot move {object_id}: no free spot on the top shelf")
 
