@@ -4,10 +4,10 @@
   outage rules of docs/reliability.md ("Dead planner").
 - Relocator: one RelocateObject goal to the motion planner, watched (shutdown, server gone, silence, cancel,
   timeout: qtree_task_planner.executive.retrieval.relocation_stop).
-- SceneWatch: the latest scene message and when it arrived; `after(t, ...)` waits for one received later
-  (closed-loop execution: a scene perceived after a relocation ended).
+- SceneWatch: the latest scene message and when it arrived; `checked(...)` is the one a goal starts from,
+  `after(t, ...)` waits for one received later (closed-loop execution: a scene perceived after a relocation ended).
 - train_goal / goal_params: a TrainPlanner goal whose numeric fields say "the node's parameter" (negative), and
-  the TrainingParams a goal asks for.
+  the TrainingParams a goal asks for; fill_optimum / fill_training_result: the outcome in the TrainPlanner result.
 """
 from __future__ import annotations
 
@@ -18,10 +18,11 @@ from typing import Callable
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
+from rclpy.time import Time
 
 from qtree_task_planner.executive.closed_loop import SeenObject
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
-from qtree_task_planner.executive.retrieval import relocation_stop
+from qtree_task_planner.executive.retrieval import check_scene, relocation_stop
 from qtree_task_planner.learning.params import TrainingParams
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.node import ActionClient, call, stop_reason, stopping_as
@@ -118,6 +119,22 @@ def goal_params(node: TrainingParams, goal) -> TrainingParams:
         if not v < 0:  # negative: the node's parameter; NaN goes on to validation and is refused
             changes[f] = v
     return node.replace(**changes)
+
+
+def fill_training_result(result: TrainPlanner.Result, trained, planner_calls: int) -> None:
+    """The training's outcome (training.TrainingResult) in the TrainPlanner result (-1: no sequence, no e_1st)."""
+    result.sequence = list(trained.sequence or ())
+    result.total_weight = float(trained.total_weight if trained.total_weight is not None else -1.0)
+    result.e_ss, result.mp_q = trained.e_ss, trained.mp_q
+    result.e_first = trained.e_1st if trained.e_1st is not None else -1
+    result.planner_calls, result.episodes = planner_calls, trained.episodes
+    result.q_sum_history = [float(x) for x in trained.q_sum_history]
+
+
+def fill_optimum(result: TrainPlanner.Result, exact) -> None:
+    """The exact optimum (exact.ExactResult) in the TrainPlanner result (-1: none)."""
+    result.optimal_sequence = list(exact.sequence or ())
+    result.optimal_weight = float(exact.total_weight if exact.total_weight is not None else -1.0)
 
 
 class Relocator:
@@ -225,6 +242,20 @@ class SceneWatch:
                     raise TimeoutError(f"no scene received within {timeout:g} s (scene_after_wait){self._last()}")
                 self._changed.wait(min(left, 0.1))
 
+
+    def checked(self, topic: str, max_age: float, wait: float, now: Callable[[], Time]):
+        """(the latest scene, a warning or None) after waiting up to `wait` s for a first one (just started:
+        discovery may be going on); ScenarioError when it is missing, stale or empty (retrieval.check_scene, with
+        its ages on the monotonic clock and on the node's clock `now()`)."""
+        deadline = time.monotonic() + wait
+        while self.latest is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        msg, t = self.latest if self.latest is not None else (None, 0.0)
+        stamp = Time.from_msg(msg.header.stamp) if msg is not None else None
+        warning = check_scene(topic, max_age, time.monotonic() - t if msg is not None else None,
+                              (now() - stamp).nanoseconds * 1e-9 if stamp and stamp.nanoseconds else None,
+                              len(msg.objects) if msg is not None else 0)
+        return msg, warning
 
     def _last(self) -> str:
         """When the last scene came, for the timeout's line."""

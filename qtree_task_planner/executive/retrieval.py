@@ -33,6 +33,7 @@ from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.search import astar
 from relocation_common.scenario import Scenario, ScenarioError
+from relocation_common.scene_check import foreign_ids
 
 T = TypeVar("T")
 STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from the node's clock is on another clock
@@ -111,6 +112,15 @@ def training_outcome(trained, optimum, *, execute: bool) -> tuple[bool, str] | N
         return True, "trained (not executed)"
     return False, (f"training did not find a sequence to the target in {trained.episodes} episodes (the exact "
                    f"optimum {' '.join(optimum.sequence)}, weight {optimum.total_weight:.2f}, exists: execute_optimum)")
+
+
+def planner_foreign_ids(oracle, ids) -> str:
+    """scene_check.foreign_ids: the motion planner's bottles (its lanes, all_lanes) the scene `ids` does not have;
+    "" when the planner is gone or refuses the question (a diagnosis only, it says nothing then)."""
+    try:
+        return foreign_ids(oracle.lane_blockers(frozenset()) or {}, ids)
+    except Exception:
+        return ""
 
 
 def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
