@@ -24,12 +24,14 @@ import dataclasses
 import json
 import threading
 import time
+from typing import Any, Callable, Sequence, TypeVar
 
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -48,8 +50,10 @@ from qtree_task_planner.executive.retrieval import (
     training_outcome,
 )
 from qtree_task_planner.executive.settings import SCENE_SOURCES, check_node_parameters
-from qtree_task_planner.learning.checkpoint import CheckpointError
+from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
 from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.q_tree import QTree
+from qtree_task_planner.learning.training import EpisodeStats
 from qtree_task_planner.markers import scene_markers
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
@@ -64,6 +68,7 @@ from qtree_task_planner.ros_clients import (
     train_goal,
     watched,
 )
+from qtree_task_planner.search.astar import AStarResult
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import replica_services
 from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main, stop_reason
@@ -72,6 +77,7 @@ from relocation_common.scenario import ScenarioError, load_scenario
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+T = TypeVar("T")
 FEEDBACK_EVERY = 10  # episodes between training feedbacks (and after a slow planner answer: training.CALLBACK_S)
 
 
@@ -109,8 +115,8 @@ class TaskPlannerNode(Node):
         self.get_logger().info(f"ready: action {self.resolve_topic_name('~/train')}, scene from "
                                f"{self._scene_topic}")
 
-    def p(self, name: str):
-        """The value of parameter `name`."""
+    def p(self, name: str) -> Any:
+        """The value of parameter `name` (of the type config/task_planner.yaml gives it)."""
         return self.get_parameter(name).value
 
     # -- inputs ---------------------------------------------------------------------------------------------
@@ -122,10 +128,10 @@ class TaskPlannerNode(Node):
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
         return RelocationProblem.from_bottles(msg_to_bottles(msg)), msg
 
-    def _params(self, goal) -> TrainingParams:
+    def _params(self, goal: TrainPlanner.Goal) -> TrainingParams:
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
 
-    def _on_goal(self, goal) -> GoalResponse:
+    def _on_goal(self, goal: TrainPlanner.Goal) -> GoalResponse:
         """Only a second goal is rejected here. Bad training parameters and the scene are checked when the goal
         starts: it aborts with the reason in the result (as nav2 does; a rejection carries no reason)."""
         with self._reserve:  # reserved here, not when execution starts: two goals sent back to back
@@ -136,7 +142,7 @@ class TaskPlannerNode(Node):
         return GoalResponse.ACCEPT
 
     # -- the action -----------------------------------------------------------------------------------------
-    def _execute(self, goal_handle):
+    def _execute(self, goal_handle: ServerGoalHandle) -> TrainPlanner.Result:
         result = TrainPlanner.Result()
         try:
             self._train_and_execute(goal_handle, result)
@@ -151,7 +157,8 @@ class TaskPlannerNode(Node):
         return result
 
     # -- a lost planner ---------------------------------------------------------------------------------
-    def _until_planner(self, fn, goal_handle, oracle: ReplicaOracle, fb):
+    def _until_planner(self, fn: Callable[[], T], goal_handle: ServerGoalHandle, oracle: ReplicaOracle,
+                       fb: TrainPlanner.Feedback) -> T:
         """fn() through planner outages (qtree_task_planner.executive.outage), with feedback while waiting."""
         phase = fb.phase
 
@@ -171,7 +178,7 @@ class TaskPlannerNode(Node):
                                wait=self.p("planner_wait"), last_answer=lambda: oracle.last_ok,
                                kept=self._keeper.kept_where, service=services, on_outage=on_outage, on_back=on_back)
 
-    def _train_and_execute(self, goal_handle, result) -> None:
+    def _train_and_execute(self, goal_handle: ServerGoalHandle, result: TrainPlanner.Result) -> None:
         params = self._params(goal_handle.request)
         problem, scene = self._problem()
         self._publish_scene(scene, ())
@@ -194,13 +201,13 @@ class TaskPlannerNode(Node):
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
         resume = self._keeper.resume_point(problem, params, oracle)
 
-        def on_solved(exact) -> None:
+        def on_solved(exact: AStarResult) -> None:
             fill_optimum(result, exact)
             self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight} "
                                    f"({oracle.calls} planner calls; {service.summary()})")
             fb.phase = "training"
 
-        def on_episode(stats) -> bool:
+        def on_episode(stats: EpisodeStats) -> bool:
             fb.episode, fb.q_sum, fb.tree_nodes = stats.episode, stats.q_sum, stats.tree_nodes
             fb.mp_queries, fb.planner_calls = stats.mp_q, len(oracle.table)
             goal_handle.publish_feedback(fb)
@@ -227,8 +234,8 @@ class TaskPlannerNode(Node):
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
 
-    def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, params, sequence,
-             note: str) -> None:
+    def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
+             scene: ObjectArray, oracle: CachedOracle, params: TrainingParams, sequence: list[str], note: str) -> None:
         """Execute (retrieval.execute, `closed_loop`; `replan_q_tree`: each re-plan also retrains the Q-Tree with the
         goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
@@ -264,25 +271,26 @@ class TaskPlannerNode(Node):
             self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note,
                                                             "execution_s": time.monotonic() - t0, **spent})))
 
-    def _keep(self, ck) -> None:
+    def _keep(self, ck: Checkpoint) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""
         if ck.reason == "cancelled" and not rclpy.ok():
             ck = dataclasses.replace(ck, reason=stop_reason())
         self._keeper.keep(ck)
 
-    def _relocate_one(self, goal_handle, object_id: str, removed: list[str]) -> tuple[bool, str]:
+    def _relocate_one(self, goal_handle: ServerGoalHandle, object_id: str, removed: list[str]) -> tuple[bool, str]:
         self.get_logger().info(f"relocating {object_id} (removed so far: {removed})")
         self._relocating.publish(String(data=object_id))
         return self._relocator.relocate(object_id, removed, cancelled=lambda: goal_handle.is_cancel_requested)
 
     # -- visualisation --------------------------------------------------------------------------------------
-    def _publish_scene(self, scene: ObjectArray, sequence, tree=None, ids=()) -> None:
+    def _publish_scene(self, scene: ObjectArray, sequence: Sequence[str], tree: QTree | None = None,
+                       ids: Sequence[str] = ()) -> None:
         """The scene and the learned order (and the trained Q-Tree) as markers (qtree_task_planner.markers)."""
         self._markers.publish(scene_markers(scene, tuple(sequence), tree.to_state() if tree is not None else None,
                                             tuple(ids)))
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """Run the node (relocation_common.node.node_main: exit 2 with one line on a bad parameter)."""
     node_main("task_planner", TaskPlannerNode, args, errors=(CheckpointError,))
 
