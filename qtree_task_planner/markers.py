@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 
 from geometry_msgs.msg import Point
+from qtree_relocation_msgs.msg import ObjectArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -104,7 +105,7 @@ def tree_markers(state: dict, ids: tuple[str, ...], best: tuple[str, ...] | None
     return out
 
 
-def scene_markers(scene, sequence: tuple[str, ...], tree_state: dict | None = None,
+def scene_markers(scene: ObjectArray, sequence: tuple[str, ...], tree_state: dict | None = None,
                   ids: tuple[str, ...] = ()) -> MarkerArray:
     """The scene's bottles (an ObjectArray) as cylinders in their colour, each labelled with its place in the
     learned `sequence`; with a trained tree (`tree_state`, QTree.to_state(); `ids` its action -> id), the Q-Tree
