@@ -23,7 +23,7 @@ TEXT_SUFFIXES = {".md", ".py", ".c", ".h", ".msg", ".srv", ".action", ".yaml", "
 CODE_SUFFIXES = {".py", ".c", ".h", ".msg", ".srv", ".action", ".xml", ".toml", ".cfg", ".ini", ".sh", ".cmake", ""}
 
 HISTORY = re.compile(
-    r"\bissues?[ _-]*#?\s*\d+"  # a tracker's issue with its number: "issue 14", "issue #14", "issues 13"
+    r"\bissues?[ _-]*#?\s*\d+"  # a tracker's issue with its number: "issue #14", "issue-14"
     r"|(?<!--)\b(?:stop|round|session|sprint|milestone)[ _-]?#?\d+\b"  # "stop 32", "stop-33", "stop33"
     r"|\b(?:stops|rounds|sessions) \d+ ?[-–] ?\d+\b"  # "stops 32-33"
     r"|(?<![\w/.-])#\d{1,5}\b"  # a bare "#14"; an upstream "rclpy#1452" has its project's name in front
@@ -237,7 +237,7 @@ def test_every_reference_resolves_inside_the_repository():
 
 def test_the_checks_catch_what_they_are_for():
     """The patterns themselves: each kind of defect is found, and what is allowed passes."""
-    for bad in ("(issue 14; docs/x.md)", "Issue #3", "the final main of stop 32", "stop-33", "demo_stop33.txt",
+    for bad in ("(issue-14; docs/x.md)", "Issue #3", "issues\t13", "the final main of stop 32", "stop-33", "demo_stop33.txt",
                 "round 2", "after this stop"):
         assert HISTORY.search(bad.replace("_", " ")), bad
     for good in ("rclpy#1452", "the arm stops 50 ms after", "20-round shutdown loops", "in/stop", "issues"):
