@@ -6,7 +6,8 @@
 (b) Every relative markdown link (and its #anchor) in docs/ and README.md, and every repository path (`dir/file.ext`
     whose first component is a top-level entry of the checkout) or dotted module path (`package.module.name`)
     named in docs/, README.md, config/ or the code resolves: the file exists, the module exists and defines the
-    name, and a section cited by its heading (`docs/x.md, "Heading"`) is a heading of that document.
+    name, and a section cited by its heading (`docs/x.md, "Heading"`) or number (`section 6`) is one of that
+    document's headings. Notes files outside the repository (`../x`, `STACK-NOTES`) are unresolved references.
 Text only, no imports of the project: well under a second.
 """
 import re
@@ -93,6 +94,7 @@ NOTE_FILE = re.compile(r"(?<![\w/.-])(\.\./[\w./-]*\w|[A-Z]{2,}(?:-[A-Z]{2,})+\b
 BARE_MODULE = re.compile(r"(?<![\w./<>{$%*-])([A-Za-z_]\w*\.py)\b")
 DOTTED = re.compile(r"(?<![\w./-])((?:%s)(?:\.\w+)+)" % "|".join(map(re.escape, PACKAGES)))
 SECTION = re.compile(r"([\w./-]+\.md)`?,?\s+(?:section\s+)?[\"“]([^\"”\n]{3,80})[\"”]")
+SECTION_NUMBER = re.compile(r"([\w./-]+\.md)`?,?\s+section\s+(\d+)\b")
 FILE_SUFFIXES = {"yaml", "py", "md", "xml", "json", "jsonl", "txt", "csv", "png", "c", "msg", "srv", "action"}
 DOCSTRING = re.compile(r'("""|\'\'\')(.*?)\1', re.DOTALL)
 
@@ -225,6 +227,11 @@ def _broken_in(rel: Path, kind: str) -> list[str]:
             report(m, f"document {doc}")
         elif not any(section.lower() in h.lower() for h in _headings(target.relative_to(ROOT))):
             report(m, f'section "{section}" of {doc}')
+    for m in SECTION_NUMBER.finditer(text):
+        doc, number = m.groups()
+        target = _document(doc, rel)
+        if not target.exists() or not any(h.startswith(f"{number}. ") for h in _headings(target.relative_to(ROOT))):
+            report(m, f"section {number} of {doc}")
     return broken
 
 
@@ -237,8 +244,8 @@ def test_every_reference_resolves_inside_the_repository():
 
 def test_the_checks_catch_what_they_are_for():
     """The patterns themselves: each kind of defect is found, and what is allowed passes."""
-    for bad in ("(issue-14; docs/x.md)", "Issue #3", "issues\t13", "the final main of stop 32", "stop-33", "demo_stop33.txt",
-                "round 2", "after this stop"):
+    for bad in ("(issue-14; docs/x.md)", "Issue #3", "issues\t13", "the final main of stop 32", "stop-33",
+                "demo_stop33.txt", "round 2", "after this stop"):
         assert HISTORY.search(bad.replace("_", " ")), bad
     for good in ("rclpy#1452", "the arm stops 50 ms after", "20-round shutdown loops", "in/stop", "issues"):
         assert not HISTORY.search(good), good
@@ -246,6 +253,7 @@ def test_the_checks_catch_what_they_are_for():
     assert [m.group(1) for m in NOTE_FILE.finditer("see STACK-NOTES and `../shared/DESIGN.md`; H-eG, RRT-Connect")] == [
         "STACK-NOTES", "../shared/DESIGN.md"]
     assert SECTION.findall('(docs/reliability.md, "Dead planner")') == [("docs/reliability.md", "Dead planner")]
+    assert SECTION_NUMBER.findall("(docs/reliability.md, section 6)") == [("docs/reliability.md", "6")]
     assert _slug("Exact sequence from blockers (`astar.solve`)") == "exact-sequence-from-blockers-astarsolve"
     assert not _module_defines("qtree_task_planner.no_such_module.Thing".split("."))
     assert _module_defines("qtree_task_planner.learning.params.TrainingParams".split("."))
