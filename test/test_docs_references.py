@@ -138,23 +138,24 @@ def _path_exists(name: str) -> bool:
     return any(ROOT.glob(name)) if "*" in name else (ROOT / name).exists()
 
 
-def _commentary(rel: Path) -> str:
-    """What a code file says in prose: its comments and triple-quoted strings (docstrings), one per line kept in
-    place so that line numbers stay right; code and its ordinary strings (test fixtures, formats) blanked."""
+def _commentary(rel: Path) -> tuple[str, list[int]]:
+    """What a file says in prose and the line number of each of its lines. A Python file's comments and
+    triple-quoted strings (docstrings) only: code and its ordinary strings (test fixtures, formats) left out."""
     text = _text(rel)
     if rel.suffix != ".py":
-        return text
-    keep = [" " * len(line) for line in text.split("\n")]
+        return text, list(range(1, text.count("\n") + 2))
     lines = text.split("\n")
+    keep: dict[int, str] = {}
     for i, line in enumerate(lines):
         hash_at = line.find("#")
         if hash_at >= 0 and line[:hash_at].count('"') % 2 == 0 and line[:hash_at].count("'") % 2 == 0:
-            keep[i] = " " * hash_at + line[hash_at:]
+            keep[i] = line[hash_at:]
     for m in DOCSTRING.finditer(text):
         first = text.count("\n", 0, m.start())
         for j, piece in enumerate(m.group(0).split("\n")):
             keep[first + j] = piece
-    return "\n".join(keep)
+    numbers = sorted(keep)
+    return "\n".join(keep[i] for i in numbers), [i + 1 for i in numbers]
 
 
 def _document(doc: str, rel: Path) -> Path:
@@ -184,11 +185,11 @@ def _module_defines(parts: list[str]) -> bool:
 
 def _broken_in(rel: Path, kind: str) -> list[str]:
     """The references of one file that do not resolve, with their line numbers."""
-    text = _commentary(rel) if kind == "code" else _text(rel)
+    text, numbers = _commentary(rel)
     broken = []
 
     def report(m: re.Match, what: str) -> None:
-        broken.append(f"{rel}:{text.count(chr(10), 0, m.start()) + 1}: {what}")
+        broken.append(f"{rel}:{numbers[text.count(chr(10), 0, m.start())]}: {what}")
 
     if kind == "doc":
         for m in LINK.finditer(text):
@@ -213,13 +214,15 @@ def _broken_in(rel: Path, kind: str) -> list[str]:
             report(m, f"outside the repository: {name}")
         elif dest is None and name not in _file_names():
             report(m, f"no such document: {name}")
-    for m in BARE_MODULE.finditer(text):
+    for m in BARE_MODULE.finditer(text) if ".py" in text else ():
         if m.group(1) not in _file_names():
             report(m, f"module file {m.group(1)}")
     for m in DOTTED.finditer(text):
         parts = m.group(1).rstrip(".").split(".")
         if parts[-1] not in FILE_SUFFIXES and not _module_defines(parts):
             report(m, f"module path {m.group(1)}")
+    if ".md" not in text:
+        return broken
     for m in SECTION.finditer(text):
         doc, section = m.groups()
         target = _document(doc, rel)
