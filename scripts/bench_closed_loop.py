@@ -248,7 +248,7 @@ def table(runs: list[dict], proofs: dict[str, str]) -> None:
               f"{ok}/{len(rs) - none} | {false} | {safe}/{len(rs)} | {sum(r['applied'] for r in rs)} | "
               f"{statistics.fmean(r['replans'] for r in rs):.1f} | {extra:.1f} | "
               f"{statistics.fmean(r['wall'] for r in rs):.0f} |")
-    for name in scenes[:-1]:  # the loop's cost undisturbed (issue's target: at most 5 % more wall time)
+    for name in scenes[:-1]:  # the loop's cost undisturbed (target: at most 5 % more wall time)
         pairs = [(c["wall"], o["wall"]) for c in groups.get((name, 0, True), []) for o in groups.get((name, 0, False),
                  []) if c["seed"] == o["seed"] and _ok(c) and _ok(o)]
         if pairs:

@@ -1,4 +1,4 @@
-"""Training through a motion planner that may go away (docs/reliability.md, "Dead planner").
+"""Training through a motion planner that may go away (docs/reliability.md, "Dead motion planner").
 
 A query unanswered within its limit, or a service that vanished, raises PlannerUnavailable inside the training;
 `until_available` then waits up to `wait` s for the planner to come back and runs the step again (the training
