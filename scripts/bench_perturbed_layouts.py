@@ -46,7 +46,7 @@ def _params(sets: list[str]):
     """config/motion_planner.yaml with the `key=value` changes, the safety nets at SAFETY_NET."""
     import dataclasses
 
-    from stpik_motion_planner.planning.planner import PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
     base = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
     if not sets:
         return base

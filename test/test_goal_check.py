@@ -67,9 +67,10 @@ def test_the_destination_is_the_certified_slot_when_it_is_free():
 
 
 def test_plan_relocation_goes_to_the_slot_given_with_the_bottles_placed():
-    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
 
-    planner = MotionPlanner(SC, PlannerParams())
+    planner = MotionPlanner(SC, PlannerParams.load())
     plan = plan_relocation(planner, "o2", [], slot=1, placed=[("o1", SLOTS[0])])
     assert plan.slot_index == 1 and plan.placed == [("o1", SLOTS[0])]
 

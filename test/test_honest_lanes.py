@@ -11,7 +11,8 @@ import yaml
 from relocation_app.evaluation.scenes.make_scenes import jitter_scene
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import parse_scenario
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 
 def test_a_neighbour_within_the_clearance_blocks_the_lane_and_the_screen_stays_exact():

@@ -8,7 +8,7 @@ import numpy as np
 from relocation_common.feasibility import Label
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.scene_update import MOVED, merge_perceived
-from stpik_motion_planner.planning.planner import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.service import MotionPlannerService
 
 SC = load_scenario("scenario1_5")

@@ -15,7 +15,8 @@ from relocation_app.evaluation.scenes.make_scenes import make_jitter
 from relocation_common.feasibility import Label
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.collision import CARRIED
-from stpik_motion_planner.planning.planner import START_RELIEF, MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import START_RELIEF, MotionPlanner
 
 
 @pytest.fixture(scope="module")

@@ -47,7 +47,7 @@ class FeasibilityCacheError(ValueError):
 def planner_params():
     """The evaluation's planner parameters: config/motion_planner.yaml's, with the safety net EVAL_TIMEOUT (not part
     of the cache key). Shared by the evaluation's commands, the scene search and the tests."""
-    from stpik_motion_planner.planning.planner import PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
     p = PlannerParams.load()
     p.timeout = EVAL_TIMEOUT
     return p

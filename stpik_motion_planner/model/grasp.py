@@ -83,7 +83,7 @@ def grasp_yaws(n: int, max_yaw: float) -> list[float]:
     return out
 
 
-def yaw_tiers(n: int, max_yaw: float, wide_n: int = 0, wide_max_yaw: float = 0.0) -> list[list[float]]:
+def yaw_tiers(n: int, max_yaw: float, wide_n: int, wide_max_yaw: float) -> list[list[float]]:
     """The approach yaws in the order they are tried: grasp_yaws(n, max_yaw) first; then, only for a question none
     of those answered, the yaws of grasp_yaws(wide_n, wide_max_yaw) not already tried (the wider grasp set)."""
     first = grasp_yaws(n, max_yaw)

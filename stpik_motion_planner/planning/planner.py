@@ -19,16 +19,13 @@ import dataclasses
 import hashlib
 import math
 import time
-from dataclasses import dataclass, field, fields
-from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
 from relocation_common import robot_description as rd
-from relocation_common.config import node_section
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
-from relocation_common.paths import config_file
 from relocation_common.scenario import Scenario, UnknownObjectError
 from stpik_motion_planner.model.blockers import answer_blockers, lane_blockers
 from stpik_motion_planner.model.collision import (
@@ -56,12 +53,12 @@ from stpik_motion_planner.model.grasp import (
 )
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.budget import SafetyNetTimeout  # noqa: F401 (for callers)
+from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.rrt import CartesianRRT, JointRRT, seed_ompl
-from stpik_motion_planner.planning.stpik import Stpik, StpikParams, StpikResult
+from stpik_motion_planner.planning.stpik import Stpik, StpikResult
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 START_RELIEF = 0.0005  # m: margin under a tight start's distance (_carried_models, _carried_hand)
-WHOLE_NUMBERS = ("max_attempts", "n_yaws", "wide_yaws", "seed", "rrt_max_checks", "simplify_checks")
 # left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
 # first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
 # tolerance (stpik.*), so that every path that converged without it is drawn and ends as before
@@ -71,102 +68,6 @@ UNSEEDED_STPIK = ("grasp_yaw_tol",)
 
 class PlanningError(RuntimeError):
     """A pick, carry or home motion that could not be planned (the message says which stage failed)."""
-
-
-@dataclass
-class PlannerParams:
-    """The motion planner's settings (config/motion_planner.yaml, docs/motion_planner.md), validated once."""
-
-    seed: int = 7
-    timeout: float = 30.0  # s: wall-clock safety net per feasibility query (the service may pass its own)
-    rrt_max_checks: int = 4000  # validity checks per RRT-Connect attempt (about 80 ms here, idle)
-    max_attempts: int = 6  # sampled paths per query before answering g_U
-    n_yaws: int = 3  # approach yaws tried: 0, +max_yaw, -max_yaw, ...
-    max_yaw: float = 0.35  # rad
-    wide_yaws: int = 0  # the second tier (grasp.yaw_tiers), tried when the first found nothing; 0: none
-    wide_max_yaw: float = 0.8  # rad
-    pre_grasp_distance: float = 0.11  # m back along the approach
-    hand_margin: float = 0.012  # m: inflation of the hand proxy in the Cartesian planner
-    resolution: float = 0.01  # m: motion checking resolution of the Cartesian planner
-    joint_resolution: float = 0.01  # rad: of the joint-space planner
-    simplify_checks: int = 250  # validity checks of OMPL path simplification (0: none)
-    lift: float = 0.03  # m, after the grasp (at least carried_clearance + stpik.act: grasp.carry_heights)
-    drop: float = 0.012  # m, bottle base above the bottom shelf at release (at most half the room: carry_heights)
-    carried_clearance: float = 0.005  # m, the carried bottle (real size) to boards and bottles
-    carry_ramp: float = 0.25  # s to full speed and to a stop at each waypoint of the carry and retreat (0: none)
-    carry_accel: float = 3.0  # rad/s^2, joint accelerations while a bottle is held (0: no limit)
-    stage_distance: float = 0.15  # m, staging pose in front of the slot (at most x_front - 0.07: grasp.place_poses)
-    carry_timeout: float = 60.0  # s: wall-clock safety net of plan_pick / plan_carry / plan_home
-    direct_first: bool = True  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
-    seed_per_query: bool = False  # every OMPL solve seeded from the question (question_rng), not process history
-    screen_at_clearance: bool = False  # the grasp screen's hand proxy inflated by at least stpik.clearance
-    certify_relocation: bool = False  # a feasible pick counts only if the carry, retreat and way home plan from it
-    workspace_lo: tuple = (0.05, -0.55, -0.10, -0.9)  # (x, y, z, yaw) box of the Cartesian planner
-    workspace_hi: tuple = (1.0, 0.55, 0.65, 0.9)
-    stpik: StpikParams = field(default_factory=StpikParams)
-
-    def __post_init__(self) -> None:
-        """Every setting checked once, with its name in the error (ValueError)."""
-        positive = ("timeout", "pre_grasp_distance", "resolution", "joint_resolution",
-                    "stage_distance", "carry_timeout", "carried_clearance")
-        non_negative = ("max_yaw", "wide_max_yaw", "hand_margin", "lift", "drop", "carry_ramp", "carry_accel")
-        for k in positive + non_negative:
-            v = getattr(self, k)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-                    or v < 0 or (v == 0 and k in positive):
-                raise ValueError(f"motion planner parameter {k} must be a finite number "
-                                 f"{'> 0' if k in positive else '>= 0'}, got {v!r}")
-        for k in WHOLE_NUMBERS:
-            v, least = getattr(self, k), {"seed": None, "simplify_checks": 0, "wide_yaws": 0}.get(k, 1)
-            if isinstance(v, bool) or not isinstance(v, int) or (least is not None and v < least):
-                raise ValueError(f"motion planner parameter {k} must be an integer"
-                                 f"{'' if least is None else f' >= {least}'}, got {v!r}")
-        lo, hi = (np.asarray(getattr(self, k), float) for k in ("workspace_lo", "workspace_hi"))
-        if lo.shape != (4,) or hi.shape != (4,) or not np.all(np.isfinite(lo) & np.isfinite(hi) & (lo < hi)):
-            raise ValueError(f"motion planner parameters workspace_lo < workspace_hi must be 4 finite numbers each "
-                             f"(x, y, z, yaw), got {self.workspace_lo!r}, {self.workspace_hi!r}")
-
-    @classmethod
-    def keys(cls) -> tuple[str, ...]:
-        """The flat parameter names (ROS parameters): the planner's own and stpik.* for StpikParams."""
-        return tuple(f.name for f in fields(cls) if f.name != "stpik") + tuple(
-            f"stpik.{f.name}" for f in fields(StpikParams))
-
-    @classmethod
-    def from_mapping(cls, data: Mapping[str, Any]) -> "PlannerParams":
-        """From a flat mapping (ROS parameters); stpik.* keys go to StpikParams. Unknown keys are an error."""
-        own = {f.name for f in fields(cls)} - {"stpik"}
-        sp = {f.name for f in fields(StpikParams)}
-        kw: dict[str, Any] = {}
-        skw: dict[str, Any] = {}
-        for k, v in data.items():
-            if k.startswith("stpik.") and k[6:] in sp:
-                skw[k[6:]] = v
-            elif k in own:
-                kw[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else v
-            else:
-                raise ValueError(f"motion planner parameter {k!r} is unknown; known: {sorted(own)} and stpik.*")
-        for k in WHOLE_NUMBERS:  # whole numbers only
-            if isinstance(kw.get(k), float) and kw[k].is_integer():
-                kw[k] = int(kw[k])
-        for k in ("direct_first", "seed_per_query", "screen_at_clearance", "certify_relocation"):
-            if k in kw and not isinstance(kw[k], bool):
-                raise ValueError(f"motion planner parameter {k} must be true or false, got {kw[k]!r}")
-        return cls(**kw, stpik=StpikParams(**skw))
-
-    @classmethod
-    def load(cls, path: str | Path | None = None) -> "PlannerParams":
-        """The planner's keys of a ROS params file (default config/motion_planner.yaml). Keys the shipped file gives
-        the motion_planner node for itself are skipped; any other unknown key is an error. ValueError naming the
-        file on malformed YAML, a wrong layout or a bad value."""
-        shipped = config_file("motion_planner.yaml")
-        path = path if path is not None else shipped
-        section = node_section(path, "motion_planner")
-        node_keys = set(node_section(shipped, "motion_planner")) - set(cls.keys())
-        try:
-            return cls.from_mapping({k: v for k, v in section.items() if k not in node_keys})
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"{path}: {e}") from None
 
 
 @dataclass
@@ -194,7 +95,7 @@ class MotionPlanner:
 
     def __init__(self, scenario: Scenario, params: PlannerParams | None = None) -> None:
         self.scenario = scenario
-        self.params = params or PlannerParams()
+        self.params = params if params is not None else PlannerParams.load()  # config/motion_planner.yaml
         seed_ompl(self.params.seed)
         self.kin = Kinematics()
         self.lying: dict[str, Lying] = {}  # bottles of the top shelf that do not stand (set_scenario)

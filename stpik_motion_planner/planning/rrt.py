@@ -124,8 +124,8 @@ def _solve_locked(space, n: int, start, goal, valid: Callable[[np.ndarray], bool
 class CartesianRRT:
     """RRT-Connect over (x, y, z, yaw) within a box; `plan` returns a list of poses or None."""
 
-    def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float = 0.01,
-                 simplify_checks: int = 250, planner_range: float = 0.0) -> None:
+    def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float, simplify_checks: int,
+                 planner_range: float = 0.0) -> None:
         self.lo = np.array(lo, float)
         self.hi = np.array(hi, float)
         self.scale = np.array([1.0, 1.0, 1.0, YAW_SCALE])
@@ -155,8 +155,7 @@ class CartesianRRT:
 class JointRRT:
     """RRT-Connect in joint space (Q convention) between two configurations, for comparison in the benchmark."""
 
-    def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float = 0.02,
-                 simplify_checks: int = 250) -> None:
+    def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float, simplify_checks: int) -> None:
         self.lo, self.hi = np.array(lo, float), np.array(hi, float)
         self.resolution = resolution
         self.simplify_checks = simplify_checks

@@ -33,31 +33,33 @@ from stpik_motion_planner.planning.budget import check_deadline
 
 @dataclass
 class StpikParams:
-    """STPIK's gains, bounds and tolerances (Eq. 9, 10; config/motion_planner.yaml stpik.*)."""
+    """STPIK's gains, bounds and tolerances (Eq. 9, 10): the stpik.* keys of config/motion_planner.yaml, their one
+    place (planning.params.PlannerParams.load)."""
 
-    dt: float = 0.04  # IK step (s); the output is resampled to 100 Hz
-    ee_speed: float = 0.25  # m/s along the reference path
-    approach_speed: float = 0.08  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
-    yaw_speed: float = 0.8  # rad/s
-    k_pos: float = 8.0  # Eq. 9 gain K, position
-    k_ori: float = 8.0  # orientation
-    k_set: float = 8.0  # set-based tasks pushing back into their set
-    k_posture: float = 0.3
-    joint_margin: float = 0.05  # rad inside Table 6
-    joint_buffer: float = 0.15  # rad: joint-limit tasks are candidates inside this band
-    joint_act: float = 0.02  # rad: ... and enter when the next step would bring them this close to the limit
-    self_clearance: float = 0.01  # m
-    clearance: float = 0.015  # m, arm capsules to bottles and boards (the verified bound)
-    buffer: float = 0.03  # m: distance tasks are candidates inside this band
-    act: float = 0.004  # m: ... and enter when the next step would bring them this close to the bound
-    violation_tol: float = 1e-3  # m or rad below a bound at an IK sample: reject
-    track_tol: float = 0.03  # m along the path
-    final_tol_pos: float = 0.004  # m at the end of the path
-    final_tol_ori: float = 0.03  # rad
-    grasp_yaw_tol: float = 0.06  # rad about the vertical, at a grasp that did not converge within final_tol_ori
-    settle_time: float = 1.0  # s allowed after the reference ends
-    step_budget: float = 3.0  # IK steps allowed, in multiples of the reference's nominal steps (accepted: <= 1.22)
-    damping: float = 0.05
+    dt: float  # IK step (s); the output is resampled to 100 Hz
+    ee_speed: float  # m/s along the reference path
+    approach_speed: float  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
+    yaw_speed: float  # rad/s
+    k_pos: float  # Eq. 9 gain K, position
+    k_ori: float  # orientation
+    k_set: float  # set-based tasks pushing back into their set
+    k_posture: float
+    joint_margin: float  # rad inside Table 6
+    joint_buffer: float  # rad: joint-limit tasks are candidates inside this band
+    joint_act: float  # rad: ... and enter when the next step would bring them this close to the limit
+    self_clearance: float  # m
+    clearance: float  # m, arm capsules to bottles and boards (the verified bound)
+    buffer: float  # m: distance tasks are candidates inside this band
+    act: float  # m: ... and enter when the next step would bring them this close to the bound
+    violation_tol: float  # m or rad below a bound at an IK sample: reject
+    track_tol: float  # m along the path
+    final_tol_pos: float  # m at the end of the path
+    final_tol_ori: float  # rad
+    grasp_yaw_tol: float  # rad about the vertical, at a grasp that did not converge within final_tol_ori
+    settle_time: float  # s allowed after the reference ends
+    step_budget: float  # IK steps allowed, in multiples of the reference's nominal steps
+    damping: float  # of the pseudo-inverse near singularities
+    # Table 7 (rad/s); without a stpik.qdot_max key, the robot description's joint speed limits (rd.QDOT_MAX)
     qdot_max: np.ndarray = field(default_factory=lambda: rd.QDOT_MAX.copy())
 
     def __post_init__(self) -> None:
