@@ -29,8 +29,8 @@ from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 from stpik_motion_planner.execution import goal_check
 from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
+from stpik_motion_planner.planning.budget import SafetyNetTimeout
 from stpik_motion_planner.planning.params import PlannerParams
-from stpik_motion_planner.planning.planner import SafetyNetTimeout
 from stpik_motion_planner.ros_interface import SURFACES, RosArmLink, trajectory_to_msg
 from stpik_motion_planner.service import MotionPlannerService
 

@@ -30,7 +30,8 @@ from stpik_motion_planner.execution.streaming import Aborted, Cancelled, Streame
 from stpik_motion_planner.model.blockers import lane_blockers
 from stpik_motion_planner.model.scene_update import Perceived, merge_perceived
 from stpik_motion_planner.planning.params import PlannerParams
-from stpik_motion_planner.planning.planner import MotionPlanner, PlanningError
+from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.results import PlanningError
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
 HEARTBEAT = 2.0  # s without feedback after which a running relocation's last feedback is sent again

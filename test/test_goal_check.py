@@ -54,7 +54,7 @@ def test_the_destination_is_a_free_slot_of_the_scene_not_the_count_of_removed():
 
 
 def test_the_destination_is_the_certified_slot_when_it_is_free():
-    """A certified feasible answer for (o6, removed) planned the carry to slot len(removed) (feasibility._certify).
+    """A certified feasible answer for (o6, removed) planned the carry to slot len(removed) (planning.certify).
     o2 in slot 0 and o3 dropped to the floor, o6 sent with both removed: slot 2 is free, so o6 goes there, as
     certified (before: the first free slot, 1, a carry nobody certified); with slot 2 taken, the first free one."""
     floor = (0.3, 0.0, SHELF.bottom_z - 0.3)

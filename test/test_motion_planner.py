@@ -15,8 +15,10 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.scenario import UnknownObjectError, parse_scenario
 from stpik_motion_planner.model.grasp import PALM_GAP, PALM_REACH, WorkspaceError
+from stpik_motion_planner.planning import home as way_home
 from stpik_motion_planner.planning.params import PlannerParams
-from stpik_motion_planner.planning.planner import MotionPlanner, PlanningError
+from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.results import PlanningError
 
 SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
          "ceiling_z": 0.28, "bottom_z": -0.18}
@@ -129,7 +131,7 @@ def test_bottle_behind_another_is_unfeasible_until_the_front_one_is_removed(plan
 
 def test_timeout_is_a_safety_net_and_no_answer(planner):
     """The wall-clock timeout only stops a query (SafetyNetTimeout: no answer), it never makes it UNFEASIBLE."""
-    from stpik_motion_planner.planning.planner import SafetyNetTimeout
+    from stpik_motion_planner.planning.budget import SafetyNetTimeout
     t = time.perf_counter()
     with pytest.raises(SafetyNetTimeout):
         planner.feasibility("A", frozenset(), timeout=0.005)
@@ -193,8 +195,8 @@ def test_the_way_home_from_a_retreat_needs_no_sampling(planner, monkeypatch):
     retreat = planner.plan_carry("C", frozenset(), 1)[1].trajectory
     slot = SMALL.slot(1)
     sampled = []
-    real = planner.plan_joint
-    monkeypatch.setattr(planner, "plan_joint", lambda *a, **k: sampled.append(1) or real(*a, **k))
+    real = way_home.plan_joint  # the joint-space RRT-Connect of home.plan_home
+    monkeypatch.setattr(way_home, "plan_joint", lambda *a, **k: sampled.append(1) or real(*a, **k))
     home = planner.plan_home(retreat.positions[-1], frozenset({"C"}), placed=[("C", slot)])
     assert not sampled
     np.testing.assert_allclose(home.positions[0], retreat.positions[-1], atol=1e-9)

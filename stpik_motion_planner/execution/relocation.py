@@ -22,7 +22,8 @@ from relocation_common import robot_description as rd
 from stpik_motion_planner.model.grasp import WorkspaceError
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
 from stpik_motion_planner.planning.params import node_parameters
-from stpik_motion_planner.planning.planner import MotionPlanner, PlanningError
+from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.results import PlanningError
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 # progress (0..1) of the whole relocation at the start of each phase, in order

@@ -1,7 +1,7 @@
 """Which bottles block each grasp lane: the grasp/approach screen of feasibility (paper Sect. 4.1,
 step 1) asked per bottle instead of once for all.
 
-A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `MotionPlanner._candidates` keeps a lane when the hand
+A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `planning.pick.candidates` keeps a lane when the hand
 proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for palm and fingers on
 the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each of them, so the
 lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the screen with
