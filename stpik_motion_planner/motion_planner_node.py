@@ -19,6 +19,7 @@ from qtree_relocation_msgs.action import RelocateObject
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
@@ -106,7 +107,7 @@ class MotionPlannerNode(Node):
         if changed:
             self.get_logger().info(f"scene updated from {self.scene_topic}: {changed}")
 
-    def _on_feasibility(self, req, res):
+    def _on_feasibility(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         """PlanFeasibility -> MotionPlannerService.feasibility (Eq. 11); ok=false with the reason for a bad one."""
         res.ok = False
         try:
@@ -134,14 +135,14 @@ class MotionPlannerNode(Node):
         res.blockers = blockers_to_msgs(ans.blockers)
         return res
 
-    def _on_goal(self, goal) -> GoalResponse:
+    def _on_goal(self, goal: RelocateObject.Goal) -> GoalResponse:
         """Only a second goal is rejected; a goal the scene refuses is accepted, then aborted with the reason."""
         if self.core.busy():
             self.get_logger().error("relocation goal rejected: a relocation is already running")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def _execute(self, goal_handle):
+    def _execute(self, goal_handle: ServerGoalHandle) -> RelocateObject.Result:
         """RelocateObject -> MotionPlannerService.relocate on this goal's arm; the outcome ends the goal."""
         assert self.link is not None  # the action server exists only with a link
         arm = StreamedArm(self.link, self.stream_params, lambda: goal_handle.is_cancel_requested,
@@ -156,7 +157,7 @@ class MotionPlannerNode(Node):
         return RelocateObject.Result(success=outcome.status == "succeeded", message=outcome.message)
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """The motion_planner executable."""
     node_main("motion_planner", MotionPlannerNode, args, threads=6)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 import time
 from array import array
-from typing import Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import rclpy
@@ -22,6 +22,9 @@ from geometry_msgs.msg import Point
 from kinova_msgs.action import SetFingersPosition
 from kinova_msgs.msg import FingerPosition, JointVelocity
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -72,7 +75,7 @@ def path_marker(traj: Trajectory, phase: str, every: int = 5) -> Marker:
     return m
 
 
-def _positions(names, msg: JointState) -> tuple[np.ndarray, float] | None:
+def _positions(names: Sequence[str], msg: JointState) -> tuple[np.ndarray, float] | None:
     """(positions of `names`, now) from a joint state, None if one is NaN; ValueError or IndexError if one lacks."""
     q = np.array([msg.position[msg.name.index(n)] for n in names], float)
     return (q, time.monotonic()) if np.all(np.isfinite(q)) else None
@@ -82,7 +85,7 @@ class RosArmLink:
     """streaming.ArmLink over the driver's topics and fingers action, created on `node` (see the module docstring);
     `path` is the publisher of the `~/path` marker. Call close()."""
 
-    def __init__(self, node, surface: str, driver_prefix: str, path) -> None:
+    def __init__(self, node: Node, surface: str, driver_prefix: str, path: Publisher) -> None:
         pre = driver_prefix.rstrip("/")
         self.kinova, self._node, self._path = surface == "kinova", node, path
         self._q: tuple[np.ndarray, float] | None = None
@@ -163,7 +166,7 @@ class RosArmLink:
         return np.array([f.finger1, f.finger2, f.finger3], float)
 
 
-def _wait(future, deadline: float, cancelled: Callable[[], bool], what: str):
+def _wait(future: Future, deadline: float, cancelled: Callable[[], bool], what: str) -> Any:
     done = threading.Event()
     future.add_done_callback(lambda _: done.set())
     while not done.wait(0.02):

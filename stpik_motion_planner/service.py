@@ -223,7 +223,7 @@ class _Heartbeat:
         self.thread.start()
         return self
 
-    def __exit__(self, *_) -> None:
+    def __exit__(self, *_: object) -> None:
         self.done.set()
         self.thread.join()
         self.arm.feedback = self.send

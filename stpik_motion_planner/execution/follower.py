@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
 from stpik_motion_planner.planning.params import node_parameters
@@ -86,7 +87,8 @@ class TrajectoryFollower:
 
     RUNNING, SETTLED, FAILED = "running", "settled", "failed"
 
-    def __init__(self, trajectory: Trajectory, qdot_max=rd.QDOT_MAX, params: FollowerParams | None = None):
+    def __init__(self, trajectory: Trajectory, qdot_max: ArrayLike = rd.QDOT_MAX, params: FollowerParams | None = None
+                 ) -> None:
         if len(trajectory) == 0:
             raise ValueError("cannot follow an empty trajectory")
         self.traj = trajectory
@@ -116,13 +118,13 @@ class TrajectoryFollower:
         k = int(np.clip(np.searchsorted(tr.times, t, side="right") - 1, 0, len(tr.times) - 1))
         return tr.positions[k] + tr.velocities[k] * (t - tr.times[k]), tr.velocities[k]
 
-    def _error(self, q) -> float:
+    def _error(self, q: ArrayLike) -> float:
         q = np.asarray(q, float)
         if q.shape != (rd.N_JOINTS,) or not np.all(np.isfinite(q)):
             raise ValueError(f"measured configuration must be 7 finite angles, got {q!r}")
         return float(np.max(np.abs(joint_error(self.reference(self.tau)[0], q))))
 
-    def update(self, q, dt: float) -> str:
+    def update(self, q: ArrayLike, dt: float) -> str:
         """Advance the reference by dt of wall time given the measured configuration; RUNNING, SETTLED or
         FAILED (see `reason`)."""
         err = self._error(q)
@@ -149,7 +151,7 @@ class TrajectoryFollower:
                 return self.FAILED
         return self.RUNNING
 
-    def command(self, q) -> np.ndarray:
+    def command(self, q: ArrayLike) -> np.ndarray:
         """Joint velocities (rad/s) to send now given the measured configuration q."""
         self._error(q)
         q_ref, v_ff = self.reference(self.tau)

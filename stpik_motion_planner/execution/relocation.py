@@ -14,13 +14,14 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import ContextManager, Protocol
 
 import numpy as np
 
 from relocation_common import robot_description as rd
 from stpik_motion_planner.model.grasp import WorkspaceError
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
+from stpik_motion_planner.planning.context import Placed
 from stpik_motion_planner.planning.params import node_parameters
 from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.results import PlanningError
@@ -94,8 +95,8 @@ def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str], 
 
 
 def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float | None = None,
-             lock=None, progress: Progress | None = None, slot: int | None = None,
-             placed: list | None = None) -> RelocationPlan:
+             lock: ContextManager[object] | None = None, progress: Progress | None = None, slot: int | None = None,
+             placed: Placed | None = None) -> RelocationPlan:
     """Relocate object_id to its slot (`slot` and `placed` as plan_relocation); PlanningError (or the arm's error)
     names the failed stage. `lock` guards the planner (not thread-safe) while it plans, not while the arm moves.
     `progress` records what was done (for `recover` after a failure). Farther than `home_tol` (rad; None:
@@ -157,7 +158,7 @@ class _Recorded:
         self.arm.follow(trajectory, phase)
 
 
-def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock=None) -> str:
+def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextManager[object] | None = None) -> str:
     """A safe state after a failed or cancelled relocation (the next goal starts from home, nothing held).
 
     Before the release: back along the motions made, newest first (the same paths, as clear as on the way there);

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, fields
-from typing import Any, Callable, Mapping, Protocol
+from typing import Any, Callable, Iterable, Mapping, Protocol
 
 import numpy as np
 
@@ -63,7 +63,7 @@ class StreamParams:
             raise ValueError(f"parameter stream_rate must be > 0, got {self.stream_rate!r}")
 
     @classmethod
-    def from_mapping(cls, params: Mapping[str, Any], qdot_max) -> StreamParams:
+    def from_mapping(cls, params: Mapping[str, Any], qdot_max: Iterable[float]) -> StreamParams:
         """From the node's parameters (the keys of this class, `follower.*` for FollowerParams); ValueError."""
         keys = {f.name for f in fields(cls)} - {"qdot_max", "follower"}
         return cls(**{k: float(v) for k, v in params.items() if k in keys}, qdot_max=tuple(qdot_max),

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -28,6 +27,7 @@ from stpik_motion_planner.model.collision import (
     carried_bottle,
 )
 from stpik_motion_planner.model.grasp import (
+    Pose,
     WorkspaceError,
     check_pose,
     exit_pose,
@@ -190,7 +190,7 @@ def carried_models(ctx: PlanningContext, b: Bottle, q_start: np.ndarray, obs: Ob
     return carried, ArmGeometry(ctx.kin, [start]), arm_c
 
 
-def carried_hand(ctx: PlanningContext, carried: CapsuleSpec, lifted: Sequence[float], obs: ObstacleSet,
+def carried_hand(ctx: PlanningContext, carried: CapsuleSpec, lifted: Pose, obs: ObstacleSet,
                  floor: float) -> HandProxy:
     """The Cartesian planner's hand proxy holding the bottle, inflated by its clearance bound plus STPIK's
     activation band, or less where the lifted start is closer than that to a neighbour (in steps of

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Iterable, Sequence
+from typing import Iterable
 
 import numpy as np
 
@@ -25,7 +25,7 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from stpik_motion_planner.model.blockers import answer_blockers
 from stpik_motion_planner.model.collision import HAND_PARTS, HandProxy, ObstacleSet
-from stpik_motion_planner.model.grasp import Grasp, WorkspaceError, pose_matrix, side_grasp
+from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, side_grasp
 from stpik_motion_planner.planning.certify import certify
 from stpik_motion_planner.planning.context import PlanningContext, draw_seed
 from stpik_motion_planner.planning.results import PlanningError, QueryStats, Segment
@@ -152,13 +152,13 @@ def candidates(ctx: PlanningContext, object_id: str, obs: ObstacleSet, yaws: lis
     return out
 
 
-def front_of_shelf(ctx: PlanningContext, pose: Sequence[float]) -> np.ndarray:
+def front_of_shelf(ctx: PlanningContext, pose: Pose) -> np.ndarray:
     """In front of the shelf at the height and lateral position of `pose` (the start of a direct entry)."""
     x = min(pose[0], ctx.scenario.shelf.x_front - 0.06)
     return np.array([x, pose[1] - (pose[0] - x) * math.tan(pose[3]), pose[2], pose[3]])
 
 
-def cartesian_path(ctx: PlanningContext, start: Sequence[float], goal: Sequence[float], obs: ObstacleSet,
+def cartesian_path(ctx: PlanningContext, start: Pose, goal: Pose, obs: ObstacleSet,
                    hand: HandProxy, max_checks: int, deadline: float, stats: QueryStats, first: bool,
                    rng: np.random.Generator | None = None) -> list[np.ndarray] | None:
     """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on

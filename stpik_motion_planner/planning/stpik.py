@@ -20,15 +20,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
-from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, ObstacleSet
+from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, ObstacleSet, Skip
 from stpik_motion_planner.model.grasp import side_rotation
+from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.budget import check_deadline
+
+Level = tuple[np.ndarray | None, np.ndarray]  # one task of Eq. 10: (Jacobian, None for the identity; reference)
+Candidates = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # set-based tasks: group, sigma, rows, threshold
 
 
 @dataclass
@@ -102,7 +107,7 @@ except (ImportError, AttributeError):  # pragma: no cover - another numpy layout
     _SVD_S = None
 
 
-def _svd(a: np.ndarray):
+def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Thin SVD of a small matrix (bit-identical to np.linalg.svd(a, full_matrices=False), less overhead)."""
     if _SVD_S is not None:
         with np.errstate(invalid="ignore"):
@@ -112,11 +117,12 @@ def _svd(a: np.ndarray):
     return np.linalg.svd(a, full_matrices=False)  # raises LinAlgError where it did not converge
 
 
-def hierarchy(levels, n: int, damping: float) -> np.ndarray:
+def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
     """Recursive null-space projection (Eq. 10): qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
     damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last).
     The first level skips its products with N_0 = I and qdot_0 = 0 (exact in floating point)."""
-    qdot = proj = None
+    qdot: np.ndarray | None = None
+    proj: np.ndarray | None = None
     for jac, xd in levels:
         if jac is None:  # identity task (posture): its projection needs no decomposition
             return np.array(xd, float) if qdot is None else qdot + proj @ (xd - qdot)
@@ -142,8 +148,8 @@ class _Run:
     q: np.ndarray
     bound: np.ndarray  # each shape's clearance bound to obstacles
     d_act: float  # broad-phase distance: the largest bound + buffer
-    qs: list = field(default_factory=list)
-    qdots: list = field(default_factory=list)
+    qs: list[np.ndarray] = field(default_factory=list)
+    qdots: list[np.ndarray] = field(default_factory=list)
     tau: float = 0.0  # reference time (slows down when joint velocities are scaled)
     settle: float = 0.0
     seg: int = 0
@@ -164,13 +170,13 @@ class _Reject(Exception):
 class Stpik:
     """Tracks a Cartesian path [(x, y, z, yaw), ...] from a start configuration; see the module docstring."""
 
-    def __init__(self, kin, arm: ArmGeometry, params: StpikParams) -> None:
+    def __init__(self, kin: Kinematics, arm: ArmGeometry, params: StpikParams) -> None:
         self.kin, self.arm, self.p = kin, arm, params
         self.lower = rd.Q_LOWER + params.joint_margin
         self.upper = rd.Q_UPPER - params.joint_margin
         self.eye = np.eye(rd.N_JOINTS)
 
-    def _reference(self, path: list[np.ndarray], speed: float | None = None):
+    def _reference(self, path: list[np.ndarray], speed: float | None = None) -> np.ndarray:
         """Piecewise-linear reference: cumulative times of the waypoints (at `speed`, default ee_speed)."""
         p = self.p
         speed = speed or p.ee_speed
@@ -180,8 +186,8 @@ class Stpik:
             times.append(times[-1] + dur)
         return np.array(times)
 
-    def track(self, q0, path: list[np.ndarray], obs: ObstacleSet, deadline: float,
-              skip: dict[str, frozenset] | None = None, posture=None, speed: float | None = None,
+    def track(self, q0: ArrayLike, path: Sequence[ArrayLike], obs: ObstacleSet, deadline: float,
+              skip: Skip | None = None, posture: ArrayLike | None = None, speed: float | None = None,
               ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0) -> StpikResult:
         """Closed-loop IK (Eq. 9) with the hierarchy of Eq. 10 along `path`, from q0.
         `yaw_tol` > 0 (rad): a goal not reached within final_tol_ori when the settle time is spent is still
@@ -195,20 +201,20 @@ class Stpik:
         bottle they held, 200-350 N, and it moved 18-25 mm in the hand for a few ms); the joint-limit tasks then
         enter early enough to stop within that acceleration. Both for a hand holding a bottle."""
         p = self.p
-        path = [np.asarray(w, float) for w in path]
-        times = self._reference(path, speed)
+        waypoints = [np.asarray(w, float) for w in path]
+        times = self._reference(waypoints, speed)
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
         # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
         bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
         run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol)
         run.qs.append(run.q.copy())
-        nominal = times[-1] + ramp * (len(path) - 1)  # a ramp adds about `ramp` s per segment
+        nominal = times[-1] + ramp * (len(waypoints) - 1)  # a ramp adds about `ramp` s per segment
         max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
         while True:
             check_deadline(deadline, "the STPIK check")
             if len(run.qdots) >= max_steps:
                 return self._result(False, f"step budget spent ({max_steps} IK steps)", run)
-            ref, vel, t1 = self._reference_at(path, times, run, ramp)
+            ref, vel, t1 = self._reference_at(waypoints, times, run, ramp)
             try:
                 scale = self._step(run, ref, vel, times[-1], obs, skip, posture, accel)
             except _Reject as e:
@@ -220,7 +226,8 @@ class Stpik:
             else:
                 run.tau = min(run.tau + p.dt * scale, times[-1])
 
-    def _reference_at(self, path, times, run: _Run, ramp: float):
+    def _reference_at(self, path: list[np.ndarray], times: np.ndarray, run: _Run, ramp: float
+                      ) -> tuple[np.ndarray, np.ndarray, float]:
         """Reference pose and velocity at run.tau (piecewise linear; trapezoidal speed with a ramp), segment end."""
         p = self.p
         while run.seg < len(path) - 2 and run.tau >= times[run.seg + 1]:
@@ -239,7 +246,8 @@ class Stpik:
             vel = vel * run.rate
         return ref, vel, t1
 
-    def _step(self, run: _Run, ref, vel, t_end: float, obs, skip, posture, accel: float) -> float:
+    def _step(self, run: _Run, ref: np.ndarray, vel: np.ndarray, t_end: float, obs: ObstacleSet, skip: Skip | None,
+              posture: np.ndarray, accel: float) -> float:
         """One IK step (Eq. 9-10) from run.q; returns the velocity scale of Table 7; raises _Reject to stop
         (reason "reached" when the goal is reached)."""
         p, kin = self.p, self.kin
@@ -279,7 +287,7 @@ class Stpik:
         run.qdots.append(qdot)
         return scale
 
-    def _set_tasks(self, run: _Run, obs, skip):
+    def _set_tasks(self, run: _Run, obs: ObstacleSet, skip: Skip | None) -> Candidates | None:
         """Set-based candidates of Eq. 10 at run.q as arrays (group, sigma, jacobian rows, activation threshold):
         joint limits (0), self-collision (1), obstacle clearance (2). Raises _Reject on a collision or a violated
         bound."""
@@ -287,8 +295,8 @@ class Stpik:
         q = run.q
         grp, sig, rows, buf = [], [], [], []
         lo, hi = q - self.lower, self.upper - q
-        for i in np.nonzero((lo < p.joint_buffer) | (hi < p.joint_buffer))[0]:
-            for s_, row in ((lo[i], self.eye[i]), (hi[i], -self.eye[i])):
+        for k in np.nonzero((lo < p.joint_buffer) | (hi < p.joint_buffer))[0]:
+            for s_, row in ((lo[k], self.eye[k]), (hi[k], -self.eye[k])):
                 if s_ < p.joint_buffer:
                     grp.append(0)
                     sig.append(s_)
@@ -328,7 +336,8 @@ class Stpik:
             return None
         return np.array(grp), np.array(sig, float), np.array(rows), np.array(buf)
 
-    def _solve(self, cands, eq_levels, prev, accel: float) -> np.ndarray:
+    def _solve(self, cands: Candidates | None, eq_levels: list[Level], prev: np.ndarray | None, accel: float
+               ) -> np.ndarray:
         """Eq. 10 with the set-based tasks that must enter: a candidate is activated when the step without it would
         bring it within its threshold (with `accel`, joint limits early enough to stop); iterated."""
         p = self.p
