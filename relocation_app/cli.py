@@ -44,7 +44,8 @@ def _blocking_oracle(scenario, args):
 
 def _planner_oracle(scenario, args):
     from stpik_motion_planner.model.grasp import WorkspaceError
-    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
 
     try:
         return MotionPlanner(scenario, PlannerParams.load())  # a LaneOracle: lane_blockers too

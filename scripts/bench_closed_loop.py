@@ -51,7 +51,8 @@ from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
 from relocation_common.shelf_object import tilt_of_quaternion
 from stpik_motion_planner.model.collision import Lying
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 # the planner's wall-clock safety nets 4-12x the defaults, the follower's settle time 3x: on the shared machine
 # (load 10-25 on 2 cores) the 5 s feasibility and 10 s (then 40 s) planning nets ran out and the follower did not

@@ -36,7 +36,8 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -46,7 +46,7 @@ def _params(sets: list[str]):
     """config/motion_planner.yaml with the `key=value` changes, the safety nets at SAFETY_NET."""
     import dataclasses
 
-    from stpik_motion_planner.planning.planner import PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
     base = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
     if not sets:
         return base
@@ -72,7 +72,8 @@ def one(path: str, solver: str, sets: list[str]) -> dict:
     from relocation_common.feasibility import Label
     from relocation_common.scenario import load_scenario
     from stpik_motion_planner.execution.relocation import plan_relocation
-    from stpik_motion_planner.planning.planner import MotionPlanner, PlanningError
+    from stpik_motion_planner.planning.planner import MotionPlanner
+    from stpik_motion_planner.planning.results import PlanningError
 
     sc = load_scenario(path)
     planner = MotionPlanner(sc, _params(sets))

@@ -24,7 +24,8 @@ from qtree_task_planner.executive.closed_loop import SeenObject, remaining_probl
 from qtree_task_planner.executive.replan import GeometryCache, replan
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 
 def shipped_scenes() -> list[str]:

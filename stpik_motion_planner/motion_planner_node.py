@@ -19,20 +19,21 @@ from qtree_relocation_msgs.action import RelocateObject
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from visualization_msgs.msg import Marker
 
 from relocation_common import arm_interface
-from relocation_common import robot_description as rd
 from relocation_common.arm_interface import ArmInterface
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_objects
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 from stpik_motion_planner.execution import goal_check
 from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
-from stpik_motion_planner.planning.planner import PlannerParams, SafetyNetTimeout
+from stpik_motion_planner.planning.budget import SafetyNetTimeout
+from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.ros_interface import RosArmLink, trajectory_to_msg
 from stpik_motion_planner.service import MotionPlannerService
 
@@ -57,7 +58,7 @@ class MotionPlannerNode(Node):
         if params["serve_relocation"]:
             goal_check.check_parameters({k: params[k] for k in goal_check.PARAMETERS})
             self.core.checks = {k: float(params[k]) for k in goal_check.PARAMETERS}
-            self.stream_params = StreamParams.from_mapping(params, rd.QDOT_MAX)  # Table 7: the robot's
+            self.stream_params = StreamParams.from_mapping(params)
             self.link = RosArmLink(self, arm, self.create_publisher(Marker, "~/path", SCENE_QOS))
         self.create_subscription(ObjectArray, params["scene_topic"], self._on_scene, SCENE_QOS,
                                  callback_group=MutuallyExclusiveCallbackGroup())
@@ -105,7 +106,7 @@ class MotionPlannerNode(Node):
         if changed:
             self.get_logger().info(f"scene updated from {self.scene_topic}: {changed}")
 
-    def _on_feasibility(self, req, res):
+    def _on_feasibility(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         """PlanFeasibility -> MotionPlannerService.feasibility (Eq. 11); ok=false with the reason for a bad one."""
         res.ok = False
         try:
@@ -133,14 +134,14 @@ class MotionPlannerNode(Node):
         res.blockers = blockers_to_msgs(ans.blockers)
         return res
 
-    def _on_goal(self, goal) -> GoalResponse:
+    def _on_goal(self, goal: RelocateObject.Goal) -> GoalResponse:
         """Only a second goal is rejected; a goal the scene refuses is accepted, then aborted with the reason."""
         if self.core.busy():
             self.get_logger().error("relocation goal rejected: a relocation is already running")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def _execute(self, goal_handle):
+    def _execute(self, goal_handle: ServerGoalHandle) -> RelocateObject.Result:
         """RelocateObject -> MotionPlannerService.relocate on this goal's arm; the outcome ends the goal."""
         assert self.link is not None  # the action server exists only with a link
         arm = StreamedArm(self.link, self.stream_params, lambda: goal_handle.is_cancel_requested,
@@ -155,7 +156,7 @@ class MotionPlannerNode(Node):
         return RelocateObject.Result(success=outcome.status == "succeeded", message=outcome.message)
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """The motion_planner executable."""
     node_main("motion_planner", MotionPlannerNode, args, threads=6)
 

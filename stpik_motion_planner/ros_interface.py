@@ -14,7 +14,7 @@ from __future__ import annotations
 import threading
 import time
 from array import array
-from typing import Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import rclpy
@@ -24,6 +24,9 @@ from geometry_msgs.msg import Point
 from kinova_msgs.action import SetFingersPosition
 from kinova_msgs.msg import FingerPosition, JointVelocity
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -71,7 +74,7 @@ def path_marker(traj: Trajectory, phase: str, every: int = 5) -> Marker:
     return m
 
 
-def _positions(names, msg: JointState) -> tuple[np.ndarray, float] | None:
+def _positions(names: Sequence[str], msg: JointState) -> tuple[np.ndarray, float] | None:
     """(positions of `names`, now) from a joint state, None if one is NaN; ValueError or IndexError if one lacks."""
     q = np.array([msg.position[msg.name.index(n)] for n in names], float)
     return (q, time.monotonic()) if np.all(np.isfinite(q)) else None
@@ -81,7 +84,7 @@ class RosArmLink:
     """streaming.ArmLink over the driver's topics and fingers action as `arm` says, created on `node` (see the module
     docstring); `path` is the publisher of the `~/path` marker. Call close()."""
 
-    def __init__(self, node, arm: ArmInterface, path) -> None:
+    def __init__(self, node: Node, arm: ArmInterface, path: Publisher) -> None:
         self.kinova, self._node, self._path = arm.kinova, node, path
         self._q: tuple[np.ndarray, float] | None = None
         self._fingers_q: tuple[np.ndarray, float] | None = None  # finger joint angles (rad), time received
@@ -164,7 +167,7 @@ class RosArmLink:
         return np.array([f.finger1, f.finger2, f.finger3], float)
 
 
-def _wait(future, deadline: float, cancelled: Callable[[], bool], what: str):
+def _wait(future: Future, deadline: float, cancelled: Callable[[], bool], what: str) -> Any:
     done = threading.Event()
     future.add_done_callback(lambda _: done.set())
     while not done.wait(0.02):

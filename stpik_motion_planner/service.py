@@ -29,7 +29,9 @@ from stpik_motion_planner.execution.relocation import Progress, recover, relocat
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm
 from stpik_motion_planner.model.blockers import lane_blockers
 from stpik_motion_planner.model.scene_update import merge_perceived
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, PlanningError
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.results import PlanningError
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
 HEARTBEAT = 2.0  # s without feedback after which a running relocation's last feedback is sent again
@@ -49,9 +51,10 @@ class Outcome:
 
 
 class MotionPlannerService:
-    """The node's behaviour (the module docstring). `home_tol`: relocation.relocate's (rad)."""
+    """The node's behaviour (the module docstring). `home_tol`: relocation.relocate's (rad; None:
+    config/motion_planner.yaml's)."""
 
-    def __init__(self, scenario: Scenario, params: PlannerParams, home_tol: float = 0.05,
+    def __init__(self, scenario: Scenario, params: PlannerParams, home_tol: float | None = None,
                  log: Callable[[str, str], None] = lambda *_: None) -> None:
         self.base, self.log, self.home_tol = scenario, log, home_tol
         self.planner = MotionPlanner(scenario, params)
@@ -62,7 +65,7 @@ class MotionPlannerService:
         self._relocating = threading.Lock()
         self._slot = 0  # the running relocation's slot
         self.scene = goal_check.SceneWatch()  # the last scene as received (goal checks, outcome checks)
-        self.checks: dict[str, float] = dict(goal_check.DEFAULTS)  # the node sets the parameters'
+        self.checks: dict[str, float] = goal_check.configured()  # the node sets the parameters'
 
     # -- the scene ------------------------------------------------------------------------------------------
     def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene") -> list[str]:
@@ -87,18 +90,18 @@ class MotionPlannerService:
         return m.changed
 
     # -- feasibility (Eq. 11) -------------------------------------------------------------------------------
-    def feasibility(self, object_id: str, removed: Iterable[str], timeout: float = 0.0,
+    def feasibility(self, object_id: str, removed: Iterable[str], timeout: float | None = None,
                     all_lanes: bool = False) -> tuple[dict[str, tuple[BlockerSet, ...]], FeasibilityAnswer | None]:
         """(every lane's blockers with `removed` gone if `all_lanes`, else {}; the answer for `object_id`, None when
-        all_lanes and no object is asked). `timeout` <= 0: the planner's. UnknownObjectError, ScenarioError,
+        all_lanes and no object is asked). `timeout` None or <= 0: the planner's. UnknownObjectError, ScenarioError,
         ValueError, TypeError for a bad question; SafetyNetTimeout when the wall-clock safety net ran out."""
-        if not math.isfinite(timeout):
+        if timeout is not None and not math.isfinite(timeout):
             raise ValueError(f"timeout must be a finite number of seconds (<= 0: the default), got {timeout}")
         removed = list(removed)
         with self.plan_lock:
             lanes = lane_blockers(self.planner, removed) if all_lanes else {}
             answer = None if all_lanes and not object_id else self.planner.feasibility(
-                object_id, removed, float(timeout) if timeout > 0 else None)
+                object_id, removed, float(timeout) if timeout is not None and timeout > 0 else None)
         return lanes, answer
 
     # -- relocation -----------------------------------------------------------------------------------------
@@ -218,7 +221,7 @@ class _Heartbeat:
         self.thread.start()
         return self
 
-    def __exit__(self, *_) -> None:
+    def __exit__(self, *_: object) -> None:
         self.done.set()
         self.thread.join()
         self.arm.feedback = self.send

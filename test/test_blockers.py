@@ -14,7 +14,9 @@ from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model import blockers
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.pick import candidates
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +32,7 @@ def planners():
 
 @pytest.mark.parametrize("name", ["scenario3_15", "paper_experiment_10"])
 def test_lane_blockers_are_the_screen(planners, name):
-    """A lane passes MotionPlanner._candidates with `removed` gone exactly when its blockers are all removed."""
+    """A lane passes pick.candidates with `removed` gone exactly when its blockers are all removed."""
     mp = planners(name)
     ids = [b.id for b in mp.scenario.objects]
     rnd = random.Random(5)
@@ -40,7 +42,7 @@ def test_lane_blockers_are_the_screen(planners, name):
         lanes = blockers.lane_blockers(mp, removed)
         assert set(lanes) == set(ids) - removed
         for o in lanes:
-            screen = {round(g.yaw, 6) for g in mp._candidates(o, mp.scene.obstacles(removed))}
+            screen = {round(g.yaw, 6) for g in candidates(mp, o, mp.scene.obstacles(removed))}
             clear = {round(g.yaw, 6) for g, bl in blockers.static_lanes(mp, o) if bl <= removed}
             assert screen == clear, (o, sorted(removed))
             assert all(b.certain and not b.objects & removed for b in lanes[o])
@@ -94,7 +96,7 @@ def test_unfeasible_answers_name_their_blockers(planners):
 def test_an_stpik_failure_is_uncertain(planners, monkeypatch):
     """A lane the screen passes but the STPIK check rejects: an uncertain set (the bottles near it)."""
     mp = planners("paper_experiment_10")
-    monkeypatch.setattr(mp, "_track", lambda *a, **k: type("R", (), {"ok": False, "reason": "test"})())
+    monkeypatch.setattr(mp, "track", lambda *a, **k: type("R", (), {"ok": False, "reason": "test"})())
     a = mp.feasibility("o1", frozenset())
     # every lane the screen passes is uncertain; the one it does not (yaw -0.80, o2 in the way) stays certain
     assert a.label == Label.UNFEASIBLE and any(not b.certain for b in a.blockers)

@@ -11,7 +11,8 @@ from relocation_common.feasibility import Label
 from relocation_common.paths import default_scenario
 from relocation_common.ros_conversions import blockers_from_msgs, lanes_from_msgs
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 pytestmark = pytest.mark.graph
 

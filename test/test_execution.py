@@ -11,7 +11,8 @@ from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.execution.follower import FollowerParams, TrajectoryFollower
 from stpik_motion_planner.execution.relocation import PHASES, relocate
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 DT = 0.01
@@ -40,7 +41,7 @@ def test_follower_on_track_sends_the_planned_velocity_and_settles():
 
 def test_follower_waits_for_a_lagging_arm_instead_of_cutting_corners():
     traj = _line(speed=0.8)
-    p = FollowerParams()
+    p = FollowerParams.load()
     f = TrajectoryFollower(traj, params=p)
     q = traj.positions[0].copy()
     for _ in range(30):  # the arm does not move for 0.3 s (late driver)
@@ -60,7 +61,7 @@ def test_follower_waits_for_a_lagging_arm_instead_of_cutting_corners():
 
 def test_follower_reports_a_blocked_arm_and_a_bad_start():
     traj = _line(speed=0.8)
-    f = TrajectoryFollower(traj, params=FollowerParams(stall_timeout=0.5))
+    f = TrajectoryFollower(traj, params=dataclasses.replace(FollowerParams.load(), stall_timeout=0.5))
     q = traj.positions[0].copy()
     statuses = [f.update(q, DT) for _ in range(100)]
     assert statuses[-1] == f.FAILED and "stalled" in f.reason
@@ -72,7 +73,7 @@ def test_follower_reports_a_blocked_arm_and_a_bad_start():
     with pytest.raises(ValueError, match="empty"):
         TrajectoryFollower(Trajectory.empty())
     with pytest.raises(ValueError, match="positive"):
-        FollowerParams(k_track=float("nan"))
+        dataclasses.replace(FollowerParams.load(), k_track=float("nan"))
 
 
 FINGERS = ("finger_sim_1", "finger_sim_2", "finger_sim_3")

@@ -14,7 +14,8 @@ from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import parse_scenario
 from stpik_motion_planner.execution.relocation import plan_relocation
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 SAMPLE = [("o3", []), ("T", ["o2", "o3", "o6"])]
 

@@ -54,7 +54,7 @@ def test_the_destination_is_a_free_slot_of_the_scene_not_the_count_of_removed():
 
 
 def test_the_destination_is_the_certified_slot_when_it_is_free():
-    """A certified feasible answer for (o6, removed) planned the carry to slot len(removed) (feasibility._certify).
+    """A certified feasible answer for (o6, removed) planned the carry to slot len(removed) (planning.certify).
     o2 in slot 0 and o3 dropped to the floor, o6 sent with both removed: slot 2 is free, so o6 goes there, as
     certified (before: the first free slot, 1, a carry nobody certified); with slot 2 taken, the first free one."""
     floor = (0.3, 0.0, SHELF.bottom_z - 0.3)
@@ -67,9 +67,10 @@ def test_the_destination_is_the_certified_slot_when_it_is_free():
 
 
 def test_plan_relocation_goes_to_the_slot_given_with_the_bottles_placed():
-    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
 
-    planner = MotionPlanner(SC, PlannerParams())
+    planner = MotionPlanner(SC, PlannerParams.load())
     plan = plan_relocation(planner, "o2", [], slot=1, placed=[("o1", SLOTS[0])])
     assert plan.slot_index == 1 and plan.placed == [("o1", SLOTS[0])]
 

@@ -17,7 +17,8 @@ from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.collision import Lying
 from stpik_motion_planner.model.grasp import grasp_standoff
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 STANDING = {"o3": (0.809, -0.097), "o4": (0.839, -0.327), "o5": (0.837, 0.112), "T": (0.87734, -0.08721)}
 LYING_O2 = Lying((0.71777, 0.0898, 0.05291), (0.707107, 0.671796, -0.220657, 0.0))  # (w, x, y, z)

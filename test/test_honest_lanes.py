@@ -1,6 +1,6 @@
 """Honest lanes (docs/motion_planner.md, "Honest lanes"): with `screen_at_clearance` the screen's hand keeps STPIK's
 own clearance, so a neighbour STPIK cannot pass at the grasp is a blocker of the lane instead of a failed STPIK
-check; the lanes stay exactly the screen's answer (`_candidates`) for any removed set."""
+check; the lanes stay exactly the screen's answer (`pick.candidates`) for any removed set."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,7 +11,9 @@ import yaml
 from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import parse_scenario
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.pick import candidates
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 
 def test_a_neighbour_within_the_clearance_blocks_the_lane_and_the_screen_stays_exact():
@@ -28,5 +30,5 @@ def test_a_neighbour_within_the_clearance_blocks_the_lane_and_the_screen_stays_e
     for _ in range(20):
         removed = frozenset(rng.sample(others, rng.randint(0, len(others))))
         clear = {b.lane for b in planner.lane_blockers(removed)["T"] if not b.objects}
-        cands = {f"yaw {g.yaw:+.2f}" for g in planner._candidates("T", planner.scene.obstacles(removed))}
+        cands = {f"yaw {g.yaw:+.2f}" for g in candidates(planner, "T", planner.scene.obstacles(removed))}
         assert clear == cands, removed

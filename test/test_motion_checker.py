@@ -21,7 +21,9 @@ from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario, parse_scenario
 from stpik_motion_planner.execution.relocation import plan_relocation, relocate
 from stpik_motion_planner.model.grasp import WorkspaceError
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, PlanningError
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.results import PlanningError
 
 PARAMS = PlannerParams.load()
 ARM_CLEARANCE = PARAMS.stpik.clearance - 0.002  # the planner's bound less the interpolation between IK samples

@@ -15,7 +15,10 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.scenario import UnknownObjectError, parse_scenario
 from stpik_motion_planner.model.grasp import PALM_GAP, PALM_REACH, WorkspaceError
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, PlanningError
+from stpik_motion_planner.planning import home as way_home
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.results import PlanningError
 
 SHELF = {"x_front": 0.62, "depth": 0.36, "width": 0.8, "board_thickness": 0.02, "top_z": 0.02,
          "ceiling_z": 0.28, "bottom_z": -0.18}
@@ -128,7 +131,7 @@ def test_bottle_behind_another_is_unfeasible_until_the_front_one_is_removed(plan
 
 def test_timeout_is_a_safety_net_and_no_answer(planner):
     """The wall-clock timeout only stops a query (SafetyNetTimeout: no answer), it never makes it UNFEASIBLE."""
-    from stpik_motion_planner.planning.planner import SafetyNetTimeout
+    from stpik_motion_planner.planning.budget import SafetyNetTimeout
     t = time.perf_counter()
     with pytest.raises(SafetyNetTimeout):
         planner.feasibility("A", frozenset(), timeout=0.005)
@@ -192,8 +195,8 @@ def test_the_way_home_from_a_retreat_needs_no_sampling(planner, monkeypatch):
     retreat = planner.plan_carry("C", frozenset(), 1)[1].trajectory
     slot = SMALL.slot(1)
     sampled = []
-    real = planner.plan_joint
-    monkeypatch.setattr(planner, "plan_joint", lambda *a, **k: sampled.append(1) or real(*a, **k))
+    real = way_home.plan_joint  # the joint-space RRT-Connect of home.plan_home
+    monkeypatch.setattr(way_home, "plan_joint", lambda *a, **k: sampled.append(1) or real(*a, **k))
     home = planner.plan_home(retreat.positions[-1], frozenset({"C"}), placed=[("C", slot)])
     assert not sampled
     np.testing.assert_allclose(home.positions[0], retreat.positions[-1], atol=1e-9)
@@ -204,13 +207,23 @@ def test_the_way_home_from_a_retreat_needs_no_sampling(planner, monkeypatch):
     assert sampled
 
 
-def test_default_scenario_target_is_blocked_and_freed_by_o2_o3_o6():
+def test_default_scenario_target_is_blocked_and_freed_by_o2_o6():
+    """With the shipped grasp set (config/motion_planner.yaml: 5 yaws up to 0.5 rad, the second tier up to 0.8):
+    T is blocked until o2 and o6 are gone, and o6 until o2 is (the demo's learned o2 -> o6 -> T, README). The
+    first tier alone (3 yaws up to 0.35 rad) needed o3 gone as well: o6 stayed blocked with o2 gone."""
     from relocation_common.paths import default_scenario
     from relocation_common.scenario import load_scenario
     sc = load_scenario(default_scenario())
-    mp = MotionPlanner(sc)
+    mp = MotionPlanner(sc)  # the shipped parameters
     assert mp.feasibility("T", frozenset()).label == Label.UNFEASIBLE
-    assert mp.feasibility("o6", frozenset({"o2"})).label == Label.UNFEASIBLE
-    ans = mp.feasibility("T", frozenset({"o2", "o3", "o6"}))
-    assert ans.label == Label.TARGET, ans.message
-    verify(ans.trajectory, sc, {"o2", "o3", "o6"}, "T", approach_start(ans.trajectory))
+    assert mp.feasibility("T", frozenset({"o2", "o3"})).label == Label.UNFEASIBLE
+    assert mp.feasibility("o6", frozenset()).label == Label.UNFEASIBLE
+    ans = mp.feasibility("o6", frozenset({"o2"}))
+    assert ans.label == Label.OBSTACLE, ans.message
+    verify(ans.trajectory, sc, {"o2"}, "o6", approach_start(ans.trajectory))
+    for removed in ({"o2", "o6"}, {"o2", "o3", "o6"}):
+        ans = mp.feasibility("T", frozenset(removed))
+        assert ans.label == Label.TARGET, ans.message
+        verify(ans.trajectory, sc, removed, "T", approach_start(ans.trajectory))
+    narrow = dataclasses.replace(mp.params, n_yaws=3, max_yaw=0.35, wide_yaws=0)  # the grasp set this is about
+    assert MotionPlanner(sc, narrow).feasibility("o6", frozenset({"o2"})).label == Label.UNFEASIBLE

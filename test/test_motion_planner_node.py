@@ -21,7 +21,8 @@ from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed
 from relocation_common.paths import default_scenario
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 pytestmark = pytest.mark.graph
 

@@ -27,7 +27,8 @@ sys.path.insert(0, {repo!r})
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model import collision
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 load = {load!r}
 collides = collision.HandProxy.collides
@@ -80,7 +81,9 @@ def test_same_answers_and_paths_idle_and_loaded():
 def test_safety_net_is_no_answer_never_unfeasible():
     from relocation_common.paths import resolve_scenario
     from relocation_common.scenario import load_scenario
-    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, SafetyNetTimeout
+    from stpik_motion_planner.planning.budget import SafetyNetTimeout
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
 
     mp = MotionPlanner(load_scenario(resolve_scenario("scenario3_15")), PlannerParams.load())
     obj, removed = QUERIES[0]

@@ -15,7 +15,8 @@ from pathlib import Path
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.execution.relocation import plan_relocation
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = "paper_experiment_10"

@@ -15,7 +15,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_procs import REPO, RosGraph
 
-from stpik_motion_planner.planning.planner import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
 
 DRIVER = ("jaco2_sim_driver.driver_node", REPO / "config" / "jaco2_sim_driver.yaml", "jaco2_sim_driver: ")
 PERCEPTION = ("perception_aruco.perception_node", REPO / "config" / "perception.yaml", "perception: ")

@@ -87,7 +87,7 @@ def test_a_recovery_that_failed_once_is_tried_again_and_brings_the_arm_home():
     from relocation_common.paths import default_scenario
     from relocation_common.scenario import load_scenario
     from stpik_motion_planner.execution.streaming import Aborted
-    from stpik_motion_planner.planning.planner import PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
 
     class LateFingers(FakeLink):
         opened = 0

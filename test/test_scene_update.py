@@ -11,7 +11,7 @@ from relocation_common.geometry import wxyz_matrix
 from relocation_common.scenario import load_scenario
 from relocation_common.shelf_object import at_pose
 from stpik_motion_planner.model.scene_update import MOVED, merge_perceived
-from stpik_motion_planner.planning.planner import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.service import MotionPlannerService
 
 SC = load_scenario("scenario1_5")

@@ -71,7 +71,8 @@ def replay() -> list[dict]:
     sys.path.insert(0, str(REPO))
     from relocation_common.paths import resolve_scenario
     from relocation_common.scenario import load_scenario
-    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
 
     planners, out = {}, []
     for name, obj, removed, direct in _queries():

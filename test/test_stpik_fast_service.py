@@ -97,7 +97,8 @@ def test_trajectory_message_holds_the_trajectory_exactly():
 
     from relocation_common.paths import default_scenario
     from relocation_common.scenario import load_scenario
-    from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
     from stpik_motion_planner.ros_interface import trajectory_to_msg
 
     tr = MotionPlanner(load_scenario(default_scenario()), PlannerParams.load()).feasibility("o2").trajectory

@@ -3,6 +3,7 @@ from the
 joint states, holding the arm while they are late, the gripper protocol on either surface) over a fake arm link,
 and stpik_motion_planner/service.py (scene updates, goal checks, a relocation's outcome and recovery) on the real
 planner. The node over DDS: test_motion_planner_node.py, test_planner_on_fake_arm.py."""
+import dataclasses
 import time
 from dataclasses import replace
 
@@ -15,7 +16,7 @@ from relocation_common.kinova import joint_to_turns, turns_to_joint
 from relocation_common.paths import config_file, default_scenario
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm, StreamParams, progress
-from stpik_motion_planner.planning.planner import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.trajectory import Trajectory
 from stpik_motion_planner.service import MotionPlannerService
 
@@ -80,8 +81,8 @@ def line(duration=0.3, speed=0.5):
 
 def arm(link, cancelled=lambda: False, **params):
     feedback, log = [], []
-    a = StreamedArm(link, StreamParams(**{**FAST, **params}), cancelled, lambda *f: feedback.append(f),
-                    lambda *m: log.append(m))
+    a = StreamedArm(link, dataclasses.replace(StreamParams.load(), **{**FAST, **params}), cancelled,
+                    lambda *f: feedback.append(f), lambda *m: log.append(m))
     return a, feedback, log
 
 
@@ -121,7 +122,7 @@ def test_silence_longer_than_state_timeout_aborts_and_cancel_is_seen():
 
 
 def test_ros2_control_gripper_closes_on_a_bottle_and_refuses_empty_or_stuck_fingers():
-    closed = StreamParams().finger_closed
+    closed = StreamParams.load().finger_closed
     a, _, log = arm(FakeLink(block=float(turns_to_joint(0.5 * closed))))
     a.gripper("close", "grasp")  # stalled half-way: a bottle between the fingers
     assert log[-1] == ("info", "gripper close: fingers stopped 50% closed")
@@ -136,7 +137,7 @@ def test_ros2_control_gripper_closes_on_a_bottle_and_refuses_empty_or_stuck_fing
 
 
 def test_kinova_gripper_takes_the_fingers_action_result():
-    closed = StreamParams().finger_closed
+    closed = StreamParams.load().finger_closed
     arm(FakeLink(kinova=True, goal_result=0.6 * closed))[0].gripper("close", "grasp")
     with pytest.raises(Aborted, match="did not move"):
         arm(FakeLink(kinova=True, goal_result=0.0))[0].gripper("close", "grasp")
@@ -145,10 +146,12 @@ def test_kinova_gripper_takes_the_fingers_action_result():
 
 def test_stream_parameters_come_from_the_node_yaml_and_are_checked():
     params = yaml.safe_load(config_file("motion_planner.yaml").read_text())["motion_planner"]["ros__parameters"]
-    p = StreamParams.from_mapping(params, rd.QDOT_MAX)
+    params.update(yaml.safe_load(config_file("arm_interface.yaml").read_text())["/**"]["ros__parameters"])
+    p = StreamParams.from_mapping(params)
     assert p.stream_rate == 100.0 and p.follower.k_track == params["follower.k_track"]
+    assert p.finger_stall_interval == params["finger_stall_interval"]  # the arm interface's, one source
     with pytest.raises(ValueError, match="0 < state_hold < state_timeout"):
-        StreamParams.from_mapping({**params, "state_hold": 3.0}, rd.QDOT_MAX)
+        StreamParams.from_mapping({**params, "state_hold": 3.0})
     assert progress("plan_pick") == 0.0 and progress("done") == 1.0
 
 

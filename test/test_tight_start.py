@@ -15,7 +15,9 @@ from relocation_app.evaluation.scenes.jitter import make_jitter
 from relocation_common.feasibility import Label
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.collision import CARRIED
-from stpik_motion_planner.planning.planner import START_RELIEF, MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.carry import START_RELIEF, carried_models
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 
 @pytest.fixture(scope="module")
@@ -40,9 +42,9 @@ def test_a_lift_from_closer_than_the_bound_keeps_the_start_distance(tmp_path):
     answer = mp.feasibility("o3", frozenset({"o1"}))
     assert answer.label == Label.OBSTACLE, answer.message
     obs = mp.scene.obstacles(frozenset({"o1", "o3"}))
-    q = np.asarray(mp._pick_end[("o3", frozenset({"o1"}))])
-    _, arm_start, arm_in = mp._carried_models(mp.scenario.object("o3"), q, obs,
-                                              {CARRIED: frozenset(["board:top_shelf"])})
+    q = np.asarray(mp.pick_end[("o3", frozenset({"o1"}))])
+    _, arm_start, arm_in = carried_models(mp, mp.scenario.object("o3"), q, obs,
+                                          {CARRIED: frozenset(["board:top_shelf"])})
     start, full = arm_start.specs[-1].clearance, arm_in.specs[-1].clearance
     assert full == mp.params.carried_clearance and 0 < start < full
 
@@ -59,10 +61,10 @@ def test_a_start_in_contact_within_the_tolerances_is_lifted(tmp_path):
     mp.update_object("o1", t.x + d * math.cos(a), t.y + d * math.sin(a))
     removed = frozenset({"o5"})
     assert mp.feasibility("o1", removed).label == Label.OBSTACLE
-    q = np.asarray(mp._pick_end[("o1", removed)])
+    q = np.asarray(mp.pick_end[("o1", removed)])
     obs = mp.scene.obstacles(removed | {"o1"})
     support = {CARRIED: frozenset(["board:top_shelf"])}
-    _, arm_start, arm_in = mp._carried_models(mp.scenario.object("o1"), q, obs, support)
+    _, arm_start, arm_in = carried_models(mp, mp.scenario.object("o1"), q, obs, support)
     mp.kin.update(q, jacobians=False)
     arm_in.pose()
     gap = min(d for i, _, d, _, _ in arm_in.obstacle_distances(obs, 0.01, support) if arm_in.specs[i].name == CARRIED)

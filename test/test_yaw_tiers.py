@@ -13,14 +13,15 @@ from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import parse_scenario
 from stpik_motion_planner.model.blockers import lane_blockers
 from stpik_motion_planner.model.grasp import yaw_tiers
-from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
 
 
 def test_the_tiers_list_each_yaw_once_straight_in_first():
     first, wide = yaw_tiers(5, 0.5, 9, 0.8)
     assert first == pytest.approx([0.0, 0.25, -0.25, 0.5, -0.5])
     assert wide == pytest.approx([0.2, -0.2, 0.4, -0.4, 0.6, -0.6, 0.8, -0.8])
-    assert yaw_tiers(5, 0.5) == [first] and yaw_tiers(5, 0.5, 5, 0.5) == [first]
+    assert yaw_tiers(5, 0.5, 0, 0.8) == [first] and yaw_tiers(5, 0.5, 5, 0.5) == [first]
 
 
 @pytest.fixture(scope="module")

@@ -47,7 +47,7 @@ class FeasibilityCacheError(ValueError):
 def planner_params():
     """The evaluation's planner parameters: config/motion_planner.yaml's, with the safety net EVAL_TIMEOUT (not part
     of the cache key). Shared by the evaluation's commands, the scene search and the tests."""
-    from stpik_motion_planner.planning.planner import PlannerParams
+    from stpik_motion_planner.planning.params import PlannerParams
     p = PlannerParams.load()
     p.timeout = EVAL_TIMEOUT
     return p
@@ -79,7 +79,10 @@ def planner_content(params) -> dict:
         if dataclasses.is_dataclass(v):
             return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
         return v
-    return {k: v for k, v in plain(params).items() if k not in SAFETY_NETS}
+    from relocation_common import robot_description as rd
+    content = {k: v for k, v in plain(params).items() if k not in SAFETY_NETS}
+    content["stpik"]["qdot_max"] = plain(rd.QDOT_MAX)  # the robot's joint speed limits (Table 7) change answers too
+    return content
 
 
 def cache_key(scenario, params) -> str:

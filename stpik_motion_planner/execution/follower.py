@@ -17,30 +17,61 @@ blocked), or no settling within `settle_timeout`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
+from stpik_motion_planner.planning.params import node_parameters
 from stpik_motion_planner.planning.trajectory import Trajectory
 
+PREFIX = "follower."  # of the follower's keys among the motion_planner node's parameters
 
 @dataclass(frozen=True)
 class FollowerParams:
-    """Gains and tolerances of the trajectory follower (see the module docstring)."""
+    """Gains and tolerances of the trajectory follower (see the module docstring): the follower.* keys of
+    config/motion_planner.yaml, their one place (`load`)."""
 
-    k_track: float = 4.0  # 1/s, position correction gain
-    lag_tol: float = 0.05  # rad: above this tracking error the reference slows down (stops at twice it)
-    settle_tol: float = 0.005  # rad, every joint at the end of the trajectory
-    settle_timeout: float = 3.0  # s after the reference ends
-    stall_timeout: float = 2.0  # s with the reference waiting before the motion is aborted
-    max_error: float = 0.3  # rad, largest tracking error before the motion is aborted
+    k_track: float  # 1/s, position correction gain
+    lag_tol: float  # rad: above this tracking error the reference slows down (stops at twice it)
+    settle_tol: float  # rad, every joint at the end of the trajectory
+    settle_timeout: float  # s after the reference ends
+    stall_timeout: float  # s with the reference waiting before the motion is aborted
+    max_error: float  # rad, largest tracking error before the motion is aborted
 
     def __post_init__(self) -> None:
-        for k in ("k_track", "lag_tol", "settle_tol", "settle_timeout", "stall_timeout", "max_error"):
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"follower parameter {k} must be a positive number, got {v!r}")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"follower parameter {f.name} must be a positive number, got {v!r}")
+
+    @classmethod
+    def keys(cls) -> tuple[str, ...]:
+        """The node's parameter names: follower.<field>."""
+        return tuple(f"{PREFIX}{f.name}" for f in fields(cls))
+
+    @classmethod
+    def from_mapping(cls, params: Mapping[str, Any]) -> FollowerParams:
+        """From the node's parameters: every follower.* key (the others are not the follower's). ValueError for an
+        unknown or a missing one."""
+        given = {k[len(PREFIX):]: v for k, v in params.items() if k.startswith(PREFIX)}
+        names = [f.name for f in fields(cls)]
+        unknown = sorted(set(given) - set(names))
+        missing = [n for n in names if n not in given]
+        if unknown or missing:
+            raise ValueError(f"follower parameters: unknown {[PREFIX + k for k in unknown]}, "
+                             f"missing {[PREFIX + k for k in missing]}")
+        return cls(**{k: float(v) if isinstance(v, int) and not isinstance(v, bool) else v
+                      for k, v in given.items()})
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> FollowerParams:
+        """The follower.* keys of config/motion_planner.yaml, with those of the ROS params file at `path` (if any)
+        over them."""
+        return cls.from_mapping(node_parameters(path))
 
 
 def joint_error(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -56,12 +87,13 @@ class TrajectoryFollower:
 
     RUNNING, SETTLED, FAILED = "running", "settled", "failed"
 
-    def __init__(self, trajectory: Trajectory, qdot_max=rd.QDOT_MAX, params: FollowerParams | None = None):
+    def __init__(self, trajectory: Trajectory, qdot_max: ArrayLike = rd.QDOT_MAX, params: FollowerParams | None = None
+                 ) -> None:
         if len(trajectory) == 0:
             raise ValueError("cannot follow an empty trajectory")
         self.traj = trajectory
         self.qdot_max = np.asarray(qdot_max, float)
-        self.p = params or FollowerParams()
+        self.p = params if params is not None else FollowerParams.load()  # config/motion_planner.yaml
         self.tau = 0.0  # reference time
         self.waited = 0.0  # s the reference has been waiting for the arm (reset when it moves on)
         self.rate = 1.0  # time-scaling rate s of the last update
@@ -86,13 +118,13 @@ class TrajectoryFollower:
         k = int(np.clip(np.searchsorted(tr.times, t, side="right") - 1, 0, len(tr.times) - 1))
         return tr.positions[k] + tr.velocities[k] * (t - tr.times[k]), tr.velocities[k]
 
-    def _error(self, q) -> float:
+    def _error(self, q: ArrayLike) -> float:
         q = np.asarray(q, float)
         if q.shape != (rd.N_JOINTS,) or not np.all(np.isfinite(q)):
             raise ValueError(f"measured configuration must be 7 finite angles, got {q!r}")
         return float(np.max(np.abs(joint_error(self.reference(self.tau)[0], q))))
 
-    def update(self, q, dt: float) -> str:
+    def update(self, q: ArrayLike, dt: float) -> str:
         """Advance the reference by dt of wall time given the measured configuration; RUNNING, SETTLED or
         FAILED (see `reason`)."""
         err = self._error(q)
@@ -119,7 +151,7 @@ class TrajectoryFollower:
                 return self.FAILED
         return self.RUNNING
 
-    def command(self, q) -> np.ndarray:
+    def command(self, q: ArrayLike) -> np.ndarray:
         """Joint velocities (rad/s) to send now given the measured configuration q."""
         self._error(q)
         q_ref, v_ff = self.reference(self.tau)

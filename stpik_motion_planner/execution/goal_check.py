@@ -20,6 +20,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 from relocation_common.feasibility import destination_slot
 from relocation_common.scenario import Scenario, ScenarioError, Shelf, UnknownObjectError
+from stpik_motion_planner.planning.params import node_parameters
 
 ON_BOARD = 0.01  # m: a bottle whose base is this close to a board's surface stands on it (scene_update.ON_SHELF)
 OUTCOME_SETTLE = 0.3  # s after the motion: the scene that shows the outcome is received after this (bottles settled)
@@ -155,7 +156,13 @@ def outcome_problems(shelf: Shelf, before: Mapping[str, SeenBottle], after: Mapp
 
 
 PARAMETERS = ("outcome_tolerance", "slot_tolerance", "outcome_timeout")  # config/motion_planner.yaml
-DEFAULTS = {"outcome_tolerance": 0.015, "slot_tolerance": 0.02, "outcome_timeout": 3.0}  # a core without a node
+
+
+def configured() -> dict[str, float]:
+    """The PARAMETERS as config/motion_planner.yaml gives them (a core without a node), checked."""
+    values = {k: v for k, v in node_parameters().items() if k in PARAMETERS}
+    check_parameters(values)
+    return {k: float(v) for k, v in values.items()}
 
 
 def check_parameters(values: Mapping[str, float]) -> None:

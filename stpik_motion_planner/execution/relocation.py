@@ -14,14 +14,17 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import ContextManager, Protocol
 
 import numpy as np
 
 from relocation_common import robot_description as rd
 from stpik_motion_planner.model.grasp import WorkspaceError
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
-from stpik_motion_planner.planning.planner import MotionPlanner, PlanningError
+from stpik_motion_planner.planning.context import Placed
+from stpik_motion_planner.planning.params import node_parameters
+from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.results import PlanningError
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 # progress (0..1) of the whole relocation at the start of each phase, in order
@@ -91,13 +94,15 @@ def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str], 
     return RelocationPlan(object_id, k, placed, pick.trajectory, carry.trajectory, retreat.trajectory, home)
 
 
-def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float = 0.05,
-             lock=None, progress: Progress | None = None, slot: int | None = None,
-             placed: list | None = None) -> RelocationPlan:
+def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float | None = None,
+             lock: ContextManager[object] | None = None, progress: Progress | None = None, slot: int | None = None,
+             placed: Placed | None = None) -> RelocationPlan:
     """Relocate object_id to its slot (`slot` and `placed` as plan_relocation); PlanningError (or the arm's error)
     names the failed stage. `lock` guards the planner (not thread-safe) while it plans, not while the arm moves.
-    `progress` records what was done (for `recover` after a failure). Returns the plan made before moving."""
+    `progress` records what was done (for `recover` after a failure). Farther than `home_tol` (rad; None:
+    config/motion_planner.yaml's) from home, the arm goes home first. Returns the plan made before moving."""
     lock = lock if lock is not None else nullcontext()
+    home_tol = float(node_parameters()["home_tol"]) if home_tol is None else home_tol
     removed = list(removed)
     arm.phase("plan_pick")
     with lock:
@@ -153,7 +158,7 @@ class _Recorded:
         self.arm.follow(trajectory, phase)
 
 
-def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock=None) -> str:
+def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextManager[object] | None = None) -> str:
     """A safe state after a failed or cancelled relocation (the next goal starts from home, nothing held).
 
     Before the release: back along the motions made, newest first (the same paths, as clear as on the way there);

@@ -13,15 +13,17 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping, Protocol
 
 import numpy as np
 
 from relocation_common import kinova
 from relocation_common import robot_description as rd
+from relocation_common.arm_interface import ArmInterface
 from stpik_motion_planner.execution.follower import FollowerParams, TrajectoryFollower
 from stpik_motion_planner.execution.relocation import PHASES
+from stpik_motion_planner.planning.params import node_parameters
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 STATE_POLL = 0.005  # s between looks at the joint states while the arm is held
@@ -38,20 +40,20 @@ class Cancelled(Exception):
 
 @dataclass(frozen=True)
 class StreamParams:
-    """The node's streaming and gripper parameters (config/motion_planner.yaml, docs/motion_planner.md)."""
+    """The node's streaming and gripper parameters (config/motion_planner.yaml, their one place: `load`;
+    docs/motion_planner.md)."""
 
-    stream_rate: float = 100.0  # Hz
-    state_hold: float = 0.1  # s: older joint states hold the arm
-    state_timeout: float = 2.0  # s: older joint states abort
-    finger_closed: float = 6800.0  # turns of a closing goal
-    finger_empty_closure: float = 0.9  # fraction of finger_closed: closed past it = closed on nothing
-    gripper_timeout: float = 5.0  # s
-    gripper_settle: float = 0.2  # s after the fingers stopped
-    finger_tolerance: float = kinova.FINGER_TOLERANCE  # turns (FingerMonitor, ros2_control surface)
-    finger_stall_threshold: float = 10.0
-    finger_stall_interval: float = kinova.STALL_INTERVAL
-    qdot_max: tuple = tuple(rd.QDOT_MAX)  # rad/s, Table 7: the follower's clamp
-    follower: FollowerParams = field(default_factory=FollowerParams)
+    stream_rate: float  # Hz
+    state_hold: float  # s: older joint states hold the arm
+    state_timeout: float  # s: older joint states abort
+    finger_closed: float  # turns of a closing goal
+    finger_empty_closure: float  # fraction of finger_closed: closed past it = closed on nothing
+    gripper_timeout: float  # s
+    gripper_settle: float  # s after the fingers stopped
+    finger_tolerance: float  # turns (FingerMonitor, ros2_control surface): config/arm_interface.yaml
+    finger_stall_threshold: float  # turns: config/arm_interface.yaml
+    finger_stall_interval: float  # s: config/arm_interface.yaml
+    follower: FollowerParams  # config/motion_planner.yaml follower.*
 
     def __post_init__(self) -> None:
         if not 0.0 < self.state_hold < self.state_timeout:
@@ -61,13 +63,17 @@ class StreamParams:
             raise ValueError(f"parameter stream_rate must be > 0, got {self.stream_rate!r}")
 
     @classmethod
-    def from_mapping(cls, params: Mapping[str, Any], qdot_max) -> StreamParams:
-        """From the node's parameters (the keys of this class, `follower.*` for FollowerParams); ValueError."""
-        keys = {f.name for f in fields(cls)} - {"qdot_max", "follower"}
-        follower = FollowerParams(**{k.split(".", 1)[1]: float(v) for k, v in params.items()
-                                     if k.startswith("follower.")})
-        return cls(**{k: float(v) for k, v in params.items() if k in keys}, qdot_max=tuple(qdot_max),
-                   follower=follower)
+    def from_mapping(cls, params: Mapping[str, Any]) -> StreamParams:
+        """From the node's parameters (the keys of this class, the arm interface's finger settings among them,
+        `follower.*` for FollowerParams); ValueError."""
+        keys = {f.name for f in fields(cls)} - {"follower"}
+        own = {k: float(v) for k, v in params.items() if k in keys}
+        return cls(**own, follower=FollowerParams.from_mapping(params))
+
+    @classmethod
+    def load(cls) -> StreamParams:
+        """config/motion_planner.yaml's and config/arm_interface.yaml's values (a core without a node)."""
+        return cls.from_mapping({**ArmInterface.load().to_dict(), **node_parameters()})
 
 
 class ArmLink(Protocol):
@@ -130,7 +136,7 @@ class StreamedArm:
 
     def follow(self, traj: Trajectory, phase: str) -> None:
         """Stream the trajectory at stream_rate with position feedback until it settles (execution/follower.py)."""
-        follower = TrajectoryFollower(traj, self.p.qdot_max, self.p.follower)
+        follower = TrajectoryFollower(traj, rd.QDOT_MAX, self.p.follower)
         self.link.show_path(traj, phase)
         period = 1.0 / self.p.stream_rate
         last = next_tick = time.monotonic()

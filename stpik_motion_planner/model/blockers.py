@@ -1,7 +1,7 @@
 """Which bottles block each grasp lane: the grasp/approach screen of feasibility (paper Sect. 4.1,
 step 1) asked per bottle instead of once for all.
 
-A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `MotionPlanner._candidates` keeps a lane when the hand
+A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `planning.pick.candidates` keeps a lane when the hand
 proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for palm and fingers on
 the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each of them, so the
 lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the screen with
@@ -15,22 +15,93 @@ SUSPECT_MARGIN of the proxy along it (suspects, not a claim).
 from __future__ import annotations
 
 import weakref
-from typing import Iterable
+from typing import Iterable, Protocol
 
 import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet
-from stpik_motion_planner.model.collision import HAND_PARTS, HandProxy, ObstacleSet
-from stpik_motion_planner.model.grasp import Grasp, WorkspaceError, pose_matrix, side_grasp
+from relocation_common.scenario import Scenario
+from stpik_motion_planner.model.collision import HAND_PARTS, CollisionScene, HandProxy, ObstacleSet
+from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, side_grasp
 
+Lanes = tuple[tuple[Grasp, frozenset[str]], ...]  # (grasp, its blockers with every bottle present) per lane
 SUSPECT_MARGIN = 0.03  # m added to the hand proxy's inflation to name the suspects of an STPIK/RRT failure
 
 # scene (replaced when the planner's scenario changes) -> {(object, screen parameters, margin): lanes}
-_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_CACHE: weakref.WeakKeyDictionary[CollisionScene, dict[tuple[object, ...], Lanes]] = weakref.WeakKeyDictionary()
 
 
-def _lanes(planner, object_id: str) -> list[Grasp]:
+class ScreenSettings(Protocol):
+    """The planner's settings the screen reads (planning.params.PlannerParams)."""
+
+    @property
+    def n_yaws(self) -> int:
+        """Approach yaws of the first tier."""
+
+    @property
+    def max_yaw(self) -> float:
+        """The first tier's widest yaw (rad)."""
+
+    @property
+    def wide_yaws(self) -> int:
+        """Approach yaws of the second tier (0: none)."""
+
+    @property
+    def wide_max_yaw(self) -> float:
+        """The second tier's widest yaw (rad)."""
+
+    @property
+    def pre_grasp_distance(self) -> float:
+        """m back along the approach."""
+
+    @property
+    def resolution(self) -> float:
+        """m between the proxy's poses along a path."""
+
+
+class Box(Protocol):
+    """The Cartesian planner's box (planning.rrt.CartesianRRT)."""
+
+    def contains(self, pose: Pose) -> bool:
+        """The pose is inside the box."""
+
+
+class Screened(Protocol):
+    """What the screen reads of the planner (planning.context.PlanningContext, a layer above)."""
+
+    @property
+    def params(self) -> ScreenSettings:
+        """The planner's settings."""
+
+    @property
+    def scenario(self) -> Scenario:
+        """The scene's shelf and bottles."""
+
+    @property
+    def scene(self) -> CollisionScene:
+        """The collision scene with every bottle present (the cache's key)."""
+
+    @property
+    def hand(self) -> HandProxy:
+        """The Cartesian planner's hand proxy."""
+
+    @property
+    def hand_margin(self) -> float:
+        """Its inflation (m)."""
+
+    @property
+    def rrt(self) -> Box:
+        """The Cartesian planner."""
+
+    def all_yaws(self) -> list[float]:
+        """Every approach yaw of both tiers, in the order they are tried."""
+
+    def not_graspable(self, object_id: str) -> str:
+        """Why the side grasp cannot take `object_id` ('' if it may)."""
+
+
+def _lanes(planner: Screened, object_id: str) -> list[Grasp]:
     """The object's grasps for every yaw inside the arm's reach and the Cartesian planner's box."""
     p = planner.params
     out = []
@@ -44,7 +115,7 @@ def _lanes(planner, object_id: str) -> list[Grasp]:
     return out
 
 
-def _blocked(planner, hand: HandProxy, g: Grasp, obs: ObstacleSet) -> bool:
+def _blocked(planner: Screened, hand: HandProxy, g: Grasp, obs: ObstacleSet) -> bool:
     """The screen of one lane against `obs`: the proxy meets it at the pre-grasp or along the approach."""
     skip = {n: frozenset([g.object_id]) for n in HAND_PARTS}
     return hand.collides(*pose_matrix(g.pre_grasp), obs) or not hand.path_clear([g.pre_grasp, g.grasp], obs,
@@ -60,7 +131,7 @@ def _near(hand: HandProxy, g: Grasp, obs: ObstacleSet) -> list:
     return [o for o, k in zip(obs.items, keep) if k]
 
 
-def _lane_blockers(planner, hand: HandProxy, g: Grasp) -> frozenset[str] | None:
+def _lane_blockers(planner: Screened, hand: HandProxy, g: Grasp) -> frozenset[str] | None:
     """The bottles the proxy meets on this lane with every bottle present; None if no removal can clear it."""
     scene = planner.scene
     fixed = ObstacleSet(scene.boards + scene.placed)
@@ -78,7 +149,7 @@ def _lane_blockers(planner, hand: HandProxy, g: Grasp) -> frozenset[str] | None:
     return None if g.object_id in hits else hits
 
 
-def static_lanes(planner, object_id: str, margin: float = 0.0) -> tuple[tuple[Grasp, frozenset[str]], ...]:
+def static_lanes(planner: Screened, object_id: str, margin: float = 0.0) -> Lanes:
     """(grasp, blockers with every bottle present) of each lane some removal can clear, for the proxy inflated
     by `margin` more than the planner's; cached per scene."""
     p = planner.params
@@ -98,7 +169,7 @@ def _name(g: Grasp) -> str:
     return f"yaw {g.yaw:+.2f}"
 
 
-def lane_blockers(planner, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
+def lane_blockers(planner: Screened, removed: Iterable[str] = frozenset()) -> dict[str, tuple[BlockerSet, ...]]:
     """Every object still on the shelf -> its lanes' certain blocker sets with `removed` gone (an empty tuple:
     no lane can ever be cleared, as for a lying bottle). No motion planning: the screen only."""
     gone = frozenset(planner.scenario.check_ids(removed))
@@ -107,7 +178,7 @@ def lane_blockers(planner, removed: Iterable[str] = frozenset()) -> dict[str, tu
             for b in planner.scenario.objects if b.id not in gone}
 
 
-def answer_blockers(planner, object_id: str, removed: frozenset[str]) -> tuple[BlockerSet, ...]:
+def answer_blockers(planner: Screened, object_id: str, removed: frozenset[str]) -> tuple[BlockerSet, ...]:
     """The blockers of an unfeasible answer: certain sets for the lanes the screen rejects; for a lane it passes
     (so STPIK or RRT-Connect failed there), an uncertain set of the bottles near it. Empty: no lane at all."""
     if planner.not_graspable(object_id):  # lying or off the shelf: no lane at all

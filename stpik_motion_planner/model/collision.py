@@ -14,12 +14,15 @@ from typing import Iterable, Iterator, Mapping, Sequence
 
 import fcl
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
 from relocation_common.geometry import wxyz_matrix
 from relocation_common.scenario import Scenario
+from stpik_motion_planner.model.kinematics import Kinematics
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
+Skip = Mapping[str, frozenset[str]]  # a shape's name -> the bottles and boards it may touch in one query
 
 
 @dataclass
@@ -52,7 +55,7 @@ def _key(o: Obstacle) -> str:
     return o.object_id if o.object_id is not None else o.name
 
 
-def _box(name: str, lo, hi) -> Obstacle:
+def _box(name: str, lo: ArrayLike, hi: ArrayLike) -> Obstacle:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(np.eye(3), (lo + hi) / 2))
     return Obstacle(name, None, obj, lo, hi)
@@ -158,7 +161,7 @@ class CapsuleSpec:
     clearance: float | None = None  # its own clearance bound to obstacles (None: the planner's)
 
 
-def capsule_spec(name: str, link: str, p0, p1, radius: float, cylinder: bool = False,
+def capsule_spec(name: str, link: str, p0: ArrayLike, p1: ArrayLike, radius: float, cylinder: bool = False,
                  clearance: float | None = None) -> CapsuleSpec:
     """CapsuleSpec of the segment p0-p1 of radius `radius` in `link`'s frame."""
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
@@ -183,7 +186,7 @@ def carried_bottle(radius: float, height: float, standoff: float = 0.0,
                         clearance=clearance)
 
 
-def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0):
+def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0) -> fcl.CollisionGeometry:
     if s.cylinder:
         return fcl.Cylinder(s.radius + inflate, s.length + 2 * inflate)
     return fcl.Capsule(s.radius + inflate, s.length)
@@ -196,7 +199,7 @@ CARRIED = "carried"  # name of the attached bottle's shape
 class ArmGeometry:
     """The arm's capsules (plus attached ones, e.g. a carried bottle), posed from a Kinematics update."""
 
-    def __init__(self, kin, attached: Sequence[CapsuleSpec] = ()) -> None:
+    def __init__(self, kin: Kinematics, attached: Sequence[CapsuleSpec] = ()) -> None:
         self.kin = kin
         self.specs = [capsule_spec(c.name, c.link, c.p0, c.p1, c.radius) for c in rd.CAPSULES] + list(attached)
         self.n = len(self.specs)
@@ -243,7 +246,7 @@ class ArmGeometry:
         self._hi = np.maximum(self.p0, self.p1) + rad
         self._dirty = [True] * self.n
 
-    def _fcl(self, i: int):
+    def _fcl(self, i: int) -> fcl.CollisionObject:
         """The fcl object of capsule i at its current pose (transforms are set lazily)."""
         if self._dirty[i]:
             k = self._li[i]
@@ -261,7 +264,8 @@ class ArmGeometry:
         ci, oi = np.nonzero(np.einsum("ijk,ijk->ij", gap, gap) < d_act * d_act)
         return idx[ci], oi
 
-    def obstacle_distances(self, obs: ObstacleSet, d_act: float, skip: dict[str, frozenset] | None = None):
+    def obstacle_distances(self, obs: ObstacleSet, d_act: float, skip: Skip | None = None
+                           ) -> list[tuple[int, Obstacle, float, np.ndarray, np.ndarray]]:
         """[(capsule index, obstacle, distance, point on capsule, point on obstacle)] for pairs nearer than d_act
         (by AABB). Distance PENETRATION (-1) means intersecting. `skip`: capsule name -> object ids (bottles) or
         board names ("board:top_shelf") to ignore."""
@@ -276,7 +280,7 @@ class ArmGeometry:
             out.append((int(ci), o, float(d), res.nearest_points[0], res.nearest_points[1]))
         return out
 
-    def self_distances(self, d_act: float):
+    def self_distances(self, d_act: float) -> list[tuple[int, int, float, np.ndarray, np.ndarray]]:
         """[(i, j, distance, point on i, point on j)] of non-adjacent capsule pairs nearer than d_act."""
         out = []
         lo, hi = self._lo, self._hi
@@ -290,7 +294,8 @@ class ArmGeometry:
         return out
 
 
-def segment_distance(a0, a1, b0, b1) -> tuple[float, np.ndarray, np.ndarray]:
+def segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray
+                     ) -> tuple[float, np.ndarray, np.ndarray]:
     """Closest points of segments a0-a1 and b0-b1 (Ericson, Real-Time Collision Detection 5.1.9)."""
     d1, d2, r = a1 - a0, b1 - b0, a0 - b0
     a, e, f = d1 @ d1, d2 @ d2, d2 @ r
@@ -332,12 +337,12 @@ class HandProxy:
         self.req = fcl.CollisionRequest()
 
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
-                 skip: dict[str, frozenset] | None = None) -> bool:
+                 skip: Skip | None = None) -> bool:
         """Any shape in contact with an obstacle (not skipped): AABB broad phase, then fcl.collide."""
         return bool(self.hits(r_tool, p_tool, obs, skip, first=True))
 
     def hits(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
-             skip: dict[str, frozenset] | None = None, first: bool = False) -> set[int]:
+             skip: Skip | None = None, first: bool = False) -> set[int]:
         """Indices (in obs.items) of the obstacles some shape is in contact with (not skipped); `first`: stop at
         the first one."""
         out: set[int] = set()
@@ -363,14 +368,14 @@ class HandProxy:
                     break
         return out
 
-    def path_clear(self, poses, obs: ObstacleSet, resolution: float, skip: dict[str, frozenset] | None = None
+    def path_clear(self, poses: Sequence[ArrayLike], obs: ObstacleSet, resolution: float, skip: Skip | None = None
                    ) -> bool:
         """The proxy is clear at every pose along the polyline of (x, y, z, yaw) poses (grasp.py), sampled every
         `resolution` m (a yaw change counts 0.25 m per rad): the straight approach of a grasp lane (feasibility's
         candidates, blockers' screen) and a direct Cartesian path."""
         return all(not self.collides(*m, obs, skip) for m in _path_poses(poses, resolution))
 
-    def path_hits(self, poses, obs: ObstacleSet, resolution: float, skip: dict[str, frozenset] | None = None
+    def path_hits(self, poses: Sequence[ArrayLike], obs: ObstacleSet, resolution: float, skip: Skip | None = None
                   ) -> set[int]:
         """Indices (in obs.items) of every obstacle the proxy meets along the polyline (`path_clear`'s poses): the
         OR of the contacts, so the obstacles each of which alone would block it."""
@@ -380,7 +385,7 @@ class HandProxy:
         return out
 
 
-def _path_poses(poses, resolution: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def _path_poses(poses: Sequence[ArrayLike], resolution: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses (a yaw change
     counts 0.25 m per rad), both ends of each segment included."""
     from stpik_motion_planner.model.grasp import pose_matrix

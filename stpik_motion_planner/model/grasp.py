@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence, Union
 
 import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.scenario import Scenario
 
+Pose = Union[Sequence[float], np.ndarray]  # (x, y, z, yaw) of the tool: a side grasp's pose
 _PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 PALM_REACH = rd.D67 - _PALM.p1[2] - _PALM.radius  # m from the grasp centre back to the palm's front (0.025)
 PALM_GAP = 0.008  # m between the palm and a grasped bottle: 4 mm plus the 4 mm final tolerance of STPIK
@@ -43,13 +45,13 @@ def approach_yaw(rot: np.ndarray) -> float:
     return float(math.atan2(rot[1, 2], rot[0, 2]))
 
 
-def pose_matrix(pose4) -> tuple[np.ndarray, np.ndarray]:
+def pose_matrix(pose4: Pose) -> tuple[np.ndarray, np.ndarray]:
     """(rotation, position) of an (x, y, z, yaw) side-grasp pose."""
     x, y, z, yaw = pose4
     return side_rotation(yaw), np.array([x, y, z], dtype=float)
 
 
-def check_pose(pose4, where: str = "pose") -> np.ndarray:
+def check_pose(pose4: Pose, where: str = "pose") -> np.ndarray:
     """Raise WorkspaceError unless pose4 is finite and the wrist centre is within the arm's reach."""
     p = np.asarray(pose4, dtype=float)
     if p.shape != (4,) or not np.all(np.isfinite(p)):
@@ -88,7 +90,7 @@ def grasp_yaws(n: int, max_yaw: float) -> list[float]:
     return out
 
 
-def yaw_tiers(n: int, max_yaw: float, wide_n: int = 0, wide_max_yaw: float = 0.0) -> list[list[float]]:
+def yaw_tiers(n: int, max_yaw: float, wide_n: int, wide_max_yaw: float) -> list[list[float]]:
     """The approach yaws in the order they are tried: grasp_yaws(n, max_yaw) first; then, only for a question none
     of those answered, the yaws of grasp_yaws(wide_n, wide_max_yaw) not already tried (the wider grasp set)."""
     first = grasp_yaws(n, max_yaw)
@@ -146,7 +148,7 @@ def carry_heights(scenario: Scenario, object_id: str, clearance: float, lift: fl
 FINGER_REACH = max(c.p1[2] + c.radius for c in rd.CAPSULES if c.name.startswith("finger")) - rd.D67
 
 
-def exit_pose(scenario: Scenario, object_id: str, pose, margin: float) -> tuple[float, float, float, float]:
+def exit_pose(scenario: Scenario, object_id: str, pose: Pose, margin: float) -> tuple[float, float, float, float]:
     """`pose` moved back against its approach direction, at its height, until the held bottle (its axis
     `grasp_standoff` beyond the tool) and the finger tips are `margin` in front of the shelf's front edge: out of
     the shelf, free to go down."""

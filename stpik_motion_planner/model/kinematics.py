@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
 
@@ -21,9 +22,9 @@ class Kinematics:
         self.fid = {n: self.model.getFrameId(n) for n in names}
         self.tool_fid = self.fid[rd.EE_LINK]
         self._jac_cache: dict[int, np.ndarray] = {}
-        self.q = None
+        self.q: np.ndarray | None = None
 
-    def update(self, q, jacobians: bool = True) -> None:
+    def update(self, q: ArrayLike, jacobians: bool = True) -> None:
         """Forward kinematics at `q` (rad), with the joint Jacobians unless `jacobians` is False."""
         q = np.asarray(q, dtype=float)
         if jacobians:

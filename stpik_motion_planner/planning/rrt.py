@@ -30,6 +30,7 @@ import numpy as np
 import ompl.base as ob
 import ompl.geometric as og
 import ompl.util as ou
+from numpy.typing import ArrayLike
 
 from stpik_motion_planner.planning.budget import check_deadline
 
@@ -77,8 +78,9 @@ def _budget(checks: list[int], limit: int, deadline: float) -> ob.PlannerTermina
         max(deadline - time.perf_counter(), 1e-3)))
 
 
-def _solve(lo, hi, start, goal, valid: Callable[[np.ndarray], bool], max_checks: int, deadline: float,
-           resolution: float, simplify_checks: int, planner_range: float, seed: int | None) -> list[np.ndarray] | None:
+def _solve(lo: np.ndarray, hi: np.ndarray, start: np.ndarray, goal: np.ndarray, valid: Callable[[np.ndarray], bool],
+           max_checks: int, deadline: float, resolution: float, simplify_checks: int, planner_range: float,
+           seed: int | None) -> list[np.ndarray] | None:
     """RRT-Connect in the box [lo, hi] until a path is found or `max_checks` validity checks are spent (then None);
     then OMPL's path simplification for `simplify_checks` more checks (0: none). With `seed` every RNG of the solve
     is seeded from it (module docstring)."""
@@ -89,12 +91,12 @@ def _solve(lo, hi, start, goal, valid: Callable[[np.ndarray], bool], max_checks:
                              simplify_checks, planner_range)
 
 
-def _solve_locked(space, n: int, start, goal, valid: Callable[[np.ndarray], bool], max_checks: int,
-                  deadline: float, resolution: float, simplify_checks: int,
-                  planner_range: float) -> list[np.ndarray] | None:
+def _solve_locked(space: ob.RealVectorStateSpace, n: int, start: np.ndarray, goal: np.ndarray,
+                  valid: Callable[[np.ndarray], bool], max_checks: int, deadline: float, resolution: float,
+                  simplify_checks: int, planner_range: float) -> list[np.ndarray] | None:
     checks = [0]
 
-    def check(s) -> bool:
+    def check(s: ob.State) -> bool:
         checks[0] += 1
         return valid(np.fromiter((s[i] for i in range(n)), float, n))
 
@@ -125,8 +127,8 @@ def _solve_locked(space, n: int, start, goal, valid: Callable[[np.ndarray], bool
 class CartesianRRT:
     """RRT-Connect over (x, y, z, yaw) within a box; `plan` returns a list of poses or None."""
 
-    def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float = 0.01,
-                 simplify_checks: int = 250, planner_range: float = 0.0) -> None:
+    def __init__(self, lo: ArrayLike, hi: ArrayLike, resolution: float, simplify_checks: int,
+                 planner_range: float = 0.0) -> None:
         self.lo = np.array(lo, float)
         self.hi = np.array(hi, float)
         self.scale = np.array([1.0, 1.0, 1.0, YAW_SCALE])
@@ -135,11 +137,11 @@ class CartesianRRT:
         self.planner_range = planner_range
         self.checks = 0
 
-    def contains(self, pose) -> bool:
+    def contains(self, pose: ArrayLike) -> bool:
         """The pose is inside the planner's box."""
         return bool(np.all(np.asarray(pose) >= self.lo - 1e-9) and np.all(np.asarray(pose) <= self.hi + 1e-9))
 
-    def plan(self, start, goal, valid: Callable[[np.ndarray], bool], max_checks: int,
+    def plan(self, start: ArrayLike, goal: ArrayLike, valid: Callable[[np.ndarray], bool], max_checks: int,
              deadline: float, seed: int | None = None) -> list[np.ndarray] | None:
         """A path of poses from start to goal or None (budget spent); with `seed` a function of it (and the
         arguments) only, else of OMPL's process-wide RNG."""
@@ -156,14 +158,13 @@ class CartesianRRT:
 class JointRRT:
     """RRT-Connect in joint space (Q convention) between two configurations, for comparison in the benchmark."""
 
-    def __init__(self, lo: Sequence[float], hi: Sequence[float], resolution: float = 0.02,
-                 simplify_checks: int = 250) -> None:
+    def __init__(self, lo: ArrayLike, hi: ArrayLike, resolution: float, simplify_checks: int) -> None:
         self.lo, self.hi = np.array(lo, float), np.array(hi, float)
         self.resolution = resolution
         self.simplify_checks = simplify_checks
         self.checks = 0
 
-    def plan(self, start, goal, valid: Callable[[np.ndarray], bool], max_checks: int,
+    def plan(self, start: np.ndarray, goal: np.ndarray, valid: Callable[[np.ndarray], bool], max_checks: int,
              deadline: float, seed: int | None = None) -> list[np.ndarray] | None:
         """A path of configurations or None; with `seed` a function of it (and the arguments) only."""
         def check(q: np.ndarray) -> bool:

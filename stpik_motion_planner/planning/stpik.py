@@ -20,62 +20,57 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
-from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, ObstacleSet
+from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, ObstacleSet, Skip
 from stpik_motion_planner.model.grasp import side_rotation
+from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.budget import check_deadline
+
+Level = tuple[np.ndarray | None, np.ndarray]  # one task of Eq. 10: (Jacobian, None for the identity; reference)
+Candidates = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # set-based tasks: group, sigma, rows, threshold
 
 
 @dataclass
 class StpikParams:
-    """STPIK's gains, bounds and tolerances (Eq. 9, 10; config/motion_planner.yaml stpik.*)."""
+    """STPIK's gains, bounds and tolerances (Eq. 9, 10): the stpik.* keys of config/motion_planner.yaml, their one
+    place (planning.params.PlannerParams.load)."""
 
-    dt: float = 0.04  # IK step (s); the output is resampled to 100 Hz
-    ee_speed: float = 0.25  # m/s along the reference path
-    approach_speed: float = 0.08  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
-    yaw_speed: float = 0.8  # rad/s
-    k_pos: float = 8.0  # Eq. 9 gain K, position
-    k_ori: float = 8.0  # orientation
-    k_set: float = 8.0  # set-based tasks pushing back into their set
-    k_posture: float = 0.3
-    joint_margin: float = 0.05  # rad inside Table 6
-    joint_buffer: float = 0.15  # rad: joint-limit tasks are candidates inside this band
-    joint_act: float = 0.02  # rad: ... and enter when the next step would bring them this close to the limit
-    self_clearance: float = 0.01  # m
-    clearance: float = 0.015  # m, arm capsules to bottles and boards (the verified bound)
-    buffer: float = 0.03  # m: distance tasks are candidates inside this band
-    act: float = 0.004  # m: ... and enter when the next step would bring them this close to the bound
-    violation_tol: float = 1e-3  # m or rad below a bound at an IK sample: reject
-    track_tol: float = 0.03  # m along the path
-    final_tol_pos: float = 0.004  # m at the end of the path
-    final_tol_ori: float = 0.03  # rad
-    grasp_yaw_tol: float = 0.06  # rad about the vertical, at a grasp that did not converge within final_tol_ori
-    settle_time: float = 1.0  # s allowed after the reference ends
-    step_budget: float = 3.0  # IK steps allowed, in multiples of the reference's nominal steps (accepted: <= 1.22)
-    damping: float = 0.05
-    qdot_max: np.ndarray = field(default_factory=lambda: rd.QDOT_MAX.copy())
+    dt: float  # IK step (s); the output is resampled to 100 Hz
+    ee_speed: float  # m/s along the reference path
+    approach_speed: float  # m/s on the last straight approach to a grasp (no overshoot into the bottle)
+    yaw_speed: float  # rad/s
+    k_pos: float  # Eq. 9 gain K, position
+    k_ori: float  # orientation
+    k_set: float  # set-based tasks pushing back into their set
+    k_posture: float
+    joint_margin: float  # rad inside Table 6
+    joint_buffer: float  # rad: joint-limit tasks are candidates inside this band
+    joint_act: float  # rad: ... and enter when the next step would bring them this close to the limit
+    self_clearance: float  # m
+    clearance: float  # m, arm capsules to bottles and boards (the verified bound)
+    buffer: float  # m: distance tasks are candidates inside this band
+    act: float  # m: ... and enter when the next step would bring them this close to the bound
+    violation_tol: float  # m or rad below a bound at an IK sample: reject
+    track_tol: float  # m along the path
+    final_tol_pos: float  # m at the end of the path
+    final_tol_ori: float  # rad
+    grasp_yaw_tol: float  # rad about the vertical, at a grasp that did not converge within final_tol_ori
+    settle_time: float  # s allowed after the reference ends
+    step_budget: float  # IK steps allowed, in multiples of the reference's nominal steps
+    damping: float  # of the pseudo-inverse near singularities
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            if f.name == "qdot_max":
-                continue
             v = getattr(self, f.name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"motion planner parameter stpik.{f.name} must be a finite number >= 0, got {v!r}")
             setattr(self, f.name, float(v))
-        try:
-            q = np.array(self.qdot_max, dtype=float)
-        except (TypeError, ValueError):
-            q = np.zeros(0)
-        if q.shape != (rd.N_JOINTS,) or not np.all(np.isfinite(q) & (q > 0)):
-            raise ValueError(f"motion planner parameter stpik.qdot_max must be {rd.N_JOINTS} positive numbers "
-                             f"(rad/s, Table 7), got {self.qdot_max!r}")
-        self.qdot_max = q
 
 
 @dataclass
@@ -100,7 +95,7 @@ except (ImportError, AttributeError):  # pragma: no cover - another numpy layout
     _SVD_S = None
 
 
-def _svd(a: np.ndarray):
+def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Thin SVD of a small matrix (bit-identical to np.linalg.svd(a, full_matrices=False), less overhead)."""
     if _SVD_S is not None:
         with np.errstate(invalid="ignore"):
@@ -110,11 +105,12 @@ def _svd(a: np.ndarray):
     return np.linalg.svd(a, full_matrices=False)  # raises LinAlgError where it did not converge
 
 
-def hierarchy(levels, n: int, damping: float) -> np.ndarray:
+def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
     """Recursive null-space projection (Eq. 10): qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
     damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last).
     The first level skips its products with N_0 = I and qdot_0 = 0 (exact in floating point)."""
-    qdot = proj = None
+    qdot: np.ndarray | None = None
+    proj: np.ndarray | None = None
     for jac, xd in levels:
         if jac is None:  # identity task (posture): its projection needs no decomposition
             return np.array(xd, float) if qdot is None else qdot + proj @ (xd - qdot)
@@ -140,8 +136,8 @@ class _Run:
     q: np.ndarray
     bound: np.ndarray  # each shape's clearance bound to obstacles
     d_act: float  # broad-phase distance: the largest bound + buffer
-    qs: list = field(default_factory=list)
-    qdots: list = field(default_factory=list)
+    qs: list[np.ndarray] = field(default_factory=list)
+    qdots: list[np.ndarray] = field(default_factory=list)
     tau: float = 0.0  # reference time (slows down when joint velocities are scaled)
     settle: float = 0.0
     seg: int = 0
@@ -162,13 +158,13 @@ class _Reject(Exception):
 class Stpik:
     """Tracks a Cartesian path [(x, y, z, yaw), ...] from a start configuration; see the module docstring."""
 
-    def __init__(self, kin, arm: ArmGeometry, params: StpikParams) -> None:
+    def __init__(self, kin: Kinematics, arm: ArmGeometry, params: StpikParams) -> None:
         self.kin, self.arm, self.p = kin, arm, params
         self.lower = rd.Q_LOWER + params.joint_margin
         self.upper = rd.Q_UPPER - params.joint_margin
         self.eye = np.eye(rd.N_JOINTS)
 
-    def _reference(self, path: list[np.ndarray], speed: float | None = None):
+    def _reference(self, path: list[np.ndarray], speed: float | None = None) -> np.ndarray:
         """Piecewise-linear reference: cumulative times of the waypoints (at `speed`, default ee_speed)."""
         p = self.p
         speed = speed or p.ee_speed
@@ -178,8 +174,8 @@ class Stpik:
             times.append(times[-1] + dur)
         return np.array(times)
 
-    def track(self, q0, path: list[np.ndarray], obs: ObstacleSet, deadline: float,
-              skip: dict[str, frozenset] | None = None, posture=None, speed: float | None = None,
+    def track(self, q0: ArrayLike, path: Sequence[ArrayLike], obs: ObstacleSet, deadline: float,
+              skip: Skip | None = None, posture: ArrayLike | None = None, speed: float | None = None,
               ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0) -> StpikResult:
         """Closed-loop IK (Eq. 9) with the hierarchy of Eq. 10 along `path`, from q0.
         `yaw_tol` > 0 (rad): a goal not reached within final_tol_ori when the settle time is spent is still
@@ -193,20 +189,20 @@ class Stpik:
         bottle they held, 200-350 N, and it moved 18-25 mm in the hand for a few ms); the joint-limit tasks then
         enter early enough to stop within that acceleration. Both for a hand holding a bottle."""
         p = self.p
-        path = [np.asarray(w, float) for w in path]
-        times = self._reference(path, speed)
+        waypoints = [np.asarray(w, float) for w in path]
+        times = self._reference(waypoints, speed)
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
         # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
         bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
         run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol)
         run.qs.append(run.q.copy())
-        nominal = times[-1] + ramp * (len(path) - 1)  # a ramp adds about `ramp` s per segment
+        nominal = times[-1] + ramp * (len(waypoints) - 1)  # a ramp adds about `ramp` s per segment
         max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
         while True:
             check_deadline(deadline, "the STPIK check")
             if len(run.qdots) >= max_steps:
                 return self._result(False, f"step budget spent ({max_steps} IK steps)", run)
-            ref, vel, t1 = self._reference_at(path, times, run, ramp)
+            ref, vel, t1 = self._reference_at(waypoints, times, run, ramp)
             try:
                 scale = self._step(run, ref, vel, times[-1], obs, skip, posture, accel)
             except _Reject as e:
@@ -218,7 +214,8 @@ class Stpik:
             else:
                 run.tau = min(run.tau + p.dt * scale, times[-1])
 
-    def _reference_at(self, path, times, run: _Run, ramp: float):
+    def _reference_at(self, path: list[np.ndarray], times: np.ndarray, run: _Run, ramp: float
+                      ) -> tuple[np.ndarray, np.ndarray, float]:
         """Reference pose and velocity at run.tau (piecewise linear; trapezoidal speed with a ramp), segment end."""
         p = self.p
         while run.seg < len(path) - 2 and run.tau >= times[run.seg + 1]:
@@ -237,7 +234,8 @@ class Stpik:
             vel = vel * run.rate
         return ref, vel, t1
 
-    def _step(self, run: _Run, ref, vel, t_end: float, obs, skip, posture, accel: float) -> float:
+    def _step(self, run: _Run, ref: np.ndarray, vel: np.ndarray, t_end: float, obs: ObstacleSet, skip: Skip | None,
+              posture: np.ndarray, accel: float) -> float:
         """One IK step (Eq. 9-10) from run.q; returns the velocity scale of Table 7; raises _Reject to stop
         (reason "reached" when the goal is reached)."""
         p, kin = self.p, self.kin
@@ -267,7 +265,7 @@ class Stpik:
                      (None, p.k_posture * (posture - q))]
         prev = run.qdots[-1] if run.qdots else None
         qdot = self._solve(cands, eq_levels, prev, accel)
-        ratio = float(np.max(np.abs(qdot) / p.qdot_max))
+        ratio = float(np.max(np.abs(qdot) / rd.QDOT_MAX))  # Table 7: the robot's
         scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
         qdot = qdot * scale
         if accel > 0.0 and prev is not None and run.tau < t_end:  # not while settling on the goal (slow by then)
@@ -277,7 +275,7 @@ class Stpik:
         run.qdots.append(qdot)
         return scale
 
-    def _set_tasks(self, run: _Run, obs, skip):
+    def _set_tasks(self, run: _Run, obs: ObstacleSet, skip: Skip | None) -> Candidates | None:
         """Set-based candidates of Eq. 10 at run.q as arrays (group, sigma, jacobian rows, activation threshold):
         joint limits (0), self-collision (1), obstacle clearance (2). Raises _Reject on a collision or a violated
         bound."""
@@ -285,8 +283,8 @@ class Stpik:
         q = run.q
         grp, sig, rows, buf = [], [], [], []
         lo, hi = q - self.lower, self.upper - q
-        for i in np.nonzero((lo < p.joint_buffer) | (hi < p.joint_buffer))[0]:
-            for s_, row in ((lo[i], self.eye[i]), (hi[i], -self.eye[i])):
+        for k in np.nonzero((lo < p.joint_buffer) | (hi < p.joint_buffer))[0]:
+            for s_, row in ((lo[k], self.eye[k]), (hi[k], -self.eye[k])):
                 if s_ < p.joint_buffer:
                     grp.append(0)
                     sig.append(s_)
@@ -326,7 +324,8 @@ class Stpik:
             return None
         return np.array(grp), np.array(sig, float), np.array(rows), np.array(buf)
 
-    def _solve(self, cands, eq_levels, prev, accel: float) -> np.ndarray:
+    def _solve(self, cands: Candidates | None, eq_levels: list[Level], prev: np.ndarray | None, accel: float
+               ) -> np.ndarray:
         """Eq. 10 with the set-based tasks that must enter: a candidate is activated when the step without it would
         bring it within its threshold (with `accel`, joint limits early enough to stop); iterated."""
         p = self.p

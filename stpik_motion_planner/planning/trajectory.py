@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
 
@@ -68,7 +69,7 @@ class Trajectory:
                           np.vstack([self.velocities[:-1], other.velocities]),
                           self.joint_names, self.phases + [(n, t + off) for n, t in other.phases])
 
-    def back_from(self, q) -> "Trajectory":
+    def back_from(self, q: ArrayLike) -> "Trajectory":
         """The way back: from the sample nearest to q (largest joint difference) to the start, reversed in time over
         the same samples (the same path, as collision-free as the way there, within the same velocity limits)."""
         if len(self.times) == 0:

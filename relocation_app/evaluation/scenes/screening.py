@@ -138,7 +138,7 @@ def replans(planner, sequence, repeats: int) -> str:
     from other stream states rejects the borderline ones (a feasible pick that the execution then cannot plan):
     twice was not enough, paper2_10's first T failed its pick in 5 of 12 plannings."""
     from stpik_motion_planner.execution.relocation import plan_relocation
-    from stpik_motion_planner.planning.planner import PlanningError
+    from stpik_motion_planner.planning.results import PlanningError
     for r in range(repeats):
         for k, oid in enumerate(sequence):
             try:

@@ -1,0 +1,25 @@
+"""A feasible pick certified for its whole relocation (certify_relocation, docs/motion_planner.md): from the grasp,
+the carry to the next slot, the retreat and the way home must plan too, or the pick lane is not taken."""
+from __future__ import annotations
+
+import numpy as np
+
+from stpik_motion_planner.model.grasp import WorkspaceError
+from stpik_motion_planner.planning.carry import carry_goal, plan_carry
+from stpik_motion_planner.planning.context import PlanningContext
+from stpik_motion_planner.planning.home import plan_home
+from stpik_motion_planner.planning.results import PlanningError
+
+
+def certify(ctx: PlanningContext, object_id: str, removed: frozenset[str], q_grasp: np.ndarray) -> str:
+    """'' if the rest of the relocation from the grasp q_grasp plans (carry to slot len(removed) with the removed
+    bottles in the earlier slots, retreat, way home), else why not. `removed`: the question's, already checked."""
+    k = len(removed)
+    try:
+        placed = ctx.placed_default(removed, k)
+        _, retreat = plan_carry(ctx, object_id, removed, carry_goal(ctx, object_id, k), q_grasp, placed)
+        plan_home(ctx, retreat.trajectory.positions[-1], removed | {object_id},
+                  placed + [(object_id, ctx.scenario.slot(k))])
+    except (PlanningError, WorkspaceError, ValueError) as e:
+        return str(e)
+    return ""

@@ -1,0 +1,165 @@
+"""What every phase of the motion planner shares (pick.py, carry.py, home.py, certify.py; planner.MotionPlanner is
+one): the scene (the scenario, its lying and gone bottles, collision scenes with bottles placed on the bottom shelf),
+the robot's models (kinematics, arm capsules, the Cartesian planner's hand proxy), the planners (RRT-Connect, STPIK),
+the question's random generator (seed_per_query) and the caches that are no history (a pick's grasp configuration,
+the staging poses' reference tracks).
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import time
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from relocation_common import robot_description as rd
+from relocation_common.scenario import Scenario, UnknownObjectError
+from relocation_common.shelf_object import objects_key
+from stpik_motion_planner.model.collision import ArmGeometry, CollisionScene, HandProxy, Lying, ObstacleSet
+from stpik_motion_planner.model.grasp import carry_heights, home_pose, yaw_tiers
+from stpik_motion_planner.model.kinematics import Kinematics
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.results import QueryStats
+from stpik_motion_planner.planning.rrt import CartesianRRT, seed_ompl
+from stpik_motion_planner.planning.stpik import Stpik, StpikResult
+
+# left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
+# first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
+# tolerance (stpik.*), so that every path that converged without it is drawn and ends as before
+UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw")
+UNSEEDED_STPIK = ("grasp_yaw_tol",)
+Placed = list[tuple[str, tuple[float, float]]]  # bottles on the bottom shelf: (id, slot xy)
+
+
+class PlanningContext:
+    """The planner's scene, models and shared steps (the module docstring); `params` default:
+    config/motion_planner.yaml."""
+
+    def __init__(self, scenario: Scenario, params: PlannerParams | None = None) -> None:
+        self.scenario = scenario
+        self.params = params if params is not None else PlannerParams.load()  # config/motion_planner.yaml
+        seed_ompl(self.params.seed)
+        self.kin = Kinematics()
+        self.lying: dict[str, Lying] = {}  # bottles of the top shelf that do not stand (set_scenario)
+        self.gone: frozenset[str] = frozenset()  # bottles that left the shelf
+        self.scene = self.collision_scene()
+        self.arm = ArmGeometry(self.kin)
+        p = self.params
+        self.stpik = Stpik(self.kin, self.arm, p.stpik)
+        # the screen (and the Cartesian planner) keep STPIK's own bound when screen_at_clearance: a lane reported
+        # clear is then clear for the fingers STPIK drives to the grasp (docs/motion_planner.md, "Blockers")
+        self.hand_margin = max(p.hand_margin, p.stpik.clearance) if p.screen_at_clearance else p.hand_margin
+        self.hand = HandProxy(self.hand_margin)
+        self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_checks)
+        self.home = np.array(home_pose())
+        self.last_stats = QueryStats()
+        self.pick_end: dict[tuple[str, frozenset[str]], np.ndarray] = {}  # (object, removed) -> grasp configuration
+        self.stage_refs: dict[tuple[object, ...], list[np.ndarray] | None] = {}  # home.stage_reference's tracks
+
+    # ---------------------------------------------------------------- the question
+    def check_question(self, object_id: str, removed: Iterable[str]) -> frozenset[str]:
+        """The removed set of a question about `object_id`, checked: UnknownObjectError, TypeError, ValueError."""
+        if not isinstance(object_id, str):
+            raise UnknownObjectError(f"object id must be a string, got {object_id!r}")
+        self.scenario.object(object_id)
+        if isinstance(removed, str):
+            raise TypeError("removed must be a collection of ids, not a string")
+        removed = self.scenario.check_ids(removed)
+        if object_id in removed:
+            raise ValueError(f"object {object_id!r} is in the removed set: it is no longer on the shelf")
+        return removed
+
+    def question_rng(self, *question: object) -> np.random.Generator | None:
+        """The random generator of one question (seed_per_query): seeded from a hash of the scene (shelf, bottles,
+        slots), the question (object, removed set, and for a carry or home its start and placed bottles) and every
+        planner parameter but the wall-clock safety nets; None (OMPL's process-wide RNG) otherwise."""
+        if not self.params.seed_per_query:
+            return None
+        sc = self.scenario
+        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED}
+        params["stpik"] = {k: v for k, v in params["stpik"].items() if k not in UNSEEDED_STPIK}
+        params["stpik"]["qdot_max"] = rd.QDOT_MAX.copy()  # Table 7, the robot's: in the seed as when it was a parameter
+        parts = [repr(sc.shelf), objects_key(sc.objects, sc.shelf.top_z), repr(sc.slots),  # objects_key: the seeds
+                 repr(sorted(params.items()))]  # of every shipped scene as they were before objects had shapes
+        if self.lying or self.gone:  # a standing scene's questions keep their seeds (the committed caches)
+            parts += [repr(sorted(self.lying.items())), repr(sorted(self.gone))]
+        for x in question:
+            if isinstance(x, np.ndarray):
+                parts.append(np.round(x, 9).tobytes().hex())
+            elif isinstance(x, (set, frozenset)):
+                parts.append(repr(sorted(x)))
+            else:
+                parts.append(repr(x))
+        digest = hashlib.sha256("\x1f".join(parts).encode()).digest()
+        return np.random.default_rng(int.from_bytes(digest[:16], "little"))
+
+    # ---------------------------------------------------------------- the scene
+    def collision_scene(self, placed: Sequence[tuple[str, tuple[float, float]]] = ()) -> CollisionScene:
+        """The scenario's collision scene with `placed` on the bottom shelf, the lying bottles as they lie and the
+        gone ones left out."""
+        return CollisionScene(self.scenario, placed, self.lying, self.gone)
+
+    def not_graspable(self, object_id: str) -> str:
+        """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): lying, or off the shelf."""
+        if object_id in self.lying:
+            return f"{object_id} is lying: no side grasp"
+        if object_id in self.gone:
+            return f"{object_id} left the shelf: nothing to grasp"
+        return ""
+
+    def placed_default(self, removed: frozenset[str], slot_index: int) -> Placed:
+        """Bottles assumed on the bottom shelf: the removed ones, in sorted order, in the slots other than
+        slot_index."""
+        slots = [k for k in range(len(self.scenario.slots)) if k != slot_index]
+        return [(oid, self.scenario.slot(k)) for oid, k in zip(sorted(removed), slots)]
+
+    def placed_key(self, placed: Iterable[tuple[str, tuple[float, float]]]) -> str:
+        """The bottles on the bottom shelf as geometry (where, which size), whatever their names: a carry planned
+        for a removed set and the same carry in a relocation order see the same scene, so draw the same samples."""
+        return repr(sorted((round(x, 4), round(y, 4), self.scenario.object(o).radius, self.scenario.object(o).height)
+                           for o, (x, y) in placed))
+
+    def carry_heights(self, object_id: str) -> tuple[float, float]:
+        """(lift, release height) of the object carried at its real size (grasp.carry_heights); WorkspaceError if
+        it is too tall for the compartments."""
+        p = self.params
+        return carry_heights(self.scenario, object_id, p.carried_clearance + p.stpik.act, p.lift, p.drop)
+
+    # ---------------------------------------------------------------- the approach yaws
+    def yaw_tiers(self) -> list[list[float]]:
+        """The approach yaws, tier by tier (grasp.yaw_tiers)."""
+        p = self.params
+        return yaw_tiers(p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw)
+
+    def all_yaws(self) -> list[float]:
+        """Every approach yaw of both tiers, in the order they are tried (the lanes of blockers.py)."""
+        return [y for tier in self.yaw_tiers() for y in tier]
+
+    # ---------------------------------------------------------------- the STPIK check
+    def track(self, q0: np.ndarray, path: Sequence[np.ndarray], obs: ObstacleSet, deadline: float,
+              stats: QueryStats, skip: dict[str, frozenset[str]] | None = None, arm: ArmGeometry | None = None,
+              speed: float | None = None, ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0
+              ) -> StpikResult:
+        """STPIK tracking `path` from q0 (Eq. 9-10; with `arm`, the arm holding a bottle), its time and rejection
+        counted in `stats`."""
+        t = time.perf_counter()
+        stpik = self.stpik if arm is None else Stpik(self.kin, arm, self.params.stpik)
+        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel, yaw_tol=yaw_tol)
+        stats.stpik_time += time.perf_counter() - t
+        if not r.ok:
+            stats.stpik_reject.append(r.reason)
+        return r
+
+
+def draw_seed(rng: np.random.Generator | None) -> int | None:
+    """The seed of one RRT-Connect solve drawn from the question's generator (None: OMPL's process-wide RNG)."""
+    return None if rng is None else int(rng.integers(1, 2**31))
+
+
+def check_q(q: object) -> np.ndarray:
+    """A configuration as 7 finite joint angles (Q convention); ValueError otherwise."""
+    q = np.asarray(q, dtype=float)
+    if q.shape != (rd.N_JOINTS,) or not np.all(np.isfinite(q)):
+        raise ValueError(f"a configuration must be {rd.N_JOINTS} finite joint angles (Q convention), got {q!r}")
+    return q
