@@ -128,13 +128,13 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
     return mask
 
 
-def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams,
+def colour_residuals(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams,
                      clipped: np.ndarray | None = None) -> np.ndarray:
-    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits
-    within `max_residual` or the best is not clearly better than the second best (`max_ratio`). `clipped` (N x 3
-    bool): channels the camera saturated; their value is a lower bound (a residual only where the class predicts
-    less), the shading gain is fitted on the other channels and may reach `gain_max` x `clipped_gain` (the pixel was
-    brighter than the camera's range: over-exposed orange is not yellow)."""
+    """N x C: the distance of each of N pixels (N x 3, 0..255) to each of C reference colours shaded by the best
+    gain in [gain_min, gain_max] (|p - s* a_c|). `clipped` (N x 3 bool): channels the camera saturated; their value
+    is a lower bound (a residual only where the class predicts less), the shading gain is fitted on the other
+    channels and may reach `gain_max` x `clipped_gain` (the pixel was brighter than the camera's range: over-exposed
+    orange is not yellow)."""
     p = rgb_pixels.astype(np.float32)
     a = refs.astype(np.float32)
     s = np.clip(p @ a.T / np.sum(a * a, axis=1), params.gain_min, params.gain_max)       # N x C
@@ -148,7 +148,16 @@ def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: Segmentat
         s = np.clip(np.where(den > 0, num / np.maximum(den, 1e-6), top), params.gain_min, top)
         diff = q[:, None, :] - s[..., None] * a[None, :, :]
         res[sat] = np.linalg.norm(np.where(c[:, None, :], np.maximum(diff, 0.0), diff), axis=2)
-    rows = np.arange(len(p))
+    return res
+
+
+def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams,
+                     clipped: np.ndarray | None = None) -> np.ndarray:
+    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits
+    within `max_residual` or the best is not clearly better than the second best (`max_ratio`); `clipped` as in
+    `colour_residuals`."""
+    res = colour_residuals(rgb_pixels, refs, params, clipped)
+    rows = np.arange(len(res))
     best = np.argmin(res, axis=1)
     first = res[rows, best].copy()
     bad = first > params.max_residual
