@@ -3,8 +3,9 @@
 Object points (`object_mask`): inside a shelf compartment, off the boards and panels by the gate's margin (grown with
 the frame's depth noise), off the marker plates (scenario and as seen), off the robot (`self_filter`), and steady
 (depth within `occluder_gap` of its 3x3 median: a real sensor's flying pixels between two surfaces are left out).
-The points are averaged per voxel (`voxel`), DBSCAN (`cluster_eps`, `cluster_min_samples`) labels the voxels and
-every pixel takes its voxel's label; clusters of fewer than `min_cluster_pixels` pixels (scaled with the image area)
+The points are averaged per voxel (`voxel`) with their colour (3x3 median, normalised by the marker plate),
+DBSCAN (`cluster_eps`, `cluster_min_samples`) labels the voxels in (position, colour scaled so that `cluster_colour`
+RGB units count as `cluster_eps`) and every pixel takes its voxel's label; clusters of fewer than `min_cluster_pixels` pixels (scaled with the image area)
 are sensor noise. Each cluster's colour: the per-channel median of its pixels normalised by the marker plate's white
 and black (segmentation.normalise_colours), with the channels the camera saturated on most of its pixels.
 """
@@ -71,7 +72,11 @@ def cluster_points(points: np.ndarray, mask: np.ndarray, rgb: np.ndarray, levels
     _, inv = np.unique(flat, return_inverse=True)
     inv = inv.ravel()
     count = np.bincount(inv)
-    centroids = np.stack([np.bincount(inv, p[:, k]) for k in range(3)], axis=1) / count[:, None]
+    # DBSCAN on (position, colour x cluster_eps / cluster_colour): touching objects of different colours (a bottle
+    # and the hand holding it) part; the shading along one object changes slowly from voxel to voxel
+    smooth = cv2.medianBlur(np.ascontiguousarray(rgb), 3)[v, u].astype(np.float64)
+    feat = np.c_[p, normalise_colours(smooth, levels, seg) * (params.cluster_eps / params.cluster_colour)]
+    centroids = np.stack([np.bincount(inv, feat[:, k]) for k in range(6)], axis=1) / count[:, None]
     labels = DBSCAN(eps=params.cluster_eps, min_samples=params.cluster_min_samples).fit(centroids).labels_[inv]
     area = min(1.0, mask.size / (640 * 480))
     least = max(10, round(params.min_cluster_pixels * area))

@@ -50,14 +50,26 @@ def listed_object(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams)
                            p.yaw if p.lying else 0.0, p.lying, False, float(rms), int(n), f.pixel)
 
 
-def unlisted_object(f: Fitted, params: ObjectParams, seg: SegmentationParams) -> PerceivedObject:
-    """Cluster f as an object the scenario does not list (its id set by `unlisted_ids`), weight estimated."""
+def room_above(support: float, scenario: Scenario) -> float:
+    """Height of the compartment above a board (m): to the ceiling board, or to the top board's underside."""
+    s = scenario.shelf
+    return (s.ceiling_z if support > s.top_z - s.board_thickness / 2 else s.top_z - s.board_thickness) - support
+
+
+def unlisted_object(f: Fitted, params: ObjectParams, seg: SegmentationParams, room: float) -> PerceivedObject:
+    """Cluster f as an object the scenario does not list (its id set by `unlisted_ids`), weight estimated. Its top
+    not seen (something nearer hides it): as tall as its compartment (`room`), said in its weight note."""
     p, c = f.prim, f.cluster
     rgb = tuple(float(v) for v in np.clip(c.colour / 255.0, 0, 1))
+    h, size = p.height, p.size
+    if not p.top_seen and not p.lying:
+        h, size = max(h, room), (size[0], size[1], max(h, room))
     o = PerceivedObject("", colour_name(c.colour, c.clipped, seg), (rgb[0], rgb[1], rgb[2]), 0.0, "", False, False,
-                        p.shape, p.x, p.y, c.support, p.radius, p.height, p.size, p.yaw, p.lying, p.conservative,
+                        p.shape, p.x, p.y, c.support, p.radius, h, size, p.yaw, p.lying, p.conservative,
                         p.rms, c.size, f.pixel)
     w, note = estimated_weight(o.volume, params.density)
+    if h != p.height:
+        note += f"; top not seen: as tall as its compartment ({h * 1000:.0f} mm, {p.height * 1000:.0f} mm seen)"
     return replace(o, weight=w, weight_note=note + (f"; conservative: {p.why}" if p.conservative else ""))
 
 
@@ -114,7 +126,8 @@ def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Sc
     for j, b in enumerate(scenario.objects):
         if b.id not in found and b.id not in missing:
             missing[b.id] = _why_missing(j, b, cost, taken, fitted, params.max_cost)
-    rest = [unlisted_object(f, params, seg) for m, f in enumerate(fitted) if m not in taken]
+    rest = [unlisted_object(f, params, seg, room_above(f.cluster.support, scenario)) for m, f in enumerate(fitted)
+            if m not in taken]
     ids = unlisted_ids(rest, memory, params.unlisted_gate)
     objects = {b.id: found[b.id] for b in scenario.objects if b.id in found}
     objects.update({i: replace(o, id=i) for i, o in zip(ids, rest)})

@@ -18,6 +18,7 @@ class ObjectParams:
     voxel: float
     cluster_eps: float
     cluster_min_samples: int
+    cluster_colour: float
     min_cluster_pixels: int
     wall_noise: float
     arm_padding: float
