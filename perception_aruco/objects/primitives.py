@@ -66,36 +66,60 @@ def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: f
                      float(np.sqrt(np.mean(d ** 2))), False, "", seen)
 
 
-def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params: ObjectParams) -> Primitive:
-    """A cylinder lying on the board (module docstring); FitError when its radius or length is out of bounds."""
-    xy = points[:, :2]
-    mean = xy.mean(axis=0)
-    w, vec = np.linalg.eigh(np.cov((xy - mean).T))
-    axis = vec[:, 1]
-    normal = np.array([-axis[1], axis[0]])
-    t, s, z = (xy - mean) @ axis, (xy - mean) @ normal, points[:, 2] - support
-    r = max(float(np.percentile(z, 99)) / 2, params.radius_min)
-    sc = float(np.median(s)) + r * math.copysign(1.0, float(normal @ view[:2]) or 1.0)
-    for _ in range(15):  # Gauss-Newton on (s_c, r): centre one radius above the board
-        ds, dz = s - sc, z - r
-        rho = np.maximum(np.hypot(ds, dz), 1e-9)
-        res = rho - r
-        jac = np.c_[-ds / rho, -dz / rho - 1.0]
-        step = np.linalg.lstsq(jac, -res, rcond=None)[0]
-        sc, r = sc + float(step[0]), r + float(step[1])
-        if np.linalg.norm(step) < 1e-7:
+def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: float,
+                   iterations: int) -> tuple[float, float, float]:
+    """Gauss-Newton on (s_c, r) of the circle through (s, z) whose centre is one radius above the board, refitted
+    twice on the points within CAP_BAND of the circle (an end cap's points lie inside it): (s_c, r, rms of the side
+    and end-cap distances)."""
+    use = np.ones(len(s), bool)
+    for _ in range(3):
+        for _ in range(iterations):
+            ds, dz = s[use] - sc, z[use] - r
+            rho = np.maximum(np.hypot(ds, dz), 1e-9)
+            jac = np.c_[-ds / rho, -dz / rho - 1.0]
+            step = np.linalg.lstsq(jac, -(rho - r), rcond=None)[0]
+            sc, r = sc + float(step[0]), r + float(step[1])
+            if np.linalg.norm(step) < 1e-7:
+                break
+        use = np.abs(np.hypot(s - sc, z - r) - r) < CAP_BAND
+        if use.sum() < 10:
             break
+    lo, hi = np.percentile(t, [0.5, 99.5])
+    rho = np.hypot(s - sc, z - r)
+    d = np.minimum(np.abs(rho - r), np.abs(np.abs(t - (lo + hi) / 2) - (hi - lo) / 2) + np.maximum(rho - r, 0.0))
+    return sc, r, float(np.sqrt(np.mean(d ** 2)))
+
+
+def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params: ObjectParams,
+                   bound: float) -> Primitive:
+    """A cylinder lying on the board (module docstring); FitError when its radius or length is out of bounds. The
+    axis: the points' principal direction in x-y; when that fit is not within `bound` (an end cap seen more than
+    the side), the best of the directions 10 deg apart."""
+    p = _sample(points)
+    xy, z = p[:, :2], p[:, 2] - support
+    mean = xy.mean(axis=0)
+    r0 = max(float(np.percentile(z, 99)) / 2, params.radius_min)
+
+    def fit(axis: np.ndarray, iterations: int) -> tuple[float, float, float]:
+        normal = np.array([-axis[1], axis[0]])
+        s = (xy - mean) @ normal
+        sc0 = float(np.median(s)) + r0 * math.copysign(1.0, float(normal @ view[:2]) or 1.0)
+        return _cross_section((xy - mean) @ axis, s, z, sc0, r0, iterations)
+    axis = np.linalg.eigh(np.cov((xy - mean).T))[1][:, 1]
+    sc, r, rms = fit(axis, 15)
+    if rms > bound:
+        dirs = [np.array([math.cos(a), math.sin(a)]) for a in np.radians(np.arange(0, 180, 10))]
+        axis = min(dirs, key=lambda d: fit(d, 6)[2])
+        sc, r, rms = fit(axis, 15)
+    normal = np.array([-axis[1], axis[0]])
+    t = (xy - mean) @ axis
     lo, hi = np.percentile(t, [0.5, 99.5])
     length = float(hi - lo)
     if not params.radius_min <= r <= params.radius_max or not params.size_min <= length <= params.size_max:
         raise FitError(f"lying cylinder radius {r * 1000:.0f} mm, length {length * 1000:.0f} mm out of bounds")
     centre = mean + axis * (lo + hi) / 2 + normal * sc
-    q = _sample(np.c_[t - (lo + hi) / 2, s - sc, z - r])
-    rho = np.hypot(q[:, 1], q[:, 2])
-    d = np.minimum(np.abs(rho - r), np.abs(np.abs(q[:, 0]) - length / 2) + np.maximum(rho - r, 0.0))
-    yaw = math.atan2(axis[1], axis[0])
-    return Primitive(CYLINDER, True, float(centre[0]), float(centre[1]), r, length, (2 * r, 2 * r, length), yaw,
-                     float(np.sqrt(np.mean(d ** 2))), False, "", True)
+    return Primitive(CYLINDER, True, float(centre[0]), float(centre[1]), r, length, (2 * r, 2 * r, length),
+                     math.atan2(axis[1], axis[0]), rms, False, "", True)
 
 
 def box(points: np.ndarray, support: float, top: float, params: ObjectParams) -> Primitive:
@@ -141,7 +165,7 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, cam
     why: list[str] = []
     for name, fit in (("standing cylinder", lambda: standing_cylinder(circle_xy, points, support, top, camera, params,
                                                                       tol)),
-                      ("lying cylinder", lambda: lying_cylinder(points, support, view, params)),
+                      ("lying cylinder", lambda: lying_cylinder(points, support, view, params, bound)),
                       ("box", lambda: box(points, support, top, params))):
         try:
             f = fit()
