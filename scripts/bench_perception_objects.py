@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""Generated benchmark of the geometry-first perception (docs/perception.md, "Objects"): shelves with N bottles
-(three sizes; radius 2-3 cm above 20 bottles, 2.5-4 cm else; colours repeated past the palette), 0-3 objects the scenario does not list (a bottle, a short
-wide jar, a box, a lying bottle), some listed bottles lying; rendered by the project's simulated camera (ideal or
-realsense_d435, arm at Q_HOME, its joint state given); every frame scored against the simulator's ground truth.
+"""Generated benchmark of the geometry-first perception (docs/perception.md, "Objects"): shelves with N bottles (three
+sizes; radius 2-3 cm above 20 bottles, 2.5-4 cm else; colours repeated past the palette), 0-3 objects the scenario
+does not list (a bottle, a short wide jar, a box, a lying bottle), some listed bottles lying; rendered by the
+project's simulated camera (ideal or realsense_d435, arm at Q_HOME, its joint state given); every frame scored
+against the simulator's ground truth.
 
 Per object with >= 300 pixels in view: found (listed: its id within 10 mm standing, 15 mm lying or box; unlisted:
 an unlisted object there), covered (some published object's footprint holds its centre), or DROPPED (occupied
@@ -28,11 +29,12 @@ import numpy as np  # noqa: E402  (after the BLAS thread setting, which must pre
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "test")]
 
+from perception_scenes import Extra, generated_layout, render_scene, with_objects  # noqa: E402
+
 from jaco2_sim_driver.sensor_model import SensorModel  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.aruco import PerceptionError  # noqa: E402
 from perception_aruco.objects.model import BOX, CYLINDER  # noqa: E402
 from perception_aruco.pipeline import Perception  # noqa: E402
-from perception_scenes import Extra, generated_layout, render_scene, with_objects  # noqa: E402
 from relocation_common.paths import default_scenario  # noqa: E402
 from relocation_common.robot_description import Q_HOME  # noqa: E402
 from relocation_common.scenario import PALETTE, Scenario, load_scenario  # noqa: E402

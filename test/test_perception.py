@@ -145,8 +145,9 @@ def test_hidden_bottle_reported_missing_not_made_up():
 
 
 def test_scene_memory_holds_unseen_objects_for_hold_frames_then_drops_them():
-    from perception_aruco.pipeline import SceneMemory
     from perception_scenes import perceived
+
+    from perception_aruco.pipeline import SceneMemory
     from relocation_common.scenario import Bottle
 
     def det(i, x):

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from perception_scenes import Extra, generated_layout, render_scene, with_objects
 
 from jaco2_sim_driver.sensor_model import SensorModel
 from perception_aruco.objects.model import BOX, CYLINDER
 from perception_aruco.pipeline import Perception, SceneMemory
-from perception_scenes import Extra, generated_layout, render_scene, with_objects
 from relocation_common.paths import default_scenario
 from relocation_common.robot_description import Q_HOME
 from relocation_common.scenario import PALETTE, load_scenario

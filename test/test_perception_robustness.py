@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from perception_scenes import perceived
 
 from jaco2_sim_driver import sensor_model as sm
 from jaco2_sim_driver.camera import render_frame
 from perception_aruco.aruco import MarkerOccludedError, PerceptionError
 from perception_aruco.pipeline import FrameFusion, Perception, identity_conflicts
-from perception_scenes import perceived
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 

@@ -1,13 +1,14 @@
 """The object points of a frame clustered into objects: scikit-learn's DBSCAN on voxel centroids.
 
 Object points (`object_mask`): inside a shelf compartment, off the boards and panels by the gate's margin (grown with
-the frame's depth noise), off the marker plates (scenario and as seen), off the robot (`self_filter`), and steady
-(depth within `occluder_gap` of its 3x3 median: a real sensor's flying pixels between two surfaces are left out).
-The points are averaged per voxel (`voxel`) with their colour (3x3 median, normalised by the marker plate),
-DBSCAN (`cluster_eps`, `cluster_min_samples`) labels the voxels in (position, colour scaled so that `cluster_colour`
-RGB units count as `cluster_eps`) and every pixel takes its voxel's label; clusters of fewer than `min_cluster_pixels` pixels (scaled with the image area)
-are sensor noise. Each cluster's colour: the per-channel median of its pixels normalised by the marker plate's white
-and black (segmentation.normalise_colours), with the channels the camera saturated on most of its pixels.
+the frame's depth noise), off the marker plates (scenario and as seen), off the robot (`self_filter`), and steady (depth
+within `occluder_gap` of its 3x3 median: a real sensor's flying pixels between two surfaces are left out). The points
+are averaged per voxel (`voxel`) with their colour (3x3 median, normalised by the marker plate), DBSCAN (`cluster_eps`,
+`cluster_min_samples`) labels the voxels in (position, colour scaled so that `cluster_colour` RGB units count as
+`cluster_eps`) and every pixel takes its voxel's label; clusters of fewer than `min_cluster_pixels` pixels (scaled with
+the image area) are sensor noise. Each cluster's colour: the per-channel median of its pixels normalised by the marker
+plate's white and black (segmentation.normalise_colours), with the channels the camera saturated on most of its
+pixels.
 """
 from __future__ import annotations
 
