@@ -139,8 +139,15 @@ def test_lying_bottle_and_box_published_with_their_orientation():
         print(f"\n{e.id}: {o.id} {o.shape} lying={o.lying} off {1000 * math.hypot(o.x - e.x, o.y - e.y):.1f} mm, "
               f"yaw off {math.degrees(dyaw):.1f} deg, size {np.round(np.array(o.size) * 1000)} mm, rms "
               f"{o.fit_rms * 1000:.1f} mm")
-        assert o.shape == e.shape and o.lying == e.lying and not o.conservative
-        assert math.hypot(o.x - e.x, o.y - e.y) <= 0.015 and dyaw < math.radians(8)
+        assert o.shape == e.shape and o.lying == e.lying and not o.conservative and dyaw < math.radians(8)
+        axis = np.array([math.cos(e.yaw), math.sin(e.yaw)])
+        off = np.array([o.x - e.x, o.y - e.y])
+        across, along = abs(float(off @ [-axis[1], axis[0]])), abs(float(off @ axis))
+        # along a listed lying cylinder's axis its place is known from an end cap in view; with both ends hidden
+        # (here the near one behind the marker plate) it is the visible part's centre: the published cylinder still
+        # holds the true centre (off by half the hidden length, 23 mm here); the others within 15 mm
+        bound = e.size[2] / 2 if e.lying and o.listed else 0.015
+        assert across <= 0.015 and along <= bound, (across, along, bound)
     assert r.objects[tipped.id].listed and r.objects[tipped.id].lying
 
 

@@ -37,12 +37,16 @@ def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.n
 
 
 def listed_object(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams) -> PerceivedObject:
-    """Listed cylinder b as cluster f shows it: lying where its lying fit puts it (a tipped bottle), else standing
-    on the circle of its known radius (FitError when that fit is doubtful)."""
+    """Listed cylinder b as cluster f shows it: lying where its lying fit puts it (a tipped bottle; one end cap
+    hidden: its known length laid from the other), else standing on the circle of its known radius (FitError when
+    that fit is doubtful)."""
     p, c = f.prim, f.cluster
     rgb = tuple(float(v) for v in np.clip(c.colour / 255.0, 0, 1))
     if p.shape == CYLINDER and p.lying:
         x, y, rms, n = p.x, p.y, p.rms, c.size
+        if p.ends_seen[0] != p.ends_seen[1] and p.height < b.height:  # one end hidden: the length from the other
+            shift = (b.height - p.height) / 2 * (1.0 if p.ends_seen[0] else -1.0)
+            x, y = x + shift * math.cos(p.yaw), y + shift * math.sin(p.yaw)
     else:
         (x, y), rms, n = locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)
     return PerceivedObject(b.id, b.label, (rgb[0], rgb[1], rgb[2]), b.weight, "", b.is_target, True, CYLINDER,

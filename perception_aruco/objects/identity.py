@@ -74,7 +74,7 @@ def _size_cost(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams, to
     # seen shorter than it is: a lying one's end, a standing one's top may be hidden by what is nearer
     short = p.lying or not p.top_seen
     dh = max(p.height - b.height, 0.0 if short else b.height - p.height) / 2
-    if p.shape == CYLINDER and not p.conservative and (p.lying or abs(p.radius - b.radius) <= tol):
+    if p.shape == CYLINDER and not p.conservative and abs(p.radius - b.radius) <= tol:
         return max(abs(p.radius - b.radius), dh) / tol
     try:  # a sliver, whose free fit is not a cylinder of its radius: is it one of the known radius?
         locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)

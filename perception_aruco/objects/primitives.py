@@ -11,6 +11,9 @@ The camera sees one side of an object, and every fit uses only what it sees:
 Each fit's quality is the rms distance of the cluster's points to the primitive's surface (the faces a camera can
 see); the smallest rms within `fit_rms` (or `fit_noise` x the depth noise) and within the size bounds wins. None
 fits: a conservative box, the visible points' bounding box in x-y reaching `hidden_extent` behind them.
+`top_seen`: the top face is in view (cap points well inside the circle or the box's top face), else the height is
+only a lower bound (something nearer hides the top); `ends_seen`: a lying cylinder's end caps in view. A lying
+cylinder is longer than wide (else it is a standing one).
 """
 from __future__ import annotations
 
@@ -45,6 +48,7 @@ class Primitive:
     conservative: bool
     why: str
     top_seen: bool
+    ends_seen: tuple[bool, bool]  # a lying cylinder's end caps in view, at -/+ height / 2 along yaw
 
 
 def _sample(points: np.ndarray) -> np.ndarray:
@@ -63,7 +67,7 @@ def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: f
     cap = points[points[:, 2] >= top - CAP_BAND, :2]
     seen = int(np.sum(np.linalg.norm(cap - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
     return Primitive(CYLINDER, False, float(centre[0]), float(centre[1]), r, h, (2 * r, 2 * r, h), 0.0,
-                     float(np.sqrt(np.mean(d ** 2))), False, "", seen)
+                     float(np.sqrt(np.mean(d ** 2))), False, "", seen, (False, False))
 
 
 def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: float,
@@ -115,11 +119,15 @@ def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params:
     t = (xy - mean) @ axis
     lo, hi = np.percentile(t, [0.5, 99.5])
     length = float(hi - lo)
-    if not params.radius_min <= r <= params.radius_max or not params.size_min <= length <= params.size_max:
+    if not params.radius_min <= r <= params.radius_max or not max(params.size_min, 2 * r) <= length <= \
+            params.size_max:
         raise FitError(f"lying cylinder radius {r * 1000:.0f} mm, length {length * 1000:.0f} mm out of bounds")
     centre = mean + axis * (lo + hi) / 2 + normal * sc
+    inside = np.hypot((xy - mean) @ normal - sc, z - r) < r - CAP_BAND   # end-cap points lie inside the circle
+    ends = (int(np.sum(inside & (t < lo + CAP_BAND))) >= MIN_TOP_POINTS,
+            int(np.sum(inside & (t > hi - CAP_BAND))) >= MIN_TOP_POINTS)
     return Primitive(CYLINDER, True, float(centre[0]), float(centre[1]), r, length, (2 * r, 2 * r, length),
-                     math.atan2(axis[1], axis[0]), rms, False, "", True)
+                     math.atan2(axis[1], axis[0]), rms, False, "", True, ends)
 
 
 def box(points: np.ndarray, support: float, top: float, params: ObjectParams) -> Primitive:
@@ -137,7 +145,7 @@ def box(points: np.ndarray, support: float, top: float, params: ObjectParams) ->
     inner = 0.25 * min(a, b)
     cap = (p[:, 2] >= top - CAP_BAND) & (np.abs(loc[:, 0]) < a / 2 - inner) & (np.abs(loc[:, 1]) < b / 2 - inner)
     return Primitive(BOX, False, float(cx), float(cy), 0.0, h, (float(a), float(b), h), yaw,
-                     float(np.sqrt(np.mean(d ** 2))), False, "", int(cap.sum()) >= MIN_TOP_POINTS)
+                     float(np.sqrt(np.mean(d ** 2))), False, "", int(cap.sum()) >= MIN_TOP_POINTS, (False, False))
 
 
 def conservative_box(points: np.ndarray, support: float, top: float, view: np.ndarray, params: ObjectParams,
@@ -150,7 +158,7 @@ def conservative_box(points: np.ndarray, support: float, top: float, view: np.nd
     a, b = max(a, params.size_min), max(b, params.size_min)
     h = max(top - support, params.size_min)
     return Primitive(BOX, False, float(cx), float(cy), 0.0, h, (float(a), float(b), h), math.radians(angle), 0.0,
-                     True, why, False)
+                     True, why, False, (False, False))
 
 
 def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, camera: np.ndarray,
