@@ -53,18 +53,30 @@ def _gauss_newton(pts: np.ndarray, centre: np.ndarray, radius: float | None, ite
         jac = -d / dist[:, None]
         if radius is None:
             jac = np.c_[jac, -np.ones(len(pts))]
-        step = np.linalg.lstsq(jac, -res, rcond=None)[0]
+        try:  # the normal equations (2 or 3 unknowns): as lstsq, a fraction of its cost
+            step = np.linalg.solve(jac.T @ jac, -jac.T @ res)
+        except np.linalg.LinAlgError:
+            step = np.linalg.lstsq(jac, -res, rcond=None)[0]
         x = x + step
         if np.linalg.norm(step) < 1e-7:
             break
     return x[:2], float(x[2]) if radius is None else r
 
 
+def algebraic_circle(xy: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """Kasa's algebraic circle fit (linear least squares of x^2 + y^2 = 2 a x + 2 b y + c): the start of the
+    geometric fit; None when degenerate (points on a line)."""
+    a = np.c_[2 * xy, np.ones(len(xy))]
+    sol, *_ = np.linalg.lstsq(a, np.sum(xy ** 2, axis=1), rcond=None)
+    r2 = float(sol[2] + sol[0] ** 2 + sol[1] ** 2)
+    return (sol[:2], math.sqrt(r2)) if r2 > 0 and np.isfinite(r2) else None
+
+
 def _trimmed(xy: np.ndarray, view_from: np.ndarray, r0: float, radius: float | None, tol: float, min_inliers: int,
-             iterations: int) -> tuple[np.ndarray, float, np.ndarray]:
+             iterations: int, start: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
     """Fit, drop points off the circle by more than tol, refit (3 rounds): (centre, radius, inlier mask)."""
     keep = np.ones(len(xy), bool)
-    centre, r = None, r0
+    centre, r = start, r0
     for _ in range(3):
         pts = xy[keep]
         if len(pts) < min_inliers:
@@ -95,11 +107,16 @@ def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray, params: Local
 
 def fit_circle(xy: np.ndarray, view_from: np.ndarray, bounds: tuple[float, float], tol: float,
                min_points: int = 12) -> tuple[np.ndarray, float, np.ndarray]:
-    """(centre, radius, inlier mask) of a circle whose radius is fitted too, started at the middle of `bounds` one
-    radius behind the points; FitError when it is out of bounds or most points are off it."""
+    """(centre, radius, inlier mask) of a circle whose radius is fitted too, started at the algebraic fit (or, when
+    that is far out of bounds, at the middle of `bounds` one radius behind the points); FitError when it is out of
+    bounds or most points are off it."""
     if len(xy) < min_points:
         raise FitError(f"{len(xy)} side and rim points, need {min_points}")
-    centre, r, keep = _trimmed(xy, view_from, sum(bounds) / 2, None, tol, min_points, 20)
+    kasa = algebraic_circle(xy)   # a start near the answer: from the middle of the bounds a short arc diverged
+    if kasa is not None and bounds[0] / 2 <= kasa[1] <= 2 * bounds[1]:
+        centre, r, keep = _trimmed(xy, view_from, kasa[1], None, tol, min_points, 20, kasa[0])
+    else:
+        centre, r, keep = _trimmed(xy, view_from, sum(bounds) / 2, None, tol, min_points, 20)
     if not bounds[0] <= r <= bounds[1]:
         raise FitError(f"radius {r * 1000:.0f} mm out of [{bounds[0] * 1000:.0f}, {bounds[1] * 1000:.0f}] mm")
     if keep.sum() < 0.6 * len(xy):

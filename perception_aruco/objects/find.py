@@ -28,12 +28,12 @@ def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.n
                  params: ObjectParams, loc: LocalizeParams, noise: float) -> list[Fitted]:
     """Each cluster's best primitive (primitives.fit_primitive) and its circle points; the pieces of one object
     merged (fragments.merge_fragments)."""
-    def fit(c: Cluster) -> Fitted:
+    def fit(c: Cluster, search: bool = True) -> Fitted:
         top = float(np.percentile(c.points[:, 2], 99.5))
         xy = circle_points(c.rows, c.cols, image_points, top, camera, loc)
-        prim = fit_primitive(c.points, xy, c.support, camera, params, noise, loc.inlier_tol)
+        prim = fit_primitive(c.points, xy, c.support, camera, params, noise, loc.inlier_tol, search)
         return Fitted(c, prim, xy, (int(np.median(c.cols)), int(np.median(c.rows))))
-    return merge_fragments([fit(c) for c in clusters], fit, seg, params.merge_gap)
+    return merge_fragments([fit(c) for c in clusters], lambda c: fit(c, False), seg, params.merge_gap)
 
 
 def listed_object(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams) -> PerceivedObject:

@@ -20,11 +20,13 @@ def union(a: Cluster, b: Cluster) -> Cluster:
                    (a.colour * a.size + b.colour * b.size) / n, a.clipped & b.clipped)
 
 
-def _gap(a: Cluster, b: Cluster) -> float:
-    """Distance between the clusters' x-y bounding boxes (0 when they overlap)."""
-    lo = np.maximum(a.points[:, :2].min(0), b.points[:, :2].min(0))
-    hi = np.minimum(a.points[:, :2].max(0), b.points[:, :2].max(0))
-    return float(np.linalg.norm(np.maximum(lo - hi, 0.0)))
+def _gap(a: np.ndarray, b: np.ndarray) -> float:
+    """Distance between two x-y bounding boxes (x0, y0, x1, y1; 0 when they overlap)."""
+    return float(np.linalg.norm(np.maximum(np.maximum(a[:2], b[:2]) - np.minimum(a[2:], b[2:]), 0.0)))
+
+
+def _box(c: Cluster) -> np.ndarray:
+    return np.r_[c.points[:, :2].min(0), c.points[:, :2].max(0)]
 
 
 def _same_colour(a: Cluster, b: Cluster, seg: SegmentationParams) -> bool:
@@ -39,7 +41,8 @@ def merge_fragments(fitted: list[Fitted], refit: Callable[[Cluster], Fitted], se
     out = list(fitted)
     tried: set[tuple[int, int]] = set()
     while True:
-        pairs = sorted((_gap(a.cluster, b.cluster), i, j) for i, a in enumerate(out) for j, b in enumerate(out)
+        boxes = [_box(f.cluster) for f in out]
+        pairs = sorted((_gap(boxes[i], boxes[j]), i, j) for i, a in enumerate(out) for j, b in enumerate(out)
                        if i < j and abs(a.cluster.support - b.cluster.support) < 1e-6
                        and (id(a), id(b)) not in tried)
         merged = False

@@ -28,6 +28,7 @@ from .model import BOX, CYLINDER
 from .params import ObjectParams
 
 RMS_SAMPLE = 3000  # points a fit's rms is evaluated on (a fixed-step subsample of larger clusters)
+SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best direction is refitted on all)
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
 
@@ -80,10 +81,15 @@ def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: fl
         for _ in range(iterations):
             ds, dz = s[use] - sc, z[use] - r
             rho = np.maximum(np.hypot(ds, dz), 1e-9)
-            jac = np.c_[-ds / rho, -dz / rho - 1.0]
-            step = np.linalg.lstsq(jac, -(rho - r), rcond=None)[0]
-            sc, r = sc + float(step[0]), r + float(step[1])
-            if np.linalg.norm(step) < 1e-7:
+            ja, jb, res = -ds / rho, -dz / rho - 1.0, rho - r   # normal equations of the 2-parameter step
+            aa, ab, bb = float(ja @ ja), float(ja @ jb), float(jb @ jb)
+            det = aa * bb - ab * ab
+            if det <= 1e-18:
+                break
+            ga, gb = -float(ja @ res), -float(jb @ res)
+            step = ((bb * ga - ab * gb) / det, (aa * gb - ab * ga) / det)
+            sc, r = sc + step[0], r + step[1]
+            if math.hypot(*step) < 1e-7:
                 break
         use = np.abs(np.hypot(s - sc, z - r) - r) < CAP_BAND
         if use.sum() < 10:
@@ -95,10 +101,10 @@ def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: fl
 
 
 def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params: ObjectParams,
-                   bound: float) -> Primitive:
+                   bound: float | None) -> Primitive:
     """A cylinder lying on the board (module docstring); FitError when its radius or length is out of bounds. The
     axis: the points' principal direction in x-y; when that fit is not within `bound` (an end cap seen more than
-    the side), the best of the directions 10 deg apart."""
+    the side), the best of the directions 10 deg apart (bound None: no search)."""
     p = _sample(points)
     xy, z = p[:, :2], p[:, 2] - support
     mean = xy.mean(axis=0)
@@ -111,9 +117,12 @@ def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params:
         return _cross_section((xy - mean) @ axis, s, z, sc0, r0, iterations)
     axis = np.linalg.eigh(np.cov((xy - mean).T))[1][:, 1]
     sc, r, rms = fit(axis, 15)
-    if rms > bound:
+    if bound is not None and rms > bound:
+        full = xy, z
+        xy, z = xy[::max(1, len(xy) // SEARCH_SAMPLE)], z[::max(1, len(z) // SEARCH_SAMPLE)]
         dirs = [np.array([math.cos(a), math.sin(a)]) for a in np.radians(np.arange(0, 180, 10))]
         axis = min(dirs, key=lambda d: fit(d, 6)[2])
+        xy, z = full
         sc, r, rms = fit(axis, 15)
     normal = np.array([-axis[1], axis[0]])
     t = (xy - mean) @ axis
@@ -162,29 +171,33 @@ def conservative_box(points: np.ndarray, support: float, top: float, view: np.nd
 
 
 def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, camera: np.ndarray,
-                  params: ObjectParams, noise: float, tol: float) -> Primitive:
+                  params: ObjectParams, noise: float, tol: float, search: bool = True) -> Primitive:
     """The best primitive of a cluster (module docstring). points: its base-frame points; circle_xy: its side and
     rim points for the standing cylinder; camera: the camera's position; noise: the frame's depth noise; tol: the
-    circle fit's inlier band."""
+    circle fit's inlier band. The lying cylinder's search over axis directions runs only when no primitive fits
+    otherwise and `search` (it costs as much as all other fits)."""
     top = float(np.percentile(points[:, 2], 99.5))
     view = points.mean(axis=0) - camera
     bound = max(params.fit_rms, params.fit_noise * noise)
     fits: list[Primitive] = []
-    why: list[str] = []
+    why: dict[str, str] = {}
     for name, fit in (("standing cylinder", lambda: standing_cylinder(circle_xy, points, support, top, camera, params,
                                                                       tol)),
-                      ("lying cylinder", lambda: lying_cylinder(points, support, view, params, bound)),
-                      ("box", lambda: box(points, support, top, params))):
+                      ("lying cylinder", lambda: lying_cylinder(points, support, view, params, None)),
+                      ("box", lambda: box(points, support, top, params)),
+                      ("lying cylinder, axis searched", lambda: lying_cylinder(points, support, view, params, bound))):
+        if name.endswith("searched") and (fits or not search):
+            continue   # the search: only when nothing fitted
         try:
             f = fit()
         except (FitError, np.linalg.LinAlgError, ValueError) as e:
-            why.append(f"{name}: {e}")
+            why[name] = str(e)
             continue
         if f.rms <= bound:
             fits.append(f)
         else:
-            why.append(f"{name}: rms {f.rms * 1000:.1f} mm")
+            why[name] = f"rms {f.rms * 1000:.1f} mm"
     if fits:
         return min(fits, key=lambda f: f.rms)
-    return conservative_box(points, support, top, view, params,
-                            f"no primitive within {bound * 1000:.1f} mm rms ({'; '.join(why)})")
+    return conservative_box(points, support, top, view, params, f"no primitive within {bound * 1000:.1f} mm rms ("
+                            + "; ".join(f"{k}: {v}" for k, v in why.items()) + ")")
