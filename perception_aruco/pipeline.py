@@ -102,6 +102,10 @@ class Perception:
         self.localizers = [MarkerLocalizer(m, refine_with_depth=refine_with_depth, params=marker)
                            for m in scenario.markers]
         self.localizer = self.localizers[0]   # the scenario's first marker
+        # the listed objects' colours, each once (two objects of one colour would make its pixels ambiguous): the
+        # shelf fit leaves pixels of these colours out
+        unique = {o.rgb: o for o in scenario.objects}
+        self._colour_classes = replace(scenario, objects=tuple(unique.values()), _by_id={})
 
     def process(self, rgb, depth, K, prior: np.ndarray | None = None, memory: SceneMemory | None = None,
                 q: np.ndarray | None = None) -> PerceptionResult:
@@ -158,8 +162,8 @@ class Perception:
         r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
         st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
         sampled = cam[::st, ::st] @ r0.T + p0
-        first = segment_points(rgb[::st, ::st], sampled, self.scenario, replace(self.seg, erode_px=0, median_px=0),
-                               levels, plates[::st, ::st])
+        first = segment_points(rgb[::st, ::st], sampled, self._colour_classes,
+                               replace(self.seg, erode_px=0, median_px=0), levels, plates[::st, ::st])
         # out of the shelf fit: bottles and the further markers' plates (a far one at a low resolution pulled the
         # fit 20 cm off; the main marker's plate, 5 mm before the top board's front, has always been in it)
         not_shelf = np.zeros(cam.shape[:2], bool)

@@ -130,7 +130,10 @@ def test_lying_bottle_and_box_published_with_their_orientation():
               Extra(tipped.id, CYLINDER, 0.72, -0.25, (2 * tipped.radius, 2 * tipped.radius, tipped.height), 1.2,
                     True, tipped.rgb))
     f, vis = render_scene(with_objects(BASE, [b for b in layout if b.id != tipped.id]), extras)
-    r = Perception(with_objects(BASE, layout)).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    # the scenario has the tipped bottle standing where it fell from: its base at one end of the lying one
+    stood = replace(tipped, x=0.72 - tipped.height / 2 * math.cos(1.2), y=-0.25 - tipped.height / 2 * math.sin(1.2))
+    given = with_objects(BASE, [stood if b.id == tipped.id else b for b in layout])
+    r = Perception(given).process(f.rgb, f.depth, f.K, q=Q_HOME)
     for e in extras:
         assert vis[e.id] >= VISIBLE
         o = r.objects.get(e.id) or min(r.unlisted.values(), key=lambda o: math.hypot(o.x - e.x, o.y - e.y))

@@ -8,8 +8,9 @@ on the cost  colour + size + position:
   (seen shorter is no difference when the top or a lying one's end may be hidden); above 1: not that object. A
   cluster no free primitive fitted (a bottle mostly hidden) is that cylinder when a circle of its known radius fits
   its points (localize.locate_cylinder);
-- position: the distance to where the object is expected (its last perceived pose, else the scenario's) over
-  `position_scale`: it tells two objects of one colour and size apart, their tracks across frames.
+- position: the distance to where the object is expected over `position_scale`: from its last perceived pose (its
+  track) at most 1 (an object moved while unseen, e.g. relocated by the arm, is still that object), else from the
+  scenario's pose in full (objects start where the scenario says); it tells two objects of one colour apart.
 A pair costing more than `max_cost` is no match. Clusters left are unlisted objects: one within `unlisted_gate` of
 an unlisted object's last position keeps its id (assignment on the distance), the others get new ids u<k> in order
 of first sight (tracking.SceneMemory).
@@ -17,7 +18,7 @@ of first sight (tracking.SceneMemory).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -74,9 +75,9 @@ def _size_cost(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams, to
     # seen shorter than it is: a lying one's end, a standing one's top may be hidden by what is nearer
     short = p.lying or not p.top_seen
     dh = max(p.height - b.height, 0.0 if short else b.height - p.height) / 2
-    if p.shape == CYLINDER and not p.conservative and abs(p.radius - b.radius) <= tol:
-        return max(abs(p.radius - b.radius), dh) / tol
-    try:  # a sliver, whose free fit is not a cylinder of its radius: is it one of the known radius?
+    if p.shape == CYLINDER and not p.conservative and (not p.lying or abs(p.radius - b.radius) <= tol):
+        return max(abs(p.radius - b.radius), dh) / tol   # a standing cylinder of another radius is another object
+    try:  # a sliver, whose free fit is no cylinder of its radius (a box, lying, none): one of the known radius?
         locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)
     except FitError:
         return NO_MATCH
@@ -91,7 +92,10 @@ def listed_costs(fitted: list[Fitted], objects: tuple[Bottle, ...], memory: Memo
         return cost
     colours = np.array([f.cluster.colour for f in fitted])
     clipped = np.array([f.cluster.clipped for f in fitted])
-    col = colour_residuals(colours, np.array([b.rgb for b in objects]) * 255.0, seg, clipped).T / seg.max_residual
+    # a cluster's median colour is its lit side's (the shading gain 0.75-1.2 measured on the shipped scenes): a
+    # narrower gain range than a single pixel's tells olive from a shaded yellow
+    shade = replace(seg, gain_min=params.cluster_gain_min, gain_max=params.cluster_gain_max)
+    col = colour_residuals(colours, np.array([b.rgb for b in objects]) * 255.0, shade, clipped).T / seg.max_residual
     for j, b in enumerate(objects):
         was = memory.expected(b.id)
         ex, ey, ez = (was.x, was.y, was.z) if was is not None else (b.x, b.y, None)
@@ -102,8 +106,10 @@ def listed_costs(fitted: list[Fitted], objects: tuple[Bottle, ...], memory: Memo
             if size > 1:
                 continue
             dz = 0.0 if ez is None else f.cluster.support - ez
-            d = math.sqrt((f.prim.x - ex) ** 2 + (f.prim.y - ey) ** 2 + dz ** 2)
-            cost[j, m] = col[j, m] + size + d / params.position_scale
+            d = math.sqrt((f.prim.x - ex) ** 2 + (f.prim.y - ey) ** 2 + dz ** 2) / params.position_scale
+            # from the track at most 1: an object moved while unseen (relocated by the arm) is still that object;
+            # from the scenario in full: objects start where it says, and two of one colour are told apart by it
+            cost[j, m] = col[j, m] + size + (min(d, 1.0) if was is not None else d)
     return cost
 
 

@@ -31,6 +31,8 @@ class ObjectParams:
     hidden_extent: float
     density: float
     size_tol: float
+    cluster_gain_min: float
+    cluster_gain_max: float
     position_scale: float
     max_cost: float
     unlisted_gate: float
