@@ -26,8 +26,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node run
 
 import numpy as np  # noqa: E402  (after the BLAS thread setting, which must precede numpy)
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT), str(ROOT / "test")]
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))   # perception_scenes (generated layouts)
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from jaco2_sim_driver.camera import render_frame
 from jaco2_sim_driver.sensor_model import CAMERA_MODELS, SensorModel
@@ -65,7 +65,8 @@ def bench(path, repeats: int, q, camera_model: str = "ideal", objects: int = 0, 
     return dict(name=s.name, found=found, total=len(s.objects), missing=missing,
                 med=np.median(err) * 1000, max=max(err) * 1000, marker_mm=max(e[0] for e in pose) * 1000,
                 marker_deg=math.degrees(max(e[1] for e in pose)), fps=1.0 / dt, cpu_fps=1.0 / dc,
-                size=f"{frames[0].width}x{frames[0].height}", ms=1000 * dc, unlisted=max(len(r.unlisted) for r in results))
+                size=f"{frames[0].width}x{frames[0].height}", ms=1000 * dc,
+                unlisted=max(len(r.unlisted) for r in results))
 
 
 def main() -> None:

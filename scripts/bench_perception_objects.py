@@ -27,7 +27,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node run
 import numpy as np  # noqa: E402  (after the BLAS thread setting, which must precede numpy)
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT), str(ROOT / "test")]
+sys.path.insert(0, str(ROOT / "test"))   # perception_scenes (generated layouts)
+sys.path.insert(0, str(ROOT))
 
 from perception_scenes import Extra, generated_layout, render_scene, with_objects  # noqa: E402
 
