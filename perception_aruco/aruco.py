@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Sequence
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common.scenario import Marker
 
@@ -38,7 +40,7 @@ class ImageFormatError(PerceptionError):
     """An image with an unexpected shape, dtype or encoding, or colour and depth of different sizes."""
 
 
-def rpy_matrix(rpy) -> np.ndarray:
+def rpy_matrix(rpy: Sequence[float]) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll): URDF / ROS fixed-axis roll-pitch-yaw (the scenario's `rpy`)."""
     r, p, y = (float(v) for v in rpy)
     cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
@@ -47,7 +49,7 @@ def rpy_matrix(rpy) -> np.ndarray:
                      [-sp, cp * sr, cp * cr]])
 
 
-def transform(rot: np.ndarray, t) -> np.ndarray:
+def transform(rot: np.ndarray, t: ArrayLike) -> np.ndarray:
     """4x4 homogeneous transform of a rotation and a translation."""
     out = np.eye(4)
     out[:3, :3], out[:3, 3] = rot, np.asarray(t, float).reshape(3)
@@ -66,13 +68,13 @@ def nearest_rotation(m: np.ndarray) -> np.ndarray:
     return u @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)))]) @ vt
 
 
-def mean_pose(poses) -> np.ndarray:
+def mean_pose(poses: Sequence[np.ndarray]) -> np.ndarray:
     """Mean of nearby rigid 4x4 poses: positions averaged, the rotation nearest to the sum of the rotations."""
     return transform(nearest_rotation(np.sum([t[:3, :3] for t in poses], axis=0)),
                      np.mean([t[:3, 3] for t in poses], axis=0))
 
 
-def fuse_markers(seen) -> tuple[np.ndarray, float]:
+def fuse_markers(seen: Sequence[tuple[Any, Any]]) -> tuple[np.ndarray, float]:
     """(T_base_camera, rms corner residual in m) from several markers seen in one frame, given as (MarkerLocalizer,
     MarkerObservation) pairs: one rigid fit (Kabsch) of every marker's corners in the camera (its depth-refined
     pose) to the same corners in the base frame (the scenario's poses); markers far apart constrain the rotation
@@ -218,7 +220,7 @@ class MarkerLocalizer:
         return np.asarray(corners[seen.index(self.marker.id)], float).reshape(4, 2)
 
     def locate(self, rgb: np.ndarray, K: np.ndarray, depth: np.ndarray | None = None,
-               expected: np.ndarray | None = None, found=None) -> MarkerObservation:
+               expected: np.ndarray | None = None, found: Any = None) -> MarkerObservation:
         """Camera pose in the base frame from the marker (and depth, when given and valid on the marker).
         `expected`: T_camera_marker of earlier frames (the node's fused frame): when the marker is not decoded,
         the depth there tells whether it is covered (MarkerOccludedError names how much). `found`: as in
@@ -242,7 +244,8 @@ class MarkerLocalizer:
         t, covered, dropped = refined
         return MarkerObservation(corners, t, self.T_base_marker @ invert(t), True, t_pnp, covered, dropped)
 
-    def _plate_points(self, K, depth, quad: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    def _plate_points(self, K: np.ndarray, depth: np.ndarray, quad: np.ndarray,
+                      scale: float) -> tuple[np.ndarray, np.ndarray]:
         """(pixels N x 2, camera points N x 3) with depth inside the quad scaled by `scale` about its centre."""
         h, w = depth.shape
         mask = np.zeros((h, w), np.uint8)
@@ -252,7 +255,8 @@ class MarkerLocalizer:
         uv = np.stack([u, v], 1).astype(float)
         return uv, _backproject(K, uv, depth[v, u].astype(float))
 
-    def _covered_corners(self, K, depth, corners, n, off) -> tuple[float, list[int]]:
+    def _covered_corners(self, K: np.ndarray, depth: np.ndarray, corners: np.ndarray, n: np.ndarray,
+                         off: float) -> tuple[float, list[int]]:
         """(fraction of the plate with something in front, corners whose neighbourhood has something in front)."""
         p = self.params
         uv, pts = self._plate_points(K, depth, corners, 1.3)
@@ -266,7 +270,7 @@ class MarkerLocalizer:
                 bad.append(k)
         return float(np.mean(front)) if len(front) else 1.0, bad
 
-    def _refine(self, corners, t_pnp, K, depth):
+    def _refine(self, corners: np.ndarray, t_pnp: np.ndarray, K: np.ndarray, depth: np.ndarray) -> Any:
         """(T_camera_marker, covered fraction, dropped corners) from a robust plane fit to the marker's depth and
         the unoccluded corners' rays; None when too few depth pixels (the colour-only pose stands).
         Raises MarkerOccludedError / MarkerInconsistentError when the checks fail."""
@@ -309,7 +313,7 @@ class MarkerLocalizer:
                 f"{math.degrees(dr):.1f} deg (bounds {bound_mm:.0f} mm, {p.max_disagreement_deg:.0f} deg)")
         return t, covered, tuple(bad)
 
-    def diagnose_cover(self, K, depth, expected: np.ndarray) -> None:
+    def diagnose_cover(self, K: np.ndarray, depth: np.ndarray, expected: np.ndarray) -> None:
         """MarkerOccludedError when the marker where `expected` (T_camera_marker) puts it has something in front."""
         obj = self.object_points
         cam = obj @ expected[:3, :3].T + expected[:3, 3]

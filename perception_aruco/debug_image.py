@@ -3,8 +3,11 @@
 was refused."""
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .objects.model import PerceivedObject
 
@@ -14,7 +17,8 @@ def _label(o: PerceivedObject) -> str:
     return f"{o.id} {o.label} {shape}".strip()
 
 
-def annotate(rgb: np.ndarray, result, K=None, note: str = "", marker_size: float = 0.0) -> np.ndarray:
+def annotate(rgb: np.ndarray, result: Any, K: ArrayLike | None = None, note: str = "",
+             marker_size: float = 0.0) -> np.ndarray:
     """Debug image (RGB) of `result` (pipeline.PerceptionResult, or None for a refused frame with `note`)."""
     img = np.ascontiguousarray(rgb).copy()
     if result is not None and result.marker is not None:

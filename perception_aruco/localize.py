@@ -76,7 +76,8 @@ def _trimmed(xy: np.ndarray, view_from: np.ndarray, r0: float, radius: float | N
              iterations: int, start: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
     """Fit, drop points off the circle by more than tol, refit (3 rounds): (centre, radius, inlier mask)."""
     keep = np.ones(len(xy), bool)
-    centre, r = start, r0
+    centre: np.ndarray | None = start
+    r = r0
     for _ in range(3):
         pts = xy[keep]
         if len(pts) < min_inliers:
@@ -90,10 +91,12 @@ def _trimmed(xy: np.ndarray, view_from: np.ndarray, r0: float, radius: float | N
         if np.array_equal(new_keep, keep):
             break
         keep = new_keep
+    assert centre is not None
     return centre, r, keep
 
 
-def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray, params: LocalizeParams = LocalizeParams()):
+def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray,
+             params: LocalizeParams = LocalizeParams()) -> tuple[np.ndarray, np.ndarray]:
     """(centre (2,), inlier mask) of a circle of known radius through N x 2 points; FitError when it fails."""
     if len(xy) < params.min_inliers:
         raise FitError(f"{len(xy)} points, need {params.min_inliers}")

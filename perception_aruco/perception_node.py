@@ -19,6 +19,7 @@ import os
 import threading
 import time
 from collections import deque
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -46,17 +47,17 @@ from .pipeline import FrameFusion, Perception, PerceptionResult, SceneMemory, id
 from .segmentation import SegmentationParams
 
 
-def _stamp_s(msg) -> float:
+def _stamp_s(msg: Any) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
 class PerceptionNode(Node):
     """The perception node (module docstring; docs/perception.md)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__("perception")
         values = declare_parameters(self)  # config/perception.yaml
-        def g(n: str):
+        def g(n: str) -> Any:
             return self.get_parameter(n).value
 
         self.p = g
@@ -77,7 +78,7 @@ class PerceptionNode(Node):
         self._colors: deque = deque(maxlen=6)
         self._depths: deque = deque(maxlen=6)
         self._info = None
-        self._last_pair = None                     # stamp of the last processed pair
+        self._last_pair: float | None = None       # stamp of the last processed pair
         self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")))
         self.fusion = FrameFusion()
         self._previous: dict = {}                  # id -> PerceivedObject of the last published scene
@@ -140,7 +141,7 @@ class PerceptionNode(Node):
         if all(n in msg.name for n in JOINT_NAMES) and len(msg.position) == len(msg.name):
             self._q = (_stamp_s(msg), np.array([msg.position[msg.name.index(n)] for n in JOINT_NAMES]))
 
-    def _newest_pair(self):
+    def _newest_pair(self) -> tuple[Image, Image] | None:
         """Newest (colour, depth) whose stamps differ by at most sync_slop, or None."""
         with self._lock:
             best = None
@@ -226,7 +227,7 @@ class PerceptionNode(Node):
                                                                      for k, v in values.items()])]
         self.diag_pub.publish(msg)
 
-    def _publish_tf(self, color: Image, result) -> None:
+    def _publish_tf(self, color: Image, result: PerceptionResult) -> None:
         """The marker where this frame's camera pose (marker, corrected by the shelf) puts it, and the shelf on it
         (/tf, stamped with the image)."""
         marker = f"aruco_marker_{self.scenario.marker.id}"
@@ -235,7 +236,7 @@ class PerceptionNode(Node):
             transform_msg(invert(result.T_base_camera) @ self._t_base_marker, color.header.frame_id, marker, stamp),
             transform_msg(self._t_marker_shelf, marker, self.p("shelf_frame"), stamp)]))
 
-    def _publish_scene(self, color: Image, result) -> None:
+    def _publish_scene(self, color: Image, result: PerceptionResult) -> None:
         log = self.get_logger()
         objects, held, lost = self.memory.update(result.objects)
         unlisted = [o for o in objects if not o.listed]
@@ -276,7 +277,7 @@ class PerceptionNode(Node):
         self.debug_pub.publish(Image(header=color.header, encoding=enc, height=h, width=w, step=step, data=data))
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """Entry point of the perception node."""
     node_main("perception", PerceptionNode, args, errors=(CalibrationError,))  # a bad calibration_file: one line
 

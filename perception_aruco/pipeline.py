@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common.scenario import Scenario
 
@@ -35,6 +36,7 @@ from .objects.find import find_objects
 from .objects.model import PerceivedObject
 from .objects.params import ObjectParams
 from .segmentation import (
+    PlateLevels,
     SegmentationParams,
     backproject_image,
     check_images,
@@ -46,6 +48,7 @@ from .segmentation import (
 from .shelf import InconsistentFrameError, ShelfFit, ShelfParams, corrected_K, fit_shelf
 from .tracking import FrameFusion, SceneMemory, identity_conflicts
 
+Seen = list[tuple[MarkerLocalizer, MarkerObservation]]   # the markers seen in a frame
 __all__ = ["Perception", "PerceptionResult", "FrameFusion", "SceneMemory", "identity_conflicts"]
 
 # a marker seen farther than this from where the largest one's frame and the scenario put it: one of them is not
@@ -60,7 +63,7 @@ SHELF_REJECTS = 3.0
 class MarkersDisagreeError(MarkerInconsistentError):
     """Two markers seen where their scenario poses cannot both be; `seen`: the (localizer, observation) pairs."""
 
-    def __init__(self, message: str, seen: list):
+    def __init__(self, message: str, seen: Seen):
         super().__init__(message)
         self.seen = seen
 
@@ -107,7 +110,8 @@ class Perception:
         unique = {o.rgb: o for o in scenario.objects}
         self._colour_classes = replace(scenario, objects=tuple(unique.values()), _by_id={})
 
-    def process(self, rgb, depth, K, prior: np.ndarray | None = None, memory: SceneMemory | None = None,
+    def process(self, rgb: ArrayLike, depth: ArrayLike, K: ArrayLike, prior: np.ndarray | None = None,
+                memory: SceneMemory | None = None,
                 q: np.ndarray | None = None) -> PerceptionResult:
         """The objects of one registered RGB-D frame. `prior`: T_base_camera of earlier frames (the node's fused
         frame); when the marker is not seen now, the prior stands in if the shelf confirms it. `memory`: the objects
@@ -143,7 +147,7 @@ class Perception:
                                         T[:3, 3], fit.noise)
         return PerceptionResult(marker, objects, missing, T, fit, tuple(notes))
 
-    def _seen_plates(self, cam: np.ndarray, seen) -> np.ndarray:
+    def _seen_plates(self, cam: np.ndarray, seen: Seen) -> np.ndarray:
         """HxW bool: pixels on the plates of the markers as seen (camera-frame points `cam`), never bottles: a
         plate the scenario puts centimetres off would otherwise pass the workspace gate as black and white."""
         h, w = cam.shape[:2]
@@ -157,7 +161,8 @@ class Perception:
                                                        self.seg.marker_margin)
         return out
 
-    def _fit_shelf(self, rgb, cam: np.ndarray, t0: np.ndarray, levels, plates: np.ndarray) -> ShelfFit:
+    def _fit_shelf(self, rgb: np.ndarray, cam: np.ndarray, t0: np.ndarray, levels: PlateLevels | None,
+                   plates: np.ndarray) -> ShelfFit:
         """The shelf fit (`fit_shelf`) of the frame `t0`, bottles and the further markers' plates left out."""
         r0, p0 = t0[:3, :3].astype(np.float32), t0[:3, 3].astype(np.float32)
         st = self.shelf.stride   # the shelf fit uses every st-th pixel: classify only those to leave bottles out
@@ -175,7 +180,8 @@ class Perception:
         return fit_shelf(cam, not_shelf, t0, self.scenario,
                          replace(self.shelf, min_points=max(100, round(self.shelf.min_points * area))))
 
-    def _shelf_decides(self, err: MarkersDisagreeError, rgb, cam: np.ndarray, notes: list[str]):
+    def _shelf_decides(self, err: MarkersDisagreeError, rgb: np.ndarray, cam: np.ndarray, notes: list[str]) \
+            -> tuple[MarkerObservation, np.ndarray, ShelfFit, PlateLevels | None, np.ndarray]:
         """Markers seen that disagree: each one's own frame is fitted to the shelf; the one the shelf confirms (its
         correction <= SHELF_CONFIRMS_M) while every other needs SHELF_REJECTS times as much and more than
         MARKERS_AGREE_M / 3 is taken, the others named in the notes ("run ./run calibrate"). Otherwise `err` (the
@@ -201,8 +207,8 @@ class Perception:
                      "not used, their scenario pose is off: run ./run calibrate")
         return obs, obs.T_base_camera, fit, levels, plates
 
-    def _marker_frame(self, rgb, K, depth, prior, notes: list[str]) -> tuple[MarkerObservation | None, np.ndarray,
-                                                                              list]:
+    def _marker_frame(self, rgb: np.ndarray, K: np.ndarray, depth: np.ndarray, prior: np.ndarray | None,
+                      notes: list[str]) -> tuple[MarkerObservation | None, np.ndarray, Seen]:
         """(the marker seen largest in the image, T_base_camera, the (localizer, observation) pairs seen): the
         markers seen fused (`fuse_markers`; a covered or inconsistent one is left out, its reason in `notes`;
         markers that disagree raise MarkersDisagreeError, `_shelf_decides`); none seen: the prior if given and no
@@ -246,6 +252,7 @@ class Perception:
             raise errors[0]
         raise type(errors[0])("; ".join(map(str, errors)))
 
-    def annotate(self, rgb: np.ndarray, result: PerceptionResult | None, K=None, note: str = "") -> np.ndarray:
+    def annotate(self, rgb: np.ndarray, result: PerceptionResult | None, K: ArrayLike | None = None,
+                 note: str = "") -> np.ndarray:
         """Debug image (debug_image.annotate) with this scenario's marker size."""
         return annotate(rgb, result, K, note, self.scenario.marker.size)

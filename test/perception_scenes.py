@@ -8,10 +8,9 @@ import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, replace
 
-import mujoco
 import numpy as np
 
-from jaco2_sim_driver.camera import CameraRenderer, Frame
+from jaco2_sim_driver.camera import CameraRenderer, Frame  # first: the package sets MUJOCO_GL before mujoco loads
 from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, quat_wxyz, rpy_matrix, scene_assets, scene_xml
 from jaco2_sim_driver.sensor_model import SensorModel
 from perception_aruco.objects.model import CYLINDER, PerceivedObject
@@ -95,8 +94,9 @@ def _add_extra(world: ET.Element, e: Extra, z: float) -> None:
     ET.SubElement(body, "geom", attrs)
 
 
-def build(scenario: Scenario, extras=(), camera: CameraSpec = CameraSpec()) -> mujoco.MjModel:
+def build(scenario: Scenario, extras=(), camera: CameraSpec = CameraSpec()):
     """The simulator's scene of `scenario` plus the extra objects (static: the frame is rendered, not simulated)."""
+    import mujoco
     root = ET.fromstring(scene_xml(scenario, camera))
     world = root.find("worldbody")
     for e in extras:
@@ -107,6 +107,7 @@ def build(scenario: Scenario, extras=(), camera: CameraSpec = CameraSpec()) -> m
 def render_scene(scenario: Scenario, extras=(), q=Q_HOME, sensor: SensorModel = SensorModel(), seed: int = 0,
                  camera: CameraSpec = CameraSpec()) -> tuple[Frame, dict[str, int]]:
     """(frame, visible pixels of each object by id) of the scene with the arm at q."""
+    import mujoco
     model = build(scenario, extras, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
