@@ -78,10 +78,12 @@ def _size_cost(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams, to
     if p.shape == CYLINDER and not p.conservative and (not p.lying or abs(p.radius - b.radius) <= tol):
         return max(abs(p.radius - b.radius), dh) / tol   # a standing cylinder of another radius is another object
     try:  # a sliver, whose free fit is no cylinder of its radius (a box, lying, none): one of the known radius?
-        locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)
+        centre = locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)[0]
     except FitError:
         return NO_MATCH
-    return dh / tol
+    # ... holding the whole cluster (a circle of a small radius also fits part of a wide jar's arc)
+    spread = float(np.percentile(np.linalg.norm(f.cluster.points[:, :2] - centre, axis=1), 95))
+    return dh / tol if spread <= b.radius + tol else NO_MATCH
 
 
 def listed_costs(fitted: list[Fitted], objects: tuple[Bottle, ...], memory: Memory, seg: SegmentationParams,
