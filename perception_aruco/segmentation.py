@@ -139,7 +139,7 @@ def colour_residuals(rgb_pixels: np.ndarray, refs: np.ndarray, params: Segmentat
     orange is not yellow)."""
     p = rgb_pixels.astype(np.float32)
     a = refs.astype(np.float32)
-    s = np.clip(p @ a.T / np.sum(a * a, axis=1), params.gain_min, params.gain_max)       # N x C
+    s = np.clip(p @ a.T / np.maximum(np.sum(a * a, axis=1), 1e-6), params.gain_min, params.gain_max)  # N x C
     res = np.linalg.norm(p[:, None, :] - s[..., None] * a[None, :, :], axis=2)             # N x C
     sat = np.nonzero(clipped.any(axis=1))[0] if clipped is not None else np.zeros(0, int)
     if clipped is not None and len(sat):  # the few saturated pixels: censored channels
