@@ -18,7 +18,7 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + ["config/fastdds.xml"]),
         (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
         *[(f"share/{PACKAGE}/config/scenarios/{d}", glob(f"config/scenarios/{d}/*.yaml"))
-          for d in ("random5", "paper_random5")],  # Table 4's random cases, both sets
+          for d in ("random5", "paper_random5", "world")],  # Table 4's random cases, both sets; the shelf as it is
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools"],

@@ -12,11 +12,13 @@ from dataclasses import dataclass
 
 import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.scenario import Scenario
 
-from .scene import CAMERA_NAME, CameraSpec, build_model
+from .params import CameraSpec
+from .scene import CAMERA_NAME, build_model
 from .sensor_model import SensorModel, SensorSimulator
 
 # MuJoCo camera frame (x right, y up, looking along -z) -> OpenCV optical frame (x right, y down, z forward)
@@ -138,10 +140,11 @@ class CameraRenderer:
         self._renderer.close()
 
 
-def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec = CameraSpec(), sensor: SensorModel = SensorModel(),
-                 seed: int = 0) -> Frame:
+def render_frame(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec | None = None,
+                 sensor: SensorModel = SensorModel(), seed: int = 0) -> Frame:
     """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception;
-    `sensor` / `seed` as in CameraRenderer."""
+    `camera` None: the driver's (CameraSpec.configured()); `sensor` / `seed` as in CameraRenderer."""
+    camera = camera if camera is not None else CameraSpec.configured()
     model = build_model(scenario, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
@@ -152,3 +155,23 @@ def render_frame(scenario: Scenario, q=Q_HOME, camera: CameraSpec = CameraSpec()
         return r.render(data)
     finally:
         r.close()
+
+
+def visible_pixels(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec | None = None) -> dict[str, int]:
+    """Pixels of each object of the scenario's world (listed and unlisted) in the camera's image at its initial
+    state with the arm at q (MuJoCo's segmentation rendering): 0 for an object the camera cannot see."""
+    camera = camera if camera is not None else CameraSpec.configured()
+    model = build_model(scenario, camera)
+    data = mujoco.MjData(model)
+    for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
+        data.qpos[model.joint(j).qposadr[0]] = qj
+    mujoco.mj_forward(model, data)
+    r = mujoco.Renderer(model, camera.height, camera.width)
+    try:
+        r.enable_segmentation_rendering()
+        r.update_scene(data, camera=CAMERA_NAME)
+        seg = r.render()
+    finally:
+        r.close()
+    geoms = np.where(seg[:, :, 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[:, :, 0], -1)
+    return {o.id: int((geoms == model.geom(f"{o.id}_geom").id).sum()) for o in scenario.world}

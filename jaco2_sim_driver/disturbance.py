@@ -21,17 +21,44 @@ import dataclasses
 import json
 import math
 import random
-from dataclasses import dataclass, field
-from typing import Any, Iterable
+from dataclasses import dataclass, field, replace
+from typing import Any, Iterable, Protocol
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
+
+from relocation_common import geometry
+from relocation_common.scenario import Scenario, ShelfObject
+from relocation_common.shelf_object import Footprint, at_pose
 
 MARGIN = 0.003  # m left between a disturbed bottle and its neighbours or the shelf's sides
 SLIP_CLEAR = 0.01  # m: a dropped bottle touches the hand again once this far from every finger and arm geom
 PUSH_STEP = 0.001  # m: resolution of the slide of a nudge
 TIP_DIRECTIONS = 12  # directions tried (evenly spaced from the asked one) for room to lie down
 KINDS = ("nudge", "tip", "move", "drop")
+
+
+class SimState(Protocol):
+    """What a disturbance reads and changes of the simulation (sim.Jaco2Sim; named here, not imported: sim.py reads
+    the driver's parameters, which read this module's plans)."""
+
+    model: Any  # mujoco.MjModel
+    data: Any  # mujoco.MjData
+    scenario: Scenario
+    grasped: str | None  # the bottle welded to the hand
+    q_home: np.ndarray
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s)."""
+
+    @property
+    def q(self) -> np.ndarray:
+        """The arm's joint angles (rad)."""
+
+    def object_poses(self) -> list[Any]:
+        """Every bottle's pose (sim.ObjectPose)."""
 
 
 class DisturbanceError(ValueError):
@@ -53,18 +80,19 @@ class Applied:
 
 
 # ------------------------------------------------------------------------------------------------ geometry helpers
-def _body(sim, object_id: str) -> int:
-    sim.scenario.object(object_id)  # UnknownObjectError naming the known ids
+def _body(sim: SimState, object_id: str) -> int:
+    sim.scenario.world_object(object_id)  # UnknownObjectError naming the known ids
     return int(sim.model.body(object_id).id)
 
 
-def _free_adr(sim, body: int) -> tuple[int, int]:
+def _free_adr(sim: SimState, body: int) -> tuple[int, int]:
     j = sim.model.body_jntadr[body]
     return int(sim.model.jnt_qposadr[j]), int(sim.model.jnt_dofadr[j])
 
 
-def _set_pose(sim, object_id: str, position, quat_wxyz) -> None:
-    """Teleport a bottle (base centre, orientation), at rest but awake (a sleeping body would hang where put)."""
+def _set_pose(sim: SimState, object_id: str, position: ArrayLike, quat_wxyz: ArrayLike) -> None:
+    """Teleport an object (its body frame: base centre as built, orientation), at rest but awake (a sleeping body
+    would hang where put)."""
     adr, vadr = _free_adr(sim, _body(sim, object_id))
     sim.data.qpos[adr:adr + 3] = position
     sim.data.qpos[adr + 3:adr + 7] = quat_wxyz
@@ -73,135 +101,148 @@ def _set_pose(sim, object_id: str, position, quat_wxyz) -> None:
     mujoco.mj_forward(sim.model, sim.data)
 
 
-def _pose(sim, object_id: str) -> tuple[np.ndarray, np.ndarray]:
+def _pose(sim: SimState, object_id: str) -> tuple[np.ndarray, np.ndarray]:
     b = _body(sim, object_id)
     return sim.data.xpos[b].copy(), sim.data.xquat[b].copy()
 
 
-def tilt(sim, object_id: str) -> float:
-    """Angle (rad) between the bottle's axis and the vertical: 0 standing, pi/2 lying."""
-    axis = sim.data.xmat[_body(sim, object_id)].reshape(3, 3)[:, 2]
-    return float(math.acos(max(-1.0, min(1.0, float(axis[2])))))
+def tilt(sim: SimState, object_id: str) -> float:
+    """Angle (rad) between the object's body z axis (a cylinder's axis) and the vertical: 0 standing, pi/2 lying."""
+    return geometry.tilt(sim.data.xmat[_body(sim, object_id)].reshape(3, 3))
 
 
-def _footprint(sim, object_id: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """The bottle's horizontal footprint as a segment (xy ends) with a radius: its axis projected on the board."""
-    b = sim.scenario.object(object_id)
-    p = sim.data.xpos[_body(sim, object_id)]
-    axis = sim.data.xmat[_body(sim, object_id)].reshape(3, 3)[:, 2]
-    return p[:2].copy(), (p + b.height * axis)[:2].copy(), b.radius
+def _rotation(sim: SimState, object_id: str) -> np.ndarray:
+    return np.asarray(sim.data.xmat[_body(sim, object_id)], float).reshape(3, 3).copy()
 
 
-def _segment_distance(a0, a1, b0, b1) -> float:
-    """Distance between two 2-D segments (sampled ends against the other segment: exact for non-crossing ones)."""
-    def point_seg(p, s0, s1) -> float:
-        d = s1 - s0
-        n = float(d @ d)
-        t = 0.0 if n == 0 else min(1.0, max(0.0, float((p - s0) @ d) / n))
-        return float(np.linalg.norm(p - (s0 + t * d)))
-    if _crosses(a0, a1, b0, b1):
-        return 0.0
-    return min(point_seg(a0, b0, b1), point_seg(a1, b0, b1), point_seg(b0, a0, a1), point_seg(b1, a0, a1))
+def current(sim: SimState, object_id: str) -> ShelfObject:
+    """The object as it is now (its primitive at the simulated pose: shelf_object.at_pose)."""
+    o = sim.scenario.world_object(object_id)
+    rot = _rotation(sim, object_id)
+    return at_pose(o, sim.data.xpos[_body(sim, object_id)] + rot[:, 2] * o.size[2] / 2, rot)
 
 
-def _crosses(a0, a1, b0, b1) -> bool:
-    def cross(o, p, q) -> float:
-        return float((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0]))
-    d1, d2 = cross(b0, b1, a0), cross(b0, b1, a1)
-    d3, d4 = cross(a0, a1, b0), cross(a0, a1, b1)
-    return d1 * d2 < 0 and d3 * d4 < 0
+def _half_extent(o: ShelfObject, rot: np.ndarray, u: np.ndarray) -> float:
+    """Half the extent along the unit vector u of the object's primitive (as built) turned by rot."""
+    if o.shape == "box":
+        return float(sum(o.size[i] / 2 * abs(float(rot[:, i] @ u)) for i in range(3)))
+    c = abs(float(rot[:, 2] @ u))
+    return o.height / 2 * c + o.radius * math.sqrt(max(0.0, 1.0 - c * c))
 
 
-def _room(sim, object_id: str, s0, s1, radius: float, z: float) -> str | None:
-    """Why a footprint (segment s0-s1, radius) at height z does not fit, or None: it must stay within the shelf's
-    sides and depth and keep MARGIN from every other bottle near that height."""
+Others = list[tuple[str, float, Footprint]]  # (id, support height, footprint) of the objects around one
+
+
+def _others(sim: SimState, object_id: str) -> Others:
+    """Every other object not in the hand, as it is now: its support height and footprint."""
+    out = []
+    for other in sim.scenario.world:
+        if other.id != object_id and other.id != sim.grasped:
+            now = current(sim, other.id)
+            out.append((other.id, float(now.support_z or 0.0), now.footprint()))
+    return out
+
+
+def _room(sim: SimState, candidate: ShelfObject, others: Others | None = None) -> str | None:
+    """Why `candidate` (an object at a pose it may be put at) does not fit, or None: its footprint must stay within
+    the shelf's sides and depth and keep MARGIN from every other object resting near its height (`others`: those
+    objects, `_others`, when a caller tries many poses)."""
     sh = sim.scenario.shelf
-    for p in (s0, s1):
-        if not (sh.x_front + radius <= p[0] <= sh.x_back - radius - MARGIN
-                and sh.y_min + radius + MARGIN <= p[1] <= sh.y_max - radius - MARGIN):
-            return "it would leave the shelf"
-    for other in sim.scenario.objects:
-        if other.id == object_id or other.id == sim.grasped:
-            continue
-        o0, o1, r = _footprint(sim, other.id)
-        if abs(float(sim.data.xpos[_body(sim, other.id)][2]) - z) > 0.05:
+    if not candidate.footprint().inside(sh.x_front, sh.x_back - MARGIN, sh.y_min + MARGIN, sh.y_max - MARGIN):
+        return "it would leave the shelf"
+    grown = candidate.footprint(MARGIN)
+    for oid, support, footprint in _others(sim, candidate.id) if others is None else others:
+        if abs(support - float(candidate.support_z or 0.0)) > 0.05:
             continue  # on another board, or in the air
-        if _segment_distance(np.asarray(s0), np.asarray(s1), o0, o1) < radius + r + MARGIN:
-            return f"it would overlap {other.id}"
+        if grown.overlaps(footprint):
+            return f"it would overlap {oid}"
     return None
 
 
-def _not_grasped(sim, object_id: str, kind: str) -> None:
+def _not_grasped(sim: SimState, object_id: str, kind: str) -> None:
     if sim.grasped == object_id:
         raise DisturbanceError(f"cannot {kind} {object_id}: it is in the hand (use drop_grasped)")
 
 
 # ------------------------------------------------------------------------------------------------ disturbances
-def nudge(sim, object_id: str, dx: float, dy: float) -> Applied:
-    """Push a standing bottle horizontally by (dx, dy) m: it slides along the push, in PUSH_STEP increments, as far
-    as it goes without touching another bottle or leaving the shelf. `detail`: asked and applied displacement."""
+def nudge(sim: SimState, object_id: str, dx: float, dy: float) -> Applied:
+    """Push an object horizontally by (dx, dy) m: it slides along the push, in PUSH_STEP increments, as far as it
+    goes without touching another object or leaving the shelf. `detail`: asked and applied displacement."""
     _not_grasped(sim, object_id, "nudge")
     p, q = _pose(sim, object_id)
-    r = sim.scenario.object(object_id).radius
+    now = current(sim, object_id)
     push = np.array([dx, dy], float)
     length = float(np.linalg.norm(push))
     if not math.isfinite(length):
         raise DisturbanceError(f"nudge of {object_id}: dx, dy must be finite, got {dx}, {dy}")
     steps = max(1, math.ceil(length / PUSH_STEP))
     done = np.zeros(2)
+    others = _others(sim, object_id)
     for k in range(1, steps + 1):
-        xy = p[:2] + push * k / steps
-        if _room(sim, object_id, xy, xy, r, float(p[2])) is not None:
+        d = push * k / steps
+        if _room(sim, replace(now, x=now.x + float(d[0]), y=now.y + float(d[1])), others) is not None:
             break
-        done = xy - p[:2]
+        done = d
     _set_pose(sim, object_id, (p[0] + done[0], p[1] + done[1], p[2]), q)
     return Applied("nudge", object_id, sim.time, {"asked": [float(dx), float(dy)],
                                                   "applied": [round(float(done[0]), 4), round(float(done[1]), 4)]})
 
 
-def tip(sim, object_id: str, direction: float = 0.0) -> Applied:
-    """Tip a bottle over: it lies on its side on its board, base where it stood, top towards `direction` (rad, in
-    the base frame's xy plane) or the next of TIP_DIRECTIONS directions with room. DisturbanceError if none."""
+def _tip_directions(now: ShelfObject, direction: float) -> list[float]:
+    """The directions a tip tries, the asked one first: a cylinder, TIP_DIRECTIONS evenly spaced; a box, the normals
+    of its four side faces (it falls over an edge onto a face), nearest the asked one first."""
+    if now.shape != "box":
+        return [direction + 2 * math.pi * k / TIP_DIRECTIONS for k in range(TIP_DIRECTIONS)]
+    faces = [now.yaw + k * math.pi / 2 for k in range(4)]
+    return sorted(faces, key=lambda a: abs(math.remainder(a - direction, 2 * math.pi)))
+
+
+def tip(sim: SimState, object_id: str, direction: float = 0.0) -> Applied:
+    """Tip an object over: it turns a quarter turn over its edge towards `direction` (rad, in the base frame's xy
+    plane) and lies on its side on its board, beside where it stood; or towards the next direction with room
+    (`_tip_directions`). DisturbanceError if none."""
     _not_grasped(sim, object_id, "tip")
-    b = sim.scenario.object(object_id)
-    p, _ = _pose(sim, object_id)
-    why = "no direction tried"
-    for k in range(TIP_DIRECTIONS):
-        a = direction + 2 * math.pi * k / TIP_DIRECTIONS
-        d = np.array([math.cos(a), math.sin(a)])
-        base = p[:2] + d * (b.radius + MARGIN)  # rolled over its base edge
-        why = _room(sim, object_id, base, base + b.height * d, b.radius, float(p[2])) or ""
+    o, now, rot = sim.scenario.world_object(object_id), current(sim, object_id), _rotation(sim, object_id)
+    centre = np.array([now.x, now.y]) if now.lying or now.shape == "box" else \
+        np.asarray(sim.data.xpos[_body(sim, object_id)][:2], float)
+    why, others = "no direction tried", _others(sim, object_id)
+    for a in _tip_directions(now, direction):
+        d = np.array([math.cos(a), math.sin(a), 0.0])
+        turned = geometry.rotvec_matrix(np.cross([0.0, 0.0, 1.0], d) * math.pi / 2) @ rot
+        xy = centre + d[:2] * (_half_extent(o, rot, d) + MARGIN + _half_extent(o, turned, d))
+        c = np.array([xy[0], xy[1], float(now.support_z or 0.0) + _half_extent(o, turned, np.array([0, 0, 1.0]))])
+        why = _room(sim, at_pose(o, c, turned), others) or ""
         if not why:
-            s, c = math.sin(math.pi / 4), math.cos(math.pi / 4)
-            quat = (c, -s * d[1], s * d[0], 0.0)  # z axis turned onto (d, 0) about (-dy, dx, 0)
-            _set_pose(sim, object_id, (base[0], base[1], p[2] + b.radius), quat)
+            _set_pose(sim, object_id, c - turned[:, 2] * o.size[2] / 2, geometry.quat_wxyz(turned))
             return Applied("tip", object_id, sim.time, {"direction": round(a % (2 * math.pi), 4)})
     raise DisturbanceError(f"cannot tip {object_id}: no room to lie down ({why} in every direction)")
 
 
-def move_to(sim, object_id: str, x: float, y: float, z: float | None = None) -> Applied:
-    """Stand a bottle upright at (x, y) on the board at height z (default: the top shelf, where bottles stand).
-    DisturbanceError when it would overlap another bottle or leave the shelf."""
+def move_to(sim: SimState, object_id: str, x: float, y: float, z: float | None = None) -> Applied:
+    """Stand an object at (x, y) on the board at height z (default: the top shelf, where objects stand): a
+    cylinder upright, a box as built. DisturbanceError when it would overlap another object or leave the shelf."""
     _not_grasped(sim, object_id, "move")
     z = sim.scenario.shelf.top_z if z is None else float(z)
-    xy = np.array([x, y], float)
-    why = _room(sim, object_id, xy, xy, sim.scenario.object(object_id).radius, z)
+    o = sim.scenario.world_object(object_id)
+    upright = replace(o, x=float(x), y=float(y), support_z=z, lying=False, tilt=None,
+                      yaw=o.yaw if o.shape == "box" else 0.0)
+    why = _room(sim, upright)
     if why:
         raise DisturbanceError(f"cannot move {object_id} to ({x:.3f}, {y:.3f}, {z:.3f}): {why}")
     before, _ = _pose(sim, object_id)
-    _set_pose(sim, object_id, (x, y, z), (1.0, 0.0, 0.0, 0.0))
+    _set_pose(sim, object_id, (x, y, z), geometry.quat_wxyz(upright.rotation()))
     return Applied("move", object_id, sim.time, {"from": [round(float(v), 4) for v in before],
                                                  "to": [round(float(x), 4), round(float(y), 4), round(z, 4)]})
 
 
-def clear_of_hand(sim, object_id: str) -> bool:
+def clear_of_hand(sim: SimState, object_id: str) -> bool:
     """True when the bottle is SLIP_CLEAR from every geom of the arm and the fingers (contype 2)."""
     m, g = sim.model, int(sim.model.geom(f"{object_id}_geom").id)
     hand = [k for k in range(m.ngeom) if m.geom_contype[k] & 2]
     return all(mujoco.mj_geomDistance(m, sim.data, g, k, SLIP_CLEAR, None) >= SLIP_CLEAR for k in hand)
 
 
-def drop_grasped(sim) -> Applied | None:
+def drop_grasped(sim: SimState) -> Applied | None:
     """The carried bottle slips out of the hand now (None when nothing is grasped): the grasp weld is switched off,
     its weight comes back, and it stops touching the fingers (it would stay wedged between them) until
     `CarryDropper.update` (or `restore_contacts`, once `clear_of_hand`) gives the contacts back. The fingers stay
@@ -221,16 +262,16 @@ def drop_grasped(sim) -> Applied | None:
     return Applied("drop", oid, sim.time, {"at": [round(float(v), 4) for v in p]})
 
 
-def restore_contacts(sim, object_id: str) -> None:
+def restore_contacts(sim: SimState, object_id: str) -> None:
     """Give a dropped bottle its contacts with the fingers back (the bottle class: contype 1, conaffinity 3)."""
     g = int(sim.model.geom(f"{object_id}_geom").id)
     sim.model.geom_contype[g], sim.model.geom_conaffinity[g] = 1, 3
 
 
-def restore_all_contacts(sim) -> None:
+def restore_all_contacts(sim: SimState) -> None:
     """Every bottle's contacts as built (Jaco2Sim.reset restores the data, not these model fields): call it with a
     scene reset, in case a dropped bottle was still slipping."""
-    for b in sim.scenario.objects:
+    for b in sim.scenario.world:
         restore_contacts(sim, b.id)
 
 
@@ -255,7 +296,7 @@ class CarryDropper:
         self._slipping: str | None = None  # a dropped bottle without contacts with the hand yet
         self.applied: list[Applied] = []
 
-    def update(self, sim) -> Applied | None:
+    def update(self, sim: SimState) -> Applied | None:
         """Count grasps, drop when due, give contacts back; returns the drop made now, if any."""
         if self._slipping is not None and clear_of_hand(sim, self._slipping):
             restore_contacts(sim, self._slipping)
@@ -377,14 +418,14 @@ class DisturbancePlan:
         return plan
 
 
-def on_top_shelf(sim, tol: float = 0.02) -> list[str]:
-    """Ids of the bottles standing on the top shelf (base within tol of top_z, upright), not in the hand."""
+def on_top_shelf(sim: SimState, tol: float = 0.02) -> list[str]:
+    """Ids of the objects standing on the top shelf (support within tol of top_z, not lying), not in the hand."""
     top = sim.scenario.shelf.top_z
-    return [p.id for p in sim.object_poses()
-            if p.id != sim.grasped and abs(p.position[2] - top) < tol and tilt(sim, p.id) < math.radians(20)]
+    return [p.id for p in sim.object_poses() if p.id != sim.grasped and
+            abs(float(current(sim, p.id).support_z or 0.0) - top) < tol and tilt(sim, p.id) < math.radians(20)]
 
 
-def apply(sim, d: Disturbance) -> dict[str, Any]:
+def apply(sim: SimState, d: Disturbance) -> dict[str, Any]:
     """Apply a planned disturbance now; the report record: the plan's entry plus what was done (`object`,
     `sim_time` and the numbers) or `skipped` with the reason (nothing in the hand to drop, no bottle, no room)."""
     record = d.to_dict()
@@ -408,15 +449,19 @@ def apply(sim, d: Disturbance) -> dict[str, Any]:
         return {**record, "skipped": str(e)}
 
 
-def _move_somewhere(sim, object_id: str, where: tuple[float, float]) -> Applied:
+def _move_somewhere(sim: SimState, object_id: str, where: tuple[float, float]) -> Applied:
     """move_to the first free spot of a 1 cm grid on the top shelf, nearest to the fractions `where`."""
-    sh, r = sim.scenario.shelf, sim.scenario.object(object_id).radius
+    sh, o = sim.scenario.shelf, sim.scenario.world_object(object_id)
+    r = max(o.size[0], o.size[1]) / 2  # the grid's margin from the edges: move_to checks the footprint itself
     x0, x1 = sh.x_front + r, sh.x_back - r - MARGIN
     y0, y1 = sh.y_min + r + MARGIN, sh.y_max - r - MARGIN
     want = np.array([x0 + where[0] * (x1 - x0), y0 + where[1] * (y1 - y0)])
     grid = [np.array([x, y]) for x in np.arange(x0, x1 + 1e-9, 0.01) for y in np.arange(y0, y1 + 1e-9, 0.01)]
+    yaw = o.yaw if o.shape == "box" else 0.0
+    others = _others(sim, object_id)
     for xy in sorted(grid, key=lambda g: float(np.linalg.norm(g - want))):
-        if _room(sim, object_id, xy, xy, r, sh.top_z) is None:
+        spot = replace(o, x=float(xy[0]), y=float(xy[1]), support_z=sh.top_z, lying=False, tilt=None, yaw=yaw)
+        if _room(sim, spot, others) is None:
             return move_to(sim, object_id, float(xy[0]), float(xy[1]))
     raise DisturbanceError(f"cannot move {object_id}: no free spot on the top shelf")
 
@@ -436,12 +481,12 @@ class DisturbanceSchedule:
         self._grasped_at = 0.0
         self._slipping: str | None = None
 
-    def at_home(self, sim) -> bool:
+    def at_home(self, sim: SimState) -> bool:
         """The arm within home_tol of its home angles (continuous joints compared modulo 2 pi)."""
         d = (np.asarray(sim.q) - np.asarray(sim.q_home) + math.pi) % (2 * math.pi) - math.pi
         return float(np.max(np.abs(d))) < self.home_tol
 
-    def update(self, sim) -> list[dict[str, Any]]:
+    def update(self, sim: SimState) -> list[dict[str, Any]]:
         """Track grasps and releases, apply what is due; returns the records made now."""
         if self._slipping is not None and clear_of_hand(sim, self._slipping):
             restore_contacts(sim, self._slipping)
@@ -473,7 +518,8 @@ class DisturbanceSchedule:
 GRASPED = "grasped"  # the command's object for "the bottle in the hand" (a drop)
 
 
-def command(sim, object_id: str, relative: bool, translation, rotation_xyzw=(0.0, 0.0, 0.0, 1.0)) -> dict[str, Any]:
+def command(sim: SimState, object_id: str, relative: bool, translation: Iterable[float],
+            rotation_xyzw: Iterable[float] = (0.0, 0.0, 0.0, 1.0)) -> dict[str, Any]:
     """One disturbance as a transform command (the driver's geometry_msgs/TransformStamped on its disturb topic):
     object GRASPED: drop the bottle in the hand; `relative` (the transform is in the bottle's own frame): a
     rotation other than the identity tips the bottle towards where it turns the bottle's axis, else a nudge by
@@ -494,7 +540,7 @@ def command(sim, object_id: str, relative: bool, translation, rotation_xyzw=(0.0
         elif not relative:
             done = move_to(sim, object_id, t[0], t[1], t[2])
         elif abs(abs(qw) - 1.0) > 1e-6:  # the bottle's z axis turned by the rotation: the tip's direction
-            ax, ay = 2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx)
+            ax, ay, _ = geometry.xyzw_matrix((qx, qy, qz, qw))[:, 2]
             if math.hypot(ax, ay) < 1e-6:
                 raise DisturbanceError("a rotation about the bottle's own axis does not tip it")
             done = tip(sim, object_id, math.atan2(ay, ax))

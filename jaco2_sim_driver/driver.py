@@ -20,22 +20,24 @@ import queue
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common import kinova as units
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.robot_description import BASE_LINK, FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX
 from relocation_common.scenario import load_scenario
 
 from . import disturbance, kinova
 from .camera import MJ_TO_OPTICAL, CameraRenderer, Frame
-from .scene import CAMERA_NAME, CameraSpec
+from .params import DriverParams
+from .scene import CAMERA_NAME
 from .sensor_model import SensorModel
 from .sim import BadCommandError, Jaco2Sim, ObjectPose, check_velocity_command
 
-SURFACES = ("kinova", "ros2_control")  # the node's command_interface
 FINGER_TIP_NAMES = tuple(f"{PREFIX}_joint_finger_tip_{i}" for i in range(1, 4))  # kinova-ros publishes them at 0
 HOMED = "KINOVA ARM HAS BEEN RETURNED HOME"  # kinova-ros's HomeArm answer
 HOME_SPEED = 0.5  # HomeArm: fraction of Table 7's joint speeds
@@ -46,17 +48,6 @@ FINGERS_OPEN = 0.02  # rad of finger hinge: open
 POLL = 0.01  # s (wall) between looks at the arm or the fingers while a service or the fingers action waits
 MAX_LAG = 0.5  # s of simulated time the loop may fall behind before it stops trying to catch up
 MAX_BATCH = 20  # steps (ms) per tick at most: a late thread gets the GIL back late
-
-
-@dataclass(frozen=True)
-class Rates:
-    """How often the loop publishes (Hz of simulated time; tf 0: once) and how fast it runs."""
-
-    joint_states: float = 100.0
-    tf: float = 50.0
-    objects: float = 10.0
-    real_time_factor: float = 1.0
-    state_on_command: bool = False  # a joint state right after every step that applied a new command
 
 
 @dataclass(frozen=True)
@@ -104,30 +95,7 @@ def joint_state(surface: str, s: Snapshot) -> tuple[list[float], list[float], li
     return position.tolist(), velocity.tolist(), np.concatenate([s.effort, zeros]).tolist()
 
 
-def check_parameters(g: Callable[[str], Any]) -> None:
-    """The node's parameters (config/jaco2_sim_driver.yaml) as `g(name)` gives them: ValueError naming the first
-    unusable one (the node's main() prints it as one line, exit 2)."""
-    for k, lo in (("joint_state_rate", 0.0), ("objects_rate", 0.0), ("watchdog_timeout", 0.0),
-                  ("camera_width", 0), ("camera_height", 0), ("camera_fovy", 0.0), ("finger_tolerance", 0.0),
-                  ("finger_stall_threshold", 0.0), ("finger_stall_interval", 0.0)):
-        if not g(k) > lo:  # also NaN
-            raise ValueError(f"parameter {k} must be > {lo}, got {g(k)!r}")
-    if not (g("camera_rate") >= 0 and g("camera_fovy") < 180):
-        raise ValueError(f"camera_rate must be >= 0 and camera_fovy < 180, got {g('camera_rate')!r}, "
-                         f"{g('camera_fovy')!r}")
-    if not g("tf_rate") >= 0:
-        raise ValueError(f"parameter tf_rate must be >= 0, got {g('tf_rate')!r}")
-    if str(g("command_interface")) not in SURFACES:
-        raise ValueError(f"parameter command_interface must be one of {', '.join(SURFACES)}, "
-                         f"got {str(g('command_interface'))!r}")
-    SensorModel.named(str(g("camera_model")))  # camera_model: ideal | realsense_d435 (ValueError naming it)
-    if not 0.0 <= g("drop_probability") <= 1.0:
-        raise ValueError(f"parameter drop_probability must be in [0, 1], got {g('drop_probability')!r}")
-    if g("disturbance_plan"):
-        disturbance.DisturbancePlan.from_json(str(g("disturbance_plan")))  # ValueError naming what is wrong
-
-
-def _check_goal(goal) -> np.ndarray:
+def _check_goal(goal: ArrayLike) -> np.ndarray:
     g = np.asarray(goal, float)
     if g.shape != (len(FINGER_JOINT_NAMES),) or not np.all(np.isfinite(g)):
         raise ValueError(f"not finite {g.tolist()}")
@@ -135,26 +103,36 @@ def _check_goal(goal) -> np.ndarray:
 
 
 class SimDriver:
-    """The driver's behaviour over one `Jaco2Sim` (see the module docstring). `finger_params`: FingerMonitor's
-    tolerance, stall_threshold, stall_interval; `log`: where grasps and refusals are told (the node's logger)."""
+    """The driver's behaviour over one `Jaco2Sim` (see the module docstring) with the node's parameters: `params`
+    the loop's rates and pacing, the camera's sensor model and the disturbances; `arm` the fingers' end rule
+    (FingerMonitor); `log`: where grasps and refusals are told (the node's logger)."""
 
-    def __init__(self, sim: Jaco2Sim, rates: Rates = Rates(), finger_params: dict | None = None,
-                 log: Callable[[str], None] = lambda _: None, sensor: SensorModel | None = None) -> None:
-        self.sim, self.rates, self.log = sim, rates, log
-        self.sensor = sensor or SensorModel()  # the camera's sensor model (sensor_model; the default: ideal)
-        self.finger_params = dict(finger_params or {})
+    def __init__(self, sim: Jaco2Sim, params: DriverParams, arm: ArmInterface,
+                 log: Callable[[str], None] = lambda _: None) -> None:
+        self.sim, self.params, self.log = sim, params, log
+        self.sensor = SensorModel.named(params.camera_model)  # the camera's sensor model (sensor_model)
+        self.finger_params = arm.finger_rule()
         self.lock = threading.Lock()
         self.stopped = False  # kinova in/stop: commands are ignored until in/start
         self._commands: queue.SimpleQueue = queue.SimpleQueue()
         self._commanded = False
         self._pace_reset = True
         self._finger_goal = 0  # sequence number of the newest fingers goal (a newer goal preempts an older one)
-        self._js_period = 1.0 / rates.joint_states
-        self._tf_period = 1.0 / rates.tf if rates.tf > 0 else float("inf")
-        self._obj_period = 1.0 / rates.objects
+        self._js_period = 1.0 / params.joint_state_rate
+        self._tf_period = 1.0 / params.tf_rate if params.tf_rate > 0 else float("inf")
+        self._obj_period = 1.0 / params.objects_rate
         self._next_js = self._next_obj = self._next_tf = self._wall0 = self._sim0 = 0.0
         self._disturb: queue.SimpleQueue = queue.SimpleQueue()  # commands (disturbance.command's arguments)
-        self.disturbances(0.0, 0, None)
+        self.disturbances(params.drop_probability, params.drop_seed, params.plan())
+
+    @classmethod
+    def from_params(cls, params: DriverParams, arm: ArmInterface,
+                    log: Callable[[str], None] = lambda _: None) -> SimDriver:
+        """The driver of the node's parameters (config/jaco2_sim_driver.yaml, config/arm_interface.yaml): the
+        scenario's simulation with its camera and watchdog, then the loop as `params` and `arm` say."""
+        sim = Jaco2Sim(load_scenario(params.scenario or None), camera=params.camera(),
+                       watchdog_timeout=params.watchdog_timeout)
+        return cls(sim, params, arm, log)
 
     def disturbances(self, drop_probability: float, drop_seed: int, plan: disturbance.DisturbancePlan | None) -> None:
         """Drop the carried bottle with `drop_probability` per carry (seeded) and apply `plan` at its moments
@@ -163,7 +141,7 @@ class SimDriver:
         self.dropper = disturbance.CarryDropper(drop_probability, drop_seed)
         self.schedule = disturbance.DisturbanceSchedule(plan) if plan is not None else None
 
-    def disturb(self, parent: str, child: str, translation, rotation_xyzw) -> None:
+    def disturb(self, parent: str, child: str, translation: Iterable[float], rotation_xyzw: Iterable[float]) -> None:
         """A disturbance command as a transform (the node's /sim/disturb): child `bottle_<id>` or `grasped`;
         parent the base frame = move the bottle there, `bottle_<id>` = relative (nudge, or tip by the rotation).
         Applied at the loop's next step; its record (or why it was skipped) comes out in a Tick."""
@@ -190,29 +168,8 @@ class SimDriver:
             record.setdefault("sim_time", round(s.time, 3))
         return out
 
-    @classmethod
-    def from_parameters(cls, g: Callable[[str], Any], log: Callable[[str], None] = lambda _: None) -> SimDriver:
-        """The driver of the node's parameters (config/jaco2_sim_driver.yaml; `g(name)` -> value): the scenario,
-        camera, limits, rates and finger protocol. ValueError naming the first unusable parameter."""
-        check_parameters(g)
-        cam_kw: dict[str, Any] = dict(fovy_deg=float(g("camera_fovy")), width=int(g("camera_width")),
-                                      height=int(g("camera_height")))
-        camera = CameraSpec.for_shelf(**cam_kw) if g("camera_relative_to_shelf") else CameraSpec(**cam_kw)
-        sim = Jaco2Sim(load_scenario(g("scenario") or None), camera=camera, qdot_max=np.asarray(g("qdot_max"), float),
-                       watchdog_timeout=float(g("watchdog_timeout")))
-        rates = Rates(joint_states=float(g("joint_state_rate")), tf=float(g("tf_rate")),
-                      objects=float(g("objects_rate")), real_time_factor=float(g("real_time_factor")),
-                      state_on_command=bool(g("state_on_command")))
-        fingers = dict(tolerance=float(g("finger_tolerance")), stall_threshold=float(g("finger_stall_threshold")),
-                       stall_interval=float(g("finger_stall_interval")))
-        driver = cls(sim, rates, fingers, log, SensorModel.named(str(g("camera_model"))))
-        plan = str(g("disturbance_plan"))
-        driver.disturbances(float(g("drop_probability")), int(g("drop_seed")),
-                            disturbance.DisturbancePlan.from_json(plan) if plan else None)
-        return driver
-
     # ------------------------------------------------------------------ commands
-    def command(self, v) -> None:
+    def command(self, v: ArrayLike) -> None:
         """A joint-velocity command (rad/s), applied at the loop's next step. BadCommandError for a bad one: the arm
         holds still."""
         try:
@@ -226,7 +183,7 @@ class SimDriver:
         """Zero velocity at the loop's next step."""
         self._commands.put(None)
 
-    def gripper(self, joint_angles) -> str | None:
+    def gripper(self, joint_angles: ArrayLike) -> str | None:
         """ros2_control's gripper command: the finger joints' angles as Kinova reports them (rad, 0 open .. 1.396
         closed); the bottle grasped or released, or None. BadCommandError, ValueError or TypeError for bad input."""
         target = kinova.turns_to_sim(units.joint_to_turns(np.asarray(joint_angles, float)))
@@ -298,7 +255,8 @@ class SimDriver:
         with self.lock:
             return self.sim.time, kinova.sim_to_turns(self.sim.finger_q)
 
-    def fingers(self, goal, cancelled: Callable[[], bool] = lambda: False, ok: Callable[[], bool] = lambda: True,
+    def fingers(self, goal: ArrayLike, cancelled: Callable[[], bool] = lambda: False,
+                ok: Callable[[], bool] = lambda: True,
                 feedback: Callable[[np.ndarray], None] = lambda _: None) -> tuple[str, np.ndarray]:
         """SetFingersPosition as kinova_fingers_action.cpp serves it, for `goal` (turns of the three fingers):
         ("succeed", turns) when the fingers are within the tolerance of the goal; ("abort", turns) when they stall
@@ -344,7 +302,7 @@ class SimDriver:
     def tick(self) -> Tick:
         """One step of the loop: apply the queued commands, step the physics as far as the pacing says (at most
         MAX_BATCH steps; one when real_time_factor is 0), and say what is due for publishing."""
-        r, s = self.rates, self.sim
+        r, s = self.params, self.sim
         with self.lock:
             if self._pace_reset:
                 self._wall0, self._sim0 = time.monotonic(), s.time
@@ -377,9 +335,9 @@ class SimDriver:
         return Tick(n, t, state, tf, objects, records)
 
     def _steps_due(self, t: float) -> int:
-        if self.rates.real_time_factor <= 0:
+        if self.params.real_time_factor <= 0:
             return 1
-        target = self._sim0 + (time.monotonic() - self._wall0) * self.rates.real_time_factor
+        target = self._sim0 + (time.monotonic() - self._wall0) * self.params.real_time_factor
         if target - t > MAX_LAG:  # too slow: drop the backlog instead of racing
             self._sim0, self._wall0 = t, time.monotonic()
             target = t

@@ -11,13 +11,15 @@ A shell: parameters, topics, services and the fingers action translated to and f
 behaviour is (the loop's pacing, the arm services, the fingers protocol, the surfaces' joint states). Threads: the
 executor (commands, services), the simulation loop (`SimDriver.tick`, then publishing), the camera
 (`SimDriver.camera_loop`, publishing in `publish_camera_frame`) and, on the kinova surface, the fingers action's own
-executor (a goal waits until the fingers stop). Interface: docs/sim_driver.md.
+executor (a goal waits until the fingers stop). Interface: docs/sim_driver.md; the settings shared with the motion
+planner: config/arm_interface.yaml (relocation_common.arm_interface; a planner on another surface is logged).
 """
 from __future__ import annotations
 
 import json
 import threading
 import time
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -28,6 +30,7 @@ from kinova_msgs.srv import HomeArm, Start, Stop
 from qtree_relocation_msgs.msg import ObjectArray
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
@@ -39,6 +42,7 @@ from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
+from relocation_common.arm_interface import FILE, GRIPPER_TOPIC, VELOCITY_TOPIC, ArmInterface, MismatchWatch
 from relocation_common.node import SideNode, declare_parameters, node_main
 from relocation_common.robot_description import BASE_LINK, urdf
 from relocation_common.ros_conversions import transform_msg
@@ -47,11 +51,9 @@ from . import frames
 from .camera import Frame
 from .driver import SimDriver, Snapshot, Tick, joint_names, joint_state
 from .messages import OPTICAL_FRAME, camera_msgs, finger_msg, joint_angles_msg, objects_msg, time_msg
+from .params import DriverParams
 from .sim import BadCommandError
 
-BASE_FRAME = BASE_LINK
-VELOCITY_TOPIC = "/velocity_controller/commands"   # ros2_control JointGroupVelocityController, rad/s
-GRIPPER_TOPIC = "/gripper_controller/commands"     # ros2_control JointGroupPositionController, finger joints rad
 # a Float64MultiArray command of 7 values serializes to ~100 bytes; bigger ones are refused before deserialization
 # (8 MB arrays deserialized on every message took the driver from 245 to 351 MiB and halved its joint-state rate)
 MAX_COMMAND_BYTES = 4096
@@ -66,20 +68,18 @@ class Jaco2SimDriver(Node):
 
     def __init__(self) -> None:
         super().__init__("jaco2_sim_driver")
-        declare_parameters(self)  # config/jaco2_sim_driver.yaml
-        g = lambda k: self.get_parameter(k).value  # noqa: E731  (a short reader of the declared parameters)
-        self.core = SimDriver.from_parameters(g, log=self.get_logger().info)  # checks them: ValueError
-        self.sim, rates, camera, scenario = self.core.sim, self.core.rates, self.core.sim.camera, self.core.sim.scenario
-        self.interface, cam_rate = str(g("command_interface")), float(g("camera_rate"))
+        params = declare_parameters(self, shared=(FILE,))  # config/jaco2_sim_driver.yaml, arm_interface
+        p, self.arm = DriverParams.from_mapping(params), ArmInterface.from_mapping(params)  # checked: ValueError
+        self.core = SimDriver.from_params(p, self.arm, log=self.get_logger().info)
+        self.sim, camera, scenario = self.core.sim, self.core.sim.camera, self.core.sim.scenario
+        self.interface, cam_rate = self.arm.command_interface, p.camera_rate
         # use_sim_time (rclpy's own parameter): stamp everything with the simulated time, as Gazebo and ros2_control
         # in simulation do; otherwise with the system clock, as kinova-ros does (ros::Time::now())
-        self.sim_stamps = bool(g("sim_time_stamps")) or bool(self.get_parameter("use_sim_time").value)
+        self.sim_stamps = p.sim_time_stamps or bool(self.get_parameter("use_sim_time").value)
         self._running = True
         self._stopping = threading.Event()  # wakes the camera thread at once on shutdown (exit within 2 s)
         self._fingers: SideNode | None = None  # serves the fingers action and in/home_arm (kinova surface)
-
-        pre = str(g("driver_prefix")).rstrip("/")
-        self.kinova = self.interface == "kinova"
+        pre, self.kinova = self.arm.driver_prefix, self.arm.kinova
         self.names = joint_names(self.interface)
         self.pub_clock = self.create_publisher(Clock, "/clock", 10)  # simulated time, as simulators publish it
         if self.kinova:
@@ -88,7 +88,7 @@ class Jaco2SimDriver(Node):
             self._ros2_control_surface()
         self.create_service(Trigger, f"{pre}/in/reset_scene", self.srv_reset)  # the simulator's own
         self._sensor_publishers()
-
+        self._watch = MismatchWatch(self, self.arm, "driver", self.resolve_topic_name(self.arm.velocity_topic))
         self._sim_thread = threading.Thread(target=self._sim_loop, name="sim", daemon=True)
         self._sim_thread.start()
         self._cam_thread = None
@@ -97,14 +97,15 @@ class Jaco2SimDriver(Node):
                                                 args=(1.0 / cam_rate, self.publish_camera_frame, self._stopping))
             self._cam_thread.start()
         self.get_logger().info(
-            f"{self.interface} surface, scenario {scenario.name} ({len(scenario.objects)} bottles), real_time_factor "
-            f"{rates.real_time_factor:g}, joint states {rates.joint_states:g} Hz, camera {cam_rate:g} Hz "
+            f"{self.interface} surface, scenario {scenario.name} ({len(scenario.objects)} objects, "
+            f"{len(scenario.unlisted)} unlisted), real_time_factor "
+            f"{p.real_time_factor:g}, joint states {p.joint_state_rate:g} Hz, camera {cam_rate:g} Hz "
             f"{camera.width}x{camera.height}")
 
     def _kinova_surface(self, pre: str) -> None:
         """kinova-ros (kinova_arm.cpp): the topics, services and fingers action of the j2s7s300 driver."""
-        self.create_subscription(JointVelocity, f"{pre}/in/joint_velocity", self.on_kinova_velocity, COMMAND_QOS)
-        self.pub_js = self.create_publisher(JointState, f"{pre}/out/joint_state", 10)
+        self.create_subscription(JointVelocity, self.arm.velocity_topic, self.on_kinova_velocity, COMMAND_QOS)
+        self.pub_js = self.create_publisher(JointState, self.arm.state_topic, 10)
         self.pub_angles = self.create_publisher(JointAngles, f"{pre}/out/joint_angles", 10)
         self.pub_finger_pos = self.create_publisher(FingerPosition, f"{pre}/out/finger_position", 10)
         self.create_service(Start, f"{pre}/in/start", self.srv_start)
@@ -113,7 +114,7 @@ class Jaco2SimDriver(Node):
         self._fingers.node.create_service(HomeArm, f"{pre}/in/home_arm", self.srv_home_arm,
                                           callback_group=ReentrantCallbackGroup())
         self._finger_server = ActionServer(
-            self._fingers.node, SetFingersPosition, f"{pre}/fingers_action/finger_positions",
+            self._fingers.node, SetFingersPosition, self.arm.fingers_action,
             execute_callback=self.execute_fingers, goal_callback=lambda _: GoalResponse.ACCEPT,
             cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup())
 
@@ -121,7 +122,7 @@ class Jaco2SimDriver(Node):
         """ros2_control: forward command controllers and joint_state_broadcaster."""
         for topic, callback in ((VELOCITY_TOPIC, self.on_velocity), (GRIPPER_TOPIC, self.on_gripper)):
             self.create_subscription(Float64MultiArray, topic, self._bounded(topic, callback), COMMAND_QOS, raw=True)
-        self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
+        self.pub_js = self.create_publisher(JointState, self.arm.state_topic, 10)
 
     def _sensor_publishers(self) -> None:
         """Ground truth, camera, and what robot_state_publisher publishes: the URDF, its fixed joints, the moving
@@ -138,7 +139,7 @@ class Jaco2SimDriver(Node):
         self.pub_tf = self.create_publisher(TFMessage, "/tf", TF_QOS)
         self.pub_description.publish(String(data=urdf(hand=True)))
         t, t_cam = self.core.camera_transform()
-        static = frames.fixed_transforms() + [(BASE_FRAME, OPTICAL_FRAME, t_cam)]
+        static = frames.fixed_transforms() + [(BASE_LINK, OPTICAL_FRAME, t_cam)]
         self.pub_tf_static.publish(self._tf(t, static))
 
     # ------------------------------------------------------------------ commands
@@ -151,7 +152,7 @@ class Jaco2SimDriver(Node):
         v = [msg.joint1, msg.joint2, msg.joint3, msg.joint4, msg.joint5, msg.joint6, msg.joint7]
         self._command(np.radians(np.asarray(v, float)), "joint_velocity")
 
-    def _bounded(self, topic: str, callback):
+    def _bounded(self, topic: str, callback: Callable[[Float64MultiArray], None]) -> Callable[[bytes], None]:
         """A raw-subscription callback: a serialized command over MAX_COMMAND_BYTES is refused (the arm holds
         still) without being deserialized; a smaller one is deserialized and passed to `callback`."""
         def on_raw(data: bytes) -> None:
@@ -181,37 +182,37 @@ class Jaco2SimDriver(Node):
         t, r = m.transform.translation, m.transform.rotation
         self.core.disturb(m.header.frame_id, m.child_frame_id, (t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
 
-    def _command(self, v, source: str) -> None:
+    def _command(self, v: Sequence[float] | np.ndarray, source: str) -> None:
         try:
             self.core.command(v)  # applied by the simulation loop at its next step (no lock wait here)
         except BadCommandError as e:  # the arm holds still
             self.get_logger().error(f"rejected {source} command: {e}", throttle_duration_sec=1.0)
 
     # ------------------------------------------------------------------ services and the fingers action
-    def srv_home_arm(self, req, res):
+    def srv_home_arm(self, req: HomeArm.Request, res: HomeArm.Response) -> HomeArm.Response:
         """kinova_msgs/HomeArm (SimDriver.home). Served on the fingers' side executor: the main one keeps serving
         in/stop."""
         res.homearm_result = self.core.home(self.context.ok)
         return res
 
-    def srv_stop(self, req, res):
+    def srv_stop(self, req: Stop.Request, res: Stop.Response) -> Stop.Response:
         """kinova_msgs/Stop: the arm stops at once; commands (velocities, finger goals) are ignored until Start."""
         self.core.stop()
         res.stop_result = "Arm stopped"
         return res
 
-    def srv_start(self, req, res):
+    def srv_start(self, req: Start.Request, res: Start.Response) -> Start.Response:
         """kinova_msgs/Start."""
         self.core.start()
         res.start_result = "Arm started"
         return res
 
-    def srv_reset(self, req, res):
+    def srv_reset(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         """The simulator's own: scenario state, arm home, fingers open, sim time 0, started (not stopped)."""
         res.success, res.message = True, f"scene reset to scenario {self.core.reset()}"
         return res
 
-    def execute_fingers(self, gh):
+    def execute_fingers(self, gh: ServerGoalHandle) -> SetFingersPosition.Result:
         """kinova_msgs/action/SetFingersPosition (SimDriver.fingers); the result holds the finger positions."""
         f = gh.request.fingers
         outcome, turns = self.core.fingers(
@@ -262,7 +263,7 @@ class Jaco2SimDriver(Node):
             self.pub_angles.publish(joint_angles_msg(s.q))
             self.pub_finger_pos.publish(finger_msg(s.turns))
 
-    def _tf(self, sim_t: float, transforms) -> TFMessage:
+    def _tf(self, sim_t: float, transforms: Iterable[tuple[str, str, np.ndarray]]) -> TFMessage:
         stamp = self._stamp(sim_t)
         return TFMessage(transforms=[transform_msg(t, parent, child, stamp) for parent, child, t in transforms])
 
@@ -291,7 +292,7 @@ class Jaco2SimDriver(Node):
             self._fingers.close()
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """The jaco2_sim_driver executable."""
     node_main("jaco2_sim_driver", Jaco2SimDriver, args, threads=1)
 

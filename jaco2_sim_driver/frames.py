@@ -9,10 +9,11 @@ fingers of `urdf(hand=True)` hang on link 7 (`finger_transforms`; tested against
 from __future__ import annotations
 
 import math
+from typing import Iterable, Sequence
 
-import mujoco
 import numpy as np
 
+from relocation_common.geometry import transform, wxyz_matrix
 from relocation_common.robot_description import (
     BASE_LINK,
     EE_LINK,
@@ -29,6 +30,8 @@ from relocation_common.robot_description import (
     joint_origins,
 )
 
+from .sim import ObjectPose
+
 BOTTLE_FRAME = "bottle_{}"  # TF frame of a bottle (ground truth): centre of its base circle
 _ORIGINS = joint_origins()
 PARENTS = (BASE_LINK,) + LINK_NAMES[:-1]
@@ -41,7 +44,7 @@ def _rz(a: float) -> np.ndarray:
     return m
 
 
-def arm_transforms(q) -> list[tuple[str, str, np.ndarray]]:
+def arm_transforms(q: Sequence[float] | np.ndarray) -> list[tuple[str, str, np.ndarray]]:
     """(parent, child, 4x4) of the 7 revolute joints at joint angles q (Kinova's Q, rad)."""
     return [(PARENTS[i], LINK_NAMES[i], _ORIGINS[i] @ _rz(Q_SIGN[i] * float(q[i]))) for i in range(N_JOINTS)]
 
@@ -62,7 +65,7 @@ def _ry(a: float) -> np.ndarray:
     return m
 
 
-def finger_transforms(finger_q) -> list[tuple[str, str, np.ndarray]]:
+def finger_transforms(finger_q: Sequence[float] | np.ndarray) -> list[tuple[str, str, np.ndarray]]:
     """(parent, child, 4x4) of the fingers of `urdf(hand=True)` at the simulated hinge angles finger_q (rad): the
     drive frame at the hinge turned by the joint state's angle (finger_q / FINGER_GEAR), the finger on it by the
     mimic joint's (FINGER_GEAR - 1) x that, together the hinge angle; each tip at the finger's end (kinova-ros's tip
@@ -83,7 +86,7 @@ def fixed_transforms() -> list[tuple[str, str, np.ndarray]]:
     return [(LINK_NAMES[-1], EE_LINK, _ORIGINS[N_JOINTS].copy())]
 
 
-def chain(q) -> dict[str, np.ndarray]:
+def chain(q: Sequence[float] | np.ndarray) -> dict[str, np.ndarray]:
     """Pose of every link and of the tool frame in the base frame."""
     out, m = {BASE_LINK: np.eye(4)}, np.eye(4)
     for _, child, t in arm_transforms(q):
@@ -93,13 +96,10 @@ def chain(q) -> dict[str, np.ndarray]:
     return out
 
 
-def bottle_transforms(poses) -> list[tuple[str, str, np.ndarray]]:
+def bottle_transforms(poses: Iterable[ObjectPose]) -> list[tuple[str, str, np.ndarray]]:
     """(base link, `bottle_<id>`, 4x4) of each bottle's ground truth (sim.ObjectPose: its base centre, w-x-y-z
     quaternion): the bottles' TF frames."""
     out = []
     for p in poses:
-        t, r = np.eye(4), np.zeros(9)
-        mujoco.mju_quat2Mat(r, np.asarray(p.quat_wxyz, float))
-        t[:3, :3], t[:3, 3] = r.reshape(3, 3), p.position
-        out.append((BASE_LINK, BOTTLE_FRAME.format(p.id), t))
+        out.append((BASE_LINK, BOTTLE_FRAME.format(p.id), transform(wxyz_matrix(p.quat_wxyz), p.position)))
     return out

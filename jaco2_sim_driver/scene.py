@@ -1,5 +1,6 @@
-"""MuJoCo scene of the experiment: the Jaco2 arm (from the one robot description), the shelf unit, the bottles of
-a scenario as free bodies, the ArUco marker as a texture, the camera and lights. No ROS here.
+"""MuJoCo scene of the experiment: the Jaco2 arm (from the one robot description), the shelf unit, every object of
+a scenario's world (listed and unlisted; cylinders standing or lying, boxes) as free bodies, the ArUco marker as a
+texture, the camera and lights. No ROS here.
 
 Frames: the MuJoCo world frame is the robot base frame of the scenario (x towards the shelf, z up, metres).
 Everything is generated from `relocation_common.robot_description` and `relocation_common.scenario`, so
@@ -8,14 +9,15 @@ obstacles and the target, bottom shelf where relocated objects go, board above t
 """
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from typing import Any, Iterable
 
 import cv2
 import mujoco  # MUJOCO_GL (headless rendering) is set by the package's __init__, imported first
 import numpy as np
+from numpy.typing import ArrayLike
 
+from relocation_common.geometry import quat_wxyz, rpy_matrix, transform
 from relocation_common.robot_description import (
     FINGER_BASE_Z,
     FINGER_CLOSED,
@@ -32,7 +34,9 @@ from relocation_common.robot_description import (
     joint_origins,
     mjcf_arm_body,
 )
-from relocation_common.scenario import Marker, Scenario
+from relocation_common.scenario import Marker, Scenario, Shelf, ShelfObject
+
+from .params import CameraSpec
 
 CAMERA_NAME = "camera_color"
 HAND_BODY = LINK_NAMES[-1]
@@ -44,60 +48,8 @@ MARKER_BORDER = 0.25       # white margin around the marker, as a fraction of th
 FLOOR_DROP = 0.30          # floor this far below the bottom shelf board
 
 
-# Default camera: fixed in the base frame, front right of the shelf (as the robot sees it), above the top shelf.
-# With the arm at Q_HOME every bottle of paper_experiment_10 shows (>= 250 px each at 640x480; test_sim_core checks
-# it); perception's tests are tuned on this view.
-CAMERA_POSITION = (0.0, -0.35, 0.55)
-CAMERA_TARGET = (0.62, 0.0, 0.26)
-# Alternative placement relative to the shelf (CameraSpec.for_shelf): chosen with segmentation renders; shows more
-# of every bottle of config/scenarios/*.yaml (paper_experiment_10: >= 1100 px each).
-CAMERA_OFFSET = (-0.30, -0.30, 0.38)       # from (x_front, y_center, top_z)
-CAMERA_LOOK_AT = (0.45, 0.0, 0.06)         # (fraction of the depth, y from y_center, z above top_z)
-
-
-@dataclass(frozen=True)
-class CameraSpec:
-    """Pinhole camera of the scene (RealSense-like). position / look_at in the base frame; None = placed from the
-    scenario's shelf (CAMERA_OFFSET, CAMERA_LOOK_AT), see `for_shelf`."""
-
-    position: tuple[float, float, float] | None = CAMERA_POSITION
-    look_at: tuple[float, float, float] | None = CAMERA_TARGET
-    fovy_deg: float = 58.0
-    width: int = 640
-    height: int = 480
-
-    @classmethod
-    def for_shelf(cls, **kw) -> "CameraSpec":
-        """The shelf-relative placement (position and look_at from the scenario's shelf)."""
-        return cls(position=None, look_at=None, **kw)
-
-    def placed(self, shelf) -> tuple[np.ndarray, np.ndarray]:
-        """(position, look_at) for this shelf."""
-        p = self.position or (shelf.x_front + CAMERA_OFFSET[0], shelf.y_center + CAMERA_OFFSET[1],
-                              shelf.top_z + CAMERA_OFFSET[2])
-        t = self.look_at or (shelf.x_front + CAMERA_LOOK_AT[0] * shelf.depth, shelf.y_center + CAMERA_LOOK_AT[1],
-                             shelf.top_z + CAMERA_LOOK_AT[2])
-        return np.asarray(p, float), np.asarray(t, float)
-
-
-def _f(v) -> str:
+def _f(v: Iterable[float]) -> str:
     return " ".join(f"{float(x):.6g}" for x in v)
-
-
-def rpy_matrix(rpy) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll) (URDF / ROS fixed-axis roll-pitch-yaw)."""
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def quat_wxyz(rot: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (MuJoCo's mju_mat2Quat)."""
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, np.asarray(rot, float).reshape(9))
-    return q
 
 
 def marker_image(marker: Marker, pixels_per_bit: int = 20) -> np.ndarray:
@@ -113,9 +65,9 @@ def marker_image(marker: Marker, pixels_per_bit: int = 20) -> np.ndarray:
     return cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
 
 
-def _el(parent: ET.Element, tag: str, **attrs) -> ET.Element:
+def _el(parent: ET.Element, tag: str, **attrs: Any) -> ET.Element:
     """A child element; attribute values as text (numbers %.6g, sequences space-separated); `class_` is `class`."""
-    def text(v) -> str:
+    def text(v: Any) -> str:
         if isinstance(v, str):
             return v
         if isinstance(v, (list, tuple, np.ndarray)):
@@ -136,12 +88,12 @@ def _hand(last_link: ET.Element) -> None:
             size=f"{FINGER_RADIUS}", mass="0.03", class_="finger")
 
 
-def _box(parent: ET.Element, name: str, lo, hi, cls: str = "shelf") -> None:
+def _box(parent: ET.Element, name: str, lo: ArrayLike, hi: ArrayLike, cls: str = "shelf") -> None:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     _el(parent, "geom", name=name, type="box", pos=(lo + hi) / 2, size=(hi - lo) / 2, class_=cls)
 
 
-def _shelf(world: ET.Element, s) -> None:
+def _shelf(world: ET.Element, s: Shelf) -> None:
     t, x0, x1, y0, y1 = s.board_thickness, s.x_front, s.x_back, s.y_min, s.y_max
     floor = s.bottom_z - FLOOR_DROP
     _box(world, "shelf_top_board", (x0, y0, s.top_z - t), (x1, y1, s.top_z))
@@ -176,20 +128,26 @@ def _marker_name(k: int) -> str:
 
 def _marker(world: ET.Element, k: int, m: Marker) -> None:
     """The scenario's k-th marker on its plate (pose from the scenario, in the base frame)."""
-    pose = np.eye(4)
-    pose[:3, :3], pose[:3, 3] = rpy_matrix(m.rpy), m.position
+    pose = transform(rpy_matrix(m.rpy), m.position)
     _marker_plate(world, f"{_marker_name(k)}_marker", pose, m.size, _marker_name(k))
 
 
-def _bottle(world: ET.Element, b, z: float) -> None:
-    """A bottle: free body whose frame is the centre of its base circle (as ObjectState.pose), mass = weight (kg)."""
-    body = _el(world, "body", name=b.id, pos=(b.x, b.y, z))
+def _object(world: ET.Element, b: ShelfObject) -> None:
+    """An object: a free body whose frame is the centre of its base as built (a cylinder's lower end face, a box's
+    bottom face: shelf_object.ShelfObject.base), its z axis the primitive's (a lying cylinder's along its axis);
+    the geom `<id>_geom` (cylinder or box) above it along z; mass = weight (kg), colour = rgb."""
+    body = _el(world, "body", name=b.id, pos=b.base(), quat=quat_wxyz(b.rotation()))
     _el(body, "freejoint", name=f"{b.id}_free")
-    _el(body, "geom", name=f"{b.id}_geom", type="cylinder", pos=(0.0, 0.0, b.height / 2),
-        size=(b.radius, b.height / 2), mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
+    if b.shape == "box":
+        sx, sy, sz = b.size
+        _el(body, "geom", name=f"{b.id}_geom", type="box", pos=(0.0, 0.0, sz / 2), size=(sx / 2, sy / 2, sz / 2),
+            mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
+    else:
+        _el(body, "geom", name=f"{b.id}_geom", type="cylinder", pos=(0.0, 0.0, b.height / 2),
+            size=(b.radius, b.height / 2), mass=b.weight, rgba=f"{_f(b.rgb)} 1", class_="bottle")
 
 
-def _camera(world: ET.Element, c: CameraSpec, shelf) -> None:
+def _camera(world: ET.Element, c: CameraSpec, shelf: Shelf) -> None:
     """MuJoCo camera looking from `position` to `look_at` (MuJoCo cameras look along -z with y up)."""
     p, t = c.placed(shelf)
     fwd = (t - p) / np.linalg.norm(t - p)
@@ -232,14 +190,16 @@ def _header(root: ET.Element, camera: CameraSpec, markers: int = 1, gripper_mark
     _el(asset, "material", name="floor", texture="grid", texrepeat="8 8")
 
 
-def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_marker: bool = False) -> str:
+def scene_xml(scenario: Scenario, camera: CameraSpec | None = None, gripper_marker: bool = False) -> str:
     """MJCF of the whole scene, built with xml.etree.ElementTree (names from a scenario are attribute values,
     escaped, never markup). Physics at 1 kHz (timestep 0.001). The marker textures are the assets 'aruco.png',
     'aruco_<k>.png' (`scene_assets`). Collision groups: arm vs environment and bottles, never arm vs arm.
-    `gripper_marker`: the calibration marker on the hand (`hand_marker()`, texture 'aruco_gripper.png')."""
+    `gripper_marker`: the calibration marker on the hand (`hand_marker()`, texture 'aruco_gripper.png'). `camera`
+    None: CameraSpec.configured()."""
     s = scenario.shelf
     floor = s.bottom_z - FLOOR_DROP
     root = ET.Element("mujoco", model=f"jaco2_shelf_{scenario.name}")
+    camera = camera if camera is not None else CameraSpec.configured()
     _header(root, camera, len(scenario.markers), gripper_marker)
     world = _el(root, "worldbody")
     for name, pos, direction, diffuse in (("key", "0.0 -0.6 1.6", "0.35 0.35 -1", "0.7 0.7 0.7"),
@@ -261,10 +221,10 @@ def scene_xml(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_mar
         _marker_plate(hand, "gripper_marker", joint_origins()[-1] @ T_TOOL_GRIPPER_MARKER, GRIPPER_MARKER_SIZE,
                       "aruco_gripper")
     world.append(arm)
-    for b in scenario.objects:
-        _bottle(world, b, s.top_z)
+    for b in scenario.world:
+        _object(world, b)
     equality = _el(root, "equality")
-    for b in scenario.objects:
+    for b in scenario.world:
         _el(equality, "weld", name=f"grasp_{b.id}", body1=HAND_BODY, body2=b.id, active="false", solref="0.004 1")
     _actuators(root)
     return ET.tostring(root, encoding="unicode")
@@ -298,7 +258,8 @@ def scene_assets(scenario: Scenario, gripper_marker: bool = False) -> dict[str, 
     return assets
 
 
-def build_model(scenario: Scenario, camera: CameraSpec = CameraSpec(), gripper_marker: bool = False) -> mujoco.MjModel:
-    """Compile the scene of a scenario (marker textures built in memory); `gripper_marker` as in `scene_xml`."""
+def build_model(scenario: Scenario, camera: CameraSpec | None = None, gripper_marker: bool = False) -> mujoco.MjModel:
+    """Compile the scene of a scenario (marker textures built in memory); `camera`, `gripper_marker` as in
+    `scene_xml`."""
     return mujoco.MjModel.from_xml_string(scene_xml(scenario, camera, gripper_marker),
                                           scene_assets(scenario, gripper_marker))

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 CAMERA_MODELS = ("ideal", "realsense_d435")
 
@@ -64,7 +65,7 @@ def edge_holes_and_flying_pixels(depth: np.ndarray, rng: np.random.Generator, ho
     return z
 
 
-def white_balance(rgb: np.ndarray, gains) -> np.ndarray:
+def white_balance(rgb: np.ndarray, gains: ArrayLike) -> np.ndarray:
     """Per-channel gains (r, g, b), clipped to 0..255."""
     return np.clip(rgb.astype(np.float32) * np.asarray(gains, np.float32), 0, 255).astype(np.uint8)
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from relocation_common.robot_description import (
     CONTINUOUS,
@@ -33,7 +34,8 @@ from relocation_common.robot_description import (
 )
 from relocation_common.scenario import Scenario
 
-from .scene import DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, CameraSpec, build_model
+from .params import CameraSpec, DriverParams
+from .scene import DESCRIPTION_FINGER_GEOMS, FINGER_CLOSED, HAND_BODY, build_model
 
 LIMIT_BRAKE_TIME = 0.02     # s: near a limit the allowed speed towards it is distance / LIMIT_BRAKE_TIME
 GRASP_RADIAL_TOL = 0.025    # m: bottle axis to grasp centre, across the hand (fingers open to about +-36 mm)
@@ -48,14 +50,16 @@ class BadCommandError(ValueError):
 
 @dataclass(frozen=True)
 class ObjectPose:
-    """Ground truth of one bottle: centre of its base circle and orientation (w, x, y, z) in the base frame."""
+    """Ground truth of one object: the centre of its base as built (scene._object: a cylinder's lower end face, a
+    box's bottom face) and its body's orientation (w, x, y, z) in the base frame; the primitive's centre is half its
+    size z along the body's z axis (messages.ground_truth)."""
 
     id: str
     position: tuple[float, float, float]
     quat_wxyz: tuple[float, float, float, float]
 
 
-def check_velocity_command(qdot, n: int = N_JOINTS) -> np.ndarray:
+def check_velocity_command(qdot: ArrayLike, n: int = N_JOINTS) -> np.ndarray:
     """Validate a joint-velocity command (rad/s); BadCommandError with the reason otherwise."""
     try:
         v = np.asarray(qdot, dtype=float).reshape(-1)
@@ -69,17 +73,20 @@ def check_velocity_command(qdot, n: int = N_JOINTS) -> np.ndarray:
 
 
 class Jaco2Sim:
-    """Scenario scene + arm; not thread-safe (the node serialises access with a lock)."""
+    """Scenario scene + arm; not thread-safe (the node serialises access with a lock). `camera` and
+    `watchdog_timeout` None: the driver's parameters (config/jaco2_sim_driver.yaml, params.DriverParams)."""
 
-    def __init__(self, scenario: Scenario, *, camera: CameraSpec = CameraSpec(), qdot_max=QDOT_MAX,
-                 watchdog_timeout: float = 0.05, q_home=Q_HOME):
+    def __init__(self, scenario: Scenario, *, camera: CameraSpec | None = None,
+                 watchdog_timeout: float | None = None, q_home: ArrayLike = Q_HOME) -> None:
+        if camera is None or watchdog_timeout is None:
+            configured = DriverParams.load()
+            camera = camera if camera is not None else configured.camera()
+            watchdog_timeout = watchdog_timeout if watchdog_timeout is not None else configured.watchdog_timeout
         self.scenario = scenario
         self.camera = camera
         self.model = build_model(scenario, camera)
         self.data = mujoco.MjData(self.model)
-        self.qdot_max = np.asarray(qdot_max, float)
-        if self.qdot_max.shape != (N_JOINTS,) or np.any(self.qdot_max <= 0):
-            raise ValueError(f"qdot_max must be {N_JOINTS} positive numbers, got {qdot_max!r}")
+        self.qdot_max = QDOT_MAX.copy()  # Table 7, from the robot description (its one place)
         if watchdog_timeout <= 0:
             raise ValueError(f"watchdog_timeout must be positive, got {watchdog_timeout}")
         self.watchdog_timeout = float(watchdog_timeout)
@@ -94,8 +101,8 @@ class Jaco2Sim:
         self._limited = ~np.asarray(CONTINUOUS)
         self._hand = m.body(HAND_BODY).id
         self._site = m.site("end_effector").id
-        self._bodies = {b.id: m.body(b.id).id for b in scenario.objects}
-        self._welds = {b.id: m.equality(f"grasp_{b.id}").id for b in scenario.objects}
+        self._bodies = {b.id: m.body(b.id).id for b in scenario.world}  # listed and unlisted
+        self._welds = {b.id: m.equality(f"grasp_{b.id}").id for b in scenario.world}
         self._release: tuple[str, float] | None = None  # (bottle, sim time) of a pending release
         for g in DESCRIPTION_FINGER_GEOMS:  # the moving finger bodies replace the description's static capsules
             gid = m.geom(g).id
@@ -153,12 +160,12 @@ class Jaco2Sim:
         return t
 
     def object_poses(self) -> list[ObjectPose]:
-        """Ground-truth bottle poses in scenario order."""
+        """Ground-truth poses of every object, listed then unlisted, in file order."""
         return [ObjectPose(oid, tuple(self.data.xpos[b]), tuple(self.data.xquat[b]))
                 for oid, b in self._bodies.items()]
 
     # ---------------------------------------------------------------- commands
-    def set_velocity(self, qdot) -> np.ndarray:
+    def set_velocity(self, qdot: ArrayLike) -> np.ndarray:
         """Command joint velocities (rad/s, order JOINT_NAMES); returns the clamped command. Feeds the watchdog.
         A bad command raises BadCommandError and changes nothing."""
         v = np.clip(check_velocity_command(qdot), -self.qdot_max, self.qdot_max)
@@ -205,7 +212,7 @@ class Jaco2Sim:
 
     # ---------------------------------------------------------------- scene
     def reset(self) -> None:
-        """Scenario state: bottles where the scenario puts them, arm at home, gripper open, no grasp."""
+        """Scenario state: objects where the scenario puts them, arm at home, gripper open, no grasp."""
         mujoco.mj_resetData(self.model, self.data)
         self.data.eq_active[:] = 0
         for b in self._bodies.values():
@@ -228,12 +235,14 @@ class Jaco2Sim:
         mujoco.mj_forward(self.model, self.data)
 
     def bottle_between_fingers(self) -> str | None:
-        """Id of the bottle whose axis passes through the grasp centre (within GRASP_RADIAL_TOL across it, the
-        grasp centre within its height) with the hand's finger-spread axis along the bottle axis, or None."""
+        """Id of the bottle (a cylinder) whose axis passes through the grasp centre (within GRASP_RADIAL_TOL across
+        it, the grasp centre within its height) with the hand's finger-spread axis along the bottle axis, or None."""
         c, r = self.data.site_xpos[self._site], self.data.site_xmat[self._site].reshape(3, 3)
         best, best_d = None, GRASP_RADIAL_TOL
         for oid, b in self._bodies.items():
-            obj = self.scenario.object(oid)
+            obj = self.scenario.world_object(oid)
+            if obj.shape != "cylinder":
+                continue
             axis = self.data.xmat[b].reshape(3, 3)[:, 2]
             if abs(float(axis @ r[:, 1])) < GRASP_TILT_COS:
                 continue
@@ -283,7 +292,7 @@ class Jaco2Sim:
             self._release = (oid, self.data.time + RELEASE_DELAY)
         return oid
 
-    def set_fingers(self, targets) -> str | None:
+    def set_fingers(self, targets: ArrayLike) -> str | None:
         """Drive the three fingers to hinge angles `targets` (rad, 0 open .. FINGER_CLOSED, clamped). A target past
         half-closed (mean over the fingers) closes the hand as `gripper_close` does (a bottle between the fingers
         is grasped), one below it opens it as `gripper_open` does (a held bottle is released). Returns the bottle

@@ -15,8 +15,8 @@ from typing import Any, Sequence
 
 import cv2
 import numpy as np
-from numpy.typing import ArrayLike
 
+from relocation_common.geometry import invert, pose_error, rotvec_matrix, rpy_matrix, transform
 from relocation_common.scenario import Marker
 
 
@@ -38,40 +38,6 @@ class MarkerInconsistentError(PerceptionError):
 
 class ImageFormatError(PerceptionError):
     """An image with an unexpected shape, dtype or encoding, or colour and depth of different sizes."""
-
-
-def rpy_matrix(rpy: Sequence[float]) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll): URDF / ROS fixed-axis roll-pitch-yaw (the scenario's `rpy`)."""
-    r, p, y = (float(v) for v in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def transform(rot: np.ndarray, t: ArrayLike) -> np.ndarray:
-    """4x4 homogeneous transform of a rotation and a translation."""
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = rot, np.asarray(t, float).reshape(3)
-    return out
-
-
-def invert(t: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid 4x4 transform."""
-    r = t[:3, :3]
-    return transform(r.T, -r.T @ t[:3, 3])
-
-
-def nearest_rotation(m: np.ndarray) -> np.ndarray:
-    """The rotation matrix nearest to a 3x3 matrix (SVD, determinant +1)."""
-    u, _, vt = np.linalg.svd(m)
-    return u @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)))]) @ vt
-
-
-def mean_pose(poses: Sequence[np.ndarray]) -> np.ndarray:
-    """Mean of nearby rigid 4x4 poses: positions averaged, the rotation nearest to the sum of the rotations."""
-    return transform(nearest_rotation(np.sum([t[:3, :3] for t in poses], axis=0)),
-                     np.mean([t[:3, 3] for t in poses], axis=0))
 
 
 def fuse_markers(seen: Sequence[tuple[Any, Any]]) -> tuple[np.ndarray, float]:
@@ -96,13 +62,6 @@ def marker_corners_3d(size: float) -> np.ndarray:
     front), the order SOLVEPNP_IPPE_SQUARE requires."""
     h = size / 2
     return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
-
-
-def pose_error(t_est: np.ndarray, t_true: np.ndarray) -> tuple[float, float]:
-    """(translation error in m, rotation error in rad) between two 4x4 poses."""
-    dt = float(np.linalg.norm(t_est[:3, 3] - t_true[:3, 3]))
-    c = (np.trace(t_est[:3, :3].T @ t_true[:3, :3]) - 1) / 2
-    return dt, float(math.acos(max(-1.0, min(1.0, c))))
 
 
 @dataclass(frozen=True)
@@ -235,7 +194,7 @@ class MarkerLocalizer:
         ok, rvec, tvec = cv2.solvePnP(self.object_points, corners, K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             raise MarkerNotFoundError(f"solvePnP failed on marker {self.marker.id}")
-        t_pnp = transform(cv2.Rodrigues(rvec)[0], tvec)
+        t_pnp = transform(rotvec_matrix(rvec), tvec)
         if not (self.refine_with_depth and depth is not None):
             return MarkerObservation(corners, t_pnp, self.T_base_marker @ invert(t_pnp), False, t_pnp)
         refined = self._refine(corners, t_pnp, K, depth)

@@ -22,13 +22,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import yaml
 
+from relocation_common.geometry import matrix_rpy, mean_pose, nearest_rotation, pose_error, rotvec_matrix, transform
 from relocation_common.scenario import Marker, Scenario
 
-from .aruco import PerceptionError, mean_pose, nearest_rotation, pose_error, transform
+from .aruco import PerceptionError
 
 MIN_POSES = 6              # fewer arm poses with the marker seen: the calibration is refused
 MAX_RESIDUAL_MM = 3.0      # rms disagreement of the two sides of the equation above at the marker
@@ -37,14 +37,6 @@ MAX_RESIDUAL_DEG = 0.5
 
 class CalibrationError(PerceptionError):
     """The calibration cannot be solved or its observations do not agree (the message says what to do)."""
-
-
-def matrix_rpy(rot: np.ndarray) -> tuple[float, float, float]:
-    """Roll-pitch-yaw (URDF fixed-axis, the scenario's `rpy`) of a rotation matrix: the inverse of `rpy_matrix`."""
-    pitch = math.asin(max(-1.0, min(1.0, -float(rot[2, 0]))))
-    if abs(abs(pitch) - math.pi / 2) < 1e-9:
-        return (math.atan2(-float(rot[1, 2]), float(rot[1, 1])), pitch, 0.0)
-    return (math.atan2(float(rot[2, 1]), float(rot[2, 2])), pitch, math.atan2(float(rot[1, 0]), float(rot[0, 0])))
 
 
 @dataclass(frozen=True)
@@ -96,10 +88,6 @@ def _closed_form(A: Sequence[np.ndarray], B: Sequence[np.ndarray]) -> tuple[np.n
     return transform(rx, t[:3]), transform(rz, t[3:])
 
 
-def _exp(w: np.ndarray) -> np.ndarray:
-    return cv2.Rodrigues(np.asarray(w, float).reshape(3, 1))[0]
-
-
 def _refine(A: Sequence[np.ndarray], B: Sequence[np.ndarray], X: np.ndarray, Z: np.ndarray,
             iterations: int = 10) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Newton on sum |A_i X c - Z B_i c|^2 over the corners c of a 4 cm square in the marker's plane (the
@@ -108,16 +96,16 @@ def _refine(A: Sequence[np.ndarray], B: Sequence[np.ndarray], X: np.ndarray, Z: 
                    [-0.02, -0.02, 0.0, 1.0]]).T
 
     def residual(x: np.ndarray) -> np.ndarray:
-        xx = transform(_exp(x[:3]) @ X[:3, :3], X[:3, 3] + x[3:6])
-        zz = transform(_exp(x[6:9]) @ Z[:3, :3], Z[:3, 3] + x[9:])
+        xx = transform(rotvec_matrix(x[:3]) @ X[:3, :3], X[:3, 3] + x[3:6])
+        zz = transform(rotvec_matrix(x[6:9]) @ Z[:3, :3], Z[:3, 3] + x[9:])
         return np.concatenate([((a @ xx - zz @ b) @ ch)[:3].ravel() for a, b in zip(A, B)])
 
     for _ in range(iterations):
         r0 = residual(np.zeros(12))
         jac = np.stack([(residual(d) - r0) / 1e-7 for d in 1e-7 * np.eye(12)], axis=1)
         step = np.linalg.lstsq(jac, -r0, rcond=None)[0]
-        X = transform(_exp(step[:3]) @ X[:3, :3], X[:3, 3] + step[3:6])
-        Z = transform(_exp(step[6:9]) @ Z[:3, :3], Z[:3, 3] + step[9:])
+        X = transform(rotvec_matrix(step[:3]) @ X[:3, :3], X[:3, 3] + step[3:6])
+        Z = transform(rotvec_matrix(step[6:9]) @ Z[:3, :3], Z[:3, 3] + step[9:])
         if np.linalg.norm(step) < 1e-9:
             break
     return X, Z

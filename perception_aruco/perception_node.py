@@ -10,8 +10,8 @@ marker also puts on /tf the marker as seen (camera optical frame -> `aruco_marke
 Health goes out on /diagnostics (diagnostic_msgs/DiagnosticArray, the ROS convention): OK with the checks' numbers,
 WARN with bottles missing, ERROR with the reason a frame was refused. The camera poses of consistent frames are
 fused (`pipeline.FrameFusion`); the fused pose stands in when the marker is covered, if the shelf confirms it.
-The arm's joint states (`joint_state_topic`) leave its body out of the depth. Objects the scenario does not list are
-found (u1, u2, ...) and logged; the scene message carries the listed ones until it carries shapes.
+The arm's joint states (`joint_state_topic`) leave its body out of the depth. Every object is published, listed or
+not (u1, u2, ...: estimated weight, said in the message's weight_note and the log), as its primitive.
 """
 from __future__ import annotations
 
@@ -30,18 +30,19 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from tf2_msgs.msg import TFMessage
 
+from relocation_common.geometry import invert
 from relocation_common.node import declare_parameters, node_main
 from relocation_common.paths import config_file
 from relocation_common.robot_description import JOINT_NAMES
-from relocation_common.ros_conversions import bottles_to_msg, transform_msg
+from relocation_common.ros_conversions import objects_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
-from .aruco import PerceptionError, invert, marker_in_base
+from .aruco import PerceptionError, marker_in_base
 from .calibration import CalibrationError, apply_calibration, load_calibration
 from .camera_check import camera_info_problem, image_problem
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
-from .objects.model import to_bottle
+from .objects.model import to_shelf_object
 from .objects.params import ObjectParams
 from .pipeline import FrameFusion, Perception, PerceptionResult, SceneMemory, identity_conflicts
 from .segmentation import SegmentationParams
@@ -241,9 +242,9 @@ class PerceptionNode(Node):
         objects, held, lost = self.memory.update(result.objects)
         unlisted = [o for o in objects if not o.listed]
         if unlisted:
-            log.info("unlisted objects (not in the scene message yet): " + "; ".join(
-                f"{o.id} {o.shape}{' lying' if o.lying else ''}{' conservative' if o.conservative else ''} at "
-                f"({o.x:.3f}, {o.y:.3f}), {o.weight:.2f} kg {o.weight_note}" for o in unlisted),
+            log.info("unlisted objects: " + "; ".join(
+                f"{o.id} {to_shelf_object(o).describe()}{' (conservative)' if o.conservative else ''} at "
+                f"({o.x:.3f}, {o.y:.3f}), {o.weight:.2f} kg estimated: {o.weight_note}" for o in unlisted),
                 throttle_duration_sec=5.0)
         dets = [o for o in objects if o.listed]
         if held:
@@ -254,10 +255,7 @@ class PerceptionNode(Node):
         if self.scenario.target_id not in {d.id for d in dets}:
             log.error(f"target {self.scenario.target_id!r} not seen: no scene published", throttle_duration_sec=2.0)
             return
-        msg = bottles_to_msg([to_bottle(d) for d in dets], self.scenario.shelf.top_z, color.header.stamp,
-                             self.p("frame_id"))
-        for m, d in zip(msg.objects, dets):
-            m.pose.position.z = d.z
+        msg = objects_to_msg([to_shelf_object(o) for o in objects], color.header.stamp, self.p("frame_id"))
         self._scene, self._scene_time = msg, time.monotonic()
         self._previous = {d.id: d for d in dets}
         self.pub.publish(msg)

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from relocation_common.geometry import invert
 from relocation_common.scenario import Scenario
 
 from .aruco import (
@@ -27,7 +28,6 @@ from .aruco import (
     MarkerObservation,
     MarkerParams,
     fuse_markers,
-    invert,
 )
 from .debug_image import annotate
 from .localize import LocalizeParams

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from relocation_common.geometry import rotation_angle, rotvec_matrix
 from relocation_common.scenario import Scenario
 
 from .aruco import PerceptionError
@@ -96,8 +97,7 @@ class ShelfFit:
     @property
     def rotation_deg(self) -> float:
         """Rotation of the correction (deg)."""
-        c = (np.trace(self.correction[:3, :3]) - 1) / 2
-        return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+        return math.degrees(rotation_angle(self.correction[:3, :3]))
 
     def summary(self) -> str:
         """One line: the correction and the planes used."""
@@ -181,7 +181,7 @@ def fit_shelf(points_cam: np.ndarray, exclude: np.ndarray, T_base_camera: np.nda
         a = jac.T @ (jac * w[:, None]) + 1e-6 * len(q) * np.eye(nx)
         x = np.linalg.solve(a, -(jac * sw[:, None]).T @ (r * sw))
         step = np.eye(4)
-        step[:3, :3] = _rotvec(x[:3])
+        step[:3, :3] = rotvec_matrix(x[:3])
         step[:3, 3] = x[3:6]
         corr = step @ corr
         if params.intrinsics:
@@ -210,13 +210,3 @@ def corrected_K(K: np.ndarray, intr: np.ndarray) -> np.ndarray:
     out[0, 0], out[1, 1] = K[0, 0] / (1 + intr[0]), K[1, 1] / (1 + intr[1])
     out[0, 2], out[1, 2] = K[0, 2] - intr[2] * out[0, 0], K[1, 2] - intr[3] * out[1, 1]
     return out
-
-
-def _rotvec(w: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a rotation vector (Rodrigues)."""
-    th = float(np.linalg.norm(w))
-    if th < 1e-12:
-        return np.eye(3)
-    k = w / th
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(th) * kx + (1 - math.cos(th)) * kx @ kx

@@ -9,7 +9,8 @@ from typing import Mapping
 
 import numpy as np
 
-from .aruco import pose_error
+from relocation_common.geometry import pose_error
+
 from .objects.model import PerceivedObject
 
 UNLISTED_PREFIX = "u"

@@ -8,13 +8,12 @@ as a thick LINE_STRIP and labelled with the objects' ids. Imports message types 
 """
 from __future__ import annotations
 
-import copy
-
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from relocation_common.scenario import PALETTE, TARGET_RGB
+from relocation_common.geometry import quat_xyzw
+from relocation_common.ros_conversions import msg_to_objects
 
 UNFEASIBLE = 0
 ORIGIN = (0.35, -0.9, 1.0)  # m: top of the drawing (the root), in the base frame
@@ -106,23 +105,26 @@ def tree_markers(state: dict, ids: tuple[str, ...], best: tuple[str, ...] | None
 
 def scene_markers(scene, sequence: tuple[str, ...], tree_state: dict | None = None,
                   ids: tuple[str, ...] = ()) -> MarkerArray:
-    """The scene's bottles (an ObjectArray) as cylinders in their colour, each labelled with its place in the
-    learned `sequence`; with a trained tree (`tree_state`, QTree.to_state(); `ids` its action -> id), the Q-Tree
-    beside the shelf (tree_markers)."""
+    """The scene's objects (an ObjectArray, read through ros_conversions.msg_to_objects) as cylinders and boxes in
+    their colour, each labelled with its place in the learned `sequence`; with a trained tree (`tree_state`,
+    QTree.to_state(); `ids` its action -> id), the Q-Tree beside the shelf (tree_markers)."""
     arr = MarkerArray()
     if tree_state is not None:
         arr.markers += tree_markers(tree_state, ids, sequence, scene.header.frame_id).markers
     order = {o: k + 1 for k, o in enumerate(sequence)}
-    for k, o in enumerate(scene.objects):
-        m = Marker(ns="scene", id=k, type=Marker.CYLINDER, action=Marker.ADD, header=scene.header)
-        m.pose = copy.deepcopy(o.pose)
-        m.pose.position.z += o.height / 2
-        m.scale.x = m.scale.y = 2 * o.radius
-        m.scale.z = o.height
-        m.color.r, m.color.g, m.color.b, m.color.a = (*PALETTE.get(o.label, TARGET_RGB), 1.0)
+    for k, o in enumerate(msg_to_objects(scene, require_target=False)):
+        box = o.shape == "box"
+        m = Marker(ns="scene", id=k, type=Marker.CUBE if box else Marker.CYLINDER, action=Marker.ADD,
+                   header=scene.header)
+        c = o.centre()
+        m.pose.position = Point(x=float(c[0]), y=float(c[1]), z=float(c[2]))
+        q = m.pose.orientation
+        q.x, q.y, q.z, q.w = quat_xyzw(o.rotation())
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in o.size)
+        m.color.r, m.color.g, m.color.b, m.color.a = (*(float(v) for v in o.rgb), 1.0)
         t = Marker(ns="order", id=k, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD, header=scene.header)
-        t.pose = copy.deepcopy(o.pose)
-        t.pose.position.z += o.height + 0.04
+        t.pose.position = Point(x=float(c[0]), y=float(c[1]), z=float(o.top_z) + 0.04)
+        t.pose.orientation.w = 1.0
         t.scale.z = 0.03
         t.color.r = t.color.g = t.color.b = t.color.a = 1.0
         t.text = f"{o.id} ({order[o.id]})" if o.id in order else o.id

@@ -44,7 +44,7 @@ class RelocationProblem:
 
     @classmethod
     def from_bottles(cls, bottles) -> "RelocationProblem":
-        """From scene bottles (relocation_common.scenario.Bottle: id, weight, is_target), e.g. a perceived scene."""
+        """From scene objects (relocation_common.scenario.ShelfObject: id, weight, is_target), e.g. perceived."""
         obstacles = [b for b in bottles if not b.is_target]
         target = next(b.id for b in bottles if b.is_target)
         return cls(tuple(b.id for b in obstacles), {b.id: b.weight for b in obstacles}, target)

@@ -19,14 +19,14 @@ import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.srv import PlanFeasibility
 
-from qtree_task_planner.executive.closed_loop import SeenObject
+from qtree_task_planner.executive.closed_loop import SeenObject, seen_object
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
 from qtree_task_planner.executive.retrieval import relocation_stop
 from qtree_task_planner.learning.params import TrainingParams
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.node import ActionClient, call, stop_reason, stopping_as
-from relocation_common.orientation import tilt_of_quaternion
-from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs
+from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs, msg_to_objects
+from relocation_common.scenario import ScenarioError
 
 
 class ServiceOracle:
@@ -189,13 +189,9 @@ class Relocator:
 
 
 def seen_scene(msg) -> dict[str, SeenObject]:
-    """An ObjectArray as closed_loop's scene (tilt from each pose's orientation)."""
-    out = {}
-    for o in msg.objects:
-        p, q = o.pose.position, o.pose.orientation
-        out[o.id] = SeenObject(o.id, p.x, p.y, p.z, o.weight, o.is_target, tilt_of_quaternion(q.w, q.x, q.y, q.z),
-                               o.radius, o.height, o.label)
-    return out
+    """An ObjectArray as closed_loop's scene (closed_loop.seen_object of each of msg_to_objects); ScenarioError (a
+    ValueError: the closed loop gives up with it) for a message that is not a scene."""
+    return {o.id: seen_object(o) for o in msg_to_objects(msg, require_target=False)}
 
 
 class SceneWatch:
@@ -233,18 +229,27 @@ class SceneWatch:
         return f"; the last one came {time.monotonic() - self.latest[1]:.0f} s ago"
 
 
+def _standing_on(msg, object_id: str, z: float, tol: float) -> bool:
+    """The message shows object_id standing on the board at height z (within tol); a malformed message, no."""
+    try:
+        objects = msg_to_objects(msg, require_target=False)
+    except ScenarioError:
+        return False
+    return any(o.id == object_id and not o.lying and abs(float(o.support_z or 0.0) - z) < tol for o in objects)
+
+
 def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[object], bool]:
     """A scene settled after relocating object_id: it no longer shows the bottle standing on the top shelf
     (perception holds an unseen bottle at its last pose for hold_frames frames)."""
     def settled(msg) -> bool:
-        return not any(o.id == object_id and abs(o.pose.position.z - top_z) < tol for o in msg.objects)
+        return not _standing_on(msg, object_id, top_z, tol)
     return settled
 
 
 def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[object], bool]:
     """A scene that shows object_id standing on the board at height z (the target on the bottom shelf)."""
     def settled(msg) -> bool:
-        return any(o.id == object_id and abs(o.pose.position.z - z) < tol for o in msg.objects)
+        return _standing_on(msg, object_id, z, tol)
     return settled
 
 

@@ -66,7 +66,7 @@ from qtree_task_planner.ros_clients import (
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import replica_services
 from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main, stop_reason
-from relocation_common.ros_conversions import msg_to_bottles
+from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import ScenarioError, load_scenario
 from relocation_common.scene_check import foreign_ids
 
@@ -148,7 +148,7 @@ class TaskPlannerNode(Node):
                               else None, len(msg.objects) if msg is not None else 0)
         if warning:
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
-        return RelocationProblem.from_bottles(msg_to_bottles(msg)), msg
+        return RelocationProblem.from_bottles(msg_to_objects(msg)), msg
 
     def _params(self, goal) -> TrainingParams:
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
@@ -266,7 +266,7 @@ class TaskPlannerNode(Node):
         goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
         executor's: for the closed loop, its scene waits, checks and re-plans)."""
-        scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_bottles(scene))
+        scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_objects(scene))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         spent = {"relocate_s": 0.0}  # the relocations' own time: the rest of the execution is the executor's
 

@@ -23,10 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from jaco2_sim_driver.camera import CameraRenderer  # first: sets MUJOCO_GL before mujoco is imported
-from jaco2_sim_driver.scene import CameraSpec, build_model, hand_marker
+from jaco2_sim_driver.params import CameraSpec
+from jaco2_sim_driver.scene import build_model, hand_marker
 from jaco2_sim_driver.sensor_model import CAMERA_MODELS, SensorModel
-from perception_aruco.aruco import MarkerLocalizer, MarkerParams, PerceptionError, marker_in_base, mean_pose, pose_error
+from perception_aruco.aruco import MarkerLocalizer, MarkerParams, PerceptionError, marker_in_base
 from perception_aruco.calibration import HandEye, marker_in_base_from, save_calibration, solve_hand_eye
+from relocation_common.geometry import mean_pose, pose_error
 from relocation_common.paths import default_scenario, resolve_scenario
 from relocation_common.robot_description import BASE_LINK, JOINT_NAMES, dh_fk
 from relocation_common.scenario import Marker, Scenario, load_scenario
@@ -67,8 +69,9 @@ class SimArm:
     """The simulator core's scene with the calibration marker on the hand: joint positions set, frames rendered
     through the camera model (the driver's camera, CameraSpec and SensorModel as in its parameters)."""
 
-    def __init__(self, scenario: Scenario, camera: CameraSpec = CameraSpec(), sensor: SensorModel = SensorModel(),
+    def __init__(self, scenario: Scenario, camera: CameraSpec | None = None, sensor: SensorModel = SensorModel(),
                  seed: int = 0):
+        camera = camera if camera is not None else CameraSpec.configured()
         self.model = build_model(scenario, camera, gripper_marker=True)
         self.data = mujoco.MjData(self.model)
         self._camera, self._sensor, self._seed = camera, sensor, seed

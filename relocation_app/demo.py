@@ -355,7 +355,8 @@ class _Latest:
     def positions(self) -> dict:
         if self.msg is None:
             return {}
-        return {o.id: [o.pose.position.x, o.pose.position.y, o.pose.position.z] for o in self.msg.objects}
+        from relocation_common.ros_conversions import msg_to_objects  # base centres, as the report has them
+        return {o.id: [float(v) for v in o.base()] for o in msg_to_objects(self.msg, require_target=False)}
 
 
 def _check_scene(scenario_path: str, before: dict, after: dict, relocated) -> dict:

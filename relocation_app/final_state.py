@@ -10,6 +10,7 @@ import numpy as np
 from relocation_common import robot_description as rd
 from relocation_common.config import node_section
 from relocation_common.paths import config_file
+from relocation_common.ros_conversions import msg_to_objects
 
 # rad per joint: the motion planner's own home_tol, read from its parameters file (one source)
 HOME_TOL = float(node_section(config_file("motion_planner.yaml"), "motion_planner")["home_tol"])
@@ -39,6 +40,5 @@ def final_state(joint_state, objects) -> dict:
     if joint_state is None or objects is None:
         return {"arm_home": False, "gripper_empty": False, "at_hand": [], "unknown": True}
     names, pos = list(joint_state.name), list(joint_state.position)
-    near = bottles_at_hand(names, pos, {o.id: (o.pose.position.x, o.pose.position.y,
-                                               o.pose.position.z + o.height / 2) for o in objects.objects})
+    near = bottles_at_hand(names, pos, {o.id: tuple(o.centre()) for o in msg_to_objects(objects, require_target=False)})
     return {"arm_home": arm_home(names, pos), "gripper_empty": not near, "at_hand": near}

@@ -19,6 +19,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from relocation_common.arm_interface import ArmInterface
+from relocation_common.config import ConfigError, node_section
 from relocation_common.feasibility import replica_namespace
 from relocation_common.paths import config_file, python_path
 
@@ -29,6 +31,7 @@ NODES = {
     "motion_planner": ("stpik_motion_planner.motion_planner_node", "motion_planner.yaml"),
     "task_planner": ("qtree_task_planner.task_planner_node", "task_planner.yaml"),
 }
+ARM_NODES = ("jaco2_sim_driver", "motion_planner")  # they read config/arm_interface.yaml and must agree on it
 
 
 LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"
@@ -129,12 +132,14 @@ class Graph:
             self.domain_id, self._lock = private_domain_id()
         self.run_dir = Path(self.run_dir)
         (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
+        self.arms: dict[str, ArmInterface] = {}  # started node -> the arm interface it runs with
         self.env = ros_env(self.domain_id, self.run_dir)
 
     def start(self, name: str, params: dict | None = None, params_file: Path | None = None,
               namespace: str = "") -> subprocess.Popen:
         """Start node `name` (with a namespace: as `<name>_<namespace>`, e.g. motion_planner_replica_1)."""
         module, cfg = NODES[name]
+        arm = self._agree(name, params or {}, params_file or config_file(cfg)) if name in ARM_NODES else None
         cmd = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file or config_file(cfg))]
         for k, v in (params or {}).items():
             cmd += ["-p", f"{k}:={param_arg(v)}"]
@@ -146,7 +151,28 @@ class Graph:
                                             stdin=subprocess.DEVNULL, cwd=self.run_dir,
                                             preexec_fn=die_with_parent)
         log.close()
+        if arm is not None:
+            self.arms[name] = arm
         return self.procs[name]
+
+    def _agree(self, name: str, params: dict, params_file: Path) -> ArmInterface | None:
+        """The arm interface node `name` will run with (config/arm_interface.yaml, then its params file's section,
+        then `params`); ValueError naming the difference when a running node that shares it runs with another
+        (the driver and the planners: config/arm_interface.yaml). None for settings the node will refuse itself."""
+        try:
+            section = node_section(params_file, name)
+            values = {**ArmInterface.load().to_dict(), **section, **params}
+            arm = ArmInterface.from_mapping({k: values[k] for k in ArmInterface.keys()})
+        except (ConfigError, ValueError):
+            return None  # the node exits with one line saying what is wrong
+        for other, theirs in self.arms.items():
+            proc = self.procs.get(other)
+            diff = [f"{k} {getattr(arm, k)!r} vs {getattr(theirs, k)!r}" for k in ArmInterface.keys()
+                    if getattr(arm, k) != getattr(theirs, k)]
+            if diff and proc is not None and proc.poll() is None:
+                raise ValueError(f"{name} and {other} would run on different arm interfaces ({', '.join(diff)}): "
+                                 f"set them in config/arm_interface.yaml, or pass the same to both")
+        return arm
 
     def start_planners(self, replicas: int, params: dict | None = None) -> list[subprocess.Popen]:
         """The motion planner and replicas - 1 feasibility-only replicas under /replica_<k> (docs/architecture.md:

@@ -6,7 +6,7 @@ column), so a node can print it and exit 2 instead of showing a traceback.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 import yaml
 
@@ -15,7 +15,7 @@ MAX_DEPTH = 32  # mapping/list nesting: deeper is refused before Python's recurs
 MAX_MESSAGE = 300  # characters of an error message (a value's repr can be megabytes)
 
 
-def short(value, limit: int = 60) -> str:
+def short(value: Any, limit: int = 60) -> str:
     """repr of a value for an error message, cut to `limit` characters."""
     text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
@@ -25,7 +25,7 @@ class ConfigError(ValueError):
     """Input that cannot be used (a file, a parameter, a scene); the message says what and where, in one line
     (newlines folded, cut to MAX_MESSAGE characters)."""
 
-    def __init__(self, message="") -> None:
+    def __init__(self, message: object = "") -> None:
         text = " ".join(str(message).split())
         super().__init__(text if len(text) <= MAX_MESSAGE else text[:MAX_MESSAGE - 3] + "...")
 
@@ -38,7 +38,7 @@ class _StrictLoader(yaml.SafeLoader):
     """SafeLoader without aliases (a "billion laughs" expands a few lines into gigabytes) and with bounded
     nesting (deep nesting ended in a RecursionError traceback)."""
 
-    def compose_node(self, parent, index):
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
         if self.check_event(yaml.AliasEvent):
             event = self.peek_event()
             raise yaml.composer.ComposerError(None, None, "aliases (*name) are not allowed here", event.start_mark)
@@ -52,7 +52,7 @@ class _StrictLoader(yaml.SafeLoader):
             self._depth -= 1
 
 
-def read_yaml(path: str | Path, error: type[Exception] = ConfigError, what: str = "file"):
+def read_yaml(path: str | Path, error: type[Exception] = ConfigError, what: str = "file") -> Any:
     """Parse a YAML file; `error` with one line naming the file (and the line of a syntax error) otherwise.
     Refused: files over MAX_FILE_BYTES, aliases, nesting deeper than MAX_DEPTH, anything that is not a regular
     file (a FIFO would block)."""
@@ -88,7 +88,7 @@ def node_section(path: str | Path, node: str) -> dict[str, Any]:
     return dict(section)
 
 
-def check_params_files(argv) -> None:
+def check_params_files(argv: Iterable[str]) -> None:
     """ParameterError (one line) for a `--params-file` in a ROS command line that is unreadable, not YAML, or not a
     mapping of node sections. Called by the nodes' main() before rclpy.init, whose own error is a traceback."""
     argv = list(argv)
@@ -100,7 +100,7 @@ def check_params_files(argv) -> None:
             raise ParameterError(f"{path}: expected '<node>: ros__parameters: {{...}}' sections")
 
 
-def _node_sections(data) -> bool:
+def _node_sections(data: Any) -> bool:
     """Every branch ends in a `ros__parameters` mapping (node names may be nested in namespaces, or `/**`)."""
     if not isinstance(data, Mapping) or not data:
         return False

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 
 class Label(IntEnum):
@@ -41,7 +41,7 @@ class BlockerSet:
         object.__setattr__(self, "objects", frozenset(self.objects))
 
 
-def claims(blockers) -> bool:
+def claims(blockers: Sequence[BlockerSet]) -> bool:
     """True if the sets make the claim "one of these lanes must be cleared": non-empty and all certain."""
     return bool(blockers) and all(b.certain for b in blockers)
 
@@ -76,6 +76,7 @@ class LaneOracle(Protocol):
 
 
 Query = tuple[str, frozenset]  # (object_id, removed)
+OnAnswer = Callable[[Query, FeasibilityAnswer], Any]  # called with each query's answer as it arrives
 
 
 class BatchOracle(Protocol):
@@ -86,17 +87,17 @@ class BatchOracle(Protocol):
 
     in_flight: int
 
-    def feasibility_many(self, queries: list[Query], on_answer=None) -> list[FeasibilityAnswer]:
+    def feasibility_many(self, queries: list[Query], on_answer: OnAnswer | None = None) -> list[FeasibilityAnswer]:
         """Answer every query, in the queries' order (see the class docstring for `on_answer`)."""
         ...
 
 
-def in_flight(oracle) -> int:
+def in_flight(oracle: FeasibilityOracle | BatchOracle) -> int:
     """How many questions `oracle` answers at once (1 for a plain FeasibilityOracle)."""
     return max(1, int(getattr(oracle, "in_flight", 1)))
 
 
-def ask_many(oracle, queries: list[Query], on_answer=None) -> list[FeasibilityAnswer]:
+def ask_many(oracle: Any, queries: list[Query], on_answer: OnAnswer | None = None) -> list[FeasibilityAnswer]:
     """Every query's answer, in parallel when the oracle is a BatchOracle, else one after the other."""
     many = getattr(oracle, "feasibility_many", None)
     if many is not None and len(queries) > 1:

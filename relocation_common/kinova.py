@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 FINGER_MAX_TURN = 6800.0                    # turns: fully closed
 FINGER_DEG_PER_TURN = 80.0 / 6800.0         # kinova_arm.cpp finger_conv_ratio_ (Jaco v2 fingers)
@@ -27,12 +28,12 @@ STALL_THRESHOLD = 1.0                       # turns, kinova_fingers_action.cpp d
 STALL_INTERVAL = 0.5                        # s, kinova_fingers_action.cpp default
 
 
-def turns_to_joint(turns) -> np.ndarray:
+def turns_to_joint(turns: ArrayLike) -> np.ndarray:
     """Finger turns -> the finger joint angle of Kinova's joint states and URDF (rad; 0 open, 1.396 closed)."""
     return np.radians(np.asarray(turns, float) * FINGER_DEG_PER_TURN)
 
 
-def joint_to_turns(rad) -> np.ndarray:
+def joint_to_turns(rad: ArrayLike) -> np.ndarray:
     """Finger joint angle (rad) -> Kinova finger turns; the inverse of `turns_to_joint`."""
     return np.degrees(np.asarray(rad, float)) / FINGER_DEG_PER_TURN
 
@@ -44,13 +45,13 @@ class FingerMonitor:
 
     MOVING, REACHED, STALLED = "moving", "reached", "stalled"
 
-    def __init__(self, goal, t0: float, positions, tolerance: float = FINGER_TOLERANCE,
+    def __init__(self, goal: ArrayLike, t0: float, positions: ArrayLike, tolerance: float = FINGER_TOLERANCE,
                  stall_threshold: float = STALL_THRESHOLD, stall_interval: float = STALL_INTERVAL):
         self.goal = np.asarray(goal, float)
         self.tolerance, self.stall_threshold, self.stall_interval = tolerance, stall_threshold, stall_interval
         self._ref, self._ref_t = np.asarray(positions, float).copy(), t0
 
-    def update(self, t: float, positions) -> str:
+    def update(self, t: float, positions: ArrayLike) -> str:
         """REACHED, STALLED or MOVING for the finger `positions` (turns) at time `t` (s)."""
         p = np.asarray(positions, float)
         if np.all(np.abs(p - self.goal) <= self.tolerance):

@@ -11,14 +11,22 @@ import sys
 import threading
 import time
 from contextlib import contextmanager
+from types import FrameType
 from typing import Any, Callable, Iterator
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionClient as RclpyActionClient
+from rclpy.action.client import ClientGoalHandle
+from rclpy.action.server import ServerGoalHandle
+from rclpy.client import Client
+from rclpy.context import Context
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.impl.rcutils_logger import RcutilsLogger
+from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 
 from .config import ConfigError, ParameterError, check_params_files, node_section
 from .paths import config_file
@@ -48,16 +56,25 @@ def stopping_as(exc_type: Callable[[str], Exception]) -> Iterator[None]:
         raise exc_type(stop_reason()) from None
 
 
-def declare_parameters(node) -> dict[str, Any]:
+def declare_parameters(node: Node, shared: tuple[str, ...] = ()) -> dict[str, Any]:
     """Declare every parameter of `config/<node name>.yaml` with that file's value as its default: the one place a
-    node's parameters and defaults are written. ParameterError for an override (-p, --params-file) that names a
-    parameter the node does not have (a typo is never silently ignored). Returns {name: value}.
+    node's parameters and defaults are written; and those of the `/**` section of each `shared` file under config/
+    (settings several nodes must agree on, e.g. arm_interface.yaml). ParameterError for a key in two of these files,
+    and for an override (-p, --params-file) that names a parameter the node does not have (a typo is never silently
+    ignored). Returns {name: value}.
 
     Read-only (ParameterDescriptor.read_only): a node checks its parameters once, at start, and some are read again
     while it runs; `ros2 param set` is refused ("parameter is read-only") instead of bypassing those checks. Set
     them with -p or --params-file and restart the node."""
     name = node.get_name()
     defaults = node_section(config_file(f"{name}.yaml"), name)
+    for f in shared:
+        more = node_section(config_file(f), "/**")
+        twice = sorted(set(more) & set(defaults))
+        if twice:
+            raise ParameterError(f"parameter(s) {', '.join(twice)} in both config/{name}.yaml and config/{f}: "
+                                 f"keep them in config/{f} only")
+        defaults.update(more)
     for k, v in defaults.items():
         node.declare_parameter(k, v, ParameterDescriptor(read_only=True))
     unknown = sorted(set(node._parameter_overrides) - set(node._parameters))
@@ -73,9 +90,7 @@ class SideNode:
     MultiThreadedExecutor (an action server whose execute callback waits, and whose goal and cancel requests must
     still be served meanwhile). Call close()."""
 
-    def __init__(self, name: str, context=None, threads: int = 1) -> None:
-        from rclpy.node import Node
-
+    def __init__(self, name: str, context: Context | None = None, threads: int = 1) -> None:
         self.node = Node(name if name.startswith("_") else f"_{name}", context=context)
         self._executor = (SingleThreadedExecutor(context=context) if threads <= 1
                           else MultiThreadedExecutor(num_threads=threads, context=context))
@@ -100,7 +115,7 @@ class SideNode:
             self.node.destroy_node()
 
 
-def run_node(node_factory, args=None, threads: int = 4) -> None:
+def run_node(node_factory: Callable[[], Node], args: list[str] | None = None, threads: int = 4) -> None:
     """Spin one node until SIGINT/SIGTERM (a single-threaded executor for threads=1, else a multi-threaded one);
     then `node.close()` if it has one.
 
@@ -110,7 +125,7 @@ def run_node(node_factory, args=None, threads: int = 4) -> None:
     from rclpy's signal thread). Here the flag is checked between waits of at most STOP_POLL s."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
-    def on_signal(sig, _frame) -> None:
+    def on_signal(sig: int, _frame: FrameType | None) -> None:
         _stopped_by.append(signal.Signals(sig).name)
         stop.set()
 
@@ -140,7 +155,7 @@ def run_node(node_factory, args=None, threads: int = 4) -> None:
             signal.signal(sig, handler)
 
 
-def _wait_for_callbacks(executor, timeout: float) -> None:
+def _wait_for_callbacks(executor: Executor, timeout: float) -> None:
     """After shutdown: until the callbacks a MultiThreadedExecutor's pool still runs have ended (at most `timeout`
     s), then their errors are taken (a callback that published after the context went away fails, as expected).
     rclpy neither waits nor takes them: the perception node printed "The following exception was never retrieved:
@@ -155,12 +170,14 @@ def _wait_for_callbacks(executor, timeout: float) -> None:
             f.exception()  # taken: not printed when the task is collected
 
 
-def node_main(name: str, node_factory, args=None, threads: int = 4, errors: tuple = ()) -> None:
+def node_main(name: str, node_factory: Callable[[], Node], args: list[str] | None = None, threads: int = 4,
+              errors: tuple[type[Exception], ...] = ()) -> None:
     """main() of a node: check the params files, run it; unusable input is one line on stderr and exit 2."""
+    unusable: tuple[type[Exception], ...] = (ConfigError, ParameterException, ValueError, TypeError) + errors
     try:
         check_params_files(sys.argv if args is None else args)
         run_node(node_factory, args, threads)
-    except (ConfigError, ParameterException, ValueError, TypeError, *errors) as e:
+    except unusable as e:
         print(f"{name}: {type(e).__name__}: {e}", file=sys.stderr)
         raise SystemExit(2) from None
 
@@ -172,30 +189,30 @@ class ActionClient(RclpyActionClient):
     future never completed: a fresh-clone CI run waited 30 s for a goal response that had come. Here the
     registration and the handling of responses hold one lock."""
 
-    def __init__(self, *args, **kwargs) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._registration = threading.RLock()  # re-entrant: a feedback callback may send a goal
 
-    def send_goal_async(self, *args, **kwargs):
+    def send_goal_async(self, *args: Any, **kwargs: Any) -> Future:
         """rclpy's send_goal_async, registered under the lock that also handles the responses."""
         with self._registration:
             return super().send_goal_async(*args, **kwargs)
 
-    def _cancel_goal_async(self, goal_handle):
+    def _cancel_goal_async(self, goal_handle: ClientGoalHandle) -> Future:
         with self._registration:
             return super()._cancel_goal_async(goal_handle)
 
-    def _get_result_async(self, goal_handle):
+    def _get_result_async(self, goal_handle: ClientGoalHandle) -> Future:
         with self._registration:
             return super()._get_result_async(goal_handle)
 
-    async def execute(self, taken_data):
+    async def execute(self, taken_data: Any) -> None:
         """rclpy's response handling, under the lock that registers requests."""
         with self._registration:
             return await super().execute(taken_data)
 
 
-def abort_with_reason(goal_handle, result, reason: str, logger):
+def abort_with_reason(goal_handle: ServerGoalHandle, result: Any, reason: str, logger: RcutilsLogger) -> Any:
     """End a goal that cannot be carried out: accepted, then aborted with `reason` in the result's message (as nav2
     does: a rejection carries no reason to the client). Logged as an error; returns `result` for the execute
     callback."""
@@ -205,7 +222,7 @@ def abort_with_reason(goal_handle, result, reason: str, logger):
     return result
 
 
-def end_goal(goal_handle, outcome: str) -> None:
+def end_goal(goal_handle: ServerGoalHandle, outcome: str) -> None:
     """goal_handle.succeed() / abort() / canceled(), unless the node is shutting down (then the action server's
     publishers are gone and rclpy raises; a client learns from the server's disappearance instead)."""
     from rclpy._rclpy_pybind11 import RCLError
@@ -217,7 +234,7 @@ def end_goal(goal_handle, outcome: str) -> None:
             raise
 
 
-def call(client, request, timeout: float, abandon: Callable[[], bool] = lambda: False):
+def call(client: Client, request: Any, timeout: float, abandon: Callable[[], bool] = lambda: False) -> Any:
     """Call a service from a worker thread and wait for the answer (an executor spins the node elsewhere).
     TimeoutError after `timeout` s, or as soon as `abandon()` is true; the pending request is dropped."""
     done = threading.Event()

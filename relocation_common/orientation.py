@@ -1,32 +1,20 @@
-"""A bottle's orientation as ObjectState carries it (pose.orientation, a unit quaternion): how far it is tipped,
-its axis, the surface it rests on. One place for the task planner's checks (qtree_task_planner.executive.closed_loop)
-and
-the motion planner's scene (stpik_motion_planner.model.scene_update, collision.lying_cylinder)."""
+"""A bottle's orientation: UPRIGHT_TILT, the one bound between standing and lying (the object model's `lying`,
+shelf_object.at_pose), how far a pose is tipped, and the surface a bottle rests on from its base centre (the closed
+loop's SeenObject). Messages are read through relocation_common.ros_conversions only; the rotations themselves are
+relocation_common.geometry's."""
 from __future__ import annotations
 
 import math
 
-import numpy as np
+from . import geometry
 
 UPRIGHT_TILT = math.radians(20)  # rad: a bottle whose axis is tilted more from the vertical is not standing
 
 
 def tilt_of_quaternion(w: float, x: float, y: float, z: float) -> float:
-    """Angle (rad) between a body's z axis and the vertical, from its orientation (ObjectState.pose)."""
-    n = w * w + x * x + y * y + z * z
-    c = 1.0 - 2.0 * (x * x + y * y) / n if n > 0 else 1.0
-    return math.acos(max(-1.0, min(1.0, c)))
-
-
-def quaternion_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
-    """The 3x3 rotation of a quaternion (normalised first; a zero one is the identity)."""
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    if n == 0:
-        return np.eye(3)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    """Angle (rad) between a body's z axis and the vertical, from its orientation (ObjectState.pose; a zero
+    quaternion is upright)."""
+    return geometry.tilt(geometry.wxyz_matrix((w, x, y, z)))
 
 
 def support_height(base_z: float, radius: float, tilt: float) -> float:

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .kinova import FINGER_JOINT_CLOSED
 
@@ -48,8 +50,9 @@ Q_OFFSET = (0.0, -PI, 0.0, 0.0, 0.0, -PI, -PI / 2)
 Q_LOWER = np.array([-PI, 0.82, -PI, 0.52, -PI, 1.13, -PI])
 Q_UPPER = np.array([3 * PI, 5.46, 3 * PI, 5.76, 3 * PI, 5.14, 3 * PI])
 CONTINUOUS = (True, False, True, False, True, False, True)
-# Table 7 (rad/s). Kinova's own files use 0.628 and 0.838: configurable as the driver's qdot_max and the planner's
-# stpik.qdot_max parameters.
+# Table 7 (rad/s): the one place of the joint speed limits. The simulator clamps its commands to them, the planner
+# times its paths and the follower clamps its commands to them, the URDF carries them. Kinova's own files use 0.628
+# and 0.838 (docs/kinova.md): to run with those, change them here.
 QDOT_MAX = np.array([0.81, 0.81, 0.81, 0.81, 1.11, 1.11, 1.11])
 
 # Home: hand horizontal (tool y up), pointing at the shelf (+x), in front of the shelf above its ceiling board,
@@ -127,7 +130,7 @@ ADJACENT = frozenset(
 )
 
 
-def dh_theta(q) -> np.ndarray:
+def dh_theta(q: ArrayLike) -> np.ndarray:
     """Kinova physical angles Q -> DH angles theta of Table 5."""
     return np.asarray(Q_SIGN) * np.asarray(q, dtype=float) + np.asarray(Q_OFFSET)
 
@@ -140,7 +143,7 @@ def _dh(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
                      [0.0, 0.0, 0.0, 1.0]])
 
 
-def dh_fk(q) -> list[np.ndarray]:
+def dh_fk(q: ArrayLike) -> list[np.ndarray]:
     """Forward kinematics straight from the DH table: the 4x4 poses of DH frames 1..7 in the base frame."""
     out, m = [], np.eye(4)
     for th, d, a, al in zip(dh_theta(q), DH_D, DH_A, DH_ALPHA):
@@ -172,7 +175,7 @@ def joint_origins() -> list[np.ndarray]:
     return out
 
 
-def _fmt(v) -> str:
+def _fmt(v: Iterable[float]) -> str:
     return " ".join(f"{float(x):.10g}" for x in v)
 
 

@@ -1,22 +1,28 @@
-"""Scenario files: the one loader of shelf, bottles, weights, target, slots and marker (config/scenarios/*.yaml).
+"""Scenario files: the one loader of shelf, objects, weights, target, slots and marker (config/scenarios/*.yaml).
 
 Every part of the system (task planner, motion planner, simulator, perception) reads a scene through
 `load_scenario`. Frames: everything is in the robot base frame (x forward to the shelf, z up, metres).
-The format is documented in docs/scenarios.md.
+The format is documented in docs/scenarios.md; the object model (ShelfObject) is relocation_common.shelf_object's.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Iterator, Mapping
 
 from .config import ConfigError, read_yaml, short
 from .paths import default_scenario, resolve_scenario
+from .shelf_object import SHAPES, ShelfObject, estimated_weight, half_turn, unlisted_density
 
-# Distinct colours for the bottles (the paper's bottles were coloured; perception identifies them by
-# colour). The target is green, as in the paper's experiment. RGB in [0, 1].
+__all__ = ["PALETTE", "TARGET_COLOR", "TARGET_RGB", "Marker", "Scenario", "ScenarioError", "Shelf", "ShelfObject",
+           "UnknownObjectError", "load_scenario", "parse_scenario"]
+
+# Named colours of the objects (the paper's bottles were coloured; perception tells objects apart by colour, among
+# other things). Objects without a `color:` take these in turn, round again after the last. The target is green,
+# as in the paper's experiment. RGB in [0, 1].
 PALETTE: dict[str, tuple[float, float, float]] = {
     "red": (0.85, 0.10, 0.10),
     "blue": (0.10, 0.25, 0.90),
@@ -48,21 +54,6 @@ class UnknownObjectError(KeyError):
 
     def __str__(self) -> str:  # KeyError would quote the message
         return str(self.args[0]) if self.args else "unknown object"
-
-
-@dataclass(frozen=True)
-class Bottle:
-    """A bottle (cylinder) standing on the top shelf: (x, y) of its axis, base on the shelf surface."""
-
-    id: str
-    label: str
-    rgb: tuple[float, float, float]
-    weight: float
-    x: float
-    y: float
-    radius: float
-    height: float
-    is_target: bool = False
 
 
 @dataclass(frozen=True)
@@ -107,12 +98,13 @@ class Marker:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A relocation scene: the shelf, its bottles (one the target), the free slots and the ArUco marker."""
+    """A relocation scene: the shelf, its listed objects (one the target), the free slots and the ArUco marker;
+    `unlisted`, the objects only the simulator builds (the planners and perception never read them)."""
 
     name: str
     description: str
     shelf: Shelf
-    objects: tuple[Bottle, ...]
+    objects: tuple[ShelfObject, ...]
     target_id: str
     slots: tuple[tuple[float, float], ...]
     marker: Marker
@@ -120,7 +112,8 @@ class Scenario:
     source: str = "<dict>"
     auto_slots: bool = False  # slots from `slots: auto` (AUTO_SLOT_*); the motion planner checks them at start
     more_markers: tuple[Marker, ...] = ()  # the further markers of `markers:` (optional)
-    _by_id: dict[str, Bottle] = field(default_factory=dict, repr=False, compare=False)
+    unlisted: tuple[ShelfObject, ...] = ()  # `unlisted:` (listed False): the simulator's world only
+    _by_id: dict[str, ShelfObject] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self._by_id.update({o.id: o for o in self.objects})
@@ -140,8 +133,29 @@ class Scenario:
         """phi_i of every obstacle (Eq. 8, 13). The target's weight does not enter the reward."""
         return {o.id: o.weight for o in self.objects if not o.is_target}
 
-    def object(self, object_id: str) -> Bottle:
-        """The bottle `object_id`; UnknownObjectError names the known ids."""
+    @property
+    def world(self) -> tuple[ShelfObject, ...]:
+        """Every object the simulator builds: the listed ones, then the unlisted ones."""
+        return self.objects + self.unlisted
+
+    def world_object(self, object_id: str) -> ShelfObject:
+        """The object `object_id`, listed or unlisted (the simulator's view); UnknownObjectError names them all."""
+        for o in self.world:
+            if o.id == object_id:
+                return o
+        raise UnknownObjectError(f"unknown object id {object_id!r} in scenario {self.name!r}; known ids: "
+                                 f"{', '.join(o.id for o in self.world)}")
+
+    @property
+    def slot_note(self) -> str:
+        """'' or one line: `slots: auto` found room for fewer slots than there are objects."""
+        if not self.auto_slots or len(self.slots) >= len(self.objects):
+            return ""
+        return (f"slots: auto lays out {len(self.slots)} slots on this bottom shelf for {len(self.objects)} objects: "
+                f"a retrieval relocating more than {len(self.slots)} is refused (list the slots, or widen the shelf)")
+
+    def object(self, object_id: str) -> ShelfObject:
+        """The listed object `object_id`; UnknownObjectError names the known ids."""
         try:
             return self._by_id[object_id]
         except KeyError:
@@ -149,26 +163,26 @@ class Scenario:
                 f"unknown object id {object_id!r} in scenario {self.name!r}; known ids: {', '.join(self.ids)}"
             ) from None
 
-    def check_ids(self, ids) -> frozenset[str]:
+    def check_ids(self, ids: Iterable[str]) -> frozenset[str]:
         """Return ids as a frozenset, raising UnknownObjectError naming the first id not in the scenario."""
         ids = frozenset(ids)
         for i in sorted(ids):
             self.object(i)
         return ids
 
-    def with_objects(self, bottles) -> "Scenario":
-        """The same shelf, slots and marker with another set of bottles (e.g. as perceived); validated."""
-        bottles = tuple(bottles)
-        targets = [b.id for b in bottles if b.is_target]
+    def with_objects(self, objects: Iterable[ShelfObject]) -> "Scenario":
+        """The same shelf, slots and marker with another set of objects (e.g. as perceived, unlisted ones
+        included); validated: one target, distinct ids. It may hold more objects than slots: the closed loop
+        refuses a sequence that relocates more than the free slots take (check_capacity)."""
+        objects = tuple(objects)
+        targets = [b.id for b in objects if b.is_target]
         if len(targets) != 1:
             raise ScenarioError(f"{self.name}: a scene needs exactly one target, got {len(targets)}")
-        ids = [b.id for b in bottles]
+        ids = [b.id for b in objects]
         if len(set(ids)) != len(ids):
             raise ScenarioError(f"{self.name}: duplicate object ids")
-        if len(bottles) > len(self.slots) and not self.auto_slots:
-            raise ScenarioError(f"{self.name}: {len(bottles)} objects but only {len(self.slots)} slots")
-        return Scenario(self.name, self.description, self.shelf, bottles, targets[0], self.slots,
-                        self.marker, None, self.source, self.auto_slots, self.more_markers)
+        return Scenario(self.name, self.description, self.shelf, objects, targets[0], self.slots,
+                        self.marker, None, self.source, self.auto_slots, self.more_markers, self.unlisted)
 
     @property
     def markers(self) -> tuple[Marker, ...]:
@@ -216,7 +230,7 @@ def _dictionary(m: Mapping[str, Any]) -> str:
     return d
 
 
-def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default=None) -> tuple[float, ...]:
+def _vec(d: Mapping[str, Any], key: str, n: int, where: str, default: Any = None) -> tuple[float, ...]:
     v = d.get(key, default)
     if v is None:
         raise ScenarioError(f"{where}: missing required key {key!r}")
@@ -291,12 +305,19 @@ def parse_scenario(data: Any, source: str = "<dict>") -> Scenario:
         raise ScenarioError(f"{source}: {e}") from None
 
 
+SCENARIO_KEYS = ("name", "description", "shelf", "defaults", "target", "objects", "unlisted", "slots", "marker",
+                 "markers", "blocking")
+
+
 def _parse(data: Mapping[str, Any], source: str) -> Scenario:
     shelf = _shelf(data.get("shelf"))
     target_id = data.get("target")
     if not isinstance(target_id, str) or not target_id:
         raise ScenarioError("target: missing; name the id of the object to retrieve")
-    objects = _objects(data, shelf, target_id)
+    unknown = sorted(set(map(str, data)) - set(SCENARIO_KEYS))
+    if unknown:
+        raise ScenarioError(f"unknown key(s) {', '.join(unknown)}; a scenario has {', '.join(SCENARIO_KEYS)}")
+    objects, unlisted = _objects(data, shelf, target_id)
     slots, auto = _slots(data.get("slots", "auto"), shelf, len(objects))
     markers = _markers(data)
     return Scenario(
@@ -311,6 +332,7 @@ def _parse(data: Mapping[str, Any], source: str) -> Scenario:
         source=source,
         auto_slots=auto,
         more_markers=markers[1:],
+        unlisted=unlisted,
     )
 
 
@@ -326,8 +348,14 @@ def _name(data: Mapping[str, Any], source: str) -> str:
     return name
 
 
-def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bottle, ...]:
-    """The bottles: ids, weights, sizes (or `defaults`), colours; on the top shelf, under the ceiling, apart."""
+OBJECT_KEYS = ("id", "weight", "xy", "shape", "radius", "height", "size", "yaw", "lying", "color")
+Palette = Iterator[tuple[str, tuple[float, float, float]]]
+
+
+def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str
+             ) -> tuple[tuple[ShelfObject, ...], tuple[ShelfObject, ...]]:
+    """(listed, unlisted): ids, weights, shapes (or `defaults`), colours; on the top shelf, under the ceiling, no
+    two footprints overlapping (listed and unlisted alike)."""
     defaults = data.get("defaults", {}) or {}
     if not isinstance(defaults, Mapping):
         raise ScenarioError("defaults: must be a mapping")
@@ -335,59 +363,111 @@ def _objects(data: Mapping[str, Any], shelf: Shelf, target_id: str) -> tuple[Bot
     raw = data.get("objects")
     if not isinstance(raw, list) or not raw:
         raise ScenarioError("objects: must be a non-empty list")
+    extra = data.get("unlisted", [])
+    if not isinstance(extra, list):
+        raise ScenarioError("unlisted: must be a list of objects (the format of `objects:`)")
     raw_ids = [o.get("id") for o in raw if isinstance(o, Mapping)]
     if target_id not in raw_ids:
         raise ScenarioError(f"target: {target_id!r} is not among the objects ({', '.join(map(str, raw_ids))})")
-    palette = iter(PALETTE.items())
-    objects: list[Bottle] = []
-    for k, o in enumerate(raw):
-        b = _bottle(o, f"objects[{k}]", shelf, target_id, size, palette)
-        if any(b.id == other.id for other in objects):
-            raise ScenarioError(f"objects[{k}]: duplicate id {b.id!r}")
-        objects.append(b)
-    labels = [o.label for o in objects]
-    if len(set(labels)) != len(labels):
-        raise ScenarioError("objects: two objects share a color; perception identifies bottles by color")
-    for i, a in enumerate(objects):
-        for b in objects[i + 1:]:
-            if math.hypot(a.x - b.x, a.y - b.y) < a.radius + b.radius:
-                raise ScenarioError(f"objects {a.id!r} and {b.id!r} overlap")
-    return tuple(objects)
+    palette = itertools.cycle(PALETTE.items())  # objects without `color:` take the colours in turn, round again
+    out: list[ShelfObject] = []
+    for section, items in (("objects", raw), ("unlisted", extra)):
+        for k, o in enumerate(items):
+            b = _object(o, f"{section}[{k}]", shelf, target_id, size, palette, section == "objects")
+            if any(b.id == other.id for other in out):
+                raise ScenarioError(f"{section}[{k}]: duplicate id {b.id!r}")
+            out.append(b)
+    prints = [o.footprint() for o in out]
+    for i, a in enumerate(out):
+        for j in range(i + 1, len(out)):
+            if prints[i].overlaps(prints[j]):
+                raise ScenarioError(f"objects {a.id!r} and {out[j].id!r} overlap")
+    return tuple(o for o in out if o.listed), tuple(o for o in out if not o.listed)
 
 
-def _bottle(o: Any, where: str, shelf: Shelf, target_id: str, size: tuple[float, float], palette) -> Bottle:
+def _object(o: Any, where: str, shelf: Shelf, target_id: str, size: tuple[float, float], palette: Palette,
+            listed: bool) -> ShelfObject:
+    """One entry of `objects:` (listed) or `unlisted:`, validated; resting on the top shelf."""
     if not isinstance(o, Mapping):
         raise ScenarioError(f"{where}: must be a mapping")
     oid = o.get("id")
     if not isinstance(oid, str) or not ID_PATTERN.fullmatch(oid):
         raise ScenarioError(f"{where}: id must be a letter then up to 31 letters, digits or underscores, "
                             f"got {short(oid)}")
+    where = f"{where} ({oid})"
+    unknown = sorted(set(map(str, o)) - set(OBJECT_KEYS))
+    if unknown:
+        raise ScenarioError(f"{where}: unknown key(s) {', '.join(unknown)}; an object has {', '.join(OBJECT_KEYS)}")
     is_target = oid == target_id
-    weight = _num(o, "weight", f"{where} ({oid})", 1.0 if is_target else None)
-    if not 0.0 < weight <= 1.0:
-        raise ScenarioError(f"{where} ({oid}): weight must be in (0, 1], got {weight}")
-    x, y = _vec(o, "xy", 2, f"{where} ({oid})")
+    if is_target and not listed:
+        raise ScenarioError(f"{where}: the target must be listed in `objects:`")
+    x, y = _vec(o, "xy", 2, where)
+    label, rgb = _color(o, where, is_target, palette)
+    radius, height, shape, dims, yaw, lying = _shape(o, where, size)
+    b = ShelfObject(oid, label, rgb, 1.0, x, y, radius, height, is_target, shape, dims, yaw, lying, listed,
+                    support_z=shelf.top_z)
+    if not is_target and ("weight" in o or listed):
+        weight = _num(o, "weight", where)
+        if not 0.0 < weight <= 1.0:
+            raise ScenarioError(f"{where}: weight must be in (0, 1], got {weight}")
+        b = replace(b, weight=weight)
+    elif not is_target:  # an unlisted object nobody weighed: as perception would estimate it
+        weight, note = estimated_weight(b, unlisted_density())
+        b = replace(b, weight=weight, weight_note=note)
+    if not b.footprint().inside(shelf.x_front, shelf.x_back, shelf.y_min, shelf.y_max):
+        raise ScenarioError(f"{where}: xy {x, y} is not on the top shelf")
+    if b.top_z - shelf.top_z >= shelf.ceiling_z - shelf.top_z:
+        raise ScenarioError(f"{where}: height {b.top_z - shelf.top_z:g} does not fit under the ceiling board")
+    return b
+
+
+def _color(o: Mapping[str, Any], where: str, is_target: bool, palette: Palette
+           ) -> tuple[str, tuple[float, float, float]]:
+    """(label, rgb): `color:` a PALETTE name or [r, g, b] in [0, 1] (labelled with the name of an equal palette
+    colour, else ""); the target without one is green; any other object takes the palette's next colour."""
+    c = o.get("color")
+    if c is None:
+        return (TARGET_COLOR, TARGET_RGB) if is_target else next(palette)
+    if isinstance(c, str):
+        if c == TARGET_COLOR:
+            return TARGET_COLOR, TARGET_RGB
+        if c not in PALETTE:
+            raise ScenarioError(f"{where}: unknown color {short(c)}; use one of {', '.join(PALETTE)}, "
+                                f"{TARGET_COLOR} or [r, g, b]")
+        return c, PALETTE[c]
+    r, g, b = _vec(o, "color", 3, where)
+    if not all(0.0 <= v <= 1.0 for v in (r, g, b)):
+        raise ScenarioError(f"{where}: color [r, g, b] must be in [0, 1], got {[r, g, b]}")
+    named = {**PALETTE, TARGET_COLOR: TARGET_RGB}
+    return next((k for k, v in named.items() if v == (r, g, b)), ""), (r, g, b)
+
+
+def _shape(o: Mapping[str, Any], where: str, size: tuple[float, float]
+           ) -> tuple[float, float, str, tuple[float, float, float], float, bool]:
+    """(radius, height, shape, size, yaw, lying) of an entry: a cylinder standing
+    (radius, height) or lying (yaw of its axis), or a box (size, yaw)."""
+    shape = o.get("shape", "cylinder")
+    if shape not in SHAPES:
+        raise ScenarioError(f"{where}: shape must be one of {', '.join(SHAPES)}, got {short(shape)}")
+    lying = o.get("lying", False)
+    if not isinstance(lying, bool):
+        raise ScenarioError(f"{where}: lying must be true or false, got {short(lying)}")
+    yaw = _num(o, "yaw", where, 0.0)
+    if shape == "box":
+        if "radius" in o or "height" in o or lying:
+            raise ScenarioError(f"{where}: a box has `size: [sx, sy, sz]` and `yaw`, not radius, height or lying")
+        sx, sy, sz = _vec3(o, "size", where)
+        if min(sx, sy, sz) <= 0:
+            raise ScenarioError(f"{where}: size must be three positive numbers, got {[sx, sy, sz]}")
+        return 0.0, sz, "box", (sx, sy, sz), half_turn(yaw), False
+    if "size" in o:
+        raise ScenarioError(f"{where}: a cylinder has radius and height, not size (or give `shape: box`)")
+    if "yaw" in o and not lying:
+        raise ScenarioError(f"{where}: yaw turns a box or a lying cylinder; a standing cylinder has none")
     radius, height = _num(o, "radius", where, size[0]), _num(o, "height", where, size[1])
     if radius <= 0 or height <= 0:
-        raise ScenarioError(f"{where} ({oid}): radius and height must be positive")
-    if is_target:
-        label, rgb = TARGET_COLOR, TARGET_RGB
-    elif "color" in o:
-        label = str(o["color"])
-        if label not in PALETTE:
-            raise ScenarioError(f"{where} ({oid}): unknown color {short(label)}; use one of {', '.join(PALETTE)}")
-        rgb = PALETTE[label]
-    else:
-        try:
-            label, rgb = next(palette)
-        except StopIteration:
-            raise ScenarioError(f"more than {len(PALETTE)} obstacles: give each a color") from None
-    if not (shelf.x_front + radius <= x <= shelf.x_back - radius
-            and shelf.y_min + radius <= y <= shelf.y_max - radius):
-        raise ScenarioError(f"{where} ({oid}): xy {x, y} is not on the top shelf")
-    if height >= shelf.ceiling_z - shelf.top_z:
-        raise ScenarioError(f"{where} ({oid}): height {height} does not fit under the ceiling board")
-    return Bottle(oid, label, rgb, weight, x, y, radius, height, is_target)
+        raise ScenarioError(f"{where}: radius and height must be positive")
+    return radius, height, "cylinder", (0.0, 0.0, 0.0), half_turn(yaw) if lying else 0.0, lying
 
 
 def _slots(raw: Any, shelf: Shelf, n: int) -> tuple[tuple[tuple[float, float], ...], bool]:

@@ -45,8 +45,10 @@ from qtree_task_planner.executive.replan import GeometryCache, replan
 from relocation_app.client import RelocationClient
 from relocation_app.final_state import final_state
 from relocation_app.graph import Graph
+from relocation_common.geometry import quat_xyzw
 from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.paths import resolve_scenario
+from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.collision import Lying
 from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
@@ -103,8 +105,9 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
         finally:
             client.close()
     sc = load_scenario(scene)
-    t = next((o.pose.position for o in box["truth"].objects if o.id == sc.target_id), None) if box["truth"] else None
-    on_bottom = t is not None and abs(t.z - sc.shelf.bottom_z) < 0.02
+    truth = msg_to_objects(box["truth"], require_target=False) if box["truth"] else ()
+    t = next((o for o in truth if o.id == sc.target_id), None)
+    on_bottom = t is not None and abs(float(t.support_z or 0.0) - sc.shelf.bottom_z) < 0.02
     ex = box["execution"] or {}
     res = outcome.result
     end = final_state(box["joints"], box["truth"])
@@ -122,13 +125,13 @@ def run_once(scene: Path, seed: int, k: int, closed: bool, run_dir: Path) -> dic
 
 
 def _scene_record(truth) -> list[dict]:
-    """The simulator's last scene, one dict per bottle (id, weight, pose, radius, height): the proof's input."""
+    """The simulator's last scene, one dict per bottle (id, weight, pose of its base centre, radius, height): the
+    proof's input."""
     if truth is None:
         return []
     return [{"id": o.id, "weight": o.weight, "is_target": o.is_target, "radius": o.radius, "height": o.height,
-             "position": [o.pose.position.x, o.pose.position.y, o.pose.position.z],
-             "orientation": [o.pose.orientation.x, o.pose.orientation.y, o.pose.orientation.z, o.pose.orientation.w]}
-            for o in truth.objects]
+             "position": [float(v) for v in o.base()], "orientation": list(quat_xyzw(o.rotation()))}
+            for o in msg_to_objects(truth, require_target=False)]
 
 
 class Patient:

@@ -31,8 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from jaco2_sim_driver.camera import render_frame
 from jaco2_sim_driver.sensor_model import CAMERA_MODELS, SensorModel
-from perception_aruco.aruco import pose_error
 from perception_aruco.pipeline import Perception
+from relocation_common.geometry import pose_error
 from relocation_common.paths import default_scenario, scenarios_dir
 from relocation_common.robot_description import Q_HOME, Q_UPRIGHT
 from relocation_common.scenario import load_scenario

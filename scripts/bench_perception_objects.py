@@ -19,7 +19,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node runs (perception_aruco/__init__.py)
@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "test"))   # perception_scenes (generated layouts)
 sys.path.insert(0, str(ROOT))
 
-from perception_scenes import Extra, generated_layout, render_scene, with_objects  # noqa: E402
+from perception_scenes import extra, generated_layout, reach, render_scene, with_objects  # noqa: E402
 
 from jaco2_sim_driver.sensor_model import SensorModel  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.aruco import PerceptionError  # noqa: E402
@@ -38,7 +38,7 @@ from perception_aruco.objects.model import BOX, CYLINDER  # noqa: E402
 from perception_aruco.pipeline import Perception  # noqa: E402
 from relocation_common.paths import default_scenario  # noqa: E402
 from relocation_common.robot_description import Q_HOME  # noqa: E402
-from relocation_common.scenario import PALETTE, Scenario, load_scenario  # noqa: E402
+from relocation_common.scenario import PALETTE, Scenario, ShelfObject, load_scenario  # noqa: E402
 
 VISIBLE = 300            # pixels in view at 640x480: the object must be found (test_perception.py's bound)
 TOL, TOL_LYING = 0.010, 0.015
@@ -46,12 +46,12 @@ TOL, TOL_LYING = 0.010, 0.015
 
 @dataclass(frozen=True)
 class Case:
-    """One generated frame: the scenario perception is given, the simulator's (listed + unlisted bottles), the
-    extras (boxes, lying cylinders: simulator only) and the truth of every object (id -> (x, y, lying or box))."""
+    """One generated frame: the scenario perception is given, the simulator's (its `unlisted`: the objects
+    perception is not told about; a tipped listed bottle lying in `objects`), the truth of every object (id -> (x,
+    y, lying or box)) and the ids of the unlisted ones."""
 
     given: Scenario
     sim: Scenario
-    extras: tuple[Extra, ...]
     truth: dict[str, tuple[float, float, bool]]
     unlisted: frozenset[str]
 
@@ -60,7 +60,7 @@ def make_case(seed: int, n: int, n_unlisted: int, n_lying: int) -> Case:
     """A seeded layout (module docstring); the unlisted objects are x1, x2, ... in the simulator."""
     base = load_scenario(default_scenario())
     rng = np.random.default_rng([seed, n, 7])
-    extras: list[Extra] = []
+    extras: list[ShelfObject] = []
     kinds = ["bottle", "jar", "box", "lying"]
     s = base.shelf
     colours = list(PALETTE)
@@ -72,27 +72,25 @@ def make_case(seed: int, n: int, n_unlisted: int, n_lying: int) -> Case:
         for _ in range(500):
             x = float(rng.uniform(s.x_front + 0.1, s.x_back - 0.1))
             y = float(rng.uniform(s.y_min + 0.1, s.y_max - 0.1))
-            e = Extra(f"x{k + 1}" if k < n_unlisted else f"lie{k}", BOX if kind == "box" else CYLINDER, x, y, size,
-                      float(rng.uniform(-math.pi, math.pi)), kind == "lying", PALETTE[c])
-            if all(math.hypot(x - f.x, y - f.y) > e.reach + f.reach + 0.02 for f in extras):
+            e = extra(base, f"x{k + 1}" if k < n_unlisted else f"lie{k}", BOX if kind == "box" else CYLINDER, x, y,
+                      size, float(rng.uniform(-math.pi, math.pi)), kind == "lying", PALETTE[c])
+            if all(math.hypot(x - f.x, y - f.y) > reach(e) + reach(f) + 0.02 for f in extras):
                 extras.append(e)
                 break
     dense = n > 20  # 30 bottles of 3-4 cm radius do not fit the 0.8 x 0.36 m board: smaller ones, closer
     bottles = generated_layout(base, seed, n, min_gap=0.012 if dense else 0.015,
                                radii=(0.02, 0.025, 0.03) if dense else (0.025, 0.033, 0.04),
-                               taken=[(e.x, e.y, e.reach + 0.005) for e in extras])
-    given = with_objects(base, bottles)
+                               taken=[(e.x, e.y, reach(e) + 0.005) for e in extras])
     lying = [e for e in extras if e.lying]
-    # a listed bottle lying: the scenario lists it standing, the simulator has it on its side (tipped over)
-    tipped = {b.id: e for b, e in zip(bottles[1:], lying)}
-    sim_bottles = [b for b in bottles if b.id not in tipped]
-    sim_extras = [e for e in extras if not e.lying] + [Extra(i, CYLINDER, e.x, e.y, (2 * b.radius, 2 * b.radius,
-                                                                                        b.height), e.yaw, True, b.rgb)
-                                                       for i, e in tipped.items() for b in [given.object(i)]]
-    truth = {b.id: (b.x, b.y, False) for b in sim_bottles}
-    truth.update({e.id: (e.x, e.y, e.lying or e.shape == BOX) for e in sim_extras})
-    return Case(given, with_objects(base, sim_bottles), tuple(sim_extras), truth,
-                frozenset(e.id for e in sim_extras if e.id.startswith("x")))
+    # a listed bottle lying: the scenario lists it standing where it fell from (its base at one end of the lying
+    # one), the simulator has it on its side
+    tipped = {b.id: replace(b, x=e.x, y=e.y, yaw=e.yaw, lying=True) for b, e in zip(bottles[1:], lying)}
+    given = with_objects(base, [replace(b, x=t.x - b.height / 2 * math.cos(t.yaw), y=t.y - b.height / 2 *
+                                        math.sin(t.yaw)) if (t := tipped.get(b.id)) else b for b in bottles])
+    unlisted = [e for e in extras if not e.lying]
+    sim = with_objects(base, [tipped.get(b.id, b) for b in bottles], unlisted)
+    truth = {o.id: (o.x, o.y, o.lying or o.shape == BOX) for o in sim.world}
+    return Case(given, sim, truth, frozenset(e.id for e in unlisted))
 
 
 def score(case: Case, result, visible: dict[str, int]) -> dict:
@@ -128,7 +126,7 @@ def score(case: Case, result, visible: dict[str, int]) -> dict:
 
 def run_case(case: Case, sensor: str, seed: int) -> tuple[dict, float, float]:
     """(score, wall s, CPU s) of one frame."""
-    f, visible = render_scene(case.sim, case.extras, sensor=SensorModel.named(sensor), seed=seed)
+    f, visible = render_scene(case.sim, sensor=SensorModel.named(sensor), seed=seed)
     p = Perception(case.given)
     t0, c0 = time.perf_counter(), time.process_time()
     try:

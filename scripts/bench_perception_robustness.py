@@ -44,9 +44,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from jaco2_sim_driver import sensor_model as sm  # noqa: E402  (after the sys.path insert of the checkout)
 from jaco2_sim_driver.camera import CameraRenderer, Frame, render_frame  # noqa: E402  (after the sys.path insert of the checkout)
-from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model  # noqa: E402  (after the sys.path insert of the checkout)
-from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
+from jaco2_sim_driver.params import CameraSpec
+from jaco2_sim_driver.scene import CAMERA_NAME, build_model  # noqa: E402  (after the sys.path insert of the checkout)
+from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.pipeline import Perception  # noqa: E402  (after the sys.path insert of the checkout)
+from relocation_common.geometry import matrix_rpy, rotvec_matrix, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.paths import scenarios_dir  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.robot_description import JOINT_NAMES, Q_HOME, Q_UPRIGHT  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.scenario import Scenario, load_scenario  # noqa: E402  (after the sys.path insert of the checkout)
@@ -56,10 +58,6 @@ TOL = 0.010  # m: a published bottle farther than this from its true position is
 VISIBLE_PIXELS = 300  # a bottle showing this many pixels at 640x480 (test_perception.py's bound) must be found
 RESOLUTIONS = {1: (480, 360), 2: (424, 240), 3: (320, 240)}
 OCCLUDER_RGB = (185, 150, 130)   # a hand / a tool: matches no bottle colour of the palette
-
-
-def rotvec_matrix(v) -> np.ndarray:
-    return cv2.Rodrigues(np.asarray(v, float).reshape(3, 1))[0]
 
 
 def random_unit(rng: np.random.Generator) -> np.ndarray:
@@ -72,9 +70,7 @@ def wrong_marker(s: Scenario, level: int, rng: np.random.Generator) -> Scenario:
     m = s.marker
     x, y, z = (float(v) for v in np.asarray(m.position) + 0.01 * level * random_unit(rng))
     rot = rotvec_matrix(math.radians(level) * random_unit(rng)) @ rpy_matrix(m.rpy)
-    rpy = (math.atan2(rot[2, 1], rot[2, 2]), -math.asin(max(-1.0, min(1.0, rot[2, 0]))), math.atan2(rot[1, 0],
-                                                                                                   rot[0, 0]))
-    return replace(s, marker=replace(m, position=(x, y, z), rpy=rpy))
+    return replace(s, marker=replace(m, position=(x, y, z), rpy=matrix_rpy(rot)))
 
 
 def project(K: np.ndarray, T_base_camera: np.ndarray, pts_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -175,7 +171,7 @@ def render_moving(s: Scenario, q, qdot, exposure: float = 0.02) -> Frame:
     """The frame of the arm arriving at q with joint speeds qdot, through a camera exposing its colour image for
     `exposure` s (the sensor model's motion blur only)."""
     import mujoco
-    model = build_model(s, CameraSpec())
+    model = build_model(s, CameraSpec.configured())
     data = mujoco.MjData(model)
     adr = [model.joint(j).qposadr[0] for j in JOINT_NAMES]
     r = CameraRenderer(model, 640, 480, sensor=sm.SensorModel(exposure_s=exposure))
@@ -225,7 +221,7 @@ def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str], p
 def visible_pixels(s: Scenario, q) -> dict[str, int]:
     """Pixels of each bottle in the 640x480 image (MuJoCo segmentation rendering of the same scene)."""
     import mujoco
-    camera = CameraSpec()
+    camera = CameraSpec.configured()
     model = build_model(s, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, q):
@@ -269,7 +265,8 @@ def run(scene_names, reps: int, q, seed: int, out, categories=tuple(CATEGORIES),
         rendered.append((s, f))
         required = {i for i, n in visible_pixels(s, q).items() if n >= VISIBLE_PIXELS}
         fused = Perception(s).process(f.rgb, f.depth, f.K, q=q).T_base_camera if prior else None
-        low = {lv: render_frame(s, q=q, camera=CameraSpec(width=w, height=h)) for lv, (w, h) in RESOLUTIONS.items()}
+        low = {lv: render_frame(s, q=q, camera=replace(CameraSpec.configured(), width=w, height=h))
+               for lv, (w, h) in RESOLUTIONS.items()}
         for ci, cat in enumerate(CATEGORIES):
             if cat not in categories:
                 continue

@@ -1,6 +1,6 @@
 """Benchmark: plans on layouts nobody tuned (docs/benchmarks.md, "Perturbed layouts"). Not a timed test.
 
-For each shipped scene x seeds x amplitudes, a perturbed layout (`make_scenes jitter`: every bottle moved by at
+For each shipped scene x seeds x amplitudes, a perturbed layout (`scenes jitter`: every bottle moved by at
 most 12 or 20 mm, kept apart and on the shelf); per layout, in a fresh process (as `./run qtree solve --scenario F
 --oracle planner` runs: one planner, OMPL seeded as configured, no cache; the wall-clock safety nets raised to
 SAFETY_NET so that a loaded machine changes no answer), the exact solve (`--solver`, default
@@ -137,7 +137,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", nargs="*", default=list(DEFAULT_SCENES))
     ap.add_argument("--all", action="store_true", help="every shipped relocation scene")
-    ap.add_argument("--seeds", default="0-1", help="jitter seeds (make_scenes jitter --seeds), default 0-1")
+    ap.add_argument("--seeds", default="0-1", help="jitter seeds (scenes jitter --seeds), default 0-1")
     ap.add_argument("--amplitudes", default="0.012,0.020", help="m, comma-separated")
     ap.add_argument("--solver", choices=("astar", "ucs"), default="astar")
     ap.add_argument("--set", action="append", default=[], help="planner parameter key=value (repeatable)")
@@ -154,7 +154,8 @@ def main() -> int:
     if a.one:
         print(json.dumps(one(a.one, a.solver, a.set)))
         return 0
-    from relocation_app.evaluation.scenes.make_scenes import _seed_range, make_jitter
+    from relocation_app.evaluation.scenes.cli import seed_range
+    from relocation_app.evaluation.scenes.jitter import make_jitter
     scenes = shipped_scenes() if a.all else a.scenes
     out = Path(a.out) if a.out else None
     rows = [json.loads(x) for x in out.read_text().splitlines() if x.strip()] if out and out.exists() else []
@@ -162,7 +163,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for scene in scenes:  # scene by scene, both amplitudes: a run stopped early is still a sample of both
             for amp in (float(x) for x in a.amplitudes.split(",")):
-                for path in make_jitter(scene, amp, _seed_range(a.seeds), tmp):
+                for path in make_jitter(scene, amp, seed_range(a.seeds), tmp):
                     if (path.stem, int(round(amp * 1000))) in done:
                         continue
                     cmd = [sys.executable, __file__, "--one", str(path), "--solver", a.solver]

@@ -1,6 +1,6 @@
 """Same question, same answer, at scale (the long version of test/test_question_seeded.py; not a timed test).
 
-N random feasibility questions (object, removed set) on shipped scenes and their perturbed layouts (make_scenes
+N random feasibility questions (object, removed set) on shipped scenes and their perturbed layouts (scenes
 jitter), asked by one planner in one order, by another in the reverse order and by a third process in a shuffled
 order; prints the fraction of identical labels and trajectories (bit for bit) per comparison.
 
@@ -24,7 +24,7 @@ SCENES = (("paper_experiment_10", 0.0), ("scenario3_15", 0.0), ("paper3_15", 0.0
 
 def questions(n: int, tmp: str) -> list[tuple[str, str, list[str]]]:
     """n questions (scene file, object, removed) spread over SCENES, seeded."""
-    from relocation_app.evaluation.scenes.make_scenes import make_jitter
+    from relocation_app.evaluation.scenes.jitter import make_jitter
     from relocation_common.paths import resolve_scenario
     from relocation_common.scenario import load_scenario
     rng, out = random.Random(0), []

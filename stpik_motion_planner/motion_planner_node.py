@@ -6,8 +6,8 @@
 - action `~/relocate` (RelocateObject): plan the pick, stream joint velocities at 100 Hz with feedback from the
   joint states, close the gripper, plan and stream the carry to the next slot of the bottom shelf, release,
   retreat, plan and stream the way home (service.py, streaming.py). Feedback by phase; cancel stops the arm; a
-  silent driver aborts the goal with the reason. The driver's surface is `command_interface` (docs/kinova.md;
-  ros_interface.RosArmLink).
+  silent driver aborts the goal with the reason. The driver's surface: config/arm_interface.yaml, shared with the
+  driver (relocation_common.arm_interface, docs/kinova.md; ros_interface.RosArmLink).
 - `~/path` (visualization_msgs/Marker, latched): the tool path of the motion being executed, as a line strip.
 - the scene: the scenario file (shelf, slots, initial bottles), updated from `scene_topic` (ObjectArray,
   transient local). Bottles no longer on the top shelf are ignored; bottles not seen keep their last pose.
@@ -24,13 +24,16 @@ from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from visualization_msgs.msg import Marker
 
+from relocation_common import arm_interface
+from relocation_common import robot_description as rd
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.node import SideNode, declare_parameters, node_main
-from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_bottles
+from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_objects
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 from stpik_motion_planner.execution import goal_check
 from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
 from stpik_motion_planner.planning.planner import PlannerParams, SafetyNetTimeout
-from stpik_motion_planner.ros_interface import SURFACES, RosArmLink, trajectory_to_msg
+from stpik_motion_planner.ros_interface import RosArmLink, trajectory_to_msg
 from stpik_motion_planner.service import MotionPlannerService
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
@@ -44,20 +47,18 @@ class MotionPlannerNode(Node):
 
     def __init__(self) -> None:
         super().__init__("motion_planner")
-        params = declare_parameters(self)  # config/motion_planner.yaml: planner, follower.* and node keys
+        # config/motion_planner.yaml (planner, follower.* and node keys) and config/arm_interface.yaml
+        params = declare_parameters(self, shared=(arm_interface.FILE,))
         planner_params = PlannerParams.from_mapping({k: v for k, v in params.items() if k in PlannerParams.keys()})
-        surface = str(params["command_interface"])
-        if surface not in SURFACES:
-            raise ValueError(f"parameter command_interface must be one of {', '.join(SURFACES)}, got {surface!r}")
+        arm = ArmInterface.from_mapping(params)  # the surface, shared with the driver; ParameterError
         self.core = MotionPlannerService(load_scenario(params["scenario"] or None), planner_params,
                                          float(params["home_tol"]), log=self._log)
         self.link: RosArmLink | None = None  # nothing in a feasibility-only replica (serve_relocation false)
         if params["serve_relocation"]:
             goal_check.check_parameters({k: params[k] for k in goal_check.PARAMETERS})
             self.core.checks = {k: float(params[k]) for k in goal_check.PARAMETERS}
-            self.stream_params = StreamParams.from_mapping(params, planner_params.stpik.qdot_max)
-            self.link = RosArmLink(self, surface, str(params["driver_prefix"]),
-                                   self.create_publisher(Marker, "~/path", SCENE_QOS))
+            self.stream_params = StreamParams.from_mapping(params, rd.QDOT_MAX)  # Table 7: the robot's
+            self.link = RosArmLink(self, arm, self.create_publisher(Marker, "~/path", SCENE_QOS))
         self.create_subscription(ObjectArray, params["scene_topic"], self._on_scene, SCENE_QOS,
                                  callback_group=MutuallyExclusiveCallbackGroup())
         # the feasibility service on a node of its own, spun by its own single-threaded executor (a thread): an
@@ -71,10 +72,12 @@ class MotionPlannerNode(Node):
                                         callback_group=ReentrantCallbackGroup())
         self.scene_topic = params["scene_topic"]
         base = self.core.base
-        driver = str(params["driver_prefix"]) if surface == "kinova" else "ros2_control"
-        self.get_logger().info(f"ready: scenario {base.name} ({len(base.objects)} bottles), service "
+        driver = arm.driver_prefix if arm.kinova else "ros2_control"
+        self.get_logger().info(f"ready: scenario {base.name} ({len(base.objects)} objects), service "
                                f"{self.resolve_service_name('~/plan_feasibility')}, scene from {self.scene_topic}, "
                                + (f"driver {driver}" if self.link else "feasibility only (serve_relocation false)"))
+        if base.slot_note:
+            self.get_logger().warning(base.slot_note)
 
     def _log(self, level: str, text: str) -> None:
         """The cores' log lines. One call site per severity: rclpy refuses a call site whose severity changes."""
@@ -95,10 +98,7 @@ class MotionPlannerNode(Node):
         """Bottles on the top shelf (standing or lying) replace the planner's, bottles off the shelf leave it; the
         rest of the scene stays (service.update_scene)."""
         try:
-            changed = self.core.update_scene(
-                [(b, o.pose.position.z, (o.pose.orientation.w, o.pose.orientation.x, o.pose.orientation.y,
-                                         o.pose.orientation.z)) for b, o in zip(msg_to_bottles(msg), msg.objects)],
-                f"scene on {self.scene_topic}")
+            changed = self.core.update_scene(msg_to_objects(msg), f"scene on {self.scene_topic}")
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return

@@ -1,11 +1,13 @@
 """The motion_planner node's ROS side beyond the node itself: the driver's interface as a `streaming.ArmLink`, the
 trajectory and tool-path messages.
 
-`RosArmLink`: the driver's surface as `command_interface` says (docs/kinova.md): `kinova` = kinova-ros's j2s7s300
-driver (kinova_msgs/JointVelocity in deg/s on `<driver_prefix>/in/joint_velocity`, `<driver_prefix>/out/joint_state`,
-the SetFingersPosition action `<driver_prefix>/fingers_action/finger_positions`); `ros2_control` =
+`RosArmLink`: the driver's surface as the arm interface says (`relocation_common.arm_interface`,
+config/arm_interface.yaml, shared with the driver; docs/kinova.md): `kinova` = kinova-ros's j2s7s300 driver
+(kinova_msgs/JointVelocity in deg/s on `<driver_prefix>/in/joint_velocity`, `<driver_prefix>/out/joint_state`, the
+SetFingersPosition action `<driver_prefix>/fingers_action/finger_positions`); `ros2_control` =
 `/velocity_controller/commands` (rad/s), `/gripper_controller/commands`, `/joint_states`. The joint states are read
-by a SideNode on its own executor (100 Hz, never late: docs/architecture.md).
+by a SideNode on its own executor (100 Hz, never late: docs/architecture.md). A driver on another surface is found in
+the ROS graph (`arm_interface.MismatchWatch`): logged, and a relocation that gets no joint state aborts with it.
 """
 from __future__ import annotations
 
@@ -28,14 +30,11 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
 from relocation_common import robot_description as rd
+from relocation_common.arm_interface import GRIPPER_TOPIC, ArmInterface, MismatchWatch
 from relocation_common.node import ActionClient, SideNode
 from relocation_common.ros_conversions import BASE_FRAME
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled
 from stpik_motion_planner.planning.trajectory import Trajectory
-
-SURFACES = ("kinova", "ros2_control")  # command_interface: the driver's surface (docs/kinova.md)
-VELOCITY_TOPIC = "/velocity_controller/commands"  # ros2_control JointGroupVelocityController (rad/s)
-GRIPPER_TOPIC = "/gripper_controller/commands"    # ros2_control JointGroupPositionController, finger joints (rad)
 
 
 def trajectory_to_msg(traj: Trajectory | None) -> JointTrajectory:
@@ -79,25 +78,24 @@ def _positions(names, msg: JointState) -> tuple[np.ndarray, float] | None:
 
 
 class RosArmLink:
-    """streaming.ArmLink over the driver's topics and fingers action, created on `node` (see the module docstring);
-    `path` is the publisher of the `~/path` marker. Call close()."""
+    """streaming.ArmLink over the driver's topics and fingers action as `arm` says, created on `node` (see the module
+    docstring); `path` is the publisher of the `~/path` marker. Call close()."""
 
-    def __init__(self, node, surface: str, driver_prefix: str, path) -> None:
-        pre = driver_prefix.rstrip("/")
-        self.kinova, self._node, self._path = surface == "kinova", node, path
+    def __init__(self, node, arm: ArmInterface, path) -> None:
+        self.kinova, self._node, self._path = arm.kinova, node, path
         self._q: tuple[np.ndarray, float] | None = None
         self._fingers_q: tuple[np.ndarray, float] | None = None  # finger joint angles (rad), time received
         if self.kinova:  # kinova-ros's j2s7s300 driver surface: kinova_msgs, deg/s, fingers action
-            self._cmd = node.create_publisher(JointVelocity, f"{pre}/in/joint_velocity", 10)
-            self._fingers = ActionClient(node, SetFingersPosition, f"{pre}/fingers_action/finger_positions",
+            self._cmd = node.create_publisher(JointVelocity, arm.velocity_topic, 10)
+            self._fingers = ActionClient(node, SetFingersPosition, arm.fingers_action,
                                          callback_group=ReentrantCallbackGroup())
-            state_topic = f"{pre}/out/joint_state"
         else:  # ros2_control: JointGroupVelocityController, the fingers as a JointGroupPositionController
-            self._cmd = node.create_publisher(Float64MultiArray, VELOCITY_TOPIC, 10)
+            self._cmd = node.create_publisher(Float64MultiArray, arm.velocity_topic, 10)
             self._gripper_cmd = node.create_publisher(Float64MultiArray, GRIPPER_TOPIC, 10)
-            state_topic = "/joint_states"
         self._state = SideNode("motion_planner_joint_state", context=node.context)  # 100 Hz, never late
-        self._state.node.create_subscription(JointState, state_topic, self._on_joint_state, 10)
+        self._state.node.create_subscription(JointState, arm.state_topic, self._on_joint_state, 10)
+        self.watch = MismatchWatch(self._state.node, arm, "planner", node.resolve_topic_name(arm.state_topic),
+                                   period=1.0, log=node.get_logger().error)
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
@@ -115,7 +113,10 @@ class RosArmLink:
 
     # -- streaming.ArmLink ------------------------------------------------------------------------------------
     def joint_state(self) -> tuple[np.ndarray, float] | None:
-        """(arm joint angles, time received) of the latest joint state."""
+        """(arm joint angles, time received) of the latest joint state. Aborted when none ever came and the driver
+        is on another surface (MismatchWatch)."""
+        if self._q is None and self.watch.found is not None:
+            raise Aborted(self.watch.found)
         return self._q
 
     def finger_state(self) -> tuple[np.ndarray, float] | None:

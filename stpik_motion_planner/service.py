@@ -22,13 +22,13 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
-from relocation_common.scenario import Scenario, ScenarioError, UnknownObjectError
+from relocation_common.scenario import Scenario, ShelfObject, UnknownObjectError
 from relocation_common.scene_check import check_scene
 from stpik_motion_planner.execution import goal_check
 from stpik_motion_planner.execution.relocation import Progress, recover, relocate
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm
 from stpik_motion_planner.model.blockers import lane_blockers
-from stpik_motion_planner.model.scene_update import Perceived, merge_perceived
+from stpik_motion_planner.model.scene_update import merge_perceived
 from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams, PlanningError
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
@@ -65,18 +65,16 @@ class MotionPlannerService:
         self.checks: dict[str, float] = dict(goal_check.DEFAULTS)  # the node sets the parameters'
 
     # -- the scene ------------------------------------------------------------------------------------------
-    def update_scene(self, perceived: Iterable[tuple], source: str = "the scene") -> list[str]:
-        """Bottles resting on the top shelf, as (bottle, base height[, orientation (w, x, y, z)]) tuples, replace
-        the planner's: standing, or lying (an obstacle as it lies, never graspable); bottles seen off the shelf
-        leave the planner's scene; the rest stays (scene_update.merge_perceived). The ids that changed;
-        ScenarioError for a scene that cannot be (scene_check: unknown or duplicate ids, poses not finite or far
-        from the shelf; an orientation not finite): the whole message is dropped, nothing changes."""
-        bottles = [Perceived(*p) for p in perceived]
-        check_scene(self.base, [(p.bottle.id, p.bottle.x, p.bottle.y, p.z) for p in bottles], source)
-        bad = next((p.bottle.id for p in bottles if not all(math.isfinite(c) for c in p.quat)), None)
-        if bad is not None:
-            raise ScenarioError(f"{source}: the orientation of {bad} is not finite")
-        self.scene.update((p.bottle.id, p.bottle.x, p.bottle.y, p.z) for p in bottles)
+    def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene") -> list[str]:
+        """Objects as perceived (ros_conversions.msg_to_objects) resting on the top shelf replace the planner's:
+        standing, or lying (an obstacle as it lies, never graspable); bottles seen off the shelf leave the planner's
+        scene; the rest stays (scene_update.merge_perceived). The ids that changed; ScenarioError for a scene that
+        cannot be (scene_check: unknown or duplicate ids, poses far from the shelf): the whole message is dropped,
+        nothing changes."""
+        bottles = list(perceived)
+        bases = [(b.id, *(float(v) for v in b.base())) for b in bottles]  # (id, x, y, z) of each base centre
+        check_scene(self.base, bases, source)
+        self.scene.update(bases)
         m = merge_perceived(self.base.shelf, self.bottles, bottles, self._held, self.planner.lying,
                             self.planner.gone)
         for i in m.seen:  # seen back on the top shelf (a reset scene): it can be relocated again

@@ -11,24 +11,18 @@ import numpy as np
 import pytest
 
 from jaco2_sim_driver.camera import render_frame  # first: sets MUJOCO_GL before mujoco is imported
-from perception_aruco.aruco import (
-    invert,
-    marker_in_base,
-    pose_error,
-    rpy_matrix,
-    transform,
-)
+from perception_aruco.aruco import marker_in_base
 from perception_aruco.calibration import (
     CalibrationError,
     apply_calibration,
     load_calibration,
     marker_in_base_from,
-    matrix_rpy,
     save_calibration,
     solve_hand_eye,
 )
 from perception_aruco.pipeline import Perception
 from relocation_app.calibrate import CALIBRATION_POSES, SimArm, calibrate
+from relocation_common.geometry import invert, matrix_rpy, pose_error, rpy_matrix, transform
 from relocation_common.paths import resolve_scenario, scenarios_dir
 from relocation_common.scenario import load_scenario
 

@@ -1,5 +1,7 @@
 """The closed loop's checks against the real MuJoCo simulator core: the default tolerances hold the settled
 physics (no difference where nothing happened) and catch each disturbance of jaco2_sim_driver.disturbance."""
+from dataclasses import replace
+
 import pytest
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
@@ -64,9 +66,8 @@ def test_checks_on_the_simulator_see_what_happened_and_only_that(sim):
 
 
 def _room_for_push(sim, oid, dy) -> bool:
-    p = {q.id: q.position for q in sim.object_poses()}[oid]
-    xy = (p[0], p[1] + dy)
-    return dist._room(sim, oid, xy, xy, SCENARIO.object(oid).radius, p[2]) is None
+    now = dist.current(sim, oid)
+    return dist._room(sim, replace(now, y=now.y + dy)) is None
 
 
 def _tips(sim, oid) -> bool:

@@ -6,26 +6,23 @@ from dataclasses import replace
 
 import pytest
 from geometry_msgs.msg import Quaternion
-from qtree_relocation_msgs.msg import ObjectArray
 
 from qtree_task_planner.executive.closed_loop import scene_from_scenario
 from qtree_task_planner.executive.retrieval import execute
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
 from relocation_common.paths import default_scenario
-from relocation_common.ros_conversions import bottle_to_msg
+from relocation_common.ros_conversions import objects_to_msg
 from relocation_common.scenario import load_scenario
 
 SC = load_scenario(default_scenario())
 
 
-def _msg(scenario=SC, z=None):
-    msg = ObjectArray()
-    for b in scenario.objects:
-        o = bottle_to_msg(b)
-        o.pose.position.z = scenario.shelf.top_z if z is None else z
-        msg.objects.append(o)
-    return msg
+def _msg(scenario=SC, z=None, target_z=None):
+    """The scenario's objects on the board at height z (default: the top shelf), the target at target_z."""
+    top = scenario.shelf.top_z if z is None else z
+    return objects_to_msg(replace(b, support_z=target_z if b.is_target and target_z is not None else top)
+                          for b in scenario.objects)
 
 
 def test_the_watch_waits_for_a_scene_received_after_the_relocation_ended():
@@ -119,9 +116,7 @@ def test_the_target_seen_on_the_bottom_shelf_is_its_verification():
                                  unseen_target=SC.target_id, bottom_z=SC.shelf.bottom_z)
     relocate(SC.target_id, ["o2"])
     watch.put(_msg())  # held on the top shelf
-    msg = _msg()
-    t = next(o for o in msg.objects if o.id == SC.target_id)
-    t.pose.position.z = SC.shelf.bottom_z
+    msg = _msg(target_z=SC.shelf.bottom_z)
     threading.Timer(0.3, lambda: watch.put(msg)).start()
     scene = perceive()
     assert scene[SC.target_id].z == pytest.approx(SC.shelf.bottom_z)

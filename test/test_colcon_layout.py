@@ -46,12 +46,12 @@ def test_ros2_run_layout(install):
         assert os.access(install / "lib" / "qtree_relocation" / exe, os.X_OK), exe
     assert (install / "share" / "ament_index" / "resource_index" / "packages" / "qtree_relocation").is_file()
     assert (install / "share" / "qtree_relocation" / "package.xml").is_file()
-    for cfg in ("task_planner", "motion_planner", "jaco2_sim_driver", "perception"):
+    for cfg in ("task_planner", "motion_planner", "jaco2_sim_driver", "perception", "arm_interface"):
         assert (install / "share" / "qtree_relocation" / "config" / f"{cfg}.yaml").is_file()
     assert (install / "share" / "qtree_relocation" / "config" / "fastdds.xml").is_file()  # the graph's DDS profile
     scen = install / "share" / "qtree_relocation" / "config" / "scenarios"
     assert (scen / "paper_experiment_10.yaml").is_file()
-    for d in ("random5", "paper_random5"):  # the Table 4 sets, usable as --scenario random5/random5_00
+    for d in ("random5", "paper_random5", "world"):  # the Table 4 sets, the shelf as it is (--scenario random5_00)
         assert sorted(p.name for p in (scen / d).glob("*.yaml")) == \
             sorted(p.name for p in (ROOT / "config" / "scenarios" / d).glob("*.yaml")), d
 

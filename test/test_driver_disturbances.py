@@ -2,25 +2,26 @@
 commands as the node's /sim/disturb transforms, a DisturbancePlan from the parameters, reset undoing them."""
 import numpy as np
 import pytest
-import yaml
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver.disturbance import DisturbancePlan
-from jaco2_sim_driver.driver import Rates, SimDriver, check_parameters
+from jaco2_sim_driver.driver import SimDriver
+from jaco2_sim_driver.params import DriverParams
 from jaco2_sim_driver.sim import Jaco2Sim
-from relocation_common.paths import config_file, default_scenario
+from relocation_common.arm_interface import ArmInterface
+from relocation_common.paths import default_scenario
 from relocation_common.robot_description import BASE_LINK, Q_HOME
 from relocation_common.scenario import load_scenario
 
 SCENARIO = load_scenario(default_scenario())
-PARAMS = yaml.safe_load(config_file("jaco2_sim_driver.yaml").read_text())["jaco2_sim_driver"]["ros__parameters"]
+PARAMS = DriverParams.load()
 
 
 @pytest.fixture(scope="module")
 def core():
     sim = Jaco2Sim(SCENARIO)
     sim.q_home = np.asarray(Q_HOME, float)
-    return SimDriver(sim, Rates(real_time_factor=0.0))
+    return SimDriver(sim, PARAMS.replace(real_time_factor=0.0), ArmInterface.load())
 
 
 def _xy(core, oid):
@@ -48,10 +49,11 @@ def test_commands_nudge_move_and_refuse_with_the_reason_then_reset_undoes_them(c
 
 def test_the_plan_and_drop_parameters_are_checked_and_taken():
     plan = DisturbancePlan.draw(2, seed=3, relocations=3)
-    check_parameters({**PARAMS, "disturbance_plan": plan.to_json(), "drop_probability": 0.5}.get)
+    PARAMS.replace(disturbance_plan=plan.to_json(), drop_probability=0.5)
     with pytest.raises(ValueError, match="drop_probability"):
-        check_parameters({**PARAMS, "drop_probability": 1.5}.get)
-    with pytest.raises(ValueError, match="not a disturbance plan"):
-        check_parameters({**PARAMS, "disturbance_plan": "{nope"}.get)
-    core = SimDriver.from_parameters({**PARAMS, "disturbance_plan": plan.to_json(), "real_time_factor": 0.0}.get)
+        PARAMS.replace(drop_probability=1.5)
+    with pytest.raises(ValueError, match="disturbance_plan: not a disturbance plan"):
+        PARAMS.replace(disturbance_plan="{nope")
+    core = SimDriver.from_params(PARAMS.replace(disturbance_plan=plan.to_json(), real_time_factor=0.0),
+                                 ArmInterface.load())
     assert core.schedule is not None and core.schedule.plan == plan and core.dropper.probability == 0.0

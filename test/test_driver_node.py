@@ -24,6 +24,7 @@ from std_srvs.srv import Trigger
 
 from relocation_common.paths import default_scenario
 from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, Q_HOME, Q_UPPER, QDOT_MAX
+from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
 
 pytestmark = pytest.mark.graph
@@ -252,14 +253,13 @@ def test_home_arm_moves_the_arm_home(g):
 
 def test_ground_truth_objects_match_the_scenario(g):
     sc = load_scenario(default_scenario())
-    objs = g.probe.collect("/sim/objects", ObjectArray, LATCHED).wait(timeout=10)[-1].objects
+    objs = msg_to_objects(g.probe.collect("/sim/objects", ObjectArray, LATCHED).wait(timeout=10)[-1], sc.ids)
     assert [o.id for o in objs] == list(sc.ids)
     for o in objs:
         b = sc.object(o.id)
-        assert (o.label, o.weight, o.is_target, o.radius, o.height) == (b.label, b.weight, b.is_target, b.radius,
-                                                                         b.height)
-        assert np.allclose([o.pose.position.x, o.pose.position.y, o.pose.position.z], [b.x, b.y, sc.shelf.top_z],
-                           atol=2e-3)
+        assert (o.label, o.rgb, o.weight, o.is_target, o.radius, o.height, o.shape, o.listed, o.lying) == \
+            (b.label, b.rgb, b.weight, b.is_target, b.radius, b.height, b.shape, b.listed, b.lying)
+        assert np.allclose([o.x, o.y, o.support_z], [b.x, b.y, sc.shelf.top_z], atol=2e-3)
 
 
 def test_camera_frame_arrives_with_the_marker_visible(g):

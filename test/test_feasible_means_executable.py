@@ -1,7 +1,7 @@
 """Feasible means executable (docs/motion_planner.md, "Determinism"): with `seed_per_query`, the execution's pick
 (relocation.plan_relocation -> plan_pick) asks the planner the same question as the feasibility answer, so it gets
 the answer's trajectory bit for bit, and the rest of the relocation is planned from its end. Every FEASIBLE answer
-of the sample is followed by a successful plan_relocation of the same question, on a perturbed layout (make_scenes
+of the sample is followed by a successful plan_relocation of the same question, on a perturbed layout (scenes
 jitter); with `certify_relocation` a feasible answer has planned that carry, retreat and way home already.
 Larger sample: scripts/check_same_answer.py --relocate."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import dataclasses
 
 import yaml
 
-from relocation_app.evaluation.scenes.make_scenes import jitter_scene
+from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import parse_scenario
 from stpik_motion_planner.execution.relocation import plan_relocation

@@ -8,7 +8,7 @@ import random
 
 import yaml
 
-from relocation_app.evaluation.scenes.make_scenes import jitter_scene
+from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import parse_scenario
 from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams

@@ -6,7 +6,9 @@
 - tf2_msgs/msg/TFMessage exactly as in ROS 2 Jazzy's geometry2, checked by its RIHS01 type hash: the one a Jazzy
   node advertises for /tf (`ros2 topic info -v /tf`), found in public generated code and bag metadata.
 - qtree_relocation_msgs still imports after the move to msg_defs/qtree_relocation_msgs/ (without its JointVelocity:
-  kinova_msgs/JointVelocity replaced it).
+  kinova_msgs/JointVelocity replaced it); its ObjectState carries a primitive as moveit_msgs/CollisionObject does
+  (shape_msgs/SolidPrimitive, full orientation, listed, the weight's note, colour, fit quality), and the installed
+  type is the one msg_defs/ defines (a stale build fails).
 
 The type hash is checked twice: in the type description installed beside the type
 (share/<pkg>/<kind>/<Type>.json, key "type_hashes") and as advertised on the graph by a publisher of this process
@@ -83,6 +85,21 @@ TF2_MSGS = {
 geometry_msgs/TransformStamped[] transforms
 """,
 }
+
+# qtree_relocation_msgs/msg/ObjectState: the fields the nodes exchange (relocation_common.ros_conversions).
+OBJECT_STATE = """\
+string id
+string label
+std_msgs/ColorRGBA color
+float64 weight
+string weight_note
+bool is_target
+bool listed
+geometry_msgs/Pose pose
+shape_msgs/SolidPrimitive shape
+float64 fit_rms
+bool conservative
+"""
 
 # RIHS01 hash of tf2_msgs/msg/TFMessage in ROS 2 Jazzy, as published: `ros2 topic info -v` output of a Jazzy
 # system, Jazzy rosbag2 metadata (type_description_hash), and the EXPECTED_HASH constants of rosidl_generator_c
@@ -243,6 +260,17 @@ def test_qtree_relocation_msgs_still_import():
     from rclpy.type_support import check_for_type_support
     for iface in (PlanFeasibility, ObjectArray, ObjectState, RelocateObject, TrainPlanner):
         check_for_type_support(iface)
+
+
+def test_object_state_carries_a_solid_primitive_and_is_the_one_msg_defs_defines():
+    check_definition("qtree_relocation_msgs", "msg/ObjectState", OBJECT_STATE)
+    source = Path(__file__).resolve().parent.parent / "msg_defs" / "qtree_relocation_msgs" / "msg" / "ObjectState.msg"
+    assert expected_fields("qtree_relocation_msgs", source.read_text()) == \
+        expected_fields("qtree_relocation_msgs", OBJECT_STATE)
+    from qtree_relocation_msgs.msg import ObjectState
+    from shape_msgs.msg import SolidPrimitive
+    m = ObjectState()
+    assert m.shape.type == 0 and SolidPrimitive.CYLINDER_HEIGHT == 0 and SolidPrimitive.CYLINDER_RADIUS == 1
 
 
 def test_the_project_joint_velocity_is_gone():

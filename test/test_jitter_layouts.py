@@ -1,4 +1,4 @@
-"""make_scenes jitter (docs/benchmarks.md, "Perturbed layouts"): seeded, within the amplitude, apart, on the shelf."""
+"""`scenes jitter` (docs/benchmarks.md, "Perturbed layouts"): seeded, within the amplitude, apart, on the shelf."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,8 @@ import math
 import pytest
 import yaml
 
-from relocation_app.evaluation.scenes.make_scenes import _seed_range, jitter_scene, main
+from relocation_app.evaluation.scenes.cli import main, seed_range
+from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import load_scenario, parse_scenario
 
@@ -40,4 +41,4 @@ def test_the_subcommand_writes_one_file_per_seed_and_refuses_a_bad_amplitude(tmp
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"scenario1_5_j12_s{k}.yaml" for k in range(3)]
     assert main(["jitter", "scenario1_5", "--amplitude", "-1", "--out", str(tmp_path)]) == 2
     assert "amplitude" in capsys.readouterr().out
-    assert _seed_range("0-2,7") == [0, 1, 2, 7]
+    assert seed_range("0-2,7") == [0, 1, 2, 7]

@@ -95,7 +95,7 @@ def test_the_optimum_of_each_paper_scene_table_touches_nothing(name, replans):
     sequence."""
     from relocation_app.evaluation.__main__ import planner_params
     from relocation_app.evaluation.feasibility_cache import PlannerOracle, open_table
-    from relocation_app.evaluation.scenes import paper_scenes
+    from relocation_app.evaluation.scenes import screening
     from relocation_common.paths import data_dir
     scenario = load_scenario(name)
     table, path = open_table(scenario, planner_params(), data_dir() / "feasibility")
@@ -108,7 +108,7 @@ def test_the_optimum_of_each_paper_scene_table_touches_nothing(name, replans):
     assert rep.segments == 4 * len(result.sequence)
     assert_clean(rep, f"{name} table optimum {'-'.join(result.sequence)}")
     # the same planner again: its OMPL stream has moved on, as a demo's planner's has
-    assert paper_scenes.replans(planner, result.sequence, replans) == "", name
+    assert screening.replans(planner, result.sequence, replans) == "", name
 
 
 def test_the_blocking_scenes_are_not_relocation_scenes():

@@ -19,6 +19,7 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
@@ -60,7 +61,7 @@ def _ask(g, object_id, removed=(), timeout=0.0):
 def _positions(g) -> dict[str, np.ndarray]:
     g.objects.clear()
     msg = g.objects.wait(timeout=5)[-1]
-    return {o.id: np.array([o.pose.position.x, o.pose.position.y, o.pose.position.z]) for o in msg.objects}
+    return {o.id: o.base() for o in msg_to_objects(msg)}  # base centres
 
 
 def _send(g, object_id, removed=()):

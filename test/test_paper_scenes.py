@@ -9,7 +9,7 @@ import pytest
 
 from relocation_app.evaluation.__main__ import PAPER, SCEN_DIR, planner_params
 from relocation_app.evaluation.feasibility_cache import open_table
-from relocation_app.evaluation.scenes import complete_tree, paper_scenes
+from relocation_app.evaluation.scenes import complete_tree, layout, paper_size, screening
 from relocation_common.paths import data_dir
 from relocation_common.scenario import load_scenario
 
@@ -24,7 +24,7 @@ def test_shipped_scene_has_the_stated_tree(name):
     edges, leaves, optimal = map(int, re.search(r"tree of (\d+) edges, (\d+) target leaves, (\d+) optimal",
                                                 sc.description, re.I).groups())
     assert (size.edges, size.target_leaves, size.optimal_leaves) == (edges, leaves, optimal)
-    goal = paper_scenes.PAPER_TREES[len(sc.obstacle_ids)]
+    goal = paper_size.PAPER_TREES[len(sc.obstacle_ids)]
     if "closest" not in sc.description and "no longer a match" not in sc.description:  # the issue's tolerance
         assert goal[0] / 2 <= size.edges <= 2 * goal[0] and size.target_leaves == goal[1] and optimal == 1
 
@@ -46,11 +46,11 @@ def test_the_random_cases_at_the_paper_size_match_table_4():
 
 
 def test_perturb_and_extend_keep_valid_layouts():
-    base = paper_scenes.free_scene(3, 5, "t")
+    base = layout.free_scene(3, 5, "t")
     rng = random.Random(0)
-    moved = [paper_scenes.perturb(base, rng) for _ in range(30)]
+    moved = [paper_size.perturb(base, rng) for _ in range(30)]
     assert any(m is not None and m != base for m in moved)
-    big = paper_scenes.extend_scene(base, 1, 10, "t10")
+    big = layout.extend_scene(base, 1, 10, "t10")
     assert big is not None and len(big["objects"]) == 11 and big["objects"][-1]["id"] == "T"
     assert [o["xy"] for o in big["objects"][:5]] == [o["xy"] for o in base["objects"][:5]]
 
@@ -59,21 +59,21 @@ def test_score_prefers_the_goal():
     goal = (84, 10)
 
     def c(e, lv, w=True):
-        return paper_scenes.Candidate({}, complete_tree.TreeSize(e, lv, 1, 1, 0.0), 0, 0.0, None, {} if w else None)
+        return screening.Candidate({}, complete_tree.TreeSize(e, lv, 1, 1, 0.0), 0, 0.0, None, {} if w else None)
 
-    assert paper_scenes.score(c(84, 10), goal) == 0.0
-    assert paper_scenes.score(c(84, 10, False), goal) > 0.0  # no single optimum
-    assert paper_scenes.score(c(100, 10), goal) < paper_scenes.score(c(84, 12), goal)
+    assert paper_size.score(c(84, 10), goal) == 0.0
+    assert paper_size.score(c(84, 10, False), goal) > 0.0  # no single optimum
+    assert paper_size.score(c(100, 10), goal) < paper_size.score(c(84, 12), goal)
     assert c(160, 10).ok(goal) and not c(170, 10).ok(goal) and not c(84, 11).ok(goal)
 
 
 @pytest.mark.parametrize("radius", [0.025, 0.033])
 def test_free_scene_of_another_bottle_radius(radius):
-    """`make_scenes paper N --radius R`: the bottles are R apart (2R + 2 mm), the scene says R, and a column in
+    """`scenes paper N --radius R`: the bottles are R apart (2R + 2 mm), the scene says R, and a column in
     front of the target holds as many bottles as the shelf's depth allows (up to 4 of 0.025, 3 of 0.033)."""
     longest = 0
     for seed in range(60):
-        d = paper_scenes.free_scene(seed, 10, "t", radius)
+        d = layout.free_scene(seed, 10, "t", radius)
         assert d["defaults"]["radius"] == radius
         pts = [o["xy"] for o in d["objects"]]
         assert min(((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2) ** 0.5 for i, a in enumerate(pts)
@@ -84,8 +84,7 @@ def test_free_scene_of_another_bottle_radius(radius):
 
 
 def test_resume_with_another_radius_keeps_the_layout():
-    """`make_scenes paper 15 --resume --radius 0.025`: the climb starts from the shipped layout, smaller bottles."""
-    from relocation_app.evaluation.scenes.make_scenes import _shipped
-    d = _shipped(None, SHIPPED[-1], 0.025)
+    """`scenes paper 15 --resume --radius 0.025`: the climb starts from the shipped layout, smaller bottles."""
+    d = paper_size.shipped(SCEN_DIR, SHIPPED[-1], 0.025)
     assert d["defaults"]["radius"] == 0.025 and d["description"] == ""
-    assert [o["xy"] for o in d["objects"]] == [o["xy"] for o in _shipped(None, SHIPPED[-1])["objects"]]
+    assert [o["xy"] for o in d["objects"]] == [o["xy"] for o in paper_size.shipped(SCEN_DIR, SHIPPED[-1])["objects"]]

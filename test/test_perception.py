@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from jaco2_sim_driver.camera import render_frame
-from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, build_model
-from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError, pose_error
+from jaco2_sim_driver.params import CameraSpec
+from jaco2_sim_driver.scene import CAMERA_NAME, build_model
+from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError
 from perception_aruco.images import decode_color, decode_depth, encode_color, encode_depth
 from perception_aruco.pipeline import Perception
+from relocation_common.geometry import pose_error
 from relocation_common.paths import scenarios_dir
 from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.scenario import load_scenario, parse_scenario
@@ -20,9 +22,11 @@ SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15"]
 VISIBLE_PIXELS = 300  # a bottle with this many pixels in view (~10 % of an unoccluded one) must be found
 
 
-def visible_pixels(scenario, camera=CameraSpec()) -> dict[str, int]:
-    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene)."""
+def visible_pixels(scenario, camera: CameraSpec | None = None) -> dict[str, int]:
+    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene; `camera` None:
+    the driver's)."""
     import mujoco
+    camera = camera if camera is not None else CameraSpec.configured()
     model = build_model(scenario, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, Q_HOME):
@@ -148,10 +152,10 @@ def test_scene_memory_holds_unseen_objects_for_hold_frames_then_drops_them():
     from perception_scenes import perceived
 
     from perception_aruco.pipeline import SceneMemory
-    from relocation_common.scenario import Bottle
+    from relocation_common.scenario import ShelfObject
 
     def det(i, x):
-        return perceived(Bottle(i, "red", (0.85, 0.1, 0.1), 0.5, x, 0.0, 0.033, 0.16), x, 0.0, 0.2)
+        return perceived(ShelfObject(i, "red", (0.85, 0.1, 0.1), 0.5, x, 0.0, 0.033, 0.16), x, 0.0, 0.2)
     m = SceneMemory(("a", "b", "T"), hold_frames=2)
     pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)})
     assert [d.id for d in pub] == ["a", "b", "T"] and not held and not lost

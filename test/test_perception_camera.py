@@ -5,6 +5,7 @@ Q_HOME hid the second one), colour noise sigma 20, blur sigma 2 px, exposure x1.
 placed within 10 mm, never wrong."""
 import importlib.util
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 
 from jaco2_sim_driver import sensor_model as sm
 from jaco2_sim_driver.camera import render_frame
-from jaco2_sim_driver.scene import CameraSpec
+from jaco2_sim_driver.params import CameraSpec
 from perception_aruco.aruco import MarkerLocalizer
 from perception_aruco.pipeline import Perception
 from perception_aruco.segmentation import SegmentationParams, classify_colours, plate_levels
@@ -123,7 +124,7 @@ def test_saturated_channel_is_a_lower_bound():
 ])
 def test_low_resolution(name, size):
     s = load_scenario(scenarios_dir() / f"{name}.yaml")
-    f = render_frame(s, camera=CameraSpec(width=size[0], height=size[1]))
+    f = render_frame(s, camera=replace(CameraSpec.configured(), width=size[0], height=size[1]))
     r = Perception(s).process(f.rgb, f.depth, f.K)
     err = _errors(s, r)
     assert s.target_id in r.detections, r.missing

@@ -12,8 +12,9 @@ import pytest
 import yaml
 
 from jaco2_sim_driver.camera import render_frame  # first: sets MUJOCO_GL before mujoco is imported
-from perception_aruco.aruco import MarkerInconsistentError, MarkerNotFoundError, invert, marker_in_base
+from perception_aruco.aruco import MarkerInconsistentError, MarkerNotFoundError, marker_in_base
 from perception_aruco.pipeline import Perception
+from relocation_common.geometry import invert
 from relocation_common.paths import resolve_scenario
 from relocation_common.scenario import ScenarioError, load_scenario, parse_scenario
 

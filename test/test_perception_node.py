@@ -13,6 +13,7 @@ from jaco2_sim_driver.camera import render_frame
 from perception_aruco.images import encode_color, encode_depth
 from relocation_app.graph import Graph
 from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
 
 pytestmark = pytest.mark.graph
@@ -102,11 +103,11 @@ def test_node_publishes_perceived_scene(tmp_path):
             assert set(ids) <= set(scenario.ids) and scenario.target_id in ids
             assert len(ids) >= 9, ids  # at Q_HOME the arm may hide one or two bottles of this scene
             errs = []
-            for o in msg.objects:
+            for o in msg_to_objects(msg, scenario.ids):
                 b = scenario.object(o.id)
-                errs.append(np.hypot(o.pose.position.x - b.x, o.pose.position.y - b.y))
+                errs.append(np.hypot(o.x - b.x, o.y - b.y))
                 assert o.label == b.label and o.weight == pytest.approx(b.weight) and o.is_target == b.is_target
-                assert o.pose.position.z == pytest.approx(scenario.shelf.top_z)
+                assert o.support_z == pytest.approx(scenario.shelf.top_z)
             assert max(errs) < 0.02 and np.median(errs) <= 0.01, errs
             assert msg.header.frame_id == "j2s7s300_link_base"
             # /tf: the marker seen from the camera, the shelf frame on it; through the camera's true pose the shelf

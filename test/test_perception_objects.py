@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from perception_scenes import Extra, generated_layout, render_scene, with_objects
+from perception_scenes import extra, generated_layout, render_scene, with_objects
 
 from jaco2_sim_driver.sensor_model import SensorModel
 from perception_aruco.objects.model import BOX, CYLINDER
@@ -86,18 +86,18 @@ def test_an_unlisted_bottle_appears_as_u1_and_drops_nothing_listed():
         layout = generated_layout(BASE, seed, 8)
         jar = seed % 2 == 1
         r_, h_ = (0.045, 0.09) if jar else (0.033, 0.16)
-        extra = generated_layout(BASE, 100 + seed, 1, radii=(r_,), heights=(h_,),
+        other = generated_layout(BASE, 100 + seed, 1, radii=(r_,), heights=(h_,),
                                  taken=[(b.x, b.y, b.radius) for b in layout])[0]
         colour = list(PALETTE)[int(rng.integers(len(PALETTE)))]
-        extra = replace(extra, id="extra", label=colour, rgb=PALETTE[colour], is_target=False)
+        other = replace(other, id="extra", label=colour, rgb=PALETTE[colour], is_target=False, listed=False)
         given = with_objects(BASE, layout)
-        f, vis = render_scene(with_objects(BASE, layout + [extra]))
+        f, vis = render_scene(with_objects(BASE, layout, [other]))   # the simulator's `unlisted`
         r = Perception(given).process(f.rgb, f.depth, f.K, q=Q_HOME)
         must, ok = _found(r, given, vis)
         assert must <= ok, (seed, must - ok, r.missing)
         if vis["extra"] < VISIBLE:
             continue
-        near = [o for o in r.unlisted.values() if math.hypot(o.x - extra.x, o.y - extra.y) <= 0.010]
+        near = [o for o in r.unlisted.values() if math.hypot(o.x - other.x, o.y - other.y) <= 0.010]
         rates.append(bool(near))
         assert near and near[0].id == "u1" and not near[0].listed, (seed, r.unlisted)
         assert "L x 600 kg/m3" in near[0].weight_note and 0 < near[0].weight <= 1
@@ -125,11 +125,11 @@ def test_lying_bottle_and_box_published_with_their_orientation():
     a box, within 15 mm, with their yaw (mod pi for a cylinder's axis, pi/2 for a box)."""
     layout = generated_layout(BASE, 3, 5, taken=[(0.80, 0.20, 0.1), (0.75, -0.05, 0.1), (0.72, -0.25, 0.09)])
     tipped = layout[2]
-    extras = (Extra("lying", CYLINDER, 0.80, 0.20, (0.06, 0.06, 0.15), 0.5, True, PALETTE["orange"]),
-              Extra("box", BOX, 0.75, -0.05, (0.06, 0.10, 0.12), -0.4, False, PALETTE["purple"]),
-              Extra(tipped.id, CYLINDER, 0.72, -0.25, (2 * tipped.radius, 2 * tipped.radius, tipped.height), 1.2,
-                    True, tipped.rgb))
-    f, vis = render_scene(with_objects(BASE, [b for b in layout if b.id != tipped.id]), extras)
+    extras = (extra(BASE, "lying", CYLINDER, 0.80, 0.20, (0.06, 0.06, 0.15), 0.5, True, PALETTE["orange"]),
+              extra(BASE, "box", BOX, 0.75, -0.05, (0.06, 0.10, 0.12), -0.4, False, PALETTE["purple"]),
+              replace(tipped, x=0.72, y=-0.25, yaw=1.2, lying=True))
+    # the simulator's world: the tipped bottle lying in the scenario's objects, the lying one and the box unlisted
+    f, vis = render_scene(with_objects(BASE, [extras[2] if b.id == tipped.id else b for b in layout], extras[:2]))
     # the scenario has the tipped bottle standing where it fell from: its base at one end of the lying one
     stood = replace(tipped, x=0.72 - tipped.height / 2 * math.cos(1.2), y=-0.25 - tipped.height / 2 * math.sin(1.2))
     given = with_objects(BASE, [stood if b.id == tipped.id else b for b in layout])

@@ -7,7 +7,8 @@ import math
 import numpy as np
 
 from jaco2_sim_driver.camera import CameraRenderer  # first: sets MUJOCO_GL before mujoco is imported
-from jaco2_sim_driver.scene import CameraSpec, build_model
+from jaco2_sim_driver.params import CameraSpec
+from jaco2_sim_driver.scene import build_model
 from jaco2_sim_driver.sensor_model import SensorModel
 from perception_aruco.pipeline import Perception
 from relocation_common.paths import resolve_scenario
@@ -19,7 +20,7 @@ import mujoco  # isort: skip  (after jaco2_sim_driver, which sets MUJOCO_GL)
 
 def test_motion_blur_while_the_arm_moves():
     s = load_scenario(resolve_scenario("paper_experiment_10"))
-    model = build_model(s, CameraSpec())
+    model = build_model(s, CameraSpec.configured())
     data = mujoco.MjData(model)
     adr = [model.joint(j).qposadr[0] for j in JOINT_NAMES]
     blurred = CameraRenderer(model, 640, 480, sensor=SensorModel(exposure_s=0.02))

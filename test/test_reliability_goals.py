@@ -8,6 +8,7 @@ import copy
 import math
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from ros_procs import REPO, RosGraph
 
 from relocation_common.node import ActionClient
 from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import msg_to_objects, object_to_msg
 from relocation_common.scenario import load_scenario
 
 pytestmark = pytest.mark.graph
@@ -71,7 +73,7 @@ def _relocate(g, object_id, removed=(), timeout=120.0):
 def _truth(g) -> dict[str, np.ndarray]:
     g.truth.clear()
     msg = g.truth.wait(timeout=5)[-1]
-    return {o.id: np.array([o.pose.position.x, o.pose.position.y, o.pose.position.z]) for o in msg.objects}
+    return {o.id: o.base() for o in msg_to_objects(msg)}  # base centres
 
 
 def _wait_log(g, words, timeout=10.0):
@@ -124,8 +126,9 @@ def test_the_destination_is_a_free_slot_of_the_scene_and_a_relocated_object_is_r
 
     def o2_in_slot0(msg):
         msg = copy.deepcopy(msg)
-        p = next(o for o in msg.objects if o.id == "o2").pose.position
-        p.x, p.y, p.z = slot0[0], slot0[1], SC.shelf.bottom_z
+        k = next(k for k, o in enumerate(msg.objects) if o.id == "o2")
+        o2 = msg_to_objects(msg)[k]
+        msg.objects[k] = object_to_msg(replace(o2, x=slot0[0], y=slot0[1], support_z=SC.shelf.bottom_z))
         relayed.append(time.monotonic())
         return msg
 

@@ -106,7 +106,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402 -- after the fa
 
 from qtree_task_planner.ros_clients import train_goal  # noqa: E402 -- after the fake planner's script part
 from relocation_common.node import ActionClient  # noqa: E402 -- after the script part; has the rclpy#1123 fix
-from relocation_common.ros_conversions import bottles_to_msg  # noqa: E402 -- after the fake planner's script part
+from relocation_common.ros_conversions import objects_to_msg  # noqa: E402 -- after the fake planner's script part
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SC10 = load_scenario(SCENARIO)
@@ -148,7 +148,7 @@ class Env:
             self.g.probe.wait_for_subscribers(self.scene_pub, 1, timeout=10.0)
         except TimeoutError:
             pass
-        self.scene_pub.publish(msg if msg is not None else bottles_to_msg(SC10.objects, SC10.shelf.top_z))
+        self.scene_pub.publish(msg if msg is not None else objects_to_msg(SC10.objects))
 
     def goal(self, node: NodeProcess, timeout=120.0, **fields):
         """Send a TrainPlanner goal; returns (result or None if rejected, feedback list)."""
@@ -283,7 +283,7 @@ def test_no_planner_at_all_aborts_after_planner_wait(env):
 
 # -- scene refusals ----------------------------------------------------------------------------------------------
 def _scene(mutate=None, stamp=None):
-    msg = bottles_to_msg(SC10.objects, SC10.shelf.top_z, stamp=stamp)
+    msg = objects_to_msg(SC10.objects, stamp=stamp)
     if mutate:
         mutate(msg)
     return msg

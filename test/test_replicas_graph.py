@@ -24,7 +24,7 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
     from relocation_app.client import RelocationClient
-    from relocation_common.ros_conversions import bottles_to_msg
+    from relocation_common.ros_conversions import objects_to_msg
 
     scenario = load_scenario(SCENARIO)
     # feasibility_timeout: a certified answer (pick, carry, way home) can take over 2 s of wall on this shared
@@ -39,7 +39,7 @@ def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch
         try:
             pub = client.node.create_publisher(ObjectArray, TOPIC, QoSProfile(
                 depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-            pub.publish(bottles_to_msg(scenario.objects, scenario.shelf.top_z))
+            pub.publish(objects_to_msg(scenario.objects))
             client.wait_until_ready(120, check=g.check_alive)
             deadline = time.monotonic() + 120
             while "feasibility only" not in g.log("motion_planner_replica_1"):

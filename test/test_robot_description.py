@@ -74,6 +74,22 @@ def test_velocity_limits_are_table7():
     np.testing.assert_allclose(PlannerParams.load().stpik.qdot_max, rd.QDOT_MAX)
 
 
+def test_velocity_limits_have_one_source():
+    """Table 7 is the robot description's: no parameter file under config/ gives joint speed limits a second
+    value (the simulator, the planner and the follower read rd.QDOT_MAX)."""
+    from relocation_common.config import read_yaml
+    from relocation_common.paths import config_dir
+
+    def keys(d):
+        for k, v in d.items() if isinstance(d, dict) else ():
+            yield str(k)
+            yield from keys(v)
+
+    found = [(f.name, k) for f in sorted(config_dir().glob("*.yaml")) for k in keys(read_yaml(f))
+             if any(w in k.lower() for w in ("qdot", "velocity_limit", "speed_limit", "max_velocity"))]
+    assert found == []
+
+
 def test_home_is_collision_free_self_and_scene():
     kin = Kinematics()
     arm = ArmGeometry(kin)

@@ -88,14 +88,14 @@ def test_with_objects_keeps_the_shelf_and_validates():
 
 
 def test_scene_messages_round_trip_and_reject_nan():
-    from relocation_common.ros_conversions import bottles_to_msg, msg_to_bottles
+    from relocation_common.ros_conversions import msg_to_objects, objects_to_msg
     s = load_scenario(default_scenario())
-    msg = bottles_to_msg(s.objects, s.shelf.top_z)
-    assert msg_to_bottles(msg) == s.objects
+    msg = objects_to_msg(s.objects)
+    assert msg_to_objects(msg) == s.objects
     msg.objects[2].pose.position.x = math.nan
     with pytest.raises(ScenarioError, match="non-finite"):
-        msg_to_bottles(msg)
-    msg = bottles_to_msg(s.objects, s.shelf.top_z)
+        msg_to_objects(msg)
+    msg = objects_to_msg(s.objects)
     msg.objects[1].id = msg.objects[0].id
     with pytest.raises(ScenarioError, match="duplicate id"):
-        msg_to_bottles(msg)
+        msg_to_objects(msg)

@@ -8,8 +8,10 @@ import pinocchio as pin
 import pytest
 
 from jaco2_sim_driver.camera import intrinsics, render_frame
-from jaco2_sim_driver.scene import CAMERA_NAME, CameraSpec, rpy_matrix
+from jaco2_sim_driver.params import CameraSpec, DriverParams
+from jaco2_sim_driver.scene import CAMERA_NAME
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
+from relocation_common.geometry import rpy_matrix
 from relocation_common.paths import default_scenario
 from relocation_common.robot_description import EE_LINK, Q_HOME, Q_LOWER, Q_UPPER, QDOT_MAX, urdf
 from relocation_common.scenario import load_scenario
@@ -242,7 +244,9 @@ def test_camera_frame_shows_the_marker_where_the_scenario_puts_it():
     assert frame.depth[v, u] == pytest.approx(float(tvec[2, 0]), abs=0.01)
 
 
-@pytest.mark.parametrize("cam,min_pixels", [(CameraSpec(), 250), (CameraSpec.for_shelf(), 1000)])
+@pytest.mark.parametrize("cam,min_pixels", [(CameraSpec.configured(), 250),
+                                             (DriverParams.load().replace(camera_relative_to_shelf=True).camera(),
+                                              1000)])
 def test_every_bottle_is_visible_from_the_camera_with_the_arm_at_home(cam, min_pixels):
     sim = Jaco2Sim(SCENARIO, camera=cam)
     r = mujoco.Renderer(sim.model, cam.height, cam.width)

@@ -10,20 +10,21 @@ import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver.driver import (
     FINGER_TIP_NAMES,
     HOMED,
-    Rates,
     SimDriver,
     Snapshot,
-    check_parameters,
     joint_names,
     joint_state,
 )
+from jaco2_sim_driver.params import DriverParams
 from jaco2_sim_driver.sim import BadCommandError, Jaco2Sim
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.kinova import FINGER_MAX_TURN, turns_to_joint
 from relocation_common.paths import config_file, default_scenario
 from relocation_common.robot_description import FINGER_JOINT_NAMES, JOINT_NAMES, N_JOINTS, Q_HOME
 from relocation_common.scenario import load_scenario
 
 SCENARIO = load_scenario(default_scenario())
+PARAMS, ARM = DriverParams.load(), ArmInterface.load()
 
 
 @pytest.fixture(scope="module")
@@ -31,10 +32,11 @@ def sim():
     return Jaco2Sim(SCENARIO)
 
 
-def driver(sim, **rates) -> SimDriver:
+def driver(sim, **params) -> SimDriver:
+    """The loop unpaced (one step a tick), no extra state after a command unless asked."""
     sim.reset()
     sim.q_home = np.asarray(Q_HOME, float)
-    return SimDriver(sim, Rates(**{"real_time_factor": 0.0, **rates}), log=lambda _: None)
+    return SimDriver(sim, PARAMS.replace(**{"real_time_factor": 0.0, "state_on_command": False, **params}), ARM)
 
 
 class Loop:
@@ -58,7 +60,7 @@ class Loop:
 
 
 def test_unpaced_loop_steps_once_per_tick_and_publishes_at_the_rates(sim):
-    core = driver(sim, joint_states=100.0, tf=0.0, objects=10.0)
+    core = driver(sim, joint_state_rate=100.0, tf_rate=0.0, objects_rate=10.0)
     ticks = [core.tick() for _ in range(200)]
     assert [t.steps for t in ticks] == [1] * 200
     states = [t.time for t in ticks if t.state is not None]
@@ -71,7 +73,7 @@ def test_unpaced_loop_steps_once_per_tick_and_publishes_at_the_rates(sim):
 
 
 def test_state_on_command_publishes_after_the_step_that_applied_it(sim):
-    core = driver(sim, joint_states=10.0, state_on_command=True)
+    core = driver(sim, joint_state_rate=10.0, state_on_command=True)
     core.tick()  # the first state is due at once
     assert core.tick().state is None
     core.command(np.full(N_JOINTS, 0.1))
@@ -177,13 +179,23 @@ def test_the_parameter_check_names_the_bad_parameter():
     import yaml
 
     params = yaml.safe_load(config_file("jaco2_sim_driver.yaml").read_text())["jaco2_sim_driver"]["ros__parameters"]
-    check_parameters(params.get)
+    assert DriverParams(**params) == PARAMS
     for key, value, words in (("joint_state_rate", 0.0, "joint_state_rate must be > 0"),
-                              ("camera_fovy", 180.0, "camera_fovy < 180"), ("tf_rate", -1.0, "tf_rate must be >= 0"),
-                              ("finger_tolerance", float("nan"), "finger_tolerance"),
-                              ("command_interface", "can", "command_interface must be one of kinova, ros2_control")):
+                              ("camera_fovy", 180.0, r"camera_fovy must be in \(0, 180\)"),
+                              ("tf_rate", -1.0, "tf_rate must be >= 0"),
+                              ("camera_height", float("nan"), "camera_height must be a finite number"),
+                              ("camera_width", 640.5, "camera_width must be an integer"),
+                              ("real_time_factor", "fast", "real_time_factor must be a finite number"),
+                              ("sim_time_stamps", 1, "sim_time_stamps must be true or false"),
+                              ("camera_model", "kinect", "camera_model must be one of")):
         with pytest.raises(ValueError, match=words):
-            check_parameters({**params, key: value}.get)
+            DriverParams(**{**params, key: value})
+    arm = ArmInterface.load().to_dict()  # the settings shared with the planner (config/arm_interface.yaml)
+    for key, value, words in (("finger_tolerance", float("nan"), "finger_tolerance"),
+                              ("command_interface", "can", "command_interface must be one of kinova, ros2_control"),
+                              ("driver_prefix", "/j2s7s300 driver", "driver_prefix must be a ROS namespace")):
+        with pytest.raises(ValueError, match=words):
+            ArmInterface(**{**arm, key: value})
 
 
 def test_the_camera_loop_hands_over_frames_until_told_to_stop(sim):

@@ -4,6 +4,7 @@ joint states, holding the arm while they are late, the gripper protocol on eithe
 and stpik_motion_planner/service.py (scene updates, goal checks, a relocation's outcome and recovery) on the real
 planner. The node over DDS: test_motion_planner_node.py, test_planner_on_fake_arm.py."""
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -176,14 +177,14 @@ def test_scene_updates_replace_moved_bottles_and_free_a_relocated_one_seen_back(
     b = service.bottles["o1"]
     z = service.base.shelf.top_z
     service.relocated["o1"] = 0
-    moved = type(b)(**{**b.__dict__, "y": b.y + 0.01})
+    moved = replace(b, y=b.y + 0.01, support_z=z)
     try:
-        assert service.update_scene([(moved, z)]) == ["o1"]
+        assert service.update_scene([moved]) == ["o1"]
         assert service.planner.scenario.object("o1").y == pytest.approx(b.y + 0.01)
         assert "o1" not in service.relocated
-        assert service.update_scene([(moved, z + 0.2)]) == []  # lifted: not on the top shelf
+        assert service.update_scene([replace(moved, support_z=z + 0.2)]) == []  # lifted: not on the top shelf
     finally:
-        service.update_scene([(b, z)])
+        service.update_scene([replace(b, support_z=z)])
 
 
 def test_a_relocation_cancelled_at_the_approach_recovers_and_reports_it(service):

@@ -28,7 +28,7 @@ def graph(tmp_path_factory):
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
-    from relocation_common.ros_conversions import blockers_to_msgs, bottles_to_msg
+    from relocation_common.ros_conversions import blockers_to_msgs, objects_to_msg
 
     scenario = load_scenario(SCENARIO)
     oracle = BlockingOracle(scenario)
@@ -51,7 +51,7 @@ def graph(tmp_path_factory):
     node.create_service(PlanFeasibility, "/motion_planner/plan_feasibility", feasibility)
     pub = node.create_publisher(ObjectArray, "/test/objects",
                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    pub.publish(bottles_to_msg(scenario.objects, scenario.shelf.top_z))
+    pub.publish(objects_to_msg(scenario.objects))
     ex = MultiThreadedExecutor(2)
     ex.add_node(node)
     t = threading.Thread(target=ex.spin, daemon=True)

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from relocation_app.evaluation.scenes.make_scenes import make_jitter
+from relocation_app.evaluation.scenes.jitter import make_jitter
 from relocation_common.feasibility import Label
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.collision import CARRIED

@@ -1,13 +1,13 @@
 """The second yaw tier (docs/motion_planner.md, "A wider grasp set"): yaws tried only for a question the first tier
 cannot answer, leaving every first-tier answer as it was; on a perturbed random5_06 (bottles moved <= 12 mm,
-`make_scenes jitter`, seed 0) T's last pick has no first-tier lane at all and is planned at yaw +0.60."""
+`scenes jitter`, seed 0) T's last pick has no first-tier lane at all and is planned at yaw +0.60."""
 import dataclasses
 
 import numpy as np
 import pytest
 import yaml
 
-from relocation_app.evaluation.scenes.make_scenes import jitter_scene
+from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.feasibility import Label
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import parse_scenario

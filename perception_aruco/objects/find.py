@@ -10,14 +10,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from relocation_common.scenario import Bottle, Scenario
+from relocation_common.scenario import Scenario, ShelfObject
 
 from ..localize import FitError, LocalizeParams, circle_points, locate_cylinder
 from ..segmentation import SegmentationParams
 from .clusters import Cluster
 from .fragments import merge_fragments
 from .identity import NO_MATCH, Fitted, Memory, assign, colour_name, listed_costs, unlisted_ids
-from .model import CYLINDER, PerceivedObject, estimated_weight
+from .model import CYLINDER, PerceivedObject, weight_estimate
 from .params import ObjectParams
 from .primitives import fit_primitive
 
@@ -36,7 +36,7 @@ def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.n
     return merge_fragments([fit(c) for c in clusters], lambda c: fit(c, False), seg, params.merge_gap)
 
 
-def listed_object(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams) -> PerceivedObject:
+def listed_object(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams) -> PerceivedObject:
     """Listed cylinder b as cluster f shows it: lying where its lying fit puts it (a tipped bottle; one end cap
     hidden: its known length laid from the other), else standing on the circle of its known radius (FitError when
     that fit is doubtful)."""
@@ -71,7 +71,7 @@ def unlisted_object(f: Fitted, params: ObjectParams, seg: SegmentationParams, ro
     o = PerceivedObject("", colour_name(c.colour, c.clipped, seg), (rgb[0], rgb[1], rgb[2]), 0.0, "", False, False,
                         p.shape, p.x, p.y, c.support, p.radius, h, size, p.yaw, p.lying, p.conservative,
                         p.rms, c.size, f.pixel)
-    w, note = estimated_weight(o.volume, params.density)
+    w, note = weight_estimate(o, params.unlisted_density)
     if h != p.height:
         note += f"; top not seen: as tall as its compartment ({h * 1000:.0f} mm, {p.height * 1000:.0f} mm seen)"
     return replace(o, weight=w, weight_note=note + (f"; conservative: {p.why}" if p.conservative else ""))
@@ -95,7 +95,7 @@ def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float)
     return out
 
 
-def _why_missing(j: int, b: Bottle, cost: np.ndarray, taken: dict[int, str], fitted: list[Fitted],
+def _why_missing(j: int, b: ShelfObject, cost: np.ndarray, taken: dict[int, str], fitted: list[Fitted],
                  max_cost: float) -> str:
     """Why listed object j matched no cluster."""
     m = int(np.argmin(cost[j])) if cost.shape[1] else -1

@@ -24,7 +24,7 @@ from typing import Protocol
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from relocation_common.scenario import PALETTE, TARGET_COLOR, TARGET_RGB, Bottle
+from relocation_common.scenario import PALETTE, TARGET_COLOR, TARGET_RGB, ShelfObject
 
 from ..localize import FitError, LocalizeParams, locate_cylinder
 from ..segmentation import SegmentationParams, colour_residuals
@@ -69,7 +69,7 @@ def colour_name(colour: np.ndarray, clipped: np.ndarray, seg: SegmentationParams
     return names[k] if res[k] <= seg.max_residual else ""
 
 
-def _size_cost(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams, tol: float) -> float:
+def _size_cost(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams, tol: float) -> float:
     """Size cost of listed cylinder b for cluster f (module docstring); NO_MATCH when it cannot be b."""
     p = f.prim
     # seen shorter than it is: a lying one's end, a standing one's top may be hidden by what is nearer
@@ -86,7 +86,7 @@ def _size_cost(b: Bottle, f: Fitted, camera: np.ndarray, loc: LocalizeParams, to
     return dh / tol if spread <= b.radius + tol else NO_MATCH
 
 
-def listed_costs(fitted: list[Fitted], objects: tuple[Bottle, ...], memory: Memory, seg: SegmentationParams,
+def listed_costs(fitted: list[Fitted], objects: tuple[ShelfObject, ...], memory: Memory, seg: SegmentationParams,
                  params: ObjectParams, loc: LocalizeParams, camera: np.ndarray) -> np.ndarray:
     """L x M cost of listed object l being cluster m (module docstring); NO_MATCH where it cannot be."""
     cost = np.full((len(objects), len(fitted)), NO_MATCH)

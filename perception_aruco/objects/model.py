@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from relocation_common.scenario import Bottle
+from relocation_common.shelf_object import ShelfObject, estimated_weight
 
 CYLINDER, BOX = "cylinder", "box"
 
@@ -16,9 +16,9 @@ class PerceivedObject:
     surface (the board it rests on); cylinder: radius, height = its length along its axis (vertical, or horizontal
     along `yaw` when `lying`); box: size (sx, sy, sz) in its own frame turned by `yaw` about the vertical, radius 0.
     listed: the scenario lists it (id, weight from there); else id u<k> and weight = volume x density
-    (`weight_note`). conservative: no primitive fitted, the box bounds what was seen (never grasped). rgb: the mean
-    colour measured (0..1, normalised by the marker's white); fit_rms: the fit's residual (m); pixel: where the
-    debug image names it."""
+    (`weight_note`, config/perception.yaml's `unlisted_density`). conservative: no primitive fitted, the box bounds
+    what was seen (never grasped). rgb: the mean colour measured (0..1, normalised by the marker's white); fit_rms:
+    the fit's residual (m); pixel: where the debug image names it."""
 
     id: str
     label: str
@@ -61,17 +61,14 @@ class PerceivedObject:
         return math.hypot(self.size[0], self.size[1]) / 2
 
 
-def estimated_weight(volume: float, density: float) -> tuple[float, str]:
-    """(weight in (0, 1], the note saying how): volume x density in kg, clipped to (0, 1] (phi_i, Eq. 8)."""
-    raw = volume * density
-    w = min(1.0, max(raw, 1e-3))
-    note = f"estimated: {volume * 1000:.2f} L x {density:.0f} kg/m3 = {raw:.2f} kg"
-    if w != raw:
-        note += f", clipped to {w:g}"
-    return w, note
+def to_shelf_object(o: PerceivedObject) -> ShelfObject:
+    """The scene's object model (relocation_common.shelf_object), which the object message carries
+    (ros_conversions.objects_to_msg): the one conversion at the pipeline's edge."""
+    return ShelfObject(o.id, o.label, o.rgb, o.weight, o.x, o.y, o.radius, o.height, o.is_target, o.shape, o.size,
+                       o.yaw, o.lying, o.listed, o.weight_note, o.z, None, o.fit_rms, o.conservative)
 
 
-def to_bottle(o: PerceivedObject) -> Bottle:
-    """The scene's object model of today (an upright cylinder): the conversion the node publishes through until the
-    object message carries shapes (relocation_common.ros_conversions); listed standing cylinders only."""
-    return Bottle(o.id, o.label, o.rgb, o.weight, o.x, o.y, o.radius, o.height, o.is_target)
+def weight_estimate(o: PerceivedObject, density: float) -> tuple[float, str]:
+    """(phi in (0, 1], the note saying how) of an object the scenario does not list: its volume x `density`
+    (relocation_common.shelf_object.estimated_weight, the simulator's ground truth's too)."""
+    return estimated_weight(to_shelf_object(o), density)

@@ -29,7 +29,7 @@ class ObjectParams:
     fit_rms: float
     fit_noise: float
     hidden_extent: float
-    density: float
+    unlisted_density: float
     size_tol: float
     cluster_gain_min: float
     cluster_gain_max: float

@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterable, Mapping
 from qtree_task_planner.problem import ProblemError, RelocationProblem
 from relocation_common.feasibility import destination_slot
 from relocation_common.orientation import UPRIGHT_TILT, support_height
-from relocation_common.scenario import PALETTE, TARGET_RGB, Bottle, Scenario
+from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
 
 
 # ------------------------------------------------------------------------------------------------ the scene
@@ -50,6 +50,13 @@ Scene = Mapping[str, SeenObject]
 def scene_of(objects: Iterable[SeenObject]) -> dict[str, SeenObject]:
     """id -> object."""
     return {o.id: o for o in objects}
+
+
+def seen_object(o: ShelfObject) -> SeenObject:
+    """An object as perceived (ros_conversions.msg_to_objects) as the closed loop's SeenObject: its base centre
+    (a lying cylinder's lower end face), the tilt of its axis."""
+    x, y, z = (float(v) for v in o.base())
+    return SeenObject(o.id, x, y, z, o.weight, o.is_target, o.axis_tilt, o.radius, o.height, o.label)
 
 
 def scene_from_scenario(scenario: Scenario) -> dict[str, SeenObject]:
@@ -188,7 +195,7 @@ class RemainingProblem:
     feasibility questions of a set S of `problem` are asked with gone | S removed."""
 
     problem: RelocationProblem | None
-    bottles: tuple[Bottle, ...]
+    bottles: tuple[ShelfObject, ...]
     relocated: tuple[str, ...]  # verified relocations, in order
     gone: frozenset[str]
     moved: Mapping[str, tuple[float, float]]  # on the top shelf, away from the scenario's pose
@@ -257,13 +264,13 @@ def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Ite
     return replace(base, problem=problem, bottles=bottles)
 
 
-def _bottle(o: SeenObject, scenario: Scenario) -> Bottle:
-    """A perceived object as a scenario Bottle (colour from the scenario when known)."""
+def _bottle(o: SeenObject, scenario: Scenario) -> ShelfObject:
+    """A perceived object as a scenario ShelfObject (colour from the scenario when known)."""
     known = o.id in scenario.ids
     label = scenario.object(o.id).label if known else (o.label or "gray")
     rgb = scenario.object(o.id).rgb if known else TARGET_RGB if o.is_target else PALETTE.get(label, (0.5, 0.5, 0.5))
     weight = 1.0 if o.is_target else min(1.0, max(1e-3, o.weight))
-    return Bottle(o.id, label, rgb, weight, o.x, o.y, o.radius, o.height, o.is_target)
+    return ShelfObject(o.id, label, rgb, weight, o.x, o.y, o.radius, o.height, o.is_target, support_z=_support(o))
 
 
 def check_capacity(sequence: Iterable[str], free: int) -> str | None:

@@ -5,8 +5,9 @@ all (default): fill the missing feasibility answers with the real planner (none 
 complete), run the missing sweep cells (the scenes of the paper's size paper1_5/paper2_10/paper3_15, scenarios
 1-3 of this project's geometry, the Sect. 5.2 scene paper_experiment_10, the 10 random scenes of each set), regenerate
 docs/evaluation.md (the paper's Tables 1-4 beside ours, data/paper/) and docs/figures/.
---only a,b: fill/sweep only those scenes. Scenes of the paper's size:
-python -m relocation_app.evaluation.scenes.make_scenes paper N.
+--only a,b: fill/sweep only those scenes.
+scenes KIND ...: make scenes (generated, paper N, paper-random, jitter): `./run evaluate scenes --help`, the same as
+`python -m relocation_app.evaluation.scenes` (scenes/cli.py).
 --quick: 3 runs per cell, two (alpha, gamma) pairs, two random scenes per set, output under out/evaluation-quick/.
 """
 from __future__ import annotations
@@ -23,7 +24,7 @@ from relocation_common.paths import data_dir, scenarios_dir, share_dir
 ROOT = share_dir()  # the checkout: the evaluation writes docs/ and data/ of the source tree
 SCEN_DIR = scenarios_dir()
 MAIN = ("scenario1_5", "scenario2_10", "scenario3_15")  # this project's geometry
-PAPER = ("paper1_5", "paper2_10", "paper3_15")  # scenes of the paper's size (make_scenes.py paper)
+PAPER = ("paper1_5", "paper2_10", "paper3_15")  # scenes of the paper's size (scenes paper N)
 EXPERIMENT = "paper_experiment_10"
 QUICK_GRID = ((1.0, 0.1), (0.3, 0.9))
 
@@ -76,8 +77,13 @@ def _only(paths: list[Path], only: set[str] | None) -> list[Path]:
 
 def main(argv=None) -> int:
     """`./run evaluate ...` (the module docstring); exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["scenes"]:
+        from relocation_app.evaluation.scenes.cli import main as scenes_main
+        return scenes_main(argv[1:])
     ap = argparse.ArgumentParser(prog="evaluate", description=__doc__.splitlines()[0])
-    ap.add_argument("command", nargs="?", default="all", choices=("all", "fill", "sweep", "report", "scenes"))
+    ap.add_argument("command", nargs="?", default="all", choices=("all", "fill", "sweep", "report", "scenes"),
+                    help="scenes KIND ...: the scene maker (its own options; `scenes --help`)")
     ap.add_argument("--runs", type=int, default=50, help="trainings per cell (default 50)")
     ap.add_argument("--quick", action="store_true", help="small version: 3 runs, 2 (alpha, gamma), 2 random scenes")
     ap.add_argument("--out", default=None, help="sweep results directory (default out/evaluation[-quick])")
@@ -101,10 +107,6 @@ def main(argv=None) -> int:
     if a.no_random:
         rnd_p, prnd_p = [], []
     exp_p = [] if a.quick or a.no_experiment else [SCEN_DIR / f"{EXPERIMENT}.yaml"]
-    if a.command == "scenes":
-        from relocation_app.evaluation.scenes.make_scenes import make_all
-        make_all(params, a.data)
-        return 0
     import os
     workers = a.workers or os.cpu_count() or 1
     only = set(a.only.split(",")) if a.only else None

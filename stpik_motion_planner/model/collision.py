@@ -16,7 +16,7 @@ import fcl
 import numpy as np
 
 from relocation_common import robot_description as rd
-from relocation_common.orientation import quaternion_matrix
+from relocation_common.geometry import wxyz_matrix
 from relocation_common.scenario import Scenario
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
@@ -69,7 +69,7 @@ def cylinder(name: str, object_id: str | None, x: float, y: float, z0: float, ra
 @dataclass(frozen=True)
 class Lying:
     """A bottle that does not stand (tipped over, lying on the top board): the centre of its base (base frame, m)
-    and its orientation as a quaternion (w, x, y, z), as ObjectState's pose carries them."""
+    and its orientation as a quaternion in MuJoCo's order (w, x, y, z): the node reorders ObjectState's pose."""
 
     base: tuple[float, float, float]
     quat: tuple[float, float, float, float]
@@ -77,7 +77,7 @@ class Lying:
 
 def lying_cylinder(name: str, object_id: str | None, pose: Lying, radius: float, height: float) -> Obstacle:
     """A bottle at any orientation, as the simulator has it: a cylinder along its own z axis from its base centre."""
-    rot = quaternion_matrix(*pose.quat)
+    rot = wxyz_matrix(pose.quat)
     base = np.asarray(pose.base, float)
     top = base + rot[:, 2] * height
     obj = fcl.CollisionObject(fcl.Cylinder(radius, height), fcl.Transform(rot, (base + top) / 2))

@@ -38,6 +38,11 @@ def side_rotation(yaw: float) -> np.ndarray:
     return np.array([[-s, 0.0, c], [c, 0.0, s], [0.0, 1.0, 0.0]])
 
 
+def approach_yaw(rot: np.ndarray) -> float:
+    """Yaw (rad) of the approach direction (the tool's z axis) of a tool rotation: the inverse of side_rotation."""
+    return float(math.atan2(rot[1, 2], rot[0, 2]))
+
+
 def pose_matrix(pose4) -> tuple[np.ndarray, np.ndarray]:
     """(rotation, position) of an (x, y, z, yaw) side-grasp pose."""
     x, y, z, yaw = pose4
@@ -106,7 +111,7 @@ def side_grasp(scenario: Scenario, object_id: str, yaw: float, pre_grasp_distanc
 def home_pose() -> tuple[float, float, float, float]:
     """(x, y, z, yaw) of the tool at Q_HOME (hand horizontal, pointing at the shelf)."""
     t = rd.dh_fk(rd.Q_HOME)[-1]
-    return (float(t[0, 3]), float(t[1, 3]), float(t[2, 3]), float(math.atan2(t[1, 2], t[0, 2])))
+    return (float(t[0, 3]), float(t[1, 3]), float(t[2, 3]), approach_yaw(t[:3, :3]))
 
 
 def lift_pose(grasp: Grasp, lift: float) -> tuple[float, float, float, float]:

@@ -13,66 +13,73 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping, NamedTuple
 
-from relocation_common.orientation import UPRIGHT_TILT, quaternion_matrix, support_height, tilt_of_quaternion
-from relocation_common.scenario import Bottle, Shelf
+from relocation_common.geometry import quat_wxyz, wxyz_matrix
+from relocation_common.orientation import UPRIGHT_TILT
+from relocation_common.scenario import Shelf, ShelfObject
 from stpik_motion_planner.model.collision import Lying
 
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
 ON_SHELF = 0.01  # m: a bottle whose support is farther from the top shelf's surface is lifted or elsewhere
-UPRIGHT = (1.0, 0.0, 0.0, 0.0)
-
-
-class Perceived(NamedTuple):
-    """A bottle as perceived: its base centre's height `z` and its orientation (w, x, y, z) besides the bottle's
-    (x, y) and size."""
-
-    bottle: Bottle
-    z: float
-    quat: tuple[float, float, float, float] = UPRIGHT
 
 
 class Merged(NamedTuple):
     """The planner's scene after a perceived one: every bottle (the scenario's objects), the lying ones, the ones
     gone from the shelf, the ids that changed, the ids seen resting on the top shelf."""
 
-    bottles: dict[str, Bottle]
+    bottles: dict[str, ShelfObject]
     lying: dict[str, Lying]
     gone: frozenset[str]
     changed: list[str]
     seen: set[str]
 
 
-def _inside(shelf: Shelf, bottle: Bottle) -> bool:
+def _inside(shelf: Shelf, bottle: ShelfObject) -> bool:
     return shelf.x_front < bottle.x < shelf.x_back and shelf.y_min < bottle.y < shelf.y_max
 
 
-def on_top_shelf(shelf: Shelf, bottle: Bottle, base_z: float, tilt: float = 0.0) -> bool:
-    """True if `bottle` (its base centre at `base_z`, its axis `tilt` rad from the vertical) rests on the top shelf,
-    within its edges (standing or lying)."""
-    return abs(support_height(base_z, bottle.radius, tilt) - shelf.top_z) < ON_SHELF and _inside(shelf, bottle)
+def _support(bottle: ShelfObject) -> float:
+    if bottle.support_z is None:
+        raise ValueError(f"perceived object {bottle.id!r} has no support_z")
+    return bottle.support_z
 
 
-def left_the_shelf(shelf: Shelf, bottle: Bottle, base_z: float, tilt: float = 0.0) -> bool:
+def on_top_shelf(shelf: Shelf, bottle: ShelfObject) -> bool:
+    """True if `bottle` (as perceived: its support_z) rests on the top shelf, within its edges (standing or
+    lying)."""
+    return abs(_support(bottle) - shelf.top_z) < ON_SHELF and _inside(shelf, bottle)
+
+
+def left_the_shelf(shelf: Shelf, bottle: ShelfObject) -> bool:
     """True if `bottle` rests below the bottom board, or outside the shelf below the top board: dropped."""
-    s = support_height(base_z, bottle.radius, tilt)
+    s = _support(bottle)
     return s < shelf.bottom_z - ON_SHELF or (not _inside(shelf, bottle) and s < shelf.top_z - ON_SHELF)
 
 
-def merge_perceived(shelf: Shelf, current: Mapping[str, Bottle], perceived: Iterable[tuple], held: str | None = None,
-                    lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> Merged:
-    """The planner's scene (`current` bottles, the `lying` and `gone` ones) after `perceived` = Perceived or
-    (bottle, base z[, quaternion]) tuples; `held`: the bottle being carried, ignored (module docstring)."""
+def lying_pose(bottle: ShelfObject) -> Lying | None:
+    """The collision model's pose of a bottle that does not stand (its axis more than UPRIGHT_TILT from the
+    vertical): its base centre and orientation; None for a standing one."""
+    if bottle.axis_tilt <= UPRIGHT_TILT:
+        return None
+    w, x, y, z = quat_wxyz(bottle.rotation())
+    bx, by, bz = (float(v) for v in bottle.base())
+    return Lying((bx, by, bz), (w, x, y, z))
+
+
+def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: Iterable[ShelfObject],
+                    held: str | None = None, lying: Mapping[str, Lying] | None = None,
+                    gone: Iterable[str] = ()) -> Merged:
+    """The planner's scene (`current` bottles, the `lying` and `gone` ones) after the `perceived` objects (as
+    relocation_common.ros_conversions.msg_to_objects gives them); `held`: the bottle being carried, ignored
+    (module docstring)."""
     bottles, lying, gone = dict(current), dict(lying or {}), set(gone)
     changed, seen = [], set()
-    for p in map(lambda t: Perceived(*t), perceived):
-        b, i = p.bottle, p.bottle.id
+    for b in perceived:
+        i = b.id
         if i == held:
             continue
-        tilt = tilt_of_quaternion(*p.quat)
-        if on_top_shelf(shelf, b, p.z, tilt):
+        if on_top_shelf(shelf, b):
             seen.add(i)
-            w, x, y, z = (float(c) for c in p.quat)
-            now = Lying((b.x, b.y, p.z), (w, x, y, z)) if tilt > UPRIGHT_TILT else None
+            now = lying_pose(b)
             if _differs(current.get(i), b, lying.get(i), now) or i in gone:
                 changed.append(i)
                 bottles[i] = b
@@ -81,14 +88,14 @@ def merge_perceived(shelf: Shelf, current: Mapping[str, Bottle], perceived: Iter
                     lying.pop(i, None)
                 else:
                     lying[i] = now
-        elif left_the_shelf(shelf, b, p.z, tilt) and i not in gone:
+        elif left_the_shelf(shelf, b) and i not in gone:
             changed.append(i)
             gone.add(i)
             lying.pop(i, None)
     return Merged(bottles, lying, frozenset(gone), sorted(changed), seen)
 
 
-def _differs(was: Bottle | None, now: Bottle, was_lying: Lying | None, now_lying: Lying | None) -> bool:
+def _differs(was: ShelfObject | None, now: ShelfObject, was_lying: Lying | None, now_lying: Lying | None) -> bool:
     """A perceived bottle differs from the planner's: new, moved more than MOVED, or standing <-> lying, or lying
     otherwise (its top moved more than MOVED)."""
     if was is None or (was_lying is None) != (now_lying is None):
@@ -101,5 +108,5 @@ def _differs(was: Bottle | None, now: Bottle, was_lying: Lying | None, now_lying
 
 def _top(pose: Lying, height: float) -> tuple[float, ...]:
     """The centre of a lying bottle's top face."""
-    axis = quaternion_matrix(*pose.quat)[:, 2]
+    axis = wxyz_matrix(pose.quat)[:, 2]
     return tuple(float(c + a * height) for c, a in zip(pose.base, axis))

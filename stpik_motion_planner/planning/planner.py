@@ -30,6 +30,7 @@ from relocation_common.config import node_section
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label
 from relocation_common.paths import config_file
 from relocation_common.scenario import Scenario, UnknownObjectError
+from relocation_common.shelf_object import objects_key
 from stpik_motion_planner.model.blockers import answer_blockers, lane_blockers
 from stpik_motion_planner.model.collision import (
     CARRIED,
@@ -325,7 +326,8 @@ class MotionPlanner:
         sc = self.scenario
         params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED}
         params["stpik"] = {k: v for k, v in params["stpik"].items() if k not in UNSEEDED_STPIK}
-        parts = [repr(sc.shelf), repr(sc.objects), repr(sc.slots), repr(sorted(params.items()))]
+        parts = [repr(sc.shelf), objects_key(sc.objects, sc.shelf.top_z), repr(sc.slots),  # objects_key: the seeds
+                 repr(sorted(params.items()))]  # of every shipped scene as they were before objects had shapes
         if self.lying or self.gone:  # a standing scene's questions keep their seeds (the committed caches)
             parts += [repr(sorted(self.lying.items())), repr(sorted(self.gone))]
         for x in question:

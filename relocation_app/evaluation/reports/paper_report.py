@@ -145,9 +145,8 @@ def table4_trees(info: dict, random: list[str]) -> str:
     return "\n".join(lines)
 
 
-SEARCH_NOTE = """**How the scenes of the paper's size were found** (`python -m
-relocation_app.evaluation.scenes.make_scenes
-paper N`, `paper_scenes.py`; logs in out/paper_search/). Only bottle positions (and weights) were chosen: same
+SEARCH_NOTE = """**How the scenes of the paper's size were found** (`python -m relocation_app.evaluation.scenes
+paper N`, `paper_size.py`; logs in out/paper_search/). Only bottle positions (and weights) were chosen: same
 shelf, bottle size, hand and planner parameters as every other scene. Layouts (a column of up to three bottles
 straight in front of the target plus bottles at random free spots, or the smaller paper scene with bottles added)
 are screened with the planner's grasp-lane screen (`stpik_motion_planner.model.blockers`); promising ones are filled
@@ -181,7 +180,7 @@ leaves); the paper's 84 / 10 / one optimum needs an optimum that Eq. 8 alone doe
 These searches ran with the planner's grasp set of the time, 3 approach yaws up to 0.35 rad. With today's 5 yaws up
 to 0.5 rad, honest lanes and certified relocations (docs/motion_planner.md) the same layouts give the trees of the
 table above: more lanes open, paper3_15 grows past 2x the paper's edges and paper2_10 gains a lighter optimum (o6 o3
-T). A new search with this grasp set (`make_scenes.py paper N --resume --strict`) has not been run.
+T). A new search with this grasp set (`scenes paper N --resume --strict`) has not been run.
 """
 
 
@@ -230,7 +229,7 @@ def beside_paper_sections(idx: dict, paper_set: list[str], main: list[str], rand
     return md
 
 
-RANDOM_NOTE = """The cases at the paper's size (`python -m relocation_app.evaluation.scenes.make_scenes paper-random`,
+RANDOM_NOTE = """The cases at the paper's size (`python -m relocation_app.evaluation.scenes paper-random`,
 `paper_random.py`) are random draws, not searched: case c is the first layout in seed order (after 5000) of the paper
 scenes' generator (random spots around a back-row target, sometimes behind a column in front of it) whose complete
 tree, with the real planner, is within 2x of case c's edges, with weights (drawn from the layout's seed) giving one

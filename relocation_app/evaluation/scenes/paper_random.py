@@ -1,12 +1,11 @@
-"""Table 4's ten random cases at the paper's size (docs/evaluation.md): `python -m
-relocation_app.evaluation.scenes.make_scenes
+"""Table 4's ten random cases at the paper's size (docs/evaluation.md): `python -m relocation_app.evaluation.scenes
 paper-random`, scenes config/scenarios/paper_random5/paper_random5_XX.yaml.
 
 The paper's random cases have 5 obstacles and complete Q-Trees of 71-104 edges (their LRND MP_q, Table 4). Case c
-gets the first layout, in seed order after SEED0, of `paper_scenes.free_scene` (random spots around a back-row target,
+gets the first layout, in seed order after SEED0, of `layout.free_scene` (random spots around a back-row target,
 possibly behind a column straight in front of it) that the lane screen puts near such a tree and whose complete tree,
 counted with the real planner, has edges within WITHIN x of case c's, weights with one optimum (Eq. 8), every bottle
-seen by perception and every relocation of the optimum planned six times in a row (`paper_scenes.valid`). There is
+seen by perception and every relocation of the optimum planned six times in a row (`screening.valid`). There is
 no climbing: the cases stay random draws, their weights drawn from the layout's seed. The paper gives no target-leaf
 count for the cases; the screen asks for 0-20 (scenario 1 has 10).
 """
@@ -17,15 +16,14 @@ import time
 from pathlib import Path
 
 from relocation_app.evaluation import paper
-from relocation_app.evaluation.scenes import complete_tree, paper_scenes
-from relocation_app.evaluation.scenes.scenarios_gen import write_scene
+from relocation_app.evaluation.scenes import complete_tree, screening
+from relocation_app.evaluation.scenes.layout import made_by
 
 DIR = "paper_random5"
 SEED0 = 5000  # the first layout seed tried is SEED0 + 1
 LEAVES = 10  # the screen's leaf goal (scenario 1's count), with slack 1.0: 0-20
 HEADER = ("# Table 4 random case at the paper's size (docs/evaluation.md), drawn with the real motion planner by\n"
-          "# relocation_app/evaluation/scenes/paper_random.py on the shelf of paper_experiment_10. "
-          "Format: docs/scenarios.md.")
+          f"# {made_by('paper-random')} on the shelf of paper_experiment_10. Format: docs/scenarios.md.")
 
 
 def name(case: int) -> str:
@@ -43,17 +41,17 @@ def draw(case: int, params, work, seed: int, deadline: float, log=print):
     goal = (case_edges()[case], LEAVES)
     while time.time() < deadline:
         seed += 1
-        d = paper_scenes.proposal(seed, 5, name(case), goal, params, slack=1.0)
+        d = screening.proposal(seed, 5, name(case), goal, params, slack=1.0)
         if d is None:
             continue
-        c = paper_scenes.evaluate(d, params, work, goal)
-        if c.size is None or not goal[0] / paper_scenes.WITHIN <= c.size.edges <= goal[0] * paper_scenes.WITHIN:
+        c = screening.evaluate(d, params, work, goal)
+        if c.size is None or not goal[0] / screening.WITHIN <= c.size.edges <= goal[0] * screening.WITHIN:
             continue
         edges = c.size.edges
         # weights drawn from the layout's seed: with the searches' seed 0, two cases of one blocking structure
         # got the same weights, hence the same training statistics
-        c.weighted = paper_scenes.one_optimum(copy.deepcopy(d), c.table, 30, seed=seed)
-        if c.weighted is None or not paper_scenes.valid(c, params, log):
+        c.weighted = screening.one_optimum(copy.deepcopy(d), c.table, 30, seed=seed)
+        if c.weighted is None or not screening.valid(c, params, log):
             log(f"case {case} seed {seed}: {edges} edges, not valid (one optimum, every bottle seen, plannable)")
             continue
         log(f"case {case} seed {seed}: {edges} edges, {c.size.target_leaves} target leaves (paper {goal[0]} edges)")
@@ -62,12 +60,12 @@ def draw(case: int, params, work, seed: int, deadline: float, log=print):
 
 
 def make(params, data_dir, scenarios: Path, cases=None, seed0: int = SEED0, minutes: float = 60.0,
-         log=print) -> int:
-    """Draw and write the cases (all ten by default); returns how many were written."""
-    from relocation_app.evaluation.feasibility_cache import open_table
+         log=print, work: Path | None = None) -> int:
+    """Draw and write the cases (all ten by default); returns how many were written. The candidates' tables are
+    kept in `work` (default out/paper_search/tables)."""
     from relocation_common.paths import share_dir
     from relocation_common.scenario import parse_scenario
-    work = share_dir() / "out" / "paper_search" / "tables"
+    work = work or share_dir() / "out" / "paper_search" / "tables"
     deadline = time.time() + 60 * minutes
     seed, written = seed0, 0
     for case in cases or sorted(case_edges()):
@@ -81,10 +79,6 @@ def make(params, data_dir, scenarios: Path, cases=None, seed0: int = SEED0, minu
         data["description"] = (f"Table 4 case {case} at the paper's size (layout seed {seed}): complete Q-Tree of "
                                f"{size.edges} edges (paper: {case_edges()[case]}), {size.target_leaves} target "
                                f"leaves, one optimum.")
-        write_scene(data, scenarios / DIR / f"{name(case)}.yaml", HEADER)
-        table, path = open_table(sc, params, data_dir)
-        table.entries.update(c.table.entries)
-        table.planner_seconds = c.table.planner_seconds
-        table.save(path)
+        screening.ship(data, c.table, params, scenarios / DIR / f"{name(case)}.yaml", HEADER, data_dir)
         written += 1
     return written
