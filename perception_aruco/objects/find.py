@@ -49,6 +49,10 @@ def listed_object(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizePa
             x, y = x + shift * math.cos(p.yaw), y + shift * math.sin(p.yaw)
     else:
         (x, y), rms, n = locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)
+        spread = float(np.percentile(np.hypot(c.points[:, 0] - x, c.points[:, 1] - y), 95))
+        if spread > b.radius + 2 * loc.inlier_tol:   # its circle must hold its cluster (a fit on a fragment's edge)
+            raise FitError(f"the circle of {b.id!r}'s radius fitted to its cluster leaves its points "
+                           f"{(spread - b.radius) * 1000:.0f} mm outside")
     return PerceivedObject(b.id, b.label, (rgb[0], rgb[1], rgb[2]), b.weight, "", b.is_target, True, CYLINDER,
                            float(x), float(y), c.support, b.radius, b.height, (2 * b.radius, 2 * b.radius, b.height),
                            p.yaw if p.lying else 0.0, p.lying, False, float(rms), int(n), f.pixel)

@@ -30,6 +30,7 @@ from .params import ObjectParams
 RMS_SAMPLE = 3000  # points a fit's rms is evaluated on (a fixed-step subsample of larger clusters)
 SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best direction is refitted on all)
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
+LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
 
 
@@ -197,7 +198,7 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, cam
             fits.append(f)
         else:
             why[name] = f"rms {f.rms * 1000:.1f} mm"
-    if fits:
-        return min(fits, key=lambda f: f.rms)
+    if fits:  # a lying fit must be LYING_MARGIN times better: a narrow standing bottle seen in part fits both
+        return min(fits, key=lambda f: f.rms * (LYING_MARGIN if f.lying else 1.0))
     return conservative_box(points, support, top, view, params, f"no primitive within {bound * 1000:.1f} mm rms ("
                             + "; ".join(f"{k}: {v}" for k, v in why.items()) + ")")
