@@ -231,8 +231,8 @@ def scene_xml(scenario: Scenario, camera: CameraSpec | None = None, gripper_mark
 
 
 def _actuators(root: ET.Element, kv: float = 200.0) -> None:
-    """Velocity actuators (gain kv, gravity compensated bodies, STACK-NOTES) for the arm; position actuators with a
-    bounded force for the fingers."""
+    """Velocity actuators (gain kv, gravity compensated bodies: docs/install.md, "Platform notes") for the arm;
+    position actuators with a bounded force for the fingers."""
     from relocation_common.robot_description import JOINT_NAMES
     actuator = _el(root, "actuator")
     for j in JOINT_NAMES:

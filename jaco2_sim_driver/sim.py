@@ -1,8 +1,8 @@
 """The simulated Jaco2 (no ROS): joint-velocity control with Kinova's safety behaviour, the gripper, ground truth.
 
 Control law: each arm joint has a MuJoCo velocity actuator tau_i = kv (qdot_cmd_i - qdot_i) on gravity-compensated
-links (STACK-NOTES: kv about 200 tracks). The command qdot_cmd is what the motion planner streams (the joint
-velocities of its STPIK solution, Eq. 16-17 of the paper) and is
+links (kv about 200 tracks: docs/install.md, "Platform notes"). The command qdot_cmd is what the motion planner
+streams (the joint velocities of its STPIK solution, Eq. 16-17 of the paper) and is
 
 - rejected whole if it has the wrong length or a NaN/Inf entry (BadCommandError; the previous state is kept),
 - clamped to the velocity limits of Table 7 (`QDOT_MAX`),

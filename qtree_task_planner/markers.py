@@ -9,6 +9,7 @@ as a thick LINE_STRIP and labelled with the objects' ids. Imports message types 
 from __future__ import annotations
 
 from geometry_msgs.msg import Point
+from qtree_relocation_msgs.msg import ObjectArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -103,7 +104,7 @@ def tree_markers(state: dict, ids: tuple[str, ...], best: tuple[str, ...] | None
     return out
 
 
-def scene_markers(scene, sequence: tuple[str, ...], tree_state: dict | None = None,
+def scene_markers(scene: ObjectArray, sequence: tuple[str, ...], tree_state: dict | None = None,
                   ids: tuple[str, ...] = ()) -> MarkerArray:
     """The scene's objects (an ObjectArray, read through ros_conversions.msg_to_objects) as cylinders and boxes in
     their colour, each labelled with its place in the learned `sequence`; with a trained tree (`tree_state`,

@@ -3,8 +3,20 @@ for tests of the Q-Tree layer only, a declared blocking relation.
 """
 from __future__ import annotations
 
-from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, FeasibilityOracle, Label, ask_many, in_flight
-from relocation_common.scenario import ScenarioError
+from typing import Callable, Iterable, Mapping, Sequence
+
+from relocation_common.feasibility import (
+    BlockerSet,
+    FeasibilityAnswer,
+    FeasibilityOracle,
+    Label,
+    Query,
+    ask_many,
+    in_flight,
+)
+from relocation_common.scenario import Scenario, ScenarioError
+
+Lanes = Mapping[str, tuple[BlockerSet, ...]]  # relocation_common.feasibility.LaneOracle's answer
 
 
 class CachedOracle:
@@ -40,13 +52,15 @@ class CachedOracle:
         """Questions the wrapped oracle answers at once."""
         return in_flight(self.oracle)
 
-    def feasibility_many(self, queries, on_answer=None) -> list[FeasibilityAnswer]:
+    def feasibility_many(self, queries: Sequence[Query],
+                         on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None
+                         ) -> list[FeasibilityAnswer]:
         """relocation_common.feasibility.BatchOracle: the misses go to the wrapped oracle together (in parallel
         when it is a BatchOracle); each answer is kept as it arrives, so an error loses none."""
         keys = [(o, frozenset(r)) for o, r in queries]
         self.queries += len(keys)
 
-        def keep(key, answer) -> None:
+        def keep(key: Query, answer: FeasibilityAnswer) -> None:
             if key not in self.table:
                 self.table[key] = answer
                 self.calls += 1
@@ -60,7 +74,7 @@ class CachedOracle:
                 on_answer(k, a)
         return out
 
-    def lane_blockers(self, removed: frozenset[str]):
+    def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """The wrapped oracle's lane blockers (relocation_common.feasibility.LaneOracle), None if it has none.
         Not cached, not counted in `calls`: no motion planning."""
         lanes = getattr(self.oracle, "lane_blockers", None)
@@ -75,16 +89,17 @@ class BlockingOracle:
     certain BlockerSet (the relation has one lane per object).
     """
 
-    def __init__(self, scenario) -> None:
+    def __init__(self, scenario: Scenario) -> None:
         """`scenario`: a relocation_common.scenario.Scenario with a `blocking` section."""
-        if getattr(scenario, "blocking", None) is None:
+        if scenario.blocking is None:
             raise ScenarioError(
-                f"{getattr(scenario, 'source', 'scenario')}: no 'blocking:' section, so the blocking oracle "
+                f"{scenario.source}: no 'blocking:' section, so the blocking oracle "
                 "has nothing to answer from (it is a test double; use a scenario that declares one)")
         self._init(scenario.blocking, scenario.target_id, scenario.ids)
 
     @classmethod
-    def from_relation(cls, blocking, target_id: str, ids=None) -> "BlockingOracle":
+    def from_relation(cls, blocking: Mapping[str, Iterable[str]], target_id: str,
+                      ids: Iterable[str] | None = None) -> "BlockingOracle":
         """From a plain mapping id -> iterable of blocker ids (ids defaults to every id mentioned)."""
         self = cls.__new__(cls)
         if ids is None:
@@ -92,7 +107,7 @@ class BlockingOracle:
         self._init(blocking, target_id, ids)
         return self
 
-    def _init(self, blocking, target_id, ids) -> None:
+    def _init(self, blocking: Mapping[str, Iterable[str]], target_id: str, ids: Iterable[str]) -> None:
         self.ids = frozenset(ids)
         self.target_id = target_id
         self.blocking = {k: frozenset(v) for k, v in blocking.items()}

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Iterable, Mapping, Sequence
+
+from relocation_common.scenario import Scenario, ShelfObject
 
 
 class ProblemError(ValueError):
@@ -38,12 +40,12 @@ class RelocationProblem:
                 raise ProblemError(f"weight of {o!r} must be in (0, 1], got {w!r}")
 
     @classmethod
-    def from_scenario(cls, scenario) -> "RelocationProblem":
+    def from_scenario(cls, scenario: Scenario) -> "RelocationProblem":
         """From a relocation_common.scenario.Scenario (already validated by its loader)."""
         return cls(scenario.obstacle_ids, scenario.weights, scenario.target_id)
 
     @classmethod
-    def from_bottles(cls, bottles) -> "RelocationProblem":
+    def from_bottles(cls, bottles: Sequence[ShelfObject]) -> "RelocationProblem":
         """From scene objects (relocation_common.scenario.ShelfObject: id, weight, is_target), e.g. perceived."""
         obstacles = [b for b in bottles if not b.is_target]
         target = next(b.id for b in bottles if b.is_target)
@@ -59,6 +61,6 @@ class RelocationProblem:
         """N, the number of obstacles."""
         return len(self.obstacles)
 
-    def weight(self, sequence) -> float:
+    def weight(self, sequence: Iterable[str]) -> float:
         """Eq. 8: total weight sum phi_i of the obstacles in a sequence (the target's weight does not count)."""
         return float(sum(self.weights[o] for o in sequence if o != self.target))

@@ -4,25 +4,33 @@
   outage rules of docs/reliability.md ("Dead planner").
 - Relocator: one RelocateObject goal to the motion planner, watched (shutdown, server gone, silence, cancel,
   timeout: qtree_task_planner.executive.retrieval.relocation_stop).
-- SceneWatch: the latest scene message and when it arrived; `after(t, ...)` waits for one received later
-  (closed-loop execution: a scene perceived after a relocation ended).
+- SceneWatch: the latest scene message and when it arrived; `checked(...)` is the one a goal starts from,
+  `after(t, ...)` waits for one received later (closed-loop execution: a scene perceived after a relocation ended).
 - train_goal / goal_params: a TrainPlanner goal whose numeric fields say "the node's parameter" (negative), and
-  the TrainingParams a goal asks for.
+  the TrainingParams a goal asks for; fill_optimum / fill_training_result: the outcome in the TrainPlanner result.
 """
 from __future__ import annotations
 
 import threading
 import time
-from typing import Callable
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
+from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
+from rclpy.client import Client
+from rclpy.task import Future
+from rclpy.time import Time
 
 from qtree_task_planner.executive.closed_loop import SeenObject, seen_object
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
-from qtree_task_planner.executive.retrieval import relocation_stop
+from qtree_task_planner.executive.retrieval import check_scene, relocation_stop
 from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.training import TrainingResult
+from qtree_task_planner.oracles import Lanes
+from qtree_task_planner.search.exact import ExactResult
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.node import ActionClient, call, stop_reason, stopping_as
 from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs, msg_to_objects
@@ -37,12 +45,12 @@ class ServiceOracle:
     killed or wedged planner). `last_ok` is the monotonic time of the last answer. Raises Cancelled before a query
     when `stop()` is true (goal cancelled, node shutting down); `on_answer()` is called after each answer."""
 
-    def __init__(self, client, timeout: float, margin: float, connect_wait: float = 1.0,
-                 stop=lambda: False, on_answer=lambda: None) -> None:
+    def __init__(self, client: Client, timeout: float, margin: float, connect_wait: float = 1.0,
+                 stop: Callable[[], bool] = lambda: False, on_answer: Callable[[], None] = lambda: None) -> None:
         self.client, self.timeout, self.margin, self.connect_wait = client, timeout, margin, connect_wait
         self.stop, self.on_answer = stop, on_answer
         self.last_ok = time.monotonic()
-        self.name = client.srv_name
+        self.name: str = client.srv_name
 
     def ready(self, timeout: float) -> bool:
         """Whether the service is up, waiting up to `timeout` s for it."""
@@ -58,7 +66,7 @@ class ServiceOracle:
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
                                  blockers=blockers_from_msgs(resp.blockers))
 
-    def lane_blockers(self, removed: frozenset[str]) -> dict | None:
+    def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None
         from a planner that refuses the question (one without lane blockers: the A* then learns from answers)."""
         req = PlanFeasibility.Request(object_id="", removed_ids=sorted(removed), timeout=self.timeout, all_lanes=True)
@@ -67,11 +75,11 @@ class ServiceOracle:
         except ValueError:
             return None
 
-    def _call(self, req, what: str):
+    def _call(self, req: PlanFeasibility.Request, what: str) -> PlanFeasibility.Response:
         with stopping_as(Cancelled):  # the node stopping mid-query: Cancelled with the reason, never RCLError
             return self._call_once(req, what)
 
-    def _call_once(self, req, what: str):
+    def _call_once(self, req: PlanFeasibility.Request, what: str) -> PlanFeasibility.Response:
         if self.stop():
             raise Cancelled("cancelled while asking the motion planner" if rclpy.ok() else stop_reason())
         srv = self.client.srv_name
@@ -99,7 +107,7 @@ NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max
                        "quiet_episodes", "seed")  # numeric goal fields: negative = the node's parameter
 
 
-def train_goal(**fields) -> TrainPlanner.Goal:
+def train_goal(**fields: object) -> TrainPlanner.Goal:
     """A TrainPlanner goal whose numeric settings say "use the node's parameter" (negative) unless given."""
     goal = TrainPlanner.Goal()
     for f in NODE_DEFAULT_FIELDS:
@@ -109,7 +117,7 @@ def train_goal(**fields) -> TrainPlanner.Goal:
     return goal
 
 
-def goal_params(node: TrainingParams, goal) -> TrainingParams:
+def goal_params(node: TrainingParams, goal: TrainPlanner.Goal) -> TrainingParams:
     """The node's training parameters with what the goal sets (policy, search; numeric fields that are not
     negative). ParameterError / ValueError for values out of range (NaN included)."""
     changes = {f: getattr(goal, f) for f in ("policy", "search") if getattr(goal, f)}
@@ -118,6 +126,22 @@ def goal_params(node: TrainingParams, goal) -> TrainingParams:
         if not v < 0:  # negative: the node's parameter; NaN goes on to validation and is refused
             changes[f] = v
     return node.replace(**changes)
+
+
+def fill_training_result(result: TrainPlanner.Result, trained: TrainingResult, planner_calls: int) -> None:
+    """The training's outcome (training.TrainingResult) in the TrainPlanner result (-1: no sequence, no e_1st)."""
+    result.sequence = list(trained.sequence or ())
+    result.total_weight = float(trained.total_weight if trained.total_weight is not None else -1.0)
+    result.e_ss, result.mp_q = trained.e_ss, trained.mp_q
+    result.e_first = trained.e_1st if trained.e_1st is not None else -1
+    result.planner_calls, result.episodes = planner_calls, trained.episodes
+    result.q_sum_history = [float(x) for x in trained.q_sum_history]
+
+
+def fill_optimum(result: TrainPlanner.Result, exact: ExactResult) -> None:
+    """The exact optimum (exact.ExactResult) in the TrainPlanner result (-1: none)."""
+    result.optimal_sequence = list(exact.sequence or ())
+    result.optimal_weight = float(exact.total_weight if exact.total_weight is not None else -1.0)
 
 
 class Relocator:
@@ -135,13 +159,13 @@ class Relocator:
         if not self.client.wait_for_server(timeout_sec=self.server_wait):
             return False, "relocate action server not available"
         done = threading.Event()
-        box: dict = {}
+        box: dict[str, Any] = {}  # "result": the GetResult response (an rclpy message: untyped); "rejected": True
 
-        def on_result(fut) -> None:
+        def on_result(fut: Future) -> None:
             box["result"] = fut.result()
             done.set()
 
-        def on_goal(fut) -> None:
+        def on_goal(fut: Future) -> None:
             h = fut.result()
             if not h.accepted:
                 box["rejected"] = True
@@ -151,7 +175,7 @@ class Relocator:
 
         heard = [time.monotonic()]  # the last feedback
 
-        def on_feedback(_) -> None:
+        def on_feedback(_: object) -> None:
             heard[0] = time.monotonic()
 
         sent = self.client.send_goal_async(RelocateObject.Goal(object_id=object_id, removed_ids=list(removed)),
@@ -174,7 +198,7 @@ class Relocator:
         res = box["result"].result
         return res.success, res.message
 
-    def _recovered(self, cancel, done: threading.Event) -> bool:
+    def _recovered(self, cancel: Future, done: threading.Event) -> bool:
         """After cancelling a silent relocation: True once its result came. A silent planner may be a starved one
         (load): its cancelled goal ends after the recovery that brings the arm home, waited for up to `silence` s.
         A dead one never acknowledges the cancel: given up after CANCEL_ACK_WAIT s without the acknowledgement."""
@@ -188,7 +212,7 @@ class Relocator:
         return True
 
 
-def seen_scene(msg) -> dict[str, SeenObject]:
+def seen_scene(msg: ObjectArray) -> dict[str, SeenObject]:
     """An ObjectArray as closed_loop's scene (closed_loop.seen_object of each of msg_to_objects); ScenarioError (a
     ValueError: the closed loop gives up with it) for a message that is not a scene."""
     return {o.id: seen_object(o) for o in msg_to_objects(msg, require_target=False)}
@@ -198,16 +222,17 @@ class SceneWatch:
     """The latest scene message and the monotonic time it arrived (`put` from the subscription)."""
 
     def __init__(self) -> None:
-        self.latest: tuple | None = None  # (msg, received)
+        self.latest: tuple[ObjectArray, float] | None = None  # (msg, received)
         self._changed = threading.Condition()
 
-    def put(self, msg) -> None:
+    def put(self, msg: ObjectArray) -> None:
         """A scene arrived."""
         with self._changed:
             self.latest = (msg, time.monotonic())
             self._changed.notify_all()
 
-    def after(self, since: float, timeout: float, settled: Callable[[object], bool] = lambda msg: True):
+    def after(self, since: float, timeout: float, settled: Callable[[ObjectArray], bool] = lambda msg: True
+              ) -> ObjectArray:
         """The latest scene received after `since` (monotonic) for which `settled(msg)` holds; once `timeout` s
         pass, the latest one received after `since` anyway; TimeoutError when none came."""
         deadline = time.monotonic() + timeout
@@ -222,6 +247,21 @@ class SceneWatch:
                 self._changed.wait(min(left, 0.1))
 
 
+    def checked(self, topic: str, max_age: float, wait: float, now: Callable[[], Time]
+                ) -> tuple[ObjectArray, str | None]:
+        """(the latest scene, a warning or None) after waiting up to `wait` s for a first one (just started:
+        discovery may be going on); ScenarioError when it is missing, stale or empty (retrieval.check_scene, with
+        its ages on the monotonic clock and on the node's clock `now()`)."""
+        deadline = time.monotonic() + wait
+        while self.latest is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        msg, t = self.latest if self.latest is not None else (None, 0.0)
+        stamp = Time.from_msg(msg.header.stamp) if msg is not None else None
+        warning = check_scene(topic, max_age, time.monotonic() - t if msg is not None else None,
+                              (now() - stamp).nanoseconds * 1e-9 if stamp and stamp.nanoseconds else None,
+                              len(msg.objects) if msg is not None else 0)
+        return msg, warning
+
     def _last(self) -> str:
         """When the last scene came, for the timeout's line."""
         if self.latest is None:
@@ -229,7 +269,7 @@ class SceneWatch:
         return f"; the last one came {time.monotonic() - self.latest[1]:.0f} s ago"
 
 
-def _standing_on(msg, object_id: str, z: float, tol: float) -> bool:
+def _standing_on(msg: ObjectArray, object_id: str, z: float, tol: float) -> bool:
     """The message shows object_id standing on the board at height z (within tol); a malformed message, no."""
     try:
         objects = msg_to_objects(msg, require_target=False)
@@ -238,17 +278,17 @@ def _standing_on(msg, object_id: str, z: float, tol: float) -> bool:
     return any(o.id == object_id and not o.lying and abs(float(o.support_z or 0.0) - z) < tol for o in objects)
 
 
-def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[object], bool]:
+def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[ObjectArray], bool]:
     """A scene settled after relocating object_id: it no longer shows the bottle standing on the top shelf
     (perception holds an unseen bottle at its last pose for hold_frames frames)."""
-    def settled(msg) -> bool:
+    def settled(msg: ObjectArray) -> bool:
         return not _standing_on(msg, object_id, top_z, tol)
     return settled
 
 
-def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[object], bool]:
+def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[ObjectArray], bool]:
     """A scene that shows object_id standing on the board at height z (the target on the bottom shelf)."""
-    def settled(msg) -> bool:
+    def settled(msg: ObjectArray) -> bool:
         return _standing_on(msg, object_id, z, tol)
     return settled
 
@@ -262,8 +302,20 @@ UNSEEN_TARGET = (". Perception publishes no scene while it does not see the targ
 TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
 
 
-def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: SceneWatch, wait: float,
-            top_z: float, unseen_target: str | bool = False, bottom_z: float | None = None):
+@dataclass
+class _Ended:
+    """The last relocation of `watched`: when it ended (monotonic), its object and its success."""
+
+    at: float
+    object_id: str
+    ok: bool
+
+
+Relocate = Callable[[str, list[str]], tuple[bool, str]]  # relocate(object_id, removed) -> (success, message)
+
+
+def watched(relocate_one: Relocate, scenes: SceneWatch, wait: float, top_z: float, unseen_target: str | bool = False,
+            bottom_z: float | None = None) -> tuple[Relocate, Callable[[], dict[str, SeenObject]]]:
     """(relocate, perceive) for the closed loop: perceive() is the latest scene received after the last relocation
     ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top).
     unseen_target: the target's id (else False) when the camera may not see the bottom shelf. After a relocation of
@@ -273,36 +325,36 @@ def watched(relocate_one: Callable[[str, list[str]], tuple[bool, str]], scenes: 
     scene (or, when none came, the last one) counts without the target, and the executor reports the target's place
     as unverified (closed_loop.Verification.unseen_place). The motion planner's "outcome unknown" (it got no scene
     either) is then no failure, and its message says unverified."""
-    ended: list = [time.monotonic(), "", False]  # when the last relocation ended, its object, its success
+    ended = _Ended(time.monotonic(), "", False)
 
     def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
-        ended[1:] = [object_id, False]
+        ended.object_id, ended.ok = object_id, False
         try:
             ok, message = relocate_one(object_id, removed)
             if not ok and object_id == unseen_target and message.endswith(OUTCOME_UNKNOWN):
                 ok, message = True, f"{message} (the target left the camera's view: the motion ended as planned; " \
                     "its place is unverified unless a scene shows it)"
-            ended[2] = ok
+            ended.ok = ok
             return ok, message
         finally:
-            ended[0] = time.monotonic()
+            ended.at = time.monotonic()
 
     def perceive() -> dict[str, SeenObject]:
-        if not (ended[2] and ended[1] == unseen_target):
+        if not (ended.ok and ended.object_id == unseen_target):
             try:
-                return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z)))
+                return seen_scene(scenes.after(ended.at, wait, left_top(ended.object_id, top_z)))
             except TimeoutError as e:
                 raise TimeoutError(f"{e}{UNSEEN_TARGET if unseen_target else ''}") from None
-        shown = on_board(ended[1], bottom_z) if bottom_z is not None else (lambda msg: False)
+        shown = on_board(ended.object_id, bottom_z) if bottom_z is not None else (lambda msg: False)
         try:
-            msg = scenes.after(ended[0], min(wait, TARGET_GONE_WAIT), shown)
+            msg = scenes.after(ended.at, min(wait, TARGET_GONE_WAIT), shown)
         except TimeoutError:  # perception publishes nothing without the target: the last scene, the target gone
             if scenes.latest is None:
                 raise
             msg = scenes.latest[0]
         scene = seen_scene(msg)
         if not shown(msg):
-            scene.pop(ended[1], None)  # held at its last pose on the top shelf, or not seen: its place unverified
+            scene.pop(ended.object_id, None)  # held at its last pose on the top shelf, or unseen: place unverified
         return scene
 
     return relocate, perceive

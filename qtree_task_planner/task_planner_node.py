@@ -22,35 +22,38 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import threading
 import time
+from typing import Any, Callable, Sequence, TypeVar
 
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.service_introspection import ServiceIntrospectionState
-from rclpy.time import Time
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from qtree_task_planner.executive.keeper import CheckpointKeeper, check_checkpoint_path
+from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, until_available
 from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.executive.retrieval import (
-    check_scene,
     chosen_sequence,
     execute,
+    planner_foreign_ids,
     solve_then_train,
     training_outcome,
 )
-from qtree_task_planner.learning.checkpoint import CheckpointError
+from qtree_task_planner.executive.settings import SCENE_SOURCES, check_node_parameters
+from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
 from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.q_tree import QTree
+from qtree_task_planner.learning.training import EpisodeStats
 from qtree_task_planner.markers import scene_markers
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
@@ -58,22 +61,24 @@ from qtree_task_planner.ros_clients import (
     Relocator,
     SceneWatch,
     ServiceOracle,
+    fill_optimum,
+    fill_training_result,
     goal_params,
     seen_scene,
     train_goal,
     watched,
 )
+from qtree_task_planner.search.astar import AStarResult
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import replica_services
 from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main, stop_reason
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import ScenarioError, load_scenario
-from relocation_common.scene_check import foreign_ids
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+T = TypeVar("T")
 FEEDBACK_EVERY = 10  # episodes between training feedbacks (and after a slow planner answer: training.CALLBACK_S)
-SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
 
 
 class TaskPlannerNode(Node):
@@ -83,7 +88,7 @@ class TaskPlannerNode(Node):
         """Parameters from config/task_planner.yaml (ParameterError naming a bad one), clients, the action."""
         super().__init__("task_planner")
         declare_parameters(self)  # config/task_planner.yaml: training parameters and the node's own
-        self._check_parameters()
+        check_node_parameters(self.p)  # ParameterError naming the first unusable one (main(): one line, exit 2)
 
         self._scenes = SceneWatch()  # the latest scene and when it came
         log = self.get_logger()
@@ -110,50 +115,23 @@ class TaskPlannerNode(Node):
         self.get_logger().info(f"ready: action {self.resolve_topic_name('~/train')}, scene from "
                                f"{self._scene_topic}")
 
-    def p(self, name: str):
-        """The value of parameter `name`."""
+    def p(self, name: str) -> Any:
+        """The value of parameter `name` (of the type config/task_planner.yaml gives it)."""
         return self.get_parameter(name).value
-
-    def _check_parameters(self) -> None:
-        """ParameterError naming the first unusable parameter (main() prints it as one line and exits 2)."""
-        TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()})
-        for name, lo in (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_timeout", 1e-3),
-                         ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3),
-                         ("relocate_silence", 1e-3), ("scene_after_wait", 0.0)):
-            v = self.p(name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
-                raise ParameterError(f"{name} must be a finite number >= {lo:g}, got {v!r}")
-        if self.p("scene_source") not in ("", *SCENE_SOURCES):
-            raise ParameterError(f"scene_source must be one of {', '.join(SCENE_SOURCES)} (or empty: scene_topic), "
-                                 f"got {self.p('scene_source')!r}")
-        n = self.p("replicas")
-        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 64:
-            raise ParameterError(f"replicas must be an integer in 1..64 (motion planners), got {n!r}")
-        every = self.p("checkpoint_every")
-        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-            raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
-        check_checkpoint_path(self.p("checkpoint_path"))
 
     # -- inputs ---------------------------------------------------------------------------------------------
     def _problem(self) -> tuple[RelocationProblem, ObjectArray]:
         """The scene as a problem; ScenarioError when it is missing, stale, empty or invalid (retrieval.check_scene)."""
-        deadline = time.monotonic() + self.p("scene_wait")
-        while self._scenes.latest is None and time.monotonic() < deadline:  # just started: discovery may be going on
-            time.sleep(0.05)
-        msg, t = self._scenes.latest if self._scenes.latest is not None else (None, 0.0)
-        stamp = Time.from_msg(msg.header.stamp) if msg is not None else None
-        warning = check_scene(self._scene_topic, self.p("scene_max_age"),
-                              time.monotonic() - t if msg is not None else None,
-                              (self.get_clock().now() - stamp).nanoseconds * 1e-9 if stamp and stamp.nanoseconds
-                              else None, len(msg.objects) if msg is not None else 0)
+        msg, warning = self._scenes.checked(self._scene_topic, self.p("scene_max_age"), self.p("scene_wait"),
+                                            self.get_clock().now)
         if warning:
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
         return RelocationProblem.from_bottles(msg_to_objects(msg)), msg
 
-    def _params(self, goal) -> TrainingParams:
+    def _params(self, goal: TrainPlanner.Goal) -> TrainingParams:
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
 
-    def _on_goal(self, goal) -> GoalResponse:
+    def _on_goal(self, goal: TrainPlanner.Goal) -> GoalResponse:
         """Only a second goal is rejected here. Bad training parameters and the scene are checked when the goal
         starts: it aborts with the reason in the result (as nav2 does; a rejection carries no reason)."""
         with self._reserve:  # reserved here, not when execution starts: two goals sent back to back
@@ -164,7 +142,7 @@ class TaskPlannerNode(Node):
         return GoalResponse.ACCEPT
 
     # -- the action -----------------------------------------------------------------------------------------
-    def _execute(self, goal_handle):
+    def _execute(self, goal_handle: ServerGoalHandle) -> TrainPlanner.Result:
         result = TrainPlanner.Result()
         try:
             self._train_and_execute(goal_handle, result)
@@ -179,7 +157,8 @@ class TaskPlannerNode(Node):
         return result
 
     # -- a lost planner ---------------------------------------------------------------------------------
-    def _until_planner(self, fn, goal_handle, oracle: ReplicaOracle, fb):
+    def _until_planner(self, fn: Callable[[], T], goal_handle: ServerGoalHandle, oracle: ReplicaOracle,
+                       fb: TrainPlanner.Feedback) -> T:
         """fn() through planner outages (qtree_task_planner.executive.outage), with feedback while waiting."""
         phase = fb.phase
 
@@ -199,7 +178,7 @@ class TaskPlannerNode(Node):
                                wait=self.p("planner_wait"), last_answer=lambda: oracle.last_ok,
                                kept=self._keeper.kept_where, service=services, on_outage=on_outage, on_back=on_back)
 
-    def _train_and_execute(self, goal_handle, result) -> None:
+    def _train_and_execute(self, goal_handle: ServerGoalHandle, result: TrainPlanner.Result) -> None:
         params = self._params(goal_handle.request)
         problem, scene = self._problem()
         self._publish_scene(scene, ())
@@ -222,14 +201,13 @@ class TaskPlannerNode(Node):
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
         resume = self._keeper.resume_point(problem, params, oracle)
 
-        def on_solved(exact) -> None:
-            result.optimal_sequence = list(exact.sequence or ())
-            result.optimal_weight = float(exact.total_weight if exact.total_weight is not None else -1.0)
+        def on_solved(exact: AStarResult) -> None:
+            fill_optimum(result, exact)
             self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight} "
                                    f"({oracle.calls} planner calls; {service.summary()})")
             fb.phase = "training"
 
-        def on_episode(stats) -> bool:
+        def on_episode(stats: EpisodeStats) -> bool:
             fb.episode, fb.q_sum, fb.tree_nodes = stats.episode, stats.q_sum, stats.tree_nodes
             fb.mp_queries, fb.planner_calls = stats.mp_q, len(oracle.table)
             goal_handle.publish_feedback(fb)
@@ -239,11 +217,7 @@ class TaskPlannerNode(Node):
                                       until_planner=lambda fn: self._until_planner(fn, goal_handle, service, fb),
                                       checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved,
                                       episode_every=FEEDBACK_EVERY)
-        result.sequence = list(r.sequence or ())
-        result.total_weight = float(r.total_weight if r.total_weight is not None else -1.0)
-        result.e_ss, result.mp_q, result.e_first = r.e_ss, r.mp_q, r.e_1st if r.e_1st is not None else -1
-        result.planner_calls, result.episodes = len(oracle.table), r.episodes
-        result.q_sum_history = [float(x) for x in r.q_sum_history]
+        fill_training_result(result, r, len(oracle.table))
         if not r.cancelled and (r.found or optimum.found):  # the learned path on the markers, executed or not
             self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
                                    f"({service.summary()})" if r.found else
@@ -253,15 +227,15 @@ class TaskPlannerNode(Node):
         if stop is not None:
             result.success, result.message = stop
             if not stop[0] and not r.cancelled and not optimum.found:
-                result.message += self._foreign_ids(service, problem)
+                result.message += planner_foreign_ids(service, problem.ids)
             return
         fb.phase = "executing"  # then each check and re-plan (_run)
         self._run(goal_handle, fb, result, scene, oracle, params, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
 
-    def _run(self, goal_handle, fb, result, scene: ObjectArray, oracle: CachedOracle, params, sequence,
-             note: str) -> None:
+    def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
+             scene: ObjectArray, oracle: CachedOracle, params: TrainingParams, sequence: list[str], note: str) -> None:
         """Execute (retrieval.execute, `closed_loop`; `replan_q_tree`: each re-plan also retrains the Q-Tree with the
         goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
@@ -297,32 +271,26 @@ class TaskPlannerNode(Node):
             self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note,
                                                             "execution_s": time.monotonic() - t0, **spent})))
 
-    def _keep(self, ck) -> None:
+    def _keep(self, ck: Checkpoint) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""
         if ck.reason == "cancelled" and not rclpy.ok():
             ck = dataclasses.replace(ck, reason=stop_reason())
         self._keeper.keep(ck)
 
-    def _foreign_ids(self, oracle, problem) -> str:
-        """scene_check.foreign_ids: the motion planner's bottles (its lanes, all_lanes) this scene does not have."""
-        try:
-            return foreign_ids(oracle.lane_blockers(frozenset()) or {}, problem.ids)
-        except Exception:  # a diagnosis only: the planner gone or refusing the question says nothing
-            return ""
-
-    def _relocate_one(self, goal_handle, object_id: str, removed: list[str]) -> tuple[bool, str]:
+    def _relocate_one(self, goal_handle: ServerGoalHandle, object_id: str, removed: list[str]) -> tuple[bool, str]:
         self.get_logger().info(f"relocating {object_id} (removed so far: {removed})")
         self._relocating.publish(String(data=object_id))
         return self._relocator.relocate(object_id, removed, cancelled=lambda: goal_handle.is_cancel_requested)
 
     # -- visualisation --------------------------------------------------------------------------------------
-    def _publish_scene(self, scene: ObjectArray, sequence, tree=None, ids=()) -> None:
+    def _publish_scene(self, scene: ObjectArray, sequence: Sequence[str], tree: QTree | None = None,
+                       ids: Sequence[str] = ()) -> None:
         """The scene and the learned order (and the trained Q-Tree) as markers (qtree_task_planner.markers)."""
         self._markers.publish(scene_markers(scene, tuple(sequence), tree.to_state() if tree is not None else None,
                                             tuple(ids)))
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """Run the node (relocation_common.node.node_main: exit 2 with one line on a bad parameter)."""
     node_main("task_planner", TaskPlannerNode, args, errors=(CheckpointError,))
 

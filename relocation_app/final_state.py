@@ -1,6 +1,6 @@
-"""Where a retrieval left the robot (issue's safety target: no run leaves the arm away from home or a bottle in the
-gripper), from the simulator's last joint state and ground truth; used by the demo's report, the closed-loop
-benchmark and its graph test."""
+"""Where a retrieval left the robot (the closed-loop benchmark's safety target: no run leaves the arm away from
+home or a bottle in the gripper), from the simulator's last joint state and ground truth; used by the demo's
+report, the closed-loop benchmark and its graph test."""
 from __future__ import annotations
 
 from typing import Mapping, Sequence

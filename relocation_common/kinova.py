@@ -6,8 +6,9 @@ and the motion planner (no rclpy). Sources, file by file: docs/kinova.md.
 - Joint velocity commands on `in/joint_velocity`: degrees per second (kinova_comm.cpp, setJointVelocities), to be
   streamed at 100 Hz (kinova-ros README, "Note on publish frequency").
 - Fingers: actuator "turns", 0 fully open to about 6800 fully closed (kinova-ros README, "Finger position control";
-  kinova_demo fingers_action_client.py: finger_maxTurn = 6800). In `out/joint_state` a finger is the angle
-  turns * 80/6800 degrees (kinova_arm.cpp: finger_conv_ratio_ = 80.0 / 6800.0), fully closed = 80 deg = 1.396 rad.
+  kinova_demo/nodes/kinova_demo/fingers_action_client.py: finger_maxTurn = 6800). In `out/joint_state` a finger
+  is the angle turns * 80/6800 degrees (kinova_arm.cpp: finger_conv_ratio_ = 80.0 / 6800.0), fully closed = 80 deg
+  = 1.396 rad.
 - Fingers action `fingers_action/finger_positions` (kinova_fingers_action.cpp): succeeded when every finger is
   within `tolerance` turns of the goal (default 6400 * 0.01 = 64); aborted, with the positions reached, when the
   fingers stall: no finger moved more than `stall_threshold` turns (default 1) for `stall_interval_seconds`

@@ -183,7 +183,7 @@ def node_main(name: str, node_factory: Callable[[], Node], args: list[str] | Non
 
 
 class ActionClient(RclpyActionClient):
-    """rclpy's ActionClient with the fix of rclpy#1123 (upstream #1308; not in the Jazzy wheels this project uses).
+    """rclpy's ActionClient with the fix of rclpy#1123 (rclpy#1308; not in the Jazzy wheels this project uses).
     send_goal_async, cancel and get_result send the request and only then register its sequence number; when the
     executor thread took the response in between, rclpy dropped it ('Ignoring unexpected goal response') and the
     future never completed: a fresh-clone CI run waited 30 s for a goal response that had come. Here the

@@ -287,8 +287,8 @@ def mjcf_arm_body(hand_xml: str = "") -> str:
     """MJCF <body> tree of the arm (to place inside <worldbody>): hinge joints in Q, Table 6 ranges, capsules.
 
     `hand_xml` is inserted in the last link's body (e.g. the simulator's finger bodies); the tool frame is the
-    site `end_effector`. Arm bodies carry gravcomp="1" for velocity control (see STACK-NOTES). Joint ranges are
-    in radians: the including model needs <compiler angle="radian"/> (MuJoCo's default is degrees).
+    site `end_effector`. Arm bodies carry gravcomp="1" for velocity control (docs/install.md, "Platform notes").
+    Joint ranges are in radians: the including model needs <compiler angle="radian"/> (MuJoCo's default is degrees).
     """
     origins = joint_origins()
     xml = []

@@ -3,7 +3,7 @@
 A scene (perception's or the driver's ObjectArray) may only name the scenario's bottles, once each, at finite
 poses on or near the shelf unit. One fault drops the whole message (never merged in part): a bottle renamed by a
 bad message would otherwise stay in the planner's scene as a phantom obstacle that no relocation removes, and
-every later training would end without a sequence (docs/reliability.md, "Scenes checked against the scenario").
+every later training would end without a sequence (docs/reliability.md, "Never report success that is not true").
 """
 from __future__ import annotations
 

@@ -5,7 +5,9 @@ on the board it rests on (`support_z`): a standing cylinder's base centre, a lyi
 seen from above. Its pose in the ROS convention (shape_msgs/SolidPrimitive, as moveit_msgs/CollisionObject has it:
 the primitive's centre, a cylinder's axis along its z) is `centre()` and `rotation()`; `at_pose` is the inverse,
 the object placed at a measured centre and orientation (the simulator's ground truth, a perceived primitive).
-Footprints (`footprint`, `Footprint.overlaps`) are what the scenario's overlap checks and the simulator's
+A cylinder stands while its axis is within UPRIGHT_TILT of the vertical and lies beyond (`lying`; `tilt_of_quaternion`
+and `support_height` read a bare pose as the closed loop's checks do). Footprints (`footprint`,
+`Footprint.overlaps`) are what the scenario's overlap checks and the simulator's
 disturbances compare: circles and convex polygons, separated along an axis (the separating axis theorem; numpy,
 a few lines, where a polygon library would be a new dependency for three shapes).
 """
@@ -19,12 +21,13 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import geometry
 from .config import ConfigError, node_section
 from .geometry import rpy_matrix
-from .orientation import UPRIGHT_TILT
 from .paths import config_file
 
 SHAPES = ("cylinder", "box")
+UPRIGHT_TILT = math.radians(20)  # rad: a cylinder whose axis is tilted more from the vertical is not standing (lying)
 EXACT_TILT = 1e-6  # rad: a cylinder within this of upright (or of flat, lying) is exactly so (`tilt` None)
 DECIMALS = 9  # a measured pose's derived numbers are rounded to 1e-9 m / rad: an object survives a round trip
 MIN_ESTIMATE = 0.01  # kg: an estimated weight is clipped to [MIN_ESTIMATE, 1] (phi must be in (0, 1], Eq. 8)
@@ -283,3 +286,16 @@ def estimated_weight(o: ShelfObject, density: float) -> tuple[float, str]:
     w = min(1.0, max(MIN_ESTIMATE, kg))
     note = f"{o.volume * 1000:.2f} L x {density:.0f} kg/m3 = {kg:.2f} kg" + (f", clipped to {w:g}" if w != kg else "")
     return w, note
+
+
+# ---------------------------------------------------------------------------------------------- bare poses
+def tilt_of_quaternion(w: float, x: float, y: float, z: float) -> float:
+    """Angle (rad) between a body's z axis and the vertical, from its orientation (w, x, y, z; a zero quaternion is
+    upright)."""
+    return geometry.tilt(geometry.wxyz_matrix((w, x, y, z)))
+
+
+def support_height(base_z: float, radius: float, tilt: float) -> float:
+    """Height of the surface a bottle rests on, from the height of its base centre: a lying bottle's base centre
+    is one radius (times the sine of its tilt) above it (the closed loop's SeenObject)."""
+    return base_z - radius * math.sin(min(tilt, math.pi / 2))

@@ -46,10 +46,10 @@ from relocation_app.client import RelocationClient
 from relocation_app.final_state import final_state
 from relocation_app.graph import Graph
 from relocation_common.geometry import quat_xyzw
-from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.paths import resolve_scenario
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
+from relocation_common.shelf_object import tilt_of_quaternion
 from stpik_motion_planner.model.collision import Lying
 from stpik_motion_planner.planning.planner import MotionPlanner, PlannerParams
 
@@ -251,7 +251,7 @@ def table(runs: list[dict], proofs: dict[str, str]) -> None:
               f"{ok}/{len(rs) - none} | {false} | {safe}/{len(rs)} | {sum(r['applied'] for r in rs)} | "
               f"{statistics.fmean(r['replans'] for r in rs):.1f} | {extra:.1f} | "
               f"{statistics.fmean(r['wall'] for r in rs):.0f} |")
-    for name in scenes[:-1]:  # the loop's cost undisturbed (issue's target: at most 5 % more wall time)
+    for name in scenes[:-1]:  # the loop's cost undisturbed (target: at most 5 % more wall time)
         pairs = [(c["wall"], o["wall"]) for c in groups.get((name, 0, True), []) for o in groups.get((name, 0, False),
                  []) if c["seed"] == o["seed"] and _ok(c) and _ok(o)]
         if pairs:

@@ -1,6 +1,6 @@
 """The demo (relocation_app.demo, the README's main job) on every shipped scene, one after the other: a table of
-success, the learned and the exact optimum's weights, what was executed and the wall time (docs/closed_loop.md,
-"The demo on every shipped scene").
+success, the learned and the exact optimum's weights, what was executed and the wall time (docs/benchmarks.md,
+"The demo on every shipped scene"; runs in docs/bench/demo.md).
 
 Each scene runs `python -m relocation_app.demo --scenario NAME --no-record --out OUT/NAME [EXTRA...]` in its own
 process (a fresh node graph); its report.json is read back. The `blocking_*` scenes are left out: test doubles of

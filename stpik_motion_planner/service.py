@@ -72,7 +72,7 @@ class MotionPlannerService:
         cannot be (scene_check: unknown or duplicate ids, poses far from the shelf): the whole message is dropped,
         nothing changes."""
         bottles = list(perceived)
-        bases = [(b.id, *(float(v) for v in b.base())) for b in bottles]  # (id, x, y, z) of each base centre
+        bases = [(b.id, float(c[0]), float(c[1]), float(c[2])) for b, c in ((b, b.base()) for b in bottles)]
         check_scene(self.base, bases, source)
         self.scene.update(bases)
         m = merge_perceived(self.base.shelf, self.bottles, bottles, self._held, self.planner.lying,

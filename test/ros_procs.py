@@ -1,4 +1,5 @@
-"""Run real ROS 2 node processes in tests (no launch_ros here: see STACK-NOTES) and talk to them over DDS.
+"""Run real ROS 2 node processes in tests (no launch_ros wheel: docs/install.md, "Platform notes") and talk to
+them over DDS.
 
     with RosGraph(tmp_path) as g:
         g.start("jaco2_sim_driver.driver_node", params_file="config/jaco2_sim_driver.yaml",

@@ -1,7 +1,7 @@
 """rclpy#1123 in the Jazzy wheels: an ActionClient spun by another thread drops a response that arrives before
 send_goal_async (or get_result_async) has registered its request, and the future never completes. A fresh-clone CI
 run hit it ("goal response never came", "Ignoring unexpected goal response"). The window is widened here as the
-issue's reproduction does: the client's handle sleeps right after sending. relocation_common.node.ActionClient
+reproduction of rclpy#1123 does: the client's handle sleeps right after sending. relocation_common.node.ActionClient
 (every action client of the project) completes; rclpy's own is shown to lose the response."""
 import threading
 import time
@@ -82,4 +82,4 @@ def test_no_response_is_lost_when_the_server_answers_at_once():
     assert _round_trip(ActionClient) == (True, True)
     stock = _round_trip(RclpyActionClient)
     print(f"\nrclpy's ActionClient: goal response, result = {stock}")
-    assert stock != (True, True), "rclpy fixed #1123: relocation_common.node.ActionClient can go"
+    assert stock != (True, True), "rclpy fixed rclpy#1123: relocation_common.node.ActionClient can go"

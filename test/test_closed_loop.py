@@ -26,8 +26,8 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.search import astar
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label, destination_slot
-from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.scenario import parse_scenario
+from relocation_common.shelf_object import tilt_of_quaternion
 
 SHELF = {"x_front": 0.45, "depth": 0.40, "width": 0.80, "y_center": 0.0, "board_thickness": 0.02, "top_z": 0.20,
          "ceiling_z": 0.46, "bottom_z": -0.15}

@@ -8,9 +8,9 @@ import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver import disturbance as dist
 from jaco2_sim_driver.sim import Jaco2Sim
 from qtree_task_planner.executive.closed_loop import SeenObject, remaining_problem, verify_relocation
-from relocation_common.orientation import tilt_of_quaternion
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
+from relocation_common.shelf_object import tilt_of_quaternion
 
 SCENARIO = load_scenario(default_scenario())
 SH = SCENARIO.shelf

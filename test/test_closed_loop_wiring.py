@@ -6,6 +6,8 @@ from dataclasses import replace
 
 import pytest
 from geometry_msgs.msg import Quaternion
+from rclpy.clock_type import ClockType
+from rclpy.time import Time
 
 from qtree_task_planner.executive.closed_loop import scene_from_scenario
 from qtree_task_planner.executive.retrieval import execute
@@ -13,7 +15,7 @@ from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
 from relocation_common.paths import default_scenario
 from relocation_common.ros_conversions import objects_to_msg
-from relocation_common.scenario import load_scenario
+from relocation_common.scenario import ScenarioError, load_scenario
 
 SC = load_scenario(default_scenario())
 
@@ -35,6 +37,23 @@ def test_the_watch_waits_for_a_scene_received_after_the_relocation_ended():
     since = time.monotonic()
     threading.Timer(0.1, lambda: watch.put(_msg())).start()
     assert watch.after(since, 5.0) is watch.latest[0]
+
+
+def test_the_scene_a_goal_starts_from_is_checked_on_both_clocks():
+    """SceneWatch.checked: none within scene_wait, stale by its stamp on the node's clock, another clock's stamp."""
+    def clock(s: int):  # a node's clock (ROS time, as Time.from_msg reads a stamp)
+        return lambda: Time(seconds=s, clock_type=ClockType.ROS_TIME)
+
+    watch = SceneWatch()
+    with pytest.raises(ScenarioError, match="no scene received on /s"):
+        watch.checked("/s", 10.0, 0.1, clock(100))
+    msg = _msg()
+    msg.header.stamp = Time(seconds=80).to_msg()
+    watch.put(msg)
+    with pytest.raises(ScenarioError, match="stamped 20.0 s ago"):
+        watch.checked("/s", 10.0, 0.0, clock(100))
+    assert watch.checked("/s", 10.0, 0.0, clock(85)) == (msg, None)
+    assert "use_sim_time" in watch.checked("/s", 10.0, 0.0, clock(10**6))[1]
 
 
 def test_perceive_waits_until_the_relocated_bottle_left_the_top_shelf_or_the_wait_ends():

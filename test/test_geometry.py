@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from relocation_common import geometry as g
-from relocation_common.orientation import tilt_of_quaternion
+from relocation_common.shelf_object import tilt_of_quaternion
 
 RNG = np.random.default_rng(20240611)
 RPYS = [tuple(RNG.uniform([-math.pi, -math.pi / 2, -math.pi], [math.pi, math.pi / 2, math.pi])) for _ in range(200)]

@@ -9,6 +9,11 @@ Imports inside functions count too. And `__file__` locates files in one helper o
 Two more rules on the same reading: no import cycle among the project's modules (a cycle through a function-level
 import is a cycle too), and no module uses another module's private (underscore) names: `from m import _f`,
 `m._f` for an imported module m, or `obj._f` where `_f` is a function or method defined only in other modules.
+Inside the two split cores each module sits in a room and imports only its own room and the rooms below it (ROOMS):
+qtree_task_planner's problem/oracles at the bottom, learning/ and search/ beside each other (neither imports the
+other), executive/ above both, then ros_clients and markers, then the node; stpik_motion_planner's model/, planning/,
+execution/, then service, ros_interface and the node. A module outside every room fails too. And no folder of the
+project's packages holds more than MAX_MODULES modules (.py files other than __init__.py).
 """
 import ast
 from pathlib import Path
@@ -218,3 +223,112 @@ def test_the_private_check_finds_each_form(tmp_path):
     assert private_uses(tmp_path) == ["stpik_motion_planner/b.py:1 imports stpik_motion_planner.a._f",
                                       "stpik_motion_planner/b.py:6 uses stpik_motion_planner.a._f",
                                       "stpik_motion_planner/b.py:7 calls _clear of stpik_motion_planner.a"]
+
+
+# ------------------------------------------------------------------------------------------------ rooms of a core
+# package -> its rooms from the bottom up, each (rank, the first names below the package it holds: modules or
+# folders; "" is the package's own __init__). A module imports its own room and the rooms of a lower rank; rooms of
+# one rank do not import each other.
+ROOMS = {
+    "qtree_task_planner": ((0, {"", "problem", "oracles"}), (1, {"learning"}), (1, {"search"}), (2, {"executive"}),
+                           (3, {"ros_clients"}), (3, {"markers"}), (4, {"task_planner_node"})),
+    "stpik_motion_planner": ((0, {"", "model"}), (1, {"planning"}), (2, {"execution"}), (3, {"service"}),
+                             (4, {"ros_interface"}), (5, {"motion_planner_node"})),
+}
+
+
+def _room(module: str) -> tuple[str, int | None]:
+    """(package, index of its room in ROOMS[package] or None) of a dotted module name."""
+    parts = module.split(".")
+    first = parts[1] if len(parts) > 1 else ""
+    rooms = ROOMS.get(parts[0], ())
+    return parts[0], next((i for i, (_, names) in enumerate(rooms) if first in names), None)
+
+
+def room_violations(root: Path = ROOT) -> list[str]:
+    """Imports inside a split core (functions included) that go up or sideways between rooms of one rank, and the
+    modules that are in no room."""
+    modules = module_names(root)
+    out = []
+    for m, path in modules.items():
+        package, room = _room(m)
+        if package not in ROOMS:
+            continue
+        where = path.relative_to(root)
+        if room is None:
+            out.append(f"{where} is in no room of {package}")
+            continue
+        rank = ROOMS[package][room][0]
+        for line, imp, _ in _imports(path, root, modules):
+            imp_package, imp_room = _room(imp)
+            if imp_package == package and imp_room != room and (
+                    imp_room is None or ROOMS[package][imp_room][0] >= rank):
+                out.append(f"{where}:{line} imports {imp}")
+    return out
+
+
+def test_every_import_inside_a_split_core_goes_down():
+    assert room_violations() == []
+
+
+def test_the_room_check_catches_each_wrong_direction(tmp_path):
+    q = tmp_path / "qtree_task_planner"
+    for folder in ("learning", "search", "executive"):
+        (q / folder).mkdir(parents=True)
+    (q / "problem.py").write_text("")
+    (q / "oracles.py").write_text("from .problem import Problem\n")
+    (q / "search" / "exact.py").write_text("from ..oracles import Oracle\n")
+    (q / "executive" / "retrieval.py").write_text("from ..search import exact\nfrom ..learning import q_tree\n")
+    (q / "task_planner_node.py").write_text("from .executive import retrieval\n")
+    (q / "learning" / "q_tree.py").write_text("from qtree_task_planner.problem import Problem\n")
+    assert room_violations(tmp_path) == []
+    (q / "learning" / "q_tree.py").write_text("def f():\n    from qtree_task_planner.search import exact\n")
+    (q / "search" / "exact.py").write_text("from ..executive.retrieval import retrieve\n")
+    (q / "problem.py").write_text("from . import task_planner_node\n")
+    (q / "stray.py").write_text("")
+    assert room_violations(tmp_path) == [
+        "qtree_task_planner/learning/q_tree.py:2 imports qtree_task_planner.search.exact",
+        "qtree_task_planner/problem.py:1 imports qtree_task_planner.task_planner_node",
+        "qtree_task_planner/search/exact.py:1 imports qtree_task_planner.executive.retrieval",
+        "qtree_task_planner/stray.py is in no room of qtree_task_planner"]
+    s = tmp_path / "stpik_motion_planner"
+    (s / "model").mkdir(parents=True)
+    (s / "planning").mkdir()
+    (s / "model" / "grasp.py").write_text("from stpik_motion_planner.planning import rrt\n")
+    (s / "planning" / "rrt.py").write_text("from ..model import grasp\nfrom .. import service\n")
+    (s / "service.py").write_text("from . import ros_interface\n")
+    (s / "ros_interface.py").write_text("from .service import serve\n")
+    assert [v for v in room_violations(tmp_path) if v.startswith("stpik")] == [
+        "stpik_motion_planner/model/grasp.py:1 imports stpik_motion_planner.planning.rrt",
+        "stpik_motion_planner/planning/rrt.py:2 imports stpik_motion_planner.service",
+        "stpik_motion_planner/service.py:1 imports stpik_motion_planner.ros_interface"]
+
+
+# ---------------------------------------------------------------------------------------------- modules per folder
+MAX_MODULES = 12  # "no folder holds more than about a dozen modules"
+
+
+def crowded_folders(root: Path = ROOT, most: int = MAX_MODULES) -> dict[str, int]:
+    """Folder -> its number of modules (.py files other than __init__.py), for folders holding more than `most`."""
+    counts: dict[str, int] = {}
+    for package in PACKAGES:
+        for path in (root / package).rglob("*.py"):
+            if path.name != "__init__.py":
+                folder = path.parent.relative_to(root).as_posix()
+                counts[folder] = counts.get(folder, 0) + 1
+    return {f: n for f, n in sorted(counts.items()) if n > most}
+
+
+def test_no_folder_holds_more_than_a_dozen_modules():
+    assert crowded_folders() == {}
+
+
+def test_the_folder_count_catches_a_crowded_folder(tmp_path):
+    folder = tmp_path / "relocation_app" / "evaluation"
+    folder.mkdir(parents=True)
+    for i in range(MAX_MODULES):
+        (folder / f"m{i}.py").write_text("")
+    (folder / "__init__.py").write_text("")
+    assert crowded_folders(tmp_path) == {}
+    (folder / "one_more.py").write_text("")
+    assert crowded_folders(tmp_path) == {"relocation_app/evaluation": MAX_MODULES + 1}

@@ -10,7 +10,7 @@ parameters have changed since, and with them data/feasibility/). Compared exactl
 converged, E_ss, MP_q, planner calls, E_1st, tree size, the Eq. 15 history (every float, by its IEEE bits) and the
 whole tree (QTree.to_state(), every Q by its bits). The one engine (the C kernel, qtree_task_planner/learning/kernel.py,
 through training.train) is checked against it in one batch, in batches between callbacks and with checkpoints; the
-reference loop (policies.py + QTree.step, test/qtree_reference.py) is checked against it too.
+reference loop (the policies and `step` of test/qtree_reference.py) is checked against it too.
 """
 from __future__ import annotations
 
@@ -144,7 +144,7 @@ def test_training_with_checkpoints_reproduces_the_reference(case):
 
 @pytest.mark.parametrize("case", CASES[::11], ids=case_id)
 def test_the_reference_loop_is_the_recorded_oracle(case):
-    """The reference (policies.py + QTree.step, test/qtree_reference.py) still reproduces the recording."""
+    """The reference (the policies and `step` of test/qtree_reference.py) still reproduces the recording."""
     problem, oracle, opt = setting(case["scene"])
     ref = reference_train(problem, oracle, TrainingParams(**case["params"]), optimal_weight=opt)
     want = case["result"]

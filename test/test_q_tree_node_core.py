@@ -4,11 +4,13 @@ import pytest
 
 from qtree_task_planner.executive.keeper import CheckpointKeeper, check_checkpoint_path
 from qtree_task_planner.executive.retrieval import check_scene, relocation_stop
+from qtree_task_planner.executive.settings import check_node_parameters
 from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.problem import RelocationProblem
-from relocation_common.config import ParameterError
+from relocation_common.config import ParameterError, node_section
+from relocation_common.paths import config_file
 from relocation_common.scenario import ScenarioError, load_scenario
 
 SC = load_scenario("blocking_5")
@@ -90,3 +92,19 @@ def test_checkpoint_path_checks(tmp_path):
     check_checkpoint_path(str(tmp_path / "new" / "ck.json"))
     with pytest.raises(ParameterError, match="is a directory"):
         check_checkpoint_path(str(tmp_path))
+
+
+NODE_PARAMS = node_section(config_file("task_planner.yaml"), "task_planner")
+
+
+@pytest.mark.parametrize("name,value,words", [
+    ("alpha", 1.5, "alpha"), ("scene_max_age", -1.0, "scene_max_age must be a finite number >= 0"),
+    ("relocate_timeout", float("nan"), "relocate_timeout must be a finite number >= 0.001"),
+    ("feasibility_timeout", True, "feasibility_timeout must be a finite number"),
+    ("scene_source", "camera", "scene_source must be one of perception, sim"),
+    ("replicas", 65, "replicas must be an integer in 1..64"), ("checkpoint_every", 0, "checkpoint_every must be"),
+    ("checkpoint_path", "/", "is a directory")])
+def test_node_parameters_name_the_first_unusable_one(name, value, words):
+    check_node_parameters(NODE_PARAMS.__getitem__)  # config/task_planner.yaml as it is: usable
+    with pytest.raises(ParameterError, match=words):
+        check_node_parameters({**NODE_PARAMS, name: value}.__getitem__)

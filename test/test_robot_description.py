@@ -59,7 +59,7 @@ def test_table6_limits_hold_in_the_q_convention():
     # ... but its DH angle theta2 is 0: applying [0.82, 5.46] to theta2 would forbid the upright pose
     theta = rd.dh_theta(rd.Q_UPRIGHT)
     assert theta[1] == pytest.approx(0.0) and not 0.82 <= theta[1] <= 5.46
-    # the mapping of STACK-NOTES
+    # the mapping of docs/robot.md, "Angle convention"
     q = random_q(1, 3)[0]
     th = rd.dh_theta(q)
     np.testing.assert_allclose(th, [-q[0], q[1] - math.pi, q[2], q[3], q[4], q[5] - math.pi, -q[6] - math.pi / 2])

@@ -161,8 +161,11 @@ def _box(x, y, sx, sy, yaw):
                        yaw=yaw).footprint()
 
 
+def circle(x, y, r):
+    return Footprint((x, y), r, ())
+
+
 def test_footprints_overlap_as_the_shapes_do():
-    circle = lambda x, y, r: Footprint((x, y), r, ())  # noqa: E731
     assert not circle(0, 0, 0.01).overlaps(circle(0.02, 0, 0.01))  # touching is not overlapping
     assert circle(0, 0, 0.01).overlaps(circle(0.0199, 0, 0.01))
     diamond = _box(0, 0, 0.1, 0.1, math.pi / 4)  # its corner at x = 0.0707

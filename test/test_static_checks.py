@@ -52,7 +52,7 @@ def test_noqa_lines_say_why():
 
 
 def test_comments_cite_no_tracker_issues():
-    """Comments and docstrings cite the docs or the paper, never this project's tracker ("issue 14")."""
+    """Comments and docstrings cite the docs or the paper, never this project's tracker (an issue number)."""
     import re
     pat = re.compile(r"\bissues? \d+\b", re.IGNORECASE)
     hits = [f"{rel}:{i}: {line.strip()}" for rel, i, line in _source_lines() if pat.search(line)]

@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from qtree_task_planner.problem import ProblemError, RelocationProblem
 from relocation_common.feasibility import destination_slot
-from relocation_common.orientation import UPRIGHT_TILT, support_height
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
+from relocation_common.shelf_object import UPRIGHT_TILT, support_height
 
 
 # ------------------------------------------------------------------------------------------------ the scene
@@ -83,7 +83,7 @@ class Tolerances:
 
 
 def _support(o: SeenObject) -> float:
-    """Height of the surface the object rests on (relocation_common.orientation.support_height)."""
+    """Height of the surface the object rests on (relocation_common.shelf_object.support_height)."""
     return support_height(o.z, o.radius, o.tilt)
 
 
@@ -555,7 +555,7 @@ def _stayed(obj: str, before: Scene, after: Scene, tol: Tolerances) -> bool:
         math.hypot(now.x - was.x, now.y - was.y) <= tol.still and abs(_support(now) - _support(was)) <= tol.board
 
 
-def _options(seq, gone: frozenset[str]):
+def _options(seq: Iterable[str], gone: frozenset[str]) -> Iterator[tuple[str, frozenset[str]]]:
     """(object, removed set) of each relocation of `seq` after `gone`."""
     removed = set(gone)
     for o in seq:
@@ -563,7 +563,7 @@ def _options(seq, gone: frozenset[str]):
         removed.add(o)
 
 
-def _invalid(seq, problem: RelocationProblem) -> str | None:
+def _invalid(seq: Sequence[str], problem: RelocationProblem) -> str | None:
     """Why `seq` is not a retrieval sequence of `problem` (obstacles of it, once each, then its target), or None."""
     if not seq or seq[-1] != problem.target:
         return f"it does not end with the target {problem.target}"

@@ -1,4 +1,4 @@
-"""Training through a motion planner that may go away (docs/reliability.md, "Dead planner").
+"""Training through a motion planner that may go away (docs/reliability.md, "Dead motion planner").
 
 A query unanswered within its limit, or a service that vanished, raises PlannerUnavailable inside the training;
 `until_available` then waits up to `wait` s for the planner to come back and runs the step again (the training
@@ -8,9 +8,17 @@ with what to do. ROS-free: the node passes how to see the service and how to rep
 from __future__ import annotations
 
 import time
-from typing import Callable, TypeVar
+from typing import Callable, Protocol, TypeVar
 
 T = TypeVar("T")
+
+
+class UntilPlanner(Protocol):
+    """step() through planner outages (until_available with the caller's settings), for steps of any result."""
+
+    def __call__(self, step: Callable[[], T]) -> T:
+        """step()'s result once the planner answered it all."""
+        ...
 
 
 class PlannerUnavailable(RuntimeError):

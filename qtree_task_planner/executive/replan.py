@@ -20,27 +20,30 @@ optimal under that constraint, or none.
 from __future__ import annotations
 
 import math
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Iterable, Mapping, Sequence
 
 from qtree_task_planner.executive.closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
+from qtree_task_planner.oracles import Lanes
 from qtree_task_planner.search import astar
-from relocation_common.feasibility import FeasibilityAnswer, Label, ask_many, in_flight
+from relocation_common.feasibility import FeasibilityAnswer, FeasibilityOracle, Label, Query, ask_many, in_flight
 
 Pose = tuple[float, float, float]  # x, y, tilt
+Key = tuple[str, frozenset[tuple[str, int]]]  # GeometryCache.key: (object, {(present object, pose version)})
 
 
 class GeometryCache:
     """Feasibility answers kept while the geometry they were computed on is unchanged (module doc). `calls`: real
     planner calls; `hits`: questions answered from the cache."""
 
-    def __init__(self, oracle, tol: float = Tolerances().still, tilt_tol: float = Tolerances().tilt) -> None:
+    def __init__(self, oracle: FeasibilityOracle, tol: float = Tolerances().still,
+                 tilt_tol: float = Tolerances().tilt) -> None:
         self.oracle, self.tol, self.tilt_tol = oracle, tol, tilt_tol
         self._ref: dict[str, Pose] = {}
         self._version: dict[str, int] = {}
-        self.table: dict[tuple, FeasibilityAnswer] = {}
-        self._lanes: dict[tuple, Mapping | None] = {}
+        self.table: dict[Key, FeasibilityAnswer] = {}
+        self._lanes: dict[Key, Lanes | None] = {}
         self.calls = self.hits = 0
 
     def observe(self, geometry: Mapping[str, Pose]) -> list[str]:
@@ -77,7 +80,7 @@ class GeometryCache:
                 self.table[k], n = answer, n + 1
         return n
 
-    def key(self, object_id: str, present: Iterable[str]) -> tuple:
+    def key(self, object_id: str, present: Iterable[str]) -> Key:
         """The cache key of a question about object_id with `present` (the objects not removed) on the shelf."""
         return object_id, frozenset((p, self._version.get(p, 0)) for p in set(present) | {object_id})
 
@@ -92,7 +95,7 @@ class GeometryCache:
             self.hits += 1
         return answer
 
-    def lane_blockers(self, removed: frozenset[str], present: Iterable[str]):
+    def lane_blockers(self, removed: frozenset[str], present: Iterable[str]) -> Lanes | None:
         """The planner's lane blockers with `removed` gone (None if it has none), cached like the answers."""
         ask = getattr(self.oracle, "lane_blockers", None)
         if ask is None:
@@ -126,7 +129,7 @@ class RemainingOracle:
             return no_slot(object_id, self.slots)
         return self.cache.feasibility(object_id, full, self.on_shelf - removed)
 
-    def lane_blockers(self, removed: frozenset[str]):
+    def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """The planner's lane blockers for the objects of the problem (others are not ours to relocate)."""
         lanes = self.cache.lane_blockers(self.rp.gone | removed, self.on_shelf - removed)
         return None if lanes is None else {o: sets for o, sets in lanes.items() if o in self.on_shelf}
@@ -151,7 +154,7 @@ class SlotLimit:
     solvers and of the Q-Tree's episodes (oracles.CachedOracle(SlotLimit(service, n, target))), no sequence
     needing more slots than exist is ever found. Lane blockers and batches pass through."""
 
-    def __init__(self, oracle, slots: int, target: str) -> None:
+    def __init__(self, oracle: FeasibilityOracle, slots: int, target: str) -> None:
         if slots < 1:
             raise ValueError(f"slots must be >= 1 (the target needs one), got {slots}")
         self.oracle, self.slots, self.target = oracle, slots, target
@@ -171,7 +174,9 @@ class SlotLimit:
         """As the wrapped oracle (relocation_common.feasibility.BatchOracle)."""
         return in_flight(self.oracle)
 
-    def feasibility_many(self, queries, on_answer=None) -> list[FeasibilityAnswer]:
+    def feasibility_many(self, queries: Sequence[Query],
+                         on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None
+                         ) -> list[FeasibilityAnswer]:
         """The queries that fit go to the wrapped oracle together; the others are g_U."""
         ask = [q for q in queries if self.fits(*q)]
         got = dict(zip(ask, ask_many(self.oracle, ask)))
@@ -181,7 +186,7 @@ class SlotLimit:
                 on_answer(q, a)
         return out
 
-    def lane_blockers(self, removed: frozenset[str]):
+    def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """The wrapped oracle's lane blockers (geometry: capacity does not change them), None if it has none."""
         lanes = getattr(self.oracle, "lane_blockers", None)
         return None if lanes is None else lanes(removed)
@@ -245,7 +250,7 @@ def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
     return f"; lying on its side, not graspable: {', '.join(sorted(lying))}"
 
 
-def never_free(lanes: Mapping, lying: frozenset[str]) -> frozenset[str]:
+def never_free(lanes: Lanes, lying: frozenset[str]) -> frozenset[str]:
     """The objects that can never be relocated because of the lying ones: those, and (to a fixpoint) every object
     each of whose lanes holds one of them (lanes: LaneOracle.lane_blockers; only certain blocker sets count: such
     a lane is clear exactly when all its blockers are gone, and a lying bottle never goes)."""

@@ -17,15 +17,32 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from typing import Callable, Protocol, Sequence, TypeVar
 
 from qtree_task_planner.executive.outage import PlannerUnavailable
-from relocation_common.feasibility import FeasibilityAnswer, Query
+from qtree_task_planner.oracles import Lanes
+from relocation_common.feasibility import FeasibilityAnswer, FeasibilityOracle, LaneOracle, Query
+
+T = TypeVar("T")
+
+
+class Replica(FeasibilityOracle, LaneOracle, Protocol):
+    """One motion planner's feasibility service (the node's ros_clients.ServiceOracle): Eq. 11 and the lane
+    blockers, its `name`, the monotonic time of its last answer `last_ok`, and whether it is up."""
+
+    name: str
+    last_ok: float
+
+    def ready(self, timeout: float) -> bool:
+        """Whether the service is up, waiting up to `timeout` s for it."""
+        ...
 
 
 class ReplicaOracle:
     """FeasibilityOracle, LaneOracle and BatchOracle over the replicas (the module docstring)."""
 
-    def __init__(self, replicas: list, retry_after: float = 5.0, max_rest: float = 60.0, clock=time.monotonic) -> None:
+    def __init__(self, replicas: Sequence[Replica], retry_after: float = 5.0, max_rest: float = 60.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         if not replicas:
             raise ValueError("ReplicaOracle needs at least one replica")
         self.replicas, self.retry_after, self.max_rest, self.clock = list(replicas), retry_after, max_rest, clock
@@ -87,8 +104,8 @@ class ReplicaOracle:
                          for i, (r, n) in enumerate(zip(self.replicas, self.answers)))
 
     # -- one question ---------------------------------------------------------------------------------------
-    def _one(self, ask, what: str):
-        errors = []
+    def _one(self, ask: Callable[[Replica], T], what: str) -> T:
+        errors: list[tuple[str, PlannerUnavailable]] = []
         for i in self._order():
             try:
                 got = ask(self.replicas[i])
@@ -106,17 +123,19 @@ class ReplicaOracle:
         """Eq. 11 from the first replica that is up (failover on PlannerUnavailable)."""
         return self._one(lambda r: r.feasibility(object_id, removed), repr(object_id))
 
-    def lane_blockers(self, removed: frozenset[str]):
+    def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers, from the first replica that is up."""
         return self._one(lambda r: r.lane_blockers(removed), "the lane blockers")
 
     # -- many questions -------------------------------------------------------------------------------------
-    def feasibility_many(self, queries: list[Query], on_answer=None) -> list[FeasibilityAnswer]:
+    def feasibility_many(self, queries: Sequence[Query],
+                         on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None
+                         ) -> list[FeasibilityAnswer]:
         """Every answer, in the queries' order; one worker thread per replica that is up, each asking its own
         replica one question at a time from a shared queue. A question whose replica fails goes back to the
         queue; PlannerUnavailable when questions remain and every replica is down; any other error (Cancelled,
         a refused query) stops the batch and is raised once the questions in flight are back."""
-        out: list = [None] * len(queries)
+        out: dict[int, FeasibilityAnswer] = {}  # query index -> answer
         todo = deque(range(len(queries)))
         stop: list[BaseException] = []
         lost: dict[int, PlannerUnavailable] = {}
@@ -164,4 +183,4 @@ class ReplicaOracle:
             tried.update(i for i in use if i in self.down)
         if stop:
             raise stop[0]
-        return out
+        return [out[k] for k in range(len(queries))]

@@ -11,12 +11,15 @@ one object; everything else (order, what is kept when the planner goes away, whe
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, TypeVar
+from typing import Callable, Iterable, Sequence
 
 from qtree_task_planner.executive.closed_loop import (
     ClosedLoopExecutor,
     ExecutionResult,
     GiveUp,
+    Option,
+    RemainingProblem,
+    ReplanAnswer,
     ReplanRecord,
     Scene,
     Step,
@@ -24,17 +27,19 @@ from qtree_task_planner.executive.closed_loop import (
     free_slots,
     remaining_problem,
 )
-from qtree_task_planner.executive.outage import PlannerUnavailable
+from qtree_task_planner.executive.outage import PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.replan import GeometryCache, relearn, replan
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
-from qtree_task_planner.learning.training import train
+from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.search import astar
+from qtree_task_planner.search.exact import ExactResult
+from relocation_common.feasibility import LaneOracle
 from relocation_common.scenario import Scenario, ScenarioError
+from relocation_common.scene_check import foreign_ids
 
-T = TypeVar("T")
 STAMP_PLAUSIBLE = 86400.0  # s: a scene stamp further from the node's clock is on another clock
 
 
@@ -63,22 +68,24 @@ def check_scene(topic: str, max_age: float, received_s: float | None, stamp_age_
 
 
 def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: TrainingParams, *,
-                     resume: Checkpoint | None, until_planner: Callable[[Callable[[], T]], T],
-                     keep: Callable[[Checkpoint], None], on_episode: Callable, checkpoint_every: int,
-                     on_solved: Callable = lambda optimum: None, episode_every: int = 1):
+                     resume: Checkpoint | None, until_planner: UntilPlanner,
+                     keep: Callable[[Checkpoint], None], on_episode: Callable[[EpisodeStats], bool | None],
+                     checkpoint_every: int, on_solved: Callable[[astar.AStarResult], None] = lambda optimum: None,
+                     episode_every: int = 1) -> tuple[astar.AStarResult, TrainingResult]:
     """(exact optimum, training result). The answers the exact solve gathered before an outage are kept in a
     checkpoint (`keep`), so nothing asked is asked again; training checkpoints every `checkpoint_every` episodes,
     calls `on_episode(stats)` every `episode_every` episodes (training.train's callback) and stops when it
     returns False (cancel, shutdown)."""
-    state = {"ck": resume}
+    state: dict[str, Checkpoint | None] = {"ck": resume}
 
-    def solve():
+    def solve() -> astar.AStarResult:
         try:
             return astar.solve(problem, oracle)
         except PlannerUnavailable as e:
-            ck = state["ck"] or Checkpoint.initial(problem, params)
-            state["ck"] = dataclasses.replace(ck, feasibility=Checkpoint.table_of(oracle), reason=f"interrupted: {e}")
-            keep(state["ck"])
+            ck = dataclasses.replace(state["ck"] or Checkpoint.initial(problem, params),
+                                     feasibility=Checkpoint.table_of(oracle), reason=f"interrupted: {e}")
+            state["ck"] = ck
+            keep(ck)
             raise
 
     optimum = until_planner(solve)
@@ -88,7 +95,7 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
         state["ck"] = ck
         keep(ck)
 
-    def run():
+    def run() -> TrainingResult:
         return train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode,
                      callback_every=episode_every, resume=state["ck"], checkpoint_every=checkpoint_every,
                      on_checkpoint=on_checkpoint)
@@ -96,7 +103,7 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
     return optimum, until_planner(run)
 
 
-def training_outcome(trained, optimum, *, execute: bool) -> tuple[bool, str] | None:
+def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: bool) -> tuple[bool, str] | None:
     """(success, message) when the goal ends after training, None when it goes on to execute. Cancelled; no
     sequence at all (the exact solver's one-line reason, exact.why_none); not executed (trained; or training found
     none within E_max while the proven optimum exists: said, with the optimum). Training without a sequence but with
@@ -110,10 +117,20 @@ def training_outcome(trained, optimum, *, execute: bool) -> tuple[bool, str] | N
     if trained.found:
         return True, "trained (not executed)"
     return False, (f"training did not find a sequence to the target in {trained.episodes} episodes (the exact "
-                   f"optimum {' '.join(optimum.sequence)}, weight {optimum.total_weight:.2f}, exists: execute_optimum)")
+                   f"optimum {' '.join(optimum.sequence or ())}, weight {optimum.total_weight:.2f}, exists: "
+                   "execute_optimum)")
 
 
-def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
+def planner_foreign_ids(oracle: LaneOracle, ids: Iterable[str]) -> str:
+    """scene_check.foreign_ids: the motion planner's bottles (its lanes, all_lanes) the scene `ids` does not have;
+    "" when the planner is gone or refuses the question (a diagnosis only, it says nothing then)."""
+    try:
+        return foreign_ids(oracle.lane_blockers(frozenset()) or {}, ids)
+    except Exception:
+        return ""
+
+
+def execute_sequence(sequence: Sequence[str], relocate_one: Callable[[str, list[str]], tuple[bool, str]],
                      cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None
                      ) -> tuple[bool, str, list[str]]:
     """Relocate the learned sequence in order (the target last): (success, message, relocated ids). Stops at the
@@ -130,22 +147,25 @@ def execute_sequence(sequence, relocate_one: Callable[[str, list[str]], tuple[bo
     return True, f"target {sequence[-1]!r} retrieved after {len(removed) - 1} relocations", removed
 
 
-def chosen_sequence(learned, learned_weight: float | None, optimum, optimal_weight: float | None, *,
+def chosen_sequence(learned: Sequence[str] | None, learned_weight: float | None, optimum: Sequence[str] | None,
+                    optimal_weight: float | None, *,
                     execute_optimum: bool, execute_learned: bool) -> tuple[list[str], str]:
     """(the sequence to execute, a note for the user): the learned one only when its weight (Eq. 8) equals the
     proven optimum's, or when asked for (execute_learned); else the optimum, saying so with both weights."""
-    learned, optimum = list(learned or ()), list(optimum or ())
-    if execute_optimum or not learned:
-        return optimum, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
-    if execute_learned or not optimum or optimal_weight is None or learned_weight is None \
+    learned_seq, optimum_seq = list(learned or ()), list(optimum or ())
+    if execute_optimum or not learned_seq:
+        return optimum_seq, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
+    if execute_learned or not optimum_seq or optimal_weight is None or learned_weight is None \
             or learned_weight <= optimal_weight + 1e-9:
-        return learned, ""
-    return optimum, (f"executed the exact optimum {' '.join(optimum)} (weight {optimal_weight:.2f}) instead of the "
-                     f"learned {' '.join(learned)} (weight {learned_weight:.2f}); execute_learned forces the learned")
+        return learned_seq, ""
+    return optimum_seq, (f"executed the exact optimum {' '.join(optimum_seq)} (weight {optimal_weight:.2f}) instead "
+                         f"of the learned {' '.join(learned_seq)} (weight {learned_weight:.2f}); execute_learned "
+                         "forces the learned")
 
 
-def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[str, list[str]], tuple[bool, str]],
-            perceive: Callable[[], Scene], oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
+def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
+            relocate_one: Callable[[str, list[str]], tuple[bool, str]], perceive: Callable[[], Scene],
+            oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
             before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,
             on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True,
             retrain: TrainingParams | None = None) -> ExecutionResult:
@@ -166,7 +186,7 @@ def execute(scenario: Scenario, sequence, scene: Scene, relocate_one: Callable[[
                 raise GiveUp(f"relocating {object_id!r} failed: {message}")
             return ok, message
 
-        def replan_through(rp, banned):
+        def replan_through(rp: RemainingProblem, banned: frozenset[Option]) -> ReplanAnswer | str:
             """replan; a feasibility question with no answer (the planner's safety net under load, PlannerUnavailable)
             is asked again, up to REPLAN_TRIES re-plans (the answers already given are kept), then the run ends
             with the reason (before, it escaped the executor: the goal ended with no execution record)."""

@@ -1,10 +1,10 @@
-/* Q-Tree training kernel (paper Sect. 4.2): the one production episode loop (qtree_task_planner/training.py
- * drives it in batches of episodes and calls back between them).
+/* Q-Tree training kernel (paper Sect. 4.2): the one production episode loop
+ * (qtree_task_planner/learning/training.py drives it in batches of episodes and calls back between them).
  *
- * Bit-identical to the reference (policies.py + QTree.step, kept as the tests' oracle): CPython's MT19937 and random() (genrand_res53) on the state taken from
+ * Bit-identical to the reference episode (test/qtree_reference.py, the tests' oracle): CPython's MT19937 and random() (genrand_res53) on the state taken from
  * random.Random.getstate(), the same draws in the same order, the same double operations in the same order
  * (Eq. 7 update, Eq. 15 sum, Eq. 16 test; compiled without FMA contraction or fast-math). Used by
- * qtree_task_planner/kernel.py through ctypes; the tree is exported to Python nodes on demand.
+ * qtree_task_planner/learning/kernel.py through ctypes; the tree is exported to Python nodes on demand.
  *
  * Node i: mask (relocated obstacles), parent, action from the parent; per action a (0..n1-1, n1 = obstacles +
  * target): label (-1 unknown, 0 g_U, 1 g_O, 2 g_T, Eq. 11), Q, child (-1 none); the known edges in creation
@@ -206,7 +206,7 @@ static void rollback(KTree *t, int jn, int n_nodes, int64_t mp_q, double q_sum) 
     t->n_nodes = n_nodes; t->mp_q = mp_q; t->q_sum = q_sum;
 }
 
-/* One episode from s_H (the reference: policies.py + QTree.step). Returns steps, or -1 (ask raised; the
+/* One episode from s_H (the reference: test/qtree_reference.py). Returns steps, or -1 (ask raised; the
    episode is undone), -2 (out of memory). */
 static int episode(KTree *t, int kind, int depth, int i_max, double eps, ask_fn ask, int *reached) {
     int node = 0, steps = 0, n1 = t->n1, target = t->target, jn = 0, n_nodes0 = t->n_nodes;

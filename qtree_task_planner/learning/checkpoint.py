@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.learning.q_tree import QTree
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
 from relocation_common.config import ParameterError
@@ -153,7 +154,7 @@ class Checkpoint:
                                   f"{len(ck.q_sum_history)} history entries, quiet {ck.quiet})")
         return ck
 
-    def restore_tree(self, tree, source: str = "checkpoint") -> None:
+    def restore_tree(self, tree: QTree, source: str = "checkpoint") -> None:
         """Load the stored tree into a fresh QTree of the same problem; CheckpointError when inconsistent."""
         try:
             tree.load_state(self.tree)
@@ -218,7 +219,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     return Checkpoint.from_payload(payload, src)
 
 
-def _answer_row(row) -> list:
+def _answer_row(row: list[Any]) -> list[Any]:
     """One stored answer, checked: [object, removed, label] or with its blocker sets [[objects, certain, lane], ...]
     (TypeError/ValueError when malformed)."""
     o, r, lab, *rest = row

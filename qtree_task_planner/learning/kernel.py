@@ -21,14 +21,17 @@ import ctypes
 import hashlib
 import math
 import os
+import random
 import subprocess
 import sysconfig
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Callable, NamedTuple
 
 from qtree_task_planner.learning.q_tree import R_TARGET, R_UNFEASIBLE, Node, QTree
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.problem import RelocationProblem
 from relocation_common.feasibility import Label
 
 SOURCE = Path(__file__).with_name("_kernel.c")
@@ -37,10 +40,11 @@ FLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math", "-std
 MAX_ACTIONS = 63  # removed sets are 64-bit masks
 POLICY_CODES = {"lrnd": 0, "h-lrnd": 1, "h-eg": 2}  # TrainingParams.policy -> the kernel's switch
 
-_loaded: Any = None
+_loaded: ctypes.CDLL | None = None
 build_error: str | None = None
 _ASK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_uint64, ctypes.c_int)
 _PATH = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int))
+PathTest = Callable[[tuple[int, ...]], bool]  # E_1st: whether a greedy path's actions have the optimal weight
 
 
 def _build() -> Path:
@@ -79,7 +83,7 @@ class RunState(NamedTuple):
     reached: bool  # the last episode relocated the target
 
 
-def _load() -> Any:
+def _load() -> ctypes.CDLL | None:
     """The loaded library (built on first use), or None (`build_error` says why)."""
     global _loaded, build_error
     if _loaded is not None or build_error is not None:
@@ -117,7 +121,7 @@ def available() -> bool:
     return _load() is not None
 
 
-def _lib() -> Any:
+def _lib() -> ctypes.CDLL:
     lib = _load()
     if lib is None:
         raise RuntimeError(f"the Q-Tree training kernel (qtree_task_planner/learning/_kernel.c) did not build: "
@@ -127,9 +131,12 @@ def _lib() -> Any:
 
 class KernelTree(QTree):
     """A QTree trained by the kernel. Counts (mp_q, q_sum, n_edges, len(nodes)) come from the kernel; the
-    Python nodes (root, nodes) are built on first access, identical to those the Python loop builds."""
+    Python nodes (root, nodes) are built on first access, identical to those the Python loop builds. Its oracle is
+    a CachedOracle: the kernel counts the questions it answers from its own memo in `queries`."""
 
-    def __init__(self, problem, oracle, alpha: float, gamma: float) -> None:
+    oracle: CachedOracle
+
+    def __init__(self, problem: RelocationProblem, oracle: CachedOracle, alpha: float, gamma: float) -> None:
         """A fresh tree (only s_H) in the kernel; RuntimeError naming the fix when the kernel did not build."""
         self._handle = None
         self._py_nodes: list[Node] | None = None
@@ -145,7 +152,7 @@ class KernelTree(QTree):
         self._n_edges = 0
         self._mt = (ctypes.c_uint32 * 624)()
 
-    def __del__(self):
+    def __del__(self) -> None:
         h = getattr(self, "_handle", None)
         if h and _loaded is not None:
             _loaded.kt_free(h)
@@ -287,7 +294,7 @@ class KernelTree(QTree):
             parent = parent.child[a]
         return parent.id
 
-    def push_state(self, rng, episode: int, prev_sum: float, quiet: int, converged: bool,
+    def push_state(self, rng: random.Random, episode: int, prev_sum: float, quiet: int, converged: bool,
                    e_1st: int | None) -> None:
         """Hand the training state to the kernel: the random.Random's state (CPython MT19937), the episodes done,
         the Eq. 16 state and E_1st."""
@@ -295,7 +302,7 @@ class KernelTree(QTree):
         mt = (ctypes.c_uint32 * 624)(*internal[:624])
         _lib().kt_set_state(self._handle, mt, internal[624], episode, prev_sum, quiet, int(converged), e_1st or 0)
 
-    def pull_state(self, rng=None) -> RunState:
+    def pull_state(self, rng: random.Random | None = None) -> RunState:
         """The kernel's training state; `rng` (the random.Random it started from), if given, gets the kernel's RNG
         state."""
         mt = self._mt
@@ -307,8 +314,9 @@ class KernelTree(QTree):
             rng.setstate((version, tuple(mt) + (ints[0],), gauss))
         return RunState(ints[1], prev_sum.value, ints[2], bool(ints[3]), ints[4] or None, ints[5], bool(ints[6]))
 
-    def run(self, policy: str, depth: bool, i_max: int, stop_at: int, epsilons, beta: float, quiet_needed: int,
-            path_ok, history, deadline: float = math.inf) -> None:
+    def run(self, policy: str, depth: bool, i_max: int, stop_at: int, epsilons: ctypes.Array[ctypes.c_double],
+            beta: float, quiet_needed: int, path_ok: PathTest | None,
+            history: ctypes.Array[ctypes.c_double], deadline: float = math.inf) -> None:
         """Episodes until `stop_at` episodes are done or Eq. 16 holds, or, after an episode in which the oracle
         was asked past `deadline` (time.monotonic), earlier. policy: a name of POLICY_CODES.
         epsilons, history: ctypes double arrays of E_max entries (Eq. 14 per episode; Eq. 15 written per episode).
@@ -332,8 +340,9 @@ class KernelTree(QTree):
                 errors.append(e)
                 return -1
 
-        def path(length: int, actions) -> int:
+        def path(length: int, actions: ctypes._Pointer[ctypes.c_int]) -> int:
             try:
+                assert path_ok is not None  # the kernel asks only when told there is a path test
                 return 1 if path_ok(tuple(actions[k] for k in range(length))) else 0
             except BaseException as e:  # noqa: BLE001 - re-raised below, after the kernel returns
                 errors.append(e)

@@ -35,7 +35,7 @@ class TrainingParams:
     seed: int
 
     def __post_init__(self) -> None:
-        def num(name, lo, hi, lo_open=False):
+        def num(name: str, lo: float, hi: float, lo_open: bool = False) -> None:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ParameterError(f"{name} must be a finite number, got {v!r}")
@@ -43,7 +43,7 @@ class TrainingParams:
                 raise ParameterError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}], got {v}")
             object.__setattr__(self, name, float(v))
 
-        def integer(name, lo):
+        def integer(name: str, lo: int) -> None:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) and not (isinstance(v, float) and v.is_integer()):
                 raise ParameterError(f"{name} must be an integer, got {v!r}")

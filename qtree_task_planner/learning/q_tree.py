@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import Iterable
 
 from qtree_task_planner.problem import RelocationProblem
-from relocation_common.feasibility import Label
+from relocation_common.feasibility import FeasibilityOracle, Label
 
 R_UNFEASIBLE = -10.0  # Eq. 13; the C kernel is compiled with these (kernel.FLAGS)
 R_TARGET = 100.0  # Eq. 13
@@ -58,7 +58,7 @@ class QTree:
     """The tree and its read-outs (best sequence, Eq. 15, Graphviz). Episodes and their Eq. 7 updates run in the C
     kernel (kernel.py); the Python reference of an episode is the tests' oracle (test/qtree_reference.py)."""
 
-    def __init__(self, problem: RelocationProblem, oracle, alpha: float, gamma: float) -> None:
+    def __init__(self, problem: RelocationProblem, oracle: FeasibilityOracle, alpha: float, gamma: float) -> None:
         """`oracle`: any object with feasibility(object_id, removed: frozenset) -> FeasibilityAnswer."""
         self.problem = problem
         self.oracle = oracle

@@ -27,6 +27,8 @@ from qtree_task_planner.learning.policies import epsilon_schedule
 from qtree_task_planner.learning.q_tree import QTree
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
+from relocation_common.feasibility import FeasibilityOracle
+from relocation_common.scenario import Scenario
 
 WEIGHT_TOL = 1e-9
 CALLBACK_S = 0.2  # s: a batch of episodes that asked the oracle longer than this ends early for the callback
@@ -96,7 +98,8 @@ class TrainingResult:
         }
 
 
-def train(problem, oracle, params: TrainingParams, *, optimal_weight: float | None = None,
+def train(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, params: TrainingParams, *,
+          optimal_weight: float | None = None,
           callback: Callable[[EpisodeStats], bool | None] | None = None, callback_every: int = 10,
           resume: Checkpoint | None = None, checkpoint_every: int = 0,
           on_checkpoint: Callable[[Checkpoint], None] | None = None) -> TrainingResult:
@@ -169,7 +172,7 @@ class _Run:
         self.e_1st, self.episode, self.epsilon = checkpoint.e_1st, checkpoint.episode, checkpoint.epsilon
         self.calls_before, self.elapsed_before = checkpoint.planner_calls, checkpoint.elapsed_s
 
-    def pull(self, history, rng: bool = False) -> kernel.RunState:
+    def pull(self, history: _Buffers, rng: bool = False) -> kernel.RunState:
         """The kernel's counters (and with `rng` its RNG state) -> this run, after a batch."""
         state = self.tree.pull_state(self.rng if rng else None)
         self.history.extend(history[self.episode:state.episode])
@@ -218,12 +221,12 @@ class _Run:
         )
 
 
-def _optimal_path_test(problem: RelocationProblem, optimal_weight: float | None):
+def _optimal_path_test(problem: RelocationProblem, optimal_weight: float | None) -> kernel.PathTest | None:
     """For the kernel's E_1st: path_ok(actions) -> the sequence's Eq. 8 weight is the optimum; None without one."""
     if optimal_weight is None:
         return None
 
-    def path_ok(actions, ids=problem.ids):
+    def path_ok(actions: tuple[int, ...], ids: tuple[str, ...] = problem.ids) -> bool:
         return problem.weight(tuple(ids[a] for a in actions)) <= optimal_weight + WEIGHT_TOL
     return path_ok
 
@@ -245,7 +248,8 @@ def _next_stop(episode: int, e_max: int, *every: int) -> int:
     return min([e_max] + [(episode // n + 1) * n for n in every if n > 0])
 
 
-def _run_batches(run: _Run, callback, callback_every: int, checkpoint_every: int, on_checkpoint) -> None:
+def _run_batches(run: _Run, callback: Callable[[EpisodeStats], bool | None] | None, callback_every: int,
+                 checkpoint_every: int, on_checkpoint: Callable[[Checkpoint], None] | None) -> None:
     """The training loop: the kernel runs episodes up to the next callback or checkpoint (epsilon of Eq. 14, the
     episode, Q_sum of Eq. 15, the Eq. 16 stop test and E_1st per episode), then Python reports. An episode the
     oracle interrupts is rolled back by the kernel and checkpointed here (see train)."""

@@ -24,9 +24,21 @@ import heapq
 import itertools
 import math
 from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
 
-from qtree_task_planner.search.exact import ExactResult, as_problem, why_none
-from relocation_common.feasibility import Label, ask_many, claims, in_flight
+from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.search.exact import Claim, ExactResult, as_problem, why_none
+from relocation_common.feasibility import (
+    BlockerSet,
+    FeasibilityAnswer,
+    FeasibilityOracle,
+    Label,
+    Query,
+    ask_many,
+    claims,
+    in_flight,
+)
+from relocation_common.scenario import Scenario
 
 DEPTH = 2  # levels of the blockers' own lanes in the heuristic
 
@@ -38,7 +50,7 @@ class AStarResult(ExactResult):
     blocker_calls: int = 0  # lane_blockers calls (the screen only, no motion planning)
     searches: int = 0  # optimistic A* searches (one more than the unfeasible answers that changed the path)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """ExactResult.to_dict plus the blocker calls and the optimistic searches."""
         return {**super().to_dict(), "blocker_calls": self.blocker_calls, "searches": self.searches}
 
@@ -46,13 +58,13 @@ class AStarResult(ExactResult):
 class Knowledge:
     """What the answers said: feasibility of asked edges and certain blocker claims (object -> [(S, lanes)])."""
 
-    def __init__(self, weights, target: str, depth: int = DEPTH) -> None:
+    def __init__(self, weights: Mapping[str, float], target: str, depth: int = DEPTH) -> None:
         self.weights, self.target, self.depth = weights, target, depth
-        self.answers: dict[tuple[str, frozenset], bool] = {}
-        self.claims: dict[str, list[tuple[frozenset, tuple[frozenset, ...]]]] = {}
-        self._h: dict[frozenset, float] = {}
+        self.answers: dict[Query, bool] = {}
+        self.claims: dict[str, list[Claim]] = {}
+        self._h: dict[frozenset[str], float] = {}
 
-    def claim(self, obj: str, removed: frozenset, blockers) -> None:
+    def claim(self, obj: str, removed: frozenset[str], blockers: Sequence[BlockerSet]) -> None:
         """Record a certain claim (ignored unless every set is certain)."""
         if claims(blockers):
             entry = (frozenset(removed), tuple(b.objects for b in blockers))
@@ -60,7 +72,7 @@ class Knowledge:
                 self.claims[obj].append(entry)
                 self._h.clear()
 
-    def lanes_known(self, obj: str, removed: frozenset, lanes) -> None:
+    def lanes_known(self, obj: str, removed: frozenset[str], lanes: tuple[BlockerSet, ...]) -> None:
         """From lane_blockers: object -> its lanes (an empty tuple: never relocatable; certain sets only)."""
         if lanes == ():
             self.claims.setdefault(obj, []).append((frozenset(removed), ()))
@@ -68,7 +80,7 @@ class Knowledge:
         else:
             self.claim(obj, removed, lanes)
 
-    def record(self, obj: str, removed: frozenset, answer) -> bool:
+    def record(self, obj: str, removed: frozenset[str], answer: FeasibilityAnswer) -> bool:
         """Remember an answer (and its lane blockers); whether the object was feasible."""
         ok = Label(answer.label) != Label.UNFEASIBLE
         self.answers[(obj, removed)] = ok
@@ -76,24 +88,24 @@ class Knowledge:
             self.claim(obj, removed, answer.blockers)
         return ok
 
-    def possible(self, obj: str, removed: frozenset) -> bool:
+    def possible(self, obj: str, removed: frozenset[str]) -> bool:
         """Not known unfeasible: not answered g_U, and every applicable claim has a lane inside `removed`."""
         if self.answers.get((obj, removed)) is False:
             return False
         return all(any(b <= removed for b in lanes) for s, lanes in self.claims.get(obj, ()) if s <= removed)
 
-    def verified(self, obj: str, removed: frozenset) -> bool:
+    def verified(self, obj: str, removed: frozenset[str]) -> bool:
         """Whether the planner answered feasible for `obj` after `removed`."""
         return self.answers.get((obj, removed)) is True
 
-    def h(self, removed: frozenset) -> float:
+    def h(self, removed: frozenset[str]) -> float:
         """Admissible lower bound on the weight still to remove before the target can be relocated."""
         got = self._h.get(removed)
         if got is None:
             got = self._h[removed] = self.need(self.target, removed, removed, frozenset(), self.depth)
         return got
 
-    def need(self, obj: str, removed: frozenset, free: frozenset, chain: frozenset, depth: int) -> float:
+    def need(self, obj: str, removed: frozenset[str], free: frozenset[str], chain: frozenset[str], depth: int) -> float:
         """Weight outside `free` that must be removed before `obj` (objects of `chain` leave after it)."""
         best = 0.0
         for s, lanes in self.claims.get(obj, ()):
@@ -113,7 +125,8 @@ class Knowledge:
         return best
 
 
-def _optimistic(obstacles, phi, target, kb: Knowledge):
+def _optimistic(obstacles: Sequence[str], phi: Mapping[str, float], target: str,
+                kb: Knowledge) -> tuple[list[Query] | None, int]:
     """A* on the optimistic graph: the edges [(object, set)] of a least-weight path ending with the target's,
     ties to fewer unverified edges; None if there is none. Also returns the sets expanded."""
     tie = itertools.count()
@@ -122,16 +135,17 @@ def _optimistic(obstacles, phi, target, kb: Knowledge):
     if math.isinf(h0):
         return None, 0
     # entries: (f, unverified edges, -depth, tie, set, parent set, object)
-    heap: list[tuple] = [(h0, 0, 0, next(tie), start, None, None)]
-    closed: dict[frozenset | None, tuple] = {}
+    heap: list[tuple[float, int, int, int, frozenset[str], frozenset[str] | None, str | None]] = [
+        (h0, 0, 0, next(tie), start, None, None)]
+    closed: dict[frozenset[str], tuple[frozenset[str] | None, str | None]] = {}  # set -> (parent set, object)
     while heap:
         f, unv, _, _, state, parent, obj = heapq.heappop(heap)
-        if obj == target:
-            path = [(target, parent)]
-            while closed[parent][0] is not None:
-                grand, o = closed[parent]
+        if obj == target and parent is not None:  # (a target entry's parent is its own set)
+            path: list[Query] = [(target, parent)]
+            grand, o = closed[parent]
+            while grand is not None and o is not None:  # back to the start, (None, None)
                 path.append((o, grand))
-                parent = grand
+                grand, o = closed[grand]
             return path[::-1], len(closed)
         if state in closed:
             continue
@@ -151,7 +165,7 @@ def _optimistic(obstacles, phi, target, kb: Knowledge):
     return None, len(closed)
 
 
-def solve(problem, oracle, depth: int = DEPTH) -> AStarResult:
+def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, depth: int = DEPTH) -> AStarResult:
     """Minimum-weight feasible relocation sequence (Eq. 8), proven, asking the oracle lazily (module doc).
 
     oracle: feasibility(object_id, removed) -> FeasibilityAnswer (blockers used when given); an optional
@@ -166,7 +180,7 @@ def solve(problem, oracle, depth: int = DEPTH) -> AStarResult:
         for o, sets in (lanes(frozenset()) or {}).items():
             kb.lanes_known(o, frozenset(), tuple(sets))
     calls = searches = expanded = 0
-    answers: dict = {}
+    answers: dict[Query, FeasibilityAnswer] = {}
     while True:
         path, n = _optimistic(obstacles, phi, target, kb)
         searches, expanded = searches + 1, expanded + n
@@ -180,7 +194,8 @@ def solve(problem, oracle, depth: int = DEPTH) -> AStarResult:
             return AStarResult(seq, problem.weight(seq), calls, expanded, "", blocker_calls, searches)
 
 
-def _verify(path, target: str, kb: Knowledge, oracle, answers: dict) -> tuple[int, bool]:
+def _verify(path: list[Query], target: str, kb: Knowledge, oracle: FeasibilityOracle,
+            answers: dict[Query, FeasibilityAnswer]) -> tuple[int, bool]:
     """Ask the path's unasked edges from the start, up to the oracle's `in_flight` at once (planner replicas;
     one at a time otherwise), the target only from a set known reachable; stop at the first batch with an
     unfeasible answer. (questions asked, every edge feasible); the answers also go to `answers`."""

@@ -18,11 +18,25 @@ from __future__ import annotations
 import heapq
 import itertools
 from dataclasses import dataclass
+from typing import Any, Iterable, Mapping, Sequence
 
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.search.reachable import reachable_sets
-from relocation_common.feasibility import Label, ask_many, claims, in_flight
+from relocation_common.feasibility import (
+    FeasibilityAnswer,
+    FeasibilityOracle,
+    Label,
+    Query,
+    ask_many,
+    claims,
+    in_flight,
+)
+from relocation_common.scenario import Scenario
+
+Claim = tuple[frozenset[str], tuple[frozenset[str], ...]]  # (removed set, its lanes' blockers): a certain claim
+# queue entries of `solve`: (cost, tie, parent set, parent sequence, object); the start has no parent and no object
+Entry = tuple[float, int, frozenset[str] | None, tuple[str, ...], str | None]
 
 
 @dataclass(frozen=True)
@@ -40,7 +54,7 @@ class ExactResult:
         """A sequence frees the target."""
         return self.sequence is not None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """As JSON (`qtree solve`)."""
         out = {"found": self.found, "sequence": list(self.sequence) if self.sequence is not None else None,
                "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
@@ -48,32 +62,34 @@ class ExactResult:
         return out if self.found else {**out, "reason": self.reason}
 
 
-def _set(s) -> str:
+def _set(s: Iterable[str]) -> str:
     return "{" + ", ".join(sorted(s)) + "}"
 
 
-def why_none(target: str, asked: dict, lanes: dict | None = None, limit: int = 4) -> str:
+def why_none(target: str, asked: Mapping[Query, FeasibilityAnswer], lanes: Mapping[str, Sequence[Claim]] | None = None,
+             limit: int = 4) -> str:
     """One line saying why no sequence frees `target`, from the answers asked ((object, removed) -> answer) and
     certain lane claims (object -> [(removed, lane sets)], e.g. astar.Knowledge.claims; the answers' own certain
     blockers are added): the target's answer from the largest set reached; a blocking cycle (every lane of the
     target needs an object that can never leave first: each of its lanes needs the target or another such object
     moved, or it has no lane at all); the objects
     never feasible in any set asked, with the planner's reason."""
-    lanes = {o: list(v) for o, v in (lanes or {}).items()}
+    claimed = {o: list(v) for o, v in (lanes or {}).items()}
     for (o, s), a in asked.items():
         if Label(a.label) == Label.UNFEASIBLE and claims(a.blockers):
-            lanes.setdefault(o, []).append((s, tuple(b.objects for b in a.blockers)))
+            claimed.setdefault(o, []).append((s, tuple(b.objects for b in a.blockers)))
     parts = []
     mine = [(s, a) for (o, s), a in asked.items() if o == target]
     if mine:
         s, a = max(mine, key=lambda x: (len(x[0]), sorted(x[0])))
         parts.append(f"{target} unfeasible from every set reached (with {_set(s)} removed: {a.message})")
-    elif any(ls == () for _, ls in lanes.get(target, ())):
+    elif any(ls == () for _, ls in claimed.get(target, ())):
         parts.append(f"{target} has no grasp lane that removing bottles can clear (boards or reach)")
-    cycle = _cycle(target, lanes)
+    cycle = _cycle(target, claimed)
     if cycle:
         parts.append(cycle)
-    last: dict[str, tuple] = {}  # object -> (largest set asked, its answer), for objects never feasible
+    last: dict[str, tuple[frozenset[str], FeasibilityAnswer]] = {}  # object -> (largest set asked, its answer),
+    # for objects never feasible
     feasible = {o for (o, _), a in asked.items() if Label(a.label) != Label.UNFEASIBLE}
     for (o, s), a in asked.items():
         if o != target and o not in feasible and (o not in last or len(s) > len(last[o][0])):
@@ -85,7 +101,7 @@ def why_none(target: str, asked: dict, lanes: dict | None = None, limit: int = 4
     return "no sequence: " + (". ".join(parts) if parts else "nothing was feasible to ask")
 
 
-def _cycle(target: str, lanes: dict, limit: int = 8) -> str:
+def _cycle(target: str, lanes: Mapping[str, Sequence[Claim]], limit: int = 8) -> str:
     """'blocking cycle: ...' if no lane of the target (claimed at the empty set) can be cleared: every lane needs an
     object that can never leave before the target, because each of its lanes needs the target or another such
     object moved, or it has no lane ('' otherwise; at most `limit` explanations). Objects without a claim count as
@@ -123,7 +139,7 @@ def _cycle(target: str, lanes: dict, limit: int = 8) -> str:
         "; ".join(parts[:limit]) + more + ")"
 
 
-def _needs(x: str, first: dict, free: set) -> str:
+def _needs(x: str, first: Mapping[str, tuple[frozenset[str], ...]], free: set[str]) -> str:
     """'x needs T moved', 'x needs one of {a, b} moved' (the objects stuck in its lanes) or 'x has no lane'."""
     stuck = sorted({m for lane in first[x] for m in lane if m not in free})
     if not first[x]:
@@ -131,12 +147,12 @@ def _needs(x: str, first: dict, free: set) -> str:
     return f"{x} needs {stuck[0]} moved" if len(stuck) == 1 else f"{x} needs one of {_set(stuck)} moved"
 
 
-def as_problem(problem) -> RelocationProblem:
+def as_problem(problem: RelocationProblem | Scenario) -> RelocationProblem:
     """`problem` itself if it is a RelocationProblem, else the problem of that scenario."""
     return problem if isinstance(problem, RelocationProblem) else RelocationProblem.from_scenario(problem)
 
 
-def solve(problem, oracle) -> ExactResult:
+def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle) -> ExactResult:
     """Minimum-weight feasible relocation sequence by lazy uniform-cost search over removed sets.
 
     oracle: feasibility(object_id, removed: frozenset) -> FeasibilityAnswer. oracle_calls counts the questions
@@ -144,15 +160,15 @@ def solve(problem, oracle) -> ExactResult:
     problem = as_problem(problem)
     obstacles, target, phi = problem.obstacles, problem.target, problem.weights
     calls = 0
-    known: dict = {}  # (object, set) -> answer
+    known: dict[Query, FeasibilityAnswer] = {}  # (object, set) -> answer
     settled: dict[frozenset[str], tuple[float, tuple[str, ...]]] = {}
     tie = itertools.count()
-    # entries: (cost, tie, parent set, parent sequence, object)
-    queue: list = [(0.0, next(tie), None, (), None)]
+    queue: list[Entry] = [(0.0, next(tie), None, (), None)]
     state: frozenset[str]
+    new_seq: tuple[str, ...]
     while queue:
         cost, _, parent, seq, obj = heapq.heappop(queue)
-        if obj is None:  # the start: the empty set, feasible by definition
+        if obj is None or parent is None:  # the start: the empty set, feasible by definition
             state, new_seq = frozenset[str](), ()
         else:
             state = parent if obj == target else parent | {obj}
@@ -174,7 +190,8 @@ def solve(problem, oracle) -> ExactResult:
     return ExactResult(None, None, calls, len(settled), why_none(target, known))
 
 
-def _ask_next(queue, question, oracle, known, settled, target) -> int:
+def _ask_next(queue: list[Entry], question: Query, oracle: FeasibilityOracle, known: dict[Query, FeasibilityAnswer],
+              settled: Mapping[frozenset[str], object], target: str) -> int:
     """Ask `question` and, for an oracle with several questions in flight (planner replicas), the
     next cheapest ones still queued whose sets are not settled, together; the answers go to `known`. Returns the
     number of questions asked (1 for a plain oracle: the search asks exactly what it pops)."""
@@ -183,7 +200,7 @@ def _ask_next(queue, question, oracle, known, settled, target) -> int:
         entry = heapq.heappop(queue)
         popped.append(entry)
         _, _, parent, _, obj = entry
-        if obj is None or (obj, parent) in known or (obj, parent) in batch:
+        if obj is None or parent is None or (obj, parent) in known or (obj, parent) in batch:
             continue
         if obj == target or (parent | {obj}) not in settled:
             batch.append((obj, parent))
@@ -193,7 +210,7 @@ def _ask_next(queue, question, oracle, known, settled, target) -> int:
     return len(batch)
 
 
-def brute_force(problem, oracle) -> ExactResult:
+def brute_force(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle) -> ExactResult:
     """Test reference: every removed set reachable by feasible single removals, asking the oracle about every
     (object, reachable set) pair, then the lightest set from which the target is feasible."""
     problem = as_problem(problem)

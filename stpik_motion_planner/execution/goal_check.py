@@ -9,7 +9,7 @@ len(removed), the one a certified feasible answer planned the carry to, when it 
 "The certified slot"). After the
 motion: the moved bottle stands at its slot (when the scene shows it; perception sees the top shelf only) and no
 other bottle moved more than the tolerance; otherwise the relocation is not a success and the result says what
-moved (docs/reliability.md, "What a relocation reports").
+moved (docs/reliability.md, "Never report success that is not true").
 """
 from __future__ import annotations
 

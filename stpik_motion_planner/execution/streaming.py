@@ -129,7 +129,7 @@ class StreamedArm:
         self.feedback(phase, progress(phase))
 
     def follow(self, traj: Trajectory, phase: str) -> None:
-        """Stream the trajectory at stream_rate with position feedback until it settles (execution.py)."""
+        """Stream the trajectory at stream_rate with position feedback until it settles (execution/follower.py)."""
         follower = TrajectoryFollower(traj, self.p.qdot_max, self.p.follower)
         self.link.show_path(traj, phase)
         period = 1.0 / self.p.stream_rate

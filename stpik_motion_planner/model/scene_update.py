@@ -14,8 +14,8 @@ import math
 from typing import Iterable, Mapping, NamedTuple
 
 from relocation_common.geometry import quat_wxyz, wxyz_matrix
-from relocation_common.orientation import UPRIGHT_TILT
 from relocation_common.scenario import Shelf, ShelfObject
+from relocation_common.shelf_object import UPRIGHT_TILT
 from stpik_motion_planner.model.collision import Lying
 
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it

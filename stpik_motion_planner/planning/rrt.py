@@ -3,8 +3,9 @@ the same planner in joint space with the same collision checker.
 
 Cartesian states are (x, y, z, yaw) of the tool of a horizontal side grasp (grasp.py); OMPL sees yaw scaled by
 YAW_SCALE (m/rad) so that its Euclidean metric and motion-checking resolution are in metres. The validity check
-is the rigid hand proxy (collision.HandProxy): no inverse kinematics inside the planner (see STACK-NOTES: IK
-goals make RRT-Connect burn its budget); the STPIK check (stpik.py) then decides whether the arm can follow.
+is the rigid hand proxy (collision.HandProxy): no inverse kinematics inside the planner (IK goals make RRT-Connect
+burn its budget: docs/install.md, "Platform notes"); the STPIK check (stpik.py) then decides whether the arm can
+follow.
 
 Budget: an attempt ends after `max_checks` validity checks (the work, the same on an idle or a loaded machine), so
 a query's answer does not depend on the load. `deadline` (time.perf_counter()) is only a safety net: reached before

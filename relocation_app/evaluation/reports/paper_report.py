@@ -173,12 +173,12 @@ reached 844 edges / 39 target leaves, one optimum, but its pick of T, at the arm
 plannings in one process and moving T forward left no single optimum, so it was not kept; a fresh radius-0.025
 search (45 min) reached 788 / 29, not valid. The hand, not the bottle, decides what blocks what. paper2_10's T was
 moved 10 mm forward after the search: at 0.902 its pick failed in 5 of 12 plannings in one process, 0 of 16 after; a
-fresh fill gives 353 edges / 24 target leaves. An earlier search (before the planner's budget became work) reached
-83 edges and 10 target leaves with five obstacles, but no weights gave it one optimum: 10 sequences of one set of
+fresh fill gives 353 edges / 24 target leaves. A five-obstacle layout with exactly the paper's shape reached
+83 edges and 10 target leaves, but no weights gave it one optimum: 10 sequences of one set of
 bottles weigh the same, as two removal chains of 2 and 3 bottles in front of the target would (exactly 83 edges, 10
 leaves); the paper's 84 / 10 / one optimum needs an optimum that Eq. 8 alone does not single out.
-These searches ran with the planner's grasp set of the time, 3 approach yaws up to 0.35 rad. With today's 5 yaws up
-to 0.5 rad, honest lanes and certified relocations (docs/motion_planner.md) the same layouts give the trees of the
+These searches ran with 3 approach yaws up to 0.35 rad. With the default grasp set (5 yaws up to 0.5 rad and a
+second tier), honest lanes and certified relocations (docs/motion_planner.md) the same layouts give the trees of the
 table above: more lanes open, paper3_15 grows past 2x the paper's edges and paper2_10 gains a lighter optimum (o6 o3
 T). A new search with this grasp set (`scenes paper N --resume --strict`) has not been run.
 """
