@@ -149,11 +149,13 @@ def test_hidden_bottle_reported_missing_not_made_up():
 
 
 def test_scene_memory_holds_unseen_objects_for_hold_frames_then_drops_them():
-    from perception_aruco.localize import Detection
+    from perception_scenes import perceived
+
     from perception_aruco.pipeline import SceneMemory
+    from relocation_common.scenario import ShelfObject
 
     def det(i, x):
-        return Detection(i, x, 0.0, 0.2, 100, 0.0, (0, 0))
+        return perceived(ShelfObject(i, "red", (0.85, 0.1, 0.1), 0.5, x, 0.0, 0.033, 0.16), x, 0.0, 0.2)
     m = SceneMemory(("a", "b", "T"), hold_frames=2)
     pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)})
     assert [d.id for d in pub] == ["a", "b", "T"] and not held and not lost
