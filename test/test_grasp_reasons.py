@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from relocation_common import robot_description as rd
-from relocation_common.feasibility import Label
+from relocation_common.feasibility import NO_GRASP, Label
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.collision import object_obstacle
-from stpik_motion_planner.model.grasp import NO_GRASP, grasp_refusal, grasp_standoff, hand_opening
+from stpik_motion_planner.model.grasp import grasp_refusal, grasp_standoff, hand_opening
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 

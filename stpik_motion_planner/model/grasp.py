@@ -22,6 +22,7 @@ from typing import Sequence, Union
 import numpy as np
 
 from relocation_common import robot_description as rd
+from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT
 
@@ -36,7 +37,6 @@ def grasp_standoff(radius: float) -> float:
     return max(0.0, radius + PALM_GAP - PALM_REACH)
 
 
-NO_GRASP = "no grasp: "  # the start of the message of an object the side grasp cannot take (an UNFEASIBLE answer)
 _FINGERS = tuple(c for c in rd.CAPSULES if c.name.startswith("finger"))
 
 

@@ -14,10 +14,11 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from relocation_common import robot_description as rd
+from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, UnknownObjectError
 from relocation_common.shelf_object import objects_key
 from stpik_motion_planner.model.collision import ArmGeometry, CollisionScene, HandProxy, Lying, ObstacleSet
-from stpik_motion_planner.model.grasp import NO_GRASP, carry_heights, grasp_refusal, home_pose, yaw_tiers
+from stpik_motion_planner.model.grasp import carry_heights, grasp_refusal, home_pose, yaw_tiers
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import QueryStats
