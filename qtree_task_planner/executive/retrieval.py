@@ -75,7 +75,9 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
     """(exact optimum, training result). The answers the exact solve gathered before an outage are kept in a
     checkpoint (`keep`), so nothing asked is asked again; training checkpoints every `checkpoint_every` episodes,
     calls `on_episode(stats)` every `episode_every` episodes (training.train's callback) and stops when it
-    returns False (cancel, shutdown)."""
+    returns False (cancel, shutdown). No training when the exact solve proved that no sequence exists (`proven_none`:
+    every episode would ask in vain, up to E_max; a blocking cycle through an object the hand cannot grasp ran 30
+    minutes of episodes before)."""
     state: dict[str, Checkpoint | None] = {"ck": resume}
 
     def solve() -> astar.AStarResult:
@@ -90,6 +92,8 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
 
     optimum = until_planner(solve)
     on_solved(optimum)
+    if not optimum.found:
+        return optimum, proven_none(params, oracle.calls)
 
     def on_checkpoint(ck: Checkpoint) -> None:
         state["ck"] = ck
@@ -101,6 +105,12 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
                      on_checkpoint=on_checkpoint)
 
     return optimum, until_planner(run)
+
+
+def proven_none(params: TrainingParams, planner_calls: int) -> TrainingResult:
+    """The training result of a problem the exact solve proved has no sequence (its A* explored every set the
+    planner's answers and certain lane claims leave open: no episode can find one): no episode run."""
+    return TrainingResult(None, None, 0, False, 0, 0, planner_calls, None, None, False, 0, 0, [], params)
 
 
 def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: bool) -> tuple[bool, str] | None:
