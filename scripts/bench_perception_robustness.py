@@ -43,9 +43,9 @@ import numpy as np  # noqa: E402  (after the BLAS thread setting, which must pre
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from jaco2_sim_driver import sensor_model as sm  # noqa: E402  (after the sys.path insert of the checkout)
-from jaco2_sim_driver.camera import CameraRenderer, Frame, render_frame  # noqa: E402  (after the sys.path insert of the checkout)
+from jaco2_sim_driver.camera import CameraRenderer, Frame, render_frame, visible_pixels  # noqa: E402  (after the sys.path insert of the checkout)
 from jaco2_sim_driver.params import CameraSpec
-from jaco2_sim_driver.scene import CAMERA_NAME, build_model  # noqa: E402  (after the sys.path insert of the checkout)
+from jaco2_sim_driver.scene import build_model  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.aruco import PerceptionError, marker_corners_3d, marker_in_base  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.pipeline import Perception  # noqa: E402  (after the sys.path insert of the checkout)
 from relocation_common.geometry import matrix_rpy, rotvec_matrix, rpy_matrix  # noqa: E402  (after the sys.path insert of the checkout)
@@ -217,25 +217,6 @@ def score(truth: Scenario, given: Scenario, K, rgb, depth, required: set[str], p
                                                                       for i in missing) if missing else "")
     return dict(outcome=outcome, reason=reason, errors=errors, swaps=swaps, false=false, unlisted=len(r.unlisted))
 
-
-def visible_pixels(s: Scenario, q) -> dict[str, int]:
-    """Pixels of each bottle in the 640x480 image (MuJoCo segmentation rendering of the same scene)."""
-    import mujoco
-    camera = CameraSpec.configured()
-    model = build_model(s, camera)
-    data = mujoco.MjData(model)
-    for j, qj in zip(JOINT_NAMES, q):
-        data.qpos[model.joint(j).qposadr[0]] = qj
-    mujoco.mj_forward(model, data)
-    r = mujoco.Renderer(model, camera.height, camera.width)
-    try:
-        r.enable_segmentation_rendering()
-        r.update_scene(data, camera=CAMERA_NAME)
-        seg = r.render()
-    finally:
-        r.close()
-    geoms = seg[:, :, 0][seg[:, :, 1] == int(mujoco.mjtObj.mjOBJ_GEOM)]
-    return {b.id: int(np.sum(geoms == model.geom(f"{b.id}_geom").id)) for b in s.objects}
 
 
 def fps(scenes: list[tuple[Scenario, Frame]], q, repeats: int = 5) -> tuple[float, float]:
