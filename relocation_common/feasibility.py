@@ -11,12 +11,17 @@ the objects the hand or arm meets there: `BlockerSet`s, the alternatives whose r
 a suspicion (the lane passed the screen but STPIK or RRT-Connect failed there): it claims nothing. The claim of an
 answer whose sets are all certain: from `removed` or any superset of it, relocating the object needs one of the listed
 lanes cleared. Empty `blockers` = no information.
+
+An object the hand cannot grasp (a box, a lying bottle, one wider than the open hand...) is answered g_U with a
+message starting NO_GRASP and the reason: it stays an obstacle, never relocated, whatever is removed.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, Callable, Mapping, Protocol, Sequence
+
+NO_GRASP = "no grasp: "  # the start of the g_U message of an object the hand cannot grasp (module docstring)
 
 
 class Label(IntEnum):
