@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from typing import ContextManager, Protocol
+from typing import Callable, ContextManager, Protocol
 
 import numpy as np
 
@@ -96,10 +96,11 @@ def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str], 
 
 def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float | None = None,
              lock: ContextManager[object] | None = None, progress: Progress | None = None, slot: int | None = None,
-             placed: Placed | None = None) -> RelocationPlan:
+             placed: Placed | None = None, on_change: Callable[[], None] = lambda: None) -> RelocationPlan:
     """Relocate object_id to its slot (`slot` and `placed` as plan_relocation); PlanningError (or the arm's error)
     names the failed stage. `lock` guards the planner (not thread-safe) while it plans, not while the arm moves.
-    `progress` records what was done (for `recover` after a failure). Farther than `home_tol` (rad; None:
+    `progress` records what was done (for `recover` after a failure); `on_change()` is called each time it changes
+    (a motion about to start, the release: the node's journal). Farther than `home_tol` (rad; None:
     config/motion_planner.yaml's) from home, the arm goes home first. Returns the plan made before moving."""
     lock = lock if lock is not None else nullcontext()
     home_tol = float(node_parameters()["home_tol"]) if home_tol is None else home_tol
@@ -110,7 +111,7 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     slot_xy = planner.scenario.slots[plan.slot_index]
     progress = progress if progress is not None else Progress()
     progress.object_id, progress.removed, progress.placed = object_id, removed, list(plan.placed)
-    arm = _Recorded(arm, progress)
+    arm = _Recorded(arm, progress, on_change)
     q = arm.measured()
     if float(np.max(np.abs(q - rd.Q_HOME))) > home_tol:
         arm.phase("plan_home")
@@ -132,6 +133,7 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     arm.gripper("open", "release")
     progress.released = True
     progress.placed.append((object_id, slot_xy))
+    on_change()
     arm.follow(retreat, "retreat")
     arm.phase("plan_home")
     home = plan.home
@@ -147,14 +149,15 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
 
 
 class _Recorded:
-    """An Arm that records each motion in a Progress before following it."""
+    """An Arm that records each motion in a Progress (then calls on_change) before following it."""
 
-    def __init__(self, arm: Arm, progress: Progress) -> None:
-        self.arm, self.progress = arm, progress
+    def __init__(self, arm: Arm, progress: Progress, on_change: Callable[[], None]) -> None:
+        self.arm, self.progress, self.on_change = arm, progress, on_change
         self.measured, self.gripper, self.phase = arm.measured, arm.gripper, arm.phase
 
     def follow(self, trajectory: Trajectory, phase: str) -> None:
         self.progress.moves.append((phase, trajectory))
+        self.on_change()
         self.arm.follow(trajectory, phase)
 
 
