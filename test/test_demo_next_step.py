@@ -1,7 +1,8 @@
-"""The demo's one-line next step after a failure (relocation_app.demo._next_step): the reason decides it."""
+"""The demo's one-line next step after a failure (relocation_app.run_report.next_step): the reason decides it."""
 from pathlib import Path
 
-from relocation_app.demo import _next_step, _timeout_hint
+from relocation_app.run_report import next_step as _next_step
+from relocation_app.run_report import timeout_hint as _timeout_hint
 
 OUT = Path("/tmp/out")
 

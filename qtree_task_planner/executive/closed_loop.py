@@ -444,6 +444,7 @@ class ClosedLoopExecutor:
         self._banned: set[Option] = set()
         self._failures: dict[str, int] = {}
         self._retried: dict[tuple[str, frozenset[str]], int] = {}  # failures of time per option
+        self._top: set[str] = set()  # every object seen resting on the top shelf during the run
         try:
             self._run(list(sequence), dict(scene if scene is not None else self._perceive("at the start")), out)
         except _Done:
@@ -468,8 +469,8 @@ class ClosedLoopExecutor:
                 raise GiveUp(f"no free slot on the bottom shelf for {obj}")
             # the relocated bottles, then those seen off the top shelf otherwise (dropped to the floor): the motion
             # planner keeps an unseen bottle at its last pose, and the re-plan's answers had them gone (rp.gone)
-            removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and
-                                                                o not in out.relocated)), rp.gone
+            removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and o in self._top
+                                                                and o not in out.relocated)), rp.gone
             slot = self.slot_of(rp) if self.slot_of else destination_slot(len(removed), rp.free_slots)
             ok, message = self.relocate(obj, list(removed))
             after = self._perceive(f"after relocating {obj}")
@@ -478,9 +479,10 @@ class ClosedLoopExecutor:
                 x, y = self.scenario.slots[slot]
                 check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
                                           self.bottom_seen)
+                check = replace(check, new=self._on_top(check.new, after))
                 if not ok and check.ok:
                     ok, message = True, f"{message}; the scene after it shows it done"
-            stayed, new = _stayed(obj, scene, after, self.tol), new_objects(scene, after, obj)
+            stayed, new = _stayed(obj, scene, after, self.tol), self._on_top(new_objects(scene, after, obj), after)
             if ok and check is not None and check.unseen_place:
                 out.unverified.append(obj)
             step = Step(len(out.steps), obj, removed, slot, ok, message, check)
@@ -506,6 +508,11 @@ class ClosedLoopExecutor:
                 seq = self._replan(f"the world differs after relocating {obj}: {check.summary()}" if not check.ok
                                    else "; ".join(d.line for d in new), rp, out)
 
+    def _on_top(self, new: tuple[Difference, ...], scene: Scene) -> tuple[Difference, ...]:
+        """The new objects that rest on the top shelf: an object first seen elsewhere (a relocated bottle the
+        camera glimpses on the bottom shelf, as perception names it anew) is no obstacle and no re-plan."""
+        return tuple(d for d in new if board_of(scene[d.object_id], self.scenario, self.tol) == "top")
+
     def _perceive(self, when: str) -> dict[str, SeenObject]:
         try:
             return dict(self.perceive())
@@ -518,6 +525,7 @@ class ClosedLoopExecutor:
         out.relocated[:] = [o for o in out.relocated
                             if o not in scene or board_of(scene[o], self.scenario, self.tol) != "top"]
         rp = remaining_problem(self.scenario, scene, out.relocated, self.tol)
+        self._top |= {b.id for b in rp.bottles}  # an object off the top shelf is sent as removed only if it was on it
         if rp.target_retrieved:
             out.success = True
             out.message = (f"target {self.scenario.target_id} retrieved after {len(out.relocated) - 1} relocations"
