@@ -43,6 +43,8 @@ from relocation_common.paths import default_scenario, resolve_scenario
 TRAINING = ("exact optimum", "training", "waiting for planner")  # the feedback phases before the execution
 SETTLE_WAIT = 200.0  # s the demo waits for the motion planner's relocation in flight when the task planner died
 RESTART_WAIT = 120.0  # s for a respawned task planner to say it is up (its /diagnostics status with its new pid)
+DISCOVERY_SETTLE = 3.0  # s after that before the goal is sent again
+GOAL_RESPONSE_WAIT = 15.0  # s for the respawned task planner's goal response before the goal is sent once more
 
 
 def _args(argv):
@@ -234,16 +236,32 @@ def _watching(g: Graph, seen: int):
 
 
 def _restarted(g: Graph, w: _Watch) -> None:
-    """Wait until the respawned task planner is up: its /diagnostics status comes from its new process."""
+    """Wait until the respawned task planner is up: its /diagnostics status comes from its new process; then
+    DISCOVERY_SETTLE s more (its action's endpoints are matched after its diagnostics: a goal sent at once was
+    lost, 'no goal response within 30 s')."""
     deadline = time.monotonic() + RESTART_WAIT
     while True:
         g.check_alive()
         p = g.procs.get("task_planner")
         if p is not None and w.pids.get("task_planner: goal") == str(p.pid):
+            time.sleep(DISCOVERY_SETTLE)
             return
         if time.monotonic() > deadline:
             raise TimeoutError(f"the respawned task planner did not come up within {RESTART_WAIT:g} s")
         time.sleep(0.2)
+
+
+def _send(client, on_feedback, check, goal: dict, again: bool) -> None:
+    """Send the training goal; `again` (to a respawned task planner): a goal whose response does not come within
+    GOAL_RESPONSE_WAIT s is sent once more (a request sent while discovery was still matching is lost)."""
+    for attempt in range(2 if again else 1):
+        try:
+            client.train(on_feedback=on_feedback, check=check, timeout=GOAL_RESPONSE_WAIT if again else 30.0, **goal)
+            return
+        except ClientError as e:
+            if not again or attempt == 1 or not str(e).startswith("no goal response"):
+                raise
+            print("[demo] no goal response from the respawned task planner: sending the goal once more")
 
 
 def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[End | None, Any]:
@@ -258,11 +276,11 @@ def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[E
     bar, on_feedback = _progress_bar(w)
     goal = dict(policy=used.policy, search=used.search, seed=used.seed, execute=not a.no_execute,
                 execute_optimum=a.execute_optimum)
-    deadline = time.monotonic() + a.timeout
+    deadline, again = time.monotonic() + a.timeout, False
     try:
         while True:
             check = _watching(g, len(g.events))
-            client.train(on_feedback=on_feedback, check=check, **goal)
+            _send(client, on_feedback, check, goal, again)
             try:
                 outcome = client.wait(max(1.0, deadline - time.monotonic()), check=check)
                 break
@@ -274,6 +292,7 @@ def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[E
                 print(f"[demo] the task planner died ({e}) and is respawned: sending the goal again (the training "
                       "resumes from its checkpoint)")
                 _restarted(g, w)
+                again = True
     except ClientError as e:
         if str(e).startswith("no result within"):
             return End("timeout", f"{e}{run_report.timeout_hint(str(e), g.run_dir / 'qtree.ckpt')}"), None
