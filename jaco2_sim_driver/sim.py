@@ -110,6 +110,7 @@ class Jaco2Sim:
             m.geom_rgba[gid, 3] = 0.0
         self.grasped: str | None = None
         self.watchdog_stops = 0  # a moving arm stopped by the watchdog, over resets too (the driver's health)
+        self._tripped = True  # the watchdog's state at the last step (a stop is counted when it trips)
         self.reset()
 
     # ---------------------------------------------------------------- state

@@ -79,6 +79,7 @@ class MotionPlannerService:
         self.on_relocated: Callable[[dict[str, int]], None] = lambda relocated: None
         self.journal = journal or Journal(None)
         self.interrupted: Running | None = None  # a relocation a previous process did not finish
+        self._running: Running | None = None  # the relocation being carried out or recovered (its journal entry)
         self._resumed: tuple[Running, str] | None = None  # it, recovered, with what the recovery did
         self._ready = threading.Event()  # set once no interrupted relocation is left to recover
         try:
@@ -187,7 +188,7 @@ class MotionPlannerService:
             arm.wait_for_state(STATE_WAIT)
             before = dict(self.scene.seen)
             self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated, len(removed_ids))
-            running = Running(progress, self._slot, [(b.id, b.x, b.y, b.z) for b in before.values()])
+            self._running = running = Running(progress, self._slot, [(b.id, b.x, b.y, b.z) for b in before.values()])
 
             def on_change() -> None:  # a motion about to start, or the release
                 if progress.released:
@@ -240,7 +241,7 @@ class MotionPlannerService:
                 what = (f"the journal's relocation of {run.progress.object_id} is not where the arm is (a new "
                         "world?): dropped")
             else:
-                self._slot = run.slot
+                self._slot, self._running = run.slot, run
                 what = self._recover(arm, run.progress).lstrip("; ")
                 self._resumed = (run, what)
         except Exception as e:  # the driver gone, the planner: said; the next goal starts from where the arm is
@@ -277,7 +278,8 @@ class MotionPlannerService:
         for attempt in range(RECOVERY_TRIES):
             try:
                 arm.measured()  # a driver that is gone: fail now, not after the gripper's timeout
-                what = recover(self.planner, arm, progress, self.plan_lock)
+                what = recover(self.planner, arm, progress, self.plan_lock,
+                               on_change=lambda: self._write_journal(self._running))
                 break
             except Exception as e:
                 self.log("error", f"recovery after the failed relocation failed: {e}")

@@ -183,7 +183,7 @@ def test_cancel_during_the_carry_sets_the_bottle_down_and_the_next_goal_works(gr
     assert max(moved.values()) < 0.01, moved
     graph.states.clear()
     q = np.array(graph.states.wait(timeout=5)[-1].position[:7])
-    # home: within 0.03 rad (the recovery's last motion once ended 0.044 rad off; service.HOME_SETTLE brings it home)
+    # home: within 0.03 rad (config/motion_planner.yaml home_tol; the recovery's last motion once ended 0.044 rad off)
     np.testing.assert_allclose(q, rd.Q_HOME, atol=0.03)
     handle, _ = _send(graph, "o3", ["o2"])
     res = _result(handle)

@@ -53,6 +53,7 @@ class Journal:
         if running is not None:
             p = running.progress
             data["running"] = {"object_id": p.object_id, "removed": list(p.removed), "released": p.released,
+                               "carried": p.carried,
                                "placed": [[i, list(xy)] for i, xy in p.placed], "slot": running.slot,
                                "before": [list(b) for b in running.before],
                                "moves": [[phase, _trajectory(t)] for phase, t in p.moves]}
@@ -82,7 +83,8 @@ class Journal:
                 return relocated, None
             progress = Progress(str(r["object_id"]), [str(i) for i in r["removed"]],
                                 [(str(i), (float(xy[0]), float(xy[1]))) for i, xy in r["placed"]],
-                                [(str(phase), _from(t)) for phase, t in r["moves"]], bool(r["released"]))
+                                [(str(phase), _from(t)) for phase, t in r["moves"]], bool(r["released"]),
+                                bool(r["carried"]))
             before = [(str(i), float(x), float(y), float(z)) for i, x, y, z in r["before"]]
             return relocated, Running(progress, int(r["slot"]), before)
         except (OSError, ValueError, KeyError, TypeError, IndexError) as e:

@@ -55,8 +55,9 @@ class Progress:
     object_id: str = ""
     removed: list = field(default_factory=list)
     placed: list = field(default_factory=list)  # (bottle, slot xy) on the bottom shelf, this one once released
-    moves: list = field(default_factory=list)  # (phase, Trajectory), oldest first
+    moves: list = field(default_factory=list)  # (phase, Trajectory), oldest first; a recovery removes those undone
     released: bool = False
+    carried: bool = False  # the carry was gone back along by a recovery (a retry says so)
 
 
 @dataclass
@@ -161,13 +162,17 @@ class _Recorded:
         self.arm.follow(trajectory, phase)
 
 
-def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextManager[object] | None = None) -> str:
+def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextManager[object] | None = None,
+            on_change: Callable[[], None] = lambda: None) -> str:
     """A safe state after a failed or cancelled relocation (the next goal starts from home, nothing held).
 
     Before the release: back along the motions made, newest first (the same paths, as clear as on the way there);
     the way back along the carry ends at the grasp, where a held bottle is let go, standing where it was picked; then
-    back along the approach to home. After the release: a fresh path home. Returns what was done; raises (the arm's
-    or PlanningError) if it could not."""
+    back along the approach to home. Each motion gone back along leaves `progress.moves` (then on_change(): the
+    journal), so a recovery tried again goes on from where the arm is with the motions left: before, a retry after
+    the last motion failed near home (did not settle under load) went back along the whole carry again, from its
+    sample nearest home into the shelf. After the release: a fresh path home. Returns what was done; raises (the
+    arm's or PlanningError) if it could not."""
     lock = lock if lock is not None else nullcontext()
     if progress.released:
         with lock:
@@ -175,11 +180,15 @@ def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextM
         arm.follow(home, "recover")
         return f"{progress.object_id} was placed; arm back home"
     moves = [(phase, t) for phase, t in progress.moves if phase in ("approach", "carry")]
-    if not moves:
+    carried = any(phase == "carry" for phase, _ in moves) or progress.carried
+    if not moves and not progress.carried:
         return "arm stopped (it had not moved towards the bottle)"
     for phase, traj in reversed(moves):
         if phase == "approach":  # at the grasp: let go of the bottle (if held) where it was picked
             arm.gripper("open", "recover")
         arm.follow(traj.back_from(arm.measured()), "recover")
-    return (f"{progress.object_id} set down where it was picked; arm back home" if moves[-1][0] == "carry" else
+        progress.carried |= phase == "carry"
+        progress.moves = [m for m in progress.moves if m[1] is not traj]  # gone back along: not again
+        on_change()
+    return (f"{progress.object_id} set down where it was picked; arm back home" if carried else
             "arm back home along its approach, gripper open")
