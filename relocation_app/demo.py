@@ -126,8 +126,12 @@ class _Watch:
         latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
         self.scene_topic = scene_topic
         self.execution, self.truth, self.scene, self.joints, self.status = (_Latest() for _ in range(5))
-        self.rec, self.disturbances, self.relocating, self.pids = _Recorder(), [], [], {}
-        self.phase, self.executing, self.before = "", False, {}
+        self.rec = _Recorder()
+        self.disturbances: list[dict[str, Any]] = []  # /sim/disturbances, as they come
+        self.relocating: list[str] = []  # /task_planner/relocating, as they come
+        self.pids: dict[str, str] = {}  # /diagnostics status name -> the pid it last gave
+        self.phase, self.executing = "", False
+        self.before: dict[str, Any] = {}  # the ground truth when the execution started
         node.create_subscription(String, "/task_planner/execution", self.execution, latched)
         node.create_subscription(String, "/sim/disturbances", lambda m: self.disturbances.append(json.loads(m.data)),
                                  QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL))
@@ -375,7 +379,8 @@ def run(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     scene_topic = "/scene/objects" if a.scene_source == "perception" else "/sim/objects"
-    end, res, w, events, recording, final = End("error", "the node graph did not start"), None, None, [], None, None
+    end: End | None = End("error", "the node graph did not start")
+    res, w, events, recording, final = None, None, [], None, None
     try:
         with Graph(out / "run", respawn=True) as g:
             events = g.events
