@@ -293,9 +293,10 @@ class MotionPlannerService:
 
     def _settle_home(self, arm: StreamedArm, progress: Progress) -> None:
         """The final settle: an arm that ended farther than HOME_SETTLE from home is brought home from where it is,
-        so the next goal starts there (a motion settles within settle_tol of its last point; under load a
-        recovery's last motion once ended 0.044 rad off). A failure is logged: the arm is near home, and the next
-        goal plans its way home first when it is farther than home_tol."""
+        so the next goal starts there (a motion settles within settle_tol of its last point, for the follower's
+        settle_dwell: on joint states a tenth of a second old, a follower that stopped at the first state within
+        settle_tol left a recovery 0.044 rad off home; this is the net for what is left). A failure is logged: the
+        arm is near home, and the next goal plans its way home first when it is farther than home_tol."""
         try:
             time.sleep(SETTLE_WAIT)  # commands still on their way to the driver (under load) have played out
             q = arm.measured()
