@@ -16,8 +16,8 @@ After the end the follower corrects until every joint has stayed within
 `settle_tol` of the last point for `settle_dwell`: the joint states it closes the loop on can be a tenth of a
 second old under load (the subscription's queue), and a follower that stopped at the first state within settle_tol
 left the arm where the correction on those old states had carried it, past the point (0.044 rad off home after a
-recovery; 0.040 rad in MuJoCo with states 0.1 s old: test_execution.py). Failures: an error above `max_error`, tau stuck for `stall_timeout` (the arm is
-blocked), or no settling within `settle_timeout`.
+recovery; 0.040 rad in MuJoCo with states 0.1 s old: test_execution.py). Failures: an error above `max_error`, tau
+stuck for `stall_timeout` (the arm is blocked), or no settling within `settle_timeout`.
 """
 from __future__ import annotations
 
