@@ -146,7 +146,7 @@ def node_died_step(message: str, out: Path) -> str:
         return (f"the driver died: its log is {out}/run/logs/jaco2_sim_driver.log; on a real arm check where it "
                 f"stopped and what it holds before moving it; then run the same command (a fresh simulated world; "
                 f"the training resumes from {ckpt})")
-    if "task_planner" in message:
+    if "task_planner" in message or "task planner died during the execution" in message:  # the demo's words
         return (f"the task planner died during the execution (its log: {out}/run/logs/task_planner.log); run the "
                 f"same command: the training resumes from {ckpt}, the execution starts on a fresh simulated shelf")
     return (f"a node kept dying (max_respawns in config/graph.yaml): read its log in {out}/run/logs, then run the "

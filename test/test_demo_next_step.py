@@ -49,3 +49,13 @@ def test_a_demo_out_of_time_says_that_the_same_command_resumes_it():
     hint = _timeout_hint("no result within 900 s", OUT / "run" / "qtree.ckpt")
     assert "/tmp/out/run/qtree.ckpt: the same command resumes it" in hint and "--timeout" in hint
     assert _timeout_hint("the train goal was rejected: bad policy", OUT) == ""
+
+
+def test_a_task_planner_that_died_during_the_execution_gets_its_own_step():
+    """The chaos benchmark's task planner SIGKILLed during a carry: the demo's message says "the task planner died
+    during the execution"; the old step read "a node kept dying (max_respawns ...)", which it had not (one respawn)."""
+    message = ("the task planner died during the execution (exit -9; phase: check 1: o4 relocated as planned): the "
+               "goal and the execution's state died with it")
+    step = _next_step(message, OUT, "node_died")
+    assert "task planner died during the execution" in step and "kept dying" not in step, step
+    assert "kept dying" in _next_step("perception died 4 times (max_respawns 3)", OUT, "node_died")
