@@ -205,6 +205,17 @@ class SimDriver:
         """kinova in/start."""
         self.stopped = False
 
+    def health(self) -> tuple[int, str, dict[str, str]]:
+        """The driver's status for /diagnostics (relocation_common.node.Health): the command age (simulated s
+        since the last velocity command), the watchdog's stops of a moving arm, stopped (kinova in/stop: WARN)."""
+        with self.lock:
+            age, stops, t = self.sim.command_age, self.sim.watchdog_stops, self.sim.time
+        state = "stopped (in/stop): commands ignored until in/start" if self.stopped else \
+            "moving on commands" if age <= self.sim.watchdog_timeout else "holding still (no command)"
+        values = {"command age (s)": f"{age:.3f}" if age < 1e9 else "no command yet",
+                  "watchdog stops": str(stops), "stopped": str(self.stopped), "sim time (s)": f"{t:.1f}"}
+        return (1 if self.stopped else 0), f"arm {state}; watchdog stops: {stops}", values
+
     def reset(self) -> str:
         """The scenario's state, arm home, fingers open, sim time 0, started; the scenario's name."""
         with self.lock:

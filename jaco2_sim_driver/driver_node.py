@@ -43,7 +43,7 @@ from tf2_msgs.msg import TFMessage
 
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
 from relocation_common.arm_interface import FILE, GRIPPER_TOPIC, VELOCITY_TOPIC, ArmInterface, MismatchWatch
-from relocation_common.node import SideNode, declare_parameters, node_main
+from relocation_common.node import Health, SideNode, declare_parameters, node_main
 from relocation_common.robot_description import BASE_LINK, urdf
 from relocation_common.ros_conversions import transform_msg
 
@@ -89,6 +89,7 @@ class Jaco2SimDriver(Node):
         self.create_service(Trigger, f"{pre}/in/reset_scene", self.srv_reset)  # the simulator's own
         self._sensor_publishers()
         self._watch = MismatchWatch(self, self.arm, "driver", self.resolve_topic_name(self.arm.velocity_topic))
+        self.health = Health(self, "jaco2_sim_driver: arm", "jaco2 (simulated)", self.core.health)  # /diagnostics
         self._sim_thread = threading.Thread(target=self._sim_loop, name="sim", daemon=True)
         self._sim_thread.start()
         self._cam_thread = None
@@ -198,14 +199,12 @@ class Jaco2SimDriver(Node):
     def srv_stop(self, req: Stop.Request, res: Stop.Response) -> Stop.Response:
         """kinova_msgs/Stop: the arm stops at once; commands (velocities, finger goals) are ignored until Start."""
         self.core.stop()
-        res.stop_result = "Arm stopped"
-        return res
+        return Stop.Response(stop_result="Arm stopped")
 
     def srv_start(self, req: Start.Request, res: Start.Response) -> Start.Response:
         """kinova_msgs/Start."""
         self.core.start()
-        res.start_result = "Arm started"
-        return res
+        return Start.Response(start_result="Arm started")
 
     def srv_reset(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         """The simulator's own: scenario state, arm home, fingers open, sim time 0, started (not stopped)."""

@@ -109,6 +109,8 @@ class Jaco2Sim:
             m.geom_contype[gid] = m.geom_conaffinity[gid] = 0
             m.geom_rgba[gid, 3] = 0.0
         self.grasped: str | None = None
+        self.watchdog_stops = 0  # a moving arm stopped by the watchdog, over resets too (the driver's health)
+        self._tripped = True  # the watchdog's state at the last step (a stop is counted when it trips)
         self.reset()
 
     # ---------------------------------------------------------------- state
@@ -150,7 +152,12 @@ class Jaco2Sim:
     @property
     def watchdog_tripped(self) -> bool:
         """True when no command came for `watchdog_timeout` of simulated time (the command is then zero)."""
-        return self.time - self._cmd_time > self.watchdog_timeout
+        return self.command_age > self.watchdog_timeout
+
+    @property
+    def command_age(self) -> float:
+        """Simulated seconds since the last velocity command (inf: none since the reset)."""
+        return self.time - self._cmd_time
 
     def ee_pose(self) -> np.ndarray:
         """4x4 pose of the tool frame (site end_effector: z approach, x closing, origin grasp centre)."""
@@ -180,7 +187,11 @@ class Jaco2Sim:
         self._apply()
 
     def _apply(self) -> None:
-        v = self._cmd if not self.watchdog_tripped else np.zeros(N_JOINTS)
+        tripped = self.watchdog_tripped
+        if tripped and not self._tripped and np.any(self._cmd != 0):
+            self.watchdog_stops += 1  # a moving arm stopped by the watchdog (the command stream stopped or stalled)
+        self._tripped = tripped
+        v = self._cmd if not tripped else np.zeros(N_JOINTS)
         q = self.data.qpos[self._qadr]
         lim = self._limited
         # joint-limit stop: the speed towards a limit shrinks with the distance to it
@@ -228,6 +239,7 @@ class Jaco2Sim:
         self.data.qvel[self._vadr] = 0.0
         self._cmd = np.zeros(N_JOINTS)
         self._cmd_time = -math.inf
+        self._tripped = True
         self.data.ctrl[self._act] = 0.0
         if self.grasped is not None:  # a carried bottle comes along, at its grasp offset
             mujoco.mj_kinematics(self.model, self.data)

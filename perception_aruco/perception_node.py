@@ -2,11 +2,13 @@
 
 Thin shell over perception_aruco.pipeline. Colour and depth are paired by stamp (closest within `sync_slop`);
 the newest pair is processed at most `process_rate` times a second. Objects hidden in the current frame are kept
-at their last perceived pose for `hold_frames` processed frames, then dropped; a scene without the target is never
-published (docs/perception.md). The last scene is republished every `republish_period` s while it is younger than
-`max_scene_age` (the task planner refuses stale scenes). Bad input is logged, never fatal. Every frame with the
-marker also puts on /tf the marker as seen (camera optical frame -> `aruco_marker_<id>`) and the shelf frame
-`shelf_frame` on it (front edge of the top board's surface, centred, axes of the base frame, from the scenario).
+at their last perceived pose for `hold_frames` processed frames, then dropped; a scene without the target is not
+published, unless the motion planner says it placed the target on the bottom shelf (`relocated_topic`), out of the
+camera's view: then the scene is what the camera sees, the top shelf without the target (docs/perception.md). The
+last scene is republished every `republish_period` s while it is younger than `max_scene_age` (the task planner
+refuses stale scenes). Bad input is logged, never fatal. Every frame with the marker also puts on /tf the marker as
+seen (camera optical frame -> `aruco_marker_<id>`) and the shelf frame `shelf_frame` on it (front edge of the top
+board's surface, centred, axes of the base frame, from the scenario).
 Health goes out on /diagnostics (diagnostic_msgs/DiagnosticArray, the ROS convention): OK with the checks' numbers,
 WARN with bottles missing, ERROR with the reason a frame was refused. The camera poses of consistent frames are
 fused (`pipeline.FrameFusion`); the fused pose stands in when the marker is covered, if the shelf confirms it.
@@ -15,6 +17,7 @@ not (u1, u2, ...: estimated weight, said in the message's weight_note and the lo
 """
 from __future__ import annotations
 
+import json
 import os
 import threading
 import time
@@ -22,16 +25,17 @@ from collections import deque
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from qtree_relocation_msgs.msg import ObjectArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
 from relocation_common.geometry import invert
-from relocation_common.node import declare_parameters, node_main
+from relocation_common.node import Health, declare_parameters, node_main
 from relocation_common.paths import config_file
 from relocation_common.robot_description import JOINT_NAMES
 from relocation_common.ros_conversions import objects_to_msg, transform_msg
@@ -95,11 +99,14 @@ class PerceptionNode(Node):
         self.create_subscription(CameraInfo, g("camera_info_topic"), self._on_info, qos_profile_sensor_data,
                                  callback_group=sensors)
         self.create_subscription(JointState, g("joint_state_topic"), self._on_joint_state, 10, callback_group=sensors)
+        self._placed: set[str] = set()  # ids the motion planner placed on the bottom shelf (relocated_topic)
+        self.create_subscription(String, g("relocated_topic"), self._on_relocated,
+                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.pub = self.create_publisher(ObjectArray, g("objects_topic"),
                                          QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.debug_pub = self.create_publisher(Image, g("debug_topic"), 1)
         self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.health = Health(self, "perception: frame", "camera")  # /diagnostics, one status per processed frame
         sh = self.scenario.shelf
         t_base_shelf = np.eye(4)
         t_base_shelf[:3, 3] = (sh.x_front, sh.y_center, sh.top_z)
@@ -138,6 +145,13 @@ class PerceptionNode(Node):
 
     def _on_info(self, msg: CameraInfo) -> None:
         self._info = msg
+
+    def _on_relocated(self, msg: String) -> None:
+        """The motion planner's placed bottles ({"relocated": {id: slot}}); a malformed message is logged."""
+        try:
+            self._placed = {str(i) for i in json.loads(msg.data)["relocated"]}
+        except (ValueError, KeyError, TypeError) as e:
+            self.get_logger().warning(f"relocated message ignored: {e}", throttle_duration_sec=10.0)
 
     def _on_joint_state(self, msg: JointState) -> None:
         if all(n in msg.name for n in JOINT_NAMES) and len(msg.position) == len(msg.name):
@@ -224,12 +238,7 @@ class PerceptionNode(Node):
 
     def _publish_health(self, level: bytes, message: str, values: dict) -> None:
         """One status on /diagnostics (diagnostic_msgs: OK, WARN, ERROR) for the last processed frame."""
-        msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [DiagnosticStatus(level=level, name="perception: frame", message=message[:1000],
-                                       hardware_id="camera", values=[KeyValue(key=k, value=v)
-                                                                     for k, v in values.items()])]
-        self.diag_pub.publish(msg)
+        self.health.send(level[0], message, values)
 
     def _publish_tf(self, color: Image, result: PerceptionResult) -> None:
         """The marker where this frame's camera pose (marker, corrected by the shelf) puts it, and the shelf on it
@@ -255,8 +264,9 @@ class PerceptionNode(Node):
         if lost:
             why = "; ".join(f"{i}: {result.missing.get(i, 'not seen')}" for i in lost)
             log.warning(f"missing from the scene (hidden or out of view): {why}", throttle_duration_sec=5.0)
-        if self.scenario.target_id not in {d.id for d in dets}:
-            log.error(f"target {self.scenario.target_id!r} not seen: no scene published", throttle_duration_sec=2.0)
+        target = self.scenario.target_id
+        if target not in {d.id for d in dets} and target not in self._placed:
+            log.error(f"target {target!r} not seen: no scene published", throttle_duration_sec=2.0)
             return
         msg = objects_to_msg([to_shelf_object(o) for o in objects], color.header.stamp, self.p("frame_id"))
         self._scene, self._scene_time = msg, time.monotonic()

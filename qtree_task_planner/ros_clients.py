@@ -7,6 +7,7 @@
 - SceneWatch: the latest scene message and when it arrived; `checked(...)` is the one a goal starts from,
   `after(t, ...)` waits for one received later (closed-loop execution: a scene perceived after a relocation ended).
 - through_outages: a call to the feasibility service's work carried through planner outages with feedback.
+- goal_health: the node's status on /diagnostics from the goal's feedback and the execution so far.
 - train_goal / goal_params: a TrainPlanner goal whose numeric fields say "the node's parameter" (negative), and
   the TrainingParams a goal asks for; fill_optimum / fill_training_result: the outcome in the TrainPlanner result.
 """
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any, Callable, TypeVar
 
 import rclpy
@@ -132,6 +132,20 @@ def through_outages(fn: Callable[[], T], goal_handle: ServerGoalHandle, fb: Trai
                            on_outage=on_outage, on_back=on_back)
 
 
+def goal_health(fb: TrainPlanner.Feedback | None, execution: dict[str, Any]) -> tuple[int, str, dict[str, str]]:
+    """The task planner's status (relocation_common.node.Health): idle, or the goal's phase with its episode and
+    planner calls, and the execution so far (relocated, re-plans); WARN while waiting for a lost planner."""
+    if fb is None:
+        return 0, "idle: no goal", {"phase": "idle"}
+    replans = execution.get("replans", [])
+    values = {"phase": fb.phase, "episode": str(fb.episode), "planner calls": str(fb.planner_calls),
+              "re-plans": str(len(replans)), "relocated": " ".join(execution.get("relocated", []))}
+    if replans:
+        last = replans[-1]
+        values["last re-plan"] = f"{last['reason'][:200]} -> {' '.join(last['sequence'] or []) or last.get('failure')}"
+    return (1 if fb.phase == "waiting for planner" else 0), f"{fb.phase[:200]}; re-plans: {len(replans)}", values
+
+
 NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",
                        "quiet_episodes", "seed")  # numeric goal fields: negative = the node's parameter
 
@@ -178,15 +192,44 @@ class Relocator:
     until its result: never blind to the node stopping, the planner gone or silent, a cancel or the time limit."""
 
     def __init__(self, client: ActionClient, server_wait: float, limit: float, silence: float,
-                 ok: Callable[[], bool]) -> None:
+                 ok: Callable[[], bool], resume_wait: float = 0.0) -> None:
         """server_wait: s to wait for the action server; limit: relocate_timeout; silence: relocate_silence (a
-        moving motion planner reports at 10 Hz); ok(): rclpy.ok of the node's context."""
+        moving motion planner reports at 10 Hz); ok(): rclpy.ok of the node's context; resume_wait: s to wait for
+        a motion planner that went away before the goal is sent again (0: never; the node: planner_wait)."""
         self.client, self.server_wait, self.limit, self.silence, self.ok = client, server_wait, limit, silence, ok
+        self.resume_wait = resume_wait
 
     def relocate(self, object_id: str, removed: list[str], cancelled: Callable[[], bool]) -> tuple[bool, str]:
-        """Relocate one object after `removed`: (success, message)."""
+        """Relocate one object after `removed`: (success, message). A motion planner that went away (its server
+        gone, or silent and deaf to the cancel) is waited for up to `resume_wait` s from then and the same goal
+        sent again: a restarted motion planner answers it for the interrupted relocation (its journal; the
+        message then says it was lost). Else the message is why it stopped."""
+        lost_at: float | None = None
+        while True:
+            ok, message, lost = self._once(object_id, removed, cancelled)
+            if not lost or self.resume_wait <= 0:
+                break
+            lost_at = lost_at if lost_at is not None else time.monotonic()
+            if not self._back(lost_at, cancelled):
+                return ok, f"{message}; not back within {self.resume_wait:g} s (planner_wait)"
+        if lost_at is not None:
+            message += f" (the motion planner was lost for {time.monotonic() - lost_at:.0f} s and came back)"
+        return ok, message
+
+    def _back(self, lost_at: float, cancelled: Callable[[], bool]) -> bool:
+        """Wait for the relocate action server until resume_wait s after lost_at; False on cancel or shutdown."""
+        while time.monotonic() - lost_at < self.resume_wait:
+            if cancelled() or not self.ok():
+                return False
+            if self.client.wait_for_server(timeout_sec=0.5):
+                return True
+        return False
+
+    def _once(self, object_id: str, removed: list[str], cancelled: Callable[[], bool]) -> tuple[bool, str, bool]:
+        """One RelocateObject goal, watched until its result (relocation_stop): (success, message, the motion
+        planner went away: its server gone, or silent and no result after the cancel)."""
         if not self.client.wait_for_server(timeout_sec=self.server_wait):
-            return False, "relocate action server not available"
+            return False, "relocate action server not available", False
         done = threading.Event()
         box: dict[str, Any] = {}  # "result": the GetResult response (an rclpy message: untyped); "rejected": True
 
@@ -220,12 +263,12 @@ class Relocator:
                 if sent.done() and sent.result() is not None and sent.result().accepted and self.ok():
                     cancel = sent.result().cancel_goal_async()  # the arm stops (the motion planner's cancel)
                     if why.startswith(SILENT) and self._recovered(cancel, done) and "result" in box:
-                        return False, f"{why}; after the cancel: {box['result'].result.message}"
-                return False, why
+                        return False, f"{why}; after the cancel: {box['result'].result.message}", False
+                return False, why, why.startswith(GONE)
         if box.get("rejected"):
-            return False, "goal rejected by the motion planner"
+            return False, "goal rejected by the motion planner", False
         res = box["result"].result
-        return res.success, res.message
+        return res.success, res.message, False
 
     def _recovered(self, cancel: Future, done: threading.Event) -> bool:
         """After cancelling a silent relocation: True once its result came. A silent planner may be a starved one
@@ -260,21 +303,26 @@ class SceneWatch:
             self.latest = (msg, time.monotonic())
             self._changed.notify_all()
 
-    def after(self, since: float, timeout: float, settled: Callable[[ObjectArray], bool] = lambda msg: True
-              ) -> ObjectArray:
+    def after(self, since: float, timeout: float, settled: Callable[[ObjectArray], bool] = lambda msg: True,
+              outage: float = 0.0) -> ObjectArray:
         """The latest scene received after `since` (monotonic) for which `settled(msg)` holds; once `timeout` s
-        pass, the latest one received after `since` anyway; TimeoutError when none came."""
-        deadline = time.monotonic() + timeout
+        pass, the latest one received after `since` anyway. When none at all came within `timeout` (the scene's
+        source silent: perception restarting), the first one that comes within `outage` s in all. TimeoutError
+        when none came."""
+        start = time.monotonic()
+        deadline, last = start + timeout, start + max(timeout, outage)
         with self._changed:
             while True:
                 fresh = self.latest if self.latest is not None and self.latest[1] > since else None
-                left = deadline - time.monotonic()
-                if fresh is not None and (settled(fresh[0]) or left <= 0):
+                now = time.monotonic()
+                if fresh is not None and (settled(fresh[0]) or now >= deadline):
                     return fresh[0]
-                if left <= 0:
-                    raise TimeoutError(f"no scene received within {timeout:g} s (scene_after_wait){self._last()}")
-                self._changed.wait(min(left, 0.1))
-
+                if now >= (deadline if fresh is not None else last):
+                    waited = f" (and {outage:g} s for the source to come back: scene_outage_wait)" \
+                        if outage > timeout else ""
+                    raise TimeoutError(f"no scene received within {timeout:g} s (scene_after_wait){waited}"
+                                       f"{self._last()}")
+                self._changed.wait(min(max(deadline if fresh is not None else last, now + 0.01) - now, 0.1))
 
     def checked(self, topic: str, max_age: float, wait: float, now: Callable[[], Time]
                 ) -> tuple[ObjectArray, str | None]:
@@ -315,75 +363,37 @@ def left_top(object_id: str, top_z: float, tol: float = 0.02) -> Callable[[Objec
     return settled
 
 
-def on_board(object_id: str, z: float, tol: float = 0.02) -> Callable[[ObjectArray], bool]:
-    """A scene that shows object_id standing on the board at height z (the target on the bottom shelf)."""
-    def settled(msg: ObjectArray) -> bool:
-        return _standing_on(msg, object_id, z, tol)
-    return settled
-
-
 SILENT = "the motion planner went away (no feedback"  # retrieval.relocation_stop's words for relocate_silence
-OUTCOME_UNKNOWN = "outcome unknown"  # the motion planner's result when no scene came after the motion
+GONE = "the motion planner went away"  # ... for relocate_silence and for its server gone
 CANCEL_ACK_WAIT = 3.0  # s: a live (even starved) motion planner acknowledges a cancel within it; a dead one never
 UNSEEN_TARGET = (". Perception publishes no scene while it does not see the target (tipped over, fallen or hidden: "
                  "/diagnostics names the missing bottles and why)")  # docs/perception.md, "Hidden objects": a
 # lying bottle fits no standing cylinder, so a tipped target is the usual cause after a relocation
-TARGET_GONE_WAIT = 2.0  # s: perception republishes >= 1 Hz while it sees the target, nothing once it does not
-
-
-@dataclass
-class _Ended:
-    """The last relocation of `watched`: when it ended (monotonic), its object and its success."""
-
-    at: float
-    object_id: str
-    ok: bool
-
 
 Relocate = Callable[[str, list[str]], tuple[bool, str]]  # relocate(object_id, removed) -> (success, message)
 
 
-def watched(relocate_one: Relocate, scenes: SceneWatch, wait: float, top_z: float, unseen_target: str | bool = False,
-            bottom_z: float | None = None) -> tuple[Relocate, Callable[[], dict[str, SeenObject]]]:
+def watched(relocate_one: Relocate, scenes: SceneWatch, wait: float, top_z: float, perception: bool = False,
+            outage: float = 0.0) -> tuple[Relocate, Callable[[], dict[str, SeenObject]]]:
     """(relocate, perceive) for the closed loop: perceive() is the latest scene received after the last relocation
-    ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top).
-    unseen_target: the target's id (else False) when the camera may not see the bottom shelf. After a relocation of
-    the target that the motion planner reports done, perceive() waits up to TARGET_GONE_WAIT s for a scene showing
-    the target on the bottom shelf (`bottom_z`): that is the target's verification. Perception may not see it there:
-    it holds the target at its last pose for a few frames and publishes no scene without it, so the latest fresh
-    scene (or, when none came, the last one) counts without the target, and the executor reports the target's place
-    as unverified (closed_loop.Verification.unseen_place). The motion planner's "outcome unknown" (it got no scene
-    either) is then no failure, and its message says unverified."""
-    ended = _Ended(time.monotonic(), "", False)
+    ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top), and,
+    when no scene comes at all (perception restarting), up to `outage` s for the first one (SceneWatch.after). The
+    target is checked like any bottle: perception publishes its scene without the target once the motion planner
+    says it placed it (perception_node, relocated_topic). `perception`: the timeout's line says that perception
+    publishes no scene while it does not see the target (else it does not hold)."""
+    ended: list[Any] = [time.monotonic(), ""]  # when the last relocation ended, its object
 
     def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
-        ended.object_id, ended.ok = object_id, False
+        ended[1] = object_id
         try:
-            ok, message = relocate_one(object_id, removed)
-            if not ok and object_id == unseen_target and message.endswith(OUTCOME_UNKNOWN):
-                ok, message = True, f"{message} (the target left the camera's view: the motion ended as planned; " \
-                    "its place is unverified unless a scene shows it)"
-            ended.ok = ok
-            return ok, message
+            return relocate_one(object_id, removed)
         finally:
-            ended.at = time.monotonic()
+            ended[0] = time.monotonic()
 
     def perceive() -> dict[str, SeenObject]:
-        if not (ended.ok and ended.object_id == unseen_target):
-            try:
-                return seen_scene(scenes.after(ended.at, wait, left_top(ended.object_id, top_z)))
-            except TimeoutError as e:
-                raise TimeoutError(f"{e}{UNSEEN_TARGET if unseen_target else ''}") from None
-        shown = on_board(ended.object_id, bottom_z) if bottom_z is not None else (lambda msg: False)
         try:
-            msg = scenes.after(ended.at, min(wait, TARGET_GONE_WAIT), shown)
-        except TimeoutError:  # perception publishes nothing without the target: the last scene, the target gone
-            if scenes.latest is None:
-                raise
-            msg = scenes.latest[0]
-        scene = seen_scene(msg)
-        if not shown(msg):
-            scene.pop(ended.object_id, None)  # held at its last pose on the top shelf, or unseen: place unverified
-        return scene
+            return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z), outage))
+        except TimeoutError as e:
+            raise TimeoutError(f"{e}{UNSEEN_TARGET if perception else ''}") from None
 
     return relocate, perceive

@@ -8,16 +8,18 @@ scene's objects the scenario does not list and what the hand cannot grasp are sa
 
 Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local); publishes
 ~/markers (visualization_msgs/MarkerArray: the scene, the learned order), ~/relocating (std_msgs/String, latched: the
-object being relocated) and ~/execution (std_msgs/String, latched: the execution's JSON, closed_loop.ExecutionResult
-with `execution_s` and `relocate_s`, the seconds of the whole execution and of its relocations);
-its PlanFeasibility queries and answers are service events on <feasibility_service>/_service_event, for recording.
-Execution: closed-loop (`closed_loop`: a check after every relocation, re-plans; docs/closed_loop.md) or open-loop.
+object being relocated), ~/execution (std_msgs/String, latched: the execution's JSON, closed_loop.ExecutionResult
+with `execution_s`, `relocate_s` and `running`, after each relocation and re-plan: what was done outlives the goal)
+and /diagnostics ("task_planner: goal": ros_clients.goal_health); its PlanFeasibility queries and answers are
+service events on <feasibility_service>/_service_event. Execution: closed-loop (docs/closed_loop.md) or open-loop.
 
 Reliability (docs/reliability.md): checkpoints (`checkpoint_path`, every `checkpoint_every` episodes, on stop and
 on a lost planner; a matching goal resumes, a corrupt or mismatched one aborts with the reason); a dead planner
 (no answer within feasibility_timeout + feasibility_margin) rolls the episode back, keeps every answer and waits up
-to `planner_wait` s, then the goal aborts saying what to do; a stale or empty scene aborts the goal before training
-(scene_max_age); bad parameters at start: one line on stderr, exit status 2.
+to `planner_wait` s, then the goal aborts saying what to do (re-plans during the execution too); a motion planner
+lost during a relocation is waited for as long and the goal sent again (ros_clients.Relocator); a scene source that
+goes silent after a relocation is waited for up to `scene_outage_wait` s; a stale or empty scene aborts the goal
+before training (scene_max_age); bad parameters at start: one line on stderr, exit status 2.
 """
 from __future__ import annotations
 
@@ -40,8 +42,9 @@ from rclpy.service_introspection import ServiceIntrospectionState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
+from qtree_task_planner.executive.closed_loop import ExecutionResult
 from qtree_task_planner.executive.keeper import CheckpointKeeper
-from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
+from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.executive.retrieval import (
     chosen_sequence,
@@ -65,6 +68,7 @@ from qtree_task_planner.ros_clients import (
     ServiceOracle,
     fill_optimum,
     fill_training_result,
+    goal_health,
     goal_params,
     seen_scene,
     through_outages,
@@ -74,7 +78,7 @@ from qtree_task_planner.ros_clients import (
 from qtree_task_planner.search.astar import AStarResult
 from relocation_common.config import ParameterError
 from relocation_common.feasibility import replica_services
-from relocation_common.node import ActionClient, declare_parameters, end_goal, node_main, stop_reason
+from relocation_common.node import ActionClient, Health, declare_parameters, end_goal, node_main, stop_reason
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import ScenarioError, load_scenario
 
@@ -105,7 +109,8 @@ class TaskPlannerNode(Node):
             c.configure_introspection(self.get_clock(), QoSProfile(depth=1000), ServiceIntrospectionState.CONTENTS)
         self._relocator = Relocator(
             ActionClient(self, RelocateObject, self.p("relocate_action"), callback_group=reentrant),
-            self.p("planner_wait"), self.p("relocate_timeout"), self.p("relocate_silence"), ok=rclpy.ok)
+            self.p("planner_wait"), self.p("relocate_timeout"), self.p("relocate_silence"), ok=rclpy.ok,
+            resume_wait=self.p("planner_wait"))
         self._scene_topic = SCENE_SOURCES.get(self.p("scene_source")) or self.p("scene_topic")
         self.create_subscription(ObjectArray, self._scene_topic, self._scenes.put, SCENE_QOS)
         self._markers = self.create_publisher(MarkerArray, "~/markers", SCENE_QOS)
@@ -114,6 +119,9 @@ class TaskPlannerNode(Node):
         self._server = ActionServer(self, TrainPlanner, "~/train", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=reentrant)
+        self._fb: TrainPlanner.Feedback | None = None  # the running goal's feedback, for the health
+        self._progress: dict[str, Any] = {}  # the execution so far
+        self.health = Health(self, "task_planner: goal", "task planner", lambda: goal_health(self._fb, self._progress))
         self.get_logger().info(f"ready: action {self.resolve_topic_name('~/train')}, scene from {self._scene_topic}")
 
     def p(self, name: str) -> Any:
@@ -153,7 +161,7 @@ class TaskPlannerNode(Node):
             result.success, result.message = False, str(e)
             self.get_logger().error(f"training aborted: {e}")
         finally:
-            self._reserved = False
+            self._reserved, self._fb = False, None
         end_goal(goal_handle, "canceled" if goal_handle.is_cancel_requested else
                  "succeed" if result.success else "abort")
         return result
@@ -162,7 +170,8 @@ class TaskPlannerNode(Node):
         params = self._params(goal_handle.request)
         problem, scene = self._problem()
         self._publish_scene(scene, ())
-        fb = TrainPlanner.Feedback(phase="exact optimum")
+        fb = self._fb = TrainPlanner.Feedback(phase="exact optimum")
+        self._progress = {}
         last = [0.0]
 
         def on_answer() -> None:  # progress of the exact solve (no episodes yet): planner calls, twice a second
@@ -180,6 +189,9 @@ class TaskPlannerNode(Node):
             self.get_logger().warning(f"feasibility service(s) not available at the start of the goal: "
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
         resume = self._keeper.resume_point(problem, params, oracle)
+
+        until: UntilPlanner = lambda fn: through_outages(  # noqa: E731 (through planner outages: training, re-plans)
+            fn, goal_handle, fb, service, self.get_logger(), self.p("planner_wait"), self._keeper.kept_where)
         notes = [""]  # retrieval.scene_notes, after the exact solve
 
         def on_solved(exact: AStarResult) -> None:
@@ -196,9 +208,7 @@ class TaskPlannerNode(Node):
             return rclpy.ok() and not goal_handle.is_cancel_requested
 
         optimum, r = solve_then_train(problem, oracle, params, resume=resume, keep=self._keep, on_episode=on_episode,
-                                      until_planner=lambda fn: through_outages(
-                                          fn, goal_handle, fb, service, self.get_logger(), self.p("planner_wait"),
-                                          self._keeper.kept_where),
+                                      until_planner=until,
                                       checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved,
                                       episode_every=FEEDBACK_EVERY)
         fill_training_result(result, r, len(oracle.table))
@@ -214,13 +224,14 @@ class TaskPlannerNode(Node):
                 result.message += planner_foreign_ids(service, problem.ids)
             return notes[0]
         fb.phase = "executing"  # then each check and re-plan (_run)
-        self._run(goal_handle, fb, result, scene, oracle, params, *chosen_sequence(
+        self._run(goal_handle, fb, result, scene, oracle, params, until, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
         return notes[0]
 
     def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
-             scene: ObjectArray, oracle: CachedOracle, params: TrainingParams, sequence: list[str], note: str) -> None:
+             scene: ObjectArray, oracle: CachedOracle, params: TrainingParams, until: UntilPlanner, sequence: list[str],
+             note: str) -> None:
         """Execute (retrieval.execute, `closed_loop`; `replan_q_tree`: each re-plan also retrains the Q-Tree with the
         goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
@@ -236,25 +247,29 @@ class TaskPlannerNode(Node):
             finally:
                 spent["relocate_s"] += time.monotonic() - t
 
-        relocate, perceive = watched(relocate_timed, self._scenes,
-                                     self.p("scene_after_wait"), scenario.shelf.top_z, not seen and scenario.target_id,
-                                     scenario.shelf.bottom_z)
+        relocate, perceive = watched(relocate_timed, self._scenes, self.p("scene_after_wait"), scenario.shelf.top_z,
+                                     perception=not seen, outage=self.p("scene_outage_wait"))
 
         def phase(text: str) -> None:
             fb.phase = text
             self.get_logger().info(text)
             goal_handle.publish_feedback(fb)
 
+        def publish(out: ExecutionResult, running: bool = True) -> None:
+            self._progress = out.to_dict()
+            if rclpy.ok():  # a goal ended by the node stopping: its publisher's context is gone
+                self._execution.publish(String(data=json.dumps({**self._progress, "sequence": sequence, "note": note,
+                                                                "running": running,
+                                                                "execution_s": time.monotonic() - t0, **spent})))
+
         t0 = time.monotonic()
         out = execute(scenario, sequence, seen_scene(scene), relocate, perceive, oracle,
                       closed_loop=self.p("closed_loop"), cancelled=lambda: goal_handle.is_cancel_requested,
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen,
-                      retrain=params if self.p("replan_q_tree") else None)
+                      retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
-        if rclpy.ok():  # a goal ended by the node stopping: its publisher's context is gone
-            self._execution.publish(String(data=json.dumps({**out.to_dict(), "sequence": sequence, "note": note,
-                                                            "execution_s": time.monotonic() - t0, **spent})))
+        publish(out, running=False)
 
     def _keep(self, ck: Checkpoint) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""

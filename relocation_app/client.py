@@ -221,6 +221,11 @@ class RelocationClient:
         assert result is not None  # the future is done
         return result
 
+    def abandon(self) -> None:
+        """Forget the goal in flight without cancelling it: its server died, no result will come (a new goal can be
+        sent to the server that replaced it)."""
+        self._goal = self._result_future = self._rejected = self._feedback = None
+
     def cancel(self, timeout: float = 10.0) -> bool:
         """Ask the server to cancel the goal in flight and wait for its answer; True when it is canceling it
         (result() then ends as CANCELED, or as it ended if it ended first). False when no goal is in flight."""

@@ -9,6 +9,13 @@ out/bag/ and the retrieval as out/retrieval.mp4 (relocation_app.recording).
 Execution is closed-loop (docs/closed_loop.md: a check after every relocation, re-plans) unless --open-loop;
 --disturb K applies K seeded disturbances (the driver's disturbance_plan, drawn with --seed) and report.json lists
 them (`disturbances`) with the re-plans (`replans`); `success` is true only with the target on the bottom shelf.
+
+A node that dies is respawned as config/graph.yaml says (docs/reliability.md, "A node that dies"): perception and
+the motion planner come back and the run goes on; the task planner comes back and, during the training, the goal is
+sent again (the training resumes from its checkpoint); during the execution the run stops (the goal and the
+execution's state died with it), after the motion planner finished the relocation in flight. The driver is not
+respawned: its death stops the run (the arm's state is unknown). However the run ends, report.json is written and
+the exit code says how it ended (relocation_app.run_report).
 """
 from __future__ import annotations
 
@@ -19,15 +26,25 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
+from relocation_app import run_report
 from relocation_app.client import ClientError, RelocationClient
 from relocation_app.final_state import final_state
-from relocation_app.graph import Graph
+from relocation_app.graph import Graph, NodeDied
 from relocation_app.progress import Progress
+from relocation_app.run_report import End
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.paths import default_scenario, resolve_scenario
+
+TRAINING = ("exact optimum", "training", "waiting for planner")  # the feedback phases before the execution
+SETTLE_WAIT = 200.0  # s the demo waits for the motion planner's relocation in flight when the task planner died
+RESTART_WAIT = 120.0  # s for a respawned task planner to say it is up (its /diagnostics status with its new pid)
+DISCOVERY_SETTLE = 3.0  # s after that before the goal is sent again
+GOAL_RESPONSE_WAIT = 15.0  # s for the respawned task planner's goal response before the goal is sent once more
 
 
 def _args(argv):
@@ -77,56 +94,89 @@ class _Recorder:
         self.frames.append(img.copy())
 
 
-def _strip(frames, path: Path, cols: int = 6) -> None:
-    import cv2
-    if not frames:
-        return
-    step = max(1, len(frames) // (cols * 2))
-    frames = frames[::step][: cols * 2]
-    h, w = frames[0].shape[:2]
-    rows = [frames[i:i + cols] for i in range(0, len(frames), cols)]
-    rows[-1] = rows[-1] + [np.zeros_like(frames[0])] * (cols - len(rows[-1]))
-    sheet = np.vstack([np.hstack(r) for r in rows])
-    scale = min(1.0, 1800 / sheet.shape[1])
-    sheet = cv2.resize(sheet, (int(sheet.shape[1] * scale), int(sheet.shape[0] * scale)))
-    cv2.imwrite(str(path), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+class _Latest:
+    """Keeps the last message of a topic and when it came."""
+
+    def __init__(self):
+        self.msg, self.at = None, None
+
+    def __call__(self, msg) -> None:
+        self.msg, self.at = msg, time.monotonic()
+
+    def positions(self) -> dict:
+        if self.msg is None:
+            return {}
+        from relocation_common.ros_conversions import msg_to_objects  # base centres, as the report has them
+        return {o.id: [float(v) for v in o.base()] for o in msg_to_objects(self.msg, require_target=False)}
 
 
-def _learning_curve(history, path: Path, title: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(7, 3.5))
-    h = np.asarray(history, float)
-    if h.size == 0:
-        plt.close(fig)
-        return
-    ax.plot(np.arange(1, len(h) + 1), h / (np.abs(h).max() or 1.0))
-    ax.set_xlabel("episode")
-    ax.set_ylabel("normalised sum of edge values (Eq. 15)")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+class _Watch:
+    """What the demo watches of the running graph, on the client's node: the execution so far (latched, after each
+    step), the disturbances, ground truth, the scene, the joint states, the object being relocated, the motion
+    planner's relocate goals (action status), the nodes' /diagnostics, the training feedback's phase."""
 
+    def __init__(self, node, scene_topic: str) -> None:
+        from action_msgs.msg import GoalStatusArray
+        from diagnostic_msgs.msg import DiagnosticArray
+        from qtree_relocation_msgs.msg import ObjectArray
+        from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+        from sensor_msgs.msg import Image, JointState
+        from std_msgs.msg import String
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt  # SIGTERM (timeout, systemd, docker stop) stops the graph like Ctrl-C
+        latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+        self.scene_topic = scene_topic
+        self.execution, self.truth, self.scene, self.joints, self.status = (_Latest() for _ in range(5))
+        self.rec = _Recorder()
+        self.disturbances: list[dict[str, Any]] = []  # /sim/disturbances, as they come
+        self.relocating: list[str] = []  # /task_planner/relocating, as they come
+        self.pids: dict[str, str] = {}  # /diagnostics status name -> the pid it last gave
+        self.phase, self.executing = "", False
+        self.before: dict[str, Any] = {}  # the ground truth when the execution started
+        node.create_subscription(String, "/task_planner/execution", self.execution, latched)
+        node.create_subscription(String, "/sim/disturbances", lambda m: self.disturbances.append(json.loads(m.data)),
+                                 QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL))
+        node.create_subscription(Image, "/camera/color/image_raw", self.rec, 2)
+        node.create_subscription(ObjectArray, "/sim/objects", self.truth, latched)
+        node.create_subscription(ObjectArray, scene_topic, self.scene, latched)
+        node.create_subscription(JointState, "/j2s7s300_driver/out/joint_state", self.joints, 10)
+        node.create_subscription(String, "/task_planner/relocating", lambda m: self.relocating.append(m.data), latched)
+        node.create_subscription(GoalStatusArray, "/motion_planner/relocate/_action/status", self.status, latched)
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_health, 50)
+
+    def _on_health(self, msg) -> None:
+        for st in msg.status:
+            self.pids[st.name] = next((kv.value for kv in st.values if kv.key == "pid"), "")
+
+    def on_feedback(self, phase: str) -> None:
+        self.phase = phase
+        if phase not in TRAINING:
+            self.executing = self.rec.active = True
+
+    def relocation_in_flight(self) -> bool:
+        """The motion planner runs a relocate goal (accepted, executing or canceling)."""
+        return self.status.msg is not None and any(st.status in (1, 2, 3) for st in self.status.msg.status_list)
+
+    def run(self) -> dict:
+        """The execution so far (the task planner's ~/execution), {} before any."""
+        return json.loads(self.execution.msg.data) if self.execution.msg is not None else {}
 
 
 def _start_graph(g: Graph, a, scene_topic: str) -> None:
     """The four nodes (perception only with --scene-source perception); the Q-Tree checkpointed in the run
-    directory, so a training stopped by a signal or a time limit is resumed by the same command."""
+    directory, so a training stopped by a signal or a time limit is resumed by the same command; the motion
+    planner's relocation journal there too, emptied first (a fresh simulated world: a respawned planner reads it)."""
     common = {"scenario": a.scenario}
     ckpt = _checkpoint(g.run_dir / "qtree.ckpt")
+    journal = g.run_dir / "motion_planner.journal"
+    journal.unlink(missing_ok=True)
     print(f"[demo] starting the node graph on ROS_DOMAIN_ID={g.domain_id} (logs: {g.run_dir / 'logs'})")
     plan = _disturbance_plan(a)
     driver = dict(common, camera_model=a.camera_model) if a.camera_model else dict(common)
     g.start("jaco2_sim_driver", dict(driver, disturbance_plan=f"'{plan.to_json()}'") if plan else driver)
-    if a.scene_source == "perception":
-        g.start("perception", common)
-    g.start_planners(a.replicas, dict(common, scene_topic=scene_topic))
+    if a.scene_source == "perception":  # the arm's joint states: its body is left out of the depth (else, in view
+        # during a relocation, perception saw it as unlisted objects, which then blocked the target's lane)
+        g.start("perception", dict(common, joint_state_topic=ArmInterface.load().state_topic))
+    g.start_planners(a.replicas, dict(common, scene_topic=scene_topic, journal_path=str(journal)))
     g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt), replicas=a.replicas,
                                  closed_loop=not a.open_loop, execute_learned=a.execute_learned,
                                  replan_q_tree=a.replan_q_tree))
@@ -158,14 +208,14 @@ def _checkpoint(path: Path) -> Path:
     return path
 
 
-def _progress_bar(rec: "_Recorder"):
+def _progress_bar(w: _Watch):
     """Progress fed by TrainPlanner feedback (relocation_app.progress: a bar on a terminal, a line every few seconds
     in a log): episodes, Eq. 15 sum, tree size, MP_q, planner calls."""
     bar = Progress("training", "ep")
 
     def on_feedback(f) -> None:
-        if f.phase not in ("exact optimum", "training", "waiting for planner"):  # executing, checks, re-plans
-            rec.active = True
+        w.on_feedback(f.phase)
+        if f.phase not in TRAINING:  # executing, checks, re-plans
             bar.update(desc=f.phase if len(f.phase) < 100 else f.phase[:97] + "...")
             return
         bar.update(f.episode, desc="exact optimum" if f.phase == "exact optimum" else "training",
@@ -174,45 +224,88 @@ def _progress_bar(rec: "_Recorder"):
     return bar, on_feedback
 
 
-def _train_and_watch(client, g: Graph, a, used, scene_topic: str, t0: float):
-    """Wait for the graph and a scene, train (and execute) through the client; (result, before, after, frames)."""
-    from qtree_relocation_msgs.msg import ObjectArray
-    from rclpy.qos import QoSDurabilityPolicy, QoSProfile
-    from sensor_msgs.msg import Image, JointState
-    from std_msgs.msg import String
+class _TaskPlannerLost(Exception):
+    """The task planner died (and is respawned): its goal is gone."""
 
-    latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
-    execution, disturbances = _Latest(), []
-    client.node.create_subscription(String, "/task_planner/execution", execution, latched)
-    client.node.create_subscription(String, "/sim/disturbances", lambda m: disturbances.append(json.loads(m.data)),
-                                    QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL))
+
+def _watching(g: Graph, seen: int):
+    """A check for the client's waits: the graph's (a node gone for good raises NodeDied), and the task planner's
+    death since event `seen` (_TaskPlannerLost)."""
+    def check() -> None:
+        g.check_alive()
+        for e in g.events[seen:]:
+            if e["node"] == "task_planner" and e["event"] == "died":
+                raise _TaskPlannerLost(f"exit {e['code']}")
+    return check
+
+
+def _restarted(g: Graph, w: _Watch) -> None:
+    """Wait until the respawned task planner is up: its /diagnostics status comes from its new process; then
+    DISCOVERY_SETTLE s more (its action's endpoints are matched after its diagnostics: a goal sent at once was
+    lost, 'no goal response within 30 s')."""
+    deadline = time.monotonic() + RESTART_WAIT
+    while True:
+        g.check_alive()
+        p = g.procs.get("task_planner")
+        if p is not None and w.pids.get("task_planner: goal") == str(p.pid):
+            time.sleep(DISCOVERY_SETTLE)
+            return
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the respawned task planner did not come up within {RESTART_WAIT:g} s")
+        time.sleep(0.2)
+
+
+def _send(client, on_feedback, check, goal: dict, again: bool) -> None:
+    """Send the training goal; `again` (to a respawned task planner): a goal whose response does not come within
+    GOAL_RESPONSE_WAIT s is sent once more (a request sent while discovery was still matching is lost)."""
+    for attempt in range(2 if again else 1):
+        try:
+            client.train(on_feedback=on_feedback, check=check, timeout=GOAL_RESPONSE_WAIT if again else 30.0, **goal)
+            return
+        except ClientError as e:
+            if not again or attempt == 1 or not str(e).startswith("no goal response"):
+                raise
+            print("[demo] no goal response from the respawned task planner: sending the goal once more")
+
+
+def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[End | None, Any]:
+    """Wait for the graph and a scene, train (and execute) through the client; (an End when the run ended
+    otherwise than with the goal's result, the TrainPlanner result or None). A task planner that died during
+    the training is waited for and the goal sent again (its checkpoint); during the execution the run ends."""
     client.wait_until_ready(120, check=g.check_alive)
-    rec, truth, scene = _Recorder(), _Latest(), _Latest()
-    client.node.create_subscription(Image, "/camera/color/image_raw", rec, 2)
-    client.node.create_subscription(ObjectArray, "/sim/objects", truth, latched)
-    client.node.create_subscription(ObjectArray, scene_topic, scene, latched)
-    joints = _Latest()
-    client.node.create_subscription(JointState, "/j2s7s300_driver/out/joint_state", joints, 10)
-    _wait_for(lambda: scene.msg is not None and len(scene.msg.objects) > 0, 90, g, f"no scene on {scene_topic}")
-    before = truth.positions()
+    _wait_for(lambda: w.scene.msg is not None and len(w.scene.msg.objects) > 0, 90, g, f"no scene on {w.scene_topic}")
+    w.before = w.truth.positions()
     print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {used.policy}/{used.search} "
           f"through the feasibility service")
-    bar, on_feedback = _progress_bar(rec)
+    bar, on_feedback = _progress_bar(w)
+    goal = dict(policy=used.policy, search=used.search, seed=used.seed, execute=not a.no_execute,
+                execute_optimum=a.execute_optimum)
+    deadline, again = time.monotonic() + a.timeout, False
     try:
-        client.train(on_feedback=on_feedback, check=g.check_alive, policy=used.policy, search=used.search,
-                     seed=used.seed, execute=not a.no_execute, execute_optimum=a.execute_optimum)
-        outcome = client.wait(a.timeout, check=g.check_alive)
+        while True:
+            check = _watching(g, len(g.events))
+            _send(client, on_feedback, check, goal, again)
+            try:
+                outcome = client.wait(max(1.0, deadline - time.monotonic()), check=check)
+                break
+            except _TaskPlannerLost as e:
+                if w.executing:
+                    return End("node_died", f"the task planner died during the execution ({e}; phase: {w.phase}): "
+                                            "the goal and the execution's state died with it"), None
+                client.abandon()
+                print(f"[demo] the task planner died ({e}) and is respawned: sending the goal again (the training "
+                      "resumes from its checkpoint)")
+                _restarted(g, w)
+                again = True
     except ClientError as e:
-        raise ClientError(f"{e}{_timeout_hint(str(e), g.run_dir / 'qtree.ckpt')}") from None
+        if str(e).startswith("no result within"):
+            return End("timeout", f"{e}{run_report.timeout_hint(str(e), g.run_dir / 'qtree.ckpt')}"), None
+        raise
     finally:
         bar.close()
     if outcome.result is None:  # rejected: no Result to report
-        raise ClientError(outcome.message)
-    res = outcome.result
-    time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
-    run = json.loads(execution.msg.data) if execution.msg is not None else {}
-    return res, before, truth.positions(), rec.frames, {**run, "disturbances": list(disturbances),
-                                                        "robot": final_state(joints.msg, truth.msg)}
+        return End("error", outcome.message), None
+    return None, outcome.result
 
 
 def _start_recording(g: Graph, a, out: Path):
@@ -236,151 +329,154 @@ def _stop_recording(rec) -> dict | None:
     return s
 
 
-def _report(out: Path, a, used, res, before, after, frames, wall: float, run: dict,
-            recording: dict | None = None) -> int:
-    """report.json, learning_curve.png, retrieval_strip.png and the summary lines; the exit status. Success only
-    with the target on the bottom shelf (when executed); no sentinel values: what is missing is said in words."""
-    executed = run.get("sequence") or list(res.optimal_sequence if a.execute_optimum else res.sequence)
-    fs = {**_check_scene(a.scenario, before, after, [] if a.no_execute else run.get("relocated", executed)),
-          **run.get("robot", {})}  # arm_home, gripper_empty (relocation_app.final_state)
-    success = bool(res.success and (a.no_execute or fs["target_on_bottom_shelf"]))
-    learned_w = res.total_weight if res.sequence else None
-    optimal_w = res.optimal_weight if res.optimal_sequence else None
-    report = {
-        "scenario": a.scenario, "policy": used.policy, "search": used.search, "seed": used.seed,
-        "success": success, "message": res.message,
-        "learned_sequence": list(res.sequence), "learned_weight": learned_w,
-        "optimal_sequence": list(res.optimal_sequence), "optimal_weight": optimal_w,
-        "episodes": res.episodes, "E_ss": res.e_ss, "MP_q": res.mp_q,
-        "E_1st": res.e_first if res.e_first >= 0 and res.episodes else None,
-        "planner_calls": res.planner_calls, "wall_time_s": round(wall, 1),
-        "q_sum_history": list(res.q_sum_history),
-        "executed": "optimum" if executed == list(res.optimal_sequence) and executed != list(res.sequence) else
-        "learned", "executed_sequence": executed, "closed_loop": not a.open_loop,
-        "disturbances": run.get("disturbances", []), "replans": run.get("replans", []), "steps": run.get("steps", []),
-        "final_scene": fs, "recording": recording,
-    }
-    (out / "report.json").write_text(json.dumps(report, indent=2))
-    _learning_curve(res.q_sum_history, out / "learning_curve.png", f"{used.policy} / {used.search}")
-    _strip(frames, out / "retrieval_strip.png")
-    if not a.no_execute:
-        print(f"[demo] target on the bottom shelf: {fs['target_on_bottom_shelf']}; largest displacement of a "
-              f"bottle not relocated: {fs['max_displacement_untouched_m'] * 100:.1f} cm; arm home: "
-              f"{fs.get('arm_home')}; gripper empty: {fs.get('gripper_empty')}")
-    print("[demo] learned sequence: " + (f"{' -> '.join(res.sequence)}  weight {learned_w:.2f}" if learned_w
-                                         is not None else "none (training found no sequence to the target)"))
-    print("[demo] exact optimum:    " + (f"{' -> '.join(res.optimal_sequence)}  weight {optimal_w:.2f}" if
-                                         optimal_w is not None else "none (no feasible sequence)"))
-    e_first = str(res.e_first) if res.e_first >= 0 and res.episodes else "not reached"
-    print(f"[demo] E_ss={res.e_ss} MP_q={res.mp_q} E_1st={e_first} real planner calls={res.planner_calls}"
-          if res.episodes else "[demo] training did not run an episode")
-    for d in report["disturbances"]:
-        print(f"[demo] disturbance {d.get('when', '')}: {d.get('kind', 'command')} {d.get('object', '')}"
-              + (f" skipped: {d['skipped']}" if "skipped" in d else ""))
-    for r in report["replans"]:
-        print(f"[demo] re-plan: {r['reason']} -> " + (f"{' '.join(r['sequence'])} ({r['weight']:.2f})"
-                                                      if r.get("sequence") else r.get("failure", ""))
-              + (f"; {r['note']}" if r.get("note") else ""))
-    message = res.message if success or not res.success else \
-        f"{res.message}; but the simulator does not show the target on the bottom shelf"
-    print(f"[demo] {'SUCCESS' if success else 'FAILED'}: {message}  ({wall:.0f} s); outputs in {out}/")
-    if not success:
-        print(f"[demo] next step: {_next_step(message, out)}")
-    return 0 if success else 1
+def _interrupted(signum: int) -> End:
+    name = signal.Signals(signum).name
+    return End("interrupted", f"stopped by {name}: the node graph was shut down", signum)
 
 
-def _next_step(message: str, out: Path) -> str:
-    """One line for the user after a failure: what to try, where to read."""
-    if "did not find a sequence" in message:
-        return ("the Q-Tree stopped before reaching the target: rerun with --execute-optimum (the proven optimum), "
-                "or raise max_episodes in config/task_planner.yaml; see docs/qtree.md")
-    if "safety net" in message:
-        return ("the motion planner ran out of time planning (its wall-clock safety net, carry_timeout in "
-                "config/motion_planner.yaml) on a loaded machine: run again when it is quieter, or raise "
-                "carry_timeout; see docs/closed_loop.md")
-    if message.startswith("the target cannot be retrieved"):
-        return ("no relocation sequence frees the target on this shelf (the reason above, from the exact solver); "
-                "move the bottles named there by hand or check the layout; see docs/motion_planner.md")
-    if "on its side" in message:
-        return ("a bottle lies on its side on the top shelf (the side grasp takes standing bottles only): stand it "
-                "up by hand, then run the demo again; see docs/closed_loop.md")
-    if "cannot be reached" in message or "no sequence remains" in message:
-        return "no collision-free way to the target remains on this shelf: see docs/closed_loop.md"
-    if "went away" in message:
-        return (f"the motion planner stopped answering during a relocation (its log: {out}/run/logs); run again, or "
-                "raise relocate_silence in config/task_planner.yaml on a loaded machine")
-    if "off the shelf" in message:
-        return "the target fell off the shelf: it cannot be retrieved; run the demo again (a fresh scene)"
-    if "does not see the target" in message:
-        return ("the target may lie on its side or have fallen (/perception/debug_image shows the shelf): stand it "
-                f"up by hand and run the demo again; otherwise check the camera and perception (logs in "
-                f"{out}/run/logs); see docs/perception.md")
-    if "scene" in message:
-        return f"check the camera and perception (logs in {out}/run/logs); see docs/perception.md"
-    return f"read the task planner's and the motion planner's logs in {out}/run/logs; see docs/closed_loop.md"
+def _died(e: NodeDied, w: _Watch | None) -> End:
+    """The End of a run whose node `e.name` died for good (the driver: the arm's state is unknown)."""
+    phase = f" (phase: {w.phase or 'starting'})" if w is not None else ""
+    if e.name == "jaco2_sim_driver":
+        return End("node_died", f"the driver (jaco2_sim_driver) died with exit {e.code}{phase}: the arm's state is "
+                                "unknown, so the run stopped safely (the goal cancelled, the arm not moved again)")
+    return End("node_died", f"node {e.name} died with exit {e.code}{phase} and was not restarted (config/graph.yaml)")
+
+
+def _settle(w: _Watch, g: Graph) -> None:
+    """After the task planner's death: wait for the motion planner's relocation in flight to end (up to
+    SETTLE_WAIT s), so the report says where it left the arm and the bottle."""
+    deadline = time.monotonic() + SETTLE_WAIT
+    while w.relocation_in_flight() and time.monotonic() < deadline and not g.dead():
+        time.sleep(0.2)
+
+
+def _final(w: _Watch | None, end: End | None, a) -> dict:
+    """Where the run left things: the ground truth (last known), the robot (final_state), the interruption."""
+    if w is None:
+        return {"before": {}, "after": {}, "robot": {"unknown": True}, "age": None, "interrupted": None}
+    time.sleep(1.0)  # the last bottle settles; ground truth at 10 Hz
+    robot = final_state(w.joints.msg, w.truth.msg)
+    if end is not None and "jaco2_sim_driver" in end.message:
+        robot = {**robot, "arm_home": None, "gripper_empty": None, "unknown": True,
+                 "note": "the driver died: the last joint state is from before its death"}
+    age = time.monotonic() - w.truth.at if w.truth.at is not None else None
+    interrupted = None
+    if end is not None and end.kind != "failed":
+        flight = w.relocating[-1] if w.relocation_in_flight() and w.relocating else None
+        what = (f"relocating {flight}" if flight else f"phase {w.phase or 'start-up'}") + f" ({end.kind})"
+        interrupted = {"phase": w.phase, "relocating": flight, "what": what}
+    return {"before": w.before, "after": w.truth.positions(), "robot": robot, "age": age,
+            "interrupted": interrupted}
 
 
 def run(argv=None) -> int:
-    """The demo (module docstring) for `argv`; 0 when the target was retrieved, else 1."""
+    """The demo (module docstring): report.json however the run ends; the exit code (run_report.END)."""
     a = _args(argv)
     a.scenario = str(resolve_scenario(a.scenario).resolve())  # the nodes run in the output directory
     used = TrainingParams.defaults().replace(policy=a.policy, search=a.search, seed=a.seed)
     out = Path(a.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
-
     t0 = time.monotonic()
     scene_topic = "/scene/objects" if a.scene_source == "perception" else "/sim/objects"
-    with Graph(out / "run") as g:
-        _start_graph(g, a, scene_topic)
-        os.environ.update(g.env)
-        rec = _start_recording(g, a, out)
-        client = RelocationClient("qtree_demo")  # its own context, no signal handlers: the signals are ours
-        try:
-            res, before, after, frames, run = _train_and_watch(client, g, a, used, scene_topic, t0)
-        finally:
-            client.close()
-            recording = _stop_recording(rec)  # also on an error or Ctrl-C: the bag so far is a valid bag
-    return _report(out, a, used, res, before, after, frames, time.monotonic() - t0, run, recording)
+    end: End | None = End("error", "the node graph did not start")
+    res, w, events, recording, final = None, None, [], None, None
+    try:
+        with Graph(out / "run", respawn=True) as g:
+            events = g.events
+            _start_graph(g, a, scene_topic)
+            os.environ.update(g.env)
+            rec = _start_recording(g, a, out)
+            client = RelocationClient("qtree_demo")  # its own context, no signal handlers: the signals are ours
+            try:
+                w = _Watch(client.node, scene_topic)
+                end, res = _train_and_watch(client, g, a, used, w, t0)
+            except _Interrupted as e:
+                end = _interrupted(e.signum)
+            except NodeDied as e:
+                end = _died(e, w)
+            except (RuntimeError, TimeoutError, ClientError) as e:
+                end = End("error", str(e))
+            finally:
+                with _signals_held():
+                    if w is not None and end is not None and "task planner died" in end.message:
+                        _settle(w, g)
+                    final = _final(w, end, a)
+                    client.close()
+                    recording = _stop_recording(rec)  # also on an error or a signal: the bag so far is valid
+    except _Interrupted as e:
+        end = _interrupted(e.signum)
+    except (RuntimeError, ValueError) as e:  # the graph could not start (a node's arm interface, no domain)
+        end = End("error", str(e))
+    with _signals_held():
+        return _report(out, a, used, res, end, final, w, events, time.monotonic() - t0, recording)
 
 
-class _Latest:
-    """Keeps the last message of a topic."""
+def _report(out: Path, a, used, res, end: End | None, final: dict | None, w: _Watch | None, events: list,
+            wall: float, recording: dict | None) -> int:
+    """report.json (run_report), the plots and the summary lines; the exit status."""
+    final = final or _final(None, end, a)
+    run = w.run() if w is not None else {}
+    executed = run.get("sequence") or ([] if res is None else list(res.optimal_sequence if a.execute_optimum
+                                                                      else res.sequence))
+    fs = {**run_report.check_scene(a.scenario, final["before"], final["after"],
+                                   [] if a.no_execute else run.get("relocated", executed)), **final["robot"]}
+    if end is None:  # the goal's result
+        ok = bool(res.success and (a.no_execute or fs["target_on_bottom_shelf"]))
+        message = res.message if ok or not res.success else \
+            f"{res.message}; but the simulator does not show the target on the bottom shelf"
+        end = End("success" if ok else "failed", message)
+    report = {"scenario": a.scenario, "policy": used.policy, "search": used.search, "seed": used.seed,
+              "success": end.kind == "success", "message": end.message, "out": str(out),
+              "end": {"kind": end.kind, "exit_code": end.exit_code},
+              "next_step": "" if end.kind == "success" else run_report.next_step(end.message, out, end.kind),
+              **run_report.training_fields(res), "wall_time_s": round(wall, 1),
+              "executed": "optimum" if res is not None and executed == list(res.optimal_sequence)
+              and executed != list(res.sequence) else "learned", "executed_sequence": executed,
+              "closed_loop": not a.open_loop, "done": {"relocated": run.get("relocated", []),
+                                                       "running": bool(run.get("running"))},
+              "interrupted": final["interrupted"], "respawns": list(events),
+              "last_known": run_report.where(a.scenario, final["after"], final["age"], fs.get("at_hand", [])),
+              "disturbances": list(w.disturbances) if w is not None else [], "replans": run.get("replans", []),
+              "steps": run.get("steps", []), "final_scene": fs, "recording": recording}
+    run_report.write(out, report)
+    if res is not None:
+        run_report.learning_curve(res.q_sum_history, out / "learning_curve.png", f"{used.policy} / {used.search}")
+    run_report.strip(w.rec.frames if w is not None else [], out / "retrieval_strip.png")
+    for line in run_report.summary(report):
+        print(f"[demo] {line}")
+    return end.exit_code
 
-    def __init__(self):
-        self.msg = None
 
-    def __call__(self, msg) -> None:
-        self.msg = msg
+class _Interrupted(Exception):
+    """SIGINT or SIGTERM: the run stops, the report is still written."""
 
-    def positions(self) -> dict:
-        if self.msg is None:
-            return {}
-        from relocation_common.ros_conversions import msg_to_objects  # base centres, as the report has them
-        return {o.id: [float(v) for v in o.base()] for o in msg_to_objects(self.msg, require_target=False)}
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
 
 
-def _check_scene(scenario_path: str, before: dict, after: dict, relocated) -> dict:
-    """Where the bottles ended (simulator ground truth): the target on the bottom shelf, the others unmoved."""
-    from relocation_common.scenario import load_scenario
-    s = load_scenario(scenario_path)
-    z_bottom = s.shelf.bottom_z
-    on_bottom = {i: abs(p[2] - z_bottom) < 0.02 and s.shelf.x_front < p[0] < s.shelf.x_back
-                 for i, p in after.items()}
-    untouched = [i for i in after if i not in relocated and i in before]
-    moved = [float(np.linalg.norm(np.subtract(after[i], before[i]))) for i in untouched]
-    return {"target_on_bottom_shelf": bool(on_bottom.get(s.target_id, False)),
-            "relocated_on_bottom_shelf": {i: bool(on_bottom.get(i, False)) for i in relocated},
-            "max_displacement_untouched_m": max(moved, default=0.0), "positions_after": after}
+_HELD: list[int] = []  # signals that came while the report was being written
 
 
-def _timeout_hint(message: str, checkpoint: Path) -> str:
-    """What to do when the goal had no result within --timeout (scenario3_15 with perception at load 7: "[demo]
-    error: no result within 900 s" and nothing else): the node graph stops, and the task planner keeps its training
-    in the checkpoint, which the same command resumes."""
-    if not message.startswith("no result within"):
-        return ""
-    return (f" (--timeout). Training so far is kept in {checkpoint}: the same command resumes it; add --timeout N "
-            "for more time (a 15-bottle scene trains for 700-1200 s on 2 cores)")
+def _interrupt(signum, frame):
+    """SIGTERM (timeout, systemd, docker stop) and Ctrl-C stop the graph; a second one while the run is being
+    wound up and reported is noted, not raised (the report is written in seconds)."""
+    if _HELD and _HELD[0] < 0:
+        _HELD.append(signum)
+        return
+    raise _Interrupted(signum)
+
+
+class _signals_held:
+    """Inside: SIGINT and SIGTERM are noted, not raised (winding up and writing the report)."""
+
+    def __enter__(self):
+        _HELD[:] = [-1]
+
+    def __exit__(self, *exc):
+        _HELD.clear()
+        return False
 
 
 def _wait_for(predicate, timeout: float, graph: Graph, what: str) -> None:
@@ -393,16 +489,11 @@ def _wait_for(predicate, timeout: float, graph: Graph, what: str) -> None:
 
 
 def main(argv=None) -> None:
-    """Console entry point: `run`, with SIGTERM and Ctrl-C shutting the graph down and errors on one line."""
+    """Console entry point: `run`, with SIGTERM and Ctrl-C winding the run up (report.json written); the exit code
+    says how the run ended (run_report.END)."""
     signal.signal(signal.SIGTERM, _interrupt)
-    try:
-        sys.exit(run(argv))
-    except KeyboardInterrupt:
-        print("\n[demo] interrupted; the node graph was shut down", file=sys.stderr)
-        sys.exit(130)
-    except (RuntimeError, TimeoutError, ClientError) as e:
-        print(f"[demo] error: {e}", file=sys.stderr)
-        sys.exit(1)
+    signal.signal(signal.SIGINT, _interrupt)
+    sys.exit(run(argv))
 
 
 if __name__ == "__main__":

@@ -5,6 +5,11 @@ on a private ROS_DOMAIN_ID with discovery limited to the loopback, logs under th
 demo, the benchmarks and the graph tests. Stop with Ctrl-C: every node gets SIGINT, then SIGKILL after a grace
 period. Each node gets SIGTERM when the process that started it dies (Linux parent-death signal), so a killed
 launcher leaves no node behind.
+
+With `respawn=True` (the demo, the chaos benchmark) a node that dies is started again with the same command after
+`respawn_delay` s, at most `max_respawns` times, as launch_ros's `respawn` does: config/graph.yaml, per node (the
+launch file reads the same). Each death and restart is logged and kept in `events` (for the report); `check_alive`
+raises NodeDied only for a node that is not coming back. Without it (the tests) any death raises at once.
 """
 from __future__ import annotations
 
@@ -15,13 +20,16 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Callable
 
 from relocation_common.arm_interface import ArmInterface
-from relocation_common.config import ConfigError, node_section
+from relocation_common.config import ConfigError, node_section, read_yaml
 from relocation_common.feasibility import replica_namespace
+from relocation_common.node import RESPAWN_ENV
 from relocation_common.paths import config_file, python_path
 
 # node name -> (module with main(), parameter file)
@@ -35,6 +43,47 @@ ARM_NODES = ("jaco2_sim_driver", "motion_planner")  # they read config/arm_inter
 
 
 LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"
+SUPERVISE_PERIOD = 0.2  # s between looks at the node processes (respawn)
+
+
+@dataclass(frozen=True)
+class Respawn:
+    """How a node that dies is restarted (config/graph.yaml; launch_ros's respawn, respawn_delay; launch's
+    respawn_max_retries as max_respawns)."""
+
+    respawn: bool
+    respawn_delay: float
+    max_respawns: int
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.respawn, bool):
+            raise ConfigError(f"config/graph.yaml: respawn must be true or false, got {self.respawn!r}")
+        if isinstance(self.respawn_delay, bool) or not isinstance(self.respawn_delay, (int, float)) \
+                or not 0 <= self.respawn_delay < 3600:
+            raise ConfigError(f"config/graph.yaml: respawn_delay must be 0..3600 s, got {self.respawn_delay!r}")
+        if isinstance(self.max_respawns, bool) or not isinstance(self.max_respawns, int) or self.max_respawns < 0:
+            raise ConfigError(f"config/graph.yaml: max_respawns must be an integer >= 0, got {self.max_respawns!r}")
+
+
+def respawn_policies(path: Path | None = None) -> dict[str, Respawn]:
+    """node name -> Respawn, from config/graph.yaml (every node of NODES; ConfigError naming a missing or bad one)."""
+    path = path or config_file("graph.yaml")
+    data = read_yaml(path)
+    out = {}
+    for name in NODES:
+        entry = data.get(name) if isinstance(data, dict) else None
+        if not isinstance(entry, dict) or set(entry) != {"respawn", "respawn_delay", "max_respawns"}:
+            raise ConfigError(f"{path}: {name} needs respawn, respawn_delay and max_respawns, got {entry!r}")
+        out[name] = Respawn(**entry)
+    return out
+
+
+class NodeDied(RuntimeError):
+    """A node of the graph died and is not coming back (no respawn, or max_respawns reached)."""
+
+    def __init__(self, name: str, code: int | None, log_tail: str) -> None:
+        super().__init__(f"node {name} exited with {code}:\n{log_tail}")
+        self.name, self.code = name, code
 
 
 def domains_in_use() -> set[int]:
@@ -125,6 +174,8 @@ class Graph:
     run_dir: Path
     domain_id: int | None = None  # default: a reserved private one (private_domain_id), released by stop_all
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    respawn: bool = False  # True: config/graph.yaml's respawn policies (the module docstring)
+    on_event: Callable[[dict[str, Any]], None] = lambda event: None  # each death and restart, from the supervisor
 
     def __post_init__(self) -> None:
         self._lock = None
@@ -134,6 +185,15 @@ class Graph:
         (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
         self.arms: dict[str, ArmInterface] = {}  # started node -> the arm interface it runs with
         self.env = ros_env(self.domain_id, self.run_dir)
+        self.policies = respawn_policies() if self.respawn else {}
+        self.events: list[dict[str, Any]] = []  # {"node", "event": died | respawned | gave up, "code", "t"}
+        self._cmds: dict[str, tuple[str, list[str]]] = {}  # started name -> (node kind, command)
+        self._deaths: dict[str, int] = {}  # started name -> deaths so far
+        self._dead: dict[str, int | None] = {}  # started name -> exit code, not coming back
+        self._guard = threading.RLock()
+        self._t0 = time.monotonic()
+        self._stopping = threading.Event()
+        self._supervisor: threading.Thread | None = None
 
     def start(self, name: str, params: dict | None = None, params_file: Path | None = None,
               namespace: str = "") -> subprocess.Popen:
@@ -143,17 +203,78 @@ class Graph:
         cmd = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file or config_file(cfg))]
         for k, v in (params or {}).items():
             cmd += ["-p", f"{k}:={param_arg(v)}"]
+        kind = name
         if namespace:
             cmd += ["-r", f"__ns:={namespace}"]
             name = f"{name}_{namespace.strip('/').replace('/', '_')}"
-        log = open(self.run_dir / "logs" / f"{name}.log", "w")
-        self.procs[name] = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT,
-                                            stdin=subprocess.DEVNULL, cwd=self.run_dir,
-                                            preexec_fn=die_with_parent)
-        log.close()
+        with self._guard:
+            self._cmds[name] = (kind, cmd)
+            self._dead.pop(name, None)
+            self.procs[name] = self._spawn(name, cmd, "w")
         if arm is not None:
             self.arms[name] = arm
+        if self.respawn and self._supervisor is None:
+            self._supervisor = threading.Thread(target=self._supervise, name="graph supervisor", daemon=True)
+            self._supervisor.start()
         return self.procs[name]
+
+    def _spawn(self, name: str, cmd: list[str], mode: str, respawn: int = 0) -> subprocess.Popen:
+        env = dict(self.env, **{RESPAWN_ENV: str(respawn)}) if respawn else self.env  # the node's health says it
+        with open(self.run_dir / "logs" / f"{name}.log", mode) as log:
+            return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                    stdin=subprocess.DEVNULL, cwd=self.run_dir, preexec_fn=die_with_parent)
+
+    # -- respawn (launch_ros's respawn, respawn_delay; config/graph.yaml) ---------------------------------------
+    def _supervise(self) -> None:
+        """Until stop_all: a node that exited is started again after its respawn_delay, up to max_respawns times;
+        every death and restart is an event (`events`, `on_event`, the log). A node stopped through `stop` is not."""
+        due: dict[str, float] = {}  # name -> when to start it again
+        while not self._stopping.wait(SUPERVISE_PERIOD):
+            try:
+                self._look(due)
+            except Exception as e:  # never silent: the graph goes on without respawn
+                print(f"[graph] supervisor stopped: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+                return
+
+    def _look(self, due: dict[str, float]) -> None:
+        """One look at the processes (_supervise): deaths noted, restarts that are due made."""
+        with self._guard:
+            for name, p in list(self.procs.items()):
+                code = p.poll()
+                if code is None or name in due or name in self._dead:
+                    continue
+                policy = self.policies.get(self._cmds[name][0])
+                n = self._deaths[name] = self._deaths.get(name, 0) + 1
+                if policy is not None and policy.respawn and n <= policy.max_respawns:
+                    due[name] = time.monotonic() + policy.respawn_delay
+                    self._event(name, "died", code, f"restarting in {policy.respawn_delay:g} s "
+                                                    f"({n} of {policy.max_respawns})")
+                else:
+                    self._dead[name] = code
+                    why = "max_respawns reached" if policy is not None and policy.respawn else "no respawn"
+                    self._event(name, "died", code, f"not restarted ({why}: config/graph.yaml)")
+            for name, at in list(due.items()):
+                if time.monotonic() >= at and name in self.procs and not self._stopping.is_set():
+                    del due[name]
+                    with open(self.run_dir / "logs" / f"{name}.log", "a") as log:
+                        log.write(f"\n----- [graph] respawned after exit {self.procs[name].returncode} -----\n")
+                    self.procs[name] = self._spawn(name, self._cmds[name][1], "a", self._deaths[name])
+                    self._event(name, "respawned", None, f"pid {self.procs[name].pid}")
+
+    def _event(self, name: str, what: str, code: int | None, note: str) -> None:
+        event = {"node": name, "event": what, "code": code, "t": round(time.monotonic() - self._t0, 1),
+                 "note": note}
+        self.events.append(event)
+        print(f"[graph] {name} {what}" + (f" (exit {code})" if code is not None else "") + f": {note}",
+              file=sys.stderr, flush=True)
+        self.on_event(event)
+
+    def dead(self) -> dict[str, int | None]:
+        """The nodes that died and are not coming back: name -> exit code (with respawn; without, any dead node)."""
+        with self._guard:
+            if self.respawn:
+                return dict(self._dead)
+            return {n: p.returncode for n, p in self.procs.items() if p.poll() is not None}
 
     def _agree(self, name: str, params: dict, params_file: Path) -> ArmInterface | None:
         """The arm interface node `name` will run with (config/arm_interface.yaml, then its params file's section,
@@ -188,14 +309,15 @@ class Graph:
         return (self.run_dir / "logs" / f"{name}.log").read_text(errors="replace")
 
     def check_alive(self) -> None:
-        """Raise RuntimeError naming any node that died, with the end of its log."""
-        for name, p in self.procs.items():
-            if p.poll() is not None:
-                raise RuntimeError(f"node {name} exited with {p.returncode}:\n{self.log(name)[-3000:]}")
+        """Raise NodeDied (a RuntimeError) naming a node that died and is not coming back (with respawn: its
+        policy let it go; without: any dead node), with the end of its log."""
+        for name, code in self.dead().items():
+            raise NodeDied(name, code, self.log(name)[-3000:])
 
     def stop(self, name: str, sig: int = signal.SIGINT, grace: float = 5.0) -> int:
-        """Stop node `name` (signal `sig`, SIGKILL after `grace` s); its exit code."""
-        p = self.procs.pop(name)
+        """Stop node `name` (signal `sig`, SIGKILL after `grace` s; never respawned); its exit code."""
+        with self._guard:
+            p = self.procs.pop(name)
         if p.poll() is None:
             p.send_signal(sig)
             try:
@@ -207,6 +329,11 @@ class Graph:
 
     def stop_all(self, grace: float = 5.0) -> dict[str, int]:
         """SIGINT to every node, SIGKILL to those still running after `grace` s; name -> exit code."""
+        self._stopping.set()  # no respawn from here on
+        with self._guard:
+            pass  # a respawn in progress has finished: its process is in procs
+        if self._supervisor is not None:
+            self._supervisor.join(timeout=2.0)
         for p in self.procs.values():
             if p.poll() is None:
                 p.send_signal(signal.SIGINT)

@@ -22,6 +22,8 @@ from enum import IntEnum
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 NO_GRASP = "no grasp: "  # the start of the g_U message of an object the hand cannot grasp (module docstring)
+OUTCOME_UNKNOWN = "outcome unknown"  # the end of a RelocateObject result whose outcome no scene showed (the motion
+# planner's goal_check.outcome: not a success; the task planner's closed loop looks at its own scene)
 
 
 class Label(IntEnum):

@@ -1,11 +1,12 @@
 """What every node shares: its parameters declared from its YAML, its main() (spin, clean exit), a blocking
-service call with a timeout, an action client without rclpy's lost-response race.
+service call with a timeout, an action client without rclpy's lost-response race, its health on /diagnostics.
 
 SIGINT and SIGTERM end the spin loop, then the context is shut down (running callbacks see rclpy.ok() false)
 and the node closed: exit 0. Bad parameters or a bad scene: one line on stderr and exit status 2, never a traceback.
 """
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
@@ -15,10 +16,12 @@ from types import FrameType
 from typing import Any, Callable, Iterator
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.action.client import ClientGoalHandle
 from rclpy.action.server import ServerGoalHandle
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.client import Client
 from rclpy.context import Context
 from rclpy.exceptions import ParameterException
@@ -246,3 +249,52 @@ def call(client: Client, request: Any, timeout: float, abandon: Callable[[], boo
             client.remove_pending_request(fut)
             raise TimeoutError(f"no answer from {client.srv_name} within {timeout:.1f} s")
     return fut.result()
+
+
+RESPAWN_ENV = "QTREE_RESPAWN"  # set by the graph launcher in a respawned node's environment: how many times
+STARTED_NOTE_S = 30.0  # s after a start during which a node's status says it (re)started
+Report = Callable[[], tuple[int, str, dict[str, str]]]  # () -> (level: 0 OK, 1 WARN, 2 ERROR, message, values)
+
+
+class Health:
+    """A node's health on /diagnostics (diagnostic_msgs/DiagnosticArray, what rqt_robot_monitor and the diagnostic
+    aggregator read): one DiagnosticStatus `name` from `report()`, every `period` s on a timer of its own (a node's
+    busy callbacks do not delay it); without `report`, only what `send` is given (perception: one per frame). Every
+    status carries the process id and its uptime; for STARTED_NOTE_S s after the start its message begins with
+    "started" or, in a respawned process (RESPAWN_ENV set by the launcher), "restarted (respawn N)": a respawn shows
+    as a status that resets and says so."""
+
+    def __init__(self, node: Node, name: str, hardware_id: str, report: Report | None = None,
+                 period: float = 1.0) -> None:
+        self.node, self.name, self.hardware_id, self.report = node, name, hardware_id, report
+        self.t0 = time.monotonic()
+        respawn = os.environ.get(RESPAWN_ENV, "")
+        self.start_note = f"restarted (respawn {respawn})" if respawn else "started"
+        self.pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        if report is not None:
+            node.create_timer(period, self.publish, MutuallyExclusiveCallbackGroup())
+
+    def publish(self) -> None:
+        """The status report() gives now (report() failing is itself an ERROR status, never an exception)."""
+        assert self.report is not None
+        try:
+            level, message, values = self.report()
+        except Exception as e:
+            level, message, values = 2, f"health report failed: {type(e).__name__}: {e}", {}
+        self.send(level, message, values)
+
+    def send(self, level: int, message: str, values: dict[str, str]) -> None:
+        """One status (level 0 OK, 1 WARN, 2 ERROR) with the start note, the pid and the uptime added."""
+        up = time.monotonic() - self.t0
+        if up < STARTED_NOTE_S:
+            message = f"{self.start_note} {up:.0f} s ago; {message}"
+        msg = DiagnosticArray()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        kv = [KeyValue(key=k, value=str(v)) for k, v in {**values, "pid": os.getpid(), "up (s)": f"{up:.0f}"}.items()]
+        msg.status = [DiagnosticStatus(level=bytes([level]), name=self.name, message=message[:1000],
+                                       hardware_id=self.hardware_id, values=kv)]
+        try:
+            self.pub.publish(msg)
+        except Exception:
+            if rclpy.ok(context=self.node.context):
+                raise

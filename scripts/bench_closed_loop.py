@@ -6,7 +6,8 @@ driver, motion planner, task planner on the ground-truth scene /sim/objects) exe
 (`execute_optimum`; training capped at 5 episodes: the executor is measured, not the Q-Tree; the planner's safety
 nets and the follower's settle time raised, `LOADED`). Success: the goal
 succeeded AND the simulator shows the target on the bottom shelf; a run that reports success without it is counted
-as `false success`. After each run: the arm within 0.05 rad of home (the final joint state) and the gripper empty
+as `false success`. After each run: the arm within home_tol of home (config/motion_planner.yaml, 0.03 rad; the final
+joint state) and the gripper empty
 (no bottle within 0.1 m of the tool). Printed: success rate, re-plans, extra relocations against the undisturbed
 optimum, wall time, the failures' reasons. A failed run is counted as "no retrieval exists" only when
 `prove` shows it: the exact blocker A* on the run's final simulator scene (in-process motion planner, the bottles

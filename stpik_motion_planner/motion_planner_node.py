@@ -10,9 +10,20 @@
   driver (relocation_common.arm_interface, docs/kinova.md; ros_interface.RosArmLink).
 - `~/path` (visualization_msgs/Marker, latched): the tool path of the motion being executed, as a line strip.
 - the scene: the scenario file (shelf, slots, initial bottles), updated from `scene_topic` (ObjectArray,
-  transient local). Bottles no longer on the top shelf are ignored; bottles not seen keep their last pose.
+  transient local; a scene without the target too: perception's once the target is relocated). Bottles no longer
+  on the top shelf are ignored; bottles not seen keep their last pose.
+- `~/relocated` (std_msgs/String, latched): JSON {"relocated": {id: slot}}, the bottles this node placed on the
+  bottom shelf (perception publishes its scene without a relocated target, out of the camera's view).
+- `journal_path`: the relocation journal; started after a process that died mid-relocation, the node first brings
+  the arm back from it (service.py), goals waiting meanwhile.
+- /diagnostics: "motion_planner: ..." (relocation_common.node.Health): feasibility questions in flight and answered,
+  the last answer, the relocation running, the recovery after a restart.
 """
 from __future__ import annotations
+
+import json
+import threading
+import time
 
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject
@@ -23,14 +34,16 @@ from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
+from std_msgs.msg import String
 from visualization_msgs.msg import Marker
 
 from relocation_common import arm_interface
 from relocation_common.arm_interface import ArmInterface
-from relocation_common.node import SideNode, declare_parameters, node_main
+from relocation_common.node import Health, SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_objects
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 from stpik_motion_planner.execution import goal_check
+from stpik_motion_planner.execution.journal import Journal
 from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
 from stpik_motion_planner.planning.params import PlannerParams
@@ -53,13 +66,22 @@ class MotionPlannerNode(Node):
         planner_params = PlannerParams.from_mapping({k: v for k, v in params.items() if k in PlannerParams.keys()})
         arm = ArmInterface.from_mapping(params)  # the surface, shared with the driver; ParameterError
         self.core = MotionPlannerService(load_scenario(params["scenario"] or None), planner_params,
-                                         float(params["home_tol"]), log=self._log)
+                                         float(params["home_tol"]), log=self._log,
+                                         journal=Journal(params["journal_path"] if params["serve_relocation"] else ""))
         self.link: RosArmLink | None = None  # nothing in a feasibility-only replica (serve_relocation false)
+        self.asked, self.answered, self.last_answer = 0, 0, (0.0, "none yet")  # feasibility, for the health
+        self.relocation = "idle"  # what the relocate action does now, for the health
         if params["serve_relocation"]:
             goal_check.check_parameters({k: params[k] for k in goal_check.PARAMETERS})
             self.core.checks = {k: float(params[k]) for k in goal_check.PARAMETERS}
             self.stream_params = StreamParams.from_mapping(params)
             self.link = RosArmLink(self, arm, self.create_publisher(Marker, "~/path", SCENE_QOS))
+            self._relocated = self.create_publisher(String, "~/relocated", SCENE_QOS)
+            self.core.on_relocated = self._publish_relocated
+            self._publish_relocated(self.core.relocated)
+            if self.core.interrupted is not None:  # a previous process died mid-relocation: the arm back first
+                self.relocation = f"recovering the relocation of {self.core.interrupted.progress.object_id}"
+                threading.Thread(target=self._recover_interrupted, name="restart recovery", daemon=True).start()
         self.create_subscription(ObjectArray, params["scene_topic"], self._on_scene, SCENE_QOS,
                                  callback_group=MutuallyExclusiveCallbackGroup())
         # the feasibility service on a node of its own, spun by its own single-threaded executor (a thread): an
@@ -79,6 +101,27 @@ class MotionPlannerNode(Node):
                                + (f"driver {driver}" if self.link else "feasibility only (serve_relocation false)"))
         if base.slot_note:
             self.get_logger().warning(base.slot_note)
+        self.health = Health(self, f"{self.get_fully_qualified_name().lstrip('/')}: planning", "motion planner",
+                             self._health)
+
+    def _health(self) -> tuple[int, str, dict[str, str]]:
+        """The node's status (relocation_common.node.Health): WARN while recovering after a restart."""
+        at, what = self.last_answer
+        values = {"feasibility questions in flight": str(self.asked - self.answered),
+                  "feasibility answers": str(self.answered),
+                  "last answer": f"{what} ({time.monotonic() - at:.0f} s ago)" if at else what,
+                  "relocation": self.relocation, "relocated": json.dumps(self.core.relocated)}
+        level = 1 if self.relocation.startswith("recovering") else 0
+        return level, f"relocation: {self.relocation}; {self.asked - self.answered} feasibility questions in flight", \
+            values
+
+    def _publish_relocated(self, relocated: dict[str, int]) -> None:
+        self._relocated.publish(String(data=json.dumps({"relocated": relocated})))
+
+    def _recover_interrupted(self) -> None:
+        assert self.link is not None
+        arm = StreamedArm(self.link, self.stream_params, log=self._log)
+        self.relocation = f"recovered after a restart: {self.core.recover_interrupted(arm)}"
 
     def _log(self, level: str, text: str) -> None:
         """The cores' log lines. One call site per severity: rclpy refuses a call site whose severity changes."""
@@ -98,8 +141,8 @@ class MotionPlannerNode(Node):
     def _on_scene(self, msg: ObjectArray) -> None:
         """Bottles on the top shelf (standing or lying) replace the planner's, bottles off the shelf leave it; the
         rest of the scene stays (service.update_scene)."""
-        try:
-            changed = self.core.update_scene(msg_to_objects(msg), f"scene on {self.scene_topic}")
+        try:  # without the target too: perception's scene once the target is relocated, out of its view
+            changed = self.core.update_scene(msg_to_objects(msg, require_target=False), f"scene on {self.scene_topic}")
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return
@@ -109,6 +152,16 @@ class MotionPlannerNode(Node):
     def _on_feasibility(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         """PlanFeasibility -> MotionPlannerService.feasibility (Eq. 11); ok=false with the reason for a bad one."""
         res.ok = False
+        self.asked += 1
+        try:
+            res = self._answer(req, res)
+        finally:
+            self.answered += 1
+            self.last_answer = (time.monotonic(), f"{req.object_id or 'lanes'}: " + (
+                f"label {res.label}" if res.ok else res.message[:80]))
+        return res
+
+    def _answer(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         try:
             lanes, ans = self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes)
         except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
@@ -149,8 +202,10 @@ class MotionPlannerNode(Node):
                                                                                                 progress=p)),
                           self._log)
         req = goal_handle.request
+        self.relocation = f"relocating {req.object_id} (removed {list(req.removed_ids)})"
         outcome = self.core.relocate(arm, req.object_id, list(req.removed_ids), f"the scene on {self.scene_topic}",
                                      rclpy.ok)
+        self.relocation = f"idle; last: {req.object_id} {outcome.status}: {outcome.message[:120]}"
         {"succeeded": goal_handle.succeed, "canceled": goal_handle.canceled, "aborted": goal_handle.abort}[
             outcome.status]()
         return RelocateObject.Result(success=outcome.status == "succeeded", message=outcome.message)

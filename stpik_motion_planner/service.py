@@ -9,6 +9,15 @@ a relocation runs, its last feedback is sent again every `HEARTBEAT` s when noth
 load can take the planner's whole wall-clock safety net (carry_timeout, 60 s) without a phase change, and the task
 planner takes `relocate_silence` (10 s) without feedback for a planner that is gone. Logging goes to
 `log(level, text)` (the node's logger).
+
+A process that dies mid-relocation leaves the arm where it stopped, perhaps holding a bottle. The relocation's
+progress is kept in a journal (`execution.journal`, the node's `journal_path`) before each motion and at the
+release; a new process reads it and `recover_interrupted` brings the arm back as after a cancel. A goal sent again
+for that object then answers for the interrupted relocation: released before the death, the outcome checked
+against the scene now; not released, aborted with what the recovery did (the task planner re-plans as after any
+failed relocation). Goals wait (with feedback) until that recovery has ended. `on_relocated(relocated)` is called
+when the bottles this node placed change (the node publishes them: perception leaves a relocated target out of
+view instead of publishing no scene).
 """
 from __future__ import annotations
 
@@ -25,6 +34,7 @@ from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
 from relocation_common.scenario import Scenario, ShelfObject, UnknownObjectError
 from relocation_common.scene_check import check_scene
 from stpik_motion_planner.execution import goal_check
+from stpik_motion_planner.execution.journal import Journal, JournalError, Running, near_recorded
 from stpik_motion_planner.execution.relocation import Progress, recover, relocate
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm
 from stpik_motion_planner.model.blockers import lane_blockers
@@ -34,6 +44,7 @@ from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.results import PlanningError
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
+RESTART_STATE_WAIT = 30.0  # s the recovery of an interrupted relocation waits for the driver's joint states
 HEARTBEAT = 2.0  # s without feedback after which a running relocation's last feedback is sent again
 HOME_SETTLE = 0.01  # rad: a relocation or a recovery that ends farther than this from home is brought home
 SETTLE_WAIT = 0.3  # s after the last motion before the arm's place is measured
@@ -55,17 +66,32 @@ class MotionPlannerService:
     config/motion_planner.yaml's)."""
 
     def __init__(self, scenario: Scenario, params: PlannerParams, home_tol: float | None = None,
-                 log: Callable[[str, str], None] = lambda *_: None) -> None:
+                 log: Callable[[str, str], None] = lambda *_: None, journal: Journal | None = None) -> None:
         self.base, self.log, self.home_tol = scenario, log, home_tol
         self.planner = MotionPlanner(scenario, params)
         self.plan_lock = threading.Lock()  # MotionPlanner is not thread-safe
         self.bottles = {b.id: b for b in scenario.objects}
-        self.relocated: dict[str, int] = {}  # object -> slot, relocated by this node (until seen on the top shelf)
         self._held: str | None = None  # the object of the running relocation: its perceived pose is ignored
         self._relocating = threading.Lock()
         self._slot = 0  # the running relocation's slot
         self.scene = goal_check.SceneWatch()  # the last scene as received (goal checks, outcome checks)
         self.checks: dict[str, float] = goal_check.configured()  # the node sets the parameters'
+        self.on_relocated: Callable[[dict[str, int]], None] = lambda relocated: None
+        self.journal = journal or Journal(None)
+        self.interrupted: Running | None = None  # a relocation a previous process did not finish
+        self._running: Running | None = None  # the relocation being carried out or recovered (its journal entry)
+        self._resumed: tuple[Running, str] | None = None  # it, recovered, with what the recovery did
+        self._ready = threading.Event()  # set once no interrupted relocation is left to recover
+        try:
+            relocated, running = self.journal.load()
+        except JournalError as e:
+            self.log("warning", f"{e}; starting without it")
+            relocated, running = {}, None
+        self.relocated: dict[str, int] = relocated  # object -> slot, placed by this node (until seen on the top shelf)
+        if running is not None and running.progress.moves:
+            self.interrupted = running
+        else:
+            self._ready.set()
 
     # -- the scene ------------------------------------------------------------------------------------------
     def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene") -> list[str]:
@@ -82,8 +108,11 @@ class MotionPlannerService:
         self.scene.update(bases)
         m = merge_perceived(self.base.shelf, self.bottles, bottles, self._held, self.planner.lying,
                             self.planner.gone)
-        for i in m.seen:  # seen back on the top shelf (a reset scene): it can be relocated again
-            self.relocated.pop(i, None)
+        back = [i for i in m.seen if i in self.relocated]  # seen back on the top shelf: it can be relocated again
+        for i in back:
+            self.relocated.pop(i)
+        if back:
+            self.on_relocated(dict(self.relocated))
         if m.changed:
             scenario = self.base.with_objects(m.bottles.values())
             with self.plan_lock:
@@ -128,39 +157,117 @@ class MotionPlannerService:
         a cancel, recover (the result message says what was done). A goal that contradicts the scene (a removed
         bottle still on the top shelf, the object already relocated: goal_check.goal_refusal) is aborted with the
         reason; after the motion, success only if the scene from `source` shows the bottle at its slot and no
-        other bottle moved (goal_check.outcome). Never raises: a bug ends the goal with its reason, not the node."""
+        other bottle moved (goal_check.outcome). The goal waits until a relocation a previous process left is
+        recovered; a goal for that object answers for it (`_resumed_outcome`). Never raises: a bug ends the goal
+        with its reason, not the node."""
         removed_ids = list(removed_ids)
-        try:
-            self.check_goal(object_id, removed_ids)
-        except ValueError as e:  # accepted, then aborted with the reason: the client learns why (as nav2 does)
-            self.log("error", f"relocation goal refused: {e}")
-            return Outcome("aborted", f"relocation goal refused: {e}")
-        progress = Progress()
         with self._relocating, _Heartbeat(arm):
+            if not self._ready.is_set():
+                arm.phase("recover")  # the heartbeat repeats it while the previous process's relocation is undone
+                self._ready.wait()
+            resumed = self._resumed_outcome(object_id, source, ok)
+            if resumed is not None:
+                return resumed
+            try:
+                self.check_goal(object_id, removed_ids)
+            except ValueError as e:  # accepted, then aborted with the reason: the client learns why (as nav2 does)
+                self.log("error", f"relocation goal refused: {e}")
+                return Outcome("aborted", f"relocation goal refused: {e}")
             self._held = object_id
             try:
-                arm.wait_for_state(STATE_WAIT)
-                before = dict(self.scene.seen)
-                self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated,
-                                                            len(removed_ids))
-                relocate(self.planner, arm, object_id, removed_ids, home_tol=self.home_tol, lock=self.plan_lock,
-                         progress=progress, slot=self._slot, placed=placed)
-                self.relocated[object_id] = self._slot
-                self._settle_home(arm, progress)
-                success, message = goal_check.outcome(self.scene, before, self.base, object_id, self._slot,
-                                                      self.checks, source, ok)
-                return Outcome("succeeded" if success else "aborted", message)
-            except Cancelled:
-                arm.stop()
-                return Outcome("canceled", "cancelled: arm stopped" + self._recover(arm, progress))
-            except Exception as e:  # planning, the arm, bad input; a bug ends the goal with its reason, not the node
-                arm.stop()
-                known = isinstance(e, (Aborted, PlanningError, UnknownObjectError, ValueError))
-                message = str(e) if known else f"internal error: {type(e).__name__}: {e}"
-                self.log("error", f"relocation of {object_id} aborted: {message}")
-                return Outcome("aborted", message + self._recover(arm, progress))
+                return self._relocate(arm, object_id, removed_ids, source, ok)
             finally:
                 self._held = None
+                self._write_journal(None)
+
+    def _relocate(self, arm: StreamedArm, object_id: str, removed_ids: list[str], source: str,
+                  ok: Callable[[], bool]) -> Outcome:
+        """The relocation of a checked goal, its journal kept, then its outcome (relocate's docstring)."""
+        progress = Progress()
+        try:
+            arm.wait_for_state(STATE_WAIT)
+            before = dict(self.scene.seen)
+            self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated, len(removed_ids))
+            self._running = running = Running(progress, self._slot, [(b.id, b.x, b.y, b.z) for b in before.values()])
+
+            def on_change() -> None:  # a motion about to start, or the release
+                if progress.released:
+                    self._placed(object_id, self._slot)
+                self._write_journal(running)
+
+            relocate(self.planner, arm, object_id, removed_ids, home_tol=self.home_tol, lock=self.plan_lock,
+                     progress=progress, slot=self._slot, placed=placed, on_change=on_change)
+            self._placed(object_id, self._slot)
+            self._settle_home(arm, progress)
+            success, message = goal_check.outcome(self.scene, before, self.base, object_id, self._slot,
+                                                  self.checks, source, ok)
+            return Outcome("succeeded" if success else "aborted", message)
+        except Cancelled:
+            arm.stop()
+            return Outcome("canceled", "cancelled: arm stopped" + self._recover(arm, progress))
+        except Exception as e:  # planning, the arm, bad input; a bug ends the goal with its reason, not the node
+            arm.stop()
+            known = isinstance(e, (Aborted, PlanningError, UnknownObjectError, ValueError))
+            message = str(e) if known else f"internal error: {type(e).__name__}: {e}"
+            self.log("error", f"relocation of {object_id} aborted: {message}")
+            return Outcome("aborted", message + self._recover(arm, progress))
+
+    def _placed(self, object_id: str, slot: int) -> None:
+        """object_id is on the bottom shelf at `slot`, put there by this node (on_relocated once)."""
+        if self.relocated.get(object_id) != slot:
+            self.relocated[object_id] = slot
+            self.on_relocated(dict(self.relocated))
+
+    def _write_journal(self, running: Running | None) -> None:
+        """The journal now (execution.journal); a failure to write is said, never raised (the arm goes on)."""
+        try:
+            self.journal.write(self.relocated, running)
+        except OSError as e:
+            self.log("error", f"journal {self.journal.path} not written: {e}")
+
+    # -- a relocation a previous process left (the module docstring) ----------------------------------------
+    def recover_interrupted(self, arm: StreamedArm) -> str:
+        """Bring the arm back from the relocation the journal says a previous process did not finish (as after a
+        cancel: the bottle set down where it was picked, or after the release, the arm home); goals wait for it.
+        A journal whose motions the arm is nowhere near (a new world) is dropped. What was done, one line."""
+        run = self.interrupted
+        if run is None:
+            self._ready.set()
+            return "nothing to recover"
+        try:
+            arm.wait_for_state(RESTART_STATE_WAIT)
+            q = arm.measured()
+            if not near_recorded(run.progress, q):
+                what = (f"the journal's relocation of {run.progress.object_id} is not where the arm is (a new "
+                        "world?): dropped")
+            else:
+                self._slot, self._running = run.slot, run
+                what = self._recover(arm, run.progress).lstrip("; ")
+                self._resumed = (run, what)
+        except Exception as e:  # the driver gone, the planner: said; the next goal starts from where the arm is
+            what = f"recovery of the interrupted relocation of {run.progress.object_id} failed: {e}"
+        finally:
+            self.interrupted = None
+            self._write_journal(None)
+            self._ready.set()
+        self.log("warning", f"restarted during the relocation of {run.progress.object_id}: {what}")
+        return what
+
+    def _resumed_outcome(self, object_id: str, source: str, ok: Callable[[], bool]) -> Outcome | None:
+        """The answer for the relocation a previous process left, to a goal for the same object (None for any
+        other goal, which forgets it): released before the death, the outcome against the scene now (success only
+        if the world confirms it); else aborted, saying what the recovery did (the task planner re-plans)."""
+        resumed, self._resumed = self._resumed, None
+        if resumed is None or resumed[0].progress.object_id != object_id:
+            return None
+        run, what = resumed
+        note = f"the motion planner restarted during this relocation ({what})"
+        if not run.progress.released:
+            return Outcome("aborted", f"interrupted: {note}")
+        before = {i: goal_check.SeenBottle(i, x, y, z) for i, x, y, z in run.before}
+        success, message = goal_check.outcome(self.scene, before, self.base, object_id, run.slot, self.checks,
+                                              source, ok)
+        return Outcome("succeeded" if success else "aborted", f"{message} ({note})")
 
     def _recover(self, arm: StreamedArm, progress: Progress) -> str:
         """After a failed or cancelled goal: relocation.recover (the bottle set down where it was picked, the arm
@@ -171,7 +278,8 @@ class MotionPlannerService:
         for attempt in range(RECOVERY_TRIES):
             try:
                 arm.measured()  # a driver that is gone: fail now, not after the gripper's timeout
-                what = recover(self.planner, arm, progress, self.plan_lock)
+                what = recover(self.planner, arm, progress, self.plan_lock,
+                               on_change=lambda: self._write_journal(self._running))
                 break
             except Exception as e:
                 self.log("error", f"recovery after the failed relocation failed: {e}")
@@ -179,15 +287,16 @@ class MotionPlannerService:
                     return f"; recovery failed: {e}"
         self.log("info", f"recovered: {what}")
         if progress.released:
-            self.relocated[progress.object_id] = self._slot
+            self._placed(progress.object_id, self._slot)
         self._settle_home(arm, progress)
         return f"; recovered: {what}"
 
     def _settle_home(self, arm: StreamedArm, progress: Progress) -> None:
         """The final settle: an arm that ended farther than HOME_SETTLE from home is brought home from where it is,
-        so the next goal starts there (a motion settles within settle_tol of its last point; under load a
-        recovery's last motion once ended 0.044 rad off). A failure is logged: the arm is near home, and the next
-        goal plans its way home first when it is farther than home_tol."""
+        so the next goal starts there (a motion settles within settle_tol of its last point, for the follower's
+        settle_dwell: on joint states a tenth of a second old, a follower that stopped at the first state within
+        settle_tol left a recovery 0.044 rad off home; this is the net for what is left). A failure is logged: the
+        arm is near home, and the next goal plans its way home first when it is farther than home_tol."""
         try:
             time.sleep(SETTLE_WAIT)  # commands still on their way to the driver (under load) have played out
             q = arm.measured()

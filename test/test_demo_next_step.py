@@ -1,7 +1,8 @@
-"""The demo's one-line next step after a failure (relocation_app.demo._next_step): the reason decides it."""
+"""The demo's one-line next step after a failure (relocation_app.run_report.next_step): the reason decides it."""
 from pathlib import Path
 
-from relocation_app.demo import _next_step, _timeout_hint
+from relocation_app.run_report import next_step as _next_step
+from relocation_app.run_report import timeout_hint as _timeout_hint
 
 OUT = Path("/tmp/out")
 
@@ -48,3 +49,13 @@ def test_a_demo_out_of_time_says_that_the_same_command_resumes_it():
     hint = _timeout_hint("no result within 900 s", OUT / "run" / "qtree.ckpt")
     assert "/tmp/out/run/qtree.ckpt: the same command resumes it" in hint and "--timeout" in hint
     assert _timeout_hint("the train goal was rejected: bad policy", OUT) == ""
+
+
+def test_a_task_planner_that_died_during_the_execution_gets_its_own_step():
+    """The chaos benchmark's task planner SIGKILLed during a carry: the demo's message says "the task planner died
+    during the execution"; the old step read "a node kept dying (max_respawns ...)", which it had not (one respawn)."""
+    message = ("the task planner died during the execution (exit -9; phase: check 1: o4 relocated as planned): the "
+               "goal and the execution's state died with it")
+    step = _next_step(message, OUT, "node_died")
+    assert "task planner died during the execution" in step and "kept dying" not in step, step
+    assert "kept dying" in _next_step("perception died 4 times (max_respawns 3)", OUT, "node_died")

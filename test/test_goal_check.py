@@ -144,8 +144,10 @@ VALUES = {"outcome_tolerance": 0.015, "slot_tolerance": 0.02, "outcome_timeout":
 
 def test_the_outcome_waits_for_a_scene_after_the_motion():
     watch = gc.SceneWatch()
+    # never a scene: unknown, never a success (the old check returned True, "outcome unverified")
     assert gc.outcome(watch, {}, SC, "o2", 0, VALUES, "/sim/objects") == (
-        True, "relocated o2 to slot 0 (outcome unverified: no scene received on /sim/objects)")
+        False, "relocated o2 to slot 0, but no scene on /sim/objects within outcome_timeout after the motion: "
+               "outcome unknown")
     before = _scene()
     watch.update((b.id, b.x, b.y, b.z) for b in before.values())  # received before the motion ended: not used
     ok, msg = gc.outcome(watch, before, SC, "o2", 0, VALUES, "/sim/objects")
@@ -157,3 +159,18 @@ def test_the_outcome_waits_for_a_scene_after_the_motion():
     values = dict(VALUES, outcome_timeout=3.0)
     assert gc.outcome(watch, before, SC, "o2", 0, values, "t") == (False, "relocated o2 to slot 0, but the scene "
                                                                           "shows: o1 moved 30 mm")
+
+
+def test_without_a_scene_before_the_motion_the_scene_after_decides():
+    """A node that got its first scene only after the motion (perception restarting): the moved bottle is checked,
+    the others cannot be. The old check answered success without waiting for any scene."""
+    import threading
+    watch = gc.SceneWatch()
+    still_there = _scene()  # o2 still standing on the top shelf: not a success
+    threading.Timer(0.4, lambda: watch.update((b.id, b.x, b.y, b.z) for b in still_there.values())).start()
+    ok, msg = gc.outcome(watch, {}, SC, "o2", 0, dict(VALUES, outcome_timeout=3.0), "t")
+    assert (ok, msg) == (False, "relocated o2 to slot 0, but the scene shows: o2 is still on the top shelf")
+    placed = _scene(o2=(*SLOTS[0], SHELF.bottom_z))
+    threading.Timer(0.4, lambda: watch.update((b.id, b.x, b.y, b.z) for b in placed.values())).start()
+    assert gc.outcome(watch, {}, SC, "o2", 0, dict(VALUES, outcome_timeout=3.0), "t") == (
+        True, "relocated o2 to slot 0 (the other bottles not checked: no scene on t before the motion)")

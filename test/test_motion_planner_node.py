@@ -165,6 +165,28 @@ def test_a_relocated_object_cannot_be_relocated_again(graph):
     assert "already relocated" in _refused(graph, "o2", ())
 
 
+def test_the_driver_and_the_planner_report_their_health_on_diagnostics(graph):
+    """diagnostic_msgs on /diagnostics, as rqt_robot_monitor reads it (the old driver and planner published none):
+    the driver's command age and watchdog stops, the planner's questions in flight, its last answer and the bottles
+    it placed (o2, by the relocation above), each with its pid. Runs after the o2 relocation above."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    diag = graph.probe.collect("/diagnostics", DiagnosticArray, 50)
+
+    def status(name):
+        msgs = diag.wait(lambda m: any(st.name == name for x in m for st in x.status), timeout=10)
+        st = [st for x in msgs for st in x.status if st.name == name][-1]
+        return st, {kv.key: kv.value for kv in st.values}
+
+    st, values = status("jaco2_sim_driver: arm")
+    assert st.level == b"\x00" and values["pid"] == str(graph.driver.pid), (st, values)
+    assert "command age (s)" in values and int(values["watchdog stops"]) >= 0, values
+    st, values = status("motion_planner: planning")
+    assert st.level == b"\x00" and values["pid"] == str(graph.planner.pid), (st, values)
+    assert values["feasibility questions in flight"] == "0" and int(values["feasibility answers"]) >= 1, values
+    assert '"o2"' in values["relocated"] and values["last answer"], values
+
+
 def test_cancel_during_the_carry_sets_the_bottle_down_and_the_next_goal_works(graph):
     """The old node stopped the arm where it was, the bottle held in the air. Now the goal ends cancelled
     after the recovery: back along the carry, the bottle let go where it was picked, back along the approach."""
@@ -183,7 +205,7 @@ def test_cancel_during_the_carry_sets_the_bottle_down_and_the_next_goal_works(gr
     assert max(moved.values()) < 0.01, moved
     graph.states.clear()
     q = np.array(graph.states.wait(timeout=5)[-1].position[:7])
-    # home: within 0.03 rad (the recovery's last motion once ended 0.044 rad off; service.HOME_SETTLE brings it home)
+    # home: within 0.03 rad (config/motion_planner.yaml home_tol; the recovery's last motion once ended 0.044 rad off)
     np.testing.assert_allclose(q, rd.Q_HOME, atol=0.03)
     handle, _ = _send(graph, "o3", ["o2"])
     res = _result(handle)

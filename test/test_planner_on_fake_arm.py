@@ -8,14 +8,18 @@ one bottle, on each surface:
 - ros2_control: /velocity_controller/commands (rad/s), /gripper_controller/commands, /joint_states.
 
 So the planner needs nothing of the simulator: what a real kinova driver (or a ros2_control stack) serves is enough.
-The scene comes from the scenario file (scene_topic is a topic nobody publishes). The test watches the commands and
-the joint states on the graph. On the kinova surface the fake's joint states also stop for a second mid-motion: the
-planner holds the arm and goes on (one graph for both checks). Numbers printed (pytest -s).
+The test plays the scene source (a fake arm has no world): the scenario's scene, then, once the bottle was let go,
+the scene with o2 at its slot; without a scene after the motion the outcome is unknown, never a success
+(test_goal_check.py). The test watches the commands and the joint states on the graph. On the kinova surface the
+fake's joint states also stop for a second mid-motion: the planner holds the arm and goes on (one graph for both
+checks). Numbers printed (pytest -s).
 """
 import math
 import re
 import signal
+import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,10 +29,15 @@ pytest.importorskip("rclpy")
 from kinova_msgs.msg import JointVelocity
 from kinova_outsider import ARM_JOINTS, FINGER_CLOSED, FINGER_JOINTS, SUCCEEDED, Client, rad_to_turns
 from qtree_relocation_msgs.action import RelocateObject
+from qtree_relocation_msgs.msg import ObjectArray
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from relocation_common.paths import default_scenario
 from relocation_common.robot_description import Q_HOME, QDOT_MAX
+from relocation_common.ros_conversions import objects_to_msg
+from relocation_common.scenario import load_scenario
 
 pytestmark = pytest.mark.graph
 
@@ -42,6 +51,23 @@ def _rad_s(msg) -> np.ndarray:
 
 
 STALL = 1.0  # s without joint states mid-motion on the kinova surface (a CI run: 0.9 s, on a loaded machine)
+SCENE = "/test/scene"  # the test's scene (ObjectArray), as perception or the simulator's ground truth would send it
+
+
+def _play_scene(client, released: threading.Event, stop: threading.Event) -> threading.Thread:
+    """Publish the scenario's scene every 0.2 s, with o2 standing at slot 0 of the bottom shelf once `released`."""
+    sc = load_scenario(default_scenario())
+    pub = client.publisher(ObjectArray, SCENE, QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    x, y = sc.slot(0)
+    placed = [replace(o, x=x, y=y, support_z=sc.shelf.bottom_z) if o.id == "o2" else o for o in sc.objects]
+
+    def run():
+        while not stop.wait(0.2):
+            pub.publish(objects_to_msg(placed if released.is_set() else sc.objects))
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t
 
 
 @pytest.mark.parametrize("interface", ["kinova", "ros2_control"])
@@ -55,6 +81,7 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
         fake = g.start_argv([g.python, str(REPO / "test" / "kinova_outsider.py"), interface,
                              *[repr(float(x)) for x in Q_HOME], *stall], "fake_arm")
         client = Client(g.domain_id, "relocation_client")
+        released, stop = threading.Event(), threading.Event()
         try:
             states = client.collect(JointState, f"{PRE}/out/joint_state" if kinova else "/joint_states", 100)
             commands = client.collect(JointVelocity, f"{PRE}/in/joint_velocity", 100) if kinova else \
@@ -62,12 +89,19 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
             states.wait(timeout=30)
             planner = g.start("stpik_motion_planner.motion_planner_node",
                               params_file=REPO / "config" / "motion_planner.yaml",
-                              params={"command_interface": interface, "scene_topic": "/nobody/publishes/this"})
+                              params={"command_interface": interface, "scene_topic": SCENE})
+            _play_scene(client, released, stop)  # once the planner listens
             ac = client.action(RelocateObject, "/motion_planner/relocate", timeout=60)
             phases = []
             t0 = time.monotonic()
+
+            def feedback(f):
+                phases.append(f.feedback.phase)
+                if f.feedback.phase in ("retreat", "plan_home", "home", "done"):
+                    released.set()  # the bottle was let go: the world shows it at its slot
+
             status, result = client.goal(ac, RelocateObject.Goal(object_id="o2", removed_ids=[]), timeout=120,
-                                         feedback=lambda f: phases.append(f.feedback.phase))
+                                         feedback=feedback)
             duration = time.monotonic() - t0
             gaps = np.diff(states.snapshot()[1])
             assert result is not None and result.success, (result, planner.log()[-3000:], fake.log()[-2000:],
@@ -94,6 +128,7 @@ def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
             assert {"approach", "grasp", "carry", "release", "home"} <= set(phases), phases
             assert all(math.isfinite(x) for c in cmds for x in c)
         finally:
+            stop.set()
             client.close()
             assert fake.stop(signal.SIGINT) == 0, fake.log()[-2000:]
 

@@ -7,6 +7,7 @@ import time
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from relocation_common import robot_description as rd
 from stpik_motion_planner import service
@@ -105,3 +106,59 @@ def test_a_recovery_that_failed_once_is_tried_again_and_brings_the_arm_home():
     out = core.relocate(a, core.base.objects[0].id, [])
     assert out.status == "canceled" and "; recovered: " in out.message and "recovery failed" not in out.message, out
     assert link.opened == 2 and link.paths[-1] == "recover"
+
+
+def _line(a, b, n=40):
+    """A trajectory from configuration a to b in n samples (0.05 s apart)."""
+    from stpik_motion_planner.planning.trajectory import Trajectory
+    pos = np.linspace(a, b, n)
+    t = np.arange(n) * 0.05
+    vel = np.zeros_like(pos)
+    vel[:-1] = np.diff(pos, axis=0) / 0.05
+    return Trajectory(t, pos, vel)
+
+
+def test_a_recovery_tried_again_goes_on_with_the_motions_left():
+    """A recovery whose last motion (back along the approach) did not settle near home (the follower's
+    settle_timeout: a stream starved under load). The old recovery, tried again (service.RECOVERY_TRIES), went back
+    along the whole carry once more, from the carry's sample nearest home (its staging pose, outside the shelf) into
+    the shelf to the grasp, then home: the arm swept the shelf with an open hand. Now a retry goes on with the
+    motions not yet gone back along."""
+    from stpik_motion_planner.execution.relocation import Progress, recover
+    from stpik_motion_planner.execution.streaming import Aborted
+
+    home = np.array(rd.Q_HOME)
+    grasp = home + np.array([0.6, 0.4, 0.0, -0.5, 0.0, 0.3, 0.0])
+    staging = home + np.array([0.05, -0.02, 0.0, 0.03, 0.0, 0.0, 0.0])  # the carry passes near home
+    slot = staging + np.array([0.0, 0.5, 0.0, -0.4, 0.0, 0.2, 0.0])
+    approach, carry = _line(home, grasp), _line(grasp, staging).then(_line(staging, slot))
+
+    class StarvedArm:
+        """Ends every motion at its last point, but the first motion home settles 0.044 rad short."""
+
+        def __init__(self):
+            self.q, self.ends, self.failed = slot.copy(), [], False
+
+        def measured(self):
+            return self.q.copy()
+
+        def follow(self, traj, phase):
+            end = traj.positions[-1]
+            if np.allclose(end, home) and not self.failed:
+                self.failed, self.q = True, home + 0.044
+                raise Aborted("recover: did not settle within 3.0 s: error 0.0440 rad > settle_tol 0.005 rad")
+            self.q = end.copy()
+            self.ends.append(end.copy())
+
+        def gripper(self, action, phase):
+            pass
+
+    arm, progress = StarvedArm(), Progress("o3", ["o2"], [], [("approach", approach), ("carry", carry)])
+    with pytest.raises(Aborted):
+        recover(None, arm, progress)
+    what = recover(None, arm, progress)  # tried again (service.RECOVERY_TRIES)
+    swept_back = [e for e in arm.ends[1:] if np.allclose(e, grasp)]
+    assert not swept_back, "the retry drove the arm back into the shelf to the grasp"
+    assert what == "o3 set down where it was picked; arm back home"
+    assert np.allclose(arm.q, home)
+    assert progress.moves == []  # nothing left to go back along

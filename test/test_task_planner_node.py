@@ -148,6 +148,28 @@ def test_node_trains_like_the_core(graph):
     assert sum(1 for m in last if m.ns == "scene") == len(scenario.objects)
 
 
+def test_the_task_planner_reports_its_health_on_diagnostics(graph):
+    """diagnostic_msgs on /diagnostics (the old task planner published none): its phase (idle after the training
+    above; during a goal the phase, episode, planner calls and re-plans: ros_clients.goal_health), with its pid."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    g, node, _, _, _ = graph
+    got: list = []
+    sub = node.create_subscription(DiagnosticArray, "/diagnostics",
+                                   lambda m: got.extend(st for st in m.status if st.name == "task_planner: goal"), 50)
+    try:
+        deadline = time.monotonic() + 10
+        while not got:
+            assert time.monotonic() < deadline, "no task_planner status on /diagnostics"
+            time.sleep(0.1)
+    finally:
+        node.destroy_subscription(sub)
+    st = got[-1]
+    values = {kv.key: kv.value for kv in st.values}
+    assert st.level == b"\x00" and values["pid"] == str(g.procs["task_planner"].pid), (st, values)
+    assert values["phase"] == "idle" and st.message.endswith("idle: no goal"), (st.message, values)
+
+
 @pytest.mark.parametrize("fields", [{"alpha": 1.5}, {"policy": "greedy"}, {"gamma": float("nan")}])
 def test_bad_goals_are_refused_with_the_reason_and_the_node_keeps_serving(graph, fields):
     g, node, *_ = graph

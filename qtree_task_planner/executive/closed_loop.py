@@ -13,6 +13,12 @@ failed option marked so that it is not proposed again. The executor gives up onl
 the reason in one line. The free slots of the bottom shelf bound every sequence (`check_capacity`): a sequence
 relocating more objects than there are free slots is never executed.
 
+A relocation whose outcome the motion planner could not see (no scene after its motion: its message ends with
+"outcome unknown", relocation_common.feasibility.OUTCOME_UNKNOWN; perception restarting, say) is neither a success
+nor a failure of the option: the scene perceived after it is checked as after any relocation, and the check
+decides. A relocation the motion planner's restart interrupted is a failure of time (TRANSIENT): re-planned, and
+its option tried again.
+
 Nothing here talks to ROS: the node supplies `relocate(object_id, removed) -> (ok, message)` (the RelocateObject
 action), `perceive() -> scene` (a scene perceived after the call) and `replan(problem, banned)`.
 """
@@ -23,7 +29,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from qtree_task_planner.problem import ProblemError, RelocationProblem
-from relocation_common.feasibility import destination_slot
+from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT, support_height
 
@@ -420,7 +426,8 @@ class ClosedLoopExecutor:
                  max_replans: int = 20, max_attempts: int = 2, cancelled: Callable[[], bool] = lambda: False,
                  on_step: Callable[[Step], None] = lambda step: None,
                  on_replan: Callable[[ReplanRecord], None] = lambda record: None,
-                 slot_of: Callable[[RemainingProblem], int] | None = None, bottom_seen: bool = True) -> None:
+                 slot_of: Callable[[RemainingProblem], int] | None = None, bottom_seen: bool = True,
+                 on_progress: Callable[[ExecutionResult], None] = lambda result: None) -> None:
         if max_replans < 0 or max_attempts < 1:
             raise ValueError(f"need max_replans >= 0 and max_attempts >= 1, got {max_replans}, {max_attempts}")
         self.scenario, self.relocate, self.perceive, self.replan = scenario, relocate, perceive, replan
@@ -428,6 +435,7 @@ class ClosedLoopExecutor:
         self.cancelled, self.on_step, self.on_replan = cancelled, on_step, on_replan
         self.slot_of = slot_of
         self.bottom_seen = bottom_seen
+        self.on_progress = on_progress
 
     def run(self, sequence: Iterable[str], scene: Scene | None = None) -> ExecutionResult:
         """Relocate `sequence` (obstacles, then the target) starting from `scene` (default: perceive()); the
@@ -436,6 +444,7 @@ class ClosedLoopExecutor:
         self._banned: set[Option] = set()
         self._failures: dict[str, int] = {}
         self._retried: dict[tuple[str, frozenset[str]], int] = {}  # failures of time per option
+        self._top: set[str] = set()  # every object seen resting on the top shelf during the run
         try:
             self._run(list(sequence), dict(scene if scene is not None else self._perceive("at the start")), out)
         except _Done:
@@ -460,18 +469,21 @@ class ClosedLoopExecutor:
                 raise GiveUp(f"no free slot on the bottom shelf for {obj}")
             # the relocated bottles, then those seen off the top shelf otherwise (dropped to the floor): the motion
             # planner keeps an unseen bottle at its last pose, and the re-plan's answers had them gone (rp.gone)
-            removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and
-                                                                o not in out.relocated)), rp.gone
+            removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and o in self._top
+                                                                and o not in out.relocated)), rp.gone
             slot = self.slot_of(rp) if self.slot_of else destination_slot(len(removed), rp.free_slots)
             ok, message = self.relocate(obj, list(removed))
             after = self._perceive(f"after relocating {obj}")
             check = None
-            if ok:
+            if ok or message.endswith(OUTCOME_UNKNOWN):  # unknown: the motion planner saw no scene, we look
                 x, y = self.scenario.slots[slot]
                 check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
                                           self.bottom_seen)
-            stayed, new = _stayed(obj, scene, after, self.tol), new_objects(scene, after, obj)
-            if check is not None and check.unseen_place:
+                check = replace(check, new=self._on_top(check.new, after))
+                if not ok and check.ok:
+                    ok, message = True, f"{message}; the scene after it shows it done"
+            stayed, new = _stayed(obj, scene, after, self.tol), self._on_top(new_objects(scene, after, obj), after)
+            if ok and check is not None and check.unseen_place:
                 out.unverified.append(obj)
             step = Step(len(out.steps), obj, removed, slot, ok, message, check)
             out.steps.append(step)
@@ -480,6 +492,7 @@ class ClosedLoopExecutor:
             if (board_of(landed, self.scenario, self.tol) == "bottom" if landed is not None else
                     ok and not self.bottom_seen):
                 out.relocated.append(obj)
+            self.on_progress(out)
             scene = after
             rp = self._problem(scene, out)
             if check is not None and check.ok and not new:
@@ -495,6 +508,11 @@ class ClosedLoopExecutor:
                 seq = self._replan(f"the world differs after relocating {obj}: {check.summary()}" if not check.ok
                                    else "; ".join(d.line for d in new), rp, out)
 
+    def _on_top(self, new: tuple[Difference, ...], scene: Scene) -> tuple[Difference, ...]:
+        """The new objects that rest on the top shelf: an object first seen elsewhere (a relocated bottle the
+        camera glimpses on the bottom shelf, as perception names it anew) is no obstacle and no re-plan."""
+        return tuple(d for d in new if board_of(scene[d.object_id], self.scenario, self.tol) == "top")
+
     def _perceive(self, when: str) -> dict[str, SeenObject]:
         try:
             return dict(self.perceive())
@@ -507,6 +525,7 @@ class ClosedLoopExecutor:
         out.relocated[:] = [o for o in out.relocated
                             if o not in scene or board_of(scene[o], self.scenario, self.tol) != "top"]
         rp = remaining_problem(self.scenario, scene, out.relocated, self.tol)
+        self._top |= {b.id for b in rp.bottles}  # an object off the top shelf is sent as removed only if it was on it
         if rp.target_retrieved:
             out.success = True
             out.message = (f"target {self.scenario.target_id} retrieved after {len(out.relocated) - 1} relocations"
@@ -547,6 +566,7 @@ class ClosedLoopExecutor:
         if isinstance(answer, str):
             out.replans.append(ReplanRecord(reason, None, None, 0, answer))
             self.on_replan(out.replans[-1])
+            self.on_progress(out)
             raise GiveUp(f"no sequence remains: {answer} (re-planned because {reason})")
         seq, weight, calls, *note = answer
         problem = rp.problem
@@ -557,14 +577,16 @@ class ClosedLoopExecutor:
         out.replans.append(ReplanRecord(reason, tuple(seq), weight, calls, f"refused: {bad}" if bad else "",
                                         note[0] if note else ""))
         self.on_replan(out.replans[-1])
+        self.on_progress(out)
         if bad:
             raise GiveUp(f"the re-planner proposed a sequence that cannot be executed: {bad}")
         return list(seq)
 
 
-TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at", "no joint state from the driver")  # the
-# motion planner's words for a relocation that ran out of time (budget.SafetyNetTimeout, execution.TrajectoryFollower,
-# a driver starved under load), not one that cannot be done
+TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at", "no joint state from the driver",
+             "restarted during this relocation")  # the motion planner's words for a relocation that ran out of time
+# (budget.SafetyNetTimeout, execution.TrajectoryFollower, a driver starved under load) or that its restart
+# interrupted (service.MotionPlannerService._resumed_outcome), not one that cannot be done
 TRANSIENT_TRIES = 3  # relocations of one option that ran out of time before it is marked (a demo under load: twice)
 
 

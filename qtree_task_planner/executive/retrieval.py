@@ -27,7 +27,7 @@ from qtree_task_planner.executive.closed_loop import (
     free_slots,
     remaining_problem,
 )
-from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
+from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.replan import GeometryCache, relearn, replan
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
@@ -195,13 +195,17 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             oracle: CachedOracle, *, closed_loop: bool, cancelled: Callable[[], bool],
             before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,
             on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True,
-            retrain: TrainingParams | None = None) -> ExecutionResult:
+            retrain: TrainingParams | None = None, until_planner: UntilPlanner | None = None,
+            on_progress: Callable[[ExecutionResult], None] = lambda out: None) -> ExecutionResult:
     """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
     checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
     with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
     open-loop execution (execute_sequence) after the same capacity check: a sequence needing more slots than
     are free is never started. retrain: each re-plan also trains the Q-Tree on the remaining problem with these
-    params (replan.relearn; the user's `replan_q_tree`), else the A* alone."""
+    params (replan.relearn; the user's `replan_q_tree`), else the A* alone. until_planner: each re-plan goes
+    through feasibility outages as training does (outage.until_available: a motion planner that died is waited for,
+    planner_wait), else a question without an answer is asked again REPLAN_TRIES times. on_progress: the execution
+    so far, after each relocation and re-plan (closed loop)."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
         cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry())
@@ -217,12 +221,17 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             """replan; a feasibility question with no answer (the planner's safety net under load, PlannerUnavailable)
             is asked again, up to REPLAN_TRIES re-plans (the answers already given are kept), then the run ends
             with the reason (before, it escaped the executor: the goal ended with no execution record)."""
+            def once() -> ReplanAnswer | str:
+                answer = replan(rp, banned, cache)
+                if retrain is None or isinstance(answer, str):
+                    return answer
+                return relearn(rp, banned, cache, retrain, answer, keep_going=lambda: not cancelled())
+
             for attempt in range(1, REPLAN_TRIES + 1):
                 try:
-                    answer = replan(rp, banned, cache)
-                    if retrain is None or isinstance(answer, str):
-                        return answer
-                    return relearn(rp, banned, cache, retrain, answer, keep_going=lambda: not cancelled())
+                    return once() if until_planner is None else until_planner(once)
+                except PlannerGone as e:
+                    raise GiveUp(f"re-plan stopped: {e}") from None
                 except PlannerUnavailable as e:
                     if attempt == REPLAN_TRIES:
                         raise GiveUp(f"re-plan failed {REPLAN_TRIES} times without a feasibility answer: {e}") from None
@@ -230,7 +239,7 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
 
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
-                                  bottom_seen=bottom_seen).run(sequence, scene)
+                                  bottom_seen=bottom_seen, on_progress=on_progress).run(sequence, scene)
     why = check_capacity(sequence, len(free_slots(scenario, scene)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")

@@ -15,7 +15,8 @@ from relocation_common.config import ParameterError
 SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
 POSITIVE_SECONDS = (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_timeout", 1e-3),
                     ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3),
-                    ("relocate_silence", 1e-3), ("scene_after_wait", 0.0))  # (name, least value)
+                    ("relocate_silence", 1e-3), ("scene_after_wait", 0.0), ("scene_outage_wait", 0.0))  # (name,
+# least value)
 
 
 def check_node_parameters(p: Callable[[str], object]) -> None:

@@ -12,9 +12,12 @@ instead of cutting corners (the STPIK check slows its reference the same way). O
 `max_step`: when the stream itself stalls (a loaded machine: the update comes 0.3 s late), the driver has stopped
 the arm after its watchdog, and a reference that jumped by the whole gap would be 0.3 rad ahead of it at once.
 Without the scaling the feed-forward would hold the arm at e = q̇_ref / k_track off the path.
-After the end the follower corrects until every joint is within
-`settle_tol` of the last point. Failures: an error above `max_error`, tau stuck for `stall_timeout` (the arm is
-blocked), or no settling within `settle_timeout`.
+After the end the follower corrects until every joint has stayed within
+`settle_tol` of the last point for `settle_dwell`: the joint states it closes the loop on can be a tenth of a
+second old under load (the subscription's queue), and a follower that stopped at the first state within settle_tol
+left the arm where the correction on those old states had carried it, past the point (0.044 rad off home after a
+recovery; 0.040 rad in MuJoCo with states 0.1 s old: test_execution.py). Failures: an error above `max_error`, tau
+stuck for `stall_timeout` (the arm is blocked), or no settling within `settle_timeout`.
 """
 from __future__ import annotations
 
@@ -41,6 +44,7 @@ class FollowerParams:
     lag_tol: float  # rad: above this tracking error the reference slows down (stops at twice it)
     settle_tol: float  # rad, every joint at the end of the trajectory
     settle_timeout: float  # s after the reference ends
+    settle_dwell: float  # s every joint stays within settle_tol before the motion counts as settled
     stall_timeout: float  # s with the reference waiting before the motion is aborted
     max_error: float  # rad, largest tracking error before the motion is aborted
     max_step: float  # s: the most the reference advances in one update (a gap in the stream: the arm stood still)
@@ -101,6 +105,7 @@ class TrajectoryFollower:
         self.waited = 0.0  # s the reference has been waiting for the arm (reset when it moves on)
         self.rate = 1.0  # time-scaling rate s of the last update
         self.after_end = 0.0  # s since the reference ended
+        self.within = 0.0  # s the arm has been within settle_tol of the last point (after the end)
         self.reason = ""
 
     @property
@@ -148,9 +153,12 @@ class TrajectoryFollower:
             self.after_end += dt
         if self.tau >= self.duration:
             err = self._error(q)
-            if err <= self.p.settle_tol:
+            self.within = self.within + dt if err <= self.p.settle_tol else 0.0
+            if self.within >= self.p.settle_dwell:
                 return self.SETTLED
             if self.after_end > self.p.settle_timeout:
+                if err <= self.p.settle_tol:  # within it now, never for settle_dwell (states far older): as before
+                    return self.SETTLED
                 self.reason = (f"did not settle within {self.p.settle_timeout} s: error {err:.4f} rad "
                                f"> settle_tol {self.p.settle_tol} rad")
                 return self.FAILED

@@ -9,7 +9,8 @@ len(removed), the one a certified feasible answer planned the carry to, when it 
 "The certified slot"). After the
 motion: the moved bottle stands at its slot (when the scene shows it; perception sees the top shelf only) and no
 other bottle moved more than the tolerance; otherwise the relocation is not a success and the result says what
-moved (docs/reliability.md, "Never report success that is not true").
+moved; with no scene after the motion, the outcome is unknown, never a success (docs/reliability.md, "Never report
+success that is not true").
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping, Sequence
 
-from relocation_common.feasibility import destination_slot
+from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
 from relocation_common.scenario import Scenario, ScenarioError, Shelf, UnknownObjectError
 from stpik_motion_planner.planning.params import node_parameters
 
@@ -176,15 +177,16 @@ def check_parameters(values: Mapping[str, float]) -> None:
 def outcome(watch: SceneWatch, before: Mapping[str, SeenBottle], scenario: Scenario, object_id: str, slot: int,
             values: Mapping[str, float], source: str, ok: Callable[[], bool] = lambda: True) -> tuple[bool, str]:
     """(success, result message) of a relocation whose motion just ended: the first scene received OUTCOME_SETTLE s
-    later against `before` (outcome_problems; `values`: the PARAMETERS). A node that never received a scene cannot
-    check: the motion succeeded and the message says "outcome unverified" (the task planner checks its own scene
-    and never counts this as verified); a scene that does not come within outcome_timeout leaves it unknown: failed."""
+    later against `before` (outcome_problems; `values`: the PARAMETERS). Success only after that look at the world:
+    a scene that does not come within outcome_timeout (none at all, or the source silent: perception restarting)
+    leaves the outcome unknown, not a success (the message ends with OUTCOME_UNKNOWN; the task planner looks at its
+    own scene). Without a scene before the motion only the moved bottle is checked (the message says so)."""
     done = f"relocated {object_id} to slot {slot}"
-    if not before:
-        return True, f"{done} (outcome unverified: no scene received on {source})"
     after = watch.after(time.monotonic() + OUTCOME_SETTLE, float(values["outcome_timeout"]), ok)
     if after is None:
-        return False, f"{done}, but no scene on {source} within outcome_timeout after the motion: outcome unknown"
+        return False, f"{done}, but no scene on {source} within outcome_timeout after the motion: {OUTCOME_UNKNOWN}"
     problems = outcome_problems(scenario.shelf, before, after, object_id, scenario.slots[slot],
                                 float(values["outcome_tolerance"]), float(values["slot_tolerance"]))
-    return not problems, done + (f", but the scene shows: {'; '.join(problems)}" if problems else "")
+    if problems:
+        return False, f"{done}, but the scene shows: {'; '.join(problems)}"
+    return True, done + ("" if before else f" (the other bottles not checked: no scene on {source} before the motion)")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from typing import ContextManager, Protocol
+from typing import Callable, ContextManager, Protocol
 
 import numpy as np
 
@@ -55,8 +55,9 @@ class Progress:
     object_id: str = ""
     removed: list = field(default_factory=list)
     placed: list = field(default_factory=list)  # (bottle, slot xy) on the bottom shelf, this one once released
-    moves: list = field(default_factory=list)  # (phase, Trajectory), oldest first
+    moves: list = field(default_factory=list)  # (phase, Trajectory), oldest first; a recovery removes those undone
     released: bool = False
+    carried: bool = False  # the carry was gone back along by a recovery (a retry says so)
 
 
 @dataclass
@@ -96,10 +97,11 @@ def plan_relocation(planner: MotionPlanner, object_id: str, removed: list[str], 
 
 def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str], home_tol: float | None = None,
              lock: ContextManager[object] | None = None, progress: Progress | None = None, slot: int | None = None,
-             placed: Placed | None = None) -> RelocationPlan:
+             placed: Placed | None = None, on_change: Callable[[], None] = lambda: None) -> RelocationPlan:
     """Relocate object_id to its slot (`slot` and `placed` as plan_relocation); PlanningError (or the arm's error)
     names the failed stage. `lock` guards the planner (not thread-safe) while it plans, not while the arm moves.
-    `progress` records what was done (for `recover` after a failure). Farther than `home_tol` (rad; None:
+    `progress` records what was done (for `recover` after a failure); `on_change()` is called each time it changes
+    (a motion about to start, the release: the node's journal). Farther than `home_tol` (rad; None:
     config/motion_planner.yaml's) from home, the arm goes home first. Returns the plan made before moving."""
     lock = lock if lock is not None else nullcontext()
     home_tol = float(node_parameters()["home_tol"]) if home_tol is None else home_tol
@@ -110,7 +112,7 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     slot_xy = planner.scenario.slots[plan.slot_index]
     progress = progress if progress is not None else Progress()
     progress.object_id, progress.removed, progress.placed = object_id, removed, list(plan.placed)
-    arm = _Recorded(arm, progress)
+    arm = _Recorded(arm, progress, on_change)
     q = arm.measured()
     if float(np.max(np.abs(q - rd.Q_HOME))) > home_tol:
         arm.phase("plan_home")
@@ -132,6 +134,7 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
     arm.gripper("open", "release")
     progress.released = True
     progress.placed.append((object_id, slot_xy))
+    on_change()
     arm.follow(retreat, "retreat")
     arm.phase("plan_home")
     home = plan.home
@@ -147,24 +150,29 @@ def relocate(planner: MotionPlanner, arm: Arm, object_id: str, removed: list[str
 
 
 class _Recorded:
-    """An Arm that records each motion in a Progress before following it."""
+    """An Arm that records each motion in a Progress (then calls on_change) before following it."""
 
-    def __init__(self, arm: Arm, progress: Progress) -> None:
-        self.arm, self.progress = arm, progress
+    def __init__(self, arm: Arm, progress: Progress, on_change: Callable[[], None]) -> None:
+        self.arm, self.progress, self.on_change = arm, progress, on_change
         self.measured, self.gripper, self.phase = arm.measured, arm.gripper, arm.phase
 
     def follow(self, trajectory: Trajectory, phase: str) -> None:
         self.progress.moves.append((phase, trajectory))
+        self.on_change()
         self.arm.follow(trajectory, phase)
 
 
-def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextManager[object] | None = None) -> str:
+def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextManager[object] | None = None,
+            on_change: Callable[[], None] = lambda: None) -> str:
     """A safe state after a failed or cancelled relocation (the next goal starts from home, nothing held).
 
     Before the release: back along the motions made, newest first (the same paths, as clear as on the way there);
     the way back along the carry ends at the grasp, where a held bottle is let go, standing where it was picked; then
-    back along the approach to home. After the release: a fresh path home. Returns what was done; raises (the arm's
-    or PlanningError) if it could not."""
+    back along the approach to home. Each motion gone back along leaves `progress.moves` (then on_change(): the
+    journal), so a recovery tried again goes on from where the arm is with the motions left: before, a retry after
+    the last motion failed near home (did not settle under load) went back along the whole carry again, from its
+    sample nearest home into the shelf. After the release: a fresh path home. Returns what was done; raises (the
+    arm's or PlanningError) if it could not."""
     lock = lock if lock is not None else nullcontext()
     if progress.released:
         with lock:
@@ -172,11 +180,15 @@ def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextM
         arm.follow(home, "recover")
         return f"{progress.object_id} was placed; arm back home"
     moves = [(phase, t) for phase, t in progress.moves if phase in ("approach", "carry")]
-    if not moves:
+    carried = any(phase == "carry" for phase, _ in moves) or progress.carried
+    if not moves and not progress.carried:
         return "arm stopped (it had not moved towards the bottle)"
     for phase, traj in reversed(moves):
         if phase == "approach":  # at the grasp: let go of the bottle (if held) where it was picked
             arm.gripper("open", "recover")
         arm.follow(traj.back_from(arm.measured()), "recover")
-    return (f"{progress.object_id} set down where it was picked; arm back home" if moves[-1][0] == "carry" else
+        progress.carried |= phase == "carry"
+        progress.moves = [m for m in progress.moves if m[1] is not traj]  # gone back along: not again
+        on_change()
+    return (f"{progress.object_id} set down where it was picked; arm back home" if carried else
             "arm back home along its approach, gripper open")
