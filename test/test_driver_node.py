@@ -136,12 +136,15 @@ def _speed_run(msgs, v) -> tuple[float, np.ndarray]:
 
 
 def test_constant_velocity_for_one_second_moves_each_joint_by_v_t(g):
-    v = 0.4 * QDOT_MAX * np.array([1, 1, -1, -1, 1, 1, -1])  # joint 4 away from its upper limit
-    q0 = _settled_q(g)
-    n = len(g.states.msgs) - 5  # from a few states at rest
-    t0, t1 = _stream(g.pub, _cmd(g, v), 1.0)
-    q1 = _settled_q(g, 0.3)
-    duration, moved = _speed_run(g.states.wait()[n:], v)
+    for attempt in range(3):  # a machine so loaded that the simulation ran < 0.3 s of the window: another window
+        v = (-1) ** attempt * 0.4 * QDOT_MAX * np.array([1, 1, -1, -1, 1, 1, -1])  # joint 4 away from its upper limit
+        q0 = _settled_q(g)
+        n = len(g.states.msgs) - 5  # from a few states at rest
+        t0, t1 = _stream(g.pub, _cmd(g, v), 1.0)
+        q1 = _settled_q(g, 0.3)
+        duration, moved = _speed_run(g.states.wait()[n:], v)
+        if duration > 0.3:
+            break
     assert duration > 0.3, duration  # simulated seconds at speed, of the 1 s wall-time command window
     # tolerance: the rise time of the velocity loop (a few ms of motion)
     assert np.allclose(moved, v * duration, atol=0.005 + 0.02 * np.abs(v * duration)), (moved, v * duration)
@@ -184,7 +187,10 @@ def test_bad_command_changes_nothing_and_node_keeps_running(g, bad):
     q1 = _settled_q(g, 0.1)
     assert np.allclose(q1, q0, atol=1e-4)
     assert g.node.alive() and "rejected" in g.node.log()
-    _stream(g.pub, Float64MultiArray(data=[0.0] * 6 + [0.5]), 0.2)  # still obeys good commands
+    for _ in range(10):  # still obeys good commands (0.1 rad a window when the simulation keeps the wall's pace)
+        _stream(g.pub, Float64MultiArray(data=[0.0] * 6 + [0.5]), 0.2)
+        if _settled_q(g)[6] - q1[6] > 0.05:
+            break
     assert _settled_q(g)[6] - q1[6] > 0.05
 
 
