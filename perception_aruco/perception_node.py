@@ -12,8 +12,9 @@ board's surface, centred, axes of the base frame, from the scenario).
 Health goes out on /diagnostics (diagnostic_msgs/DiagnosticArray, the ROS convention): OK with the checks' numbers,
 WARN with bottles missing, ERROR with the reason a frame was refused. The camera poses of consistent frames are
 fused (`pipeline.FrameFusion`); the fused pose stands in when the marker is covered, if the shelf confirms it.
-The arm's joint states (`joint_state_topic`) leave its body out of the depth. Every object is published, listed or
-not (u1, u2, ...: estimated weight, said in the message's weight_note and the log), as its primitive.
+The arm's joint states (on the surface of config/arm_interface.yaml, the driver's and the planner's) leave its body
+out of the depth. Every object is published, listed or not (u1, u2, ...: estimated weight, said in weight_note and
+the log), as its primitive.
 """
 from __future__ import annotations
 
@@ -34,6 +35,8 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
+from relocation_common.arm_interface import FILE as ARM_INTERFACE_FILE
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.geometry import invert
 from relocation_common.node import Health, declare_parameters, node_main
 from relocation_common.paths import config_file
@@ -62,7 +65,7 @@ class PerceptionNode(Node):
 
     def __init__(self) -> None:
         super().__init__("perception")
-        values = declare_parameters(self)  # config/perception.yaml
+        values = declare_parameters(self, shared=(ARM_INTERFACE_FILE,))  # config/perception.yaml, arm_interface
         def g(n: str) -> Any:
             return self.get_parameter(n).value
 
@@ -96,9 +99,10 @@ class PerceptionNode(Node):
                                  callback_group=sensors)
         self.create_subscription(Image, g("depth_topic"), self._on_depth, qos_profile_sensor_data,
                                  callback_group=sensors)
-        self.create_subscription(CameraInfo, g("camera_info_topic"), self._on_info, qos_profile_sensor_data,
+        self.create_subscription(CameraInfo, g("camera_info_topic"), lambda m: setattr(self, "_info", m),
+                                 qos_profile_sensor_data, callback_group=sensors)
+        self.create_subscription(JointState, ArmInterface.from_mapping(values).state_topic, self._on_joint_state, 10,
                                  callback_group=sensors)
-        self.create_subscription(JointState, g("joint_state_topic"), self._on_joint_state, 10, callback_group=sensors)
         self._placed: set[str] = set()  # ids the motion planner placed on the bottom shelf (relocated_topic)
         self.create_subscription(String, g("relocated_topic"), self._on_relocated,
                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
@@ -142,9 +146,6 @@ class PerceptionNode(Node):
         if why is not None:
             self.get_logger().error(f"frame dropped: {why}", throttle_duration_sec=2.0)
         return why is not None
-
-    def _on_info(self, msg: CameraInfo) -> None:
-        self._info = msg
 
     def _on_relocated(self, msg: String) -> None:
         """The motion planner's placed bottles ({"relocated": {id: slot}}); a malformed message is logged."""

@@ -39,7 +39,7 @@ NODES = {
     "motion_planner": ("stpik_motion_planner.motion_planner_node", "motion_planner.yaml"),
     "task_planner": ("qtree_task_planner.task_planner_node", "task_planner.yaml"),
 }
-ARM_NODES = ("jaco2_sim_driver", "motion_planner")  # they read config/arm_interface.yaml and must agree on it
+ARM_NODES = ("jaco2_sim_driver", "motion_planner", "perception")  # they read config/arm_interface.yaml, must agree
 
 
 LOCK_DIR = Path(tempfile.gettempdir()) / "ros_domain_locks"

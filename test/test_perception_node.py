@@ -13,7 +13,9 @@ import pytest
 from jaco2_sim_driver.camera import render_frame
 from perception_aruco.images import encode_color, encode_depth
 from relocation_app.graph import Graph
+from relocation_common.arm_interface import ArmInterface
 from relocation_common.paths import default_scenario
+from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
 
@@ -45,7 +47,8 @@ def test_node_publishes_perceived_scene(tmp_path):
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
-    from sensor_msgs.msg import CameraInfo, Image
+    from sensor_msgs.msg import CameraInfo, Image, JointState
+    from std_msgs.msg import Header
     from tf2_msgs.msg import TFMessage
 
     scenario = load_scenario(default_scenario())
@@ -59,6 +62,8 @@ def test_node_publishes_perceived_scene(tmp_path):
             color_pub = node.create_publisher(Image, "/camera/color/image_raw", qos_profile_sensor_data)
             depth_pub = node.create_publisher(Image, "/camera/depth/image_rect_raw", qos_profile_sensor_data)
             info_pub = node.create_publisher(CameraInfo, "/camera/color/camera_info", qos_profile_sensor_data)
+            # the arm's joint states on the surface of config/arm_interface.yaml (the driver's): the arm is filtered
+            joints_pub = node.create_publisher(JointState, ArmInterface.load().state_topic, 10)
             scenes, debug = [], []
             node.create_subscription(ObjectArray, "/scene/objects", scenes.append,
                                      QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
@@ -82,6 +87,8 @@ def test_node_publishes_perceived_scene(tmp_path):
                     stamp = node.get_clock().now().to_msg()
                     info.header.stamp = stamp
                     info_pub.publish(info)
+                    joints_pub.publish(JointState(header=Header(stamp=stamp), name=list(JOINT_NAMES),
+                                                  position=[float(x) for x in Q_HOME]))
                     color_pub.publish(_image(stamp, *color_fields))
                     depth_pub.publish(_image(stamp, *depth16))
                     time.sleep(0.25)
@@ -132,6 +139,7 @@ def test_node_publishes_perceived_scene(tmp_path):
             levels = [(st.level, st.message) for a in health for st in a.status]
             assert any(lv == DiagnosticStatus.ERROR and "not supported" in m for lv, m in levels), levels
             assert levels[-1][0] in (DiagnosticStatus.OK, DiagnosticStatus.WARN), levels[-1]
+            assert "no joint state" not in levels[-1][1], levels[-1]  # it listens where the driver publishes
             g.check_alive()
             ex.shutdown()
             node.destroy_node()

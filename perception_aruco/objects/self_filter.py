@@ -55,10 +55,11 @@ def on_arm(points: np.ndarray, q: np.ndarray | None, padding: float) -> np.ndarr
 
 def arm_in_shelf(q: np.ndarray | None, shelf: Shelf, margin: float) -> bool:
     """Whether the arm, at any of the joint states around a frame (k x 7, or one), comes within `margin` of the
-    shelf's inside (its capsules sampled along their axes; no joint state: assumed in). With the arm in the shelf
-    its body, the object in its hand and the pieces they cut out of others show as clusters of their own."""
+    shelf's inside (its capsules sampled along their axes). With the arm in the shelf its body, the object in its
+    hand and the pieces they cut out of others show as clusters of their own. No joint state: not known to be in
+    (the arm is then not filtered at all, said in the frame's notes, and what it shows is published)."""
     if q is None:
-        return True
+        return False
     lo = np.array([shelf.x_front, shelf.y_min, shelf.bottom_z])
     hi = np.array([shelf.x_back, shelf.y_max, shelf.ceiling_z])
     s = np.linspace(0.0, 1.0, 8)[:, None]
