@@ -37,7 +37,6 @@ from relocation_app.final_state import final_state
 from relocation_app.graph import Graph, NodeDied
 from relocation_app.progress import Progress
 from relocation_app.run_report import End
-from relocation_common.arm_interface import ArmInterface
 from relocation_common.paths import default_scenario, resolve_scenario
 
 TRAINING = ("exact optimum", "training", "waiting for planner")  # the feedback phases before the execution
@@ -173,9 +172,8 @@ def _start_graph(g: Graph, a, scene_topic: str) -> None:
     plan = _disturbance_plan(a)
     driver = dict(common, camera_model=a.camera_model) if a.camera_model else dict(common)
     g.start("jaco2_sim_driver", dict(driver, disturbance_plan=f"'{plan.to_json()}'") if plan else driver)
-    if a.scene_source == "perception":  # the arm's joint states: its body is left out of the depth (else, in view
-        # during a relocation, perception saw it as unlisted objects, which then blocked the target's lane)
-        g.start("perception", dict(common, joint_state_topic=ArmInterface.load().state_topic))
+    if a.scene_source == "perception":  # it reads the arm's joint states where config/arm_interface.yaml says
+        g.start("perception", dict(common))
     g.start_planners(a.replicas, dict(common, scene_topic=scene_topic, journal_path=str(journal)))
     g.start("task_planner", dict(common, scene_topic=scene_topic, checkpoint_path=str(ckpt), replicas=a.replicas,
                                  closed_loop=not a.open_loop, execute_learned=a.execute_learned,
