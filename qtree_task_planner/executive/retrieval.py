@@ -177,7 +177,7 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     params (replan.relearn; the user's `replan_q_tree`), else the A* alone."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
-        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry())
+        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry(), oracle.certified)
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
             before_each()

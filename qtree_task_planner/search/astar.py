@@ -15,8 +15,10 @@ every claim holds. The path found is then verified with real feasibility calls f
 from a set known reachable: asking it first cost 2.7x the calls on random instances without lane information);
 the first unfeasible answer (and its blockers) is recorded and the search repeated. An oracle with several planner
 replicas (docs/architecture.md) is asked up to `in_flight` consecutive edges of the path at once. When every edge of the
-optimistic optimum is feasible it is the proven optimum: the optimistic graph contains every true edge. Each (object,
-set) is asked at most once.
+optimistic optimum is feasible, its edges are certified (the whole relocation of each: relocation_common.feasibility,
+"Certification"; all at once over replicas): an edge that fails is unfeasible and the search goes on (LazySP's
+forward selector); when all certify it is the proven optimum, certified end to end: the optimistic graph contains
+every true edge. Each (object, set) is asked at most once.
 """
 from __future__ import annotations
 
@@ -35,6 +37,8 @@ from relocation_common.feasibility import (
     Label,
     Query,
     ask_many,
+    certifies,
+    certify_many,
     claims,
     in_flight,
 )
@@ -198,7 +202,8 @@ def _verify(path: list[Query], target: str, kb: Knowledge, oracle: FeasibilityOr
             answers: dict[Query, FeasibilityAnswer]) -> tuple[int, bool]:
     """Ask the path's unasked edges from the start, up to the oracle's `in_flight` at once (planner replicas;
     one at a time otherwise), the target only from a set known reachable; stop at the first batch with an
-    unfeasible answer. (questions asked, every edge feasible); the answers also go to `answers`."""
+    unfeasible answer. Then certify every edge at once (feasibility.certify_many); a failed one is recorded
+    unfeasible. (questions asked, every edge feasible and certified); the answers also go to `answers`."""
     todo = [(o, s) for o, s in path if (o, s) not in kb.answers]
     asked = 0
     while todo:
@@ -209,4 +214,10 @@ def _verify(path: list[Query], target: str, kb: Knowledge, oracle: FeasibilityOr
         if not all([kb.record(o, s, a) for (o, s), a in zip(batch, got)]):
             return asked, False
         todo = todo[len(batch):]
-    return asked, True
+    if not certifies(oracle):  # final answers: nothing to certify
+        return asked, True
+    failed = [(e, a) for e, a in zip(path, certify_many(oracle, path)) if Label(a.label) == Label.UNFEASIBLE]
+    for (o, s), a in failed:
+        answers[(o, s)] = a
+        kb.record(o, s, a)
+    return asked, not failed

@@ -26,8 +26,11 @@ from stpik_motion_planner.planning.stpik import Stpik, StpikResult
 
 # left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
 # first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
-# tolerance (stpik.*), so that every path that converged without it is drawn and ends as before
-UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw")
+# tolerance (stpik.*), so that every path that converged without it is drawn and ends as before; reuse_distance
+# (what an answer reports, not how it is planned). certify_relocation is in the seed as true (SEEDED_AS): a lazy
+# pick draws what the eager one drew, so the lane a certification accepts is the eager answer's
+UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance")
+SEEDED_AS = {"certify_relocation": True}
 UNSEEDED_STPIK = ("grasp_yaw_tol",)
 Placed = list[tuple[str, tuple[float, float]]]  # bottles on the bottom shelf: (id, slot xy)
 
@@ -51,11 +54,14 @@ class PlanningContext:
         # clear is then clear for the fingers STPIK drives to the grasp (docs/motion_planner.md, "Blockers")
         self.hand_margin = max(p.hand_margin, p.stpik.clearance) if p.screen_at_clearance else p.hand_margin
         self.hand = HandProxy(self.hand_margin)
+        self.reach = HandProxy(p.reuse_distance)  # the hand proxy inflated to reuse_distance (reuse.near_objects)
         self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_checks)
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
         self.pick_end: dict[tuple[str, frozenset[str]], np.ndarray] = {}  # (object, removed) -> grasp configuration
+        self.pick_near: dict[tuple[str, frozenset[str]], frozenset[str] | None] = {}  # -> reuse.near_objects
         self.stage_refs: dict[tuple[object, ...], list[np.ndarray] | None] = {}  # home.stage_reference's tracks
+        self.certified: dict[tuple[str, frozenset[str], bytes], str] = {}  # (object, removed, grasp) -> certify.certify
 
     # ---------------------------------------------------------------- the question
     def check_question(self, object_id: str, removed: Iterable[str]) -> frozenset[str]:
@@ -77,7 +83,7 @@ class PlanningContext:
         if not self.params.seed_per_query:
             return None
         sc = self.scenario
-        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED}
+        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED} | SEEDED_AS
         params["stpik"] = {k: v for k, v in params["stpik"].items() if k not in UNSEEDED_STPIK}
         params["stpik"]["qdot_max"] = rd.QDOT_MAX.copy()  # Table 7, the robot's: in the seed as when it was a parameter
         parts = [repr(sc.shelf), objects_key(sc.objects, sc.shelf.top_z), repr(sc.slots),  # objects_key: the seeds
