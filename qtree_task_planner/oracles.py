@@ -30,12 +30,12 @@ class CachedOracle:
 
     Answers repeated questions (object, frozenset(removed)) without asking the wrapped oracle again and counts the
     real calls in `calls`; `queries` counts every question asked of the cache. A question not in the table is
-    answered without asking (`reused` counts them) when an answer the oracle gave for the same object holds for it:
+    answered without asking (`reused`: those questions) when an answer the oracle gave for the same object holds for it:
     a feasible one whose motion comes near none of the objects removed then and present now (feasibility.reuses),
     or an unfeasible one whose certain blocker sets all stay uncleared (feasibility.claim_holds); with `reuse`
     False (the default: a plain cache, whose calls count the distinct questions) every new question is asked. The
-    task planner node reuses (its `reuse_answers`). Share one instance across trainings to reuse a feasibility table (evaluation sweeps);
-    read `calls` before and after to get the real calls of one run.
+    task planner node reuses (its `reuse_answers`). Share one instance across trainings to reuse a feasibility
+    table (evaluation sweeps); read `calls` before and after to get the real calls of one run.
 
     Certifications are kept apart (`certified`, real ones counted in `cert_calls`): `certify(o, R)` asks once; a
     failed one turns the table's answer for (o, R) UNFEASIBLE with the certification's reason, so every search and
@@ -51,7 +51,7 @@ class CachedOracle:
         self.calls = 0
         self.queries = 0
         self.reuse = reuse
-        self.reused = 0
+        self.reused: set[Query] = set()
         self.certified: dict[tuple[str, frozenset[str]], FeasibilityAnswer] = {}
         self.cert_calls = 0
         self._sources: dict[str, list[tuple[frozenset[str], FeasibilityAnswer]]] = {}  # object -> answers asked
@@ -87,9 +87,15 @@ class CachedOracle:
             else:
                 continue
             self.table[key] = got
-            self.reused += 1
+            self.reused.add(key)
             return got
         return None
+
+    @property
+    def planner_answers(self) -> int:
+        """Answers the planner gave behind this cache: the table's answers not reused (a checkpoint's included) and
+        the certifications asked."""
+        return len(self.table) - len(self.reused) + self.cert_calls
 
     @property
     def in_flight(self) -> int:

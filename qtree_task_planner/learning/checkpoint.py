@@ -104,7 +104,7 @@ class Checkpoint:
             if key not in cache.table:
                 sets = tuple(BlockerSet(frozenset(objs), bool(certain), str(lane))
                              for objs, certain, lane in (blockers[0] if blockers else ()))
-                cache.table[key] = FeasibilityAnswer(Label(label), message="from checkpoint", blockers=sets)
+                cache.put(key, FeasibilityAnswer(Label(label), message="from checkpoint", blockers=sets))
                 added += 1
         return added
 
