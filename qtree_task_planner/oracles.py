@@ -17,6 +17,7 @@ from relocation_common.feasibility import (
     certify_many,
     claim_holds,
     in_flight,
+    is_pick,
     reuses,
 )
 from relocation_common.scenario import Scenario, ScenarioError
@@ -39,8 +40,8 @@ class CachedOracle:
 
     Certifications are kept apart (`certified`, real ones counted in `cert_calls`): `certify(o, R)` asks once; a
     failed one turns the table's answer for (o, R) UNFEASIBLE with the certification's reason, so every search and
-    training from then on sees it unfeasible. An oracle without `certify` gives final answers: its answer is the
-    certification (no call).
+    training from then on sees it unfeasible. Only a pick alone is certified (feasibility.is_pick: feasible, with its
+    near set); any other answer, or any answer of an oracle without `certify`, is final: its own certification.
     """
 
     __slots__ = ("oracle", "table", "calls", "queries", "reuse", "reused", "certified", "cert_calls", "_sources")
@@ -132,13 +133,14 @@ class CachedOracle:
     def certify_many(self, queries: Sequence[Query],
                      on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None) -> list[FeasibilityAnswer]:
         """Every query's certification, the ones not yet known asked together (in parallel over replicas:
-        feasibility.certify_many); an unfeasible pick answer is its own certification (nothing to certify)."""
+        feasibility.certify_many); an answer that is no pick alone (unfeasible, or final: feasibility.is_pick) is its
+        own certification."""
         keys = [(o, frozenset(r)) for o, r in queries]
-        final = not certifies(self.oracle)
+        certifying = certifies(self.oracle)
         for k in keys:
             if k not in self.certified:
                 pick = self.table.get(k) or self.feasibility(*k)
-                if final or Label(pick.label) == Label.UNFEASIBLE:
+                if not (certifying and is_pick(pick)):
                     self.certified[k] = pick
 
         def keep(key: Query, answer: FeasibilityAnswer) -> None:

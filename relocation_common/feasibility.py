@@ -15,7 +15,9 @@ lanes cleared. Empty `blockers` = no information.
 Certification (docs/motion_planner.md, "Lazy certification"). A feasible answer is the pick (home -> pre-grasp ->
 grasp), as in the paper. Whether the whole relocation plans from it (carry to slot len(removed), release, retreat,
 way home) is its own question, `CertifyingOracle.certify`, asked only for the answers on a sequence about to be
-committed to (the A*'s optimum, the learned sequence); an oracle without `certify` gives final answers already.
+committed to (the A*'s optimum, the learned sequence). A pick alone names its near set (below: `is_pick`); a feasible
+answer without one is final (certified already, as an eager planner's, or from an oracle that does not certify), and
+so is every answer of an oracle without `certify`.
 
 Reuse (`reuses`, `claim_holds`). A feasible answer may carry `near`: every object whose place on the top shelf some
 part of the arm, the hand or the Cartesian planner's hand proxy came within the planner's `reuse_distance` of, along
@@ -68,7 +70,7 @@ class FeasibilityAnswer:
     message: str = ""
     trajectory: Any = None  # the motion planner's joint trajectory on success
     blockers: tuple[BlockerSet, ...] = ()  # unfeasible answers: one set per candidate grasp lane (see above)
-    near: frozenset[str] | None = None  # feasible answers: the objects near the motion (module doc); None: unknown
+    near: frozenset[str] | None = None  # a feasible pick alone: the objects near its motion (module doc); None: final
 
 
 class FeasibilityOracle(Protocol):
@@ -151,6 +153,12 @@ def certify_many(oracle: Any, queries: list[Query], on_answer: OnAnswer | None =
         if on_answer is not None:
             on_answer(q, out[-1])
     return out
+
+
+def is_pick(answer: FeasibilityAnswer) -> bool:
+    """Whether `answer` is a feasible pick alone, to be certified before it is committed to (it names its near set);
+    any other answer is final (module docstring)."""
+    return answer.near is not None and Label(answer.label) != Label.UNFEASIBLE
 
 
 def reuses(answer: FeasibilityAnswer, removed: frozenset[str], asked: Iterable[str]) -> bool:

@@ -100,11 +100,15 @@ class Certifying(BlockingOracle):
         super().__init__(scenario)
         self.fails, self.certified = set(fails), []
 
+    def feasibility(self, object_id, removed):  # a pick alone (it names its near set: every object, no reuse)
+        a = super().feasibility(object_id, removed)
+        return a if a.label == Label.UNFEASIBLE else FeasibilityAnswer(a.label, near=F(self.ids))
+
     def certify(self, object_id, removed):
         self.certified.append((object_id, F(removed)))
         if (object_id, F(removed)) in self.fails:
             return FeasibilityAnswer(Label.UNFEASIBLE, message="carry: no path to the slot")
-        return self.feasibility(object_id, removed)
+        return super().feasibility(object_id, removed)
 
 
 def edges(seq):

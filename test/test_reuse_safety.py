@@ -1,6 +1,6 @@
-"""Reuse across answers is safe (relocation_common.feasibility, "Reuse"; stpik_motion_planner/planning/reuse.py),
-checked against the project's MuJoCo model by the independent checker (test/motion_checker.py), nothing of the
-planner's collision model used:
+"""Reuse across answers is safe (relocation_common.feasibility, "Reuse"; near_objects in
+stpik_motion_planner/planning/context.py), checked against the project's MuJoCo model by the independent checker
+(test/motion_checker.py), nothing of the planner's collision model used:
 
 - every bottle the replayed pick comes near in MuJoCo (closer than reuse_distance less the models' difference) is in
   the answer's near set;

@@ -37,6 +37,7 @@ from relocation_common.feasibility import (
     certifies,
     certify_many,
     in_flight,
+    is_pick,
 )
 
 Pose = tuple[float, float, float]  # x, y, tilt
@@ -111,13 +112,13 @@ class GeometryCache:
 
     def certify(self, object_id: str, removed: frozenset[str], present: Iterable[str]) -> FeasibilityAnswer:
         """The certification of (object_id, removed) (relocation_common.feasibility, "Certification"), cached like
-        the answers; a failed one turns the cached answer unfeasible. A planner that does not certify gives final
-        answers: the answer is its certification."""
+        the answers; a failed one turns the cached answer unfeasible. A final answer (no pick alone:
+        feasibility.is_pick), or any of a planner that does not certify, is its own certification."""
         k = self.key(object_id, present)
         got = self.certified.get(k)
         if got is None:
             answer = self.feasibility(object_id, removed, present)
-            if Label(answer.label) == Label.UNFEASIBLE or not certifies(self.oracle):
+            if not (certifies(self.oracle) and is_pick(answer)):  # final (feasibility.is_pick)
                 got = answer
             else:
                 got = certify_many(self.oracle, [(object_id, frozenset(removed))])[0]

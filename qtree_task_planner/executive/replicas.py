@@ -28,6 +28,7 @@ from relocation_common.feasibility import (
     FeasibilityOracle,
     LaneOracle,
     Query,
+    certify_many,
 )
 
 T = TypeVar("T")
@@ -131,8 +132,9 @@ class ReplicaOracle:
         return self._one(lambda r: r.feasibility(object_id, removed), repr(object_id))
 
     def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
-        """The certification of (object_id, removed) from the first replica that is up (failover)."""
-        return self._one(lambda r: r.certify(object_id, removed), f"the certification of {object_id!r}")
+        """The certification of (object_id, removed) from the first replica that is up (failover); a replica that
+        does not certify gives final answers (feasibility.certify_many)."""
+        return self._one(lambda r: certify_many(r, [(object_id, removed)])[0], f"the certification of {object_id!r}")
 
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers, from the first replica that is up."""
@@ -151,7 +153,7 @@ class ReplicaOracle:
     def certify_many(self, queries: Sequence[Query],
                      on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None) -> list[FeasibilityAnswer]:
         """Every certification, in the queries' order, as feasibility_many (one in flight per replica that is up)."""
-        return self._many(queries, on_answer, lambda r, q: r.certify(*q))
+        return self._many(queries, on_answer, lambda r, q: certify_many(r, [q])[0])
 
     def _many(self, queries: Sequence[Query], on_answer: Callable[[Query, FeasibilityAnswer], None] | None,
               ask: Callable[[Replica, Query], FeasibilityAnswer]) -> list[FeasibilityAnswer]:

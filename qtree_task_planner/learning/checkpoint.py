@@ -110,10 +110,13 @@ class Checkpoint:
 
     @staticmethod
     def table_of(cache: CachedOracle) -> list:
-        """[object, removed, label] per answer, and the blocker sets [[objects, certain, lane], ...] when the answer
-        named any (the blocker A* needs them to ask nothing twice after a resume)."""
+        """[object, removed, label] per answer the planner gave (not those the cache reused), and the blocker sets
+        [[objects, certain, lane], ...] when the answer named any (the blocker A* needs them to ask nothing twice
+        after a resume)."""
         out = []
         for (o, removed), a in cache.table.items():
+            if (o, removed) in cache.reused:  # the answers the planner gave: the reused ones follow from them
+                continue
             row = [o, sorted(removed), int(a.label)]
             if a.blockers:
                 row.append([[sorted(b.objects), b.certain, b.lane] for b in a.blockers])

@@ -7,7 +7,7 @@ space for the tool from its home pose to the pre-grasp, keeping the hand clear o
 tracking that path; a rejected path is re-sampled up to max_attempts times (`pick_lanes`); when certifying (a certify
 request, an execution's pick, or every answer with certify_relocation) the rest of the relocation must plan from the
 grasp (certify.py). 4) label g_U / g_O / g_T, planning time, attempts and the joint trajectory (100 Hz, Q convention,
-within Table 7); an uncertified feasible answer names the objects its motion comes near (reuse.py).
+within Table 7); an uncertified feasible answer names the objects its motion comes near (context.near_objects).
 
 Budgets are work, not time: validity checks per RRT-Connect attempt (rrt_max_checks), IK steps per STPIK check
 (stpik.step_budget), attempts per query (max_attempts); so a question gets the same answer on an idle and on a
@@ -28,9 +28,8 @@ from stpik_motion_planner.model.blockers import answer_blockers
 from stpik_motion_planner.model.collision import HAND_PARTS, HandProxy, ObstacleSet
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, side_grasp
 from stpik_motion_planner.planning.certify import certify as certify_rest
-from stpik_motion_planner.planning.context import PlanningContext, draw_seed
+from stpik_motion_planner.planning.context import PlanningContext, draw_seed, near_objects
 from stpik_motion_planner.planning.results import PlanningError, QueryStats, Segment
-from stpik_motion_planner.planning.reuse import near_objects
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 Picked = tuple[Trajectory | None, int, str]  # (trajectory or None, attempts, message)
@@ -105,7 +104,7 @@ def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], ob
                ) -> Picked:
     """Up to `budget` sampled paths over the grasps `cands` in turn (each one's direct path first):
     (trajectory or None, attempts, the grasp used or the last failure). The grasp configuration goes to
-    ctx.pick_end; uncertified, the objects the motion comes near to ctx.pick_near (reuse.py)."""
+    ctx.pick_end; uncertified, the objects the motion comes near to ctx.pick_near (context.near_objects)."""
     p = ctx.params
     skip = {n: frozenset([object_id]) for n in HAND_PARTS}
     attempts, last = 0, ""
