@@ -140,16 +140,22 @@ class CameraRenderer:
         self._renderer.close()
 
 
-def render_frame(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec | None = None,
-                 sensor: SensorModel = SensorModel(), seed: int = 0) -> Frame:
-    """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception;
-    `camera` None: the driver's (CameraSpec.configured()); `sensor` / `seed` as in CameraRenderer."""
-    camera = camera if camera is not None else CameraSpec.configured()
+def _posed(scenario: Scenario, q: ArrayLike, camera: CameraSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The scenario's world at its initial state with the arm at q (forward kinematics only)."""
     model = build_model(scenario, camera)
     data = mujoco.MjData(model)
     for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
         data.qpos[model.joint(j).qposadr[0]] = qj
     mujoco.mj_forward(model, data)
+    return model, data
+
+
+def render_frame(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec | None = None,
+                 sensor: SensorModel = SensorModel(), seed: int = 0) -> Frame:
+    """One frame of a scenario at its initial state with the arm at q (no simulation, no ROS): for perception;
+    `camera` None: the driver's (CameraSpec.configured()); `sensor` / `seed` as in CameraRenderer."""
+    camera = camera if camera is not None else CameraSpec.configured()
+    model, data = _posed(scenario, q, camera)
     r = CameraRenderer(model, camera.width, camera.height, sensor=sensor, seed=seed)
     try:
         return r.render(data)
@@ -161,11 +167,7 @@ def visible_pixels(scenario: Scenario, q: ArrayLike = Q_HOME, camera: CameraSpec
     """Pixels of each object of the scenario's world (listed and unlisted) in the camera's image at its initial
     state with the arm at q (MuJoCo's segmentation rendering): 0 for an object the camera cannot see."""
     camera = camera if camera is not None else CameraSpec.configured()
-    model = build_model(scenario, camera)
-    data = mujoco.MjData(model)
-    for j, qj in zip(JOINT_NAMES, np.asarray(q, float)):
-        data.qpos[model.joint(j).qposadr[0]] = qj
-    mujoco.mj_forward(model, data)
+    model, data = _posed(scenario, q, camera)
     r = mujoco.Renderer(model, camera.height, camera.width)
     try:
         r.enable_segmentation_rendering()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Sequence
 
 import cv2
 import numpy as np
@@ -39,7 +40,7 @@ class ImageFormatError(PerceptionError):
     """An image with an unexpected shape, dtype or encoding, or colour and depth of different sizes."""
 
 
-def fuse_markers(seen) -> tuple[np.ndarray, float]:
+def fuse_markers(seen: Sequence[tuple[Any, Any]]) -> tuple[np.ndarray, float]:
     """(T_base_camera, rms corner residual in m) from several markers seen in one frame, given as (MarkerLocalizer,
     MarkerObservation) pairs: one rigid fit (Kabsch) of every marker's corners in the camera (its depth-refined
     pose) to the same corners in the base frame (the scenario's poses); markers far apart constrain the rotation
@@ -178,7 +179,7 @@ class MarkerLocalizer:
         return np.asarray(corners[seen.index(self.marker.id)], float).reshape(4, 2)
 
     def locate(self, rgb: np.ndarray, K: np.ndarray, depth: np.ndarray | None = None,
-               expected: np.ndarray | None = None, found=None) -> MarkerObservation:
+               expected: np.ndarray | None = None, found: Any = None) -> MarkerObservation:
         """Camera pose in the base frame from the marker (and depth, when given and valid on the marker).
         `expected`: T_camera_marker of earlier frames (the node's fused frame): when the marker is not decoded,
         the depth there tells whether it is covered (MarkerOccludedError names how much). `found`: as in
@@ -202,7 +203,8 @@ class MarkerLocalizer:
         t, covered, dropped = refined
         return MarkerObservation(corners, t, self.T_base_marker @ invert(t), True, t_pnp, covered, dropped)
 
-    def _plate_points(self, K, depth, quad: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    def _plate_points(self, K: np.ndarray, depth: np.ndarray, quad: np.ndarray,
+                      scale: float) -> tuple[np.ndarray, np.ndarray]:
         """(pixels N x 2, camera points N x 3) with depth inside the quad scaled by `scale` about its centre."""
         h, w = depth.shape
         mask = np.zeros((h, w), np.uint8)
@@ -212,7 +214,8 @@ class MarkerLocalizer:
         uv = np.stack([u, v], 1).astype(float)
         return uv, _backproject(K, uv, depth[v, u].astype(float))
 
-    def _covered_corners(self, K, depth, corners, n, off) -> tuple[float, list[int]]:
+    def _covered_corners(self, K: np.ndarray, depth: np.ndarray, corners: np.ndarray, n: np.ndarray,
+                         off: float) -> tuple[float, list[int]]:
         """(fraction of the plate with something in front, corners whose neighbourhood has something in front)."""
         p = self.params
         uv, pts = self._plate_points(K, depth, corners, 1.3)
@@ -226,7 +229,7 @@ class MarkerLocalizer:
                 bad.append(k)
         return float(np.mean(front)) if len(front) else 1.0, bad
 
-    def _refine(self, corners, t_pnp, K, depth):
+    def _refine(self, corners: np.ndarray, t_pnp: np.ndarray, K: np.ndarray, depth: np.ndarray) -> Any:
         """(T_camera_marker, covered fraction, dropped corners) from a robust plane fit to the marker's depth and
         the unoccluded corners' rays; None when too few depth pixels (the colour-only pose stands).
         Raises MarkerOccludedError / MarkerInconsistentError when the checks fail."""
@@ -269,7 +272,7 @@ class MarkerLocalizer:
                 f"{math.degrees(dr):.1f} deg (bounds {bound_mm:.0f} mm, {p.max_disagreement_deg:.0f} deg)")
         return t, covered, tuple(bad)
 
-    def diagnose_cover(self, K, depth, expected: np.ndarray) -> None:
+    def diagnose_cover(self, K: np.ndarray, depth: np.ndarray, expected: np.ndarray) -> None:
         """MarkerOccludedError when the marker where `expected` (T_camera_marker) puts it has something in front."""
         obj = self.object_points
         cam = obj @ expected[:3, :3].T + expected[:3, 3]

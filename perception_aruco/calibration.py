@@ -88,7 +88,8 @@ def _closed_form(A: Sequence[np.ndarray], B: Sequence[np.ndarray]) -> tuple[np.n
     return transform(rx, t[:3]), transform(rz, t[3:])
 
 
-def _refine(A, B, X: np.ndarray, Z: np.ndarray, iterations: int = 10):
+def _refine(A: Sequence[np.ndarray], B: Sequence[np.ndarray], X: np.ndarray, Z: np.ndarray,
+            iterations: int = 10) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Newton on sum |A_i X c - Z B_i c|^2 over the corners c of a 4 cm square in the marker's plane (the
     hand marker's scale), numeric Jacobian over 12 parameters (rotation vector and translation of X and of Z)."""
     ch = np.array([[-0.02, 0.02, 0.0, 1.0], [0.02, 0.02, 0.0, 1.0], [0.02, -0.02, 0.0, 1.0],

@@ -5,6 +5,8 @@ RealSense driver's default), returned as float32 metres with 0 = no return. Anyt
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .aruco import ImageFormatError
@@ -13,7 +15,8 @@ COLOR_ENCODINGS = ("rgb8", "bgr8")
 DEPTH_ENCODINGS = ("32FC1", "16UC1", "mono16")
 
 
-def _array(encoding, height, width, step, data, dtype, channels, is_bigendian=False) -> np.ndarray:
+def _array(encoding: str, height: int, width: int, step: int, data: Any, dtype: Any, channels: int,
+           is_bigendian: bool = False) -> np.ndarray:
     dt = np.dtype(dtype).newbyteorder(">" if is_bigendian else "<")
     row = width * channels * dt.itemsize
     if height <= 0 or width <= 0:
@@ -31,7 +34,8 @@ def _array(encoding, height, width, step, data, dtype, channels, is_bigendian=Fa
     return out.astype(dt.newbyteorder("="), copy=False)
 
 
-def decode_color(encoding: str, height: int, width: int, step: int, data, is_bigendian: bool = False) -> np.ndarray:
+def decode_color(encoding: str, height: int, width: int, step: int, data: Any,
+                 is_bigendian: bool = False) -> np.ndarray:
     """HxWx3 uint8 RGB."""
     if encoding not in COLOR_ENCODINGS:
         raise ImageFormatError(f"colour image encoding {encoding!r} not supported (use {', '.join(COLOR_ENCODINGS)})")
@@ -39,7 +43,8 @@ def decode_color(encoding: str, height: int, width: int, step: int, data, is_big
     return img[:, :, ::-1].copy() if encoding == "bgr8" else img
 
 
-def decode_depth(encoding: str, height: int, width: int, step: int, data, is_bigendian: bool = False) -> np.ndarray:
+def decode_depth(encoding: str, height: int, width: int, step: int, data: Any,
+                 is_bigendian: bool = False) -> np.ndarray:
     """HxW float32 metres (0 = no return; NaN/Inf of a float image also become 0)."""
     if encoding == "32FC1":
         d = _array(encoding, height, width, step, data, np.float32, 1, is_bigendian).astype(np.float32)

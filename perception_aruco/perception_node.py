@@ -10,6 +10,8 @@ marker also puts on /tf the marker as seen (camera optical frame -> `aruco_marke
 Health goes out on /diagnostics (diagnostic_msgs/DiagnosticArray, the ROS convention): OK with the checks' numbers,
 WARN with bottles missing, ERROR with the reason a frame was refused. The camera poses of consistent frames are
 fused (`pipeline.FrameFusion`); the fused pose stands in when the marker is covered, if the shelf confirms it.
+The arm's joint states (`joint_state_topic`) leave its body out of the depth. Every object is published, listed or
+not (u1, u2, ...: estimated weight, said in the message's weight_note and the log), as its primitive.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ import os
 import threading
 import time
 from collections import deque
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -24,12 +27,13 @@ from qtree_relocation_msgs.msg import ObjectArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 from tf2_msgs.msg import TFMessage
 
 from relocation_common.geometry import invert
 from relocation_common.node import declare_parameters, node_main
 from relocation_common.paths import config_file
+from relocation_common.robot_description import JOINT_NAMES
 from relocation_common.ros_conversions import objects_to_msg, transform_msg
 from relocation_common.scenario import load_scenario
 
@@ -38,21 +42,23 @@ from .calibration import CalibrationError, apply_calibration, load_calibration
 from .camera_check import camera_info_problem, image_problem
 from .images import decode_color, decode_depth, encode_color
 from .localize import LocalizeParams
+from .objects.model import to_shelf_object
+from .objects.params import ObjectParams
 from .pipeline import FrameFusion, Perception, PerceptionResult, SceneMemory, identity_conflicts
 from .segmentation import SegmentationParams
 
 
-def _stamp_s(msg) -> float:
+def _stamp_s(msg: Any) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
 class PerceptionNode(Node):
     """The perception node (module docstring; docs/perception.md)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__("perception")
-        declare_parameters(self)  # config/perception.yaml
-        def g(n: str):
+        values = declare_parameters(self)  # config/perception.yaml
+        def g(n: str) -> Any:
             return self.get_parameter(n).value
 
         self.p = g
@@ -67,15 +73,16 @@ class PerceptionNode(Node):
             self.scenario,
             SegmentationParams(gain_min=g("gain_min"), gain_max=g("gain_max"), max_residual=g("max_residual")),
             LocalizeParams(min_pixels=g("min_pixels"), inlier_tol=g("inlier_tol")),
-            refine_with_depth=g("refine_with_depth"))
+            refine_with_depth=g("refine_with_depth"), objects=ObjectParams.from_mapping(values))
+        self._q: tuple[float, np.ndarray] | None = None   # (stamp, arm joint angles) of the newest joint state
         self._lock = threading.Lock()
         self._colors: deque = deque(maxlen=6)
         self._depths: deque = deque(maxlen=6)
         self._info = None
-        self._last_pair = None                     # stamp of the last processed pair
+        self._last_pair: float | None = None       # stamp of the last processed pair
         self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")))
         self.fusion = FrameFusion()
-        self._previous: dict = {}                  # id -> Detection of the last published scene
+        self._previous: dict = {}                  # id -> PerceivedObject of the last published scene
         self._scene: ObjectArray | None = None
         self._scene_time = 0.0
 
@@ -86,6 +93,7 @@ class PerceptionNode(Node):
                                  callback_group=sensors)
         self.create_subscription(CameraInfo, g("camera_info_topic"), self._on_info, qos_profile_sensor_data,
                                  callback_group=sensors)
+        self.create_subscription(JointState, g("joint_state_topic"), self._on_joint_state, 10, callback_group=sensors)
         self.pub = self.create_publisher(ObjectArray, g("objects_topic"),
                                          QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.debug_pub = self.create_publisher(Image, g("debug_topic"), 1)
@@ -130,7 +138,11 @@ class PerceptionNode(Node):
     def _on_info(self, msg: CameraInfo) -> None:
         self._info = msg
 
-    def _newest_pair(self):
+    def _on_joint_state(self, msg: JointState) -> None:
+        if all(n in msg.name for n in JOINT_NAMES) and len(msg.position) == len(msg.name):
+            self._q = (_stamp_s(msg), np.array([msg.position[msg.name.index(n)] for n in JOINT_NAMES]))
+
+    def _newest_pair(self) -> tuple[Image, Image] | None:
         """Newest (colour, depth) whose stamps differ by at most sync_slop, or None."""
         with self._lock:
             best = None
@@ -171,7 +183,8 @@ class PerceptionNode(Node):
             if why is not None:
                 raise PerceptionError(why)
             K = np.asarray(self._info.k, float).reshape(3, 3)
-            result = self.perception.process(rgb, dep, K, prior=self.fusion.fused)
+            q = None if self._q is None else self._q[1]
+            result = self.perception.process(rgb, dep, K, prior=self.fusion.fused, memory=self.memory, q=q)
             jump = self.fusion.update(result.T_base_camera)
             if jump:
                 raise PerceptionError(jump)
@@ -182,11 +195,10 @@ class PerceptionNode(Node):
             if rgb is not None:
                 self._publish_debug(color, self.perception.annotate(rgb, None, note=str(e)))
             return
-        doubt = identity_conflicts(result.detections, self._previous, self.scenario)
+        doubt = identity_conflicts(result.detections, self._previous)
         if doubt:
-            result = PerceptionResult(result.marker, {i: d for i, d in result.detections.items() if i not in doubt},
-                                      {**result.missing, **doubt}, result.segmentation, result.T_base_camera,
-                                      result.shelf, result.notes)
+            result = PerceptionResult(result.marker, {i: d for i, d in result.objects.items() if i not in doubt},
+                                      {**result.missing, **doubt}, result.T_base_camera, result.shelf, result.notes)
         self._report_health(result)
         self._publish_debug(color, self.perception.annotate(rgb, result, K))
         self._publish_tf(color, result)
@@ -195,7 +207,7 @@ class PerceptionNode(Node):
     def _report_health(self, result: PerceptionResult) -> None:
         fit = result.shelf
         values = {"bottles found": str(len(result.detections)), "missing": ", ".join(sorted(result.missing)),
-                  "marker seen": str(result.marker is not None)}
+                  "unlisted": ", ".join(sorted(result.unlisted)), "marker seen": str(result.marker is not None)}
         if fit is not None:
             values.update({"shelf vs marker (mm)": f"{fit.shift * 1000:.1f}",
                            "shelf vs marker (deg)": f"{fit.rotation_deg:.2f}",
@@ -216,7 +228,7 @@ class PerceptionNode(Node):
                                                                      for k, v in values.items()])]
         self.diag_pub.publish(msg)
 
-    def _publish_tf(self, color: Image, result) -> None:
+    def _publish_tf(self, color: Image, result: PerceptionResult) -> None:
         """The marker where this frame's camera pose (marker, corrected by the shelf) puts it, and the shelf on it
         (/tf, stamped with the image)."""
         marker = f"aruco_marker_{self.scenario.marker.id}"
@@ -225,9 +237,16 @@ class PerceptionNode(Node):
             transform_msg(invert(result.T_base_camera) @ self._t_base_marker, color.header.frame_id, marker, stamp),
             transform_msg(self._t_marker_shelf, marker, self.p("shelf_frame"), stamp)]))
 
-    def _publish_scene(self, color: Image, result) -> None:
+    def _publish_scene(self, color: Image, result: PerceptionResult) -> None:
         log = self.get_logger()
-        dets, held, lost = self.memory.update(result.detections)
+        objects, held, lost = self.memory.update(result.objects)
+        unlisted = [o for o in objects if not o.listed]
+        if unlisted:
+            log.info("unlisted objects: " + "; ".join(
+                f"{o.id} {to_shelf_object(o).describe()}{' (conservative)' if o.conservative else ''} at "
+                f"({o.x:.3f}, {o.y:.3f}), {o.weight:.2f} kg estimated: {o.weight_note}" for o in unlisted),
+                throttle_duration_sec=5.0)
+        dets = [o for o in objects if o.listed]
         if held:
             log.warning(f"not seen in this frame, kept at last pose: {', '.join(held)}", throttle_duration_sec=5.0)
         if lost:
@@ -236,7 +255,7 @@ class PerceptionNode(Node):
         if self.scenario.target_id not in {d.id for d in dets}:
             log.error(f"target {self.scenario.target_id!r} not seen: no scene published", throttle_duration_sec=2.0)
             return
-        msg = objects_to_msg(self.perception.bottles(dets), color.header.stamp, self.p("frame_id"))
+        msg = objects_to_msg([to_shelf_object(o) for o in objects], color.header.stamp, self.p("frame_id"))
         self._scene, self._scene_time = msg, time.monotonic()
         self._previous = {d.id: d for d in dets}
         self.pub.publish(msg)
@@ -256,7 +275,7 @@ class PerceptionNode(Node):
         self.debug_pub.publish(Image(header=color.header, encoding=enc, height=h, width=w, step=step, data=data))
 
 
-def main(args=None) -> None:
+def main(args: list[str] | None = None) -> None:
     """Entry point of the perception node."""
     node_main("perception", PerceptionNode, args, errors=(CalibrationError,))  # a bad calibration_file: one line
 

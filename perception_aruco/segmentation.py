@@ -26,11 +26,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Sequence
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
-from relocation_common.scenario import Scenario
+from relocation_common.scenario import Marker, Scenario
 
 from .aruco import ImageFormatError, marker_in_base
 
@@ -71,7 +73,7 @@ class SegmentationParams:
                        erode_px=self.erode_px if focal >= self.erode_min_focal else 0)
 
 
-def check_images(rgb, depth) -> tuple[np.ndarray, np.ndarray]:
+def check_images(rgb: ArrayLike, depth: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Colour HxWx3 uint8 and depth HxW (float metres) of the same size; ImageFormatError otherwise."""
     rgb, depth = np.asarray(rgb), np.asarray(depth)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
@@ -98,12 +100,12 @@ def backproject_image(depth: np.ndarray, K: np.ndarray, T_base_camera: np.ndarra
     return out
 
 
-def on_marker_plates(points: np.ndarray, markers, margin: float) -> np.ndarray:
+def on_marker_plates(points: np.ndarray, markers: Sequence[Marker], margin: float) -> np.ndarray:
     """Bool per point (... x 3, base frame, NaN allowed): on one of the markers' plates (within `margin`)."""
     return on_plates(points, [(marker_in_base(m), m.size) for m in markers], margin)
 
 
-def on_plates(points: np.ndarray, plates, margin: float) -> np.ndarray:
+def on_plates(points: np.ndarray, plates: Sequence[tuple[np.ndarray, float]], margin: float) -> np.ndarray:
     """Bool per point (... x 3, NaN allowed): on one of the plates, given as (T_frame_marker 4x4 in the points'
     frame, marker size), within `margin` of its edge and 2 cm of its face."""
     out = np.zeros(points.shape[:-1], bool)
@@ -128,16 +130,16 @@ def workspace_mask(points: np.ndarray, scenario: Scenario, margin: float, marker
     return mask
 
 
-def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams,
+def colour_residuals(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams,
                      clipped: np.ndarray | None = None) -> np.ndarray:
-    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits
-    within `max_residual` or the best is not clearly better than the second best (`max_ratio`). `clipped` (N x 3
-    bool): channels the camera saturated; their value is a lower bound (a residual only where the class predicts
-    less), the shading gain is fitted on the other channels and may reach `gain_max` x `clipped_gain` (the pixel was
-    brighter than the camera's range: over-exposed orange is not yellow)."""
+    """N x C: the distance of each of N pixels (N x 3, 0..255) to each of C reference colours shaded by the best
+    gain in [gain_min, gain_max] (|p - s* a_c|). `clipped` (N x 3 bool): channels the camera saturated; their value
+    is a lower bound (a residual only where the class predicts less), the shading gain is fitted on the other
+    channels and may reach `gain_max` x `clipped_gain` (the pixel was brighter than the camera's range: over-exposed
+    orange is not yellow)."""
     p = rgb_pixels.astype(np.float32)
     a = refs.astype(np.float32)
-    s = np.clip(p @ a.T / np.sum(a * a, axis=1), params.gain_min, params.gain_max)       # N x C
+    s = np.clip(p @ a.T / np.maximum(np.sum(a * a, axis=1), 1e-6), params.gain_min, params.gain_max)  # N x C
     res = np.linalg.norm(p[:, None, :] - s[..., None] * a[None, :, :], axis=2)             # N x C
     sat = np.nonzero(clipped.any(axis=1))[0] if clipped is not None else np.zeros(0, int)
     if clipped is not None and len(sat):  # the few saturated pixels: censored channels
@@ -148,7 +150,16 @@ def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: Segmentat
         s = np.clip(np.where(den > 0, num / np.maximum(den, 1e-6), top), params.gain_min, top)
         diff = q[:, None, :] - s[..., None] * a[None, :, :]
         res[sat] = np.linalg.norm(np.where(c[:, None, :], np.maximum(diff, 0.0), diff), axis=2)
-    rows = np.arange(len(p))
+    return res
+
+
+def classify_colours(rgb_pixels: np.ndarray, refs: np.ndarray, params: SegmentationParams,
+                     clipped: np.ndarray | None = None) -> np.ndarray:
+    """Class index per pixel (N,) for N x 3 pixels and C x 3 reference colours (0..255); UNASSIGNED if none fits
+    within `max_residual` or the best is not clearly better than the second best (`max_ratio`); `clipped` as in
+    `colour_residuals`."""
+    res = colour_residuals(rgb_pixels, refs, params, clipped)
+    rows = np.arange(len(res))
     best = np.argmin(res, axis=1)
     first = res[rows, best].copy()
     bad = first > params.max_residual
@@ -242,8 +253,8 @@ class Segmentation:
         return self.labels == self.classes.index(object_id)
 
 
-def segment(rgb, depth, K, T_base_camera, scenario: Scenario,
-            params: SegmentationParams = SegmentationParams(), levels=None) -> Segmentation:
+def segment(rgb: ArrayLike, depth: ArrayLike, K: ArrayLike, T_base_camera: ArrayLike, scenario: Scenario,
+            params: SegmentationParams = SegmentationParams(), levels: PlateLevels | None = None) -> Segmentation:
     """Per-pixel bottle class of a registered RGB-D frame (see the module docstring)."""
     rgb, depth = check_images(rgb, depth)
     points = backproject_image(depth, np.asarray(K, float), np.asarray(T_base_camera, float))
@@ -251,7 +262,7 @@ def segment(rgb, depth, K, T_base_camera, scenario: Scenario,
 
 
 def segment_points(rgb: np.ndarray, points: np.ndarray, scenario: Scenario,
-                   params: SegmentationParams = SegmentationParams(), levels=None,
+                   params: SegmentationParams = SegmentationParams(), levels: PlateLevels | None = None,
                    exclude: np.ndarray | None = None) -> Segmentation:
     """`segment` on base-frame points already computed (HxWx3, NaN without depth); `levels`: the marker plate
     (`plate_levels`) for the colour normalisation (None: none); `exclude`: HxW bool, pixels never classified (the

@@ -1,5 +1,6 @@
 """Adapters over a feasibility oracle (the contract is relocation_common.feasibility): a set-keyed cache with reuse
-across answers and lazy certification, and, for tests of the Q-Tree layer only, a declared blocking relation.
+across answers and lazy certification, the obstacles the hand cannot grasp with the planner's reason (`no_grasp`),
+and, for tests of the Q-Tree layer only, a declared blocking relation.
 """
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import dataclasses
 from typing import Callable, Iterable, Mapping, Sequence
 
 from relocation_common.feasibility import (
+    NO_GRASP,
     BlockerSet,
     FeasibilityAnswer,
     FeasibilityOracle,
@@ -80,11 +82,10 @@ class CachedOracle:
         obj, removed = key
         for was, a in self._sources.get(obj, ()):
             if reuses(a, was, removed):
-                got = dataclasses.replace(a, message=f"reused: {a.message} (with {', '.join(sorted(was)) or 'none'} "
-                                          "removed)")
+                got = a
             elif claim_holds(a, was, removed):
-                got = dataclasses.replace(a, message=f"reused: {a.message}", blockers=tuple(
-                    dataclasses.replace(b, objects=b.objects - removed) for b in a.blockers))
+                got = dataclasses.replace(a, blockers=tuple(dataclasses.replace(b, objects=b.objects - removed)
+                                                            for b in a.blockers))
             else:
                 continue
             self.table[key] = got
@@ -165,6 +166,23 @@ class CachedOracle:
         Not cached, not counted in `calls`: no motion planning."""
         lanes = getattr(self.oracle, "lane_blockers", None)
         return None if lanes is None else lanes(frozenset(removed))
+
+
+def no_grasp(objects: Iterable[str], lanes: Lanes | None, known: Iterable[tuple[str, FeasibilityAnswer]],
+             ask: Callable[[str], FeasibilityAnswer]) -> dict[str, str]:
+    """object -> the motion planner's reason, for the `objects` the hand cannot grasp (their g_U message starts
+    relocation_common.feasibility.NO_GRASP): those a `known` (object, answer) says so of, and those with no lane at
+    all in `lanes` (the planner's lane_blockers) asked once with `ask(object)` (such an answer costs no planning).
+    They stay obstacles, never relocated: this is what the log and the result say of them."""
+    objects = list(objects)
+    out = {o: a.message for o, a in known if o in objects and a.message.startswith(NO_GRASP)
+           and Label(a.label) == Label.UNFEASIBLE}
+    for o in objects:
+        if o not in out and lanes is not None and lanes.get(o) == ():
+            a = ask(o)
+            if Label(a.label) == Label.UNFEASIBLE and a.message.startswith(NO_GRASP):
+                out[o] = a.message
+    return dict(sorted(out.items()))
 
 
 class BlockingOracle:

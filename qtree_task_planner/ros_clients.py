@@ -6,6 +6,7 @@
   timeout: qtree_task_planner.executive.retrieval.relocation_stop).
 - SceneWatch: the latest scene message and when it arrived; `checked(...)` is the one a goal starts from,
   `after(t, ...)` waits for one received later (closed-loop execution: a scene perceived after a relocation ended).
+- through_outages: a call to the feasibility service's work carried through planner outages with feedback.
 - train_goal / goal_params: a TrainPlanner goal whose numeric fields say "the node's parameter" (negative), and
   the TrainingParams a goal asks for; fill_optimum / fill_training_result: the outcome in the TrainPlanner result.
 """
@@ -14,18 +15,21 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, TypeVar
 
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
+from rclpy.action.server import ServerGoalHandle
 from rclpy.client import Client
+from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.task import Future
 from rclpy.time import Time
 
 from qtree_task_planner.executive.closed_loop import SeenObject, seen_object
-from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
+from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, until_available
+from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.executive.retrieval import check_scene, relocation_stop
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import TrainingResult
@@ -116,6 +120,31 @@ class ServiceOracle:
         if not resp.ok:
             raise ValueError(f"motion planner refused the query for {what}: {resp.message}")
         return resp
+
+
+T = TypeVar("T")
+
+
+def through_outages(fn: Callable[[], T], goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback,
+                    oracle: ReplicaOracle, log: RcutilsLogger, wait: float, kept: Callable[[], str]) -> T:
+    """fn() through planner outages (qtree_task_planner.executive.outage: up to `wait` s each, `kept()` says where the
+    work is kept), with the goal's feedback phase "waiting for planner" while waiting."""
+    phase = fb.phase
+
+    def on_outage(message: str) -> None:
+        log.warning(message)
+        fb.phase = "waiting for planner"
+        goal_handle.publish_feedback(fb)
+
+    services = " or ".join(r.name for r in oracle.replicas)
+
+    def on_back() -> None:
+        fb.phase = phase
+        log.info(f"motion planner {services} is back: resuming")
+
+    return until_available(fn, service_up=oracle.ready, stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
+                           wait=wait, last_answer=lambda: oracle.last_ok, kept=kept, service=services,
+                           on_outage=on_outage, on_back=on_back)
 
 
 NODE_DEFAULT_FIELDS = ("alpha", "gamma", "epsilon0", "epsilon_min", "beta", "max_episodes", "max_steps",

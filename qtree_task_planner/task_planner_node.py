@@ -1,9 +1,10 @@
 """task_planner node: the Q-Tree training action over the motion planner's feasibility service, then execution.
 
-Thin shell: parameters, the scene subscription and the TrainPlanner action in; calls to the core out. The job
-(exact optimum, training, relocations in order, scene checks) is qtree_task_planner.executive.retrieval, the checkpoint
+Thin shell: parameters, the scene subscription and the TrainPlanner action in; calls to the core out. The job (exact
+optimum, training, relocations in order, scene checks) is qtree_task_planner.executive.retrieval, the checkpoint
 bookkeeping qtree_task_planner.executive.keeper, the ROS clients (feasibility oracle over PlanFeasibility, the watched
-RelocateObject goal) qtree_task_planner.ros_clients. Eq. 15 is reported as action feedback every few episodes.
+RelocateObject goal) qtree_task_planner.ros_clients. Eq. 15 is reported as action feedback every few episodes. The
+scene's objects the scenario does not list and what the hand cannot grasp are said in the log and the result.
 
 Interfaces: action ~/train (TrainPlanner); subscribes the scene (`scene_topic`, transient local); publishes
 ~/markers (visualization_msgs/MarkerArray: the scene, the learned order), ~/relocating (std_msgs/String, latched: the
@@ -24,7 +25,7 @@ import dataclasses
 import json
 import threading
 import time
-from typing import Any, Callable, Sequence, TypeVar
+from typing import Any, Sequence
 
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
@@ -40,12 +41,13 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from qtree_task_planner.executive.keeper import CheckpointKeeper
-from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, until_available
+from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable
 from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.executive.retrieval import (
     chosen_sequence,
     execute,
     planner_foreign_ids,
+    scene_notes,
     solve_then_train,
     training_outcome,
 )
@@ -65,6 +67,7 @@ from qtree_task_planner.ros_clients import (
     fill_training_result,
     goal_params,
     seen_scene,
+    through_outages,
     train_goal,
     watched,
 )
@@ -77,7 +80,6 @@ from relocation_common.scenario import ScenarioError, load_scenario
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-T = TypeVar("T")
 FEEDBACK_EVERY = 10  # episodes between training feedbacks (and after a slow planner answer: training.CALLBACK_S)
 
 
@@ -112,8 +114,7 @@ class TaskPlannerNode(Node):
         self._server = ActionServer(self, TrainPlanner, "~/train", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=reentrant)
-        self.get_logger().info(f"ready: action {self.resolve_topic_name('~/train')}, scene from "
-                               f"{self._scene_topic}")
+        self.get_logger().info(f"ready: action {self.resolve_topic_name('~/train')}, scene from {self._scene_topic}")
 
     def p(self, name: str) -> Any:
         """The value of parameter `name` (of the type config/task_planner.yaml gives it)."""
@@ -145,7 +146,8 @@ class TaskPlannerNode(Node):
     def _execute(self, goal_handle: ServerGoalHandle) -> TrainPlanner.Result:
         result = TrainPlanner.Result()
         try:
-            self._train_and_execute(goal_handle, result)
+            notes = self._train_and_execute(goal_handle, result)  # unlisted objects, what the hand cannot grasp
+            result.message += f" ({notes})" if notes else ""
         except (PlannerUnavailable, Cancelled, CheckpointError, ParameterError, ScenarioError, ValueError, KeyError,
                 OSError) as e:
             result.success, result.message = False, str(e)
@@ -156,29 +158,7 @@ class TaskPlannerNode(Node):
                  "succeed" if result.success else "abort")
         return result
 
-    # -- a lost planner ---------------------------------------------------------------------------------
-    def _until_planner(self, fn: Callable[[], T], goal_handle: ServerGoalHandle, oracle: ReplicaOracle,
-                       fb: TrainPlanner.Feedback) -> T:
-        """fn() through planner outages (qtree_task_planner.executive.outage), with feedback while waiting."""
-        phase = fb.phase
-
-        def on_outage(message: str) -> None:
-            self.get_logger().warning(message)
-            fb.phase = "waiting for planner"
-            goal_handle.publish_feedback(fb)
-
-        services = " or ".join(c.srv_name for c in self._feas)
-
-        def on_back() -> None:
-            fb.phase = phase
-            self.get_logger().info(f"motion planner {services} is back: resuming")
-
-        return until_available(fn, service_up=oracle.ready,
-                               stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
-                               wait=self.p("planner_wait"), last_answer=lambda: oracle.last_ok,
-                               kept=self._keeper.kept_where, service=services, on_outage=on_outage, on_back=on_back)
-
-    def _train_and_execute(self, goal_handle: ServerGoalHandle, result: TrainPlanner.Result) -> None:
+    def _train_and_execute(self, goal_handle: ServerGoalHandle, result: TrainPlanner.Result) -> str:
         params = self._params(goal_handle.request)
         problem, scene = self._problem()
         self._publish_scene(scene, ())
@@ -200,11 +180,13 @@ class TaskPlannerNode(Node):
             self.get_logger().warning(f"feasibility service(s) not available at the start of the goal: "
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
         resume = self._keeper.resume_point(problem, params, oracle)
+        notes = [""]  # retrieval.scene_notes, after the exact solve
 
         def on_solved(exact: AStarResult) -> None:
             fill_optimum(result, exact)
-            self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight} "
-                                   f"({oracle.calls} planner calls; {service.summary()})")
+            notes[0] = scene_notes(problem, oracle)
+            self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight} ({oracle.calls} "
+                                   f"planner calls; {service.summary()}){'; ' * bool(notes[0])}{notes[0]}")
             fb.phase = "training"
 
         def on_episode(stats: EpisodeStats) -> bool:
@@ -214,7 +196,9 @@ class TaskPlannerNode(Node):
             return rclpy.ok() and not goal_handle.is_cancel_requested
 
         optimum, r = solve_then_train(problem, oracle, params, resume=resume, keep=self._keep, on_episode=on_episode,
-                                      until_planner=lambda fn: self._until_planner(fn, goal_handle, service, fb),
+                                      until_planner=lambda fn: through_outages(
+                                          fn, goal_handle, fb, service, self.get_logger(), self.p("planner_wait"),
+                                          self._keeper.kept_where),
                                       checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved,
                                       episode_every=FEEDBACK_EVERY)
         fill_training_result(result, r, oracle.planner_answers)
@@ -228,11 +212,12 @@ class TaskPlannerNode(Node):
             result.success, result.message = stop
             if not stop[0] and not r.cancelled and not optimum.found:
                 result.message += planner_foreign_ids(service, problem.ids)
-            return
+            return notes[0]
         fb.phase = "executing"  # then each check and re-plan (_run)
         self._run(goal_handle, fb, result, scene, oracle, params, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
+        return notes[0]
 
     def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
              scene: ObjectArray, oracle: CachedOracle, params: TrainingParams, sequence: list[str], note: str) -> None:

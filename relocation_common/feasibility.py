@@ -12,6 +12,9 @@ a suspicion (the lane passed the screen but STPIK or RRT-Connect failed there): 
 answer whose sets are all certain: from `removed` or any superset of it, relocating the object needs one of the listed
 lanes cleared. Empty `blockers` = no information.
 
+An object the hand cannot grasp (a box, a lying bottle, one wider than the open hand...) is answered g_U with a
+message starting NO_GRASP and the reason: it stays an obstacle, never relocated, whatever is removed.
+
 Certification (docs/motion_planner.md, "Lazy certification"). A feasible answer is the pick (home -> pre-grasp ->
 grasp), as in the paper. Whether the whole relocation plans from it (carry to slot len(removed), release, retreat,
 way home) is its own question, `CertifyingOracle.certify`, asked only for the answers on a sequence about to be
@@ -31,6 +34,8 @@ import os
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, Callable, Iterable, Mapping, Protocol, Sequence
+
+NO_GRASP = "no grasp: "  # the start of the g_U message of an object the hand cannot grasp (module docstring)
 
 
 class Label(IntEnum):

@@ -1,33 +1,39 @@
 """A scene update checked against the scenario before any of it is merged (ROS-free).
 
-A scene (perception's or the driver's ObjectArray) may only name the scenario's bottles, once each, at finite
-poses on or near the shelf unit. One fault drops the whole message (never merged in part): a bottle renamed by a
-bad message would otherwise stay in the planner's scene as a phantom obstacle that no relocation removes, and
-every later training would end without a sequence (docs/reliability.md, "Never report success that is not true").
+A scene (perception's or the driver's ObjectArray) names the scenario's objects, once each, and may hold objects the
+scenario does not list (`listed: false`: perception found them, or only the simulator knows them): those must not
+take an id the scenario lists. Every pose is finite and on or near the shelf unit. One fault drops the whole
+message (never merged in part): a listed bottle renamed by a bad message would otherwise stay in the planner's scene
+as a phantom obstacle that no relocation removes, and every later training would end without a sequence
+(docs/reliability.md, "Never report success that is not true").
 """
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from typing import Collection, Iterable
 
 from .scenario import Scenario, ScenarioError
 
-NEAR_SHELF = 0.5  # m: a bottle's frame farther than this outside the shelf unit's box is not a scene of this shelf
+NEAR_SHELF = 0.5  # m: an object's frame farther than this outside the shelf unit's box is not a scene of this shelf
 
 
-def check_scene(scenario: Scenario, objects: Iterable[tuple[str, float, float, float]], source: str = "scene"
-                ) -> None:
-    """ScenarioError naming the first fault of `objects` = (id, x, y, z) of each bottle: an id the scenario does
-    not have, an id twice, a non-finite coordinate, or a pose away from the shelf by more than NEAR_SHELF."""
+def check_scene(scenario: Scenario, objects: Iterable[tuple[str, float, float, float]], source: str = "scene",
+                unlisted: Collection[str] = ()) -> None:
+    """ScenarioError naming the first fault of `objects` = (id, x, y, z) of each object: a listed id the scenario
+    does not have, an unlisted one (in `unlisted`: the message says `listed: false`) that it does, an id twice, a
+    non-finite coordinate, or a pose away from the shelf by more than NEAR_SHELF."""
     s = scenario.shelf
     box = ((s.x_front - NEAR_SHELF, s.x_back + NEAR_SHELF), (s.y_min - NEAR_SHELF, s.y_max + NEAR_SHELF),
            (s.bottom_z - NEAR_SHELF, s.ceiling_z + NEAR_SHELF))
     seen: set[str] = set()
     for k, (oid, *xyz) in enumerate(objects):
         where = f"{source}: objects[{k}]"
-        if oid not in scenario.ids:
+        if oid in unlisted and oid in scenario.ids:
+            raise ScenarioError(f"{where}: {oid!r} is marked unlisted, but scenario {scenario.name!r} lists that id")
+        if oid not in scenario.ids and oid not in unlisted:
             raise ScenarioError(f"{where}: id {oid!r} is not in scenario {scenario.name!r} (known: "
-                                f"{', '.join(scenario.ids)})")
+                                f"{', '.join(scenario.ids)}; an object the scenario does not list must be marked "
+                                "listed: false)")
         if oid in seen:
             raise ScenarioError(f"{where}: {oid!r} appears twice")
         seen.add(oid)
@@ -39,7 +45,7 @@ def check_scene(scenario: Scenario, objects: Iterable[tuple[str, float, float, f
 
 
 def foreign_ids(planner_ids: Iterable[str], scene_ids: Iterable[str]) -> str:
-    """The text added to 'training did not find a sequence': the bottles the motion planner's scene holds that the
+    """The text added to 'training did not find a sequence': the objects the motion planner's scene holds that the
     task's scene does not (obstacles no relocation of this task removes), or '' when there are none."""
     extra = sorted(set(planner_ids) - set(scene_ids))
     if not extra:

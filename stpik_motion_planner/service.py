@@ -70,13 +70,15 @@ class MotionPlannerService:
     # -- the scene ------------------------------------------------------------------------------------------
     def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene") -> list[str]:
         """Objects as perceived (ros_conversions.msg_to_objects) resting on the top shelf replace the planner's:
-        standing, or lying (an obstacle as it lies, never graspable); bottles seen off the shelf leave the planner's
-        scene; the rest stays (scene_update.merge_perceived). The ids that changed; ScenarioError for a scene that
-        cannot be (scene_check: unknown or duplicate ids, poses far from the shelf): the whole message is dropped,
-        nothing changes."""
+        standing, or lying (an obstacle as it lies, never graspable), listed in the scenario or not (`listed`
+        false: an object the scenario does not name, an obstacle as its primitive, relocatable when the side grasp
+        takes it); bottles seen off the shelf leave the planner's scene; the rest stays
+        (scene_update.merge_perceived). The ids that changed; ScenarioError for a scene that cannot be
+        (scene_check: a listed id the scenario does not have, an unlisted one it has, an id twice, poses far from
+        the shelf): the whole message is dropped, nothing changes."""
         bottles = list(perceived)
         bases = [(b.id, float(c[0]), float(c[1]), float(c[2])) for b, c in ((b, b.base()) for b in bottles)]
-        check_scene(self.base, bases, source)
+        check_scene(self.base, bases, source, unlisted={b.id for b in bottles if not b.listed})
         self.scene.update(bases)
         m = merge_perceived(self.base.shelf, self.bottles, bottles, self._held, self.planner.lying,
                             self.planner.gone)
@@ -114,8 +116,11 @@ class MotionPlannerService:
 
     def check_goal(self, object_id: str, removed_ids: Iterable[str]) -> None:
         """ValueError with the reason a RelocateObject goal cannot be carried out (goal_check.goal_refusal: unknown
-        ids, the object in its own removed set, no free slot, the goal contradicting the scene)."""
-        why = goal_check.goal_refusal(self.base, object_id, list(removed_ids), self.scene.seen, self.relocated)
+        ids (of the planner's scene: the scenario's and the unlisted objects seen), the object in its own removed
+        set, no free slot, the goal contradicting the scene)."""
+        # the planner's scene, not the file's: an unlisted object is relocated and removed like a listed one
+        why = goal_check.goal_refusal(self.planner.scenario, object_id, list(removed_ids), self.scene.seen,
+                                      self.relocated)
         if why is not None:
             raise ValueError(why)
 

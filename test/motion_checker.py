@@ -1,7 +1,8 @@
 """Independent motion checker: planned joint trajectories replayed kinematically in the project's MuJoCo model.
 
 Nothing of the planner's collision model is used: the world is `jaco2_sim_driver.scene.build_model(scenario)`
-(arm capsules, the simulator's finger bodies, bottles, shelf boards, side and back panels, pedestal, floor), the
+(arm capsules, the simulator's finger bodies, every object of the scenario's world, its `unlisted:` ones included,
+shelf boards, side and back panels, pedestal, floor), the
 arm is posed by MuJoCo's own kinematics from the planned joint angles, a grasped bottle is attached to the hand
 at the relative pose it had when the pick ended (as the simulator's weld does) and released bottles stand where
 they were let go, on the board below them. Distances are MuJoCo's signed geom distances (`mj_geomDistance`, < 0
@@ -120,8 +121,9 @@ class MotionChecker:
         self._qadr = np.array([m.joint(j).qposadr[0] for j in rd.JOINT_NAMES])
         self._fadr = np.array([m.joint(j).qposadr[0] for j in rd.FINGER_JOINT_NAMES])
         self._hand = m.body(HAND_BODY).id
-        self.bottle_geom = {b.id: gid(f"{b.id}_geom") for b in scenario.objects}
-        self._free = {b.id: m.jnt_qposadr[m.body_jntadr[m.body(b.id).id]] for b in scenario.objects}
+        # every object the simulator builds, the scenario's `unlisted` ones too (the planner may not know them)
+        self.bottle_geom = {b.id: gid(f"{b.id}_geom") for b in scenario.world}
+        self._free = {b.id: m.jnt_qposadr[m.body_jntadr[m.body(b.id).id]] for b in scenario.world}
         self.arm = [gid(n) for n in ARM_GEOMS]
         self.world = [gid(n) for n in ("floor", "pedestal") + BOARDS]
         self.floor = gid("floor")

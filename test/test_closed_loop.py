@@ -5,6 +5,7 @@ The fake shelf is a unit-test double of the other layers: it relocates by moving
 (or fails when told to), lets the test disturb it after a given relocation, and answers feasibility from its
 current geometry (an object is blocked by the objects standing in front of it in its lane), so that a disturbance
 really changes the answers and the re-planner's cache must notice."""
+import dataclasses
 import math
 
 import pytest
@@ -141,11 +142,14 @@ def test_verification_lists_every_difference_one_line_each():
     after["x"] = SeenObject("x", 0.7, 0.3, TOP, 0.2)  # hidden behind, now seen
     v = verify_relocation("b", slot0(), before, after)
     kinds = {d.object_id: d.kind for d in v.differences}
-    assert kinds == {"b": "not_at_slot", "d": "moved", "e": "tipped", "T": "target_missing", "x": "new"}
-    assert all("\n" not in d.line for d in v.differences)
+    assert kinds == {"b": "not_at_slot", "d": "moved", "e": "tipped", "T": "target_missing"}
+    assert [(d.object_id, d.kind, d.line) for d in v.new] == [("x", "new", "new object x (cylinder, listed, phi 0.20) "
+                                                                           "at (0.70, 0.30)")]  # no difference
+    assert all("\n" not in d.line for d in v.differences + v.new)
     assert "d moved by 5.0 cm" in v.to_dict()["differences"][3] or any("d moved by 5.0 cm" in d.line
                                                                          for d in v.differences)
-    assert v.summary().startswith("b is not on the bottom shelf") and "(and 4 more differences)" in v.summary()
+    assert v.summary().startswith("b is not on the bottom shelf") and "(and 3 more differences); new object x" \
+        in v.summary()
 
 
 def test_verification_off_slot_on_the_bottom_shelf():
@@ -308,6 +312,58 @@ def test_a_tipped_bottle_is_never_proposed_for_relocation():
                                 lambda rp, banned: asked.append(banned) or replan(rp, banned, cache)).run(seq)
     assert result.success and result.replans and "d tipped over" in result.replans[0].reason, result.message
     assert asked and all(Option("d", None) in banned for banned in asked)
+
+
+HIDDEN = SeenObject("h", 0.70, 0.0, TOP, 0.31, listed=False, weight_note="0.52 L x 600 kg/m3 = 0.31 kg")
+
+
+def test_a_new_object_revealed_behind_a_relocated_one_is_re_planned_with():
+    """After b leaves T's lane an object no scene showed before stands there (hidden behind b; one the scenario does
+    not list, its weight estimated). b's relocation was as planned: the new object is no difference of its check
+    but a re-plan with it (h, then T), and the execution record says so. Before, it was a difference ("the world
+    differs after relocating b: h newly seen at ...") and the record had no line for it."""
+    shelf = FakeShelf()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    assert tuple(seq) == ("b", "T")
+    shelf.disturb[0] = lambda s: s.scene.update(h=HIDDEN)
+    asked = []
+    result = ClosedLoopExecutor(shelf.scenario, shelf.relocate, shelf.perceive,
+                                lambda rp, banned: asked.append(rp) or replan(rp, banned, cache)).run(seq)
+    assert result.success, result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "h", "T"]
+    check = result.steps[0].verification
+    assert check is not None and check.ok and [d.object_id for d in check.new] == ["h"]
+    line = "new object h (cylinder, 0.31 kg est.) at (0.70, 0.00)"
+    assert result.replans[0].reason == line and result.replans[0].sequence == ("h", "T")
+    assert asked[0].problem.estimated == {"h": HIDDEN.weight_note} and asked[0].problem.weights["h"] == 0.31
+    import json
+    report = json.loads(json.dumps(result.to_dict()))  # the execution record (~/execution, report.json's steps)
+    assert report["new_objects"] == [f"{line} after relocating b: re-planned"]
+    assert report["steps"][0]["verification"]["new"] == [line]
+
+
+class NoGraspBoxes(FakeShelf):
+    """The motion planner's answer for a box: "no grasp: ..." (stpik_motion_planner.model.grasp.grasp_refusal)."""
+
+    def feasibility(self, obj, removed):
+        if self.scene[obj].shape == "box":
+            self.questions.append((obj, frozenset(removed)))
+            return FeasibilityAnswer(Label.UNFEASIBLE, message=f"no grasp: {obj} is a box: the side grasp takes "
+                                     "standing cylinders only")
+        return super().feasibility(obj, removed)
+
+
+def test_a_new_object_the_hand_cannot_grasp_stays_an_obstacle_and_the_give_up_says_why():
+    shelf = NoGraspBoxes()
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    shelf.disturb[0] = lambda s: s.scene.update(h=dataclasses.replace(HIDDEN, shape="box"))
+    result = executor(shelf, cache).run(seq)
+    assert not result.success and [o for o, _ in shelf.relocations] == ["b"]
+    assert result.new_objects == ["new object h (box, 0.31 kg est.) at (0.70, 0.00) after relocating b: re-planned"]
+    assert "h (no grasp: h is a box: the side grasp takes standing cylinders only)" in result.message, \
+        result.message
 
 
 def test_a_give_up_without_a_lying_bottle_gives_the_solver_s_reason():

@@ -59,6 +59,21 @@ def test_follower_waits_for_a_lagging_arm_instead_of_cutting_corners():
     np.testing.assert_allclose(q, traj.positions[-1], atol=p.settle_tol)
 
 
+def test_a_late_update_does_not_take_the_reference_ahead_of_the_arm():
+    """The stream's loop stalled 0.45 s (a loaded machine; seen in a graph test at load 8: "approach: tracking error
+    0.333 rad > max_error 0.3 rad at tau=0.35 s"): the driver stopped the arm meanwhile, so the reference must not
+    jump by the whole gap. On track, then one update 0.45 s late with the arm where it was: the motion goes on."""
+    traj = _line(speed=0.8)
+    p = FollowerParams.load()
+    f = TrajectoryFollower(traj, params=p)
+    for k in range(10):
+        assert f.update(traj.positions[k], DT if k else 0.0) == f.RUNNING
+    q = traj.positions[9].copy()
+    assert f.update(q, 0.45) == f.RUNNING
+    assert f.update(q, DT) == f.RUNNING, f.reason
+    assert f.tau <= 9 * DT + p.max_step + DT + 1e-9
+
+
 def test_follower_reports_a_blocked_arm_and_a_bad_start():
     traj = _line(speed=0.8)
     f = TrajectoryFollower(traj, params=dataclasses.replace(FollowerParams.load(), stall_timeout=0.5))

@@ -7,40 +7,17 @@ import math
 import numpy as np
 import pytest
 
-from jaco2_sim_driver.camera import render_frame
-from jaco2_sim_driver.params import CameraSpec
-from jaco2_sim_driver.scene import CAMERA_NAME, build_model
+from jaco2_sim_driver.camera import render_frame, visible_pixels
 from perception_aruco.aruco import ImageFormatError, MarkerNotFoundError
 from perception_aruco.images import decode_color, decode_depth, encode_color, encode_depth
 from perception_aruco.pipeline import Perception
 from relocation_common.geometry import pose_error
 from relocation_common.paths import scenarios_dir
-from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.scenario import load_scenario, parse_scenario
 
 SCENES = ["paper_experiment_10", "blocking_5", "blocking_10", "blocking_15"]
 VISIBLE_PIXELS = 300  # a bottle with this many pixels in view (~10 % of an unoccluded one) must be found
 
-
-def visible_pixels(scenario, camera: CameraSpec | None = None) -> dict[str, int]:
-    """Pixels of each bottle in the camera image (MuJoCo segmentation rendering of the same scene; `camera` None:
-    the driver's)."""
-    import mujoco
-    camera = camera if camera is not None else CameraSpec.configured()
-    model = build_model(scenario, camera)
-    data = mujoco.MjData(model)
-    for j, qj in zip(JOINT_NAMES, Q_HOME):
-        data.qpos[model.joint(j).qposadr[0]] = qj
-    mujoco.mj_forward(model, data)
-    r = mujoco.Renderer(model, camera.height, camera.width)
-    try:
-        r.enable_segmentation_rendering()
-        r.update_scene(data, camera=CAMERA_NAME)
-        seg = r.render()
-    finally:
-        r.close()
-    geoms = seg[:, :, 0][seg[:, :, 1] == int(mujoco.mjtObj.mjOBJ_GEOM)]
-    return {b.id: int(np.sum(geoms == model.geom(f"{b.id}_geom").id)) for b in scenario.objects}
 
 
 @pytest.fixture(scope="module")
@@ -149,11 +126,13 @@ def test_hidden_bottle_reported_missing_not_made_up():
 
 
 def test_scene_memory_holds_unseen_objects_for_hold_frames_then_drops_them():
-    from perception_aruco.localize import Detection
+    from perception_scenes import perceived
+
     from perception_aruco.pipeline import SceneMemory
+    from relocation_common.scenario import ShelfObject
 
     def det(i, x):
-        return Detection(i, x, 0.0, 0.2, 100, 0.0, (0, 0))
+        return perceived(ShelfObject(i, "red", (0.85, 0.1, 0.1), 0.5, x, 0.0, 0.033, 0.16), x, 0.0, 0.2)
     m = SceneMemory(("a", "b", "T"), hold_frames=2)
     pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)})
     assert [d.id for d in pub] == ["a", "b", "T"] and not held and not lost

@@ -5,6 +5,7 @@ fatal."""
 import os
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -132,6 +133,68 @@ def test_node_publishes_perceived_scene(tmp_path):
             assert any(lv == DiagnosticStatus.ERROR and "not supported" in m for lv, m in levels), levels
             assert levels[-1][0] in (DiagnosticStatus.OK, DiagnosticStatus.WARN), levels[-1]
             g.check_alive()
+            ex.shutdown()
+            node.destroy_node()
+        finally:
+            rclpy.try_shutdown()
+        assert g.stop("perception") == 0
+
+
+def test_node_publishes_an_unlisted_object(tmp_path):
+    """The user's case over DDS: the camera sees a bottle the scenario does not list (the simulator's `unlisted`);
+    the node, given the arm's joint state, publishes it as u1 (listed false, its estimated weight said in
+    weight_note) beside every listed bottle, through the one message conversion."""
+    import rclpy
+    from perception_scenes import render_scene, with_objects
+    from qtree_relocation_msgs.msg import ObjectArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image, JointState
+
+    from relocation_common.robot_description import JOINT_NAMES, Q_HOME
+    from relocation_common.scenario import PALETTE
+
+    scenario = load_scenario(default_scenario())
+    # the issue's case: an unlisted bottle at (0.86, 0.07) of paper_experiment_10, between o6, o7, o9 and T
+    other = replace(scenario.objects[0], id="x1", label="pink", rgb=PALETTE["pink"], x=0.86, y=0.07, listed=False,
+                    is_target=False)
+    frame, vis = render_scene(with_objects(scenario, scenario.objects, [other]))
+    assert vis["x1"] >= 300
+    with Graph(tmp_path) as g:
+        g.start("perception", {"process_rate": 10.0})
+        os.environ.update({k: g.env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+        rclpy.init()
+        try:
+            node = rclpy.create_node("fake_camera")
+            pubs = [node.create_publisher(t, n, qos_profile_sensor_data) for t, n in (
+                (Image, "/camera/color/image_raw"), (Image, "/camera/depth/image_rect_raw"),
+                (CameraInfo, "/camera/color/camera_info"))]
+            joints = node.create_publisher(JointState, "/joint_states", 10)
+            scenes = []
+            node.create_subscription(ObjectArray, "/scene/objects", scenes.append,
+                                     QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            ex = SingleThreadedExecutor()
+            ex.add_node(node)
+            threading.Thread(target=ex.spin, daemon=True).start()
+            info = CameraInfo(width=frame.width, height=frame.height, distortion_model="plumb_bob",
+                              k=frame.K.reshape(-1).tolist(), d=[0.0] * 5)
+            deadline = time.monotonic() + 30
+            while not scenes:
+                g.check_alive()
+                assert time.monotonic() < deadline, "no ObjectArray on /scene/objects:\n" + g.log("perception")
+                stamp = node.get_clock().now().to_msg()
+                info.header.stamp = stamp
+                joints.publish(JointState(name=list(JOINT_NAMES), position=[float(v) for v in Q_HOME]))
+                pubs[2].publish(info)
+                pubs[0].publish(_image(stamp, *encode_color(frame.rgb)))
+                pubs[1].publish(_image(stamp, *encode_depth(frame.depth, "16UC1")))
+                time.sleep(0.25)
+            objects = {o.id: o for o in msg_to_objects(scenes[-1], scenario.ids)}
+            u = objects.get("u1")
+            assert u is not None and not u.listed, objects
+            assert np.hypot(u.x - other.x, u.y - other.y) < 0.01 and "L x 600 kg/m3" in u.weight_note
+            assert "unlisted objects: u1" in g.log("perception")
+            assert set(scenario.ids) <= set(objects) | {i for i in scenario.ids if vis[i] < 300}
             ex.shutdown()
             node.destroy_node()
         finally:

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from perception_scenes import perceived
 
 from jaco2_sim_driver import sensor_model as sm
 from jaco2_sim_driver.camera import render_frame
 from perception_aruco.aruco import MarkerOccludedError, PerceptionError
-from perception_aruco.localize import Detection
 from perception_aruco.pipeline import FrameFusion, Perception, identity_conflicts
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
@@ -124,10 +124,10 @@ def test_identity_conflict_with_the_previous_scene(frames):
     o4, o7 = s.object("o4"), s.object("o7")
 
     def det(i, x, y):
-        return Detection(i, x, y, s.shelf.top_z, 100, 0.001, (0, 0))
+        return perceived(s.object(i), x, y, s.shelf.top_z)
     previous = {"o4": det("o4", o4.x, o4.y), "o7": det("o7", o7.x, o7.y)}
-    assert not identity_conflicts({"o4": det("o4", o4.x, o4.y), "o7": det("o7", o7.x, o7.y)}, previous, s)
-    doubt = identity_conflicts({"o4": det("o4", o7.x, o7.y)}, previous, s)   # o4 where o7 stood, o7 gone
+    assert not identity_conflicts({"o4": det("o4", o4.x, o4.y), "o7": det("o7", o7.x, o7.y)}, previous)
+    doubt = identity_conflicts({"o4": det("o4", o7.x, o7.y)}, previous)   # o4 where o7 stood, o7 gone
     assert "o7" in doubt["o4"]
 
 

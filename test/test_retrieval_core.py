@@ -1,7 +1,7 @@
 """qtree_task_planner.executive.retrieval: exact optimum then training through an oracle that goes away; execution
 order."""
 from qtree_task_planner.executive.outage import PlannerUnavailable
-from qtree_task_planner.executive.retrieval import execute_sequence, solve_then_train
+from qtree_task_planner.executive.retrieval import execute_sequence, solve_then_train, training_outcome
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.problem import RelocationProblem
@@ -43,6 +43,19 @@ def test_an_outage_during_the_exact_solve_keeps_the_answers_and_gives_the_same_r
                                     checkpoint_every=1000)
     assert kept and kept[0].reason.startswith("interrupted") and len(kept[0].feasibility) == 2
     assert optimum.sequence == ref_opt.sequence and r.sequence == ref.sequence and r.found
+
+
+def test_no_training_when_the_exact_solve_proves_there_is_no_sequence():
+    """T's lane needs b gone and b's needs T gone (a blocking cycle): the A* proves it in 0 planner calls, and the
+    goal ends with its reason instead of training up to E_max (before: every episode asked in vain)."""
+    problem = RelocationProblem(("a", "b"), {"a": 0.2, "b": 0.5}, "T")
+    oracle = CachedOracle(BlockingOracle.from_relation({"T": {"b"}, "b": {"T"}}, "T", ("a", "b", "T")))
+    optimum, r = solve_then_train(problem, oracle, PARAMS, resume=None, until_planner=retry, keep=lambda ck: None,
+                                  on_episode=lambda s: True, checkpoint_every=1000)
+    assert not optimum.found and "blocking cycle" in optimum.reason
+    assert r.episodes == 0 and not r.found and not r.cancelled
+    ok, message = training_outcome(r, optimum, execute=True)
+    assert not ok and message.startswith("the target cannot be retrieved: no sequence: blocking cycle"), message
 
 
 def test_execution_stops_at_the_first_failure_and_on_cancel():

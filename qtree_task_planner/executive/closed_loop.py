@@ -2,8 +2,10 @@
 
 The paper executes the learned sequence open-loop (Sect. 5). Here, after each relocation a scene perceived after
 it ended is checked against the plan (`verify_relocation`: the moved bottle on the bottom shelf at its slot, every
-other bottle where it was, the target present). When the world differs, or a relocation failed (the motion
-planner's recovery has brought the arm home and the bottle back), the remaining retrieval problem is built from
+other bottle where it was, the target present). When the world differs, when a new object is seen (one present now
+and absent before: a hidden object revealed behind the relocated one, or an object the scenario does not list seen
+for the first time; `new_objects`), or a relocation failed (the motion planner's recovery has brought the arm home
+and the bottle back), the remaining retrieval problem is built from
 the perceived scene (`remaining_problem`: relocated bottles out, moved ones at their new poses, newly seen ones in)
 and solved again (an injected re-planner: `qtree_task_planner.executive.replan` over the exact blocker A*, Eq. 8),
 with the
@@ -29,8 +31,9 @@ from relocation_common.shelf_object import UPRIGHT_TILT, support_height
 # ------------------------------------------------------------------------------------------------ the scene
 @dataclass(frozen=True)
 class SeenObject:
-    """A bottle as perceived: centre of its base (base frame, m), tilt of its axis from the vertical (rad; 0 for a
-    perception that only sees upright bottles), and what ObjectState carries besides (weight phi, target, size)."""
+    """An object as perceived: centre of its base (base frame, m), tilt of its axis from the vertical (rad; 0 for a
+    perception that only sees upright bottles), and what ObjectState carries besides (weight phi, target, size,
+    shape; `listed` false: the scenario does not list it, `weight_note` says how its weight was estimated)."""
 
     id: str
     x: float
@@ -42,6 +45,9 @@ class SeenObject:
     radius: float = 0.033
     height: float = 0.16
     label: str = ""
+    shape: str = "cylinder"
+    listed: bool = True
+    weight_note: str = ""
 
 
 Scene = Mapping[str, SeenObject]
@@ -56,14 +62,15 @@ def seen_object(o: ShelfObject) -> SeenObject:
     """An object as perceived (ros_conversions.msg_to_objects) as the closed loop's SeenObject: its base centre
     (a lying cylinder's lower end face), the tilt of its axis."""
     x, y, z = (float(v) for v in o.base())
-    return SeenObject(o.id, x, y, z, o.weight, o.is_target, o.axis_tilt, o.radius, o.height, o.label)
+    return SeenObject(o.id, x, y, z, o.weight, o.is_target, o.axis_tilt, o.radius, o.height, o.label, o.shape,
+                      o.listed, o.weight_note)
 
 
 def scene_from_scenario(scenario: Scenario) -> dict[str, SeenObject]:
     """The scenario's bottles where it puts them: upright on the top shelf (the world the first plan assumes)."""
     z = scenario.shelf.top_z
-    return scene_of(SeenObject(b.id, b.x, b.y, z, b.weight, b.is_target, 0.0, b.radius, b.height, b.label)
-                    for b in scenario.objects)
+    return scene_of(SeenObject(b.id, b.x, b.y, z, b.weight, b.is_target, 0.0, b.radius, b.height, b.label, b.shape,
+                               b.listed, b.weight_note) for b in scenario.objects)
 
 
 @dataclass(frozen=True)
@@ -104,8 +111,8 @@ def _at(o: SeenObject) -> str:
 # ------------------------------------------------------------------------------------------------ verification
 @dataclass(frozen=True)
 class Difference:
-    """One way the perceived world differs from the plan: kind (not_at_slot, not_seen, moved, tipped, new,
-    target_missing), the object, and one line for the user."""
+    """One way the perceived world differs from the plan: kind (not_at_slot, not_seen, moved, tipped,
+    target_missing; or new: a new object, `new_objects`), the object, and one line for the user."""
 
     kind: str
     object_id: str
@@ -114,11 +121,13 @@ class Difference:
 
 @dataclass(frozen=True)
 class Verification:
-    """The check after one relocation: what differs from the plan (nothing: ok)."""
+    """The check after one relocation: what differs from the plan (nothing: ok), and the new objects seen (no
+    fault of the relocation: the rest is re-planned with them)."""
 
     object_id: str
     differences: tuple[Difference, ...] = ()
     unseen_place: bool = False  # the bottle left the top shelf, its place was not seen (bottom shelf out of view)
+    new: tuple[Difference, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -126,19 +135,20 @@ class Verification:
         return not self.differences
 
     def summary(self) -> str:
-        """One line: 'as planned' or the first difference (and how many more)."""
+        """One line: 'as planned' or the first difference (and how many more); then the new objects."""
+        new = "".join(f"; {d.line}" for d in self.new)
         if self.ok and self.unseen_place:
             return (f"{self.object_id} left the top shelf as planned; its place on the bottom shelf was not seen "
-                    "(unverified)")
+                    "(unverified)") + new
         if self.ok:
-            return f"{self.object_id} relocated as planned"
+            return f"{self.object_id} relocated as planned" + new
         more = len(self.differences) - 1
-        return self.differences[0].line + (f" (and {more} more difference{'s' * (more > 1)})" if more else "")
+        return self.differences[0].line + (f" (and {more} more difference{'s' * (more > 1)})" if more else "") + new
 
     def to_dict(self) -> dict[str, Any]:
         """For the feedback and the result (and report.json)."""
         return {"object": self.object_id, "ok": self.ok, "differences": [d.line for d in self.differences],
-                "place_seen": not self.unseen_place}
+                "place_seen": not self.unseen_place, "new": [d.line for d in self.new]}
 
 
 def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float], before_scene: Scene,
@@ -146,9 +156,10 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
                       ) -> Verification:
     """Check a scene perceived after relocating `planned_object` against the plan: that object upright on the bottom
     shelf at `slot_pose` (x, y, z of the board's surface) within tolerances.slot; every other object of
-    `before_scene` where it was (tolerances.still in xy, board in z, still standing); the target present; nothing
-    new. Returns every difference found, one line each. `bottom_seen` False (a camera that does not see the bottom
-    shelf): a bottle not seen there is no difference (the relocated one must only have left the top shelf)."""
+    `before_scene` where it was (tolerances.still in xy, board in z, still standing); the target present. Returns
+    every difference found, one line each, and the new objects (`new_objects`: not a difference, a re-plan).
+    `bottom_seen` False (a camera that does not see the bottom shelf): a bottle not seen there is no difference
+    (the relocated one must only have left the top shelf)."""
     tol, diffs = tolerances, []
     moved = after_scene.get(planned_object)
     sx, sy, sz = slot_pose
@@ -181,9 +192,19 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
                                     f"{_at(now)}"))
         elif d > tol.still or abs(_support(now) - _support(was)) > tol.board:
             diffs.append(Difference("moved", oid, f"{oid} moved by {100 * d:.1f} cm: {_at(was)} -> {_at(now)}"))
+    return Verification(planned_object, tuple(diffs), unseen_place=moved is None and not bottom_seen,
+                        new=new_objects(before_scene, after_scene, planned_object))
+
+
+def new_objects(before_scene: Scene, after_scene: Scene, planned_object: str) -> tuple[Difference, ...]:
+    """The objects of `after_scene` absent from `before_scene` (a hidden one revealed, an unlisted one seen for
+    the first time), one line each: 'new object u3 (box, 0.31 kg est.) at (0.84, 0.12)'."""
+    out = []
     for oid in sorted(set(after_scene) - set(before_scene) - {planned_object}):
-        diffs.append(Difference("new", oid, f"{oid} newly seen at {_at(after_scene[oid])}"))
-    return Verification(planned_object, tuple(diffs), unseen_place=moved is None and not bottom_seen)
+        o = after_scene[oid]
+        what = f"{o.weight:.2f} kg est." if not o.listed else f"listed, phi {o.weight:.2f}"
+        out.append(Difference("new", oid, f"new object {oid} ({o.shape}, {what}) at ({o.x:.2f}, {o.y:.2f})"))
+    return tuple(out)
 
 
 # ------------------------------------------------------------------------------------------------ remaining problem
@@ -199,7 +220,7 @@ class RemainingProblem:
     relocated: tuple[str, ...]  # verified relocations, in order
     gone: frozenset[str]
     moved: Mapping[str, tuple[float, float]]  # on the top shelf, away from the scenario's pose
-    new: tuple[str, ...]  # seen, not in the scenario
+    new: tuple[str, ...]  # seen, not in the scenario (as the executor was given it)
     unseen: tuple[str, ...]  # in the scenario, not seen
     tipped: tuple[str, ...]  # on the top shelf, lying
     free_slots: tuple[int, ...]  # indices of the scenario's slots with no bottle on or near them
@@ -257,8 +278,7 @@ def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Ite
         return replace(base, reason=why, target_retrieved=where == "bottom")
     bottles = tuple(_bottle(o, scenario) for _, o in sorted(top.items()))
     try:
-        problem = RelocationProblem(tuple(b.id for b in bottles if not b.is_target),
-                                    {b.id: b.weight for b in bottles if not b.is_target}, t.id)
+        problem = RelocationProblem.from_bottles(bottles)
     except ProblemError as e:
         return replace(base, bottles=bottles, reason=f"the perceived scene is not a problem: {e}")
     return replace(base, problem=problem, bottles=bottles)
@@ -270,7 +290,8 @@ def _bottle(o: SeenObject, scenario: Scenario) -> ShelfObject:
     label = scenario.object(o.id).label if known else (o.label or "gray")
     rgb = scenario.object(o.id).rgb if known else TARGET_RGB if o.is_target else PALETTE.get(label, (0.5, 0.5, 0.5))
     weight = 1.0 if o.is_target else min(1.0, max(1e-3, o.weight))
-    return ShelfObject(o.id, label, rgb, weight, o.x, o.y, o.radius, o.height, o.is_target, support_z=_support(o))
+    return ShelfObject(o.id, label, rgb, weight, o.x, o.y, o.radius, o.height, o.is_target, listed=o.listed,
+                       weight_note=o.weight_note, support_z=_support(o))
 
 
 def check_capacity(sequence: Iterable[str], free: int) -> str | None:
@@ -356,7 +377,8 @@ class Step:
 class ExecutionResult:
     """The outcome: success only when the target was seen on the bottom shelf (or, with a camera that does not see
     it, relocated and gone from the top shelf); one-line message; the steps
-    (relocations tried), the re-plans, and the objects relocated (verified, in order)."""
+    (relocations tried), the re-plans, the objects relocated (verified, in order) and the new objects seen on the
+    way, one line each ('new object u3 (box, 0.31 kg est.) at (0.84, 0.12) after relocating o2: re-planned')."""
 
     success: bool = False
     message: str = ""
@@ -364,12 +386,13 @@ class ExecutionResult:
     steps: list[Step] = field(default_factory=list)
     replans: list[ReplanRecord] = field(default_factory=list)
     unverified: list[str] = field(default_factory=list)  # relocated, but no scene showed where they stand
+    new_objects: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        """For the result and report.json (`replans`, `unverified`)."""
+        """For the result and report.json (`replans`, `unverified`, `new_objects`)."""
         return {"success": self.success, "message": self.message, "relocated": list(self.relocated),
                 "steps": [s.to_dict() for s in self.steps], "replans": [r.to_dict() for r in self.replans],
-                "unverified": list(self.unverified)}
+                "unverified": list(self.unverified), "new_objects": list(self.new_objects)}
 
 
 class GiveUp(Exception):
@@ -447,7 +470,7 @@ class ClosedLoopExecutor:
                 x, y = self.scenario.slots[slot]
                 check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
                                           self.bottom_seen)
-            stayed = _stayed(obj, scene, after, self.tol)
+            stayed, new = _stayed(obj, scene, after, self.tol), new_objects(scene, after, obj)
             if check is not None and check.unseen_place:
                 out.unverified.append(obj)
             step = Step(len(out.steps), obj, removed, slot, ok, message, check)
@@ -459,16 +482,18 @@ class ClosedLoopExecutor:
                 out.relocated.append(obj)
             scene = after
             rp = self._problem(scene, out)
-            if check is not None and check.ok:
+            if check is not None and check.ok and not new:
                 seq = seq[1:]
                 continue
+            out.new_objects += [f"{d.line} after relocating {obj}: re-planned" for d in new]
             if not ok:
                 if stayed:  # the option failed; else the bottle was dropped or knocked: the re-plan asks about its
                     self._fail(obj, gone, message)  # new pose (a bottle on the bottom shelf is relocated, above)
                 seq = self._replan(f"relocating {obj} failed: {message}", rp, out)
             else:
-                assert check is not None
-                seq = self._replan(f"the world differs after relocating {obj}: {check.summary()}", rp, out)
+                assert check is not None  # a new object is no fault of the relocation: the rest is re-planned
+                seq = self._replan(f"the world differs after relocating {obj}: {check.summary()}" if not check.ok
+                                   else "; ".join(d.line for d in new), rp, out)
 
     def _perceive(self, when: str) -> dict[str, SeenObject]:
         try:

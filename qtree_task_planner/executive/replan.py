@@ -26,7 +26,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 from qtree_task_planner.executive.closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
-from qtree_task_planner.oracles import Lanes
+from qtree_task_planner.oracles import Lanes, no_grasp
 from qtree_task_planner.search import astar
 from relocation_common.feasibility import (
     FeasibilityAnswer,
@@ -280,7 +280,22 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
                     f"(the best without those limits, {' '.join(free.sequence)}, {'; '.join(why)})")
     because = lying_reason(rp, cache) or (f"; {r.reason.removeprefix('no sequence: ')}" if r.reason else "")
     return (f"{t} cannot be reached: no feasible relocation sequence over the {n} obstacle{'s' * (n != 1)} "
-            f"on the top shelf ({cache.calls - calls0} planner calls){because}")
+            f"on the top shelf ({cache.calls - calls0} planner calls){because}{grasp_reason(rp, cache)}")
+
+
+def grasp_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
+    """What a failed re-plan's line adds about the obstacles the hand cannot grasp (never relocated: oracles.no_grasp
+    over the answers about each object as it is now and the objects without a lane; the lying ones are
+    lying_reason's), or ""."""
+    if rp.problem is None:
+        return ""
+    on_shelf = frozenset(rp.problem.ids)
+    mine = [o for o in rp.problem.obstacles if o not in rp.tipped]
+    known = [(k[0], a) for k, a in cache.table.items() if cache.key(k[0], ())[1] <= k[1]]  # its pose as now
+    lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset())
+    why = no_grasp(mine, lanes, known, lambda o: cache.feasibility(o, rp.gone, on_shelf))
+    return f"; never relocated, the hand cannot grasp {'it' if len(why) == 1 else 'them'}: " + "; ".join(
+        f"{o} ({m})" for o, m in why.items()) if why else ""
 
 
 def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:

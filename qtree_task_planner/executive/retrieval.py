@@ -27,12 +27,12 @@ from qtree_task_planner.executive.closed_loop import (
     free_slots,
     remaining_problem,
 )
-from qtree_task_planner.executive.outage import PlannerUnavailable, UntilPlanner
+from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.replan import GeometryCache, relearn, replan
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
-from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.oracles import CachedOracle, no_grasp
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.search import astar
 from qtree_task_planner.search.exact import ExactResult
@@ -75,7 +75,9 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
     """(exact optimum, training result). The answers the exact solve gathered before an outage are kept in a
     checkpoint (`keep`), so nothing asked is asked again; training checkpoints every `checkpoint_every` episodes,
     calls `on_episode(stats)` every `episode_every` episodes (training.train's callback) and stops when it
-    returns False (cancel, shutdown)."""
+    returns False (cancel, shutdown). No training when the exact solve proved that no sequence exists (`proven_none`:
+    every episode would ask in vain, up to E_max; a blocking cycle through an object the hand cannot grasp ran 30
+    minutes of episodes before)."""
     state: dict[str, Checkpoint | None] = {"ck": resume}
 
     def solve() -> astar.AStarResult:
@@ -90,6 +92,8 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
 
     optimum = until_planner(solve)
     on_solved(optimum)
+    if not optimum.found:
+        return optimum, proven_none(params, oracle.calls)
 
     def on_checkpoint(ck: Checkpoint) -> None:
         state["ck"] = ck
@@ -101,6 +105,12 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
                      on_checkpoint=on_checkpoint)
 
     return optimum, until_planner(run)
+
+
+def proven_none(params: TrainingParams, planner_calls: int) -> TrainingResult:
+    """The training result of a problem the exact solve proved has no sequence (its A* explored every set the
+    planner's answers and certain lane claims leave open: no episode can find one): no episode run."""
+    return TrainingResult(None, None, 0, False, 0, 0, planner_calls, None, None, False, 0, 0, [], params)
 
 
 def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: bool) -> tuple[bool, str] | None:
@@ -119,6 +129,23 @@ def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: 
     return False, (f"training did not find a sequence to the target in {trained.episodes} episodes (the exact "
                    f"optimum {' '.join(optimum.sequence or ())}, weight {optimum.total_weight:.2f}, exists: "
                    "execute_optimum)")
+
+
+def scene_notes(problem: RelocationProblem, oracle: CachedOracle) -> str:
+    """One line for the log and the TrainPlanner result (after the exact solve): the scene's objects the scenario does
+    not list with their estimated weights (problem.unlisted_line), and the obstacles the hand cannot grasp with the
+    motion planner's reason (oracles.no_grasp over the answers at the start and the objects without a lane: such an
+    answer costs no planning); "" when there are neither. A planner gone meanwhile leaves its part out (a note)."""
+    parts = [problem.unlisted_line()]
+    try:
+        why = no_grasp(problem.obstacles, oracle.lane_blockers(frozenset()),
+                       [(o, a) for (o, r), a in oracle.table.items() if not r],
+                       lambda o: oracle.feasibility(o, frozenset()))
+    except (PlannerUnavailable, Cancelled, ValueError):
+        why = {}
+    if why:
+        parts.append("never relocated, the hand cannot grasp them: " + "; ".join(f"{o} ({m})" for o, m in why.items()))
+    return "; ".join(p for p in parts if p)
 
 
 def planner_foreign_ids(oracle: LaneOracle, ids: Iterable[str]) -> str:

@@ -8,8 +8,10 @@ clamped to Table 7:
 
 s = 1 while the tracking error e (largest joint) is below `lag_tol` and falls linearly to 0 at 2 lag_tol: a late
 command stream or a slow simulator makes the reference wait for the arm, which catches up on the planned path
-instead of cutting corners (the STPIK check slows its reference the same way). Without the scaling the
-feed-forward would hold the arm at e = q̇_ref / k_track off the path.
+instead of cutting corners (the STPIK check slows its reference the same way). One update advances tau by at most
+`max_step`: when the stream itself stalls (a loaded machine: the update comes 0.3 s late), the driver has stopped
+the arm after its watchdog, and a reference that jumped by the whole gap would be 0.3 rad ahead of it at once.
+Without the scaling the feed-forward would hold the arm at e = q̇_ref / k_track off the path.
 After the end the follower corrects until every joint is within
 `settle_tol` of the last point. Failures: an error above `max_error`, tau stuck for `stall_timeout` (the arm is
 blocked), or no settling within `settle_timeout`.
@@ -41,6 +43,7 @@ class FollowerParams:
     settle_timeout: float  # s after the reference ends
     stall_timeout: float  # s with the reference waiting before the motion is aborted
     max_error: float  # rad, largest tracking error before the motion is aborted
+    max_step: float  # s: the most the reference advances in one update (a gap in the stream: the arm stood still)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -133,7 +136,9 @@ class TrajectoryFollower:
             return self.FAILED
         if self.tau < self.duration:
             self.rate = min(1.0, max(0.0, (2.0 * self.p.lag_tol - err) / self.p.lag_tol))
-            self.tau = min(self.tau + self.rate * dt, self.duration)
+            # after a gap longer than max_step (the command stream was late: the driver stopped the arm after its
+            # watchdog), the reference goes on from where the arm could have followed it, not dt further
+            self.tau = min(self.tau + self.rate * min(dt, self.p.max_step), self.duration)
             self.waited = 0.0 if self.rate >= 0.1 else self.waited + dt
             if self.waited > self.p.stall_timeout:
                 self.reason = (f"stalled at tau={self.tau:.2f} s: error {err:.3f} rad > 2 lag_tol for "

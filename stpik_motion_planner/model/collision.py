@@ -1,15 +1,17 @@
-"""Collision scene with python-fcl: arm capsules vs shelf boards vs bottles (the clearance tasks of Eq. 10).
+"""Collision scene with python-fcl: arm capsules vs shelf boards vs objects (the clearance tasks of Eq. 10).
 
 Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel), the floor, the
-pedestal under the robot and the bottles of the scenario as cylinders; bottles already relocated may stand on the bottom
-shelf (`placed`). The set of removed bottles is a parameter of every query (`CollisionScene.obstacles(removed)`).
-A numpy AABB broad phase keeps only the capsule/obstacle pairs closer than an activation distance; fcl
-computes their exact distances and witness points (in the base frame). fcl returns -1 on penetration.
+pedestal under the robot and every object of the scene, listed in the scenario or not, as the primitive it is
+(`object_obstacle`: a cylinder standing or lying, an oriented box; a conservative object is its bounding box);
+bottles already relocated may stand on the bottom shelf (`placed`). The set of removed objects is a parameter of
+every query (`CollisionScene.obstacles(removed)`). A numpy AABB broad phase keeps only the capsule/obstacle pairs
+closer than an activation distance; fcl computes their exact distances and witness points (in the base frame). fcl
+returns -1 on penetration.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Iterable, Iterator, Mapping, Sequence
 
 import fcl
@@ -18,7 +20,7 @@ from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
 from relocation_common.geometry import wxyz_matrix
-from relocation_common.scenario import Scenario
+from relocation_common.scenario import Scenario, ShelfObject
 from stpik_motion_planner.model.kinematics import Kinematics
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
@@ -27,10 +29,10 @@ Skip = Mapping[str, frozenset[str]]  # a shape's name -> the bottles and boards 
 
 @dataclass
 class Obstacle:
-    """One collision object of the scene: a shelf board or a bottle, with its axis-aligned bounding box."""
+    """One collision object of the scene: a shelf board or an object, with its axis-aligned bounding box."""
 
     name: str
-    object_id: str | None  # bottle id, None for a board
+    object_id: str | None  # object id, None for a board
     obj: fcl.CollisionObject
     lo: np.ndarray
     hi: np.ndarray
@@ -87,6 +89,27 @@ def lying_cylinder(name: str, object_id: str | None, pose: Lying, radius: float,
     return Obstacle(name, object_id, obj, np.minimum(base, top) - radius, np.maximum(base, top) + radius)
 
 
+def object_obstacle(o: ShelfObject, top_z: float) -> Obstacle:
+    """Any object of the scene as the primitive it is, named "bottle:<id>" (a query's `skip` names it by its id): an
+    upright cylinder standing on the top shelf (`top_z`) as `cylinder` has always modelled it; a lying or leaning
+    cylinder along its axis, a box turned by its yaw, both at the primitive's centre (shelf_object.ShelfObject.centre,
+    on its own support or the top shelf). A conservative object is a box (its bounding box) like any other."""
+    name = f"bottle:{o.id}"
+    if o.shape == "cylinder" and o.axis_tilt == 0.0:
+        return cylinder(name, o.id, o.x, o.y, top_z, o.radius, o.height)
+    placed = o if o.support_z is not None else replace(o, support_z=top_z)
+    rot, centre = placed.rotation(), placed.centre()
+    if o.shape == "box":
+        shape: fcl.CollisionGeometry = fcl.Box(*o.size)
+        half = np.abs(rot) @ (np.asarray(o.size, float) / 2)
+    else:
+        shape = fcl.Cylinder(o.radius, o.height)
+        axis = np.abs(rot[:, 2])  # the cylinder's extent along each world axis: its axis's, plus the disc's
+        half = axis * o.height / 2 + o.radius * np.sqrt(np.maximum(0.0, 1.0 - axis ** 2))
+    obj = fcl.CollisionObject(shape, fcl.Transform(rot, centre))
+    return Obstacle(name, o.id, obj, centre - half, centre + half)
+
+
 # The rest of the world of the simulator's scene (jaco2_sim_driver/scene.py, which this layer cannot import; the
 # independent motion checker in the tests replays plans in that scene and finds any difference): the floor
 # FLOOR_DROP below the bottom board, the shelf's side and back panels down to it, the pedestal under the robot base.
@@ -114,9 +137,9 @@ def shelf_boards(scenario: Scenario) -> list[Obstacle]:
 
 
 class CollisionScene:
-    """Boards and bottles of a scenario. `placed`: (id, (x, y)) of bottles standing on the bottom shelf; `lying`:
-    bottles of the top shelf that do not stand, as the cylinders they are; `gone`: bottles that left the shelf
-    (on the floor), no obstacle."""
+    """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`:
+    (id, (x, y)) of bottles standing on the bottom shelf; `lying`: bottles of the top shelf that do not stand as
+    perception saw them (scene_update.lying_pose); `gone`: objects that left the shelf (on the floor), no obstacle."""
 
     def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = (),
                  lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> None:
@@ -125,7 +148,7 @@ class CollisionScene:
         z0 = scenario.shelf.top_z
         lying, gone = lying or {}, frozenset(gone)
         self.bottles = {b.id: lying_cylinder(f"bottle:{b.id}", b.id, lying[b.id], b.radius, b.height)
-                        if b.id in lying else cylinder(f"bottle:{b.id}", b.id, b.x, b.y, z0, b.radius, b.height)
+                        if b.id in lying else object_obstacle(b, z0)
                         for b in scenario.objects if b.id not in gone}
         zb = scenario.shelf.bottom_z
         self.placed = []
@@ -135,7 +158,7 @@ class CollisionScene:
         self._cache: dict[tuple[frozenset, frozenset], ObstacleSet] = {}
 
     def obstacles(self, removed: Iterable[str] = frozenset(), exclude: Iterable[str] = frozenset()) -> ObstacleSet:
-        """Boards, placed bottles and the top-shelf bottles that are neither removed nor excluded."""
+        """Boards, placed bottles and the top-shelf objects that are neither removed nor excluded."""
         key = (frozenset(removed), frozenset(exclude))
         got = self._cache.get(key)
         if got is None:

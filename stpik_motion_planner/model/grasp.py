@@ -7,6 +7,11 @@ mid-height, `grasp_standoff(radius)` short of its axis along the approach, so th
 the bottle (the palm's front is PALM_REACH behind the grasp centre; the open fingers still surround the bottle).
 A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction.
 The robot's home pose (Q_HOME) is such a pose with yaw 0.
+
+What the side grasp takes (`grasp_refusal`): a standing cylinder no wider than the open hand (`hand_opening`: the gap
+between the description's open finger capsules where the cylinder's axis comes to rest). A box, a lying cylinder, a
+conservative object (a cluster no primitive fits) or a wider cylinder is answered "no grasp: " and the reason: it
+stays an obstacle, never relocated.
 """
 from __future__ import annotations
 
@@ -17,7 +22,9 @@ from typing import Sequence, Union
 import numpy as np
 
 from relocation_common import robot_description as rd
-from relocation_common.scenario import Scenario
+from relocation_common.feasibility import NO_GRASP
+from relocation_common.scenario import Scenario, ShelfObject
+from relocation_common.shelf_object import UPRIGHT_TILT
 
 Pose = Union[Sequence[float], np.ndarray]  # (x, y, z, yaw) of the tool: a side grasp's pose
 _PALM = next(c for c in rd.CAPSULES if c.name == "palm")
@@ -28,6 +35,42 @@ PALM_GAP = 0.008  # m between the palm and a grasped bottle: 4 mm plus the 4 mm 
 def grasp_standoff(radius: float) -> float:
     """Distance of the grasp centre short of the bottle axis along the approach: the palm stays PALM_GAP away."""
     return max(0.0, radius + PALM_GAP - PALM_REACH)
+
+
+_FINGERS = tuple(c for c in rd.CAPSULES if c.name.startswith("finger"))
+
+
+def hand_opening(depth: float) -> float:
+    """Width (m) between the open fingers `depth` m beyond the grasp centre along the approach, from the robot
+    description's finger capsules (tool x is the closing direction: finger 1 on +x faces fingers 2 and 3 on -x):
+    the inner faces' distance along x, each finger's axis interpolated at that depth."""
+    z = rd.D67 + depth
+
+    def x_at(c: rd.Capsule) -> float:
+        t = (z - c.p0[2]) / (c.p1[2] - c.p0[2])
+        return float(c.p0[0] + t * (c.p1[0] - c.p0[0]))
+
+    inner = [x_at(c) - c.radius for c in _FINGERS if c.p0[0] > 0]
+    outer = [x_at(c) + c.radius for c in _FINGERS if c.p0[0] < 0]
+    return min(inner) - max(outer)
+
+
+def grasp_refusal(o: ShelfObject) -> str:
+    """Why the side grasp cannot take `o` ("no grasp: ..."), or "" when it may (module docstring): a conservative
+    object, a box, a cylinder lying (its axis more than UPRIGHT_TILT from the vertical), or a cylinder wider than
+    the open hand where its axis comes to rest (`grasp_standoff` beyond the grasp centre)."""
+    if o.conservative:
+        return (f"{NO_GRASP}{o.id} is a conservative obstacle (an unfitted cluster's bounding box, "
+                f"{o.describe()}): an obstacle only")
+    if o.shape == "box":
+        return f"{NO_GRASP}{o.id} is a box ({o.describe()}): the side grasp takes standing cylinders only"
+    if o.axis_tilt > UPRIGHT_TILT:
+        return f"{NO_GRASP}{o.id} is lying on its side: the side grasp takes standing cylinders only"
+    opening = hand_opening(grasp_standoff(o.radius))
+    if 2 * o.radius > opening:
+        return (f"{NO_GRASP}{o.id} is {2 * o.radius * 1000:.0f} mm wide, wider than the open hand "
+                f"({opening * 1000:.0f} mm between the fingers)")
+    return ""
 
 
 class WorkspaceError(ValueError):

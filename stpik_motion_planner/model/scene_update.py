@@ -7,6 +7,11 @@ rests: standing (its axis within UPRIGHT_TILT of the vertical), or lying (tipped
 it is, never graspable). A bottle seen below the bottom board or outside the shelf below the top board left the
 shelf (dropped to the floor): gone from the scene, no obstacle. Bottles on the bottom shelf (relocated), lifted or
 not seen keep their last pose (hidden behind others, or in the hand).
+
+Objects the scenario does not list (`listed` false: perception found them, or the simulator's ground truth carries
+them) enter the scene like any other, as the primitive they are. One that is no longer in a scene which holds
+another object where it stood (its footprint overlapped) is dropped: perception named it anew, and kept, it would
+be a phantom obstacle no relocation removes. Otherwise it keeps its last pose, as a listed bottle does.
 """
 from __future__ import annotations
 
@@ -23,8 +28,8 @@ ON_SHELF = 0.01  # m: a bottle whose support is farther from the top shelf's sur
 
 
 class Merged(NamedTuple):
-    """The planner's scene after a perceived one: every bottle (the scenario's objects), the lying ones, the ones
-    gone from the shelf, the ids that changed, the ids seen resting on the top shelf."""
+    """The planner's scene after a perceived one: every object (the scenario's and the unlisted ones seen), the lying
+    ones, the ones gone from the shelf, the ids that changed, the ids seen resting on the top shelf."""
 
     bottles: dict[str, ShelfObject]
     lying: dict[str, Lying]
@@ -73,6 +78,11 @@ def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived:
     (module docstring)."""
     bottles, lying, gone = dict(current), dict(lying or {}), set(gone)
     changed, seen = [], set()
+    perceived = list(perceived)
+    for i in _superseded(shelf, current, perceived, gone):
+        changed.append(i)
+        del bottles[i]
+        lying.pop(i, None)
     for b in perceived:
         i = b.id
         if i == held:
@@ -93,6 +103,21 @@ def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived:
             gone.add(i)
             lying.pop(i, None)
     return Merged(bottles, lying, frozenset(gone), sorted(changed), seen)
+
+
+def _superseded(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: list[ShelfObject],
+                gone: Iterable[str]) -> list[str]:
+    """The unlisted objects of `current` (still on the shelf) that `perceived` does not hold while it holds another
+    object on the same board whose footprint overlaps theirs (the module docstring)."""
+    ids, gone = {b.id for b in perceived}, set(gone)
+    out = []
+    for i, o in current.items():
+        if o.listed or i in ids or i in gone:
+            continue
+        mine, board = o.footprint(), shelf.top_z if o.support_z is None else o.support_z
+        if any(abs(_support(b) - board) < ON_SHELF and b.footprint().overlaps(mine) for b in perceived):
+            out.append(i)
+    return out
 
 
 def _differs(was: ShelfObject | None, now: ShelfObject, was_lying: Lying | None, now_lying: Lying | None) -> bool:

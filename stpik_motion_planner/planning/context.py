@@ -16,10 +16,11 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from relocation_common import robot_description as rd
+from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, UnknownObjectError
 from relocation_common.shelf_object import objects_key
 from stpik_motion_planner.model.collision import ArmGeometry, CollisionScene, HandProxy, Lying, ObstacleSet
-from stpik_motion_planner.model.grasp import carry_heights, home_pose, yaw_tiers
+from stpik_motion_planner.model.grasp import carry_heights, grasp_refusal, home_pose, yaw_tiers
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import QueryStats
@@ -109,12 +110,14 @@ class PlanningContext:
         return CollisionScene(self.scenario, placed, self.lying, self.gone)
 
     def not_graspable(self, object_id: str) -> str:
-        """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): lying, or off the shelf."""
-        if object_id in self.lying:
-            return f"{object_id} is lying: no side grasp"
+        """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): off the shelf, or
+        "no grasp: " and why (lying as perceived, or grasp.grasp_refusal: a box, a conservative object, lying, too
+        wide for the open hand)."""
         if object_id in self.gone:
             return f"{object_id} left the shelf: nothing to grasp"
-        return ""
+        if object_id in self.lying:
+            return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing cylinders only"
+        return grasp_refusal(self.scenario.object(object_id))
 
     def placed_default(self, removed: frozenset[str], slot_index: int) -> Placed:
         """Bottles assumed on the bottom shelf: the removed ones, in sorted order, in the slots other than

@@ -92,18 +92,19 @@ class MotionPlanner(PlanningContext):
 
     def slot_problems(self) -> list[str]:
         """Why some of the scenario's slots cannot take a bottle (empty if all can): not on the bottom shelf with room
-        for the open hand beside it, or the place or staging pose of a bottle of any size in the scene out of the
-        arm's reach (grasp.check_pose)."""
+        for the open hand beside it, or the place or staging pose of a graspable bottle of any size in the scene out
+        of the arm's reach (grasp.check_pose)."""
         sc, p = self.scenario, self.params
         s = sc.shelf
         hand = max(abs(c.p1[0]) + c.radius for c in rd.CAPSULES if c.name.startswith("finger"))
         sizes: dict[tuple[float, float], str] = {}
         for b in sc.objects:
-            sizes.setdefault((b.radius, b.height), b.id)
+            if not self.not_graspable(b.id):  # never carried (a box, a lying bottle...): never placed
+                sizes.setdefault((b.radius, b.height), b.id)
         out = []
         for k, (x, y) in enumerate(sc.slots):
             where = f"slot {k} {(round(x, 3), round(y, 3))}"
-            r = max(rad for rad, _ in sizes)
+            r = max((rad for rad, _ in sizes), default=0.0)
             if not (s.x_front + r <= x <= s.x_back - r):
                 out.append(f"{where} is not on the bottom shelf (x {s.x_front:.2f}-{s.x_back:.2f})")
                 continue

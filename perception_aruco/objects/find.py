@@ -1,0 +1,142 @@
+"""The objects of one frame from its clusters: a primitive per cluster, listed objects by identity, the rest
+unlisted (docs/perception.md, "Objects"). A listed standing cylinder is placed by the circle of its known radius
+(localize.locate_cylinder: sub-millimetre where the free fit is a few millimetres); when that fit is doubtful, or
+two listed fits overlap, or one lies outside the shelf, the listed object is reported missing with the reason and
+its cluster published as an unlisted object: occupied space is never left out."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from relocation_common.scenario import Scenario, ShelfObject
+
+from ..localize import FitError, LocalizeParams, circle_points, locate_cylinder
+from ..segmentation import SegmentationParams
+from .clusters import Cluster
+from .fragments import merge_fragments
+from .identity import NO_MATCH, Fitted, Memory, assign, colour_name, listed_costs, unlisted_ids
+from .model import CYLINDER, PerceivedObject, weight_estimate
+from .params import ObjectParams
+from .primitives import fit_primitive
+
+BOARD_APART = 0.05  # m: supports further apart than this are different boards
+
+
+def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.ndarray, seg: SegmentationParams,
+                 params: ObjectParams, loc: LocalizeParams, noise: float) -> list[Fitted]:
+    """Each cluster's best primitive (primitives.fit_primitive) and its circle points; the pieces of one object
+    merged (fragments.merge_fragments)."""
+    def fit(c: Cluster, search: bool = True) -> Fitted:
+        top = float(np.percentile(c.points[:, 2], 99.5))
+        xy = circle_points(c.rows, c.cols, image_points, top, camera, loc)
+        prim = fit_primitive(c.points, xy, c.support, camera, params, noise, loc.inlier_tol, search)
+        return Fitted(c, prim, xy, (int(np.median(c.cols)), int(np.median(c.rows))))
+    return merge_fragments([fit(c) for c in clusters], lambda c: fit(c, False), seg, params.merge_gap)
+
+
+def listed_object(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams) -> PerceivedObject:
+    """Listed cylinder b as cluster f shows it: lying where its lying fit puts it (a tipped bottle; one end cap
+    hidden: its known length laid from the other), else standing on the circle of its known radius (FitError when
+    that fit is doubtful)."""
+    p, c = f.prim, f.cluster
+    rgb = tuple(float(v) for v in np.clip(c.colour / 255.0, 0, 1))
+    if p.shape == CYLINDER and p.lying:
+        x, y, rms, n = p.x, p.y, p.rms, c.size
+        if p.ends_seen[0] != p.ends_seen[1] and p.height < b.height:  # one end hidden: the length from the other
+            shift = (b.height - p.height) / 2 * (1.0 if p.ends_seen[0] else -1.0)
+            x, y = x + shift * math.cos(p.yaw), y + shift * math.sin(p.yaw)
+    else:
+        (x, y), rms, n = locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)
+        spread = float(np.percentile(np.hypot(c.points[:, 0] - x, c.points[:, 1] - y), 95))
+        if spread > b.radius + 2 * loc.inlier_tol:   # its circle must hold its cluster (a fit on a fragment's edge)
+            raise FitError(f"the circle of {b.id!r}'s radius fitted to its cluster leaves its points "
+                           f"{(spread - b.radius) * 1000:.0f} mm outside")
+    return PerceivedObject(b.id, b.label, (rgb[0], rgb[1], rgb[2]), b.weight, "", b.is_target, True, CYLINDER,
+                           float(x), float(y), c.support, b.radius, b.height, (2 * b.radius, 2 * b.radius, b.height),
+                           p.yaw if p.lying else 0.0, p.lying, False, float(rms), int(n), f.pixel)
+
+
+def room_above(support: float, scenario: Scenario) -> float:
+    """Height of the compartment above a board (m): to the ceiling board, or to the top board's underside."""
+    s = scenario.shelf
+    return (s.ceiling_z if support > s.top_z - s.board_thickness / 2 else s.top_z - s.board_thickness) - support
+
+
+def unlisted_object(f: Fitted, params: ObjectParams, seg: SegmentationParams, room: float) -> PerceivedObject:
+    """Cluster f as an object the scenario does not list (its id set by `unlisted_ids`), weight estimated. Its top
+    not seen (something nearer hides it): as tall as its compartment (`room`), said in its weight note."""
+    p, c = f.prim, f.cluster
+    rgb = tuple(float(v) for v in np.clip(c.colour / 255.0, 0, 1))
+    h, size = p.height, p.size
+    if not p.top_seen and not p.lying:
+        h, size = max(h, room), (size[0], size[1], max(h, room))
+    o = PerceivedObject("", colour_name(c.colour, c.clipped, seg), (rgb[0], rgb[1], rgb[2]), 0.0, "", False, False,
+                        p.shape, p.x, p.y, c.support, p.radius, h, size, p.yaw, p.lying, p.conservative,
+                        p.rms, c.size, f.pixel)
+    w, note = weight_estimate(o, params.unlisted_density)
+    if h != p.height:
+        note += f"; top not seen: as tall as its compartment ({h * 1000:.0f} mm, {p.height * 1000:.0f} mm seen)"
+    return replace(o, weight=w, weight_note=note + (f"; conservative: {p.why}" if p.conservative else ""))
+
+
+def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float) -> dict[str, str]:
+    """Listed fits outside the shelf, and pairs on one board that overlap by more than 2 tol: id -> why."""
+    sh, out = scenario.shelf, {}
+    for i, d in found.items():
+        r = d.reach
+        if not (sh.x_front + r - tol <= d.x <= sh.x_back - r + tol and sh.y_min + r - tol <= d.y <= sh.y_max - r + tol):
+            out[i] = f"fit at ({d.x:.3f}, {d.y:.3f}) is not inside the shelf: not this object"
+    ids = [i for i in found if i not in out]
+    for a, i in enumerate(ids):
+        for j in ids[a + 1:]:
+            di, dj = found[i], found[j]
+            gap = math.hypot(di.x - dj.x, di.y - dj.y) - di.reach - dj.reach
+            if abs(di.z - dj.z) <= BOARD_APART and gap < -2 * tol and not (di.lying or dj.lying):
+                why = f"overlaps {{}} by {-gap * 1000:.0f} mm: identity in doubt"
+                out[i], out[j] = why.format(j), why.format(i)
+    return out
+
+
+def _why_missing(j: int, b: ShelfObject, cost: np.ndarray, taken: dict[int, str], fitted: list[Fitted],
+                 max_cost: float) -> str:
+    """Why listed object j matched no cluster."""
+    m = int(np.argmin(cost[j])) if cost.shape[1] else -1
+    if m < 0 or cost[j, m] >= NO_MATCH:
+        return f"no cluster of its colour {b.label!r} and size in view (hidden or out of view)"
+    at = f"the cluster at ({fitted[m].prim.x:.3f}, {fitted[m].prim.y:.3f})"
+    if m in taken:
+        return f"{at}, its best match, is {taken[m]}"
+    return f"{at}, its best match, costs {cost[j, m]:.1f} (bound {max_cost:g})"
+
+
+def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Scenario, memory: Memory,
+                 seg: SegmentationParams, params: ObjectParams, loc: LocalizeParams, camera: np.ndarray,
+                 noise: float) -> tuple[dict[str, PerceivedObject], dict[str, str]]:
+    """(objects by id: listed ones first in scenario order, then unlisted; missing listed id -> reason)."""
+    fitted = fit_clusters(clusters, image_points, camera, seg, params, loc, noise)
+    cost = listed_costs(fitted, scenario.objects, memory, seg, params, loc, camera)
+    found: dict[str, PerceivedObject] = {}
+    cluster_of: dict[str, int] = {}
+    missing: dict[str, str] = {}
+    for j, m in assign(cost, params.max_cost):
+        b = scenario.objects[j]
+        try:
+            found[b.id] = listed_object(b, fitted[m], camera, loc)
+            cluster_of[b.id] = m
+        except FitError as e:
+            missing[b.id] = f"{e}; its cluster published as an unlisted object"
+    for i, why in _doubtful(found, scenario, loc.inlier_tol).items():
+        missing[i] = f"{why}; its cluster published as an unlisted object"
+        del found[i], cluster_of[i]
+    taken = {m: i for i, m in cluster_of.items()}
+    for j, b in enumerate(scenario.objects):
+        if b.id not in found and b.id not in missing:
+            missing[b.id] = _why_missing(j, b, cost, taken, fitted, params.max_cost)
+    rest = [unlisted_object(f, params, seg, room_above(f.cluster.support, scenario)) for m, f in enumerate(fitted)
+            if m not in taken]
+    ids = unlisted_ids(rest, memory, params.unlisted_gate)
+    objects = {b.id: found[b.id] for b in scenario.objects if b.id in found}
+    objects.update({i: replace(o, id=i) for i, o in zip(ids, rest)})
+    return objects, missing

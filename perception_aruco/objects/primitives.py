@@ -1,0 +1,204 @@
+"""A cluster's shape: the primitive that fits its points best (docs/perception.md, "Objects").
+
+The camera sees one side of an object, and every fit uses only what it sees:
+- standing cylinder: a circle in x-y with its radius fitted (bounded), through the side points and the cap's rim
+  (`localize.circle_points`: the far side is hidden, the visible arc suffices); height = top - support;
+- lying cylinder (axis horizontal, resting on the board): the axis direction is the principal direction of the
+  points in x-y; in the cross-section the circle's centre is one radius above the board, radius and offset fitted;
+  length = the points' extent along the axis;
+- box: cv2.minAreaRect of the points in x-y (the top face shows the whole footprint from above; the side faces seen,
+  1 to 3, lie on its edges); height = top - support.
+Each fit's quality is the rms distance of the cluster's points to the primitive's surface (the faces a camera can
+see); the smallest rms within `fit_rms` (or `fit_noise` x the depth noise) and within the size bounds wins. None
+fits: a conservative box, the visible points' bounding box in x-y reaching `hidden_extent` behind them.
+`top_seen`: the top face is in view (cap points well inside the circle or the box's top face), else the height is
+only a lower bound (something nearer hides the top); `ends_seen`: a lying cylinder's end caps in view. A lying
+cylinder is longer than wide (else it is a standing one).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..localize import FitError, fit_circle
+from .model import BOX, CYLINDER
+from .params import ObjectParams
+
+RMS_SAMPLE = 3000  # points a fit's rms is evaluated on (a fixed-step subsample of larger clusters)
+SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best direction is refitted on all)
+CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
+LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
+MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A fitted shape (the fields as PerceivedObject's); why: for a conservative box, why no primitive fitted."""
+
+    shape: str
+    lying: bool
+    x: float
+    y: float
+    radius: float
+    height: float
+    size: tuple[float, float, float]
+    yaw: float
+    rms: float
+    conservative: bool
+    why: str
+    top_seen: bool
+    ends_seen: tuple[bool, bool]  # a lying cylinder's end caps in view, at -/+ height / 2 along yaw
+
+
+def _sample(points: np.ndarray) -> np.ndarray:
+    step = max(1, len(points) // RMS_SAMPLE)
+    return points[::step]
+
+
+def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: float, camera: np.ndarray,
+                      params: ObjectParams, tol: float) -> Primitive:
+    """The standing cylinder through the circle points `xy` (side and rim); FitError when it does not fit."""
+    centre, r, _ = fit_circle(xy, camera, (params.radius_min, params.radius_max), tol)
+    p = _sample(points)
+    rho = np.linalg.norm(p[:, :2] - centre, axis=1)
+    d = np.minimum(np.abs(rho - r), np.abs(p[:, 2] - top) + np.maximum(rho - r, 0.0))
+    h = top - support
+    cap = points[points[:, 2] >= top - CAP_BAND, :2]
+    seen = int(np.sum(np.linalg.norm(cap - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
+    return Primitive(CYLINDER, False, float(centre[0]), float(centre[1]), r, h, (2 * r, 2 * r, h), 0.0,
+                     float(np.sqrt(np.mean(d ** 2))), False, "", seen, (False, False))
+
+
+def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: float,
+                   iterations: int) -> tuple[float, float, float]:
+    """Gauss-Newton on (s_c, r) of the circle through (s, z) whose centre is one radius above the board, refitted
+    twice on the points within CAP_BAND of the circle (an end cap's points lie inside it): (s_c, r, rms of the side
+    and end-cap distances)."""
+    use = np.ones(len(s), bool)
+    for _ in range(3):
+        for _ in range(iterations):
+            ds, dz = s[use] - sc, z[use] - r
+            rho = np.maximum(np.hypot(ds, dz), 1e-9)
+            ja, jb, res = -ds / rho, -dz / rho - 1.0, rho - r   # normal equations of the 2-parameter step
+            aa, ab, bb = float(ja @ ja), float(ja @ jb), float(jb @ jb)
+            det = aa * bb - ab * ab
+            if det <= 1e-18:
+                break
+            ga, gb = -float(ja @ res), -float(jb @ res)
+            step = ((bb * ga - ab * gb) / det, (aa * gb - ab * ga) / det)
+            sc, r = sc + step[0], r + step[1]
+            if math.hypot(*step) < 1e-7:
+                break
+        use = np.abs(np.hypot(s - sc, z - r) - r) < CAP_BAND
+        if use.sum() < 10:
+            break
+    lo, hi = np.percentile(t, [0.5, 99.5])
+    rho = np.hypot(s - sc, z - r)
+    d = np.minimum(np.abs(rho - r), np.abs(np.abs(t - (lo + hi) / 2) - (hi - lo) / 2) + np.maximum(rho - r, 0.0))
+    return sc, r, float(np.sqrt(np.mean(d ** 2)))
+
+
+def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params: ObjectParams,
+                   bound: float | None) -> Primitive:
+    """A cylinder lying on the board (module docstring); FitError when its radius or length is out of bounds. The
+    axis: the points' principal direction in x-y; when that fit is not within `bound` (an end cap seen more than
+    the side), the best of the directions 10 deg apart (bound None: no search)."""
+    p = _sample(points)
+    xy, z = p[:, :2], p[:, 2] - support
+    mean = xy.mean(axis=0)
+    r0 = max(float(np.percentile(z, 99)) / 2, params.radius_min)
+
+    def fit(axis: np.ndarray, iterations: int) -> tuple[float, float, float]:
+        normal = np.array([-axis[1], axis[0]])
+        s = (xy - mean) @ normal
+        sc0 = float(np.median(s)) + r0 * math.copysign(1.0, float(normal @ view[:2]) or 1.0)
+        return _cross_section((xy - mean) @ axis, s, z, sc0, r0, iterations)
+    axis = np.linalg.eigh(np.cov((xy - mean).T))[1][:, 1]
+    sc, r, rms = fit(axis, 15)
+    if bound is not None and rms > bound:
+        full = xy, z
+        xy, z = xy[::max(1, len(xy) // SEARCH_SAMPLE)], z[::max(1, len(z) // SEARCH_SAMPLE)]
+        dirs = [np.array([math.cos(a), math.sin(a)]) for a in np.radians(np.arange(0, 180, 10))]
+        axis = min(dirs, key=lambda d: fit(d, 6)[2])
+        xy, z = full
+        sc, r, rms = fit(axis, 15)
+    normal = np.array([-axis[1], axis[0]])
+    t = (xy - mean) @ axis
+    lo, hi = np.percentile(t, [0.5, 99.5])
+    length = float(hi - lo)
+    if not params.radius_min <= r <= params.radius_max or not max(params.size_min, 2 * r) <= length <= \
+            params.size_max:
+        raise FitError(f"lying cylinder radius {r * 1000:.0f} mm, length {length * 1000:.0f} mm out of bounds")
+    centre = mean + axis * (lo + hi) / 2 + normal * sc
+    inside = np.hypot((xy - mean) @ normal - sc, z - r) < r - CAP_BAND   # end-cap points lie inside the circle
+    ends = (int(np.sum(inside & (t < lo + CAP_BAND))) >= MIN_TOP_POINTS,
+            int(np.sum(inside & (t > hi - CAP_BAND))) >= MIN_TOP_POINTS)
+    return Primitive(CYLINDER, True, float(centre[0]), float(centre[1]), r, length, (2 * r, 2 * r, length),
+                     math.atan2(axis[1], axis[0]), rms, False, "", True, ends)
+
+
+def box(points: np.ndarray, support: float, top: float, params: ObjectParams) -> Primitive:
+    """The oriented box of the points' footprint (cv2.minAreaRect); FitError when a side is out of bounds."""
+    (cx, cy), (a, b), angle = cv2.minAreaRect(points[:, :2].astype(np.float32))
+    h = top - support
+    if min(a, b, h) < params.size_min or max(a, b, h) > params.size_max:
+        raise FitError(f"box {a * 1000:.0f} x {b * 1000:.0f} x {h * 1000:.0f} mm out of bounds")
+    yaw = math.radians(angle)
+    c, s = math.cos(yaw), math.sin(yaw)
+    p = _sample(points)
+    loc = (p[:, :2] - (cx, cy)) @ np.array([[c, -s], [s, c]])
+    d = np.minimum(np.minimum(np.abs(a / 2 - np.abs(loc[:, 0])), np.abs(b / 2 - np.abs(loc[:, 1]))),
+                   np.abs(top - p[:, 2]))
+    inner = 0.25 * min(a, b)
+    cap = (p[:, 2] >= top - CAP_BAND) & (np.abs(loc[:, 0]) < a / 2 - inner) & (np.abs(loc[:, 1]) < b / 2 - inner)
+    return Primitive(BOX, False, float(cx), float(cy), 0.0, h, (float(a), float(b), h), yaw,
+                     float(np.sqrt(np.mean(d ** 2))), False, "", int(cap.sum()) >= MIN_TOP_POINTS, (False, False))
+
+
+def conservative_box(points: np.ndarray, support: float, top: float, view: np.ndarray, params: ObjectParams,
+                     why: str) -> Primitive:
+    """The points' oriented bounding box in x-y, grown `hidden_extent` away from the camera (what it cannot see),
+    from the board to the top: an obstacle that bounds the cluster."""
+    ray = view[:2] / max(float(np.linalg.norm(view[:2])), 1e-9)
+    xy = points[:, :2]
+    (cx, cy), (a, b), angle = cv2.minAreaRect(np.r_[xy, xy + params.hidden_extent * ray].astype(np.float32))
+    a, b = max(a, params.size_min), max(b, params.size_min)
+    h = max(top - support, params.size_min)
+    return Primitive(BOX, False, float(cx), float(cy), 0.0, h, (float(a), float(b), h), math.radians(angle), 0.0,
+                     True, why, False, (False, False))
+
+
+def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, camera: np.ndarray,
+                  params: ObjectParams, noise: float, tol: float, search: bool = True) -> Primitive:
+    """The best primitive of a cluster (module docstring). points: its base-frame points; circle_xy: its side and
+    rim points for the standing cylinder; camera: the camera's position; noise: the frame's depth noise; tol: the
+    circle fit's inlier band. The lying cylinder's search over axis directions runs only when no primitive fits
+    otherwise and `search` (it costs as much as all other fits)."""
+    top = float(np.percentile(points[:, 2], 99.5))
+    view = points.mean(axis=0) - camera
+    bound = max(params.fit_rms, params.fit_noise * noise)
+    fits: list[Primitive] = []
+    why: dict[str, str] = {}
+    for name, fit in (("standing cylinder", lambda: standing_cylinder(circle_xy, points, support, top, camera, params,
+                                                                      tol)),
+                      ("lying cylinder", lambda: lying_cylinder(points, support, view, params, None)),
+                      ("box", lambda: box(points, support, top, params)),
+                      ("lying cylinder, axis searched", lambda: lying_cylinder(points, support, view, params, bound))):
+        if name.endswith("searched") and (fits or not search):
+            continue   # the search: only when nothing fitted
+        try:
+            f = fit()
+        except (FitError, np.linalg.LinAlgError, ValueError) as e:
+            why[name] = str(e)
+            continue
+        if f.rms <= bound:
+            fits.append(f)
+        else:
+            why[name] = f"rms {f.rms * 1000:.1f} mm"
+    if fits:  # a lying fit must be LYING_MARGIN times better: a narrow standing bottle seen in part fits both
+        return min(fits, key=lambda f: f.rms * (LYING_MARGIN if f.lying else 1.0))
+    return conservative_box(points, support, top, view, params, f"no primitive within {bound * 1000:.1f} mm rms ("
+                            + "; ".join(f"{k}: {v}" for k, v in why.items()) + ")")

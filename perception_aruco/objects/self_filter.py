@@ -1,0 +1,49 @@
+"""The robot's own body in the depth image: points within its collision capsules (robot_description.CAPSULES at
+the joint angles of the frame) plus a padding are not objects, as MoveIt's depth self-filter does. The capsules are
+the motion planner's conservative envelope of the open hand, so closed fingers lie inside them too."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from relocation_common import robot_description as rd
+
+
+def link_frames(q: np.ndarray) -> dict[str, np.ndarray]:
+    """4x4 pose of every arm link in the base frame at joint angles q (the URDF chain: joint_origins, then a rotation
+    about z by Q_SIGN x q; the MuJoCo scene is built from the same description)."""
+    origins = rd.joint_origins()
+    t = np.eye(4)
+    out = {rd.BASE_LINK: t.copy()}
+    for i in range(rd.N_JOINTS):
+        a = rd.Q_SIGN[i] * float(q[i])
+        rz = np.array([[math.cos(a), -math.sin(a), 0, 0], [math.sin(a), math.cos(a), 0, 0], [0, 0, 1, 0],
+                       [0, 0, 0, 1]])
+        t = t @ origins[i] @ rz
+        out[rd.LINK_NAMES[i]] = t.copy()
+    return out
+
+
+def arm_segments(q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """(p0, p1, radius) of each collision capsule in the base frame at joint angles q."""
+    frames = link_frames(q)
+    out = []
+    for c in rd.CAPSULES:
+        f = frames[c.link]
+        out.append((f[:3, :3] @ np.asarray(c.p0) + f[:3, 3], f[:3, :3] @ np.asarray(c.p1) + f[:3, 3], c.radius))
+    return out
+
+
+def on_arm(points: np.ndarray, q: np.ndarray | None, padding: float) -> np.ndarray:
+    """Bool per point (N x 3, base frame): within `padding` of the arm's capsules at q (none when q is None)."""
+    out = np.zeros(len(points), bool)
+    if q is None or not len(points):
+        return out
+    p = np.asarray(points, float)
+    for p0, p1, r in arm_segments(np.asarray(q, float)):
+        seg = p1 - p0
+        s = np.clip((p - p0) @ seg / max(float(seg @ seg), 1e-12), 0.0, 1.0)
+        d = np.linalg.norm(p - (p0 + s[:, None] * seg), axis=1)
+        out |= d < r + padding
+    return out

@@ -1,0 +1,124 @@
+"""What perception keeps across frames (no rclpy): the objects' last poses and the hidden-object policy
+(`SceneMemory`), the fused camera pose (`FrameFusion`) and the identity check against the previous scene
+(`identity_conflicts`). docs/perception.md, "Hidden objects" and "Health, fusion"."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+from relocation_common.geometry import pose_error
+
+from .objects.model import PerceivedObject
+
+UNLISTED_PREFIX = "u"
+
+
+def unlisted_number(object_id: str) -> int:
+    """k of an unlisted object's id u<k> (0 for any other id)."""
+    tail = object_id[len(UNLISTED_PREFIX):]
+    return int(tail) if object_id.startswith(UNLISTED_PREFIX) and tail.isdigit() else 0
+
+
+@dataclass
+class SceneMemory:
+    """The hidden-object policy (docs/perception.md): an object not seen in the current frame keeps its last
+    perceived pose for `hold_frames` processed frames, then is dropped; nothing is ever guessed. It also remembers
+    every object's last pose (the identity match's expected position) and numbers the unlisted objects u1, u2, ...
+    in order of first sight. ids: the scenario's listed ids, in the order the scene lists them."""
+
+    ids: tuple[str, ...]
+    hold_frames: int
+    frame: int = 0
+    last_seen: dict[str, tuple[PerceivedObject, int]] = field(default_factory=dict)  # id -> (object, frame index)
+    unlisted_count: int = 0
+
+    def expected(self, object_id: str) -> PerceivedObject | None:
+        """The object's last perceived pose (any age), or None if never seen."""
+        seen = self.last_seen.get(object_id)
+        return None if seen is None else seen[0]
+
+    def unlisted(self) -> dict[str, PerceivedObject]:
+        """The unlisted objects ever seen, by id (their last poses)."""
+        return {i: o for i, (o, _) in self.last_seen.items() if i not in self.ids}
+
+    def new_ids(self, n: int) -> list[str]:
+        """The ids the next n unlisted objects seen for the first time get (`update` takes them)."""
+        return [f"{UNLISTED_PREFIX}{self.unlisted_count + k + 1}" for k in range(n)]
+
+    def update(self, objects: Mapping[str, PerceivedObject]) -> tuple[list[PerceivedObject], list[str], list[str]]:
+        """Record one processed frame; returns (objects to publish: listed in scenario order, then unlisted by
+        number; held ids; lost ids: listed objects not held, and unlisted ones dropped in this frame)."""
+        self.frame += 1
+        for i, o in objects.items():
+            self.last_seen[i] = (o, self.frame)
+            self.unlisted_count = max(self.unlisted_count, unlisted_number(i) if i not in self.ids else 0)
+        keep = {i: o for i, (o, f) in self.last_seen.items() if self.frame - f <= self.hold_frames}
+        order = list(self.ids) + sorted((i for i in keep if i not in self.ids), key=unlisted_number)
+        held = [i for i in order if i in keep and i not in objects]
+        lost = [i for i in self.ids if i not in keep] + sorted(
+            (i for i, (_, f) in self.last_seen.items() if i not in self.ids and self.frame - f == self.hold_frames + 1),
+            key=unlisted_number)
+        return [keep[i] for i in order if i in keep], held, lost
+
+
+class FrameFusion:
+    """The shelf does not move: the camera poses of consistent frames are averaged (translation mean, rotation the
+    projection of the mean matrix onto SO(3)); a frame more than `max_jump` / `max_jump_deg` from the fused pose is
+    refused, unless `reset_after` such frames in a row agree with one another (the camera was moved: start over)."""
+
+    def __init__(self, max_jump: float = 0.005, max_jump_deg: float = 0.5, window: int = 30, reset_after: int = 3):
+        self.max_jump, self.max_jump_deg, self.window, self.reset_after = max_jump, max_jump_deg, window, reset_after
+        self.poses: list[np.ndarray] = []
+        self.outliers: list[np.ndarray] = []
+
+    @property
+    def fused(self) -> np.ndarray | None:
+        """T_base_camera averaged over the consistent frames, or None before the first."""
+        if not self.poses:
+            return None
+        m = np.mean([p[:3, :3] for p in self.poses], axis=0)
+        u, _, vt = np.linalg.svd(m)
+        out = np.eye(4)
+        out[:3, :3] = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+        out[:3, 3] = np.mean([p[:3, 3] for p in self.poses], axis=0)
+        return out
+
+    def update(self, T: np.ndarray) -> str | None:
+        """Add one frame's pose; None when it agrees (or restarts the fusion), else the reason to refuse it."""
+        f = self.fused
+        if f is None or self._agrees(T, f):
+            self.poses = (self.poses + [np.asarray(T, float)])[-self.window:]
+            self.outliers = []
+            return None
+        self.outliers.append(np.asarray(T, float))
+        if len(self.outliers) >= self.reset_after and all(self._agrees(o, self.outliers[-1]) for o in self.outliers):
+            self.poses, self.outliers = self.outliers, []
+            return None
+        dt, dr = pose_error(T, f)
+        return (f"camera pose {dt * 1000:.0f} mm / {math.degrees(dr):.1f} deg from the pose fused over "
+                f"{len(self.poses)} frames (bounds {self.max_jump * 1000:.0f} mm / {self.max_jump_deg} deg): refused "
+                f"until {self.reset_after} frames agree")
+
+    def _agrees(self, a: np.ndarray, b: np.ndarray) -> bool:
+        dt, dr = pose_error(a, b)
+        return dt <= self.max_jump and math.degrees(dr) <= self.max_jump_deg
+
+
+def identity_conflicts(detections: Mapping[str, PerceivedObject], previous: Mapping[str, PerceivedObject],
+                       moved: float = 0.02) -> dict[str, str]:
+    """Listed objects that take the place of another object of the previous scene (overlapping where it stood)
+    while that one is not seen now and this one stood elsewhere (> `moved` away): an identity swap is likelier than
+    an object teleported onto another's place. id -> reason."""
+    out = {}
+    for i, d in detections.items():
+        for j, p in previous.items():
+            if j == i or j in detections or abs(d.z - p.z) > 0.05:
+                continue
+            gap = math.hypot(d.x - p.x, d.y - p.y) - d.reach - p.reach
+            was = previous.get(i)
+            if gap < -0.01 and (was is None or math.hypot(d.x - was.x, d.y - was.y) > moved):
+                out[i] = f"found where {j} stood in the previous scene, and {j} is not seen: identity in doubt"
+    return out

@@ -1,0 +1,166 @@
+"""Geometry-first perception on frames rendered by the project's simulated camera (perception_scenes: the
+simulator's scene, generated layouts with seeds fixed before any result): every visible listed object found within
+10 mm; two bottles of one colour kept apart over frames while one moves; an object the scenario does not list
+published as u1 with its weight note, nothing listed dropped for it; more than 16 objects; lying bottles and boxes
+(the simulator's scene with test-only extras). The rates are printed."""
+import importlib.util
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from perception_scenes import extra, generated_layout, render_scene, with_objects
+
+from jaco2_sim_driver.sensor_model import SensorModel
+from perception_aruco.objects.model import BOX, CYLINDER
+from perception_aruco.pipeline import Perception, SceneMemory
+from relocation_common.paths import default_scenario
+from relocation_common.robot_description import Q_HOME
+from relocation_common.scenario import PALETTE, load_scenario
+
+_spec = importlib.util.spec_from_file_location(
+    "bench_perception_objects", Path(__file__).resolve().parent.parent / "scripts/bench_perception_objects.py")
+assert _spec is not None and _spec.loader is not None
+bench = importlib.util.module_from_spec(_spec)
+sys.modules[_spec.name] = bench  # its dataclasses look their module up
+_spec.loader.exec_module(bench)
+
+VISIBLE = 300
+BASE = load_scenario(default_scenario())
+
+
+def _found(result, scenario, visible, tol=0.010):
+    """(visible listed ids, those found within tol with their id)."""
+    must = {b.id for b in scenario.objects if visible.get(b.id, 0) >= VISIBLE}
+    ok = {i for i in must if i in result.detections and math.hypot(
+        result.detections[i].x - scenario.object(i).x, result.detections[i].y - scenario.object(i).y) <= tol}
+    return must, ok
+
+
+@pytest.mark.parametrize("camera", ["ideal", "realsense_d435"])
+def test_every_visible_listed_object_found_within_10_mm(camera):
+    """Generated layouts of 10 bottles (seeds 0-5, three sizes): every listed bottle with >= 300 pixels in view found
+    with its id within 10 mm, and no listed id published elsewhere."""
+    must_all, ok_all, wrong = 0, 0, []
+    for seed in range(6):
+        s = with_objects(BASE, generated_layout(BASE, seed, 10))
+        f, vis = render_scene(s, sensor=SensorModel.named(camera), seed=seed)
+        r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+        must, ok = _found(r, s, vis)
+        must_all, ok_all = must_all + len(must), ok_all + len(ok)
+        wrong += [f"seed {seed} {i}" for i, d in r.detections.items()
+                  if math.hypot(d.x - s.object(i).x, d.y - s.object(i).y) > 0.010]
+        assert must <= ok, (seed, must - ok, {i: r.missing.get(i) for i in must - ok})
+    print(f"\n{camera}: {ok_all}/{must_all} visible listed bottles found within 10 mm; wrong: {wrong}")
+    assert not wrong
+
+
+def test_two_bottles_of_one_colour_kept_apart_while_one_moves():
+    """Two red bottles (the loader refuses that; the simulator does not): both found, each with its id, over 6
+    frames while o2 moves 15 mm a frame towards o1's row; identities from the tracks (SceneMemory)."""
+    layout = generated_layout(BASE, 11, 6, colours=["red", "red", "blue", "yellow", "cyan"])
+    assert layout[1].label == layout[2].label == "red"
+    memory = SceneMemory(tuple(b.id for b in layout), 10)
+    p = Perception(with_objects(BASE, layout))
+    for k in range(6):
+        moved = [replace(b, y=b.y + 0.015 * k) if b.id == "o2" else b for b in layout]
+        truth = with_objects(BASE, moved)
+        f, vis = render_scene(truth)
+        r = p.process(f.rgb, f.depth, f.K, memory=memory, q=Q_HOME)
+        memory.update(r.objects)
+        for i in ("o1", "o2"):
+            assert vis[i] >= VISIBLE and i in r.detections, (k, i, r.missing)
+            d, t = r.detections[i], truth.object(i)
+            assert math.hypot(d.x - t.x, d.y - t.y) <= 0.010, (k, i, d.x, d.y, t.x, t.y)
+
+
+def test_an_unlisted_bottle_appears_as_u1_and_drops_nothing_listed():
+    """The user's case: the simulator's scene has an extra bottle (or a short wide jar) the scenario does not list.
+    Over seeds 0-5 (colour from the palette, position at random): it is published as u1, listed false, with its
+    estimated weight said; every visible listed bottle is still found within 10 mm."""
+    rates = []
+    for seed in range(6):
+        rng = np.random.default_rng([seed, 36])
+        layout = generated_layout(BASE, seed, 8)
+        jar = seed % 2 == 1
+        r_, h_ = (0.045, 0.09) if jar else (0.033, 0.16)
+        other = generated_layout(BASE, 100 + seed, 1, radii=(r_,), heights=(h_,),
+                                 taken=[(b.x, b.y, b.radius) for b in layout])[0]
+        colour = list(PALETTE)[int(rng.integers(len(PALETTE)))]
+        other = replace(other, id="extra", label=colour, rgb=PALETTE[colour], is_target=False, listed=False)
+        given = with_objects(BASE, layout)
+        f, vis = render_scene(with_objects(BASE, layout, [other]))   # the simulator's `unlisted`
+        r = Perception(given).process(f.rgb, f.depth, f.K, q=Q_HOME)
+        must, ok = _found(r, given, vis)
+        assert must <= ok, (seed, must - ok, r.missing)
+        if vis["extra"] < VISIBLE:
+            continue
+        near = [o for o in r.unlisted.values() if math.hypot(o.x - other.x, o.y - other.y) <= 0.010]
+        rates.append(bool(near))
+        assert near and near[0].id == "u1" and not near[0].listed, (seed, r.unlisted)
+        assert "L x 600 kg/m3" in near[0].weight_note and 0 < near[0].weight <= 1
+        assert abs(near[0].radius - r_) < 0.005
+        # its height as seen, or (its top hidden under the ceiling board) never less: as tall as the compartment
+        assert abs(near[0].height - h_) < 0.01 or ("top not seen" in near[0].weight_note and near[0].height > h_)
+    print(f"\nunlisted bottle or jar found as u1: {sum(rates)}/{len(rates)} (visible ones)")
+    assert len(rates) >= 4
+
+
+def test_more_than_16_objects():
+    """20 bottles, colours repeated past the palette's 16 (seeds 0-2): every visible listed bottle found within
+    10 mm (identities of repeated colours from the scenario's positions)."""
+    for seed in range(3):
+        s = with_objects(BASE, generated_layout(BASE, seed, 20))
+        f, vis = render_scene(s, seed=seed)
+        r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+        must, ok = _found(r, s, vis)
+        print(f"\nseed {seed}: {len(ok)}/{len(must)} visible found, {len(r.unlisted)} unlisted")
+        assert must <= ok, (seed, must - ok, r.missing)
+
+
+def test_lying_bottle_and_box_published_with_their_orientation():
+    """A lying bottle and a box the scenario does not list, and a listed bottle tipped over: published lying or as
+    a box, within 15 mm, with their yaw (mod pi for a cylinder's axis, pi/2 for a box)."""
+    layout = generated_layout(BASE, 3, 5, taken=[(0.80, 0.20, 0.1), (0.75, -0.05, 0.1), (0.72, -0.25, 0.09)])
+    tipped = layout[2]
+    extras = (extra(BASE, "lying", CYLINDER, 0.80, 0.20, (0.06, 0.06, 0.15), 0.5, True, PALETTE["orange"]),
+              extra(BASE, "box", BOX, 0.75, -0.05, (0.06, 0.10, 0.12), -0.4, False, PALETTE["purple"]),
+              replace(tipped, x=0.72, y=-0.25, yaw=1.2, lying=True))
+    # the simulator's world: the tipped bottle lying in the scenario's objects, the lying one and the box unlisted
+    f, vis = render_scene(with_objects(BASE, [extras[2] if b.id == tipped.id else b for b in layout], extras[:2]))
+    # the scenario has the tipped bottle standing where it fell from: its base at one end of the lying one
+    stood = replace(tipped, x=0.72 - tipped.height / 2 * math.cos(1.2), y=-0.25 - tipped.height / 2 * math.sin(1.2))
+    given = with_objects(BASE, [stood if b.id == tipped.id else b for b in layout])
+    r = Perception(given).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    for e in extras:
+        assert vis[e.id] >= VISIBLE
+        o = r.objects.get(e.id) or min(r.unlisted.values(), key=lambda o: math.hypot(o.x - e.x, o.y - e.y))
+        period = math.pi if e.shape == CYLINDER else math.pi / 2
+        dyaw = abs((o.yaw - e.yaw + period / 2) % period - period / 2)
+        print(f"\n{e.id}: {o.id} {o.shape} lying={o.lying} off {1000 * math.hypot(o.x - e.x, o.y - e.y):.1f} mm, "
+              f"yaw off {math.degrees(dyaw):.1f} deg, size {np.round(np.array(o.size) * 1000)} mm, rms "
+              f"{o.fit_rms * 1000:.1f} mm")
+        assert o.shape == e.shape and o.lying == e.lying and not o.conservative and dyaw < math.radians(8)
+        axis = np.array([math.cos(e.yaw), math.sin(e.yaw)])
+        off = np.array([o.x - e.x, o.y - e.y])
+        across, along = abs(float(off @ [-axis[1], axis[0]])), abs(float(off @ axis))
+        # along a listed lying cylinder's axis its place is known from an end cap in view; with both ends hidden
+        # (here the near one behind the marker plate) it is the visible part's centre: the published cylinder still
+        # holds the true centre (off by half the hidden length, 23 mm here); the others within 15 mm
+        bound = e.size[2] / 2 if e.lying and o.listed else 0.015
+        assert across <= 0.015 and along <= bound, (across, along, bound)
+    assert r.objects[tipped.id].listed and r.objects[tipped.id].lying
+
+
+def test_generated_benchmark_small():
+    """The generated benchmark's small version (scripts/bench_perception_objects.py: 5 and 15 bottles, 0-3
+    unlisted, some lying, seeds 0-2, realistic camera): no occupied space dropped, no listed id published wrong."""
+    for n in (5, 15):
+        for seed in range(3):
+            case = bench.make_case(seed, n, seed % 4, 1 if seed % 2 else 0)
+            sc, _, _ = bench.run_case(case, "realsense_d435", seed)
+            assert "refused" not in sc, sc
+            print(f"\nn={n} seed {seed}: {sc['found']}/{sc['visible']} found, {sc['covered']} covered")
+            assert not sc["dropped"] and not sc["wrong"], sc

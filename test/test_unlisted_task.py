@@ -1,0 +1,48 @@
+"""The task planner's problem is the scene's objects, listed or not, and what it says of them
+(qtree_task_planner.problem.RelocationProblem.from_bottles, executive.retrieval.scene_notes), over the real motion
+planner: an unlisted object is an obstacle with its estimated weight; an object the hand cannot grasp stays an
+obstacle, never relocated, with the planner's reason. Before, the log and the result said neither.
+"""
+from __future__ import annotations
+
+import pytest
+
+from jaco2_sim_driver.messages import objects_msg, time_msg
+from jaco2_sim_driver.sim import Jaco2Sim
+from qtree_task_planner.executive.retrieval import scene_notes
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.problem import ProblemError, RelocationProblem
+from qtree_task_planner.search import astar
+from relocation_common.ros_conversions import msg_to_objects
+from relocation_common.scenario import load_scenario
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.planner import MotionPlanner
+
+UNLISTED = load_scenario("config/scenarios/world/paper_experiment_10_unlisted.yaml")
+BOXES = load_scenario("config/scenarios/world/shapes_box_10.yaml")
+
+
+def test_the_problem_of_a_scene_holds_its_unlisted_objects_with_their_estimates():
+    scene = msg_to_objects(objects_msg(UNLISTED, Jaco2Sim(UNLISTED).object_poses(), time_msg(0.0)))
+    p = RelocationProblem.from_bottles(scene)
+    assert "x1" in p.obstacles and p.target == "T" and len(p.obstacles) == 11
+    assert p.estimated == {"x1": "0.45 L x 600 kg/m3 = 0.27 kg"} and p.weights["x1"] == pytest.approx(0.2714, abs=1e-4)
+    assert p.unlisted_line() == "unlisted (obstacles, weight estimated): x1 phi 0.27 (0.45 L x 600 kg/m3 = 0.27 kg)"
+    assert RelocationProblem.from_scenario(UNLISTED).unlisted_line() == ""
+    with pytest.raises(ProblemError, match="estimated weights must be of obstacles"):
+        RelocationProblem(("a",), {"a": 0.5}, "T", {"T": "x"})
+
+
+def test_the_notes_name_what_the_hand_cannot_grasp_with_the_planner_s_reason():
+    """shapes_box_10: its three boxes stay obstacles; each of T's lanes holds o7 or a bottle held by the boxes, which
+    the A* proves from the lanes alone (before, the boxes were answered as bottles of radius 0, some feasible)."""
+    planner = MotionPlanner(BOXES, PlannerParams.load())
+    problem = RelocationProblem.from_scenario(BOXES)
+    oracle = CachedOracle(planner)
+    optimum = astar.solve(problem, oracle)  # the boxes have no lane: every lane through one is closed for good
+    assert not optimum.found and optimum.oracle_calls == 0 and "o7 has no lane" in optimum.reason, optimum.reason
+    notes = scene_notes(problem, oracle)
+    assert notes.startswith("never relocated, the hand cannot grasp them: o7 (no grasp: o7 is a box (box 0.06 x "
+                            "0.09 x 0.14 m): the side grasp takes standing cylinders only); o8 (no grasp: o8 is a "
+                            "box"), notes
+    assert "o9 (no grasp: o9 is a box" in notes
