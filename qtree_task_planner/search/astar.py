@@ -55,7 +55,7 @@ class AStarResult(ExactResult):
         return {**super().to_dict(), "blocker_calls": self.blocker_calls, "searches": self.searches}
 
 
-def _optimistic(obstacles: Sequence[str], phi: Mapping[str, float], target: str,
+def optimistic(obstacles: Sequence[str], phi: Mapping[str, float], target: str,
                 kb: Knowledge) -> tuple[list[Query] | None, int]:
     """A* on the optimistic graph (module doc): the edges [(object, set)] of a least-weight path ending with the
     target's; None if there is none. Also returns the sets expanded."""
@@ -117,7 +117,7 @@ def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, dept
     calls = searches = expanded = 0
     answers: dict[Query, FeasibilityAnswer] = {}
     while True:
-        path, n = _optimistic(obstacles, phi, target, kb)
+        path, n = optimistic(obstacles, phi, target, kb)
         searches, expanded = searches + 1, expanded + n
         if path is None:
             return AStarResult(None, None, calls, expanded, why_none(target, answers, kb.claims), blocker_calls,
