@@ -148,7 +148,8 @@ class CachedOracle:
             if key not in self.certified:
                 self.cert_calls += 1
                 self.certified[key] = answer
-                if Label(answer.label) == Label.UNFEASIBLE:
+                if Label(answer.label) == Label.UNFEASIBLE:  # the planner's answer now, reused or not
+                    self.reused.discard(key)
                     self.table[key] = dataclasses.replace(answer, message=f"certification: {answer.message}",
                                                           blockers=(), trajectory=None)
 

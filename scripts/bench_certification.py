@@ -20,6 +20,11 @@ the scene of the question it answered (the removed objects on the bottom shelf),
     .venv/bin/python scripts/bench_certification.py --out /tmp/cert.jsonl            # every scene (an hour or more)
     .venv/bin/python scripts/bench_certification.py --scenes paper_experiment_10     # one scene
     .venv/bin/python scripts/bench_certification.py --summary /tmp/cert.jsonl        # the table of a run
+    .venv/bin/python scripts/bench_certification.py --latency scenario3_15 --rounds 2  # a feasible answer's time
+
+--latency SCENE: a feasible answer's in-process time (the planner's planning_time, p50 / p95) during a uniform-cost
+solve of the scene (qtree_task_planner.search.exact.solve, every question asked of the planner), old and new
+alternated `--rounds` times in one process, so that a change of the machine's load hits both.
 """
 from __future__ import annotations
 
@@ -163,6 +168,29 @@ def replay_reused(sc: Any, cache: Any) -> dict:
             "reused_why": "; ".join(map(str, rep.contacts[:3]))}
 
 
+def latency(name: str, rounds: int) -> str:
+    """A feasible answer's time during a uniform-cost solve, old and new alternated (the module docstring)."""
+    from qtree_task_planner.search import exact
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
+
+    sc = load_scenario(name)
+    times: dict[str, list[float]] = {m: [] for m in MODES}
+    unfeasible: dict[str, list[float]] = {m: [] for m in MODES}
+    for _ in range(rounds):
+        for mode in MODES:
+            params = dataclasses.replace(PlannerParams.load(), certify_relocation=mode == "old", timeout=SAFETY_NET,
+                                         carry_timeout=SAFETY_NET)
+            answers = Answers(MotionPlanner(sc, params), certifying=False)
+            exact.solve(sc, answers)
+            times[mode] += [t for ok, t in answers.times if ok]
+            unfeasible[mode] += [t for ok, t in answers.times if not ok]
+    return "\n".join(f"{name} {mode}: feasible p50 {_pct(times[mode], 0.5)} ms, p95 {_pct(times[mode], 0.95)} ms "
+                     f"({len(times[mode])} answers); unfeasible p50 {_pct(unfeasible[mode], 0.5)} ms "
+                     f"({len(unfeasible[mode])})" for mode in MODES)
+
+
 def one(name: str, modes: tuple[str, ...]) -> list[dict]:
     """Both modes of a scene (a scene that does not load: one row saying why)."""
     rows = []
@@ -225,7 +253,13 @@ def main() -> None:
     ap.add_argument("--modes", nargs="*", default=list(MODES), choices=MODES)
     ap.add_argument("--out", help="JSON lines, one per scene and mode (resumable: scenes there are skipped)")
     ap.add_argument("--summary", help="print the table of a run's JSON lines and exit")
+    ap.add_argument("--latency", metavar="SCENE", help="a feasible answer's time, old and new (module docstring)")
+    ap.add_argument("--rounds", type=int, default=1, help="--latency: old and new alternated this many times")
     a = ap.parse_args()
+    if a.latency:
+        print(f"# {time.strftime('%Y-%m-%d %H:%M')}, load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+        print(latency(a.latency, a.rounds))
+        return
     if a.summary:
         print(summary([json.loads(x) for x in Path(a.summary).read_text().splitlines() if x.strip()]))
         return

@@ -153,3 +153,34 @@ def test_the_astar_optimum_is_certified_end_to_end():
     assert set(edges(r.sequence)) <= set(oracle.certified)
     assert all(cache.certified[e].label != Label.UNFEASIBLE for e in edges(r.sequence))
     assert cache.table[bad].label == Label.UNFEASIBLE
+
+
+class Near(BlockingOracle):
+    """A declared relation whose feasible answers name their near set: the object's declared blockers (its motion
+    passes where they stood), so reuse holds exactly where the relation agrees. Questions counted in `asked`."""
+
+    def __init__(self, scenario) -> None:
+        super().__init__(scenario)
+        self.asked = []
+
+    def feasibility(self, object_id, removed):
+        self.asked.append((object_id, F(removed)))
+        a = super().feasibility(object_id, removed)
+        if a.label == Label.UNFEASIBLE:
+            return a
+        return FeasibilityAnswer(a.label, near=self.blocking.get(object_id, F()))
+
+
+def test_a_training_resumed_from_a_checkpoint_reuses_as_the_uninterrupted_one():
+    """The checkpoint keeps the planner's answers with their near sets, not the reused ones: a resumed training
+    reuses what the uninterrupted one reused and asks nothing it did not ask."""
+    whole, kept = CachedOracle(Near(SCENE), reuse=True), []
+    r = train(SCENE, whole, PARAMS, checkpoint_every=25, on_checkpoint=kept.append)
+    assert whole.reused and r.found
+    mid = next(ck for ck in kept if ck.episode >= 50)
+    assert len(mid.feasibility) == mid.planner_calls  # the reused answers are not stored
+    fresh = CachedOracle(Near(SCENE), reuse=True)
+    again = train(SCENE, fresh, PARAMS, resume=mid)
+    assert (again.sequence, again.episodes, again.q_sum_history) == (r.sequence, r.episodes, r.q_sum_history)
+    assert again.planner_calls == r.planner_calls and set(fresh.oracle.asked) <= set(whole.oracle.asked)
+    assert len(fresh.oracle.asked) == len(whole.oracle.asked) - mid.planner_calls
