@@ -3,7 +3,8 @@
 Old and new side by side in one run, on every shipped scene (config/scenarios, its random5/ and paper_random5/
 folders, the blocking_* scenes and the world/ ones that load), in-process with the real MotionPlanner and the code the
 task planner node runs (qtree_task_planner.oracles.CachedOracle, search.astar.solve, learning.training.train with
-config/task_planner.yaml's parameters, executive.retrieval.chosen_sequence):
+config/task_planner.yaml's parameters, no training when the A* proves there is no sequence, as the node;
+executive.retrieval.chosen_sequence):
 
 - old: eager certification (certify_relocation: every feasible answer plans its carry, retreat and way home), a
   plain cache (no reuse);
@@ -80,7 +81,7 @@ def _pct(xs: list[float], q: float) -> float | None:
 
 def run_mode(name: str, mode: str) -> dict:
     """One scene in one mode (the module docstring)."""
-    from qtree_task_planner.executive.retrieval import chosen_sequence
+    from qtree_task_planner.executive.retrieval import chosen_sequence, proven_none
     from qtree_task_planner.learning.params import TrainingParams
     from qtree_task_planner.learning.training import train
     from qtree_task_planner.oracles import CachedOracle
@@ -94,14 +95,19 @@ def run_mode(name: str, mode: str) -> dict:
     params = dataclasses.replace(PlannerParams.load(), certify_relocation=mode == "old", timeout=SAFETY_NET,
                                  carry_timeout=SAFETY_NET)
     planner = MotionPlanner(sc, params)
+    if sc.unlisted:  # the scene as the node has it: perception (or /sim/objects) reports the unlisted objects too
+        planner.set_scenario(sc.with_objects(sc.world))
     answers = Answers(planner, certifying=mode == "new")
     cache = CachedOracle(answers, reuse=mode == "new")
-    problem = RelocationProblem.from_scenario(sc)
+    problem = RelocationProblem.from_scenario(planner.scenario)
     t0 = time.perf_counter()
     opt = astar.solve(problem, cache)
     t1 = time.perf_counter()
     astar_calls, astar_certs = cache.calls, cache.cert_calls
-    r = train(problem, cache, TrainingParams.defaults(), optimal_weight=opt.total_weight)
+    if opt.found:
+        r = train(problem, cache, TrainingParams.defaults(), optimal_weight=opt.total_weight)
+    else:  # proven: no sequence; the node trains no episode then either
+        r = proven_none(TrainingParams.defaults(), 0)
     t2 = time.perf_counter()
     seq, note = chosen_sequence(r.sequence, r.total_weight, opt.sequence, opt.total_weight, execute_optimum=False,
                                 execute_learned=False)
@@ -118,7 +124,7 @@ def run_mode(name: str, mode: str) -> dict:
            "feasible_p95_ms": _pct(feasible, 0.95), "feasible_n": len(feasible),
            "unfeasible_p50_ms": _pct([t for ok, t in answers.times if not ok], 0.5),
            "cert_p50_ms": _pct([t for _, t in answers.cert_times], 0.5), "executed": seq, "note": note}
-    out.update(replay_sequence(sc, planner, seq))
+    out.update(replay_sequence(sc, planner, seq))  # in the simulator's world (sc.world: unlisted objects too)
     if mode == "new":
         out.update(replay_reused(sc, cache))
     return out
