@@ -9,12 +9,12 @@ before its bounds (knowledge.py's forced objects and objects worth removing), si
    expanded, optimistic searches, new and old (old stopped after --old-timeout s).
 2. The same relations with the lane blockers hidden (the A* learns them from its answers only, a claim then
    holding only at supersets of the set asked), and with 1-3 alternative lanes per object (`--families`): where
-   the bounds are weaker; both solvers stopped after --timeout s.
+   the bounds are weaker. The new A* is stopped after --timeout s.
 3. Every shipped scene without a `blocking:` section on the real motion planner (in-process): the planner calls of
    the new and the old A* over one shared answer cache (the same answers for both), and their optimum.
 
     .venv/bin/python scripts/bench_search_scale.py [--sizes 5 10 ...] [--instances 5] [--old-timeout 60]
-        [--families layered answers alternatives] [--timeout 30] [--skip-scenes] [--plot docs/figures/astar_scale.png]
+        [--families layered answers alternatives] [--timeout 120] [--skip-scenes] [--plot docs/figures/astar_scale.png]
 
 The baseline (`OldKnowledge`, `old_solve`) is the A* of the commit before the bounds, copied here as a benchmark
 reference only; the product has one implementation, qtree_task_planner/search/astar.py.
@@ -287,7 +287,7 @@ def family_table(family: str, sizes: Sequence[int], instances: int, limit_new: f
     return rows
 
 
-def summary(rows: list[dict], limit_old: float) -> None:
+def summary(rows: list[dict], limit_new: float, limit_old: float) -> None:
     """Per family and n: the new search's median and largest time, calls and expansions; the old one's."""
     print("\n| family | n | new s median / max | new calls max | new expanded max | old finished | old s max |")
     print("|---|---|---|---|---|---|---|")
@@ -295,7 +295,8 @@ def summary(rows: list[dict], limit_old: float) -> None:
         g = list(group)
         done = [r["new"] for r in g if r["new"]["s"] is not None]
         old = [r["old"]["s"] for r in g if r["old"]["s"] is not None]
-        new_s = f"{statistics.median(r['s'] for r in done):.3f} / {max(r['s'] for r in done):.3f}" if done else "-"
+        new_s = f"{statistics.median(r['s'] for r in done):.3f} / {max(r['s'] for r in done):.3f}" if done else \
+            f"> {limit_new:.0f}"
         print(f"| {family} | {n} | {new_s} ({len(done)}/{len(g)} done) | {max((r['calls'] for r in done), default='-')}"
               f" | {max((r['expanded'] for r in done), default='-')} | {len(old)}/{len(g)} | "
               f"{f'{max(old):.3f}' if old else f'> {limit_old:.0f}'} |")
@@ -326,7 +327,7 @@ def shipped_scenes() -> None:
               f"{old.sets_settled} | {w} | {'yes' if new.sequence == old.sequence else 'no'} |", flush=True)
 
 
-def plot(rows: list[dict], out: Path, limit_old: float) -> None:
+def plot(rows: list[dict], out: Path, limits: dict[str, float]) -> None:
     """Time and oracle calls (and sets expanded) against n, new and old, one point per instance."""
     import matplotlib
     matplotlib.use("Agg")
@@ -341,8 +342,8 @@ def plot(rows: list[dict], out: Path, limit_old: float) -> None:
             ax = axes[0][col]
             ax.scatter([r["n"] for r in done], [r[which]["s"] for r in done], c=colour, s=14, label=f"{which} A*")
             if late:
-                ax.scatter([r["n"] for r in late], [limit_old] * len(late), c=colour, marker="^", s=30,
-                           label=f"{which}: stopped")
+                ax.scatter([r["n"] for r in late], [limits[which]] * len(late), c=colour, marker="^", s=30,
+                           label=f"{which}: stopped at {limits[which]:.0f} s")
             ax = axes[1][col]
             ax.scatter([r["n"] for r in done], [r[which]["calls"] for r in done], c=colour, s=14, marker="o",
                        label=f"{which} oracle calls")
@@ -364,8 +365,8 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
     ap.add_argument("--instances", type=int, default=5)
     ap.add_argument("--families", nargs="+", default=["layered"], choices=["layered", "answers", "alternatives"])
-    ap.add_argument("--old-timeout", type=float, default=60.0, help="s before the old A* is stopped (layered)")
-    ap.add_argument("--timeout", type=float, default=30.0, help="s before either is stopped (other families)")
+    ap.add_argument("--timeout", type=float, default=120.0, help="s before the new A* is stopped")
+    ap.add_argument("--old-timeout", type=float, default=60.0, help="s before the old A* is stopped")
     ap.add_argument("--skip-scenes", action="store_true")
     ap.add_argument("--plot", type=Path)
     args = ap.parse_args()
@@ -373,12 +374,10 @@ def main() -> None:
           f"{platform.python_version()}, load average {' '.join(f'{x:.2f}' for x in __import__('os').getloadavg())}")
     rows: list[dict] = []
     for fam in args.families:
-        new_limit = 600.0 if fam == "layered" else args.timeout
-        old_limit = args.old_timeout if fam == "layered" else args.timeout
-        rows += family_table(fam, args.sizes, args.instances, new_limit, old_limit)
-    summary(rows, args.old_timeout)
+        rows += family_table(fam, args.sizes, args.instances, args.timeout, args.old_timeout)
+    summary(rows, args.timeout, args.old_timeout)
     if args.plot:
-        plot(rows, args.plot, args.old_timeout)
+        plot(rows, args.plot, {"new": args.timeout, "old": args.old_timeout})
     if not args.skip_scenes:
         shipped_scenes()
 
