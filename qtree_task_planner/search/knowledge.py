@@ -22,13 +22,20 @@ is inside R; a claim with a lane inside R holds at every superset of R, so it ne
    lane(o, b) <= R' - R, so is the intersection, so is the union over the claims. An impossible y has no path at
    all. Objects without any claim (no lane information) get F = {}: nothing is known, so nothing is forced.
    Claims not yet made, or made at sets that are not subsets of R, are left out, which only weakens F (sound).
-2. Heuristic h(R) (`h`): the larger of w(F_R(T)) and `need(T)`: over the open claims of T the lightest of its
+2. Heuristic h(R) (`h`): the largest of w(F_R(T)); `need(T)`: over the open claims of T the lightest of its
    lanes' weights w(lane(T, b)), plus, for the objects y of that lane, the most any one needs beyond it for one of
-   its own lanes (recursively, `depth` levels; a lane of y needing an object that leaves after y is no way).
+   its own lanes (recursively, `depth` levels; a lane of y needing an object that leaves after y is no way); and
+   the chain bound d(T) (`chain`): d(o) = over the open claims of o the least over their lanes of the larger of
+   w(lane(o, b)) and the most w(y) + d(y) of an object y of b, an object without open claims 0.
    Admissible on G: any path relocating T clears one lane b of every open claim of T, so removes lane(T, b) (1.),
    and each y in b cleared one of its own lanes before it left; the y's may share what they need, hence the max,
-   not the sum. An impossible target gives h = infinity (the set is pruned). Memoised by set across the searches;
-   a new (not implied) claim made at S clears the memo of the supersets of S, an answer alone does not change h.
+   not the sum. For d, by induction over the order in which `chain` settles objects: everything removed before y
+   is removed before o too, and y itself, so a path relocating o removes at least w(y) + d(y) before it, and all
+   of lane(o, b); an object whose every way needs an unsettled one (a cycle, an impossible object) is never
+   settled, and a target never settled has no path (infinity). An impossible target gives h = infinity (the set
+   is pruned). Memoised by set across the searches; a new (not implied) claim made at S clears the memo of the
+   supersets of S, an answer alone does not change h. The sums lose ROUNDING so float rounding never lifts them
+   over w(F_R(T)) (f is then one exact sum, and the sets of one closure tie exactly).
 3. Objects worth removing, D(R) (`relevant`): T, and, grown to a fixpoint, the objects not in R of every lane of
    every claim (made at any set) of an object in D(R) that is not held at R (no lane inside R). The search removes
    only objects of D(R) after R, unless an *unexplained* g_U answer (o, S) (o answered unfeasible at S though every
