@@ -9,12 +9,13 @@ before its bounds (knowledge.py's forced objects and objects worth removing), si
    expanded, optimistic searches, new and old (old stopped after --old-timeout s).
 2. The same relations with the lane blockers hidden (the A* learns them from its answers only, a claim then
    holding only at supersets of the set asked), and with 1-3 alternative lanes per object (`--families`): where
-   the bounds are weaker; both solvers stopped after --timeout s.
+   the bounds are weaker. The new A* is stopped after --timeout s.
 3. Every shipped scene without a `blocking:` section on the real motion planner (in-process): the planner calls of
    the new and the old A* over one shared answer cache (the same answers for both), and their optimum.
 
     .venv/bin/python scripts/bench_search_scale.py [--sizes 5 10 ...] [--instances 5] [--old-timeout 60]
-        [--families layered answers alternatives] [--timeout 30] [--skip-scenes] [--plot docs/figures/astar_scale.png]
+        [--families layered answers alternatives] [--timeout 120] [--skip-scenes] [--plot docs/figures/astar_scale.png]
+        [--replot SAVED_OUTPUT.txt --plot PNG]   (redraw a plot from the printed tables)
 
 The baseline (`OldKnowledge`, `old_solve`) is the A* of the commit before the bounds, copied here as a benchmark
 reference only; the product has one implementation, qtree_task_planner/search/astar.py.
@@ -255,14 +256,14 @@ def timed(solve: Callable[[RelocationProblem, Any], astar.AStarResult], problem:
             "searches": r.searches, "weight": r.total_weight}
 
 
-def _s(r: dict[str, Any], limit: float) -> str:
-    return f"> {limit:.0f}" if r["s"] is None else f"{r['s']:.3f}"
+def _ms(r: dict[str, Any], limit: float) -> str:
+    return f"> {limit * 1e3:.0f}" if r["s"] is None else f"{r['s'] * 1e3:.3g}"
 
 
 def family_table(family: str, sizes: Sequence[int], instances: int, limit_new: float, limit_old: float) -> list[dict]:
     """Rows of one family (module doc), printed as a Markdown table as they come."""
     print(f"\n### {family}\n")
-    print("| n | seed | closure | optimum | new s | new calls | new expanded | new searches | old s | old calls | "
+    print("| n | seed | closure | optimum | new ms | new calls | new expanded | new searches | old ms | old calls | "
           "old expanded |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
@@ -282,20 +283,22 @@ def family_table(family: str, sizes: Sequence[int], instances: int, limit_new: f
             rows.append({"family": family, "n": n, "seed": seed, "new": new, "old": old})
             opt = new["weight"] if new["s"] is not None else old.get("weight")
             print(f"| {n} | {seed} | {len(closure)} | {'?' if opt is None else f'{opt:.2f}'} | "
-                  f"{_s(new, limit_new)} | {new['calls']} | {new.get('expanded', '')} | {new.get('searches', '')} | "
-                  f"{_s(old, limit_old)} | {old['calls']} | {old.get('expanded', '')} |", flush=True)
+                  f"{_ms(new, limit_new)} | {new['calls']} | {new.get('expanded', '')} | {new.get('searches', '')} | "
+                  f"{_ms(old, limit_old)} | {old['calls']} | {old.get('expanded', '')} |", flush=True)
     return rows
 
 
-def summary(rows: list[dict], limit_old: float) -> None:
+def summary(rows: list[dict], limit_new: float, limit_old: float) -> None:
     """Per family and n: the new search's median and largest time, calls and expansions; the old one's."""
-    print("\n| family | n | new s median / max | new calls max | new expanded max | old finished | old s max |")
+    print("\n| family | n | new s median / max | new calls max | new expanded max | old finished | "
+          "old s max (finished) |")
     print("|---|---|---|---|---|---|---|")
     for (family, n), group in itertools.groupby(rows, key=lambda r: (r["family"], r["n"])):
         g = list(group)
         done = [r["new"] for r in g if r["new"]["s"] is not None]
         old = [r["old"]["s"] for r in g if r["old"]["s"] is not None]
-        new_s = f"{statistics.median(r['s'] for r in done):.3f} / {max(r['s'] for r in done):.3f}" if done else "-"
+        new_s = f"{statistics.median(r['s'] for r in done):.4f} / {max(r['s'] for r in done):.4f}" if done else \
+            f"> {limit_new:.0f}"
         print(f"| {family} | {n} | {new_s} ({len(done)}/{len(g)} done) | {max((r['calls'] for r in done), default='-')}"
               f" | {max((r['expanded'] for r in done), default='-')} | {len(old)}/{len(g)} | "
               f"{f'{max(old):.3f}' if old else f'> {limit_old:.0f}'} |")
@@ -326,36 +329,53 @@ def shipped_scenes() -> None:
               f"{old.sets_settled} | {w} | {'yes' if new.sequence == old.sequence else 'no'} |", flush=True)
 
 
-def plot(rows: list[dict], out: Path, limit_old: float) -> None:
-    """Time and oracle calls (and sets expanded) against n, new and old, one point per instance."""
+def parse_rows(text: str) -> list[dict]:
+    """The per-instance rows back from this script's printed tables (so a pasted output redraws its plot)."""
+    rows, family = [], ""
+    for line in text.splitlines():
+        if line.startswith("### "):
+            family = line[4:].strip()
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if family in ("layered", "answers", "alternatives") and len(cells) == 11 and cells[0].isdigit():
+            def run(s: str, calls: str, expanded: str) -> dict[str, Any]:
+                return {"s": None if s.startswith(">") else float(s) / 1e3, "calls": int(calls),
+                        "expanded": int(expanded) if expanded else None}
+            rows.append({"family": family, "n": int(cells[0]), "seed": int(cells[1]),
+                         "new": run(cells[4], cells[5], cells[6]), "old": run(cells[8], cells[9], cells[10])})
+    return rows
+
+
+def plot(rows: list[dict], out: Path, limits: dict[str, float]) -> None:
+    """Time, oracle calls and sets expanded against n, new (left of n) and old (right of n), one point per instance,
+    the medians joined by a line where every instance finished."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fams = sorted({r["family"] for r in rows}, key=["layered", "answers", "alternatives"].index)
-    fig, axes = plt.subplots(2, len(fams), figsize=(5 * len(fams), 7), squeeze=False)
+    fig, axes = plt.subplots(3, len(fams), figsize=(5.5 * len(fams), 10), squeeze=False)
     for col, fam in enumerate(fams):
         g = [r for r in rows if r["family"] == fam]
-        for which, colour in (("new", "tab:blue"), ("old", "tab:red")):
-            done = [r for r in g if r[which]["s"] is not None]
-            late = [r for r in g if r[which]["s"] is None]
-            ax = axes[0][col]
-            ax.scatter([r["n"] for r in done], [r[which]["s"] for r in done], c=colour, s=14, label=f"{which} A*")
-            if late:
-                ax.scatter([r["n"] for r in late], [limit_old] * len(late), c=colour, marker="^", s=30,
-                           label=f"{which}: stopped")
-            ax = axes[1][col]
-            ax.scatter([r["n"] for r in done], [r[which]["calls"] for r in done], c=colour, s=14, marker="o",
-                       label=f"{which} oracle calls")
-            ax.scatter([r["n"] for r in done], [r[which]["expanded"] for r in done], c=colour, s=14, marker="x",
-                       label=f"{which} sets expanded")
-        axes[0][col].set(title=f"{fam}: wall time", xlabel="obstacles n", ylabel="s", yscale="log")
-        axes[1][col].set(title=f"{fam}: oracle calls, sets expanded", xlabel="obstacles n", yscale="log")
-        for ax in axes[:, col]:
+        sizes = sorted({r["n"] for r in g})
+        for which, colour, dx in (("new", "tab:blue", -0.012), ("old", "tab:red", 0.012)):
+            for ax, key in zip(axes[:, col], ("s", "calls", "expanded")):
+                done = [r for r in g if r[which]["s"] is not None]
+                ax.scatter([r["n"] * (1 + dx) for r in done], [r[which][key] for r in done], c=colour, s=14,
+                           label=f"{which} A*")
+                med = [(n, statistics.median(r[which][key] for r in done if r["n"] == n)) for n in sizes
+                       if all(r[which]["s"] is not None for r in g if r["n"] == n)]  # where all finished
+                ax.plot([n for n, _ in med], [m for _, m in med], c=colour, lw=1, alpha=0.6)
+                late = [r for r in g if r[which]["s"] is None]
+                if late and key == "s":
+                    ax.scatter([r["n"] * (1 + dx) for r in late], [limits[which]] * len(late), c=colour,
+                               marker="^", s=36, label=f"{which}: stopped at {limits[which]:.0f} s")
+        for ax, what in zip(axes[:, col], ("wall time (s)", "oracle calls", "sets expanded")):
+            ax.set(title=f"{fam}: {what}", xlabel="obstacles n", xscale="log", yscale="log")
+            ax.set_xticks(sizes, [str(n) for n in sizes])
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    fig.savefig(out, dpi=100)
     print(f"\nplot: {out}")
 
 
@@ -364,21 +384,23 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
     ap.add_argument("--instances", type=int, default=5)
     ap.add_argument("--families", nargs="+", default=["layered"], choices=["layered", "answers", "alternatives"])
-    ap.add_argument("--old-timeout", type=float, default=60.0, help="s before the old A* is stopped (layered)")
-    ap.add_argument("--timeout", type=float, default=30.0, help="s before either is stopped (other families)")
+    ap.add_argument("--timeout", type=float, default=120.0, help="s before the new A* is stopped")
+    ap.add_argument("--old-timeout", type=float, default=60.0, help="s before the old A* is stopped")
     ap.add_argument("--skip-scenes", action="store_true")
     ap.add_argument("--plot", type=Path)
+    ap.add_argument("--replot", type=Path, help="redraw --plot from a saved output of this script, run nothing")
     args = ap.parse_args()
+    if args.replot:
+        plot(parse_rows(args.replot.read_text()), args.plot, {"new": args.timeout, "old": args.old_timeout})
+        return
     print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {platform.python_implementation()} "
           f"{platform.python_version()}, load average {' '.join(f'{x:.2f}' for x in __import__('os').getloadavg())}")
     rows: list[dict] = []
     for fam in args.families:
-        new_limit = 600.0 if fam == "layered" else args.timeout
-        old_limit = args.old_timeout if fam == "layered" else args.timeout
-        rows += family_table(fam, args.sizes, args.instances, new_limit, old_limit)
-    summary(rows, args.old_timeout)
+        rows += family_table(fam, args.sizes, args.instances, args.timeout, args.old_timeout)
+    summary(rows, args.timeout, args.old_timeout)
     if args.plot:
-        plot(rows, args.plot, args.old_timeout)
+        plot(rows, args.plot, {"new": args.timeout, "old": args.old_timeout})
     if not args.skip_scenes:
         shipped_scenes()
 

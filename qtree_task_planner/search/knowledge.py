@@ -11,7 +11,7 @@ claim of o made at some S <= R has no lane inside R. A path of G from R relocate
 weight (Eq. 8) is phi(o_1) + .. + phi(o_k) in any order. A claim made at S <= R is *open* at R when none of its lanes
 is inside R; a claim with a lane inside R holds at every superset of R, so it never blocks again.
 
-1. Forced objects, F_R(o) (`forced`): objects not in R that every path of G from R removes before relocating o.
+1. Forced objects, F_R(o) (`frame`): objects not in R that every path of G from R removes before relocating o.
    The least fixpoint, grown from F = {} for every object, of
        lane(o, b) = (b - R) | union of F(y) over y in b - R, no way if it holds o or an impossible y;
        F(o)      = union over the claims of o open at R of (the intersection of lane(o, b) over its lanes b
@@ -22,13 +22,20 @@ is inside R; a claim with a lane inside R holds at every superset of R, so it ne
    lane(o, b) <= R' - R, so is the intersection, so is the union over the claims. An impossible y has no path at
    all. Objects without any claim (no lane information) get F = {}: nothing is known, so nothing is forced.
    Claims not yet made, or made at sets that are not subsets of R, are left out, which only weakens F (sound).
-2. Heuristic h(R) (`h`): the larger of w(F_R(T)) and `need(T)`: over the open claims of T the lightest of its
+2. Heuristic h(R) (`h`): the largest of w(F_R(T)); `need(T)`: over the open claims of T the lightest of its
    lanes' weights w(lane(T, b)), plus, for the objects y of that lane, the most any one needs beyond it for one of
-   its own lanes (recursively, `depth` levels; a lane of y needing an object that leaves after y is no way).
+   its own lanes (recursively, `depth` levels; a lane of y needing an object that leaves after y is no way); and
+   the chain bound d(T) (`chain`): d(o) = over the open claims of o the least over their lanes of the larger of
+   w(lane(o, b)) and the most w(y) + d(y) of an object y of b, an object without open claims 0.
    Admissible on G: any path relocating T clears one lane b of every open claim of T, so removes lane(T, b) (1.),
    and each y in b cleared one of its own lanes before it left; the y's may share what they need, hence the max,
-   not the sum. An impossible target gives h = infinity (the set is pruned). Memoised by set across the searches;
-   a new (not implied) claim clears the memo, an answer alone does not change h.
+   not the sum. For d, by induction over the order in which `chain` settles objects: everything removed before y
+   is removed before o too, and y itself, so a path relocating o removes at least w(y) + d(y) before it, and all
+   of lane(o, b); an object whose every way needs an unsettled one (a cycle, an impossible object) is never
+   settled, and a target never settled has no path (infinity). An impossible target gives h = infinity (the set
+   is pruned). Memoised by set across the searches; a new (not implied) claim made at S clears the memo of the
+   supersets of S, an answer alone does not change h. The sums lose ROUNDING so float rounding never lifts them
+   over w(F_R(T)) (f is then one exact sum, and the sets of one closure tie exactly).
 3. Objects worth removing, D(R) (`relevant`): T, and, grown to a fixpoint, the objects not in R of every lane of
    every claim (made at any set) of an object in D(R) that is not held at R (no lane inside R). The search removes
    only objects of D(R) after R, unless an *unexplained* g_U answer (o, S) (o answered unfeasible at S though every
@@ -47,7 +54,9 @@ is inside R; a claim with a lane inside R holds at every superset of R, so it ne
 """
 from __future__ import annotations
 
+import heapq
 import math
+from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 from qtree_task_planner.search.exact import Claim
@@ -56,6 +65,18 @@ from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label, 
 DEPTH = 2  # levels of the blockers' own lanes in `need`
 Forced = dict[str, "frozenset[str] | None"]  # object -> F_R(object), None: impossible from R
 Lanes = tuple[frozenset[str], ...]
+ROUNDING = 1e-9  # taken off the summed bounds: their float rounding must not break the exact ties of w(F_R(T))
+
+
+@dataclass
+class Frame:
+    """One removed set R seen from the target: the claims open at R of the objects reached through their lanes,
+    F_R of each (1.; None: impossible) and each open lane's value lane(o, b) (None: no way), claim by claim."""
+
+    removed: frozenset[str]
+    opened: dict[str, list[Lanes]]
+    forced: Forced
+    values: dict[str, list[list[frozenset[str] | None]]]
 
 
 def _implies(old: Claim, new: Claim) -> bool:
@@ -94,7 +115,8 @@ class Knowledge:
         if any(_implies(old, entry) for old in self.claims.get(obj, ())):
             return
         self.claims.setdefault(obj, []).append(entry)
-        self._h.clear()
+        made = entry[0]  # h(R) reads only the claims made at subsets of R
+        self._h = {r: v for r, v in self._h.items() if not made <= r} if made else {}
         self._relevant.clear()
         self._unexplained = None
 
@@ -135,13 +157,13 @@ class Knowledge:
         summed in one exact sum when w(F_R(T)) is the bound, so sets of one closure tie exactly."""
         got = self._h.get(removed)
         if got is None:
-            opened = self._open(removed)
-            forced = self.forced(removed, opened)
-            mine = forced[self.target]
+            frame = self.frame(removed)
+            mine = frame.forced[self.target]
             if mine is None:
                 got = (math.inf, 0, math.inf)
             else:
-                need = self.need(self.target, removed, forced, opened, frozenset(), frozenset(), self.depth)
+                need = max(self.need(frame, self.target, frozenset(), frozenset(), self.depth),
+                           self.chain(frame)) - ROUNDING  # a lower bound may only go down
                 h = self._w(mine)
                 f = self._w(removed | mine) if h >= need else self._w(removed) + need
                 got = (max(h, need), len(mine), f)
@@ -152,9 +174,9 @@ class Knowledge:
         """Weight of a set (Eq. 8); the target (or an unknown id) weighs infinity: nothing leaves after it."""
         return math.fsum(self.weights.get(y, math.inf) for y in objects)  # fsum: exact in any set order
 
-    def _open(self, removed: frozenset[str]) -> dict[str, list[Lanes]]:
+    def frame(self, removed: frozenset[str]) -> Frame:
         """The claims open at `removed` (made at a subset, no lane inside) of every object reached from the target
-        through their lanes (the objects not in `removed`): object -> [lanes]."""
+        through their lanes (the objects not in `removed`), with F_R (1.) and the lanes' values."""
         opened: dict[str, list[Lanes]] = {}
         todo = [self.target]
         while todo:
@@ -162,29 +184,33 @@ class Knowledge:
             mine = opened[o] = [ls for s, ls in self.claims.get(o, ()) if s <= removed
                                 and not any(b <= removed for b in ls)]
             todo.extend(y for ls in mine for b in ls for y in b - removed if y not in opened and y not in todo)
-        return opened
+        frame = Frame(removed, opened, {o: frozenset() for o in opened}, {})
+        while self._grow(frame):
+            pass
+        return frame
 
-    def forced(self, removed: frozenset[str], opened: dict[str, list[Lanes]]) -> Forced:
-        """F_R(o) for every object of `opened` (1.): the least fixpoint, grown from {} (None: impossible)."""
-        forced: Forced = {o: frozenset() for o in opened}
-        changed = True
-        while changed:
-            changed = False
-            for o in reversed(list(opened)):  # the ones found last first: fewer rounds on chains
-                if forced[o] is None:
-                    continue
-                got: set[str] | None = set()
-                for lanes in opened[o]:
-                    ways = [v for v in (self.lane(o, b, removed, forced) for b in lanes) if v is not None]
-                    if not ways:
-                        got = None
-                        break
-                    assert got is not None
-                    got |= frozenset.intersection(*ways)
-                new = None if got is None else frozenset(got)
-                if new != forced[o]:
-                    forced[o], changed = new, True
-        return forced
+    def _grow(self, frame: Frame) -> bool:
+        """One round of the fixpoint of 1. over every object of the frame (the ones found last first: fewer rounds on
+        chains), keeping each lane's value; whether a forced set grew."""
+        changed = False
+        forced = frame.forced
+        for o in reversed(list(frame.opened)):
+            if forced[o] is None:
+                continue
+            got: set[str] | None = set()
+            values = frame.values[o] = []
+            for lanes in frame.opened[o]:
+                values.append([self.lane(o, b, frame.removed, forced) for b in lanes])
+                ways = [v for v in values[-1] if v is not None]
+                if not ways:
+                    got = None
+                    break
+                assert got is not None
+                got |= frozenset.intersection(*ways)
+            new = None if got is None else frozenset(got)
+            if new != forced[o]:
+                forced[o], changed = new, True
+        return changed
 
     @staticmethod
     def lane(obj: str, lane: frozenset[str], removed: frozenset[str], forced: Forced) -> frozenset[str] | None:
@@ -199,24 +225,62 @@ class Knowledge:
             out |= f
         return None if obj in out else frozenset(out)
 
-    def need(self, obj: str, removed: frozenset[str], forced: Forced, opened: dict[str, list[Lanes]],
-             free: frozenset[str], chain: frozenset[str], depth: int) -> float:
+    def need(self, frame: Frame, obj: str, free: frozenset[str], chain: frozenset[str], depth: int) -> float:
         """Weight outside `free` that must be removed before `obj` (2.; objects of `chain` leave after it)."""
         best = 0.0
-        for lanes in opened.get(obj, ()):
+        for lanes, values in zip(frame.opened.get(obj, ()), frame.values.get(obj, ())):
             low = math.inf
-            for b in lanes:
-                v = self.lane(obj, b, removed, forced)
+            for b, v in zip(lanes, values):
                 if v is None or v & chain:
                     continue
                 cost = self._w(v - free)
                 if depth and cost < low:
                     sub, up = free | v, chain | {obj}
-                    cost += max((self.need(y, removed, forced, opened, sub, up, depth - 1) for y in b - removed),
-                                default=0.0)
+                    cost += max((self.need(frame, y, sub, up, depth - 1) for y in b - frame.removed), default=0.0)
                 low = min(low, cost)
             best = max(best, low)
         return best
+
+    def chain(self, frame: Frame) -> float:
+        """d(T) of 2.: d(o) = over the claims of o open at R, the least over its lanes b of the larger of
+        w(lane(o, b)) and the most w(y) + d(y) of an object y of b; solved as Knuth's generalisation of Dijkstra
+        (every lane's value is at least each of its objects' d), so an object is settled only through lanes of
+        settled objects: cycles never settle, the target then unreachable (infinity)."""
+        waiting: dict[str, list[tuple[str, int, int]]] = {}  # object -> the lanes (owner, claim, lane) it is in
+        left: dict[tuple[str, int, int], int] = {}  # lane -> objects of it not settled yet
+        top: dict[tuple[str, int, int], float] = {}  # lane -> its value so far
+        best: dict[str, list[float]] = {o: [math.inf] * len(cl) for o, cl in frame.opened.items()}
+        heap: list[tuple[float, str]] = []
+        for o, cl in frame.opened.items():
+            if frame.forced[o] is None:
+                continue
+            for c, (lanes, values) in enumerate(zip(cl, frame.values[o])):
+                for k, (b, v) in enumerate(zip(lanes, values)):
+                    if v is None:
+                        continue
+                    key, members = (o, c, k), b - frame.removed
+                    left[key], top[key] = len(members), self._w(v)
+                    for y in members:
+                        waiting.setdefault(y, []).append(key)
+                    if not members:
+                        best[o][c] = min(best[o][c], top[key])
+            heapq.heappush(heap, (max(best[o], default=0.0), o))
+        settled: set[str] = set()
+        while heap:
+            value, o = heapq.heappop(heap)
+            if o in settled or math.isinf(value):
+                continue
+            if o == self.target:
+                return value
+            settled.add(o)
+            for key in waiting.get(o, ()):
+                top[key] = max(top[key], self.weights.get(o, math.inf) + value)
+                left[key] -= 1
+                owner, c, _ = key
+                if left[key] == 0 and owner not in settled and top[key] < best[owner][c]:
+                    best[owner][c] = top[key]
+                    heapq.heappush(heap, (max(best[owner]), owner))
+        return math.inf
 
     def relevant(self, removed: frozenset[str]) -> frozenset[str] | None:
         """D(R) of 3. without the target: the objects worth removing after `removed`; None: every object (an
