@@ -46,6 +46,7 @@ from .objects.model import to_shelf_object
 from .objects.params import ObjectParams
 from .pipeline import FrameFusion, Perception, PerceptionResult, SceneMemory, identity_conflicts
 from .segmentation import SegmentationParams
+from .tracking import JointHistory
 
 
 def _stamp_s(msg: Any) -> float:
@@ -74,7 +75,7 @@ class PerceptionNode(Node):
             SegmentationParams(gain_min=g("gain_min"), gain_max=g("gain_max"), max_residual=g("max_residual")),
             LocalizeParams(min_pixels=g("min_pixels"), inlier_tol=g("inlier_tol")),
             refine_with_depth=g("refine_with_depth"), objects=ObjectParams.from_mapping(values))
-        self._q: tuple[float, np.ndarray] | None = None   # (stamp, arm joint angles) of the newest joint state
+        self._joints = JointHistory(float(g("arm_sync_window")), float(g("arm_padding")))  # self-filter
         self._lock = threading.Lock()
         self._colors: deque = deque(maxlen=6)
         self._depths: deque = deque(maxlen=6)
@@ -140,7 +141,8 @@ class PerceptionNode(Node):
 
     def _on_joint_state(self, msg: JointState) -> None:
         if all(n in msg.name for n in JOINT_NAMES) and len(msg.position) == len(msg.name):
-            self._q = (_stamp_s(msg), np.array([msg.position[msg.name.index(n)] for n in JOINT_NAMES]))
+            with self._lock:
+                self._joints.add(_stamp_s(msg), np.array([msg.position[msg.name.index(n)] for n in JOINT_NAMES]))
 
     def _newest_pair(self) -> tuple[Image, Image] | None:
         """Newest (colour, depth) whose stamps differ by at most sync_slop, or None."""
@@ -183,7 +185,8 @@ class PerceptionNode(Node):
             if why is not None:
                 raise PerceptionError(why)
             K = np.asarray(self._info.k, float).reshape(3, 3)
-            q = None if self._q is None else self._q[1]
+            with self._lock:
+                q = self._joints.around(_stamp_s(color))
             result = self.perception.process(rgb, dep, K, prior=self.fusion.fused, memory=self.memory, q=q)
             jump = self.fusion.update(result.T_base_camera)
             if jump:

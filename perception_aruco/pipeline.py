@@ -35,6 +35,7 @@ from .objects.clusters import cluster_points, object_mask
 from .objects.find import find_objects
 from .objects.model import PerceivedObject
 from .objects.params import ObjectParams
+from .objects.self_filter import arm_in_shelf
 from .segmentation import (
     PlateLevels,
     SegmentationParams,
@@ -116,7 +117,8 @@ class Perception:
         """The objects of one registered RGB-D frame. `prior`: T_base_camera of earlier frames (the node's fused
         frame); when the marker is not seen now, the prior stands in if the shelf confirms it. `memory`: the objects
         of earlier frames (their tracks: identity, unlisted ids; read, not changed: the caller updates it with the
-        result); q: the arm's joint angles at the frame (its body is left out; None: not filtered, said in notes)."""
+        result); q: the arm's joint angles at the frame, or one row per joint state around its stamp (the body is left
+        out over all of them; None: not filtered, said in notes)."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
         notes: list[str] = []
@@ -143,8 +145,12 @@ class Perception:
                       min_pixels=max(12, round(self.loc.min_pixels * area)),
                       min_inliers=max(10, round(self.loc.min_inliers * area)))
         memory = memory if memory is not None else SceneMemory(self.scenario.ids, 0)
-        objects, missing = find_objects(clusters, points, self.scenario, memory, self.seg, self.objects, loc,
-                                        T[:3, 3], fit.noise)
+        in_shelf = arm_in_shelf(q, self.scenario.shelf, self.objects.arm_padding)
+        objects, missing, left_out = find_objects(clusters, points, self.scenario, memory, self.seg, self.objects,
+                                                  loc, T[:3, 3], fit.noise, new_unlisted=not in_shelf)
+        if left_out:
+            notes.append(f"{left_out} cluster(s) matching no known object left out while the arm is in the shelf "
+                         "(new objects are taken with the arm out of it)")
         return PerceptionResult(marker, objects, missing, T, fit, tuple(notes))
 
     def _seen_plates(self, cam: np.ndarray, seen: Seen) -> np.ndarray:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -122,3 +123,39 @@ def identity_conflicts(detections: Mapping[str, PerceivedObject], previous: Mapp
             if gap < -0.01 and (was is None or math.hypot(d.x - was.x, d.y - was.y) > moved):
                 out[i] = f"found where {j} stood in the previous scene, and {j} is not seen: identity in doubt"
     return out
+
+
+class JointHistory:
+    """The arm's recent joint states (stamp, 7 angles), for the self-filter: the ones within `window` s of a frame's
+    stamp, with the nearest one on either side, are where the arm may have been when the frame was taken (images and
+    joint states come on their own streams and clocks' jitter; the newest joint state alone lags or leads a moving
+    arm). Poses within `step` rad of the previous kept one add nothing: with the arm's reach under 1 m, such a pose
+    lies within `step` m of the kept one, which the filter's padding (the node passes `arm_padding`) covers."""
+
+    def __init__(self, window: float, step: float, keep: float = 2.0):
+        self.window, self.step, self.keep = window, step, keep
+        self.states: deque[tuple[float, np.ndarray]] = deque()
+
+    def add(self, t: float, q: np.ndarray) -> None:
+        """Record one joint state; states older than `keep` s before the newest are forgotten."""
+        self.states.append((t, np.asarray(q, float)))
+        while self.states and self.states[0][0] < t - self.keep:
+            self.states.popleft()
+
+    def around(self, t: float) -> np.ndarray | None:
+        """k x 7: the poses the arm may have had at stamp t (class docstring); None before any joint state."""
+        if not self.states:
+            return None
+        stamps = np.array([s for s, _ in self.states])
+        near = np.abs(stamps - t) <= self.window
+        before, after = np.nonzero(stamps <= t)[0], np.nonzero(stamps >= t)[0]
+        for side in (before[-1:], after[:1]):
+            near[side] = True
+        if not near.any():
+            near[-1] = True
+        out: list[np.ndarray] = []
+        for i in np.nonzero(near)[0]:
+            q = self.states[int(i)][1]
+            if not out or float(np.max(np.abs(q - out[-1]))) > self.step:
+                out.append(q)
+        return np.array(out)

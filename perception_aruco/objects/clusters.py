@@ -48,7 +48,8 @@ class Cluster:
 def object_mask(points: np.ndarray, depth: np.ndarray, scenario: Scenario, seg: SegmentationParams,
                 params: ObjectParams, noise: float, exclude: np.ndarray | None, q: np.ndarray | None) -> np.ndarray:
     """HxW bool: the pixels that may belong to objects (module docstring). `exclude`: pixels never objects (the
-    markers' plates as seen); q: the arm's joint angles (None: the arm is not filtered)."""
+    markers' plates as seen); q: the arm's joint angles, one row per joint state around the frame's stamp (None: the
+    arm is not filtered)."""
     gate = workspace_mask(points, scenario, seg.wall_margin + params.wall_noise * noise, seg.marker_margin)
     if exclude is not None:
         gate &= ~exclude

@@ -2,11 +2,13 @@
 unlisted (docs/perception.md, "Objects"). A listed standing cylinder is placed by the circle of its known radius
 (localize.locate_cylinder: sub-millimetre where the free fit is a few millimetres); when that fit is doubtful, or
 two listed fits overlap, or one lies outside the shelf, the listed object is reported missing with the reason and
-its cluster published as an unlisted object: occupied space is never left out."""
+its cluster published as an unlisted object: occupied space is never left out. A cluster within a found object's
+space is a piece of it (`part_of`)."""
 from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Iterable
 
 import numpy as np
 
@@ -17,7 +19,7 @@ from ..segmentation import SegmentationParams
 from .clusters import Cluster
 from .fragments import merge_fragments
 from .identity import NO_MATCH, Fitted, Memory, assign, colour_name, listed_costs, unlisted_ids
-from .model import CYLINDER, PerceivedObject, weight_estimate
+from .model import CYLINDER, PerceivedObject, inside, weight_estimate
 from .params import ObjectParams
 from .primitives import fit_primitive
 
@@ -81,6 +83,14 @@ def unlisted_object(f: Fitted, params: ObjectParams, seg: SegmentationParams, ro
     return replace(o, weight=w, weight_note=note + (f"; conservative: {p.why}" if p.conservative else ""))
 
 
+def part_of(f: Fitted, listed: Iterable[PerceivedObject], params: ObjectParams) -> bool:
+    """Whether cluster f lies in the space of an object found (all but `absorb_outside` of its points within
+    `absorb_tol` of its primitive): a piece of that object the clustering kept apart (an edge seen past a nearer
+    object, a rim), already explained by it, not an object of its own."""
+    pts = f.cluster.points
+    return any(float(np.mean(inside(o, pts, params.absorb_tol))) >= 1.0 - params.absorb_outside for o in listed)
+
+
 def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float) -> dict[str, str]:
     """Listed fits outside the shelf, and pairs on one board that overlap by more than 2 tol: id -> why."""
     sh, out = scenario.shelf, {}
@@ -113,8 +123,12 @@ def _why_missing(j: int, b: ShelfObject, cost: np.ndarray, taken: dict[int, str]
 
 def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Scenario, memory: Memory,
                  seg: SegmentationParams, params: ObjectParams, loc: LocalizeParams, camera: np.ndarray,
-                 noise: float) -> tuple[dict[str, PerceivedObject], dict[str, str]]:
-    """(objects by id: listed ones first in scenario order, then unlisted; missing listed id -> reason)."""
+                 noise: float, new_unlisted: bool = True) -> tuple[dict[str, PerceivedObject], dict[str, str], int]:
+    """(objects by id: listed ones first in scenario order, then unlisted; missing listed id -> reason; clusters
+    left out). new_unlisted False (the arm moves in view): a cluster that is no listed object and no known unlisted
+    one is left out, not made a new object (counted): the moving arm's body between joint states, the object in its
+    hand and the pieces it cuts out of others are where such clusters come from; new objects are taken from frames
+    with the arm still."""
     fitted = fit_clusters(clusters, image_points, camera, seg, params, loc, noise)
     cost = listed_costs(fitted, scenario.objects, memory, seg, params, loc, camera)
     found: dict[str, PerceivedObject] = {}
@@ -135,8 +149,9 @@ def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Sc
         if b.id not in found and b.id not in missing:
             missing[b.id] = _why_missing(j, b, cost, taken, fitted, params.max_cost)
     rest = [unlisted_object(f, params, seg, room_above(f.cluster.support, scenario)) for m, f in enumerate(fitted)
-            if m not in taken]
+            if m not in taken and not part_of(f, found.values(), params)]
     ids = unlisted_ids(rest, memory, params.unlisted_gate)
+    known = memory.unlisted()
     objects = {b.id: found[b.id] for b in scenario.objects if b.id in found}
-    objects.update({i: replace(o, id=i) for i, o in zip(ids, rest)})
-    return objects, missing
+    objects.update({i: replace(o, id=i) for i, o in zip(ids, rest) if new_unlisted or i in known})
+    return objects, missing, sum(1 for i in ids if i not in objects)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from relocation_common.shelf_object import ShelfObject, estimated_weight
 
 CYLINDER, BOX = "cylinder", "box"
@@ -59,6 +61,19 @@ class PerceivedObject:
         if self.shape == CYLINDER:
             return math.hypot(self.radius, self.height / 2) if self.lying else self.radius
         return math.hypot(self.size[0], self.size[1]) / 2
+
+
+def inside(o: PerceivedObject, points: np.ndarray, tol: float) -> np.ndarray:
+    """Bool per point (N x 3, base frame): within the object's primitive grown by `tol`."""
+    p = np.asarray(points, float) - (o.x, o.y, o.z)
+    c, s = math.cos(o.yaw), math.sin(o.yaw)
+    u, v, z = c * p[:, 0] + s * p[:, 1], -s * p[:, 0] + c * p[:, 1], p[:, 2]   # in the object's frame
+    if o.shape == CYLINDER and o.lying:   # axis along u, at the radius' height
+        return (np.abs(u) <= o.height / 2 + tol) & (np.hypot(v, z - o.radius) <= o.radius + tol)
+    in_z = (z >= -tol) & (z <= o.top_z - o.z + tol)
+    if o.shape == CYLINDER:
+        return in_z & (np.hypot(u, v) <= o.radius + tol)
+    return in_z & (np.abs(u) <= o.size[0] / 2 + tol) & (np.abs(v) <= o.size[1] / 2 + tol)
 
 
 def to_shelf_object(o: PerceivedObject) -> ShelfObject:

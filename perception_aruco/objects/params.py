@@ -37,6 +37,8 @@ class ObjectParams:
     max_cost: float
     unlisted_gate: float
     merge_gap: float
+    absorb_tol: float
+    absorb_outside: float
 
     def __post_init__(self) -> None:
         for f in fields(self):

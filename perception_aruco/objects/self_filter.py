@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from relocation_common import robot_description as rd
+from relocation_common.scenario import Shelf
 
 
 def link_frames(q: np.ndarray) -> dict[str, np.ndarray]:
@@ -36,14 +37,35 @@ def arm_segments(q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
 
 
 def on_arm(points: np.ndarray, q: np.ndarray | None, padding: float) -> np.ndarray:
-    """Bool per point (N x 3, base frame): within `padding` of the arm's capsules at q (none when q is None)."""
+    """Bool per point (N x 3, base frame): within `padding` of the arm's capsules at q (none when q is None). q: one
+    joint state (7), or the joint states around the frame's stamp (k x 7): the arm's swept volume over them, since
+    a moving arm is seen at the image's stamp, not at the newest joint state's."""
     out = np.zeros(len(points), bool)
     if q is None or not len(points):
         return out
     p = np.asarray(points, float)
-    for p0, p1, r in arm_segments(np.asarray(q, float)):
-        seg = p1 - p0
-        s = np.clip((p - p0) @ seg / max(float(seg @ seg), 1e-12), 0.0, 1.0)
-        d = np.linalg.norm(p - (p0 + s[:, None] * seg), axis=1)
-        out |= d < r + padding
+    for qi in np.atleast_2d(np.asarray(q, float)):
+        for p0, p1, r in arm_segments(qi):
+            seg = p1 - p0
+            s = np.clip((p - p0) @ seg / max(float(seg @ seg), 1e-12), 0.0, 1.0)
+            d = np.linalg.norm(p - (p0 + s[:, None] * seg), axis=1)
+            out |= d < r + padding
     return out
+
+
+def arm_in_shelf(q: np.ndarray | None, shelf: Shelf, margin: float) -> bool:
+    """Whether the arm, at any of the joint states around a frame (k x 7, or one), comes within `margin` of the
+    shelf's inside (its capsules sampled along their axes; no joint state: assumed in). With the arm in the shelf
+    its body, the object in its hand and the pieces they cut out of others show as clusters of their own."""
+    if q is None:
+        return True
+    lo = np.array([shelf.x_front, shelf.y_min, shelf.bottom_z])
+    hi = np.array([shelf.x_back, shelf.y_max, shelf.ceiling_z])
+    s = np.linspace(0.0, 1.0, 8)[:, None]
+    for qi in np.atleast_2d(np.asarray(q, float)):
+        for p0, p1, r in arm_segments(qi):
+            pts = p0 + s * (p1 - p0)
+            gap = np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0.0), axis=1)
+            if float(gap.min()) < r + margin:
+                return True
+    return False
