@@ -1,9 +1,10 @@
-"""Adapters over a feasibility oracle (the contract is relocation_common.feasibility): a set-keyed cache, the
-obstacles the hand cannot grasp with the planner's reason (`no_grasp`), and, for tests of the Q-Tree layer only, a
-declared blocking relation.
+"""Adapters over a feasibility oracle (the contract is relocation_common.feasibility): a set-keyed cache with reuse
+across answers and lazy certification, the obstacles the hand cannot grasp with the planner's reason (`no_grasp`),
+and, for tests of the Q-Tree layer only, a declared blocking relation.
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Callable, Iterable, Mapping, Sequence
 
 from relocation_common.feasibility import (
@@ -14,7 +15,12 @@ from relocation_common.feasibility import (
     Label,
     Query,
     ask_many,
+    certifies,
+    certify_many,
+    claim_holds,
     in_flight,
+    is_pick,
+    reuses,
 )
 from relocation_common.scenario import Scenario, ScenarioError
 
@@ -22,32 +28,76 @@ Lanes = Mapping[str, tuple[BlockerSet, ...]]  # relocation_common.feasibility.La
 
 
 class CachedOracle:
-    """Set-keyed cache in front of any oracle (design sketch: feasibility depends only on the removed set).
+    """Set-keyed cache in front of any oracle (design sketch: feasibility depends only on the removed set), with
+    reuse across answers and lazy certification (relocation_common.feasibility, "Certification" and "Reuse").
 
-    Answers repeated questions (object, frozenset(removed)) without asking the wrapped oracle again and counts
-    the real calls in `calls`; `queries` counts every question asked of the cache. Share one instance across
-    trainings to reuse a feasibility table (evaluation sweeps); read `calls` before and after to get the real
-    calls of one run.
+    Answers repeated questions (object, frozenset(removed)) without asking the wrapped oracle again and counts the
+    real calls in `calls`; `queries` counts every question asked of the cache. A question not in the table is
+    answered without asking (`reused`: those questions) when an answer the oracle gave for the same object holds for it:
+    a feasible one whose motion comes near none of the objects removed then and present now (feasibility.reuses),
+    or an unfeasible one whose certain blocker sets all stay uncleared (feasibility.claim_holds); with `reuse`
+    False (the default: a plain cache, whose calls count the distinct questions) every new question is asked. The
+    task planner node reuses (its `reuse_answers`). Share one instance across trainings to reuse a feasibility
+    table (evaluation sweeps); read `calls` before and after to get the real calls of one run.
+
+    Certifications are kept apart (`certified`, real ones counted in `cert_calls`): `certify(o, R)` asks once; a
+    failed one turns the table's answer for (o, R) UNFEASIBLE with the certification's reason, so every search and
+    training from then on sees it unfeasible. Only a pick alone is certified (feasibility.is_pick: feasible, with its
+    near set); any other answer, or any answer of an oracle without `certify`, is final: its own certification.
     """
 
-    __slots__ = ("oracle", "table", "calls", "queries")
+    __slots__ = ("oracle", "table", "calls", "queries", "reuse", "reused", "certified", "cert_calls", "_sources")
 
-    def __init__(self, oracle: FeasibilityOracle) -> None:
+    def __init__(self, oracle: FeasibilityOracle, reuse: bool = False) -> None:
         self.oracle = oracle
         self.table: dict[tuple[str, frozenset[str]], FeasibilityAnswer] = {}
         self.calls = 0
         self.queries = 0
+        self.reuse = reuse
+        self.reused: set[Query] = set()
+        self.certified: dict[tuple[str, frozenset[str]], FeasibilityAnswer] = {}
+        self.cert_calls = 0
+        self._sources: dict[str, list[tuple[frozenset[str], FeasibilityAnswer]]] = {}  # object -> answers asked
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
-        """The cached answer for (object, removed set); the wrapped oracle is asked on a miss."""
+        """The cached answer for (object, removed set); reused, or the wrapped oracle asked, on a miss."""
         self.queries += 1
         key = (object_id, frozenset(removed))
-        answer = self.table.get(key)
+        answer = self.table.get(key) or self._reused(key)
         if answer is None:
             answer = self.oracle.feasibility(object_id, key[1])
             self.calls += 1
-            self.table[key] = answer
+            self.put(key, answer)
         return answer
+
+    def put(self, key: Query, answer: FeasibilityAnswer) -> None:
+        """Keep an answer the oracle gave for `key` (a source of reuse too)."""
+        self.table[key] = answer
+        if self.reuse:
+            self._sources.setdefault(key[0], []).append((key[1], answer))
+
+    def _reused(self, key: Query) -> FeasibilityAnswer | None:
+        """The answer of `key` from an answer of the same object that holds for it (class docstring), kept in the
+        table; None when none does."""
+        obj, removed = key
+        for was, a in self._sources.get(obj, ()):
+            if reuses(a, was, removed):
+                got = a
+            elif claim_holds(a, was, removed):
+                got = dataclasses.replace(a, blockers=tuple(dataclasses.replace(b, objects=b.objects - removed)
+                                                            for b in a.blockers))
+            else:
+                continue
+            self.table[key] = got
+            self.reused.add(key)
+            return got
+        return None
+
+    @property
+    def planner_answers(self) -> int:
+        """Answers the planner gave behind this cache: the table's answers not reused (a checkpoint's included) and
+        the certifications asked."""
+        return len(self.table) - len(self.reused) + self.cert_calls
 
     @property
     def in_flight(self) -> int:
@@ -64,13 +114,49 @@ class CachedOracle:
 
         def keep(key: Query, answer: FeasibilityAnswer) -> None:
             if key not in self.table:
-                self.table[key] = answer
+                self.put(key, answer)
                 self.calls += 1
 
-        misses = list(dict.fromkeys(k for k in keys if k not in self.table))
+        misses = list(dict.fromkeys(k for k in keys if k not in self.table and self._reused(k) is None))
         if misses:
             ask_many(self.oracle, misses, keep)
         out = [self.table[k] for k in keys]
+        if on_answer is not None:
+            for k, a in zip(keys, out):
+                on_answer(k, a)
+        return out
+
+    # -- certification ---------------------------------------------------------------------------------------
+    def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """The certification of (object, removed set) (relocation_common.feasibility.CertifyingOracle), asked once."""
+        return self.certify_many([(object_id, frozenset(removed))])[0]
+
+    def certify_many(self, queries: Sequence[Query],
+                     on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None) -> list[FeasibilityAnswer]:
+        """Every query's certification, the ones not yet known asked together (in parallel over replicas:
+        feasibility.certify_many); an answer that is no pick alone (unfeasible, or final: feasibility.is_pick) is its
+        own certification."""
+        keys = [(o, frozenset(r)) for o, r in queries]
+        certifying = certifies(self.oracle)
+        for k in keys:
+            if k not in self.certified:
+                pick = self.table.get(k) or self.feasibility(*k)
+                if not (certifying and is_pick(pick)):
+                    self.certified[k] = pick
+
+        def keep(key: Query, answer: FeasibilityAnswer) -> None:
+            if key not in self.certified:
+                self.cert_calls += 1
+                self.certified[key] = answer
+                if Label(answer.label) == Label.UNFEASIBLE:  # the planner's answer now, reused or not
+                    self.reused.discard(key)
+                    self.table[key] = dataclasses.replace(answer, message=f"certification: {answer.message}",
+                                                          blockers=(), trajectory=None)
+
+        misses = list(dict.fromkeys(k for k in keys if k not in self.certified))
+        if misses:
+            certify_many(self.oracle, misses, keep)
+        out = [self.certified[k] for k in keys]
         if on_answer is not None:
             for k, a in zip(keys, out):
                 on_answer(k, a)

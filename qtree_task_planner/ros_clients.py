@@ -37,7 +37,13 @@ from qtree_task_planner.oracles import Lanes
 from qtree_task_planner.search.exact import ExactResult
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from relocation_common.node import ActionClient, call, stop_reason, stopping_as
-from relocation_common.ros_conversions import NO_ANSWER, blockers_from_msgs, lanes_from_msgs, msg_to_objects
+from relocation_common.ros_conversions import (
+    NO_ANSWER,
+    blockers_from_msgs,
+    lanes_from_msgs,
+    msg_to_objects,
+    near_from_fields,
+)
 from relocation_common.scenario import ScenarioError
 
 
@@ -62,13 +68,22 @@ class ServiceOracle:
             return self.client.service_is_ready() or (timeout > 0 and self.client.wait_for_service(timeout_sec=timeout))
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
-        """Eq. 11's label of relocating `object_id` after `removed` (and the lane blockers the planner saw)."""
+        """Eq. 11's label of relocating `object_id` after `removed` (and the lane blockers the planner saw, the
+        objects a feasible pick comes near)."""
+        return self._ask(object_id, removed, False)
+
+    def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """The certification of (object_id, removed): the whole relocation (relocation_common.feasibility)."""
+        return self._ask(object_id, removed, True)
+
+    def _ask(self, object_id: str, removed: frozenset[str], certify: bool) -> FeasibilityAnswer:
         # the label only: training never uses the trajectory (about 5 ms of a feasible answer's round trip)
         req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout,
-                                      label_only=True)
-        resp = self._call(req, repr(object_id))
+                                      label_only=True, certify=certify)
+        resp = self._call(req, f"the certification of {object_id!r}" if certify else repr(object_id))
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
-                                 blockers=blockers_from_msgs(resp.blockers))
+                                 blockers=blockers_from_msgs(resp.blockers),
+                                 near=near_from_fields(resp.near_known, resp.near_ids))
 
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None

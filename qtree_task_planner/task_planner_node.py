@@ -176,14 +176,14 @@ class TaskPlannerNode(Node):
 
         def on_answer() -> None:  # progress of the exact solve (no episodes yet): planner calls, twice a second
             if fb.phase == "exact optimum" and time.monotonic() - last[0] > 0.5:
-                last[0], fb.planner_calls = time.monotonic(), len(oracle.table) + 1
+                last[0], fb.planner_calls = time.monotonic(), oracle.planner_answers + 1
                 goal_handle.publish_feedback(fb)
 
         service = ReplicaOracle([  # training itself stops at the end of an episode
             ServiceOracle(c, self.p("feasibility_timeout"), self.p("feasibility_margin"), on_answer=on_answer,
                           stop=lambda: fb.phase == "exact optimum" and (goal_handle.is_cancel_requested
                                                                        or not rclpy.ok())) for c in self._feas])
-        oracle = CachedOracle(service)
+        oracle = CachedOracle(service, reuse=self.p("reuse_answers"))  # answers reused across questions
         missing = [c.srv_name for c in self._feas if not c.service_is_ready()]
         if missing:  # asked anyway (it may be starting); the others answer meanwhile
             self.get_logger().warning(f"feasibility service(s) not available at the start of the goal: "
@@ -203,7 +203,7 @@ class TaskPlannerNode(Node):
 
         def on_episode(stats: EpisodeStats) -> bool:
             fb.episode, fb.q_sum, fb.tree_nodes = stats.episode, stats.q_sum, stats.tree_nodes
-            fb.mp_queries, fb.planner_calls = stats.mp_q, len(oracle.table)
+            fb.mp_queries, fb.planner_calls = stats.mp_q, oracle.planner_answers
             goal_handle.publish_feedback(fb)
             return rclpy.ok() and not goal_handle.is_cancel_requested
 
@@ -211,7 +211,7 @@ class TaskPlannerNode(Node):
                                       until_planner=until,
                                       checkpoint_every=self.p("checkpoint_every"), on_solved=on_solved,
                                       episode_every=FEEDBACK_EVERY)
-        fill_training_result(result, r, len(oracle.table))
+        fill_training_result(result, r, oracle.planner_answers)
         if not r.cancelled and (r.found or optimum.found):  # the learned path on the markers, executed or not
             self.get_logger().info(f"learned {r.sequence} weight {r.total_weight:.2f} in {r.episodes} episodes "
                                    f"({service.summary()})" if r.found else

@@ -37,6 +37,7 @@ from relocation_app.final_state import final_state
 from relocation_app.graph import Graph, NodeDied
 from relocation_app.progress import Progress
 from relocation_app.run_report import End
+from relocation_common.feasibility import default_replicas
 from relocation_common.paths import default_scenario, resolve_scenario
 
 TRAINING = ("exact optimum", "training", "waiting for planner")  # the feedback phases before the execution
@@ -65,8 +66,9 @@ def _args(argv):
                    help="the paper's open-loop execution: no check of the scene between relocations, no re-plan")
     p.add_argument("--disturb", type=int, default=0, metavar="K",
                    help="K seeded disturbances (nudge, tip, move, drop; seed: --seed) during the execution")
-    p.add_argument("--replicas", type=int, default=1, choices=range(1, 9), metavar="N",
-                   help="motion planner processes answering feasibility (1-8; the first also moves the arm)")
+    p.add_argument("--replicas", type=int, default=default_replicas(), choices=range(1, 9), metavar="N",
+                   help="motion planner processes answering feasibility (1-8; the first also moves the arm; default: "
+                   f"one per core, {default_replicas()} here)")
     p.add_argument("--camera-model", choices=("ideal", "realsense_d435"),
                    help="the simulated camera (driver parameter camera_model; default: config/jaco2_sim_driver.yaml)")
     p.add_argument("--out", default="out", help="output directory (default: ./out)")

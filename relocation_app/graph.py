@@ -28,7 +28,7 @@ from typing import Any, Callable
 
 from relocation_common.arm_interface import ArmInterface
 from relocation_common.config import ConfigError, node_section, read_yaml
-from relocation_common.feasibility import replica_namespace
+from relocation_common.feasibility import default_replicas, replica_namespace
 from relocation_common.node import RESPAWN_ENV
 from relocation_common.paths import config_file, python_path
 
@@ -295,9 +295,11 @@ class Graph:
                                  f"set them in config/arm_interface.yaml, or pass the same to both")
         return arm
 
-    def start_planners(self, replicas: int, params: dict | None = None) -> list[subprocess.Popen]:
+    def start_planners(self, replicas: int | None = None, params: dict | None = None) -> list[subprocess.Popen]:
         """The motion planner and replicas - 1 feasibility-only replicas under /replica_<k> (docs/architecture.md:
-        the task planner started with the same `replicas` keeps one question in flight per replica)."""
+        the task planner started with the same `replicas` keeps one question in flight per replica); `replicas`
+        None: one per core (relocation_common.feasibility.default_replicas)."""
+        replicas = default_replicas() if replicas is None else replicas
         procs = [self.start("motion_planner", params)]
         for k in range(1, replicas):
             procs.append(self.start("motion_planner", dict(params or {}, serve_relocation=False),

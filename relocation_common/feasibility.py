@@ -14,12 +14,26 @@ lanes cleared. Empty `blockers` = no information.
 
 An object the hand cannot grasp (a box, a lying bottle, one wider than the open hand...) is answered g_U with a
 message starting NO_GRASP and the reason: it stays an obstacle, never relocated, whatever is removed.
+
+Certification (docs/motion_planner.md, "Lazy certification"). A feasible answer is the pick (home -> pre-grasp ->
+grasp), as in the paper. Whether the whole relocation plans from it (carry to slot len(removed), release, retreat,
+way home) is its own question, `CertifyingOracle.certify`, asked only for the answers on a sequence about to be
+committed to (the A*'s optimum, the learned sequence). A pick alone names its near set (below: `is_pick`); a feasible
+answer without one is final (certified already, as an eager planner's, or from an oracle that does not certify), and
+so is every answer of an oracle without `certify`.
+
+Reuse (`reuses`, `claim_holds`). A feasible answer may carry `near`: every object whose place on the top shelf some
+part of the arm, the hand or the Cartesian planner's hand proxy came within the planner's `reuse_distance` of, along
+the answer's motion (removed or not). Objects farther away entered no check of that motion, so the same motion
+answers (o, R') feasible when every object near it that was absent then is absent now: R' >= R & near. An unfeasible
+answer whose blocker sets all claim (certain) answers (o, R') for R' >= R unfeasible while no lane is cleared.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Callable, Mapping, Protocol, Sequence
+from typing import Any, Callable, Iterable, Mapping, Protocol, Sequence
 
 NO_GRASP = "no grasp: "  # the start of the g_U message of an object the hand cannot grasp (module docstring)
 OUTCOME_UNKNOWN = "outcome unknown"  # the end of a RelocateObject result whose outcome no scene showed (the motion
@@ -63,6 +77,7 @@ class FeasibilityAnswer:
     message: str = ""
     trajectory: Any = None  # the motion planner's joint trajectory on success
     blockers: tuple[BlockerSet, ...] = ()  # unfeasible answers: one set per candidate grasp lane (see above)
+    near: frozenset[str] | None = None  # a feasible pick alone: the objects near its motion (module doc); None: final
 
 
 class FeasibilityOracle(Protocol):
@@ -79,6 +94,16 @@ class LaneOracle(Protocol):
     def lane_blockers(self, removed: frozenset[str]) -> Mapping[str, tuple[BlockerSet, ...]] | None:
         """object -> its lanes' blocker sets with `removed` gone, for every object still there: an empty tuple
         = no lane can ever be cleared; an object left out (or None for all) = no information."""
+        ...
+
+
+class CertifyingOracle(Protocol):
+    """An oracle that certifies a feasible answer for its whole relocation (the module docstring)."""
+
+    def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """OBSTACLE / TARGET with the certified pick when the whole relocation of `object_id` after `removed` plans
+        (pick, carry to slot len(removed) with the removed objects in the other slots, release, retreat, home);
+        UNFEASIBLE with the reason otherwise."""
         ...
 
 
@@ -115,6 +140,55 @@ def ask_many(oracle: Any, queries: list[Query], on_answer: OnAnswer | None = Non
         if on_answer is not None:
             on_answer(q, out[-1])
     return out
+
+
+def certifies(oracle: Any) -> bool:
+    """Whether `oracle` certifies (CertifyingOracle); one that does not gives final answers (module docstring)."""
+    return callable(getattr(oracle, "certify", None))
+
+
+def certify_many(oracle: Any, queries: list[Query], on_answer: OnAnswer | None = None) -> list[FeasibilityAnswer]:
+    """Every query's certification, in parallel when the oracle has `certify_many` (planner replicas), else one
+    after the other; an oracle that does not certify gives final answers: its feasibility answers are returned."""
+    many = getattr(oracle, "certify_many", None)
+    if many is not None and len(queries) > 1:
+        return many(queries, on_answer)
+    ask = oracle.certify if certifies(oracle) else oracle.feasibility
+    out = []
+    for q in queries:
+        out.append(ask(*q))
+        if on_answer is not None:
+            on_answer(q, out[-1])
+    return out
+
+
+def is_pick(answer: FeasibilityAnswer) -> bool:
+    """Whether `answer` is a feasible pick alone, to be certified before it is committed to (it names its near set);
+    any other answer is final (module docstring)."""
+    return answer.near is not None and Label(answer.label) != Label.UNFEASIBLE
+
+
+def reuses(answer: FeasibilityAnswer, removed: frozenset[str], asked: Iterable[str]) -> bool:
+    """Whether the feasible `answer` given for (o, removed) answers (o, asked) with the same motion: its near set
+    is known and every object near the motion that was absent then is absent now (asked >= removed & near)."""
+    return answer.near is not None and Label(answer.label) != Label.UNFEASIBLE and \
+        (removed & answer.near) <= frozenset(asked)
+
+
+def claim_holds(answer: FeasibilityAnswer, removed: frozenset[str], asked: frozenset[str]) -> bool:
+    """Whether the unfeasible `answer` given for (o, removed) answers (o, asked) unfeasible: its blocker sets all
+    claim (certain), asked >= removed, and no lane is cleared in `asked`."""
+    return Label(answer.label) == Label.UNFEASIBLE and claims(answer.blockers) and removed <= asked and \
+        not any(b.objects <= asked for b in answer.blockers)
+
+
+def default_replicas() -> int:
+    """Motion planner replicas when none is asked for: one per core of this machine (docs/reliability.md, "Planner
+    replicas"), at most MAX_DEFAULT_REPLICAS."""
+    return max(1, min(MAX_DEFAULT_REPLICAS, os.cpu_count() or 1))
+
+
+MAX_DEFAULT_REPLICAS = 8
 
 
 def destination_slot(n_removed: int, free: Sequence[int]) -> int:

@@ -140,6 +140,16 @@ def blockers_from_msgs(msgs: Iterable[BlockerSetMsg]) -> tuple[BlockerSet, ...]:
     return tuple(BlockerSet(frozenset(m.object_ids), bool(m.certain), m.lane) for m in msgs)
 
 
+def near_to_fields(near: frozenset[str] | None) -> tuple[bool, list[str]]:
+    """FeasibilityAnswer.near -> PlanFeasibility's (near_known, near_ids) (ids sorted; None: unknown)."""
+    return near is not None, sorted(near or ())
+
+
+def near_from_fields(known: bool, ids: Iterable[str]) -> frozenset[str] | None:
+    """PlanFeasibility's (near_known, near_ids) -> FeasibilityAnswer.near."""
+    return frozenset(ids) if known else None
+
+
 def lanes_to_msgs(lanes: Mapping[str, Iterable[BlockerSet]]) -> list[LaneBlockers]:
     """object -> its lanes' BlockerSets (MotionPlanner.lane_blockers) -> PlanFeasibility's `lanes`."""
     return [LaneBlockers(object_id=o, lanes=blockers_to_msgs(sets)) for o, sets in sorted(lanes.items())]

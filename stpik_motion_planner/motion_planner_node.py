@@ -1,8 +1,10 @@
 """motion_planner node: a thin ROS 2 shell over stpik_motion_planner.service.MotionPlannerService (paper Sect. 4.1).
 
 - service `~/plan_feasibility` (PlanFeasibility): Eq. 11's answer g_U / g_O / g_T for (object, removed set),
-  with the home -> grasp trajectory unless the request asks for the label only; a bad request answers ok=false
-  with the reason, the node keeps serving. Served by its own executor thread (SideNode), not the main executor.
+  with the home -> grasp trajectory unless the request asks for the label only, and the objects the pick comes near
+  (`near_ids`); with `certify`, the certification of the whole relocation (docs/motion_planner.md, "Lazy
+  certification"); a bad request answers ok=false with the reason, the node keeps serving. Served by its own
+  executor thread (SideNode), not the main executor.
 - action `~/relocate` (RelocateObject): plan the pick, stream joint velocities at 100 Hz with feedback from the
   joint states, close the gripper, plan and stream the carry to the next slot of the bottom shelf, release,
   retreat, plan and stream the way home (service.py, streaming.py). Feedback by phase; cancel stops the arm; a
@@ -40,7 +42,13 @@ from visualization_msgs.msg import Marker
 from relocation_common import arm_interface
 from relocation_common.arm_interface import ArmInterface
 from relocation_common.node import Health, SideNode, declare_parameters, node_main
-from relocation_common.ros_conversions import NO_ANSWER, blockers_to_msgs, lanes_to_msgs, msg_to_objects
+from relocation_common.ros_conversions import (
+    NO_ANSWER,
+    blockers_to_msgs,
+    lanes_to_msgs,
+    msg_to_objects,
+    near_to_fields,
+)
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
 from stpik_motion_planner.execution import goal_check
 from stpik_motion_planner.execution.journal import Journal
@@ -163,7 +171,8 @@ class MotionPlannerNode(Node):
 
     def _answer(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         try:
-            lanes, ans = self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes)
+            lanes, ans = self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes,
+                                               req.certify)
         except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
             res.message = str(e)
             self.get_logger().warning(f"feasibility request refused: {e}")
@@ -185,6 +194,7 @@ class MotionPlannerNode(Node):
         if not req.label_only:  # training asks for the label only; execution for the trajectory too
             res.trajectory = trajectory_to_msg(ans.trajectory)
         res.blockers = blockers_to_msgs(ans.blockers)
+        res.near_known, res.near_ids = near_to_fields(ans.near)
         return res
 
     def _on_goal(self, goal: RelocateObject.Goal) -> GoalResponse:

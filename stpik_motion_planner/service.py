@@ -122,16 +122,19 @@ class MotionPlannerService:
 
     # -- feasibility (Eq. 11) -------------------------------------------------------------------------------
     def feasibility(self, object_id: str, removed: Iterable[str], timeout: float | None = None,
-                    all_lanes: bool = False) -> tuple[dict[str, tuple[BlockerSet, ...]], FeasibilityAnswer | None]:
+                    all_lanes: bool = False, certify: bool = False
+                    ) -> tuple[dict[str, tuple[BlockerSet, ...]], FeasibilityAnswer | None]:
         """(every lane's blockers with `removed` gone if `all_lanes`, else {}; the answer for `object_id`, None when
-        all_lanes and no object is asked). `timeout` None or <= 0: the planner's. UnknownObjectError, ScenarioError,
-        ValueError, TypeError for a bad question; SafetyNetTimeout when the wall-clock safety net ran out."""
+        all_lanes and no object is asked): the pick, or with `certify` the certification (MotionPlanner.certify).
+        `timeout` None or <= 0: the planner's. UnknownObjectError, ScenarioError, ValueError, TypeError for a bad
+        question; SafetyNetTimeout when the wall-clock safety net ran out."""
         if timeout is not None and not math.isfinite(timeout):
             raise ValueError(f"timeout must be a finite number of seconds (<= 0: the default), got {timeout}")
         removed = list(removed)
         with self.plan_lock:
             lanes = lane_blockers(self.planner, removed) if all_lanes else {}
-            answer = None if all_lanes and not object_id else self.planner.feasibility(
+            ask = self.planner.certify if certify else self.planner.feasibility
+            answer = None if all_lanes and not object_id else ask(
                 object_id, removed, float(timeout) if timeout is not None and timeout > 0 else None)
         return lanes, answer
 

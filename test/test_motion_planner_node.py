@@ -101,6 +101,21 @@ def test_feasibility_service_answers_as_the_core(graph):
             assert not res.trajectory.points
 
 
+def test_a_certify_request_answers_as_the_core_and_a_pick_names_what_it_comes_near(graph):
+    """PlanFeasibility's certify (the whole relocation) and near_ids (the pick's near set), as the core gives them."""
+    core = MotionPlanner(SCENARIO, PlannerParams.load())
+    for object_id, removed in [("o6", ("o2",)), ("T", ("o2", "o6")), ("T", ())]:
+        req = PlanFeasibility.Request(object_id=object_id, removed_ids=list(removed), timeout=5.0, label_only=True)
+        pick = graph.probe.call(PlanFeasibility, SRV, req, timeout=30)
+        req.certify = True
+        cert = graph.probe.call(PlanFeasibility, SRV, req, timeout=60)
+        want, want_cert = core.feasibility(object_id, frozenset(removed)), core.certify(object_id, frozenset(removed))
+        assert pick.ok and cert.ok and (Label(pick.label), Label(cert.label)) == (want.label, want_cert.label)
+        assert pick.near_known == (want.label != Label.UNFEASIBLE) and not cert.near_known
+        assert frozenset(pick.near_ids) == (want.near or frozenset())
+    assert want.label == Label.UNFEASIBLE and not pick.near_ids  # T with nothing removed: blocked
+
+
 @pytest.mark.parametrize("object_id, removed, timeout, fragment", [
     ("ghost", (), 0.0, "unknown object id 'ghost'"),
     ("o2", ("o2",), 0.0, "is in the removed set"),

@@ -131,7 +131,8 @@ class Env:
 
     def task_planner(self, **params):
         base = {"scene_topic": SCENE_TOPIC, "feasibility_timeout": 1.0, "feasibility_margin": 0.5,
-                "checkpoint_every": 25, "scenario": str(SCENARIO)}  # its shelf and slots: closed-loop execution
+                "checkpoint_every": 25, "scenario": str(SCENARIO),  # its shelf and slots: closed-loop execution
+                "reuse_answers": False}  # a plain cache, as the reference: every distinct question asked once
         return self.g.start(MODULE, params_file=PARAMS_FILE, params={**base, **params}, name="task_planner")
 
     def fake(self, die_after=-1, delay=0.0, relocate="none") -> NodeProcess:

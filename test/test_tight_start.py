@@ -27,8 +27,8 @@ def planner(tmp_path_factory):
 
 
 def test_a_bottle_standing_close_to_a_neighbour_is_carried_away(planner):
-    assert planner.params.certify_relocation  # the answer stands for the carry, retreat and way home too
-    answer = planner.feasibility("o3", frozenset({"o1"}))
+    assert planner.feasibility("o3", frozenset({"o1"})).label == Label.OBSTACLE
+    answer = planner.certify("o3", frozenset({"o1"}))  # the answer stands for the carry, retreat and way home too
     assert answer.label == Label.OBSTACLE, answer.message
     segments = planner.plan_carry("o3", {"o1"}, 1)
     assert [s.name for s in segments] == ["carry", "retreat"]

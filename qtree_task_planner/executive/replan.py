@@ -19,6 +19,7 @@ optimal under that constraint, or none.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Callable, Iterable, Mapping, Sequence
 
@@ -27,7 +28,17 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp
 from qtree_task_planner.search import astar
-from relocation_common.feasibility import FeasibilityAnswer, FeasibilityOracle, Label, Query, ask_many, in_flight
+from relocation_common.feasibility import (
+    FeasibilityAnswer,
+    FeasibilityOracle,
+    Label,
+    Query,
+    ask_many,
+    certifies,
+    certify_many,
+    in_flight,
+    is_pick,
+)
 
 Pose = tuple[float, float, float]  # x, y, tilt
 Key = tuple[str, frozenset[tuple[str, int]]]  # GeometryCache.key: (object, {(present object, pose version)})
@@ -43,6 +54,7 @@ class GeometryCache:
         self._ref: dict[str, Pose] = {}
         self._version: dict[str, int] = {}
         self.table: dict[Key, FeasibilityAnswer] = {}
+        self.certified: dict[Key, FeasibilityAnswer] = {}
         self._lanes: dict[Key, Lanes | None] = {}
         self.calls = self.hits = 0
 
@@ -60,7 +72,8 @@ class GeometryCache:
         return changed
 
     def adopt(self, table: Mapping[tuple[str, frozenset[str]], FeasibilityAnswer],
-              geometry: Mapping[str, Pose]) -> int:
+              geometry: Mapping[str, Pose],
+              certified: Mapping[tuple[str, frozenset[str]], FeasibilityAnswer] | None = None) -> int:
         """Take the answers of a set-keyed table (oracles.CachedOracle.table: (object, removed) -> answer) gathered
         on `geometry` (id -> (x, y, tilt) of the objects on the top shelf when they were asked: the first scene),
         before anything moved (ValueError once an object's version changed). The optimum's and training's answers
@@ -78,6 +91,8 @@ class GeometryCache:
             k = self.key(obj, ids - removed)
             if k not in self.table:
                 self.table[k], n = answer, n + 1
+        for (obj, removed), answer in (certified or {}).items():  # the certifications too (CachedOracle.certified)
+            self.certified.setdefault(self.key(obj, ids - removed), answer)
         return n
 
     def key(self, object_id: str, present: Iterable[str]) -> Key:
@@ -94,6 +109,24 @@ class GeometryCache:
         else:
             self.hits += 1
         return answer
+
+    def certify(self, object_id: str, removed: frozenset[str], present: Iterable[str]) -> FeasibilityAnswer:
+        """The certification of (object_id, removed) (relocation_common.feasibility, "Certification"), cached like
+        the answers; a failed one turns the cached answer unfeasible. A final answer (no pick alone:
+        feasibility.is_pick), or any of a planner that does not certify, is its own certification."""
+        k = self.key(object_id, present)
+        got = self.certified.get(k)
+        if got is None:
+            answer = self.feasibility(object_id, removed, present)
+            if not (certifies(self.oracle) and is_pick(answer)):  # final (feasibility.is_pick)
+                got = answer
+            else:
+                got = certify_many(self.oracle, [(object_id, frozenset(removed))])[0]
+                self.calls += 1
+                if Label(got.label) == Label.UNFEASIBLE:
+                    self.table[k] = dataclasses.replace(got, message=f"certification: {got.message}", blockers=())
+            self.certified[k] = got
+        return got
 
     def lane_blockers(self, removed: frozenset[str], present: Iterable[str]) -> Lanes | None:
         """The planner's lane blockers with `removed` gone (None if it has none), cached like the answers."""
@@ -128,6 +161,14 @@ class RemainingOracle:
         if self.slots is not None and not fits(object_id, removed, self.slots, self.target):
             return no_slot(object_id, self.slots)
         return self.cache.feasibility(object_id, full, self.on_shelf - removed)
+
+    def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """The certification of a question (GeometryCache.certify); g_U as `feasibility` for a banned option or a
+        slot too many."""
+        answer = self.feasibility(object_id, removed)
+        if Label(answer.label) == Label.UNFEASIBLE:
+            return answer
+        return self.cache.certify(object_id, self.rp.gone | removed, self.on_shelf - removed)
 
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """The planner's lane blockers for the objects of the problem (others are not ours to relocate)."""
@@ -180,6 +221,24 @@ class SlotLimit:
         """The queries that fit go to the wrapped oracle together; the others are g_U."""
         ask = [q for q in queries if self.fits(*q)]
         got = dict(zip(ask, ask_many(self.oracle, ask)))
+        out = [got[q] if q in got else no_slot(q[0], self.slots) for q in queries]
+        if on_answer is not None:
+            for q, a in zip(queries, out):
+                on_answer(q, a)
+        return out
+
+    def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """g_U beyond the slots, else the oracle's certification (its answer when it does not certify)."""
+        if not self.fits(object_id, removed):
+            return no_slot(object_id, self.slots)
+        return certify_many(self.oracle, [(object_id, removed)])[0]
+
+    def certify_many(self, queries: Sequence[Query],
+                     on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None
+                     ) -> list[FeasibilityAnswer]:
+        """The certifications of the queries that fit, together (feasibility.certify_many); the others g_U."""
+        ask = [q for q in queries if self.fits(*q)]
+        got = dict(zip(ask, certify_many(self.oracle, ask)))
         out = [got[q] if q in got else no_slot(q[0], self.slots) for q in queries]
         if on_answer is not None:
             for q, a in zip(queries, out):

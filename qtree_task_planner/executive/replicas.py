@@ -8,9 +8,10 @@ SIGKILLed planner's service stays in the DDS graph for some 20 s and each try co
 PlannerUnavailable leaves this oracle only when no replica could answer a question, so the task planner's outage
 handling (outage.until_available) sees an outage only when all of them are gone.
 
-One question at a time (`feasibility`, `lane_blockers`) goes to the first replica that is up, in the given order:
-with replica 0 up, a sequential caller (the Q-Tree's episodes) asks exactly what one planner would be asked.
-`feasibility_many` keeps one question in flight per replica that is up (relocation_common.feasibility.BatchOracle).
+One question at a time (`feasibility`, `certify`, `lane_blockers`) goes to the first replica that is up, in the given
+order: with replica 0 up, a sequential caller (the Q-Tree's episodes) asks exactly what one planner would be asked.
+`feasibility_many` and `certify_many` keep one question in flight per replica that is up
+(relocation_common.feasibility.BatchOracle; a certification: feasibility.CertifyingOracle).
 """
 from __future__ import annotations
 
@@ -21,14 +22,21 @@ from typing import Callable, Protocol, Sequence, TypeVar
 
 from qtree_task_planner.executive.outage import PlannerUnavailable
 from qtree_task_planner.oracles import Lanes
-from relocation_common.feasibility import FeasibilityAnswer, FeasibilityOracle, LaneOracle, Query
+from relocation_common.feasibility import (
+    CertifyingOracle,
+    FeasibilityAnswer,
+    FeasibilityOracle,
+    LaneOracle,
+    Query,
+    certify_many,
+)
 
 T = TypeVar("T")
 
 
-class Replica(FeasibilityOracle, LaneOracle, Protocol):
-    """One motion planner's feasibility service (the node's ros_clients.ServiceOracle): Eq. 11 and the lane
-    blockers, its `name`, the monotonic time of its last answer `last_ok`, and whether it is up."""
+class Replica(FeasibilityOracle, CertifyingOracle, LaneOracle, Protocol):
+    """One motion planner's feasibility service (the node's ros_clients.ServiceOracle): Eq. 11, certifications and
+    the lane blockers, its `name`, the monotonic time of its last answer `last_ok`, and whether it is up."""
 
     name: str
     last_ok: float
@@ -123,6 +131,11 @@ class ReplicaOracle:
         """Eq. 11 from the first replica that is up (failover on PlannerUnavailable)."""
         return self._one(lambda r: r.feasibility(object_id, removed), repr(object_id))
 
+    def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """The certification of (object_id, removed) from the first replica that is up (failover); a replica that
+        does not certify gives final answers (feasibility.certify_many)."""
+        return self._one(lambda r: certify_many(r, [(object_id, removed)])[0], f"the certification of {object_id!r}")
+
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers, from the first replica that is up."""
         return self._one(lambda r: r.lane_blockers(removed), "the lane blockers")
@@ -135,6 +148,16 @@ class ReplicaOracle:
         replica one question at a time from a shared queue. A question whose replica fails goes back to the
         queue; PlannerUnavailable when questions remain and every replica is down; any other error (Cancelled,
         a refused query) stops the batch and is raised once the questions in flight are back."""
+        return self._many(queries, on_answer, lambda r, q: r.feasibility(*q))
+
+    def certify_many(self, queries: Sequence[Query],
+                     on_answer: Callable[[Query, FeasibilityAnswer], None] | None = None) -> list[FeasibilityAnswer]:
+        """Every certification, in the queries' order, as feasibility_many (one in flight per replica that is up)."""
+        return self._many(queries, on_answer, lambda r, q: certify_many(r, [q])[0])
+
+    def _many(self, queries: Sequence[Query], on_answer: Callable[[Query, FeasibilityAnswer], None] | None,
+              ask: Callable[[Replica, Query], FeasibilityAnswer]) -> list[FeasibilityAnswer]:
+        """feasibility_many's work with `ask(replica, query)` as the question."""
         out: dict[int, FeasibilityAnswer] = {}  # query index -> answer
         todo = deque(range(len(queries)))
         stop: list[BaseException] = []
@@ -147,7 +170,7 @@ class ReplicaOracle:
                         return
                     k = todo.popleft()
                 try:
-                    a = self.replicas[i].feasibility(*queries[k])
+                    a = ask(self.replicas[i], queries[k])
                 except PlannerUnavailable as e:
                     lost[i] = e
                     self._failed(i)

@@ -208,7 +208,7 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     so far, after each relocation and re-plan (closed loop)."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
-        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry())
+        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry(), oracle.certified)
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
             before_each()

@@ -32,6 +32,8 @@ def check_node_parameters(p: Callable[[str], object]) -> None:
     n = p("replicas")
     if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 64:
         raise ParameterError(f"replicas must be an integer in 1..64 (motion planners), got {n!r}")
+    if not isinstance(p("reuse_answers"), bool):
+        raise ParameterError(f"reuse_answers must be true or false, got {p('reuse_answers')!r}")
     every = p("checkpoint_every")
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
         raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")

@@ -410,6 +410,65 @@ void kt_add_edge(KTree *t, int node, int a, int label, double q, int child) {
 
 void kt_set_counts(KTree *t, int64_t mp_q, double q_sum) { t->mp_q = mp_q; t->q_sum = q_sum; }
 
+/* A certification turned the edge (removed set `mask`, action a) unfeasible (training.py): in every node with that
+   removed set a known feasible edge a becomes unfeasible, as if first met so (Q = alpha * R_UNFEASIBLE, Eq. 7 from
+   0; pruned from the offered actions); the subtree below it is dropped (its edges leave MP_q and Eq. 15's sum, the
+   remaining nodes keep their creation order with compacted ids); the memo answers g_U from now on. Returns the
+   edges relabelled, or -2 (out of memory). Between kt_train calls only (no episode running). */
+int kt_relabel(KTree *t, uint64_t mask, int a) {
+    int n1 = t->n1, n = t->n_nodes, count = 0, m = 0;
+    int8_t *row = memo_row(t, mask);
+    char *dead = calloc((size_t)n, 1);
+    int32_t *remap = malloc(sizeof(int32_t) * (size_t)n);
+    if (!row || !dead || !remap) { free(dead); free(remap); return -2; }
+    row[a] = 0;
+    for (int i = 0; i < n; i++) {
+        size_t e = (size_t)i * n1 + a;
+        if (t->mask[i] != mask || t->label[e] <= 0) continue;
+        count++;
+        if (t->child[e] >= 0) dead[t->child[e]] = 1;
+        double nw = t->alpha * R_UNFEASIBLE;
+        t->q_sum += fabs(nw) - fabs(t->q[e]);
+        t->q[e] = nw; t->label[e] = 0; t->child[e] = -1;
+        int8_t *off = t->offer + (size_t)i * n1;
+        int no = t->n_offer[i], k = 0;
+        while (k < no && off[k] != a) k++;
+        if (k < no) { memmove(off + k, off + k + 1, (size_t)(no - k - 1)); t->n_offer[i]--; }
+    }
+    for (int i = 1; i < n; i++)  /* a child is created after its parent: one pass marks whole subtrees */
+        if (!dead[i] && dead[t->parent[i]]) dead[i] = 1;
+    for (int i = 0; i < n; i++) {
+        if (!dead[i]) { remap[i] = m++; continue; }
+        remap[i] = -1;
+        for (int k = 0; k < t->n_edges[i]; k++) {
+            t->q_sum -= fabs(t->q[(size_t)i * n1 + t->order[(size_t)i * n1 + k]]);
+            t->mp_q--;
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        int j = remap[i];
+        if (j < 0) continue;
+        size_t src = (size_t)i * n1, dst = (size_t)j * n1;
+        t->mask[j] = t->mask[i]; t->action[j] = t->action[i];
+        t->parent[j] = t->parent[i] >= 0 ? remap[t->parent[i]] : -1;
+        t->n_edges[j] = t->n_edges[i]; t->n_offer[j] = t->n_offer[i];
+        for (int b = 0; b < n1; b++) {
+            int c = t->child[src + b];
+            t->child[dst + b] = c >= 0 ? remap[c] : -1;
+        }
+        if (j != i) {
+            memmove(t->label + dst, t->label + src, (size_t)n1);
+            memmove(t->order + dst, t->order + src, (size_t)n1);
+            memmove(t->offer + dst, t->offer + src, (size_t)n1);
+            memmove(t->q + dst, t->q + src, sizeof(double) * (size_t)n1);
+        }
+    }
+    t->n_nodes = m;
+    t->last_len = -2; t->last_ok = 0;  /* E_1st: the greedy path is read again */
+    free(dead); free(remap);
+    return count;
+}
+
 /* accessors for the export to Python nodes */
 int kt_n_nodes(const KTree *t) { return t->n_nodes; }
 int64_t kt_mp_q(const KTree *t) { return t->mp_q; }

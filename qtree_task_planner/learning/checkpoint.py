@@ -69,7 +69,7 @@ class Checkpoint:
     converged: bool
     cancelled: bool
     tree: dict  # QTree.to_state()
-    feasibility: list = field(default_factory=list)  # [[object_id, [removed ids], label(, blocker sets)], ...]
+    feasibility: list = field(default_factory=list)  # [[object_id, [removed ids], label(, blocker sets(, near))]]
     elapsed_s: float = 0.0
     reason: str = "periodic"  # periodic | final | cancelled | interrupted: <why>
 
@@ -99,24 +99,31 @@ class Checkpoint:
     def fill_cache(self, cache: CachedOracle) -> int:
         """Put the stored feasibility answers into `cache` (not counted as calls); returns how many were new."""
         added = 0
-        for object_id, removed, label, *blockers in self.feasibility:
+        for object_id, removed, label, *rest in self.feasibility:
             key = (object_id, frozenset(removed))
             if key not in cache.table:
                 sets = tuple(BlockerSet(frozenset(objs), bool(certain), str(lane))
-                             for objs, certain, lane in (blockers[0] if blockers else ()))
-                cache.table[key] = FeasibilityAnswer(Label(label), message="from checkpoint", blockers=sets)
+                             for objs, certain, lane in (rest[0] if rest else ()))
+                near = frozenset(rest[1]) if len(rest) > 1 and rest[1] is not None else None
+                cache.put(key, FeasibilityAnswer(Label(label), message="from checkpoint", blockers=sets, near=near))
                 added += 1
         return added
 
     @staticmethod
     def table_of(cache: CachedOracle) -> list:
-        """[object, removed, label] per answer, and the blocker sets [[objects, certain, lane], ...] when the answer
-        named any (the blocker A* needs them to ask nothing twice after a resume)."""
+        """[object, removed, label] per answer the planner gave, then the blocker sets [[objects, certain, lane],
+        ...] when the answer named any (the blocker A* needs them to ask nothing twice after a resume), then its near
+        set when it is a pick alone. The answers the cache reused are left out: the same rule gives them again from
+        these (CachedOracle), so a resumed training asks what the uninterrupted one would have."""
         out = []
         for (o, removed), a in cache.table.items():
+            if (o, removed) in cache.reused:  # the answers the planner gave: the reused ones follow from them
+                continue
             row = [o, sorted(removed), int(a.label)]
-            if a.blockers:
+            if a.blockers or a.near is not None:
                 row.append([[sorted(b.objects), b.certain, b.lane] for b in a.blockers])
+            if a.near is not None:
+                row.append(sorted(a.near))
             out.append(row)
         return out
 
@@ -220,12 +227,14 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
 
 
 def _answer_row(row: list[Any]) -> list[Any]:
-    """One stored answer, checked: [object, removed, label] or with its blocker sets [[objects, certain, lane], ...]
-    (TypeError/ValueError when malformed)."""
+    """One stored answer, checked: [object, removed, label], with its blocker sets [[objects, certain, lane], ...],
+    and its near set [objects] (TypeError/ValueError when malformed)."""
     o, r, lab, *rest = row
     out = [str(o), [str(x) for x in r], int(Label(lab))]
-    if len(rest) > 1:
+    if len(rest) > 2:
         raise ValueError(f"feasibility row of {len(row)} fields")
     if rest:
         out.append([[[str(x) for x in objs], bool(certain), str(lane)] for objs, certain, lane in rest[0]])
+    if len(rest) > 1:
+        out.append([str(x) for x in rest[1]])
     return out

@@ -106,6 +106,8 @@ def _load() -> ctypes.CDLL | None:
     lib.kt_add_node.argtypes = [P, INT, INT]
     lib.kt_add_edge.argtypes = [P, INT, INT, INT, D, INT]
     lib.kt_set_counts.argtypes = [P, I64, D]
+    lib.kt_relabel.restype = INT
+    lib.kt_relabel.argtypes = [P, ctypes.c_uint64, INT]
     lib.kt_best_path.restype = INT
     lib.kt_best_path.argtypes = [P, IP]
     for name, res in (("kt_n_nodes", INT), ("kt_mp_q", I64), ("kt_memo_hits", I64), ("kt_q_sum", D)):
@@ -359,6 +361,17 @@ class KernelTree(QTree):
             raise MemoryError("Q-Tree kernel: out of memory")
         if rc != 0:
             raise RuntimeError(f"Q-Tree kernel failed ({rc})")
+
+    def relabel(self, object_id: str, removed: frozenset[str]) -> int:
+        """A certification turned (object_id, removed) unfeasible: every node with that removed set has the edge
+        unfeasible from now on and the subtree below it dropped (kt_relabel in _kernel.c); the number of edges
+        relabelled (0 when the tree never took it)."""
+        mask = sum(1 << self.ids.index(o) for o in removed)
+        n = _lib().kt_relabel(self._handle, mask, self.ids.index(object_id))
+        if n == -2:
+            raise MemoryError("Q-Tree kernel: out of memory")
+        self._sync()
+        return int(n)
 
     def best_actions(self) -> list[int] | None:
         """QTree.best_path's actions, in C; None when the greedy path misses the target."""

@@ -5,6 +5,13 @@ offered, or (breadth search only) at the first unfeasible action. In depth searc
 another action from the same node (the unfeasible one is pruned there). Training stops after E_max episodes, or
 when Eq. 16 holds, |Q_sum(e) - Q_sum(e-1)| <= beta, for `quiet_episodes` consecutive episodes.
 
+Lazy certification (docs/qtree.md, "Certified sequences"): the episodes learn from pick answers; when training stops
+(Eq. 16 or E_max) the learned sequence is certified (CachedOracle.certify_many: the whole relocation of each edge,
+all at once over planner replicas). An edge that fails is unfeasible from then on: relabelled in the tree (its
+subtree dropped: KernelTree.relabel) and in the cache, and training goes on (more episodes while E_max allows) until
+the learned sequence certifies or the greedy path misses the target. An oracle without certification (a test
+double, an eager planner) gives final answers: its sequence is certified as it is.
+
 `train` is the one entry point: the CLI, the task_planner node (with a ROS service-client oracle) and the
 evaluation sweeps (with a shared CachedOracle) call it. The episodes run in one engine, the C kernel (kernel.py);
 the reference (test/qtree_reference.py) is the tests' oracle.
@@ -27,7 +34,7 @@ from qtree_task_planner.learning.policies import epsilon_schedule
 from qtree_task_planner.learning.q_tree import QTree
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
-from relocation_common.feasibility import FeasibilityOracle
+from relocation_common.feasibility import FeasibilityOracle, Label
 from relocation_common.scenario import Scenario
 
 WEIGHT_TOL = 1e-9
@@ -68,6 +75,8 @@ class TrainingResult:
     tree_edges: int
     q_sum_history: list[float]  # Eq. 15 after each episode (paper Fig. 4)
     params: TrainingParams
+    certify_calls: int = 0  # certifications asked of the oracle by this run (not answered by the cache)
+    relabelled: int = 0  # learned edges a failed certification turned unfeasible
     elapsed_s: float = field(default=0.0, compare=False)
     tree: QTree | None = field(default=None, compare=False, repr=False)
 
@@ -92,6 +101,8 @@ class TrainingResult:
             "cancelled": self.cancelled,
             "tree_nodes": self.tree_nodes,
             "tree_edges": self.tree_edges,
+            "certify_calls": self.certify_calls,
+            "relabelled": self.relabelled,
             "elapsed_s": self.elapsed_s,
             "params": self.params.to_dict(),
             "q_sum_history": self.q_sum_history,
@@ -135,7 +146,11 @@ def train(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, para
     try:
         if resume is not None:
             run.resume(resume)
-        _run_batches(run, callback, callback_every if callback is not None else 0, checkpoint_every, on_checkpoint)
+        while True:
+            _run_batches(run, callback, callback_every if callback is not None else 0, checkpoint_every,
+                         on_checkpoint)
+            if run.cancelled or run.certified():
+                break
     finally:
         if gc_enabled:
             gc.enable()
@@ -159,6 +174,23 @@ class _Run:
         self.prev_sum, self.quiet, self.converged, self.cancelled = 0.0, 0, False, False
         self.e_1st: int | None = None
         self.calls_before, self.elapsed_before = 0, 0.0
+        self.cert0, self.relabelled = cache.cert_calls, 0
+
+    def certified(self) -> bool:
+        """Certify the learned sequence (module doc): True when it certifies or there is none; else its failed edges
+        are relabelled unfeasible, Eq. 16's count starts again and False (train goes on: more episodes, or at
+        E_max the next greedy sequence)."""
+        seq = self.tree.best_sequence()
+        if seq is None:
+            return True
+        edges = [(o, frozenset(seq[:k])) for k, o in enumerate(seq)]
+        failed = [e for e, a in zip(edges, self.cache.certify_many(edges)) if a.label == Label.UNFEASIBLE]
+        for o, removed in failed:
+            self.relabelled += self.tree.relabel(o, removed)
+        if failed:
+            self.converged, self.quiet = False, 0
+            self.tree.push_state(self.rng, self.episode, self.prev_sum, self.quiet, self.converged, self.e_1st)
+        return not failed
 
     def resume(self, checkpoint: Checkpoint) -> None:
         """Go on from `checkpoint` (CheckpointError unless it was written for this problem and these params)."""
@@ -216,6 +248,8 @@ class _Run:
             tree_edges=tree.n_edges,
             q_sum_history=self.history,
             params=self.params,
+            certify_calls=self.cache.cert_calls - self.cert0,
+            relabelled=self.relabelled,
             elapsed_s=self.elapsed(),
             tree=tree,
         )

@@ -1,22 +1,23 @@
 """The exact minimum-weight sequence (Eq. 8) in few planner calls: lazy A* over removed sets with blockers
 (docs/qtree.md). exact.solve (uniform-cost search) stays the reference.
 
-Knowledge. A certain blocker claim (relocation_common.feasibility: an unfeasible answer whose BlockerSets are all
-certain, or the oracle's `lane_blockers`) made at set S says: from S or any superset, relocating the object needs
-one of its lanes cleared (all of that lane's objects removed). Uncertain sets claim nothing and are not used.
-
 Search (Lazy Shortest Path, Dellin & Srinivasa 2016). The cost of a removed set R is g(R) = sum of phi over R
-(Eq. 8: the order does not change the weight). A* runs on the optimistic graph: an edge "remove o from R" or
-"relocate T from R" is there unless an answer or a claim says it is unfeasible; nothing is asked during this
-search. Its heuristic h(R) = `need(T, R)`: the lightest clearing of one of the target's lanes not yet removed,
-plus, for the objects of that lane, the most any one of them needs removed beyond it (recursively, `depth`
-levels); a lane needing an object that must leave after it is no way. Admissible on the optimistic graph, where
-every claim holds. The path found is then verified with real feasibility calls from the start (the target only
-from a set known reachable: asking it first cost 2.7x the calls on random instances without lane information);
-the first unfeasible answer (and its blockers) is recorded and the search repeated. An oracle with several planner
-replicas (docs/architecture.md) is asked up to `in_flight` consecutive edges of the path at once. When every edge of the
-optimistic optimum is feasible it is the proven optimum: the optimistic graph contains every true edge. Each (object,
-set) is asked at most once.
+(Eq. 8: the order does not change the weight). A* runs on the optimistic graph G of knowledge.py: an edge "remove o
+from R" or "relocate T from R" is there unless an answer or a certain blocker claim says it is unfeasible; nothing
+is asked during this search. Its heuristic h (knowledge.py, 2.: the objects every path must remove before the
+target, its lanes' own needs) is admissible on G, and it removes after R only the objects D(R) of knowledge.py,
+3. (objects some claim not yet held on the way to the target names, all objects where an unexplained answer is in
+reach), which keeps every optimal path of G. Ties of f go to the paths with fewer unverified edges (those
+forced before the target counted as unverified), then to the deeper set: on a tie the search runs down one path.
+The path found is then verified with real feasibility calls from the start (`_verify`; the target only from a set
+known reachable: asking it first cost 2.7x the calls on random instances without lane information); the first
+unfeasible answer (and its blockers) is recorded and the search repeated, with the heuristic's memo kept while no
+new claim arrives. An oracle with several planner replicas (docs/architecture.md) is asked up to `in_flight`
+consecutive edges of the path at once. When every edge of the optimistic optimum is feasible, its edges are
+certified (the whole relocation of each: relocation_common.feasibility, "Certification"; all at once over replicas):
+an edge that fails is unfeasible and the search goes on (LazySP's forward selector); when all certify it is the
+proven optimum, certified end to end: the optimistic graph contains every true edge. Each (object, set) is asked at
+most once.
 """
 from __future__ import annotations
 
@@ -27,20 +28,25 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.search.exact import Claim, ExactResult, as_problem, why_none
+from qtree_task_planner.search.exact import ExactResult, as_problem, why_none
+from qtree_task_planner.search.knowledge import DEPTH, Knowledge
 from relocation_common.feasibility import (
-    BlockerSet,
     FeasibilityAnswer,
     FeasibilityOracle,
     Label,
     Query,
     ask_many,
-    claims,
+    certifies,
+    certify_many,
     in_flight,
 )
 from relocation_common.scenario import Scenario
 
-DEPTH = 2  # levels of the blockers' own lanes in the heuristic
+__all__ = ["AStarResult", "DEPTH", "Knowledge", "solve"]
+
+# open-list entries: (f, unverified edges on the path + objects forced before the target, -depth, tie, set,
+# parent set, object, unverified edges on the path)
+Entry = tuple[float, int, int, int, frozenset[str], "frozenset[str] | None", "str | None", int]
 
 
 @dataclass(frozen=True)
@@ -55,114 +61,49 @@ class AStarResult(ExactResult):
         return {**super().to_dict(), "blocker_calls": self.blocker_calls, "searches": self.searches}
 
 
-class Knowledge:
-    """What the answers said: feasibility of asked edges and certain blocker claims (object -> [(S, lanes)])."""
-
-    def __init__(self, weights: Mapping[str, float], target: str, depth: int = DEPTH) -> None:
-        self.weights, self.target, self.depth = weights, target, depth
-        self.answers: dict[Query, bool] = {}
-        self.claims: dict[str, list[Claim]] = {}
-        self._h: dict[frozenset[str], float] = {}
-
-    def claim(self, obj: str, removed: frozenset[str], blockers: Sequence[BlockerSet]) -> None:
-        """Record a certain claim (ignored unless every set is certain)."""
-        if claims(blockers):
-            entry = (frozenset(removed), tuple(b.objects for b in blockers))
-            if entry not in self.claims.setdefault(obj, []):
-                self.claims[obj].append(entry)
-                self._h.clear()
-
-    def lanes_known(self, obj: str, removed: frozenset[str], lanes: tuple[BlockerSet, ...]) -> None:
-        """From lane_blockers: object -> its lanes (an empty tuple: never relocatable; certain sets only)."""
-        if lanes == ():
-            self.claims.setdefault(obj, []).append((frozenset(removed), ()))
-            self._h.clear()
-        else:
-            self.claim(obj, removed, lanes)
-
-    def record(self, obj: str, removed: frozenset[str], answer: FeasibilityAnswer) -> bool:
-        """Remember an answer (and its lane blockers); whether the object was feasible."""
-        ok = Label(answer.label) != Label.UNFEASIBLE
-        self.answers[(obj, removed)] = ok
-        if not ok:
-            self.claim(obj, removed, answer.blockers)
-        return ok
-
-    def possible(self, obj: str, removed: frozenset[str]) -> bool:
-        """Not known unfeasible: not answered g_U, and every applicable claim has a lane inside `removed`."""
-        if self.answers.get((obj, removed)) is False:
-            return False
-        return all(any(b <= removed for b in lanes) for s, lanes in self.claims.get(obj, ()) if s <= removed)
-
-    def verified(self, obj: str, removed: frozenset[str]) -> bool:
-        """Whether the planner answered feasible for `obj` after `removed`."""
-        return self.answers.get((obj, removed)) is True
-
-    def h(self, removed: frozenset[str]) -> float:
-        """Admissible lower bound on the weight still to remove before the target can be relocated."""
-        got = self._h.get(removed)
-        if got is None:
-            got = self._h[removed] = self.need(self.target, removed, removed, frozenset(), self.depth)
-        return got
-
-    def need(self, obj: str, removed: frozenset[str], free: frozenset[str], chain: frozenset[str], depth: int) -> float:
-        """Weight outside `free` that must be removed before `obj` (objects of `chain` leave after it)."""
-        best = 0.0
-        for s, lanes in self.claims.get(obj, ()):
-            if not s <= removed:
-                continue
-            low = math.inf
-            for b in lanes:
-                if b & chain or obj in b:
-                    continue
-                rest = b - free
-                v = math.fsum(self.weights.get(y, math.inf) for y in rest)
-                if depth and rest and v < low:
-                    sub = free | b
-                    v += max(self.need(y, removed, sub, chain | {obj}, depth - 1) for y in rest)
-                low = min(low, v)
-            best = max(best, low)
-        return best
-
-
-def _optimistic(obstacles: Sequence[str], phi: Mapping[str, float], target: str,
+def optimistic(obstacles: Sequence[str], phi: Mapping[str, float], target: str,
                 kb: Knowledge) -> tuple[list[Query] | None, int]:
-    """A* on the optimistic graph: the edges [(object, set)] of a least-weight path ending with the target's,
-    ties to fewer unverified edges; None if there is none. Also returns the sets expanded."""
+    """A* on the optimistic graph (module doc): the edges [(object, set)] of a least-weight path ending with the
+    target's; None if there is none. Also returns the sets expanded."""
     tie = itertools.count()
     start: frozenset[str] = frozenset()
-    h0 = kb.h(start)
+    h0, forced0, _ = kb.bound(start)
     if math.isinf(h0):
         return None, 0
-    # entries: (f, unverified edges, -depth, tie, set, parent set, object)
-    heap: list[tuple[float, int, int, int, frozenset[str], frozenset[str] | None, str | None]] = [
-        (h0, 0, 0, next(tie), start, None, None)]
+    heap: list[Entry] = [(h0, forced0, 0, next(tie), start, None, None, 0)]
     closed: dict[frozenset[str], tuple[frozenset[str] | None, str | None]] = {}  # set -> (parent set, object)
     while heap:
-        f, unv, _, _, state, parent, obj = heapq.heappop(heap)
+        _, _, _, _, state, parent, obj, unv = heapq.heappop(heap)
         if obj == target and parent is not None:  # (a target entry's parent is its own set)
-            path: list[Query] = [(target, parent)]
-            grand, o = closed[parent]
-            while grand is not None and o is not None:  # back to the start, (None, None)
-                path.append((o, grand))
-                grand, o = closed[grand]
-            return path[::-1], len(closed)
+            return _path(target, parent, closed), len(closed)
         if state in closed:
             continue
         closed[state] = (parent, obj)
         g = math.fsum(phi[o] for o in state)  # fsum: exact, in any set order (PYTHONHASHSEED)
         if kb.possible(target, state):
-            heapq.heappush(heap, (g, unv + (not kb.verified(target, state)), -len(state), next(tie), state, state,
-                                  target))
+            u = unv + (not kb.verified(target, state))
+            heapq.heappush(heap, (g, u, -len(state), next(tie), state, state, target, u))
+        worth = kb.relevant(state)
         for o in obstacles:
             nxt = state | {o}
-            if o in state or nxt in closed or not kb.possible(o, state):
+            if o in state or (worth is not None and o not in worth) or nxt in closed or not kb.possible(o, state):
                 continue
-            h = kb.h(nxt)
-            if not math.isinf(h):
-                heapq.heappush(heap, (g + phi[o] + h, unv + (not kb.verified(o, state)), -len(nxt), next(tie), nxt,
-                                      state, o))
+            _, forced, f = kb.bound(nxt)
+            if not math.isinf(f):
+                u = unv + (not kb.verified(o, state))
+                heapq.heappush(heap, (f, u + forced + 1, -len(nxt), next(tie), nxt, state, o, u))
     return None, len(closed)
+
+
+def _path(target: str, last: frozenset[str], closed: Mapping[frozenset[str], tuple[frozenset[str] | None,
+                                                                                  str | None]]) -> list[Query]:
+    """The edges from the empty set to `last` (parent pointers of `closed`), then the target's from `last`."""
+    path: list[Query] = [(target, last)]
+    grand, o = closed[last]
+    while grand is not None and o is not None:  # back to the start, (None, None)
+        path.append((o, grand))
+        grand, o = closed[grand]
+    return path[::-1]
 
 
 def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, depth: int = DEPTH) -> AStarResult:
@@ -182,7 +123,7 @@ def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, dept
     calls = searches = expanded = 0
     answers: dict[Query, FeasibilityAnswer] = {}
     while True:
-        path, n = _optimistic(obstacles, phi, target, kb)
+        path, n = optimistic(obstacles, phi, target, kb)
         searches, expanded = searches + 1, expanded + n
         if path is None:
             return AStarResult(None, None, calls, expanded, why_none(target, answers, kb.claims), blocker_calls,
@@ -198,7 +139,8 @@ def _verify(path: list[Query], target: str, kb: Knowledge, oracle: FeasibilityOr
             answers: dict[Query, FeasibilityAnswer]) -> tuple[int, bool]:
     """Ask the path's unasked edges from the start, up to the oracle's `in_flight` at once (planner replicas;
     one at a time otherwise), the target only from a set known reachable; stop at the first batch with an
-    unfeasible answer. (questions asked, every edge feasible); the answers also go to `answers`."""
+    unfeasible answer. Then certify every edge at once (feasibility.certify_many); a failed one is recorded
+    unfeasible. (questions asked, every edge feasible and certified); the answers also go to `answers`."""
     todo = [(o, s) for o, s in path if (o, s) not in kb.answers]
     asked = 0
     while todo:
@@ -209,4 +151,10 @@ def _verify(path: list[Query], target: str, kb: Knowledge, oracle: FeasibilityOr
         if not all([kb.record(o, s, a) for (o, s), a in zip(batch, got)]):
             return asked, False
         todo = todo[len(batch):]
-    return asked, True
+    if not certifies(oracle):  # final answers: nothing to certify
+        return asked, True
+    failed = [(e, a) for e, a in zip(path, certify_many(oracle, path)) if Label(a.label) == Label.UNFEASIBLE]
+    for (o, s), a in failed:
+        answers[(o, s)] = a
+        kb.record(o, s, a)
+    return asked, not failed

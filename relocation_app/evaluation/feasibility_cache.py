@@ -46,10 +46,13 @@ class FeasibilityCacheError(ValueError):
 
 def planner_params():
     """The evaluation's planner parameters: config/motion_planner.yaml's, with the safety net EVAL_TIMEOUT (not part
-    of the cache key). Shared by the evaluation's commands, the scene search and the tests."""
+    of the cache key) and every answer certified (certify_relocation: the tables hold eager answers, final for a
+    training that asks nothing else; docs/motion_planner.md, "Lazy certification"). Shared by the evaluation's
+    commands, the scene search and the tests."""
     from stpik_motion_planner.planning.params import PlannerParams
     p = PlannerParams.load()
     p.timeout = EVAL_TIMEOUT
+    p.certify_relocation = True
     return p
 
 
@@ -66,6 +69,7 @@ def scenario_content(scenario) -> dict:
 
 
 SAFETY_NETS = ("timeout", "carry_timeout")  # wall-clock limits that never change an answer (they raise instead)
+NOT_LABELS = ("reuse_distance",)  # what an answer reports besides its label (its near set), not in the tables
 
 
 def planner_content(params) -> dict:
@@ -80,7 +84,7 @@ def planner_content(params) -> dict:
             return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
         return v
     from relocation_common import robot_description as rd
-    content = {k: v for k, v in plain(params).items() if k not in SAFETY_NETS}
+    content = {k: v for k, v in plain(params).items() if k not in SAFETY_NETS + NOT_LABELS}
     content["stpik"]["qdot_max"] = plain(rd.QDOT_MAX)  # the robot's joint speed limits (Table 7) change answers too
     return content
 

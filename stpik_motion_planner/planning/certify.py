@@ -1,5 +1,8 @@
-"""A feasible pick certified for its whole relocation (certify_relocation, docs/motion_planner.md): from the grasp,
-the carry to the next slot, the retreat and the way home must plan too, or the pick lane is not taken."""
+"""A feasible pick certified for its whole relocation (docs/motion_planner.md, "Lazy certification"): from the
+grasp, the carry to the next slot, the retreat and the way home must plan too, or the pick lane is not taken. Asked
+for every answer with certify_relocation (eager), else by a certify request (MotionPlanner.certify) and by the pick
+of an execution (plan_pick). Kept by grasp: (object, removed set, joint configuration at the grasp) -> verdict, so a
+certification asked again (a second question, the execution's pick) plans nothing."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,6 +17,15 @@ from stpik_motion_planner.planning.results import PlanningError
 def certify(ctx: PlanningContext, object_id: str, removed: frozenset[str], q_grasp: np.ndarray) -> str:
     """'' if the rest of the relocation from the grasp q_grasp plans (carry to slot len(removed) with the removed
     bottles in the earlier slots, retreat, way home), else why not. `removed`: the question's, already checked."""
+    key = (object_id, removed, np.round(np.asarray(q_grasp, float), 9).tobytes())
+    why = ctx.certified.get(key)
+    if why is None:
+        why = ctx.certified[key] = _plan_rest(ctx, object_id, removed, q_grasp)
+    return why
+
+
+def _plan_rest(ctx: PlanningContext, object_id: str, removed: frozenset[str], q_grasp: np.ndarray) -> str:
+    """certify's planning (no memo): '' or the failure."""
     k = len(removed)
     try:
         placed = ctx.placed_default(removed, k)

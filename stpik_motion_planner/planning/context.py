@@ -1,13 +1,15 @@
 """What every phase of the motion planner shares (pick.py, carry.py, home.py, certify.py; planner.MotionPlanner is
 one): the scene (the scenario, its lying and gone bottles, collision scenes with bottles placed on the bottom shelf),
 the robot's models (kinematics, arm capsules, the Cartesian planner's hand proxy), the planners (RRT-Connect, STPIK),
-the question's random generator (seed_per_query) and the caches that are no history (a pick's grasp configuration,
-the staging poses' reference tracks).
+the question's random generator (seed_per_query), the caches that are no history (a pick's grasp configuration and
+near set, the staging poses' reference tracks, certifications by grasp) and the objects a pick comes near
+(`near_objects`: reuse across answers).
 """
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import time
 from typing import Iterable, Sequence
 
@@ -27,8 +29,11 @@ from stpik_motion_planner.planning.stpik import Stpik, StpikResult
 
 # left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
 # first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
-# tolerance (stpik.*), so that every path that converged without it is drawn and ends as before
-UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw")
+# tolerance (stpik.*), so that every path that converged without it is drawn and ends as before; reuse_distance
+# (what an answer reports, not how it is planned). certify_relocation is in the seed as true (SEEDED_AS): a lazy
+# pick draws what the eager one drew, so the lane a certification accepts is the eager answer's
+UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance")
+SEEDED_AS = {"certify_relocation": True}
 UNSEEDED_STPIK = ("grasp_yaw_tol",)
 Placed = list[tuple[str, tuple[float, float]]]  # bottles on the bottom shelf: (id, slot xy)
 
@@ -52,11 +57,14 @@ class PlanningContext:
         # clear is then clear for the fingers STPIK drives to the grasp (docs/motion_planner.md, "Blockers")
         self.hand_margin = max(p.hand_margin, p.stpik.clearance) if p.screen_at_clearance else p.hand_margin
         self.hand = HandProxy(self.hand_margin)
+        self.reach = HandProxy(p.reuse_distance)  # the hand proxy inflated to reuse_distance (near_objects)
         self.rrt = CartesianRRT(p.workspace_lo, p.workspace_hi, p.resolution, p.simplify_checks)
         self.home = np.array(home_pose())
         self.last_stats = QueryStats()
         self.pick_end: dict[tuple[str, frozenset[str]], np.ndarray] = {}  # (object, removed) -> grasp configuration
+        self.pick_near: dict[tuple[str, frozenset[str]], frozenset[str] | None] = {}  # -> near_objects
         self.stage_refs: dict[tuple[object, ...], list[np.ndarray] | None] = {}  # home.stage_reference's tracks
+        self.certified: dict[tuple[str, frozenset[str], bytes], str] = {}  # (object, removed, grasp) -> certify.certify
 
     # ---------------------------------------------------------------- the question
     def check_question(self, object_id: str, removed: Iterable[str]) -> frozenset[str]:
@@ -78,7 +86,7 @@ class PlanningContext:
         if not self.params.seed_per_query:
             return None
         sc = self.scenario
-        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED}
+        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED} | SEEDED_AS
         params["stpik"] = {k: v for k, v in params["stpik"].items() if k not in UNSEEDED_STPIK}
         params["stpik"]["qdot_max"] = rd.QDOT_MAX.copy()  # Table 7, the robot's: in the seed as when it was a parameter
         parts = [repr(sc.shelf), objects_key(sc.objects, sc.shelf.top_z), repr(sc.slots),  # objects_key: the seeds
@@ -153,6 +161,72 @@ class PlanningContext:
         if not r.ok:
             stats.stpik_reject.append(r.reason)
         return r
+
+
+# ---------------------------------------------------------------- reuse across answers
+# The objects a pick's motion comes near (relocation_common.feasibility, "Reuse"; docs/motion_planner.md, "Reuse
+# across answers"): the answer's `near` set. An object enters a check of a pick only within the widest band any check
+# of it looks at (PlannerParams.checked_distance: the hand proxy's inflation in the Cartesian planner, STPIK's
+# candidate band clearance + buffer). `near_objects` lists every top-shelf bottle, removed or not, whose place some arm
+# capsule (at each IK step of the tracked motion) or the hand proxy (along the tool path, at the Cartesian planner's
+# resolution) comes within `reuse_distance` (>= that band) of, by axis-aligned boxes (a superset of the true
+# distances: never too few). A bottle outside that set took part in no check of the motion whether it stood there or
+# not, so the motion stays valid and is tracked identically in any scene that differs from the question's only in such
+# bottles.
+def near_objects(ctx: PlanningContext, object_id: str, steps: Sequence[np.ndarray], tool_path: Sequence[np.ndarray]
+                 ) -> frozenset[str]:
+    """The bottles (other than `object_id`, removed or not) within reuse_distance of the arm at the IK `steps` or of
+    the hand proxy along `tool_path` ((x, y, z, yaw) poses)."""
+    d = ctx.params.reuse_distance
+    bottles = [o for i, o in ctx.scene.bottles.items() if i != object_id]
+    if not bottles:
+        return frozenset()
+    obs = ObstacleSet(bottles)
+    arm_lo, arm_hi = arm_boxes(ctx, steps)
+    hand_lo, hand_hi = proxy_boxes(ctx, tool_path)
+    lo, hi = np.vstack([arm_lo, hand_lo - d]), np.vstack([arm_hi, hand_hi + d])
+    gap = np.maximum(np.maximum(obs.lo[None] - hi[:, None], lo[:, None] - obs.hi[None]), 0.0)
+    near = np.nonzero((np.einsum("ijk,ijk->ij", gap, gap) < d * d).any(axis=0))[0]
+    return frozenset(str(bottles[k].object_id) for k in near)
+
+
+def proxy_boxes(ctx: PlanningContext, tool_path: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned boxes (lo, hi: one row per shape and pose) of the Cartesian planner's hand proxy, uninflated,
+    at every pose its checks visit along the polyline `tool_path` (every `resolution` m, as HandProxy.path_clear)."""
+    proxy, res = ctx.hand, ctx.params.resolution
+    poses = []
+    for a, b in zip(tool_path[:-1], tool_path[1:]):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / res)))
+        poses.append(a + (b - a) * (np.arange(n + 1) / n)[:, None])
+    pose = np.vstack(poses)
+    c, s = np.cos(pose[:, 3]), np.sin(pose[:, 3])
+    rot = np.zeros((len(pose), 3, 3))  # grasp.side_rotation of each yaw
+    rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 0], rot[:, 1, 2], rot[:, 2, 1] = -s, c, c, s, 1.0
+    p7 = pose[:, :3] - rot[:, :, 2] * rd.D67  # link 7's origin (HandProxy.hits)
+    p0 = np.einsum("nij,cj->nci", rot, proxy.p0) + p7[:, None]
+    p1 = np.einsum("nij,cj->nci", rot, proxy.p1) + p7[:, None]
+    rad = np.array([sp.radius for sp in proxy.specs])[None, :, None]
+    return (np.minimum(p0, p1) - rad).reshape(-1, 3), (np.maximum(p0, p1) + rad).reshape(-1, 3)
+
+
+def arm_boxes(ctx: PlanningContext, steps: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned boxes (lo, hi: one row per arm capsule and step) of the arm's capsules (robot_description.
+    CAPSULES) at every configuration of `steps`: the frames of all steps first, then every capsule at once."""
+    caps = rd.CAPSULES
+    fids = sorted({ctx.kin.fid[c.link] for c in caps})
+    row = np.array([fids.index(ctx.kin.fid[c.link]) for c in caps])
+    frames = np.empty((len(steps), len(fids), 4, 4))
+    omf = ctx.kin.data.oMf
+    for s, q in enumerate(steps):
+        ctx.kin.update(q, jacobians=False)
+        for k, fid in enumerate(fids):
+            frames[s, k] = omf[fid].homogeneous
+    m = frames[:, row]  # steps x capsules x 4 x 4
+    p0 = np.einsum("scij,cj->sci", m[..., :3, :3], np.array([c.p0 for c in caps])) + m[..., :3, 3]
+    p1 = np.einsum("scij,cj->sci", m[..., :3, :3], np.array([c.p1 for c in caps])) + m[..., :3, 3]
+    rad = np.array([c.radius for c in caps])[None, :, None]
+    return (np.minimum(p0, p1) - rad).reshape(-1, 3), (np.maximum(p0, p1) + rad).reshape(-1, 3)
 
 
 def draw_seed(rng: np.random.Generator | None) -> int | None:

@@ -58,7 +58,8 @@ class PlannerParams:
     direct_first: bool  # try home -> front of shelf -> pre-grasp before sampling with RRT-Connect
     seed_per_query: bool  # every OMPL solve seeded from the question (question_rng), not process history
     screen_at_clearance: bool  # the grasp screen's hand proxy inflated by at least stpik.clearance
-    certify_relocation: bool  # a feasible pick counts only if the carry, retreat and way home plan from it
+    certify_relocation: bool  # every feasible answer certified (eager); false: the pick, certified when asked (lazy)
+    reuse_distance: float  # m: objects farther from a pick's motion entered none of its checks (its `near` set)
     workspace_lo: tuple[float, ...]  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple[float, ...]
     stpik: StpikParams
@@ -67,7 +68,8 @@ class PlannerParams:
         """Every setting checked once, with its name in the error (ValueError)."""
         positive = ("timeout", "pre_grasp_distance", "resolution", "joint_resolution",
                     "stage_distance", "carry_timeout", "carried_clearance")
-        non_negative = ("max_yaw", "wide_max_yaw", "hand_margin", "lift", "drop", "carry_ramp", "carry_accel")
+        non_negative = ("max_yaw", "wide_max_yaw", "hand_margin", "lift", "drop", "carry_ramp", "carry_accel",
+                        "reuse_distance")
         for k in positive + non_negative:
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
@@ -82,10 +84,21 @@ class PlannerParams:
         for k in SWITCHES:
             if not isinstance(getattr(self, k), bool):
                 raise ValueError(f"motion planner parameter {k} must be true or false, got {getattr(self, k)!r}")
+        band = self.checked_distance()
+        if self.reuse_distance < band:
+            raise ValueError(f"motion planner parameter reuse_distance must be at least {band:g} m (the widest band "
+                             f"a check of a pick looks at: hand_margin, stpik.clearance + stpik.buffer), got "
+                             f"{self.reuse_distance!r}")
         lo, hi = (np.asarray(getattr(self, k), float) for k in ("workspace_lo", "workspace_hi"))
         if lo.shape != (4,) or hi.shape != (4,) or not np.all(np.isfinite(lo) & np.isfinite(hi) & (lo < hi)):
             raise ValueError(f"motion planner parameters workspace_lo < workspace_hi must be 4 finite numbers each "
                              f"(x, y, z, yaw), got {self.workspace_lo!r}, {self.workspace_hi!r}")
+
+    def checked_distance(self) -> float:
+        """The widest distance at which an object enters a check of a pick (m): the hand proxy's inflation
+        (hand_margin, or stpik.clearance with screen_at_clearance) and STPIK's candidate band (clearance + buffer)."""
+        s = self.stpik
+        return max(self.hand_margin, s.clearance, s.clearance + s.buffer)
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:

@@ -4,9 +4,10 @@ feasibility(i, removed): 1) action to pose: side grasp and pre-grasp of object i
 (`candidates`: those whose pre-grasp and approach the hand proxy finds clear); 2) RRT-Connect (OMPL) in Cartesian
 space for the tool from its home pose to the pre-grasp, keeping the hand clear of the bottles still there
 (`cartesian_path`, the direct path first); then the straight approach to the grasp; 3) STPIK check (Eq. 9-10)
-tracking that path; a rejected path is re-sampled up to max_attempts times (`pick_lanes`); with certify_relocation
-the rest of the relocation must plan from the grasp (certify.py). 4) label g_U / g_O / g_T, planning time, attempts
-and the joint trajectory (100 Hz, Q convention, within Table 7).
+tracking that path; a rejected path is re-sampled up to max_attempts times (`pick_lanes`); when certifying (a certify
+request, an execution's pick, or every answer with certify_relocation) the rest of the relocation must plan from the
+grasp (certify.py). 4) label g_U / g_O / g_T, planning time, attempts and the joint trajectory (100 Hz, Q convention,
+within Table 7); an uncertified feasible answer names the objects its motion comes near (context.near_objects).
 
 Budgets are work, not time: validity checks per RRT-Connect attempt (rrt_max_checks), IK steps per STPIK check
 (stpik.step_budget), attempts per query (max_attempts); so a question gets the same answer on an idle and on a
@@ -26,8 +27,8 @@ from relocation_common.feasibility import FeasibilityAnswer, Label
 from stpik_motion_planner.model.blockers import answer_blockers
 from stpik_motion_planner.model.collision import HAND_PARTS, HandProxy, ObstacleSet
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, side_grasp
-from stpik_motion_planner.planning.certify import certify
-from stpik_motion_planner.planning.context import PlanningContext, draw_seed
+from stpik_motion_planner.planning.certify import certify as certify_rest
+from stpik_motion_planner.planning.context import PlanningContext, draw_seed, near_objects
 from stpik_motion_planner.planning.results import PlanningError, QueryStats, Segment
 from stpik_motion_planner.planning.trajectory import Trajectory
 
@@ -35,10 +36,11 @@ Picked = tuple[Trajectory | None, int, str]  # (trajectory or None, attempts, me
 
 
 def feasibility(ctx: PlanningContext, object_id: str, removed: Iterable[str] = frozenset(),
-                timeout: float | None = None) -> FeasibilityAnswer:
-    """g_T / g_O with the home -> pre-grasp -> grasp trajectory (100 Hz) if a path passes the STPIK check,
-    g_U otherwise. Raises UnknownObjectError / ValueError / WorkspaceError on bad input, SafetyNetTimeout when
-    the wall-clock `timeout` (default params.timeout) ran out before the work budget (no answer)."""
+                timeout: float | None = None, certify: bool = False) -> FeasibilityAnswer:
+    """g_T / g_O with the home -> pre-grasp -> grasp trajectory (100 Hz) if a path passes the STPIK check (and, with
+    `certify` or certify_relocation, the rest of its relocation plans), g_U otherwise. Raises UnknownObjectError /
+    ValueError / WorkspaceError on bad input, SafetyNetTimeout when the wall-clock `timeout` (default params.timeout)
+    ran out before the work budget (no answer)."""
     t0 = time.perf_counter()
     removed = ctx.check_question(object_id, removed)
     if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout)):
@@ -48,26 +50,30 @@ def feasibility(ctx: PlanningContext, object_id: str, removed: Iterable[str] = f
     stats = QueryStats()
     ctx.last_stats = stats
     ok_label = Label.TARGET if object_id == ctx.scenario.target_id else Label.OBSTACLE
-    traj, attempts, msg = pick(ctx, object_id, removed, deadline, stats)
+    certify = certify or ctx.params.certify_relocation
+    traj, attempts, msg = pick(ctx, object_id, removed, deadline, stats, certify)
     dt = time.perf_counter() - t0
     if traj is None:  # with the lane blockers of the refused pick (docs/motion_planner.md, "Blockers")
         return FeasibilityAnswer(Label.UNFEASIBLE, dt, attempts, msg,
                                  blockers=answer_blockers(ctx, object_id, removed))
-    return FeasibilityAnswer(ok_label, dt, attempts, msg, traj)
+    return FeasibilityAnswer(ok_label, dt, attempts, msg, traj, near=ctx.pick_near.get((object_id, removed)))
 
 
 def plan_pick(ctx: PlanningContext, object_id: str, removed: Iterable[str] = frozenset()) -> list[Segment]:
-    """Home -> pre-grasp -> grasp, then close the gripper. Raises PlanningError if unfeasible."""
+    """Home -> pre-grasp -> grasp, then close the gripper: the certified pick (the lane a certify request accepts).
+    Raises PlanningError if unfeasible."""
     removed = ctx.check_question(object_id, removed)
-    traj, _, msg = pick(ctx, object_id, removed, time.perf_counter() + ctx.params.carry_timeout, QueryStats())
+    traj, _, msg = pick(ctx, object_id, removed, time.perf_counter() + ctx.params.carry_timeout, QueryStats(), True)
     if traj is None:
         raise PlanningError(f"pick of {object_id!r}: {msg}")
     return [Segment("pick", traj, "close")]
 
 
-def pick(ctx: PlanningContext, object_id: str, removed: frozenset[str], deadline: float, stats: QueryStats) -> Picked:
+def pick(ctx: PlanningContext, object_id: str, removed: frozenset[str], deadline: float, stats: QueryStats,
+         certify: bool) -> Picked:
     """Home -> pre-grasp -> grasp for the yaws of the first tier; if none gave one, for the second
-    (yaw_tiers): (trajectory or None, attempts, message). A lying or gone bottle: none (not_graspable)."""
+    (yaw_tiers): (trajectory or None, attempts, message). A lying or gone bottle: none (not_graspable).
+    `certify`: a lane counts only if the rest of its relocation plans (certify.py)."""
     why = ctx.not_graspable(object_id)
     if why:
         return None, 0, why
@@ -84,7 +90,7 @@ def pick(ctx: PlanningContext, object_id: str, removed: frozenset[str], deadline
         # the first tier's draws are those of a planner without the second (context.UNSEEDED)
         rng = ctx.question_rng("pick", object_id, removed, *(["wide"] if tier else []))
         budget = ctx.params.max_attempts if tier == 0 else max(ctx.params.max_attempts, len(cands))
-        traj, n, last = pick_lanes(ctx, object_id, removed, obs, cands, budget, rng, deadline, stats)
+        traj, n, last = pick_lanes(ctx, object_id, removed, obs, cands, budget, rng, deadline, stats, certify)
         attempts += n
         if traj is not None:
             return traj, attempts, last
@@ -94,9 +100,11 @@ def pick(ctx: PlanningContext, object_id: str, removed: frozenset[str], deadline
 
 
 def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], obs: ObstacleSet, cands: list[Grasp],
-               budget: int, rng: np.random.Generator | None, deadline: float, stats: QueryStats) -> Picked:
+               budget: int, rng: np.random.Generator | None, deadline: float, stats: QueryStats, certify: bool
+               ) -> Picked:
     """Up to `budget` sampled paths over the grasps `cands` in turn (each one's direct path first):
-    (trajectory or None, attempts, the grasp used or the last failure)."""
+    (trajectory or None, attempts, the grasp used or the last failure). The grasp configuration goes to
+    ctx.pick_end; uncertified, the objects the motion comes near to ctx.pick_near (context.near_objects)."""
     p = ctx.params
     skip = {n: frozenset([object_id]) for n in HAND_PARTS}
     attempts, last = 0, ""
@@ -118,14 +126,16 @@ def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], ob
         if not r2.ok:
             last = f"STPIK rejected the approach: {r2.reason}"
             continue
-        if p.certify_relocation:
-            why = certify(ctx, object_id, removed, r2.q[-1])
+        if certify:
+            why = certify_rest(ctx, object_id, removed, r2.q[-1])
             if why:
                 last = f"the rest of the relocation: {why}"
                 continue
         traj = Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_grasp").then(
             Trajectory.from_steps(r2.q, r2.qdot, r2.dt, "approach")).resample()
         ctx.pick_end[(object_id, removed)] = r2.q[-1]
+        ctx.pick_near[(object_id, removed)] = None if certify else near_objects(
+            ctx, object_id, [*r1.q, *r2.q], [*path, np.asarray(g.grasp)])
         return traj, attempts, f"yaw {g.yaw:+.2f}, {len(path)} waypoints"
     return None, attempts, last
 

@@ -2,8 +2,9 @@
 relocation, behind one class. `MotionPlanner` is the planning context (context.py: the scene, the robot's models,
 the question's random generator) with the phases as its methods:
 
-- `feasibility` / `plan_pick` (pick.py): home -> pre-grasp -> grasp, the answer g_U / g_O / g_T; with
-  certify_relocation a pick counts only if the rest of its relocation plans (certify.py);
+- `feasibility` / `certify` / `plan_pick` (pick.py): home -> pre-grasp -> grasp, the answer g_U / g_O / g_T;
+  certified (`certify`, the executed pick, every answer with certify_relocation) a pick counts only if the rest of
+  its relocation plans (certify.py);
 - `plan_carry` (carry.py): lift, out of the shelf, in to the slot, release, retreat;
 - `plan_home` (home.py): back to the home configuration;
 - the scene: `set_scenario`, `update_object` (bottles as perceived), `slot_problems`, `lane_blockers`.
@@ -47,6 +48,13 @@ class MotionPlanner(PlanningContext):
         """Eq. 11's answer with the home -> grasp trajectory (pick.feasibility); SafetyNetTimeout when the wall-clock
         `timeout` (default params.timeout) ran out before the work budget (no answer)."""
         return pick.feasibility(self, object_id, removed, timeout)
+
+    def certify(self, object_id: str, removed: Iterable[str] = frozenset(),
+                timeout: float | None = None) -> FeasibilityAnswer:
+        """The certify question (relocation_common.feasibility.CertifyingOracle): Eq. 11's answer whose pick counts
+        only if the carry to slot len(removed), the retreat and the way home plan from its grasp (certify.py); the
+        lane an execution's plan_pick takes. Errors as `feasibility`."""
+        return pick.feasibility(self, object_id, removed, timeout, certify=True)
 
     def plan_pick(self, object_id: str, removed: Iterable[str] = frozenset()) -> list[Segment]:
         """Home -> pre-grasp -> grasp, then close the gripper (pick.plan_pick). PlanningError if unfeasible."""
@@ -125,7 +133,9 @@ class MotionPlanner(PlanningContext):
         self.lying, self.gone = dict(lying or {}), frozenset(gone)
         self.scene = self.collision_scene()
         self.pick_end.clear()
+        self.pick_near.clear()
         self.stage_refs.clear()
+        self.certified.clear()
 
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
