@@ -35,10 +35,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
-from relocation_app.final_state import arm_home, bottles_at_hand  # noqa: E402
-from relocation_app.graph import reserve_domain_id  # noqa: E402
-from relocation_common.paths import resolve_scenario  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_app.final_state import arm_home, bottles_at_hand  # noqa: E402  (after the sys.path insert)
+from relocation_app.graph import reserve_domain_id  # noqa: E402  (after the sys.path insert)
+from relocation_common.paths import resolve_scenario  # noqa: E402  (after the sys.path insert)
+from relocation_common.scenario import load_scenario  # noqa: E402  (after the sys.path insert)
 
 REPO = Path(__file__).resolve().parent.parent
 NODES = {"jaco2_sim_driver": "jaco2_sim_driver.driver_node", "perception": "perception_aruco.perception_node",

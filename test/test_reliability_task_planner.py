@@ -405,7 +405,7 @@ def test_sigterm_while_executing_a_relocation_exits_at_once(env):
 def test_a_motion_planner_dying_mid_relocation_ends_the_goal(env):
     """Old code: the goal waited for relocate_timeout (180 s) for a result that never came."""
     fake = env.fake(relocate="hang")
-    tp = env.task_planner(relocate_timeout=600.0)
+    tp = env.task_planner(relocate_timeout=600.0, planner_wait=0.0)  # 0: no wait for a respawn (test_chaos_graph)
     env.scene()
     handle, _ = _send_async(env, tp, execute=True, max_episodes=300)
     _wait(lambda: "relocating" in fake.log(), 120, "the relocation never started", tp)
