@@ -77,9 +77,8 @@ class PerceptionNode(Node):
         if g("calibration_file"):  # the marker's pose measured with the robot (`./run calibrate`)
             self.scenario = apply_calibration(self.scenario, load_calibration(g("calibration_file")))
             self.get_logger().info(f"marker pose from the calibration {g('calibration_file')}")
-        self.perception = Perception(
-            self.scenario,
-            SegmentationParams(gain_min=g("gain_min"), gain_max=g("gain_max"), max_residual=g("max_residual")),
+        self.perception = Perception(self.scenario, SegmentationParams(
+            gain_min=g("gain_min"), gain_max=g("gain_max"), max_residual=g("max_residual")),
             LocalizeParams(min_pixels=g("min_pixels"), inlier_tol=g("inlier_tol")),
             refine_with_depth=g("refine_with_depth"), objects=ObjectParams.from_mapping(values))
         self._joints = JointHistory(float(g("arm_sync_window")), float(g("arm_padding")))  # self-filter
@@ -99,8 +98,8 @@ class PerceptionNode(Node):
                                  callback_group=sensors)
         self.create_subscription(Image, g("depth_topic"), self._on_depth, qos_profile_sensor_data,
                                  callback_group=sensors)
-        self.create_subscription(CameraInfo, g("camera_info_topic"), lambda m: setattr(self, "_info", m),
-                                 qos_profile_sensor_data, callback_group=sensors)
+        self.create_subscription(CameraInfo, g("camera_info_topic"), self._on_info, qos_profile_sensor_data,
+                                 callback_group=sensors)
         self.create_subscription(JointState, ArmInterface.from_mapping(values).state_topic, self._on_joint_state, 10,
                                  callback_group=sensors)
         self._placed: set[str] = set()  # ids the motion planner placed on the bottom shelf (relocated_topic)
@@ -146,6 +145,9 @@ class PerceptionNode(Node):
         if why is not None:
             self.get_logger().error(f"frame dropped: {why}", throttle_duration_sec=2.0)
         return why is not None
+
+    def _on_info(self, msg: CameraInfo) -> None:
+        self._info = msg
 
     def _on_relocated(self, msg: String) -> None:
         """The motion planner's placed bottles ({"relocated": {id: slot}}); a malformed message is logged."""

@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 from ros_procs import REPO, VENV_PYTHON
 
+from relocation_common.feasibility import default_replicas
+
 pytestmark = pytest.mark.graph
 PY = str(VENV_PYTHON if VENV_PYTHON.exists() else sys.executable)
 
@@ -67,7 +69,8 @@ def start_demo(tmp_path):
             raise AssertionError("the demo never started training:\n" + (tmp_path / "demo.log").read_text()[-3000:])
         time.sleep(0.2)
     nodes = children(p.pid)
-    assert len(nodes) == 3, nodes  # driver, motion planner, task planner (ground truth: no perception)
+    # driver, motion planner and its feasibility replicas, task planner (ground truth: no perception)
+    assert len(nodes) == 2 + default_replicas(), nodes
     return p, nodes
 
 
