@@ -203,8 +203,8 @@ class PerceptionNode(Node):
                 raise PerceptionError(why)
             K = np.asarray(self._info.k, float).reshape(3, 3)
             with self._lock:
-                q = self._joints.around(_stamp_s(color))
-            result = self.perception.process(rgb, dep, K, prior=self.fusion.fused, memory=self.memory, q=q)
+                q, unknown = self._joints.around(_stamp_s(color)), self._joints.unknown_at(_stamp_s(color))
+            result = self.perception.process(rgb, dep, K, self.fusion.fused, self.memory, q, unknown)
             jump = self.fusion.update(result.T_base_camera)
             if jump:
                 raise PerceptionError(jump)

@@ -113,12 +113,13 @@ class Perception:
 
     def process(self, rgb: ArrayLike, depth: ArrayLike, K: ArrayLike, prior: np.ndarray | None = None,
                 memory: SceneMemory | None = None,
-                q: np.ndarray | None = None) -> PerceptionResult:
+                q: np.ndarray | None = None, arm_unknown: bool = False) -> PerceptionResult:
         """The objects of one registered RGB-D frame. `prior`: T_base_camera of earlier frames (the node's fused
         frame); when the marker is not seen now, the prior stands in if the shelf confirms it. `memory`: the objects
         of earlier frames (their tracks: identity, unlisted ids; read, not changed: the caller updates it with the
         result); q: the arm's joint angles at the frame, or one row per joint state around its stamp (the body is left
-        out over all of them; None: not filtered, said in notes)."""
+        out over all of them; None: not filtered, said in notes). arm_unknown: the arm moved and no joint state at or
+        after the frame's stamp came yet (tracking.JointHistory.unknown_at): no new objects from this frame."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
         notes: list[str] = []
@@ -145,7 +146,7 @@ class Perception:
                       min_pixels=max(12, round(self.loc.min_pixels * area)),
                       min_inliers=max(10, round(self.loc.min_inliers * area)))
         memory = memory if memory is not None else SceneMemory(self.scenario.ids, 0)
-        in_shelf = arm_in_shelf(q, self.scenario.shelf, self.objects.arm_padding)
+        in_shelf = arm_unknown or arm_in_shelf(q, self.scenario.shelf, self.objects.arm_padding)
         objects, missing, left_out = find_objects(clusters, points, self.scenario, memory, self.seg, self.objects,
                                                   loc, T[:3, 3], fit.noise, new_unlisted=not in_shelf)
         if left_out:

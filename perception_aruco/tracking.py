@@ -142,6 +142,16 @@ class JointHistory:
         while self.states and self.states[0][0] < t - self.keep:
             self.states.popleft()
 
+    def unknown_at(self, t: float) -> bool:
+        """Whether the arm's pose at stamp t is not known: no joint state at or after t yet (their delivery lags
+        under load) while the arm moved over the last `window` s of the states there are. No joint state at all:
+        False (the arm is then not filtered, as the frame's notes say)."""
+        if not self.states or self.states[-1][0] >= t:
+            return False
+        last_t, last_q = self.states[-1]
+        recent = [q for s, q in self.states if s >= last_t - self.window]
+        return any(float(np.max(np.abs(q - last_q))) > self.step for q in recent)
+
     def around(self, t: float) -> np.ndarray | None:
         """k x 7: the poses the arm may have had at stamp t (class docstring); None before any joint state."""
         if not self.states:

@@ -44,6 +44,12 @@ def test_the_joint_states_around_a_frame():
     assert 2 <= len(moving) <= 6 and math.isclose(moving[0][0] - Q_HOME[0], 0.45, abs_tol=0.011)
     assert moving[-1][0] - Q_HOME[0] >= 0.54 - 0.02
     assert not arm_in_shelf(Q_HOME, load_scenario(default_scenario()).shelf, 0.02)
+    # a frame newer than every joint state: its arm pose is unknown while the arm moved, known while it stood still
+    assert h.unknown_at(3.2) and not h.unknown_at(2.0)
+    still = JointHistory(0.1, 0.02)
+    for k in range(50):
+        still.add(k * 0.01, Q_HOME)
+    assert not still.unknown_at(1.0) and not JointHistory(0.1, 0.02).unknown_at(1.0)
 
 
 def _phantoms(r, s) -> list[str]:
