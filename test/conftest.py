@@ -4,11 +4,6 @@ import os
 # MuJoCo picks its OpenGL platform when it is first imported; a test module that imports mujoco before
 # jaco2_sim_driver would leave the whole pytest process unable to render (headless: EGL).
 os.environ.setdefault("MUJOCO_GL", "egl")
-# The test process's own ROS nodes (clients, fake servers) use the graph's Fast DDS profile, as every node the graph
-# starts does (relocation_app.graph): its service writers wait for a slow reader instead of dropping the response
-# after 100 ms on a loaded machine (ros2/rmw_fastrtps#704).
-_REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(_REPO, "config", "fastdds.xml"))
 
 
 def pytest_collection_modifyitems(config, items):
