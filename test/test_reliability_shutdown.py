@@ -95,3 +95,46 @@ def test_motion_planner_exits_0_on_sigint_after_a_client_came_and_went(tmp_path,
                             "5", "--seed", str(r)], env=g.env, capture_output=True, text=True, timeout=120)
             codes.append(g.stop("motion_planner", signal.SIGINT, grace=DEADLINE + 3))
     assert codes == [0] * rounds, codes
+
+
+STUCK_NODE = """
+import time
+from rclpy.node import Node
+from relocation_common.node import run_node
+
+class StuckNode(Node):
+    def __init__(self):
+        super().__init__("stuck_node")
+        print("ready", flush=True)
+
+    def close(self):  # a stop that never ends (as Fast DDS's teardown did once; run_node's docstring)
+        time.sleep(3600)
+
+run_node(StuckNode, threads=1)
+"""
+
+
+def test_a_node_whose_stop_hangs_is_gone_within_the_stop_grace(tmp_path):
+    """run_node bounds the stop: a node whose teardown hangs ends STOP_GRACE s after SIGTERM, by SIGALRM. A node
+    orphaned by a SIGKILLed demo has no launcher to kill it (test_lifecycle). Old code: still running 20 s later."""
+    from relocation_common import node
+
+    STOP_GRACE = getattr(node, "STOP_GRACE", 5)  # (old code has none: it fails on the time, not on the import)
+    script = tmp_path / "stuck_node.py"
+    script.write_text(STUCK_NODE)
+    with RosGraph(tmp_path) as g:
+        p = g.start_argv([sys.executable, str(script)], name="stuck_node", cwd=REPO)
+        deadline = time.monotonic() + 30
+        while "ready" not in p.log():
+            assert p.alive() and time.monotonic() < deadline, p.log()[-2000:]
+            time.sleep(0.05)
+        t0 = time.monotonic()
+        p.popen.send_signal(signal.SIGTERM)
+        try:
+            code = p.popen.wait(STOP_GRACE + 15)
+        except subprocess.TimeoutExpired:
+            p.popen.kill()
+            raise AssertionError(f"still running {STOP_GRACE + 15} s after SIGTERM") from None
+        took = time.monotonic() - t0
+        print(f"\nstuck node gone {took:.2f} s after SIGTERM, exit {code}")
+        assert code == -signal.SIGALRM and took >= STOP_GRACE - 0.5, (code, took)
