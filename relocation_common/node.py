@@ -33,6 +33,7 @@ from rclpy.task import Future
 
 from .config import ConfigError, ParameterError, check_params_files, node_section
 from .paths import config_file
+from .type_support import InterfaceMismatch, check_type_support
 
 STOP_POLL = 0.2  # s: how often a node's main loop looks for SIGINT/SIGTERM
 STOP_GRACE = 5  # s (whole): a node still running this long after SIGINT/SIGTERM is ended by SIGALRM (run_node)
@@ -184,9 +185,12 @@ def _wait_for_callbacks(executor: Executor, timeout: float) -> None:
 
 def node_main(name: str, node_factory: Callable[[], Node], args: list[str] | None = None, threads: int = 4,
               errors: tuple[type[Exception], ...] = ()) -> None:
-    """main() of a node: check the params files, run it; unusable input is one line on stderr and exit 2."""
-    unusable: tuple[type[Exception], ...] = (ConfigError, ParameterException, ValueError, TypeError) + errors
+    """main() of a node: check the interfaces' build (type_support) and the params files, run it; unusable input is
+    one line on stderr and exit 2."""
+    unusable: tuple[type[Exception], ...] = (ConfigError, ParameterException, ValueError, TypeError,
+                                             InterfaceMismatch) + errors
     try:
+        check_type_support()
         check_params_files(sys.argv if args is None else args)
         run_node(node_factory, args, threads)
     except unusable as e:
