@@ -40,8 +40,7 @@ from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
 from relocation_app.graph import wait_for_interfaces
 from relocation_common.feasibility import Label, replica_services
-from relocation_common.node import ActionClient, call
-from relocation_common.type_support import check_type_support
+from relocation_common.node import ActionClient, call, check_type_support
 
 FEASIBILITY = "/motion_planner/plan_feasibility"
 TRAIN = "/task_planner/train"

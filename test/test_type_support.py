@@ -1,6 +1,6 @@
-"""The interfaces' Python classes and C libraries from one build (relocation_common.type_support): a feasible pick
-answered through a node whose PlanFeasibility had lost `near_known` in its C library reused nothing (the demo on
-scenario3_15: 2,369 planner calls where the same training through a sound install asks 574)."""
+"""The interfaces' Python classes and C libraries from one build (relocation_common.node.check_type_support): a
+feasible pick answered through a node whose PlanFeasibility had lost `near_known` in its C library reused nothing
+(the demo on scenario3_15: 2,369 planner calls where the same training through a sound install asks 574)."""
 import re
 import shutil
 import time
@@ -12,7 +12,7 @@ pytest.importorskip("rclpy")
 import qtree_relocation_msgs  # noqa: E402
 from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
 
-from relocation_common.type_support import check_type_support, lost_fields, sample  # noqa: E402
+from relocation_common.node import check_type_support, lost_fields, sample  # noqa: E402
 
 NEW_FIELD = "reach_known"
 
