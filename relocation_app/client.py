@@ -40,7 +40,7 @@ from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.task_planner_node import ServiceOracle, train_goal
 from relocation_app.graph import wait_for_interfaces
 from relocation_common.feasibility import Label, replica_services
-from relocation_common.node import ActionClient, call
+from relocation_common.node import ActionClient, call, check_type_support
 
 FEASIBILITY = "/motion_planner/plan_feasibility"
 TRAIN = "/task_planner/train"
@@ -92,6 +92,7 @@ class RelocationClient:
             raise ValueError("domain_id is for the client's own context: the context given has its domain already")
         if context is not None and not context.ok():
             raise ClientError("the context given is not initialised: call rclpy.init(context=...) first")
+        check_type_support()  # InterfaceMismatch: a field of these messages would be lost silently
         self._own_context = context is None
         self.context = Context() if context is None else context
         if self._own_context:
