@@ -129,8 +129,9 @@ class Watch:
 
     def moment_reached(self, spec: Spec, p: dict) -> str | None:
         """What is happening when the moment `spec` draws has come (a line for the record), else None."""
-        if spec.moment == "training":
-            if self.training_since is not None and time.monotonic() - self.training_since >= p["delay"]:
+        if spec.moment == "training":  # only while the Q-Tree trains: a delay past the training's end kills nothing
+            if (self.training_since is not None and self.train_phase == "training"
+                    and time.monotonic() - self.training_since >= p["delay"]):
                 return f"training ({self.train_phase}) {p['delay']:.1f} s in"
             return None
         goals = self.goals

@@ -48,6 +48,10 @@ RESTART_STATE_WAIT = 30.0  # s the recovery of an interrupted relocation waits f
 HEARTBEAT = 2.0  # s without feedback after which a running relocation's last feedback is sent again
 HOME_SETTLE = 0.01  # rad: a relocation or a recovery that ends farther than this from home is brought home
 SETTLE_WAIT = 0.3  # s after the last motion before the arm's place is measured
+RECOVERY_STATE_WAIT = 10.0  # s each recovery attempt waits for fresh joint states: a relocation aborted because the
+# driver fell silent (starved under load) was recovered at once, on the same stale state, and failed twice within a
+# millisecond; the arm stayed in the shelf holding the bottle and every later goal failed (the closed-loop grid at
+# a load average of 25, scenario1_5 K=1 seed 1)
 RECOVERY_TRIES = 2  # a recovery that failed (under load: the fingers' result late) is tried again from where the arm
 # is: the recorded motions are followed back from the nearest sample (Trajectory.back_from); left in the shelf, the
 # arm had no collision-free way home and every later goal failed (the benchmark, scenario1_5 K=3 seed 1)
@@ -280,6 +284,7 @@ class MotionPlannerService:
         arm = arm.uncancellable()
         for attempt in range(RECOVERY_TRIES):
             try:
+                arm.wait_for_state(RECOVERY_STATE_WAIT)
                 arm.measured()  # a driver that is gone: fail now, not after the gripper's timeout
                 what = recover(self.planner, arm, progress, self.plan_lock,
                                on_change=lambda: self._write_journal(self._running))

@@ -162,3 +162,39 @@ def test_a_recovery_tried_again_goes_on_with_the_motions_left():
     assert what == "o3 set down where it was picked; arm back home"
     assert np.allclose(arm.q, home)
     assert progress.moves == []  # nothing left to go back along
+
+
+def test_a_relocation_aborted_by_silent_joint_states_recovers_once_they_return():
+    """The closed-loop grid at a load average of 25 (scenario1_5 K=1 seed 1): the driver, starved, sent no joint
+    state for 2.5 s during the approach to o4; the relocation aborted (state_timeout) and the old recovery, tried at
+    once on the same stale state, failed twice within a millisecond ("recovery failed: no joint state from the driver
+    for 2.6 s"); the arm stayed in the shelf and every later goal failed ("no collision-free joint path back to the
+    home configuration"). Now each recovery attempt first waits for fresh joint states."""
+    from test_streaming import FakeLink, arm
+
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.planning.params import PlannerParams
+
+    class StarvedDriver(FakeLink):
+        """Joint states stop for `gap` s once the approach has streamed 30 commands, then come back."""
+
+        gap, stall = 1.5, None
+
+        def joint_state(self):
+            now = self._advance()
+            if self.stall is None and "approach" in self.paths and len(self.sent) > 30:
+                self.stall = now
+            if self.stall is None or not self.stall <= now < self.stall + self.gap:
+                self.last = self.q.copy(), now
+            return getattr(self, "last", None)
+
+    core = service.MotionPlannerService(load_scenario(default_scenario()), PlannerParams.load())
+    link = StarvedDriver(kinova=True)
+    a, _, _ = arm(link)  # state_timeout 0.5 s < the 1.5 s gap
+    out = core.relocate(a, core.base.objects[0].id, [])
+    assert link.stall is not None, "the joint states never stopped"
+    assert out.status == "aborted" and "no joint state from the driver" in out.message, out
+    assert "; recovered: " in out.message and "recovery failed" not in out.message, out
+    assert link.paths[-1] == "recover"
+    assert np.allclose(link.q, rd.Q_HOME, atol=0.03)

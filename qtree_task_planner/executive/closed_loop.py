@@ -526,6 +526,10 @@ class ClosedLoopExecutor:
                             if o not in scene or board_of(scene[o], self.scenario, self.tol) != "top"]
         rp = remaining_problem(self.scenario, scene, out.relocated, self.tol)
         self._top |= {b.id for b in rp.bottles}  # an object off the top shelf is sent as removed only if it was on it
+        # ... in the feasibility questions too: an unlisted object never seen on the top shelf (perception's glimpse
+        # of the carried bottle or the hand, named anew) is one the motion planner never had, and it refuses the
+        # question ("unknown object id 'u2'"), which ended the run
+        rp = replace(rp, gone=frozenset(o for o in rp.gone if o in self.scenario.ids or o in self._top))
         if rp.target_retrieved:
             out.success = True
             out.message = (f"target {self.scenario.target_id} retrieved after {len(out.relocated) - 1} relocations"

@@ -187,9 +187,14 @@ class StreamedArm:
                 self.link.send(np.zeros(rd.N_JOINTS))
 
     def wait_for_state(self, timeout: float) -> None:
-        """Right after start-up, discovery of the driver can take a moment: wait up to `timeout` s for a state."""
+        """Wait up to `timeout` s (less if the node shuts down) for a joint state no older than `state_hold`: right
+        after start-up, discovery of the driver can take a moment; a driver starved under load can fall silent for
+        longer than `state_timeout` (the closed-loop grid at a load average of 25: 2.5 s)."""
         deadline = time.monotonic() + timeout
-        while self.link.joint_state() is None and time.monotonic() < deadline:
+        while time.monotonic() < deadline and self.link.ok():
+            st = self.link.joint_state()
+            if st is not None and time.monotonic() - st[1] <= self.p.state_hold:
+                return
             time.sleep(0.05)
 
     def _check(self) -> None:
