@@ -75,7 +75,8 @@ class MotionPlannerNode(Node):
         arm = ArmInterface.from_mapping(params)  # the surface, shared with the driver; ParameterError
         self.core = MotionPlannerService(load_scenario(params["scenario"] or None), planner_params,
                                          float(params["home_tol"]), log=self._log,
-                                         journal=Journal(params["journal_path"] if params["serve_relocation"] else ""))
+                                         journal=Journal(params["journal_path"] if params["serve_relocation"] else ""),
+                                         recover_near=float(params["recover_near"]))
         self.link: RosArmLink | None = None  # nothing in a feasibility-only replica (serve_relocation false)
         self.asked, self.answered, self.last_answer = 0, 0, (0.0, "none yet")  # feasibility, for the health
         self.relocation = "idle"  # what the relocate action does now, for the health

@@ -66,12 +66,13 @@ class Outcome:
 
 
 class MotionPlannerService:
-    """The node's behaviour (the module docstring). `home_tol`: relocation.relocate's (rad; None:
-    config/motion_planner.yaml's)."""
+    """The node's behaviour (the module docstring). `home_tol`: relocation.relocate's, `recover_near`:
+    relocation.recover's `near` (rad; None: config/motion_planner.yaml's)."""
 
     def __init__(self, scenario: Scenario, params: PlannerParams, home_tol: float | None = None,
-                 log: Callable[[str, str], None] = lambda *_: None, journal: Journal | None = None) -> None:
-        self.base, self.log, self.home_tol = scenario, log, home_tol
+                 log: Callable[[str, str], None] = lambda *_: None, journal: Journal | None = None,
+                 recover_near: float | None = None) -> None:
+        self.base, self.log, self.home_tol, self.recover_near = scenario, log, home_tol, recover_near
         self.planner = MotionPlanner(scenario, params)
         self.plan_lock = threading.Lock()  # MotionPlanner is not thread-safe
         self.bottles = {b.id: b for b in scenario.objects}
@@ -287,7 +288,7 @@ class MotionPlannerService:
                 arm.wait_for_state(RECOVERY_STATE_WAIT)
                 arm.measured()  # a driver that is gone: fail now, not after the gripper's timeout
                 what = recover(self.planner, arm, progress, self.plan_lock,
-                               on_change=lambda: self._write_journal(self._running))
+                               on_change=lambda: self._write_journal(self._running), near=self.recover_near)
                 break
             except Exception as e:
                 self.log("error", f"recovery after the failed relocation failed: {e}")

@@ -198,3 +198,65 @@ def test_a_relocation_aborted_by_silent_joint_states_recovers_once_they_return()
     assert "; recovered: " in out.message and "recovery failed" not in out.message, out
     assert link.paths[-1] == "recover"
     assert np.allclose(link.q, rd.Q_HOME, atol=0.03)
+
+
+def test_joint_states_that_stop_right_after_the_release_leave_the_arm_on_along_its_retreat_then_home():
+    """The chaos benchmark under load (perception/carry/2): the driver's joint states stopped right after the
+    release at the slot, the relocation aborted (state_timeout) at the start of the retreat, and both recovery
+    attempts planned home from the slot: "no collision-free joint path back to the home configuration" (RRT-Connect's
+    start in collision, the open fingers around the bottle just placed); the arm stayed at the slot. Now the
+    recovery goes on along the recorded retreat (away from the bottle), then home."""
+    from test_streaming import FakeLink, arm
+
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.planning.params import PlannerParams
+
+    class SilentAfterRelease(FakeLink):
+        """Joint states stop for `gap` s as the retreat starts (before it moves the arm), then come back."""
+
+        gap, stall = 1.5, None
+
+        def joint_state(self):
+            now = self._advance()
+            if self.stall is None and "retreat" in self.paths:
+                self.stall = now
+            if self.stall is None or not self.stall <= now < self.stall + self.gap:
+                self.last = self.q.copy(), now
+            return getattr(self, "last", None)
+
+    core = service.MotionPlannerService(load_scenario(default_scenario()), PlannerParams.load())
+    oid = core.base.objects[0].id
+    link = SilentAfterRelease(kinova=True)
+    a, _, _ = arm(link)  # state_timeout 0.5 s < the 1.5 s gap
+    out = core.relocate(a, oid, [])
+    assert link.stall is not None, "the joint states never stopped"
+    assert out.status == "aborted" and "no joint state from the driver" in out.message, out
+    assert "; recovered: " in out.message and "recovery failed" not in out.message, out
+    assert f"{oid} was placed; arm on along its retreat, then back home" in out.message, out
+    assert core.relocated == {oid: 0}
+    home_tol = 0.03  # config/motion_planner.yaml home_tol
+    assert np.max(np.abs(link.q - rd.Q_HOME)) <= home_tol, link.q - rd.Q_HOME
+
+
+def test_a_recovery_after_the_release_goes_on_along_the_motion_the_arm_is_near():
+    """relocation.after_release: of the retreat and the way home recorded after the carry, the one with a sample
+    within `near` of the arm (largest joint difference), from that sample to its end; the later one where they meet;
+    none farther than `near` (then a fresh path home), none of the motions before the release."""
+    from stpik_motion_planner.execution.relocation import Progress, after_release
+
+    home = np.array(rd.Q_HOME)
+    slot = home + np.array([0.6, 0.4, 0.0, -0.5, 0.0, 0.3, 0.0])
+    stage = home + np.array([0.4, 0.2, 0.0, -0.3, 0.0, 0.2, 0.0])
+    retreat, way_home = _line(slot, stage), _line(stage, home)
+    moves = [("approach", _line(home, slot)), ("carry", _line(slot, slot + 0.01)), ("retreat", retreat),
+             ("home", way_home)]
+    progress = Progress("T", [], [], moves, True)
+    phase, rest = after_release(progress, retreat.positions[5] + 0.002, 0.1)
+    assert phase == "retreat" and np.allclose(rest.positions, retreat.positions[5:]) and rest.times[0] == 0.0
+    off = np.array([0, 0, 1.0, 0, 0, 0, 0])  # joint 3 does not move on these lines
+    assert after_release(progress, retreat.positions[5] + 0.09 * off, 0.1)[0] == "retreat"
+    assert after_release(progress, retreat.positions[5] + 0.11 * off, 0.1) is None
+    assert after_release(progress, stage, 0.1)[0] == "home"  # where the retreat ends the way home starts
+    progress.moves = moves[:2]  # the approach passes the slot too, but it was made before the release
+    assert after_release(progress, slot, 0.1) is None

@@ -82,10 +82,11 @@ class FollowerParams:
 
 
 def joint_error(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """q_ref - q, wrapped to (-pi, pi] on the continuous joints (1, 3, 5, 7)."""
+    """q_ref - q, wrapped to (-pi, pi] on the continuous joints (1, 3, 5, 7); q_ref one configuration or a row
+    of them."""
     e = np.asarray(q_ref, float) - np.asarray(q, float)
     cont = np.array(rd.CONTINUOUS)
-    e[cont] = (e[cont] + math.pi) % (2 * math.pi) - math.pi
+    e[..., cont] = (e[..., cont] + math.pi) % (2 * math.pi) - math.pi
     return e
 
 

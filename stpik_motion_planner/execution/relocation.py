@@ -19,6 +19,7 @@ from typing import Callable, ContextManager, Protocol
 import numpy as np
 
 from relocation_common import robot_description as rd
+from stpik_motion_planner.execution.follower import joint_error
 from stpik_motion_planner.model.grasp import WorkspaceError
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
 from stpik_motion_planner.planning.context import Placed
@@ -163,7 +164,7 @@ class _Recorded:
 
 
 def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextManager[object] | None = None,
-            on_change: Callable[[], None] = lambda: None) -> str:
+            on_change: Callable[[], None] = lambda: None, near: float | None = None) -> str:
     """A safe state after a failed or cancelled relocation (the next goal starts from home, nothing held).
 
     Before the release: back along the motions made, newest first (the same paths, as clear as on the way there);
@@ -171,14 +172,23 @@ def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextM
     back along the approach to home. Each motion gone back along leaves `progress.moves` (then on_change(): the
     journal), so a recovery tried again goes on from where the arm is with the motions left: before, a retry after
     the last motion failed near home (did not settle under load) went back along the whole carry again, from its
-    sample nearest home into the shelf. After the release: a fresh path home. Returns what was done; raises (the
-    arm's or PlanningError) if it could not."""
+    sample nearest home into the shelf. After the release: on along the motion made since that the arm is on
+    (`after_release`: the retreat away from the bottle, or the way home), then a path home from where it ends; from
+    the slot itself a fresh path home started in collision (the open fingers around the bottle just placed) and the
+    arm stayed there. `near`: rad (None: config/motion_planner.yaml's recover_near). Returns what was done; raises
+    (the arm's or PlanningError) if it could not."""
     lock = lock if lock is not None else nullcontext()
     if progress.released:
+        near = float(node_parameters()["recover_near"]) if near is None else near
+        on = after_release(progress, arm.measured(), near)
+        if on is not None:
+            arm.follow(on[1], "recover")
+            if on[0] == "home":
+                return f"{progress.object_id} was placed; arm on along its way home"
         with lock:
             home = planner.plan_home(arm.measured(), progress.removed + [progress.object_id], progress.placed)
         arm.follow(home, "recover")
-        return f"{progress.object_id} was placed; arm back home"
+        return f"{progress.object_id} was placed; arm " + (f"on along its {on[0]}, then " if on else "") + "back home"
     moves = [(phase, t) for phase, t in progress.moves if phase in ("approach", "carry")]
     carried = any(phase == "carry" for phase, _ in moves) or progress.carried
     if not moves and not progress.carried:
@@ -192,3 +202,20 @@ def recover(planner: MotionPlanner, arm: Arm, progress: Progress, lock: ContextM
         on_change()
     return (f"{progress.object_id} set down where it was picked; arm back home" if carried else
             "arm back home along its approach, gripper open")
+
+
+def after_release(progress: Progress, q: np.ndarray, near: float) -> tuple[str, Trajectory] | None:
+    """The rest of the motion made after the release that the arm is on: of the retreat and the way home recorded
+    after the last carry (both planned with the bottle at its slot, each toward its clear end: the staging pose,
+    home), the one with the sample nearest q (largest joint difference, follower.joint_error; the later one on a tie)
+    if that is within `near`; (its phase, its samples from that one to its end). None when the arm is on neither."""
+    carry = max((i for i, (phase, _) in enumerate(progress.moves) if phase == "carry"), default=-1)
+    best: tuple[float, str, Trajectory, int] | None = None
+    for phase, t in progress.moves[carry + 1:]:
+        if phase not in ("retreat", "home") or not len(t):
+            continue
+        d = np.max(np.abs(joint_error(t.positions, q)), axis=1)
+        k = int(np.argmin(d))
+        if d[k] <= near and (best is None or d[k] <= best[0]):
+            best = (float(d[k]), phase, t, k)
+    return None if best is None else (best[1], best[2].from_sample(best[3]))

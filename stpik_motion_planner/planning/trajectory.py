@@ -82,6 +82,11 @@ class Trajectory:
             vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
         return Trajectory(t, pos, vel, self.joint_names, [("back", 0.0)])
 
+    def from_sample(self, k: int) -> "Trajectory":
+        """The rest from sample k on: the same samples and velocities, its times from 0."""
+        return Trajectory(self.times[k:] - self.times[k], self.positions[k:].copy(), self.velocities[k:].copy(),
+                          self.joint_names, [("on", 0.0)])
+
     @classmethod
     def empty(cls) -> "Trajectory":
         """A trajectory with no points."""
