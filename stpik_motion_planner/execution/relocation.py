@@ -5,10 +5,11 @@ approach -> close the gripper -> re-plan the carry from the measured configurati
 that fails) -> carry -> open -> retreat -> re-plan home from the measured configuration (idem) -> home.
 Nothing moves before the whole relocation is planned, so a carry that cannot be planned never leaves the arm
 holding a bottle; and when a motion fails or the goal is cancelled, `recover` brings the arm back to a safe state
-along the motions it made (the bottle set down where it was picked, the arm home). The destination is the slot the
-caller chose (the motion_planner node: a free one of the scene, goal_check.destination) with the bottles placed so far
-where they stand; by default slot `len(removed)`, the objects already relocated in the earlier slots. The arm is
-anything that implements `Arm`: the motion_planner node streams over ROS, the tests drive the MuJoCo core directly.
+along the motions it made (the bottle set down where it was picked, the arm home; after the release, on along the
+retreat first). The destination is the slot the caller chose (the motion_planner node: a free one of the scene,
+goal_check.destination) with the bottles placed so far where they stand; by default slot `len(removed)`, the
+objects already relocated in the earlier slots. The arm is anything that implements `Arm`: the motion_planner node
+streams over ROS, the tests drive the MuJoCo core directly.
 """
 from __future__ import annotations
 
