@@ -22,8 +22,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from relocation_common.paths import resolve_scenario  # noqa: E402
-from relocation_common.scenario import load_scenario  # noqa: E402
+from relocation_common.paths import resolve_scenario  # noqa: E402  (after the sys.path insert)
+from relocation_common.scenario import load_scenario  # noqa: E402  (after the sys.path insert)
 
 
 def through_nodes(scenario: Path, replicas: int, run_dir: Path) -> dict:

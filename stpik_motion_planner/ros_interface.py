@@ -97,6 +97,7 @@ class RosArmLink:
             self._gripper_cmd = node.create_publisher(Float64MultiArray, GRIPPER_TOPIC, 10)
         self._state = SideNode("motion_planner_joint_state", context=node.context)  # 100 Hz, never late
         self._state.node.create_subscription(JointState, arm.state_topic, self._on_joint_state, 10)
+        self._state_topic = node.resolve_topic_name(arm.state_topic)
         self.watch = MismatchWatch(self._state.node, arm, "planner", node.resolve_topic_name(arm.state_topic),
                                    period=1.0, log=node.get_logger().error)
 
@@ -145,6 +146,10 @@ class RosArmLink:
     def ok(self) -> bool:
         """rclpy is not shutting down."""
         return rclpy.ok()
+
+    def driver_present(self) -> bool:
+        """A publisher of the joint states is in the graph (a SIGKILLed driver's stays until its DDS lease ends)."""
+        return self._state.node.count_publishers(self._state_topic) > 0
 
     def finger_goal(self, turns: float, deadline: float, cancelled: Callable[[], bool]) -> np.ndarray:
         """kinova surface: a SetFingersPosition goal (Kinova turns) -> the finger positions of its result (kinova-ros

@@ -71,6 +71,9 @@ class FakeLink:
     def ok(self):
         return self.alive
 
+    def driver_present(self):
+        return True
+
 
 def line(duration=0.3, speed=0.5):
     t = np.arange(0, duration + 1e-9, 0.01)

@@ -9,10 +9,10 @@ import pytest
 from ros_procs import REPO, RosGraph
 
 pytest.importorskip("rclpy")
-import qtree_relocation_msgs  # noqa: E402
-from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402
+import qtree_relocation_msgs  # noqa: E402  (after the importorskip of rclpy)
+from qtree_relocation_msgs.srv import PlanFeasibility  # noqa: E402  (after the importorskip of rclpy)
 
-from relocation_common.node import check_type_support, lost_fields, sample  # noqa: E402
+from relocation_common.node import check_type_support, lost_fields, sample  # noqa: E402  (after the importorskip of rclpy)
 
 NEW_FIELD = "reach_known"
 

@@ -103,6 +103,9 @@ class ArmLink(Protocol):
     def ok(self) -> bool:
         """False once the node is shutting down."""
 
+    def driver_present(self) -> bool:
+        """False once no publisher of the joint states is left in the graph (the driver has gone)."""
+
 
 def progress(phase: str, within: float = 0.0) -> float:
     """The whole relocation's progress (0..1) at `within` (0..1) of `phase` (relocation.PHASES)."""
@@ -189,11 +192,12 @@ class StreamedArm:
     def wait_for_state(self, timeout: float) -> None:
         """Wait up to `timeout` s (less if the node shuts down) for a joint state no older than `state_hold`: right
         after start-up, discovery of the driver can take a moment; a driver starved under load can fall silent for
-        longer than `state_timeout` (the closed-loop grid at a load average of 25: 2.5 s)."""
+        longer than `state_timeout` (the closed-loop grid at a load average of 25: 2.5 s). A driver that has gone
+        (states came before, no publisher of them is left) is not waited for: its relocation aborts at once."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline and self.link.ok():
             st = self.link.joint_state()
-            if st is not None and time.monotonic() - st[1] <= self.p.state_hold:
+            if st is not None and (time.monotonic() - st[1] <= self.p.state_hold or not self.link.driver_present()):
                 return
             time.sleep(0.05)
 
