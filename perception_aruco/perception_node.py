@@ -87,7 +87,7 @@ class PerceptionNode(Node):
         self._depths: deque = deque(maxlen=6)
         self._info = None
         self._last_pair: float | None = None       # stamp of the last processed pair
-        self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")))
+        self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")), int(g("confirm_frames")))
         self.fusion = FrameFusion()
         self._previous: dict = {}                  # id -> PerceivedObject of the last published scene
         self._scene: ObjectArray | None = None
@@ -218,7 +218,8 @@ class PerceptionNode(Node):
         doubt = identity_conflicts(result.detections, self._previous)
         if doubt:
             result = PerceptionResult(result.marker, {i: d for i, d in result.objects.items() if i not in doubt},
-                                      {**result.missing, **doubt}, result.T_base_camera, result.shelf, result.notes)
+                                      {**result.missing, **doubt}, result.T_base_camera, result.shelf, result.notes,
+                                      result.uncounted)
         self._report_health(result)
         self._publish_debug(color, self.perception.annotate(rgb, result, K))
         self._publish_tf(color, result)
@@ -254,7 +255,7 @@ class PerceptionNode(Node):
 
     def _publish_scene(self, color: Image, result: PerceptionResult) -> None:
         log = self.get_logger()
-        objects, held, lost = self.memory.update(result.objects)
+        objects, held, lost = self.memory.update(result.objects, result.uncounted)
         unlisted = [o for o in objects if not o.listed]
         if unlisted:
             log.info("unlisted objects: " + "; ".join(

@@ -133,14 +133,14 @@ def test_scene_memory_holds_unseen_objects_for_hold_frames_then_drops_them():
 
     def det(i, x):
         return perceived(ShelfObject(i, "red", (0.85, 0.1, 0.1), 0.5, x, 0.0, 0.033, 0.16), x, 0.0, 0.2)
-    m = SceneMemory(("a", "b", "T"), hold_frames=2)
-    pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)})
+    m = SceneMemory(("a", "b", "T"), hold_frames=2, confirm_frames=1)
+    pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)}, ())
     assert [d.id for d in pub] == ["a", "b", "T"] and not held and not lost
     for _ in range(2):  # b hidden for two frames: kept at its last pose
-        pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)})
+        pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)}, ())
         assert [d.id for d in pub] == ["a", "b", "T"] and held == ["b"] and not lost
         assert pub[1].x == 0.6 and pub[0].x == 0.51
-    pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)})  # third frame: dropped
+    pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)}, ())  # third frame: dropped
     assert [d.id for d in pub] == ["a", "T"] and lost == ["b"]
-    pub, held, lost = SceneMemory(("a", "T"), 5).update({"a": det("a", 0.5)})  # never seen: never made up
+    pub, held, lost = SceneMemory(("a", "T"), 5, 1).update({"a": det("a", 0.5)}, ())  # never seen: never made up
     assert [d.id for d in pub] == ["a"] and lost == ["T"]

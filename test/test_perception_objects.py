@@ -62,14 +62,14 @@ def test_two_bottles_of_one_colour_kept_apart_while_one_moves():
     frames while o2 moves 15 mm a frame towards o1's row; identities from the tracks (SceneMemory)."""
     layout = generated_layout(BASE, 11, 6, colours=["red", "red", "blue", "yellow", "cyan"])
     assert layout[1].label == layout[2].label == "red"
-    memory = SceneMemory(tuple(b.id for b in layout), 10)
+    memory = SceneMemory(tuple(b.id for b in layout), 10, 3)
     p = Perception(with_objects(BASE, layout))
     for k in range(6):
         moved = [replace(b, y=b.y + 0.015 * k) if b.id == "o2" else b for b in layout]
         truth = with_objects(BASE, moved)
         f, vis = render_scene(truth)
         r = p.process(f.rgb, f.depth, f.K, memory=memory, q=Q_HOME)
-        memory.update(r.objects)
+        memory.update(r.objects, r.uncounted)
         for i in ("o1", "o2"):
             assert vis[i] >= VISIBLE and i in r.detections, (k, i, r.missing)
             d, t = r.detections[i], truth.object(i)
