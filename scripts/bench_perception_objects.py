@@ -97,7 +97,7 @@ def make_case(seed: int, n: int, n_unlisted: int, n_lying: int) -> Case:
 
 def score(case: Case, result, visible: dict[str, int]) -> dict:
     """Per visible object: found / covered / dropped; listed ids off (WRONG); the unlisted found."""
-    out = dict(found=0, covered=0, dropped=[], wrong=[], visible=0, unlisted_found=0, unlisted_visible=0)
+    out: dict = dict(found=0, covered=0, dropped=[], wrong=[], visible=0, unlisted_found=0, unlisted_visible=0)
     objs = list(result.objects.values())
     for i, o in result.objects.items():
         if o.listed and i in case.truth:
