@@ -121,7 +121,11 @@ class Perception:
         of earlier frames (their tracks: identity, unlisted ids; read, not changed: the caller updates it with the
         result); q: the arm's joint angles at the frame, or one row per joint state around its stamp (the body is left
         out over all of them; None: not filtered, said in notes). arm_unknown: the arm moved and no joint state at or
-        after the frame's stamp came yet (tracking.JointHistory.unknown_at): no new objects from this frame."""
+        after the frame's stamp came yet (tracking.JointHistory.unknown_at): no new objects from this frame.
+        The result's `uncounted`: the new unlisted objects (seen now, or candidates the memory counts) this frame
+        is no evidence for: the arm's pose unknown, the arm in the shelf, or moving (q of more than one row) in
+        front of them (self_filter.arm_in_view); SceneMemory.update publishes a new one after `confirm_frames`
+        frames that count."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
         notes: list[str] = []
@@ -154,7 +158,8 @@ class Perception:
         if left_out:
             notes.append(f"{left_out} cluster(s) matching no known object left out while the arm is in the shelf "
                          "(new objects are taken with the arm out of it)")
-        candidates = {**memory.unlisted(), **{i: o for i, o in objects.items() if not o.listed}}
+        candidates = {**memory.pending(), **{i: o for i, o in objects.items()
+                                             if not o.listed and i not in memory.confirmed}}
         moving = q is not None and len(np.atleast_2d(q)) > 1
         uncounted = frozenset(i for i, o in candidates.items() if in_shelf or (moving and arm_in_view(
             q, box_corners(o), T, corrected_K(K, fit.intrinsics), self.objects.arm_padding)))

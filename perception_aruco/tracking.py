@@ -57,6 +57,10 @@ class SceneMemory:
         """The unlisted objects ever seen (candidates too), by id (their last poses)."""
         return {i: o for i, (o, _) in self.last_seen.items() if i not in self.ids}
 
+    def pending(self) -> dict[str, PerceivedObject]:
+        """The candidates (unlisted, not yet published) with a count under way, by id (their last poses)."""
+        return {i: self.last_seen[i][0] for i in self.streak}
+
     def new_ids(self, n: int) -> list[str]:
         """The ids the next n unlisted objects seen for the first time get (`update` takes them)."""
         return [f"{UNLISTED_PREFIX}{self.unlisted_count + k + 1}" for k in range(n)]
