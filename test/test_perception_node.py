@@ -207,6 +207,7 @@ def test_node_publishes_an_unlisted_object(tmp_path):
                 time.sleep(0.25)
             print(f"\nu1 published {after_first} frame(s) after the first scene (confirm_frames "
                   f"{node_section(config_file('perception.yaml'), 'perception')['confirm_frames']})")
+            assert after_first == 0   # no scene before confirm_frames frames: the first one holds it
             objects = {o.id: o for o in msg_to_objects(scenes[-1], scenario.ids)}
             u = objects.get("u1")
             assert u is not None and not u.listed, objects
