@@ -2,7 +2,9 @@
 
 Thin shell over perception_aruco.pipeline. Colour and depth are paired by stamp (closest within `sync_slop`);
 the newest pair is processed at most `process_rate` times a second. Objects hidden in the current frame are kept
-at their last perceived pose for `hold_frames` processed frames, then dropped; a scene without the target is not
+at their last perceived pose for `hold_frames` processed frames, then dropped; a new unlisted object is published
+once seen in `confirm_frames` frames that count (SceneMemory), and no scene before that many frames (the first holds
+the unlisted objects in view); a scene without the target is not
 published, unless the motion planner says it placed the target on the bottom shelf (`relocated_topic`), out of the
 camera's view: then the scene is what the camera sees, the top shelf without the target (docs/perception.md). The
 last scene is republished every `republish_period` s while it is younger than `max_scene_age` (the task planner
@@ -87,7 +89,7 @@ class PerceptionNode(Node):
         self._depths: deque = deque(maxlen=6)
         self._info = None
         self._last_pair: float | None = None       # stamp of the last processed pair
-        self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")))
+        self.memory = SceneMemory(self.scenario.ids, int(g("hold_frames")), int(g("confirm_frames")))
         self.fusion = FrameFusion()
         self._previous: dict = {}                  # id -> PerceivedObject of the last published scene
         self._scene: ObjectArray | None = None
@@ -218,7 +220,8 @@ class PerceptionNode(Node):
         doubt = identity_conflicts(result.detections, self._previous)
         if doubt:
             result = PerceptionResult(result.marker, {i: d for i, d in result.objects.items() if i not in doubt},
-                                      {**result.missing, **doubt}, result.T_base_camera, result.shelf, result.notes)
+                                      {**result.missing, **doubt}, result.T_base_camera, result.shelf, result.notes,
+                                      result.uncounted)
         self._report_health(result)
         self._publish_debug(color, self.perception.annotate(rgb, result, K))
         self._publish_tf(color, result)
@@ -254,7 +257,7 @@ class PerceptionNode(Node):
 
     def _publish_scene(self, color: Image, result: PerceptionResult) -> None:
         log = self.get_logger()
-        objects, held, lost = self.memory.update(result.objects)
+        objects, held, lost = self.memory.update(result.objects, result.uncounted)
         unlisted = [o for o in objects if not o.listed]
         if unlisted:
             log.info("unlisted objects: " + "; ".join(
@@ -267,6 +270,10 @@ class PerceptionNode(Node):
         if lost:
             why = "; ".join(f"{i}: {result.missing.get(i, 'not seen')}" for i in lost)
             log.warning(f"missing from the scene (hidden or out of view): {why}", throttle_duration_sec=5.0)
+        if self.memory.frame < self.memory.confirm_frames:   # the first scene holds the objects confirmed by then
+            log.info(f"first frames: no scene until {self.memory.confirm_frames} frames confirm the unlisted objects "
+                     f"({self.memory.frame} so far)", throttle_duration_sec=2.0)
+            return
         target = self.scenario.target_id
         if target not in {d.id for d in dets} and target not in self._placed:
             log.error(f"target {target!r} not seen: no scene published", throttle_duration_sec=2.0)

@@ -33,9 +33,9 @@ from .debug_image import annotate
 from .localize import LocalizeParams
 from .objects.clusters import cluster_points, object_mask
 from .objects.find import find_objects
-from .objects.model import PerceivedObject
+from .objects.model import PerceivedObject, box_corners
 from .objects.params import ObjectParams
-from .objects.self_filter import arm_in_shelf
+from .objects.self_filter import arm_in_shelf, arm_in_view
 from .segmentation import (
     PlateLevels,
     SegmentationParams,
@@ -74,7 +74,8 @@ class PerceptionResult:
     """One processed frame. objects: every object found, by id (listed ones in scenario order, then the unlisted
     ones); missing: listed id -> why it was not found; T_base_camera: the camera pose used (marker, corrected by the
     shelf fit); marker: the marker as seen (None when it was not, and the caller's `prior` pose stood in); notes:
-    what the checks said."""
+    what the checks said; uncounted: the unlisted ids (seen now, or candidates not seen) this frame is no evidence
+    for (SceneMemory.update: the arm's pose unknown, the arm in the shelf, or moving in front of them)."""
 
     marker: MarkerObservation | None
     objects: dict[str, PerceivedObject]
@@ -82,6 +83,7 @@ class PerceptionResult:
     T_base_camera: np.ndarray = field(repr=False)
     shelf: ShelfFit | None
     notes: tuple[str, ...]
+    uncounted: frozenset[str]
 
     @property
     def detections(self) -> dict[str, PerceivedObject]:
@@ -119,7 +121,11 @@ class Perception:
         of earlier frames (their tracks: identity, unlisted ids; read, not changed: the caller updates it with the
         result); q: the arm's joint angles at the frame, or one row per joint state around its stamp (the body is left
         out over all of them; None: not filtered, said in notes). arm_unknown: the arm moved and no joint state at or
-        after the frame's stamp came yet (tracking.JointHistory.unknown_at): no new objects from this frame."""
+        after the frame's stamp came yet (tracking.JointHistory.unknown_at): no new objects from this frame.
+        The result's `uncounted`: the new unlisted objects (seen now, or candidates the memory counts) this frame
+        is no evidence for: the arm's pose unknown, the arm in the shelf, or moving (q of more than one row) in
+        front of them (self_filter.arm_in_view); SceneMemory.update publishes a new one after `confirm_frames`
+        frames that count."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
         notes: list[str] = []
@@ -145,14 +151,19 @@ class Perception:
                       max_rms=max(self.loc.max_rms, 1.5 * fit.noise), depth_noise=fit.noise,
                       min_pixels=max(12, round(self.loc.min_pixels * area)),
                       min_inliers=max(10, round(self.loc.min_inliers * area)))
-        memory = memory if memory is not None else SceneMemory(self.scenario.ids, 0)
+        memory = memory if memory is not None else SceneMemory(self.scenario.ids, 0, 1)
         in_shelf = arm_unknown or arm_in_shelf(q, self.scenario.shelf, self.objects.arm_padding)
         objects, missing, left_out = find_objects(clusters, points, self.scenario, memory, self.seg, self.objects,
                                                   loc, T[:3, 3], fit.noise, new_unlisted=not in_shelf)
         if left_out:
             notes.append(f"{left_out} cluster(s) matching no known object left out while the arm is in the shelf "
                          "(new objects are taken with the arm out of it)")
-        return PerceptionResult(marker, objects, missing, T, fit, tuple(notes))
+        candidates = {**memory.pending(), **{i: o for i, o in objects.items()
+                                             if not o.listed and i not in memory.confirmed}}
+        moving = q is not None and len(np.atleast_2d(q)) > 1
+        uncounted = frozenset(i for i, o in candidates.items() if in_shelf or (moving and arm_in_view(
+            q, box_corners(o), T, corrected_K(K, fit.intrinsics), self.objects.arm_padding)))
+        return PerceptionResult(marker, objects, missing, T, fit, tuple(notes), uncounted)
 
     def _seen_plates(self, cam: np.ndarray, seen: Seen) -> np.ndarray:
         """HxW bool: pixels on the plates of the markers as seen (camera-frame points `cam`), never bottles: a

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Collection, Mapping
 
 import numpy as np
 
@@ -28,40 +28,69 @@ class SceneMemory:
     """The hidden-object policy (docs/perception.md): an object not seen in the current frame keeps its last
     perceived pose for `hold_frames` processed frames, then is dropped; nothing is ever guessed. It also remembers
     every object's last pose (the identity match's expected position) and numbers the unlisted objects u1, u2, ...
-    in order of first sight. ids: the scenario's listed ids, in the order the scene lists them."""
+    in order of first sight. A new unlisted object is published once seen in `confirm_frames` consecutive frames
+    that count for it (the arm's pose known, out of the shelf, and not moving in front of it: the caller says which
+    frames do not, `update`'s `uncounted`); a frame that counts without it starts its count over. Until then it
+    is a candidate: tracked (its id kept), never published. ids: the scenario's listed ids, in the order the scene
+    lists them."""
 
     ids: tuple[str, ...]
     hold_frames: int
+    confirm_frames: int
     frame: int = 0
     last_seen: dict[str, tuple[PerceivedObject, int]] = field(default_factory=dict)  # id -> (object, frame index)
     unlisted_count: int = 0
+    streak: dict[str, int] = field(default_factory=dict)   # candidate id -> frames that counted in a row
+    confirmed: set[str] = field(default_factory=set)       # unlisted ids published (confirmed)
 
     def expected(self, object_id: str) -> PerceivedObject | None:
         """The object's last perceived pose (any age), or None if never seen."""
         seen = self.last_seen.get(object_id)
         return None if seen is None else seen[0]
 
+    def held(self) -> dict[str, PerceivedObject]:
+        """The listed objects the next frame would still publish at their last pose if not seen in it, by id."""
+        return {i: o for i, (o, f) in self.last_seen.items()
+                if i in self.ids and self.frame + 1 - f <= self.hold_frames}
+
     def unlisted(self) -> dict[str, PerceivedObject]:
-        """The unlisted objects ever seen, by id (their last poses)."""
+        """The unlisted objects ever seen (candidates too), by id (their last poses)."""
         return {i: o for i, (o, _) in self.last_seen.items() if i not in self.ids}
+
+    def pending(self) -> dict[str, PerceivedObject]:
+        """The candidates (unlisted, not yet published) with a count under way, by id (their last poses)."""
+        return {i: self.last_seen[i][0] for i in self.streak}
 
     def new_ids(self, n: int) -> list[str]:
         """The ids the next n unlisted objects seen for the first time get (`update` takes them)."""
         return [f"{UNLISTED_PREFIX}{self.unlisted_count + k + 1}" for k in range(n)]
 
-    def update(self, objects: Mapping[str, PerceivedObject]) -> tuple[list[PerceivedObject], list[str], list[str]]:
-        """Record one processed frame; returns (objects to publish: listed in scenario order, then unlisted by
-        number; held ids; lost ids: listed objects not held, and unlisted ones dropped in this frame)."""
+    def update(self, objects: Mapping[str, PerceivedObject], uncounted: Collection[str]) \
+            -> tuple[list[PerceivedObject], list[str], list[str]]:
+        """Record one processed frame; returns (objects to publish: listed in scenario order, then the confirmed
+        unlisted by number; held ids; lost ids: listed objects not held, and confirmed unlisted ones dropped in this
+        frame). uncounted: the unlisted ids this frame is no evidence for, seen in it or not (class docstring)."""
         self.frame += 1
         for i, o in objects.items():
             self.last_seen[i] = (o, self.frame)
             self.unlisted_count = max(self.unlisted_count, unlisted_number(i) if i not in self.ids else 0)
-        keep = {i: o for i, (o, f) in self.last_seen.items() if self.frame - f <= self.hold_frames}
+        for i in [i for i in self.unlisted() if i not in self.confirmed]:
+            if i in uncounted:
+                continue
+            if i in objects:
+                self.streak[i] = self.streak.get(i, 0) + 1
+            else:
+                self.streak.pop(i, None)   # not seen in a frame that counts: its count starts over
+            if self.streak.get(i, 0) >= self.confirm_frames:
+                self.confirmed.add(i)
+                del self.streak[i]
+        keep = {i: o for i, (o, f) in self.last_seen.items() if self.frame - f <= self.hold_frames
+                and (i in self.ids or i in self.confirmed)}
         order = list(self.ids) + sorted((i for i in keep if i not in self.ids), key=unlisted_number)
         held = [i for i in order if i in keep and i not in objects]
         lost = [i for i in self.ids if i not in keep] + sorted(
-            (i for i, (_, f) in self.last_seen.items() if i not in self.ids and self.frame - f == self.hold_frames + 1),
-            key=unlisted_number)
+            (i for i, (_, f) in self.last_seen.items()
+             if i in self.confirmed and self.frame - f == self.hold_frames + 1), key=unlisted_number)
         return [keep[i] for i in order if i in keep], held, lost
 
 

@@ -10,7 +10,7 @@ an unlisted object there), covered (some published object's footprint holds its 
 space published as free: silently wrong). Also: listed ids published > tolerance off (WRONG), frames refused,
 frames/s and CPU time per frame of Perception.process. Seeds are fixed before any result (seed k = layout k).
 Usage: .venv/bin/python scripts/bench_perception_objects.py [--sizes 5 10 15 20 30] [--seeds 5]
-       [--camera-model ideal realsense_d435]
+       [--camera-model ideal realsense_d435] [--frames K: score what the node publishes after K frames]
 """
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from types import SimpleNamespace
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node runs (perception_aruco/__init__.py)
 
@@ -35,8 +36,9 @@ from perception_scenes import extra, generated_layout, reach, render_scene, with
 from jaco2_sim_driver.sensor_model import SensorModel  # noqa: E402  (after the sys.path insert of the checkout)
 from perception_aruco.aruco import PerceptionError  # noqa: E402 (after sys.path)
 from perception_aruco.objects.model import BOX, CYLINDER  # noqa: E402 (after sys.path)
-from perception_aruco.pipeline import Perception  # noqa: E402 (after sys.path)
-from relocation_common.paths import default_scenario  # noqa: E402 (after sys.path)
+from perception_aruco.pipeline import Perception, SceneMemory  # noqa: E402 (after sys.path)
+from relocation_common.config import node_section  # noqa: E402 (after sys.path)
+from relocation_common.paths import config_file, default_scenario  # noqa: E402 (after sys.path)
 from relocation_common.robot_description import Q_HOME  # noqa: E402 (after sys.path)
 from relocation_common.scenario import PALETTE, Scenario, ShelfObject, load_scenario  # noqa: E402 (after sys.path)
 
@@ -95,7 +97,7 @@ def make_case(seed: int, n: int, n_unlisted: int, n_lying: int) -> Case:
 
 def score(case: Case, result, visible: dict[str, int]) -> dict:
     """Per visible object: found / covered / dropped; listed ids off (WRONG); the unlisted found."""
-    out = dict(found=0, covered=0, dropped=[], wrong=[], visible=0, unlisted_found=0, unlisted_visible=0)
+    out: dict = dict(found=0, covered=0, dropped=[], wrong=[], visible=0, unlisted_found=0, unlisted_visible=0)
     objs = list(result.objects.values())
     for i, o in result.objects.items():
         if o.listed and i in case.truth:
@@ -124,17 +126,23 @@ def score(case: Case, result, visible: dict[str, int]) -> dict:
     return out
 
 
-def run_case(case: Case, sensor: str, seed: int) -> tuple[dict, float, float]:
-    """(score, wall s, CPU s) of one frame."""
-    f, visible = render_scene(case.sim, sensor=SensorModel.named(sensor), seed=seed)
+def run_case(case: Case, sensor: str, seed: int, frames: int = 0) -> tuple[dict, float, float]:
+    """(score, wall s, CPU s) of one frame: what Perception.process finds in it (frames 0), or what the node would
+    publish after `frames` frames of the scene (sensor seeds seed, seed + 1000, ...) through its SceneMemory
+    (config/perception.yaml's hold_frames, confirm_frames: a new unlisted object is published once confirmed)."""
     p = Perception(case.given)
-    t0, c0 = time.perf_counter(), time.process_time()
-    try:
-        r = p.process(f.rgb, f.depth, f.K, q=Q_HOME)
-    except PerceptionError as e:
-        return dict(refused=str(e)), 0.0, 0.0
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    return score(case, r, visible), wall, cpu
+    cfg = node_section(config_file("perception.yaml"), "perception")
+    memory = SceneMemory(case.given.ids, int(cfg["hold_frames"]), int(cfg["confirm_frames"]))
+    for k in range(max(frames, 1)):
+        f, visible = render_scene(case.sim, sensor=SensorModel.named(sensor), seed=seed + 1000 * k)
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            r = p.process(f.rgb, f.depth, f.K, memory=memory, q=Q_HOME)
+        except PerceptionError as e:
+            return dict(refused=str(e)), 0.0, 0.0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        published = memory.update(r.objects, r.uncounted)[0]
+    return score(case, r if not frames else SimpleNamespace(objects={o.id: o for o in published}), visible), wall, cpu
 
 
 def main() -> None:
@@ -142,6 +150,9 @@ def main() -> None:
     ap.add_argument("--sizes", nargs="*", type=int, default=[5, 10, 15, 20, 30])
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--camera-model", nargs="*", default=["ideal", "realsense_d435"])
+    ap.add_argument("--frames", type=int, default=0, help="score what the node publishes after this many frames of "
+                    "each scene (its SceneMemory: unlisted objects confirmed over confirm_frames); 0: one frame's "
+                    "objects as found")
     a = ap.parse_args()
     print("| camera | objects | frames | visible | found | covered | DROPPED | WRONG ids | unlisted found | refused | "
           "wall ms | CPU ms |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
@@ -152,7 +163,7 @@ def main() -> None:
             wall, cpu = [], []
             for seed in range(a.seeds):
                 case = make_case(seed, n, seed % 4, 1 if seed % 2 else 0)
-                sc, w, c = run_case(case, cam, seed)
+                sc, w, c = run_case(case, cam, seed, a.frames)
                 if "refused" in sc:
                     tot["refused"] += 1
                     notes.append(f"{cam} n={n} seed {seed}: refused: {sc['refused']}")

@@ -3,6 +3,7 @@ against the scenario's ground truth, marker pose error against the simulator's c
 
 Ground-truth visibility of each bottle comes from MuJoCo's segmentation rendering of the same camera."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -133,14 +134,42 @@ def test_scene_memory_holds_unseen_objects_for_hold_frames_then_drops_them():
 
     def det(i, x):
         return perceived(ShelfObject(i, "red", (0.85, 0.1, 0.1), 0.5, x, 0.0, 0.033, 0.16), x, 0.0, 0.2)
-    m = SceneMemory(("a", "b", "T"), hold_frames=2)
-    pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)})
+    m = SceneMemory(("a", "b", "T"), hold_frames=2, confirm_frames=1)
+    pub, held, lost = m.update({"a": det("a", 0.5), "b": det("b", 0.6), "T": det("T", 0.7)}, ())
     assert [d.id for d in pub] == ["a", "b", "T"] and not held and not lost
     for _ in range(2):  # b hidden for two frames: kept at its last pose
-        pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)})
+        pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)}, ())
         assert [d.id for d in pub] == ["a", "b", "T"] and held == ["b"] and not lost
         assert pub[1].x == 0.6 and pub[0].x == 0.51
-    pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)})  # third frame: dropped
+    pub, held, lost = m.update({"a": det("a", 0.51), "T": det("T", 0.7)}, ())  # third frame: dropped
     assert [d.id for d in pub] == ["a", "T"] and lost == ["b"]
-    pub, held, lost = SceneMemory(("a", "T"), 5).update({"a": det("a", 0.5)})  # never seen: never made up
+    pub, held, lost = SceneMemory(("a", "T"), 5, 1).update({"a": det("a", 0.5)}, ())  # never seen: never made up
     assert [d.id for d in pub] == ["a"] and lost == ["T"]
+
+
+def test_a_new_unlisted_object_is_published_after_confirm_frames_frames_that_count():
+    """SceneMemory: a new unlisted object (u1) is published once seen in confirm_frames (3) consecutive frames that
+    count for it; a frame that does not count (the arm in front of it, its pose unknown: `uncounted`) neither adds
+    nor starts over; a counted frame without it starts its count over. Once published it is held and dropped as a
+    listed object is; a candidate is never reported lost."""
+    from perception_scenes import perceived
+
+    from perception_aruco.pipeline import SceneMemory
+    from relocation_common.scenario import ShelfObject
+
+    def det(i, x, listed=True):
+        o = perceived(ShelfObject(i, "red", (0.85, 0.1, 0.1), 0.5, x, 0.0, 0.033, 0.16), x, 0.0, 0.2)
+        return o if listed else replace(o, listed=False)
+    m = SceneMemory(("T",), hold_frames=1, confirm_frames=3)
+    seen = {"T": det("T", 0.9), "u1": det("u1", 0.7, False)}
+    steps = [(seen, ()), (seen, ("u1",)), (seen, ()), ({"T": seen["T"]}, ()),   # 2 counted, 1 not, then lost: over
+             (seen, ()), (seen, ("u1",)), ({"T": seen["T"]}, ("u1",)), (seen, ()), (seen, ())]
+    published = []
+    for objects, uncounted in steps:
+        pub, held, lost = m.update(objects, uncounted)
+        published.append([d.id for d in pub])
+        assert "u1" not in lost
+    assert published[:8] == [["T"]] * 8 and published[8] == ["T", "u1"], published
+    assert m.update({"T": seen["T"]}, ())[:2] == ([seen["T"], seen["u1"]], ["u1"])   # held for hold_frames
+    pub, held, lost = m.update({"T": seen["T"]}, ())
+    assert [d.id for d in pub] == ["T"] and lost == ["u1"]

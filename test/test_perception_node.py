@@ -14,7 +14,8 @@ from jaco2_sim_driver.camera import render_frame
 from perception_aruco.images import encode_color, encode_depth
 from relocation_app.graph import Graph
 from relocation_common.arm_interface import ArmInterface
-from relocation_common.paths import default_scenario
+from relocation_common.config import node_section
+from relocation_common.paths import config_file, default_scenario
 from relocation_common.robot_description import JOINT_NAMES, Q_HOME
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
@@ -191,9 +192,12 @@ def test_node_publishes_an_unlisted_object(tmp_path):
             info = CameraInfo(width=frame.width, height=frame.height, distortion_model="plumb_bob",
                               k=frame.K.reshape(-1).tolist(), d=[0.0] * 5)
             deadline = time.monotonic() + 30
-            while not scenes:
+            after_first = 0   # frames sent after the first scene: a new unlisted object is published once confirmed
+            while not scenes or "u1" not in {o.id for o in scenes[-1].objects}:
                 g.check_alive()
-                assert time.monotonic() < deadline, "no ObjectArray on /scene/objects:\n" + g.log("perception")
+                assert time.monotonic() < deadline, f"no ObjectArray with u1 on /scene/objects ({len(scenes)} " \
+                    "without):\n" + g.log("perception")
+                after_first += bool(scenes)
                 stamp = node.get_clock().now().to_msg()
                 info.header.stamp = stamp
                 joints.publish(JointState(name=list(JOINT_NAMES), position=[float(v) for v in Q_HOME]))
@@ -201,6 +205,9 @@ def test_node_publishes_an_unlisted_object(tmp_path):
                 pubs[0].publish(_image(stamp, *encode_color(frame.rgb)))
                 pubs[1].publish(_image(stamp, *encode_depth(frame.depth, "16UC1")))
                 time.sleep(0.25)
+            print(f"\nu1 published {after_first} frame(s) after the first scene (confirm_frames "
+                  f"{node_section(config_file('perception.yaml'), 'perception')['confirm_frames']})")
+            assert after_first == 0   # no scene before confirm_frames frames: the first one holds it
             objects = {o.id: o for o in msg_to_objects(scenes[-1], scenario.ids)}
             u = objects.get("u1")
             assert u is not None and not u.listed, objects

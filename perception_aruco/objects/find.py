@@ -3,7 +3,8 @@ unlisted (docs/perception.md, "Objects"). A listed standing cylinder is placed b
 (localize.locate_cylinder: sub-millimetre where the free fit is a few millimetres); when that fit is doubtful, or
 two listed fits overlap, or one lies outside the shelf, the listed object is reported missing with the reason and
 its cluster published as an unlisted object: occupied space is never left out. A cluster within a found object's
-space is a piece of it (`part_of`)."""
+space is a piece of it (`part_of`); one within the last pose of a listed object held unseen (`held_tol`: its
+identity not established in this frame) is that object, kept at its last pose, never a new unlisted object."""
 from __future__ import annotations
 
 import math
@@ -24,6 +25,7 @@ from .params import ObjectParams
 from .primitives import fit_primitive
 
 BOARD_APART = 0.05  # m: supports further apart than this are different boards
+KEPT = "; a cluster within its last pose: that object, kept there"
 
 
 def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.ndarray, seg: SegmentationParams,
@@ -83,12 +85,13 @@ def unlisted_object(f: Fitted, params: ObjectParams, seg: SegmentationParams, ro
     return replace(o, weight=w, weight_note=note + (f"; conservative: {p.why}" if p.conservative else ""))
 
 
-def part_of(f: Fitted, listed: Iterable[PerceivedObject], params: ObjectParams) -> bool:
-    """Whether cluster f lies in the space of an object found (all but `absorb_outside` of its points within
-    `absorb_tol` of its primitive): a piece of that object the clustering kept apart (an edge seen past a nearer
-    object, a rim), already explained by it, not an object of its own."""
+def part_of(f: Fitted, listed: Iterable[PerceivedObject], params: ObjectParams, tol: float) -> str | None:
+    """The id of an object whose space cluster f lies in (all but `absorb_outside` of its points within `tol` of
+    its primitive), or None. An object found: a piece of it the clustering kept apart (an edge seen past a nearer
+    object, a rim), already explained by it; a listed object held unseen at its last pose: that object, seen
+    without its identity (`find_objects`). Not an object of its own either way."""
     pts = f.cluster.points
-    return any(float(np.mean(inside(o, pts, params.absorb_tol))) >= 1.0 - params.absorb_outside for o in listed)
+    return next((o.id for o in listed if float(np.mean(inside(o, pts, tol))) >= 1.0 - params.absorb_outside), None)
 
 
 def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float) -> dict[str, str]:
@@ -148,8 +151,17 @@ def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Sc
     for j, b in enumerate(scenario.objects):
         if b.id not in found and b.id not in missing:
             missing[b.id] = _why_missing(j, b, cost, taken, fitted, params.max_cost)
-    rest = [unlisted_object(f, params, seg, room_above(f.cluster.support, scenario)) for m, f in enumerate(fitted)
-            if m not in taken and not part_of(f, found.values(), params)]
+    held = [o for i, o in memory.held().items() if i not in found]
+    rest = []
+    for m, f in enumerate(fitted):
+        if m in taken or part_of(f, found.values(), params, params.absorb_tol) is not None:
+            continue
+        at = part_of(f, held, params, params.held_tol)
+        if at is not None:   # its last pose's space: that object, kept there, not a new one (e.g. its colour hidden)
+            why = missing.get(at, "not identified").replace("; its cluster published as an unlisted object", "")
+            missing[at] = why + ("" if why.endswith(KEPT) else KEPT)
+            continue
+        rest.append(unlisted_object(f, params, seg, room_above(f.cluster.support, scenario)))
     ids = unlisted_ids(rest, memory, params.unlisted_gate)
     known = memory.unlisted()
     objects = {b.id: found[b.id] for b in scenario.objects if b.id in found}

@@ -43,6 +43,9 @@ class Memory(Protocol):
     def expected(self, object_id: str) -> PerceivedObject | None:
         """The object's last perceived pose, or None."""
 
+    def held(self) -> dict[str, PerceivedObject]:
+        """The listed objects still held at their last pose if not seen in this frame, by id."""
+
     def unlisted(self) -> dict[str, PerceivedObject]:
         """The unlisted objects ever seen, by id."""
 

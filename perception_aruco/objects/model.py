@@ -76,6 +76,12 @@ def inside(o: PerceivedObject, points: np.ndarray, tol: float) -> np.ndarray:
     return in_z & (np.abs(u) <= o.size[0] / 2 + tol) & (np.abs(v) <= o.size[1] / 2 + tol)
 
 
+def box_corners(o: PerceivedObject) -> np.ndarray:
+    """8 x 3: the corners of a box holding the object (its footprint's bounding circle's square, support to top)."""
+    r = o.reach
+    return np.array([[o.x + dx, o.y + dy, z] for dx in (-r, r) for dy in (-r, r) for z in (o.z, o.top_z)])
+
+
 def to_shelf_object(o: PerceivedObject) -> ShelfObject:
     """The scene's object model (relocation_common.shelf_object), which the object message carries
     (ros_conversions.objects_to_msg): the one conversion at the pipeline's edge."""

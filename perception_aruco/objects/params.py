@@ -39,6 +39,7 @@ class ObjectParams:
     merge_gap: float
     absorb_tol: float
     absorb_outside: float
+    held_tol: float
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 
 from relocation_common import robot_description as rd
@@ -69,4 +70,31 @@ def arm_in_shelf(q: np.ndarray | None, shelf: Shelf, margin: float) -> bool:
             gap = np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0.0), axis=1)
             if float(gap.min()) < r + margin:
                 return True
+    return False
+
+
+def arm_in_view(q: np.ndarray | None, corners: np.ndarray, T_base_camera: np.ndarray, K: np.ndarray,
+                margin: float) -> bool:
+    """Whether the arm, at any of the joint states around a frame (k x 7, or one), is between the camera and the
+    box of `corners` (N x 3, base frame; an object's bounding box) or touches it in the image: a capsule, sampled
+    along its axis, nearer than the box's farthest corner and projecting within its radius + `margin` (in pixels at
+    its depth) of the box's image (the convex hull of its corners). Such a frame shows the arm, the object in its
+    hand and the pieces they cut out of the objects behind them there: no evidence of an object. No joint state:
+    False (as `arm_in_shelf`)."""
+    if q is None:
+        return False
+    to_cam = np.linalg.inv(T_base_camera)
+    c = np.asarray(corners, float) @ to_cam[:3, :3].T + to_cam[:3, 3]
+    if np.any(c[:, 2] <= 1e-3):
+        return True   # the box reaches behind the camera: its view cannot be told
+    hull = cv2.convexHull(((K @ c.T).T[:, :2] / c[:, 2:]).astype(np.float32))
+    far = float(c[:, 2].max())
+    s = np.linspace(0.0, 1.0, 8)[:, None]
+    for qi in np.atleast_2d(np.asarray(q, float)):
+        for p0, p1, r in arm_segments(qi):
+            pts = (p0 + s * (p1 - p0)) @ to_cam[:3, :3].T + to_cam[:3, 3]
+            for p in pts[(pts[:, 2] > 1e-3) & (pts[:, 2] < far + r + margin)]:
+                uv = (float(K[0, 0] * p[0] / p[2] + K[0, 2]), float(K[1, 1] * p[1] / p[2] + K[1, 2]))
+                if cv2.pointPolygonTest(hull, uv, True) > -K[0, 0] * (r + margin) / p[2]:
+                    return True
     return False
