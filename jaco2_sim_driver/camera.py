@@ -29,13 +29,14 @@ MJ_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
 class Frame:
     """One RGB-D frame. rgb: HxWx3 uint8; depth: HxW float32 metres (0 = no return); K: 3x3 pinhole matrix;
     T_base_camera: 4x4 pose of the optical frame (OpenCV: z forward, x right, y down) in the base frame;
-    stamp: simulated time (s)."""
+    stamp: simulated time (s); wall: the wall-clock time (s, time.time()) of the state it shows (None: not known)."""
 
     rgb: np.ndarray
     depth: np.ndarray
     K: np.ndarray
     T_base_camera: np.ndarray
     stamp: float = 0.0
+    wall: float | None = None
 
     @property
     def width(self) -> int:

@@ -252,6 +252,10 @@ class Jaco2SimDriver(Node):
     def _stamp(self, sim_t: float) -> Time:
         return time_msg(sim_t) if self.sim_stamps else self.get_clock().now().to_msg()
 
+    def _frame_stamp(self, f: Frame) -> Time:
+        """A camera frame's stamp: the instant of the state it shows (SimDriver.camera_loop), not of publishing."""
+        return time_msg(f.stamp) if self.sim_stamps or f.wall is None else time_msg(f.wall)
+
     def _publish_state(self, s: Snapshot) -> None:
         """Joint states (and on the kinova surface joint angles and finger positions) of one instant."""
         msg = JointState(name=self.names)
@@ -272,7 +276,7 @@ class Jaco2SimDriver(Node):
         node is shutting down (the camera loop ends)."""
         try:
             for pub, m in zip((self.pub_rgb, self.pub_depth, self.pub_info, self.pub_cam_pose),
-                              camera_msgs(f, self._stamp(f.stamp))):
+                              camera_msgs(f, self._frame_stamp(f))):
                 pub.publish(m)
         except RCLError:
             if self.context.ok():

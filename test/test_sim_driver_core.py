@@ -207,3 +207,23 @@ def test_the_camera_loop_hands_over_frames_until_told_to_stop(sim):
     stop.set()
     core.camera_loop(0.01, frames.append, stop)  # set before: no frame
     assert len(frames) == 2
+
+
+def test_a_frame_carries_the_wall_time_of_the_state_it_shows_not_of_its_publishing(sim, monkeypatch):
+    """Under load a render took far longer than its 75 ms, and frames stamped when published showed the arm where it
+    had been before the stamp (perception's self-filter took the wrong joint states). The frame's `wall` is taken
+    when the joint positions are copied: with a render of 0.3 s the frame is published 0.3 s after its `wall`."""
+    import time
+
+    import jaco2_sim_driver.driver as driver_module
+
+    class SlowRenderer(driver_module.CameraRenderer):
+        def render(self, data):
+            time.sleep(0.3)
+            return super().render(data)
+
+    monkeypatch.setattr(driver_module, "CameraRenderer", SlowRenderer)
+    core = driver(sim)
+    lags = []
+    core.camera_loop(0.01, lambda f: lags.append(time.time() - f.wall) or False, threading.Event())
+    assert len(lags) == 1 and lags[0] >= 0.3, lags
