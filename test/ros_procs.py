@@ -234,3 +234,14 @@ class RosGraph:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def load_script(name: str):
+    """A script of scripts/ (not a package) imported as module `name`, e.g. load_script("bench_chaos")."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

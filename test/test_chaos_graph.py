@@ -3,21 +3,15 @@ on scenario1_5 (ground truth), its motion planner SIGKILLed during the first car
 with exit 1, "node motion_planner exited with -9", and no report.json. Now the planner is respawned, recovers the
 arm from its journal (the bottle set down where it was picked), the task planner sends the goal again and re-plans,
 and the target is retrieved: report.json says so with the respawn, the arm is home, nothing is left running."""
-import importlib.util
-import sys
 
 import pytest
-from ros_procs import REPO
+from ros_procs import load_script
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_chaos", REPO / "scripts" / "bench_chaos.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["bench_chaos"] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script("bench_chaos")
 
 
 def test_a_motion_planner_killed_during_a_carry_is_respawned_and_the_target_retrieved(tmp_path):

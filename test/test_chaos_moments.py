@@ -3,19 +3,13 @@ the training moment happens only while the Q-Tree trains. The old code killed `d
 feedback whatever the phase: on scenario1_5 the training ends within 3-10 s, so all 10 runs of perception and the
 motion planner "at the training moment" under load were killed during the execution ("training (executing) 10.7 s
 in")."""
-import importlib.util
-import sys
 import time
 
-from ros_procs import REPO
+from ros_procs import load_script
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_chaos", REPO / "scripts" / "bench_chaos.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["bench_chaos"] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script("bench_chaos")
 
 
 def test_a_training_kill_happens_only_while_the_q_tree_trains():
