@@ -81,7 +81,8 @@ def test_the_node_drops_frames_with_a_bad_camera_info_and_goes_on(node):
     for stamp, k in enumerate(([math.nan] * 9, [0.0] * 9), start=1):
         _feed(node, k, stamp=stamp)
         assert node._scene is None
-    _feed(node, node.frame.K.reshape(-1).tolist(), stamp=3)  # the real calibration: a scene
+    for stamp in range(3, 3 + node.memory.confirm_frames):  # the real calibration: a scene once the node's first
+        _feed(node, node.frame.K.reshape(-1).tolist(), stamp=stamp)  # `confirm_frames` frames are in
     assert node._scene is not None and len(node._scene.objects) >= 9
 
 
