@@ -7,11 +7,17 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def pytest_collection_modifyitems(config, items):
-    """Tests marked `extended` (the longer variants: the rest of a parametrized sweep, many-round loops) are skipped
+    """The files that hold a test marked `slow` run first (in their collected order; the rest after them): with the
+    files spread over workers (`./run test`, --dist loadfile) the longest ones start at once instead of being
+    handed out last to one worker while the other waits.
+
+    Tests marked `extended` (the longer variants: the rest of a parametrized sweep, many-round loops) are skipped
     unless asked for: `-m extended` runs only them (pytest's own selection), QTREE_EXTENDED=1 runs them with the
     rest. The default run (`./run test`) keeps a small version of each check."""
     import pytest
 
+    slow_files = {item.path for item in items if "slow" in item.keywords}
+    items.sort(key=lambda item: item.path not in slow_files)  # stable: the order inside each group is kept
     expr = config.getoption("-m") or ""
     if ("extended" in expr and "not extended" not in expr) or os.environ.get("QTREE_EXTENDED") == "1":
         return

@@ -77,6 +77,7 @@ def _wait(fut, timeout):
     return fut.result()
 
 
+@pytest.mark.slow
 def test_a_nudge_after_the_first_relocation_is_seen_and_re_planned_around(tmp_path):
     result, out, records, final, wall, log, end = _run(tmp_path, closed_loop=True)
     print(f"closed loop: {wall:.0f} s; {result.message}; re-plans {[r['reason'] for r in out['replans']]}")

@@ -130,6 +130,7 @@ def test_bad_feasibility_requests_are_refused_and_the_node_keeps_serving(graph, 
     assert _ask(graph, "o2").ok and graph.planner.alive
 
 
+@pytest.mark.slow
 def test_relocation_moves_the_bottle_to_its_slot_and_leaves_the_others(graph):
     before = _positions(graph)
     handle, feedback = _send(graph, "o2")
@@ -202,6 +203,7 @@ def test_the_driver_and_the_planner_report_their_health_on_diagnostics(graph):
     assert '"o2"' in values["relocated"] and values["last answer"], values
 
 
+@pytest.mark.slow
 def test_cancel_during_the_carry_sets_the_bottle_down_and_the_next_goal_works(graph):
     """The old node stopped the arm where it was, the bottle held in the air. Now the goal ends cancelled
     after the recovery: back along the carry, the bottle let go where it was picked, back along the approach."""

@@ -71,6 +71,7 @@ def _play_scene(client, released: threading.Event, stop: threading.Event) -> thr
 
 
 @pytest.mark.parametrize("interface", ["kinova", "ros2_control"])
+@pytest.mark.slow
 def test_planner_relocates_a_bottle_with_a_fake_driver(tmp_path, interface):
     """On the kinova surface the fake's joint states also stop for STALL s mid-motion: that does not end the
     relocation; the planner, with its default parameters, commands zero velocity until the states return and then

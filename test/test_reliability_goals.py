@@ -118,6 +118,7 @@ def test_a_removed_set_that_the_scene_contradicts_is_refused_with_the_reason(gra
     assert max(float(np.linalg.norm(after[i] - before[i])) for i in SC.ids) < 0.005  # nothing moved
 
 
+@pytest.mark.slow
 def test_the_destination_is_a_free_slot_of_the_scene_and_a_relocated_object_is_refused(graph):
     """The scene shows o2 in slot 0 of the bottom shelf (the relay says so) and o3 is sent with removed=[]: the old
     node took slot len(removed) = 0, where o2 stands, and shoved it; now o3 goes to slot 1, the first free one."""

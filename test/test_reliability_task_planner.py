@@ -244,6 +244,7 @@ def test_planner_killed_mid_training_then_back_resumes_exactly(env, reference, t
     assert json.loads(ck.read_text())["payload"]["reason"] == "final"
 
 
+@pytest.mark.slow
 def test_planner_gone_aborts_with_advice_and_a_restarted_task_planner_resumes(env, reference, tmp_path):
     ck = tmp_path / "qtree.ckpt"
     env.fake(die_after=300)  # first, so that discovery has begun when the task planner starts
@@ -402,6 +403,7 @@ def test_sigterm_while_executing_a_relocation_exits_at_once(env):
     assert "Traceback" not in tp.log(), tp.log()[-3000:]
 
 
+@pytest.mark.slow
 def test_a_motion_planner_dying_mid_relocation_ends_the_goal(env):
     """Old code: the goal waited for relocate_timeout (180 s) for a result that never came."""
     fake = env.fake(relocate="hang")

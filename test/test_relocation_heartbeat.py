@@ -200,6 +200,7 @@ def test_a_relocation_aborted_by_silent_joint_states_recovers_once_they_return()
     assert np.allclose(link.q, rd.Q_HOME, atol=0.03)
 
 
+@pytest.mark.slow
 def test_joint_states_that_stop_right_after_the_release_leave_the_arm_on_along_its_retreat_then_home():
     """The chaos benchmark under load (perception/carry/2): the driver's joint states stopped right after the
     release at the slot, the relocation aborted (state_timeout) at the start of the retreat, and both recovery

@@ -19,6 +19,7 @@ SCENARIO = scenarios_dir() / "scenario1_5.yaml"  # its 84 questions keep the tes
 TOPIC = "/test/objects"
 
 
+@pytest.mark.slow
 def test_training_goes_on_when_the_first_planner_is_killed(tmp_path, monkeypatch):
     from qtree_relocation_msgs.msg import ObjectArray
     from rclpy.qos import DurabilityPolicy, QoSProfile

@@ -39,6 +39,7 @@ def _wait(fut, timeout):
     return fut.result()
 
 
+@pytest.mark.slow
 def test_a_scene_with_an_unlisted_bottle_is_trained_on_and_executed_without_touching_it(tmp_path):
     with RosGraph(tmp_path) as g:
         g.start("jaco2_sim_driver.driver_node", params_file=REPO / "config" / "jaco2_sim_driver.yaml",

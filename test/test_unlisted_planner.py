@@ -112,6 +112,7 @@ def _replay(sc: Scenario, told: bool) -> tuple[tuple[str, ...] | None, Report]:
     return r.sequence, rep
 
 
+@pytest.mark.slow
 def test_planned_motions_never_touch_the_unlisted_bottle():
     """The two shipped scenes with an unlisted bottle and seeded variants of x1's place in the first: the planner told
     of x1 plans nothing that touches it (nor anything else); the planner of the scenario file alone drives into it
