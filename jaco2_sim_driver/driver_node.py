@@ -45,7 +45,7 @@ import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco is imported)
 from relocation_common.arm_interface import FILE, GRIPPER_TOPIC, VELOCITY_TOPIC, ArmInterface, MismatchWatch
 from relocation_common.node import Health, SideNode, declare_parameters, node_main
 from relocation_common.robot_description import BASE_LINK, urdf
-from relocation_common.ros_conversions import transform_msg
+from relocation_common.ros_conversions import transform_msgs
 
 from . import frames
 from .camera import Frame
@@ -268,7 +268,7 @@ class Jaco2SimDriver(Node):
 
     def _tf(self, sim_t: float, transforms: Iterable[tuple[str, str, np.ndarray]]) -> TFMessage:
         stamp = self._stamp(sim_t)
-        return TFMessage(transforms=[transform_msg(t, parent, child, stamp) for parent, child, t in transforms])
+        return TFMessage(transforms=transform_msgs(list(transforms), stamp))
 
     # ------------------------------------------------------------------ camera
     def publish_camera_frame(self, f: Frame) -> bool:

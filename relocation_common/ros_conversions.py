@@ -9,7 +9,7 @@ support, `support_z`, `lying`, `yaw`); every producer and consumer of ObjectStat
 from __future__ import annotations
 
 import math
-from typing import Collection, Iterable, Mapping
+from typing import Collection, Iterable, Mapping, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -21,7 +21,7 @@ from shape_msgs.msg import SolidPrimitive
 from std_msgs.msg import ColorRGBA
 
 from .feasibility import BlockerSet
-from .geometry import quat_xyzw, xyzw_matrix
+from .geometry import quat_xyzw, quats_xyzw, xyzw_matrix
 from .scenario import ID_PATTERN, PALETTE, TARGET_COLOR, TARGET_RGB, ScenarioError, ShelfObject
 from .shelf_object import at_pose
 
@@ -118,16 +118,25 @@ def _object(o: ObjectState, listed_ids: Collection[str] | None) -> ShelfObject:
 
 def transform_msg(t: ArrayLike, parent: str, child: str, stamp: Time | None = None) -> TransformStamped:
     """geometry_msgs/TransformStamped of the 4x4 pose `t` of `child` in `parent` (as tf2 publishes it)."""
-    m = TransformStamped()
-    if stamp is not None:
-        m.header.stamp = stamp
-    m.header.frame_id, m.child_frame_id = parent, child
-    tr = m.transform.translation
-    t = np.asarray(t, float)
-    tr.x, tr.y, tr.z = (float(v) for v in t[:3, 3])
-    r = m.transform.rotation
-    r.x, r.y, r.z, r.w = quat_xyzw(t[:3, :3])
-    return m
+    return transform_msgs([(parent, child, t)], stamp)[0]
+
+
+def transform_msgs(transforms: Sequence[tuple[str, str, ArrayLike]], stamp: Time | None = None
+                   ) -> list[TransformStamped]:
+    """transform_msg of each (parent, child, 4x4 pose), the rotations converted together (geometry.quats_xyzw)."""
+    poses = np.asarray([t for _, _, t in transforms], float).reshape(-1, 4, 4)
+    quats = quats_xyzw(poses[:, :3, :3]) if len(poses) else np.zeros((0, 4))
+    out = []
+    for (parent, child, _), t, q in zip(transforms, poses, quats):
+        m = TransformStamped()
+        if stamp is not None:
+            m.header.stamp = stamp
+        m.header.frame_id, m.child_frame_id = parent, child
+        tr, r = m.transform.translation, m.transform.rotation
+        tr.x, tr.y, tr.z = (float(v) for v in t[:3, 3])
+        r.x, r.y, r.z, r.w = (float(v) for v in q)
+        out.append(m)
+    return out
 
 
 def blockers_to_msgs(blockers: Iterable[BlockerSet]) -> list[BlockerSetMsg]:
