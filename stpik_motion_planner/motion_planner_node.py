@@ -41,6 +41,7 @@ from visualization_msgs.msg import Marker
 
 from relocation_common import arm_interface
 from relocation_common.arm_interface import ArmInterface
+from relocation_common.config import ParameterError
 from relocation_common.node import Health, SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import (
     NO_ANSWER,
@@ -79,6 +80,7 @@ class MotionPlannerNode(Node):
                                          recover_near=float(params["recover_near"]))
         self.link: RosArmLink | None = None  # nothing in a feasibility-only replica (serve_relocation false)
         self.asked, self.answered, self.last_answer = 0, 0, (0.0, "none yet")  # feasibility, for the health
+        self.scene_seen = threading.Event()  # a scene came on scene_topic (_on_scene)
         self.relocation = "idle"  # what the relocate action does now, for the health
         if params["serve_relocation"]:
             goal_check.check_parameters({k: params[k] for k in goal_check.PARAMETERS})
@@ -103,6 +105,9 @@ class MotionPlannerNode(Node):
                                         goal_callback=self._on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                         callback_group=ReentrantCallbackGroup())
         self.scene_topic = params["scene_topic"]
+        self.scene_wait = float(params["scene_wait"])
+        if not self.scene_wait >= 0.0:
+            raise ParameterError(f"parameter scene_wait must be >= 0 s, got {params['scene_wait']}")
         base = self.core.base
         driver = arm.driver_prefix if arm.kinova else "ros2_control"
         self.get_logger().info(f"ready: scenario {base.name} ({len(base.objects)} objects), service "
@@ -155,6 +160,7 @@ class MotionPlannerNode(Node):
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return
+        self.scene_seen.set()
         if changed:
             self.get_logger().info(f"scene updated from {self.scene_topic}: {changed}")
 
@@ -170,10 +176,23 @@ class MotionPlannerNode(Node):
                 f"label {res.label}" if res.ok else res.message[:80]))
         return res
 
+    def _feasibility(self, req: PlanFeasibility.Request) -> tuple:
+        """core.feasibility of the request. A question naming an object the planner does not know, asked before any
+        scene came (a client that discovered the scene's publisher sooner: an unlisted object it saw), waits up to
+        scene_wait for that scene and is asked again."""
+        def ask() -> tuple:
+            return self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes, req.certify)
+
+        try:
+            return ask()
+        except UnknownObjectError:
+            if self.scene_seen.is_set() or not self.scene_seen.wait(self.scene_wait):
+                raise
+            return ask()
+
     def _answer(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         try:
-            lanes, ans = self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes,
-                                               req.certify)
+            lanes, ans = self._feasibility(req)
         except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
             res.message = str(e)
             self.get_logger().warning(f"feasibility request refused: {e}")

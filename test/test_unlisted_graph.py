@@ -10,18 +10,20 @@ question about x1 was refused ("unknown object id"), which ended the goal.
 """
 import json
 import math
+import threading
 import time
 
 import pytest
 from qtree_relocation_msgs.action import TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
+from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 from ros_procs import REPO, RosGraph
 from std_msgs.msg import String
 
 from qtree_task_planner.ros_clients import train_goal
 from relocation_common.node import ActionClient
-from relocation_common.ros_conversions import msg_to_objects
+from relocation_common.ros_conversions import msg_to_objects, objects_to_msg
 from relocation_common.scenario import load_scenario
 
 pytestmark = pytest.mark.graph
@@ -75,3 +77,27 @@ def test_a_scene_with_an_unlisted_bottle_is_trained_on_and_executed_without_touc
     moved = math.dist((x1.x, x1.y, x1.support_z), (end.x, end.y, end.support_z))
     assert moved < STILL, f"x1 moved {moved * 1000:.1f} mm"
     assert abs(final[SC.target_id].support_z - SC.shelf.bottom_z) < 0.02, final[SC.target_id]
+
+
+def test_a_question_about_an_unlisted_object_asked_before_the_first_scene_waits_for_it(tmp_path):
+    """A client that saw x1 sooner than the planner (discovery right after start-up: a fresh-clone test run under
+    load ended a goal so, "unknown object id 'x1'") is answered once the planner's first scene comes (scene_wait);
+    an id unknown to a planner that has a scene is refused at once."""
+    srv = "/motion_planner/plan_feasibility"
+    with RosGraph(tmp_path) as g:
+        mp = g.start("stpik_motion_planner.motion_planner_node", params_file=REPO / "config" / "motion_planner.yaml",
+                     params={"scene_topic": "/test/scene", "scenario": str(SCENE), "serve_relocation": False})
+        client = g.probe.client(PlanFeasibility, srv, timeout=60)
+        assert client is not None, mp.log()[-2000:]
+        pub = g.probe.publisher(ObjectArray, "/test/scene", LATCHED)
+        scene = objects_to_msg(list(SC.objects) + list(SC.unlisted))
+        threading.Timer(1.0, lambda: pub.publish(scene)).start()
+        t0 = time.monotonic()
+        res = g.probe.call(PlanFeasibility, srv, PlanFeasibility.Request(object_id="x1"), timeout=30)
+        waited = time.monotonic() - t0
+        assert res.ok, (res.message, mp.log()[-2000:])
+        assert 0.9 < waited, waited  # it waited for the scene
+        t0 = time.monotonic()
+        res = g.probe.call(PlanFeasibility, srv, PlanFeasibility.Request(object_id="x9"), timeout=30)
+        assert not res.ok and "unknown object id 'x9'" in res.message, res.message
+        assert time.monotonic() - t0 < 0.9 * 5.0, "an id unknown with a scene at hand waited for scene_wait"
