@@ -1,13 +1,13 @@
 """Which bottles block each grasp lane: the grasp/approach screen of feasibility (paper Sect. 4.1,
 step 1) asked per bottle instead of once for all.
 
-A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `planning.pick.candidates` keeps a lane when the hand
-proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for palm and fingers on
-the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each of them, so the
-lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the screen with
-`removed` gone exactly when all of its blockers are in `removed` (a *certain* BlockerSet). A lane the proxy cannot
-use whatever is removed (out of the planner's workspace or reach, a board, the grasped bottle itself in the way) is
-no lane. Computed once per (scene, object) with every bottle present; a query subtracts its removed set.
+A lane is one approach yaw of `grasp.grasp_yaw_tiers` (both tiers; a box's face yaws). `planning.pick.candidates` keeps
+a lane when the hand proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for
+palm and fingers on the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each
+of them, so the lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the
+screen with `removed` gone exactly when all of its blockers are in `removed` (a *certain* BlockerSet). A lane the proxy
+cannot use whatever is removed (out of the planner's workspace or reach, a board, the grasped bottle itself in the way)
+is no lane. Computed once per (scene, object) with every bottle present; a query subtracts its removed set.
 
 When the screen passes and STPIK or RRT-Connect still fail, the lane gets an *uncertain* set: the bottles within
 SUSPECT_MARGIN of the proxy along it (suspects, not a claim).
@@ -94,8 +94,8 @@ class Screened(Protocol):
     def rrt(self) -> Box:
         """The Cartesian planner."""
 
-    def all_yaws(self) -> list[float]:
-        """Every approach yaw of both tiers, in the order they are tried."""
+    def all_yaws(self, object_id: str) -> list[float]:
+        """Every approach yaw of the object of both tiers, in the order they are tried."""
 
     def not_graspable(self, object_id: str) -> str:
         """Why the side grasp cannot take `object_id` ('' if it may)."""
@@ -105,7 +105,7 @@ def _lanes(planner: Screened, object_id: str) -> list[Grasp]:
     """The object's grasps for every yaw inside the arm's reach and the Cartesian planner's box."""
     p = planner.params
     out = []
-    for yaw in planner.all_yaws():
+    for yaw in planner.all_yaws(object_id):
         try:
             g = side_grasp(planner.scenario, object_id, yaw, p.pre_grasp_distance)
         except WorkspaceError:

@@ -3,7 +3,8 @@
 Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel), the floor, the
 pedestal under the robot and every object of the scene, listed in the scenario or not, as the primitive it is
 (`object_obstacle`: a cylinder standing or lying, an oriented box; a conservative object is its bounding box);
-bottles already relocated may stand on the bottom shelf (`placed`). The set of removed objects is a parameter of
+objects already relocated may stand on the bottom shelf (`placed`, each as the vertical cylinder that holds it at any
+turn: `upright_radius`). The set of removed objects is a parameter of
 every query (`CollisionScene.obstacles(removed)`). A numpy AABB broad phase keeps only the capsule/obstacle pairs
 closer than an activation distance; fcl computes their exact distances and witness points (in the base frame). fcl
 returns -1 on penetration.
@@ -136,10 +137,17 @@ def shelf_boards(scenario: Scenario) -> list[Obstacle]:
     ]
 
 
+def upright_radius(o: ShelfObject) -> float:
+    """Radius of the vertical cylinder about a standing object's centre that holds it at any turn about the
+    vertical: a cylinder's radius, a box's half-diagonal (a box in its slot stands turned as the hand held it)."""
+    return math.hypot(o.size[0], o.size[1]) / 2 if o.shape == "box" else o.radius
+
+
 class CollisionScene:
     """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`:
-    (id, (x, y)) of bottles standing on the bottom shelf; `lying`: bottles of the top shelf that do not stand as
-    perception saw them (scene_update.lying_pose); `gone`: objects that left the shelf (on the floor), no obstacle."""
+    (id, (x, y)) of objects standing on the bottom shelf (centred there, `upright_radius`); `lying`: bottles of the
+    top shelf that do not stand as perception saw them (scene_update.lying_pose); `gone`: objects that left the shelf
+    (on the floor), no obstacle."""
 
     def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = (),
                  lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> None:
@@ -154,7 +162,7 @@ class CollisionScene:
         self.placed = []
         for oid, (x, y) in placed:
             b = scenario.object(oid)
-            self.placed.append(cylinder(f"placed:{oid}", f"placed:{oid}", x, y, zb, b.radius, b.height))
+            self.placed.append(cylinder(f"placed:{oid}", f"placed:{oid}", x, y, zb, upright_radius(b), b.height))
         self._cache: dict[tuple[frozenset, frozenset], ObstacleSet] = {}
 
     def obstacles(self, removed: Iterable[str] = frozenset(), exclude: Iterable[str] = frozenset()) -> ObstacleSet:
@@ -182,10 +190,12 @@ class CapsuleSpec:
     length: float
     cylinder: bool = False  # a cylinder between p0 and p1 instead of a capsule (for obstacles)
     clearance: float | None = None  # its own clearance bound to obstacles (None: the planner's)
+    box: tuple[float, float, float] | None = None  # a box of these sides (x, y, z of `rot`) instead (`radius`:
+    # half its diagonal across z, for the broad phase and the self-distances, which see it as that capsule)
 
 
 def capsule_spec(name: str, link: str, p0: ArrayLike, p1: ArrayLike, radius: float, cylinder: bool = False,
-                 clearance: float | None = None) -> CapsuleSpec:
+                 clearance: float | None = None, box: tuple[float, float, float] | None = None) -> CapsuleSpec:
     """CapsuleSpec of the segment p0-p1 of radius `radius` in `link`'s frame."""
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     axis = p1 - p0
@@ -194,7 +204,7 @@ def capsule_spec(name: str, link: str, p0: ArrayLike, p1: ArrayLike, radius: flo
     x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
     x /= np.linalg.norm(x)
     return CapsuleSpec(name, link, p0, p1, radius, np.column_stack([x, np.cross(z, x), z]), (p0 + p1) / 2, length,
-                       cylinder, clearance)
+                       cylinder, clearance, box)
 
 
 def carried_bottle(radius: float, height: float, standoff: float = 0.0,
@@ -209,7 +219,26 @@ def carried_bottle(radius: float, height: float, standoff: float = 0.0,
                         clearance=clearance)
 
 
+def carried_box(depth: float, width: float, height: float, standoff: float, turn: float,
+                clearance: float | None = None) -> CapsuleSpec:
+    """The grasped box at its real size as `grasp.side_grasp` takes it: `depth` along the approach (tool z),
+    `width` across it (tool x, the fingers' closing direction), `height` along tool y (vertical), its centre
+    `standoff` beyond the tool origin along tool z at the tool's height, turned by `turn` (rad, counter-clockwise
+    seen from above) from square to the hand (the tool's yaw error at the grasp). Named and exempted as
+    `carried_bottle`."""
+    half = height / 2
+    z = rd.D67 + standoff
+    # capsule_spec's frame of a segment along link y: its x is link z (the approach), its y link x (closing), its z
+    # link y (up): a turn seen from above is a turn about its z
+    spec = capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -half, z), (0, half, z), math.hypot(depth, width) / 2,
+                        clearance=clearance, box=(depth, width, height))
+    c, s = math.cos(turn), math.sin(turn)
+    return replace(spec, rot=spec.rot @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
+
+
 def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0) -> fcl.CollisionGeometry:
+    if s.box is not None:
+        return fcl.Box(*(np.asarray(s.box, float) + 2 * inflate))
     if s.cylinder:
         return fcl.Cylinder(s.radius + inflate, s.length + 2 * inflate)
     return fcl.Capsule(s.radius + inflate, s.length)

@@ -1,17 +1,21 @@
-"""Action to pose (paper Sect. 4.1, step 1): the side grasp of a bottle, its pre-grasp, and the carry poses.
+"""Action to pose (paper Sect. 4.1, step 1): the side grasp of a standing object, its pre-grasp, and the carry poses.
 
 Tool frame (DH frame 7): z is the approach direction, x the closing direction of the fingers, origin the grasp
 centre. A side grasp keeps the hand horizontal: tool z = (cos yaw, sin yaw, 0) points into the shelf from its
-open side (-x), tool y = world z (vertical), tool x = y x z (horizontal). The tool origin is at the bottle's
-mid-height, `grasp_standoff(radius)` short of its axis along the approach, so that the palm stops PALM_GAP from
-the bottle (the palm's front is PALM_REACH behind the grasp centre; the open fingers still surround the bottle).
+open side (-x), tool y = world z (vertical), tool x = y x z (horizontal). The tool origin is at the object's
+mid-height, `grasp_standoff(half_depth)` short of its centre along the approach (`grasp_extent`: a cylinder's
+radius, a box's half-size along the approach), so that the palm stops PALM_GAP from the object (the palm's front
+is PALM_REACH behind the grasp centre; the open fingers still surround the object).
 A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction.
 The robot's home pose (Q_HOME) is such a pose with yaw 0.
 
-What the side grasp takes (`grasp_refusal`): a standing cylinder no wider than the open hand (`hand_opening`: the gap
-between the description's open finger capsules where the cylinder's axis comes to rest). A box, a lying cylinder, a
-conservative object (a cluster no primitive fits) or a wider cylinder is answered "no grasp: " and the reason: it
-stays an obstacle, never relocated.
+What the side grasp takes (`grasp_refusal`): a standing cylinder, approached at any yaw of the tiers (`yaw_tiers`),
+or a standing box, approached square to one of its vertical faces (`face_yaws`: its yaw + k pi/2 within the tiers'
+range), the fingers closing across the box's width perpendicular to that approach; either no wider there than the
+open hand (`hand_opening`: the gap between the description's open finger capsules where the object's centre comes
+to rest). A lying cylinder, a conservative object (a cluster no primitive fits), a wider cylinder or a box too
+wide across every face it can be approached by is answered "no grasp: " and the reason: it stays an obstacle,
+never relocated. A box is carried as held: square to the hand, so placed in its slot square to the shelf.
 """
 from __future__ import annotations
 
@@ -32,9 +36,28 @@ PALM_REACH = rd.D67 - _PALM.p1[2] - _PALM.radius  # m from the grasp centre back
 PALM_GAP = 0.008  # m between the palm and a grasped bottle: 4 mm plus the 4 mm final tolerance of STPIK
 
 
-def grasp_standoff(radius: float) -> float:
-    """Distance of the grasp centre short of the bottle axis along the approach: the palm stays PALM_GAP away."""
-    return max(0.0, radius + PALM_GAP - PALM_REACH)
+def grasp_standoff(half_depth: float) -> float:
+    """Distance of the grasp centre short of the object's centre along the approach, for an object reaching
+    `half_depth` in front of its centre (a cylinder's radius; `grasp_extent`): the palm stays PALM_GAP away."""
+    return max(0.0, half_depth + PALM_GAP - PALM_REACH)
+
+
+def grasp_extent(o: ShelfObject, yaw: float) -> tuple[float, float]:
+    """(half-depth along the approach of yaw `yaw`, width across it that the fingers close on) of a standing
+    object: (r, 2r) for a cylinder; for a box, the half-size along the box axis nearest to the approach and the
+    size along the other (a face yaw of `face_yaws` is square to that face)."""
+    if o.shape != "box":
+        return o.radius, 2 * o.radius
+    along_x = abs(math.cos(yaw - o.yaw)) >= abs(math.sin(yaw - o.yaw))
+    sx, sy, _ = o.size
+    return (sx / 2, sy) if along_x else (sy / 2, sx)
+
+
+def face_yaws(o: ShelfObject) -> list[float]:
+    """The approach yaws square to a box's four vertical faces, in [-pi, pi): its yaw + k pi/2, straightest
+    (smallest |yaw|) first."""
+    out = [(o.yaw + k * math.pi / 2 + math.pi) % (2 * math.pi) - math.pi for k in range(4)]
+    return sorted(out, key=abs)
 
 
 _FINGERS = tuple(c for c in rd.CAPSULES if c.name.startswith("finger"))
@@ -55,19 +78,48 @@ def hand_opening(depth: float) -> float:
     return min(inner) - max(outer)
 
 
-def grasp_refusal(o: ShelfObject) -> str:
+def hand_fits(o: ShelfObject, yaw: float) -> bool:
+    """The open hand takes `o` approached at `yaw`: its width across the approach (`grasp_extent`) is no wider
+    than `hand_opening` where its centre comes to rest (`grasp_standoff` beyond the grasp centre)."""
+    half_depth, width = grasp_extent(o, yaw)
+    return width <= hand_opening(grasp_standoff(half_depth))
+
+
+def box_refusal(o: ShelfObject, max_yaw: float) -> str:
+    """Why the side grasp cannot take the box `o` ("no grasp: ..."), or "": no face whose approach yaw
+    (`face_yaws`) is within `max_yaw` of straight in is narrow enough for the open hand (`hand_fits`)."""
+    faces = [y for y in face_yaws(o) if abs(y) <= max_yaw + 1e-9]
+    if any(hand_fits(o, y) for y in faces):
+        return ""
+    narrow = min(face_yaws(o), key=lambda y: grasp_extent(o, y)[1])  # the straighter of its two yaws
+
+    def across(yaw: float) -> str:
+        half_depth, width = grasp_extent(o, yaw)
+        return f"{width * 1000:.0f} mm across, wider than the open hand " \
+               f"({hand_opening(grasp_standoff(half_depth)) * 1000:.0f} mm between the fingers)"
+
+    if not hand_fits(o, narrow):
+        return f"{NO_GRASP}{o.id} is a box {across(narrow).replace('across', 'across every face')} ({o.describe()})"
+    within = f"the faces within {max_yaw:.2f} rad of straight in are {across(faces[0])}" if faces else \
+        f"no face is within {max_yaw:.2f} rad of straight in"
+    return (f"{NO_GRASP}{o.id} is a box ({o.describe()}): {within}; the face the hand fits "
+            f"({grasp_extent(o, narrow)[1] * 1000:.0f} mm across) is turned {abs(narrow):.2f} rad from straight in")
+
+
+def grasp_refusal(o: ShelfObject, max_yaw: float = math.pi) -> str:
     """Why the side grasp cannot take `o` ("no grasp: ..."), or "" when it may (module docstring): a conservative
-    object, a box, a cylinder lying (its axis more than UPRIGHT_TILT from the vertical), or a cylinder wider than
-    the open hand where its axis comes to rest (`grasp_standoff` beyond the grasp centre)."""
+    object, a box too wide across every face within `max_yaw` of straight in (`box_refusal`; default: any face),
+    a cylinder lying (its axis more than UPRIGHT_TILT from the vertical), or a cylinder wider than the open hand
+    where its axis comes to rest (`hand_fits`)."""
     if o.conservative:
         return (f"{NO_GRASP}{o.id} is a conservative obstacle (an unfitted cluster's bounding box, "
                 f"{o.describe()}): an obstacle only")
     if o.shape == "box":
-        return f"{NO_GRASP}{o.id} is a box ({o.describe()}): the side grasp takes standing cylinders only"
+        return box_refusal(o, max_yaw)
     if o.axis_tilt > UPRIGHT_TILT:
         return f"{NO_GRASP}{o.id} is lying on its side: the side grasp takes standing cylinders only"
     opening = hand_opening(grasp_standoff(o.radius))
-    if 2 * o.radius > opening:
+    if not hand_fits(o, 0.0):
         return (f"{NO_GRASP}{o.id} is {2 * o.radius * 1000:.0f} mm wide, wider than the open hand "
                 f"({opening * 1000:.0f} mm between the fingers)")
     return ""
@@ -141,11 +193,24 @@ def yaw_tiers(n: int, max_yaw: float, wide_n: int, wide_max_yaw: float) -> list[
     return [first, wide] if wide else [first]
 
 
+def grasp_yaw_tiers(o: ShelfObject, n: int, max_yaw: float, wide_n: int, wide_max_yaw: float) -> list[list[float]]:
+    """The approach yaws of object `o` in the order they are tried: a cylinder's `yaw_tiers`; a box's face yaws
+    (`face_yaws`) the open hand fits (`hand_fits`), within max_yaw first, then (with a second tier, wide_n > 0)
+    those within wide_max_yaw."""
+    if o.shape != "box":
+        return yaw_tiers(n, max_yaw, wide_n, wide_max_yaw)
+    fits = [y for y in face_yaws(o) if hand_fits(o, y)]
+    first = [y for y in fits if abs(y) <= max_yaw + 1e-9]
+    wide = [y for y in fits if max_yaw + 1e-9 < abs(y) <= wide_max_yaw + 1e-9] if wide_n else []
+    return [first, wide] if wide else [first]
+
+
 def side_grasp(scenario: Scenario, object_id: str, yaw: float, pre_grasp_distance: float) -> Grasp:
-    """Grasp and pre-grasp poses of a bottle on the top shelf for one approach yaw."""
+    """Grasp and pre-grasp poses of a standing object on the top shelf for one approach yaw (at its mid-height,
+    `grasp_standoff` short of its centre: the module docstring)."""
     b = scenario.object(object_id)
     z = scenario.shelf.top_z + b.height / 2
-    s = grasp_standoff(b.radius)
+    s = grasp_standoff(grasp_extent(b, yaw)[0])
     g = (b.x - s * math.cos(yaw), b.y - s * math.sin(yaw), z, yaw)
     d = s + pre_grasp_distance
     pre = (b.x - d * math.cos(yaw), b.y - d * math.sin(yaw), z, yaw)
@@ -192,14 +257,18 @@ FINGER_REACH = max(c.p1[2] + c.radius for c in rd.CAPSULES if c.name.startswith(
 
 
 def exit_pose(scenario: Scenario, object_id: str, pose: Pose, margin: float) -> tuple[float, float, float, float]:
-    """`pose` moved back against its approach direction, at its height, until the held bottle (its axis
-    `grasp_standoff` beyond the tool) and the finger tips are `margin` in front of the shelf's front edge: out of
-    the shelf, free to go down."""
+    """`pose` moved back against its approach direction, at its height, until the held object (its centre
+    `grasp_standoff` beyond the tool; a box square to the hand, its corners reaching `grasp_extent` along and
+    across the approach) and the finger tips are `margin` in front of the shelf's front edge: out of the shelf,
+    free to go down."""
     b = scenario.object(object_id)
     x, y, z, yaw = (float(v) for v in pose)
     c = math.cos(yaw)
-    front = max(grasp_standoff(b.radius) + b.radius, FINGER_REACH)
-    need = x + front * c - (scenario.shelf.x_front - margin)
+    half_depth, width = grasp_extent(b, yaw)
+    ahead = (grasp_standoff(half_depth) + half_depth) * c  # a cylinder: as its axis and radius always were
+    if b.shape == "box":
+        ahead += width / 2 * abs(math.sin(yaw))
+    need = x + max(ahead, FINGER_REACH * c) - (scenario.shelf.x_front - margin)
     if need <= 0.0:
         return (x, y, z, yaw)
     back = need / c
@@ -207,13 +276,14 @@ def exit_pose(scenario: Scenario, object_id: str, pose: Pose, margin: float) -> 
 
 
 def place_poses(scenario: Scenario, object_id: str, slot_xy: tuple[float, float], drop: float,
-                stage_distance: float) -> tuple[tuple, tuple]:
+                stage_distance: float, grasp_yaw: float) -> tuple[tuple, tuple]:
     """(staging pose in front of the bottom shelf, place pose at the slot), approach straight in (yaw 0).
-    The tool is at the bottle's mid-height with the bottle's base `drop` above the bottom shelf (the release height
-    of `carry_heights`)."""
+    The tool is at the object's mid-height with its base `drop` above the bottom shelf (the release height of
+    `carry_heights`) and its centre on the slot: `grasp_standoff` ahead, for the depth it was grasped by at
+    `grasp_yaw` (a box is held square to the hand: `grasp_extent`)."""
     b = scenario.object(object_id)
     z = scenario.shelf.bottom_z + drop + b.height / 2
-    place = (slot_xy[0] - grasp_standoff(b.radius), slot_xy[1], z, 0.0)
+    place = (slot_xy[0] - grasp_standoff(grasp_extent(b, grasp_yaw)[0]), slot_xy[1], z, 0.0)
     stage = (min(slot_xy[0] - stage_distance, scenario.shelf.x_front - 0.07), slot_xy[1], z, 0.0)
     check_pose(place, f"place of {object_id} at slot {slot_xy}")
     return stage, place

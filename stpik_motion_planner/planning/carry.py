@@ -1,11 +1,11 @@
 """The carry of a relocation: from the grasp, lift, out of the shelf, in to the slot on the bottom shelf, release,
 and the retreat to the staging pose in front of the slot (paper Sect. 4.1, the relocation after the pick).
 
-The bottle is modelled at its real size on the hand (STPIK's arm geometry and the Cartesian planner's hand proxy)
-with its own clearance bound `carried_clearance`; it may touch only the board it stands on, and only while it is
-lifted straight up off it (`lift` >= carried_clearance + stpik.act, so it clears the board before any motion out of
-the shelf). Then straight back out of the shelf at that height (or RRT-Connect if that is blocked), to the staging
-pose in front of the slot, and straight in at the release height.
+The bottle (or box, square to the hand: model.grasp) is modelled at its real size on the hand (STPIK's arm geometry and
+the Cartesian planner's hand proxy; `carried_shape`) with its own clearance bound `carried_clearance`; it may touch only
+the board it stands on, and only while it is lifted straight up off it (`lift` >= carried_clearance + stpik.act, so it
+clears the board before any motion out of the shelf). Then straight back out of the shelf at that height (or RRT-Connect
+if that is blocked), to the staging pose in front of the slot, and straight in at the release height.
 """
 from __future__ import annotations
 
@@ -25,12 +25,15 @@ from stpik_motion_planner.model.collision import (
     HandProxy,
     ObstacleSet,
     carried_bottle,
+    carried_box,
 )
 from stpik_motion_planner.model.grasp import (
     Pose,
     WorkspaceError,
     check_pose,
     exit_pose,
+    face_yaws,
+    grasp_extent,
     grasp_standoff,
     place_poses,
     pose_matrix,
@@ -56,15 +59,16 @@ class CarryGoal:
     place: np.ndarray
 
 
-def carry_goal(ctx: PlanningContext, object_id: str, slot_index: int) -> CarryGoal:
-    """The goal of the carry of `object_id` to `scenario.slot(slot_index)`, checked before anything is planned:
-    PlanningError naming the carry for a slot or a pose out of reach (or a bottle too tall to carry)."""
+def carry_goal(ctx: PlanningContext, object_id: str, slot_index: int, grasp_yaw: float) -> CarryGoal:
+    """The goal of the carry of `object_id`, grasped at approach yaw `grasp_yaw` (the face of a box it holds), to
+    `scenario.slot(slot_index)`, checked before anything is planned: PlanningError naming the carry for a slot or
+    a pose out of reach (or a bottle too tall to carry)."""
     what = f"carry of {object_id!r} to slot {slot_index}"
     try:
         slot = ctx.scenario.slot(slot_index)
         lift, release = ctx.carry_heights(object_id)
         stage, place = (np.array(x) for x in place_poses(ctx.scenario, object_id, slot, release,
-                                                           ctx.params.stage_distance))
+                                                           ctx.params.stage_distance, grasp_yaw))
         check_pose(stage, f"staging pose for slot {slot_index}")
     except (ValueError, WorkspaceError) as e:
         raise PlanningError(f"{what}: {e}") from None
@@ -84,10 +88,10 @@ def plan_carry(ctx: PlanningContext, object_id: str, removed: frozenset[str], go
     placed = ctx.placed_default(removed, goal.slot_index) if placed is None else list(placed)
     obs = ctx.collision_scene(placed).obstacles(removed | {object_id})
     support = {CARRIED: frozenset(["board:top_shelf"])}  # the one board the bottle may touch: on the lift
-    carried, arm_start, arm_c = carried_models(ctx, b, q_start, obs, support)
     ctx.kin.update(q_start, jacobians=False)
     rot, pos = ctx.kin.tool_pose()
     start = np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
+    carried, arm_start, arm_c = carried_models(ctx, b, float(start[3]), q_start, obs, support)
     lifted = start + np.array([0.0, 0.0, goal.lift, 0.0])
     bound = arm_start.specs[-1].clearance
     hand_c = carried_hand(ctx, carried, lifted, obs, p.carried_clearance if bound is None else bound)
@@ -165,10 +169,23 @@ def retreat(ctx: PlanningContext, object_id: str, removed: frozenset[str], place
     return back
 
 
-def carried_models(ctx: PlanningContext, b: ShelfObject, q_start: np.ndarray, obs: ObstacleSet,
+def carried_shape(b: ShelfObject, grasp_yaw: float, clearance: float) -> CapsuleSpec:
+    """The object held at its real size, with its clearance bound: collision.carried_bottle, or carried_box for a
+    box held by the face nearest to square to the tool's yaw `grasp_yaw` at the grasp (grasp.grasp_extent), turned
+    by the yaw error the grasp accepted (stpik.grasp_yaw_tol)."""
+    half_depth, width = grasp_extent(b, grasp_yaw)
+    if b.shape == "box":
+        face = min(face_yaws(b), key=lambda y: abs(math.remainder(y - grasp_yaw, 2 * math.pi)))
+        turn = math.remainder(face - grasp_yaw, 2 * math.pi)
+        return carried_box(2 * half_depth, width, b.height, grasp_standoff(half_depth), turn, clearance)
+    return carried_bottle(b.radius, b.height, grasp_standoff(b.radius), clearance)
+
+
+def carried_models(ctx: PlanningContext, b: ShelfObject, grasp_yaw: float, q_start: np.ndarray, obs: ObstacleSet,
                    support: dict[str, frozenset[str]]) -> tuple[CapsuleSpec, ArmGeometry, ArmGeometry]:
-    """(carried bottle, arm holding it out of the shelf, arm holding it in to the slot). The bottle is modelled
-    on the hand where the tool stopped at the grasp (STPIK's final tolerance, up to 4 mm from the bottle's
+    """(carried bottle, arm holding it out of the shelf, arm holding it in to the slot), the object held as taken
+    at approach yaw `grasp_yaw` (`carried_shape`). The bottle is modelled on the hand where the tool stopped at the
+    grasp (STPIK's final tolerance, up to 4 mm from the bottle's
     perceived place); where that model stands closer to a neighbour than `carried_clearance`, the lift and
     the way out keep that start distance less START_RELIEF (less half of it under 2 x START_RELIEF: the bound
     never allows contact) as the bound, whatever it is (a model in contact within the perception and STPIK
@@ -177,7 +194,7 @@ def carried_models(ctx: PlanningContext, b: ShelfObject, q_start: np.ndarray, ob
     start would fail the bound at once and the pick would be refused for the model's offset. A model that
     penetrates a neighbour at the start (no distance to keep) keeps the full bound: refused."""
     p = ctx.params
-    carried = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), p.carried_clearance)
+    carried = carried_shape(b, grasp_yaw, p.carried_clearance)
     arm_c = ArmGeometry(ctx.kin, [carried])
     ctx.kin.update(q_start, jacobians=False)
     arm_c.pose()
@@ -186,7 +203,7 @@ def carried_models(ctx: PlanningContext, b: ShelfObject, q_start: np.ndarray, ob
     gap = min(near, default=math.inf)
     if gap >= p.carried_clearance or gap == PENETRATION:
         return carried, arm_c, arm_c
-    start = carried_bottle(b.radius, b.height, grasp_standoff(b.radius), gap - min(START_RELIEF, gap / 2))
+    start = carried_shape(b, grasp_yaw, gap - min(START_RELIEF, gap / 2))
     return carried, ArmGeometry(ctx.kin, [start]), arm_c
 
 

@@ -19,8 +19,15 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, UnknownObjectError
 from relocation_common.shelf_object import objects_key
-from stpik_motion_planner.model.collision import ArmGeometry, CollisionScene, HandProxy, Lying, ObstacleSet
-from stpik_motion_planner.model.grasp import carry_heights, grasp_refusal, home_pose, yaw_tiers
+from stpik_motion_planner.model.collision import (
+    ArmGeometry,
+    CollisionScene,
+    HandProxy,
+    Lying,
+    ObstacleSet,
+    upright_radius,
+)
+from stpik_motion_planner.model.grasp import approach_yaw, carry_heights, grasp_refusal, grasp_yaw_tiers, home_pose
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import QueryStats
@@ -35,7 +42,7 @@ from stpik_motion_planner.planning.stpik import Stpik, StpikResult
 UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance")
 SEEDED_AS = {"certify_relocation": True}
 UNSEEDED_STPIK = ("grasp_yaw_tol",)
-Placed = list[tuple[str, tuple[float, float]]]  # bottles on the bottom shelf: (id, slot xy)
+Placed = list[tuple[str, tuple[float, float]]]  # objects on the bottom shelf: (id, slot xy)
 
 
 class PlanningContext:
@@ -111,13 +118,14 @@ class PlanningContext:
 
     def not_graspable(self, object_id: str) -> str:
         """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): off the shelf, or
-        "no grasp: " and why (lying as perceived, or grasp.grasp_refusal: a box, a conservative object, lying, too
-        wide for the open hand)."""
+        "no grasp: " and why (lying as perceived, or grasp.grasp_refusal: a conservative object, lying, too wide
+        for the open hand, a box too wide across every face the approach yaws of both tiers can take it by)."""
         if object_id in self.gone:
             return f"{object_id} left the shelf: nothing to grasp"
         if object_id in self.lying:
             return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing cylinders only"
-        return grasp_refusal(self.scenario.object(object_id))
+        p = self.params
+        return grasp_refusal(self.scenario.object(object_id), p.wide_max_yaw if p.wide_yaws else p.max_yaw)
 
     def placed_default(self, removed: frozenset[str], slot_index: int) -> Placed:
         """Bottles assumed on the bottom shelf: the removed ones, in sorted order, in the slots other than
@@ -126,10 +134,11 @@ class PlanningContext:
         return [(oid, self.scenario.slot(k)) for oid, k in zip(sorted(removed), slots)]
 
     def placed_key(self, placed: Iterable[tuple[str, tuple[float, float]]]) -> str:
-        """The bottles on the bottom shelf as geometry (where, which size), whatever their names: a carry planned
-        for a removed set and the same carry in a relocation order see the same scene, so draw the same samples."""
-        return repr(sorted((round(x, 4), round(y, 4), self.scenario.object(o).radius, self.scenario.object(o).height)
-                           for o, (x, y) in placed))
+        """The objects on the bottom shelf as geometry (where, which size: collision.upright_radius), whatever their
+        names: a carry planned for a removed set and the same carry in a relocation order see the same scene, so
+        draw the same samples."""
+        return repr(sorted((round(x, 4), round(y, 4), upright_radius(self.scenario.object(o)),
+                            self.scenario.object(o).height) for o, (x, y) in placed))
 
     def carry_heights(self, object_id: str) -> tuple[float, float]:
         """(lift, release height) of the object carried at its real size (grasp.carry_heights); WorkspaceError if
@@ -138,14 +147,20 @@ class PlanningContext:
         return carry_heights(self.scenario, object_id, p.carried_clearance + p.stpik.act, p.lift, p.drop)
 
     # ---------------------------------------------------------------- the approach yaws
-    def yaw_tiers(self) -> list[list[float]]:
-        """The approach yaws, tier by tier (grasp.yaw_tiers)."""
+    def yaw_tiers(self, object_id: str) -> list[list[float]]:
+        """The approach yaws of `object_id`, tier by tier (grasp.grasp_yaw_tiers: a box's face yaws)."""
         p = self.params
-        return yaw_tiers(p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw)
+        return grasp_yaw_tiers(self.scenario.object(object_id), p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw)
 
-    def all_yaws(self) -> list[float]:
-        """Every approach yaw of both tiers, in the order they are tried (the lanes of blockers.py)."""
-        return [y for tier in self.yaw_tiers() for y in tier]
+    def all_yaws(self, object_id: str) -> list[float]:
+        """Every approach yaw of `object_id` of both tiers, in the order they are tried (the lanes of
+        blockers.py)."""
+        return [y for tier in self.yaw_tiers(object_id) for y in tier]
+
+    def grasp_yaw(self, q_grasp: object) -> float:
+        """The approach yaw of the tool at the grasp configuration `q_grasp` (which face of a box the hand holds)."""
+        self.kin.update(check_q(q_grasp), jacobians=False)
+        return approach_yaw(self.kin.tool_pose()[0])
 
     # ---------------------------------------------------------------- the STPIK check
     def track(self, q0: np.ndarray, path: Sequence[np.ndarray], obs: ObstacleSet, deadline: float,

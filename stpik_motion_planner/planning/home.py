@@ -49,7 +49,8 @@ def home_via_stage(ctx: PlanningContext, q_from: np.ndarray, obs: ObstacleSet, p
     for oid, xy in placed:
         try:
             _, release = ctx.carry_heights(oid)
-            stage = np.array(place_poses(ctx.scenario, oid, xy, release, p.stage_distance)[0])
+            # the staging pose: the same whichever face of a box the hand holds (grasp yaw 0 for any)
+            stage = np.array(place_poses(ctx.scenario, oid, xy, release, p.stage_distance, 0.0)[0])
         except WorkspaceError:
             continue
         if np.linalg.norm(pos - stage[:3]) > 2 * p.stpik.final_tol_pos or \

@@ -83,7 +83,7 @@ def pick(ctx: PlanningContext, object_id: str, removed: frozenset[str], deadline
         return None, 0, str(e)
     obs = ctx.scene.obstacles(removed)
     attempts, last = 0, ""
-    for tier, yaws in enumerate(ctx.yaw_tiers()):
+    for tier, yaws in enumerate(ctx.yaw_tiers(object_id)):
         cands = candidates(ctx, object_id, obs, yaws)
         if not cands:
             continue
@@ -146,7 +146,7 @@ def candidates(ctx: PlanningContext, object_id: str, obs: ObstacleSet, yaws: lis
     (the target excluded for the palm and fingers on the approach only)."""
     skip = {n: frozenset([object_id]) for n in HAND_PARTS}
     out = []
-    for yaw in ctx.all_yaws() if yaws is None else yaws:
+    for yaw in ctx.all_yaws(object_id) if yaws is None else yaws:
         try:
             g = side_grasp(ctx.scenario, object_id, yaw, ctx.params.pre_grasp_distance)
         except WorkspaceError:
