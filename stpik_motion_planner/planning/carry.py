@@ -88,10 +88,10 @@ def plan_carry(ctx: PlanningContext, object_id: str, removed: frozenset[str], go
     placed = ctx.placed_default(removed, goal.slot_index) if placed is None else list(placed)
     obs = ctx.collision_scene(placed).obstacles(removed | {object_id})
     support = {CARRIED: frozenset(["board:top_shelf"])}  # the one board the bottle may touch: on the lift
+    carried, arm_start, arm_c = carried_models(ctx, b, q_start, obs, support)
     ctx.kin.update(q_start, jacobians=False)
     rot, pos = ctx.kin.tool_pose()
     start = np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
-    carried, arm_start, arm_c = carried_models(ctx, b, float(start[3]), q_start, obs, support)
     lifted = start + np.array([0.0, 0.0, goal.lift, 0.0])
     bound = arm_start.specs[-1].clearance
     hand_c = carried_hand(ctx, carried, lifted, obs, p.carried_clearance if bound is None else bound)
@@ -181,11 +181,11 @@ def carried_shape(b: ShelfObject, grasp_yaw: float, clearance: float) -> Capsule
     return carried_bottle(b.radius, b.height, grasp_standoff(b.radius), clearance)
 
 
-def carried_models(ctx: PlanningContext, b: ShelfObject, grasp_yaw: float, q_start: np.ndarray, obs: ObstacleSet,
+def carried_models(ctx: PlanningContext, b: ShelfObject, q_start: np.ndarray, obs: ObstacleSet,
                    support: dict[str, frozenset[str]]) -> tuple[CapsuleSpec, ArmGeometry, ArmGeometry]:
-    """(carried bottle, arm holding it out of the shelf, arm holding it in to the slot), the object held as taken
-    at approach yaw `grasp_yaw` (`carried_shape`). The bottle is modelled on the hand where the tool stopped at the
-    grasp (STPIK's final tolerance, up to 4 mm from the bottle's
+    """(carried bottle, arm holding it out of the shelf, arm holding it in to the slot), the object held as the
+    tool took it at q_start (`carried_shape` at the tool's yaw there). The bottle is modelled on the hand where
+    the tool stopped at the grasp (STPIK's final tolerance, up to 4 mm from the bottle's
     perceived place); where that model stands closer to a neighbour than `carried_clearance`, the lift and
     the way out keep that start distance less START_RELIEF (less half of it under 2 x START_RELIEF: the bound
     never allows contact) as the bound, whatever it is (a model in contact within the perception and STPIK
@@ -194,6 +194,7 @@ def carried_models(ctx: PlanningContext, b: ShelfObject, grasp_yaw: float, q_sta
     start would fail the bound at once and the pick would be refused for the model's offset. A model that
     penetrates a neighbour at the start (no distance to keep) keeps the full bound: refused."""
     p = ctx.params
+    grasp_yaw = ctx.grasp_yaw(q_start)
     carried = carried_shape(b, grasp_yaw, p.carried_clearance)
     arm_c = ArmGeometry(ctx.kin, [carried])
     ctx.kin.update(q_start, jacobians=False)
