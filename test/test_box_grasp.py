@@ -1,6 +1,8 @@
 """The side grasp of a standing box (stpik_motion_planner.model.grasp: `face_yaws`, `grasp_extent`, `box_refusal`),
 its relocation replayed in MuJoCo by the independent checker (test/motion_checker.py: the simulator's world, the box
-attached to the hand at the pose it had when the pick ended), and the refusal of a box too wide for the open hand.
+attached to the hand at the pose it had when the pick ended) and executed in MuJoCo's physics (the simulator's core,
+relocation.relocate as the motion planner node runs it: the fingers close on the box and carry it), and the refusal of
+a box too wide for the open hand.
 
 The scenes are generated: a box in the front row of the top shelf, a bottle beside it and the target behind it, the
 box's size, yaw and place drawn from seeds fixed before any result (a face the hand fits is not guaranteed: a box
@@ -15,10 +17,12 @@ import math
 import numpy as np
 import pytest
 from motion_checker import MotionChecker, replay_relocation
+from test_execution import MAX_SLIP, SimArm
 
+from jaco2_sim_driver.sim import Jaco2Sim
 from relocation_common.feasibility import NO_GRASP, Label
 from relocation_common.scenario import Scenario, parse_scenario
-from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation
+from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation, relocate
 from stpik_motion_planner.model.grasp import approach_yaw, grasp_standoff, hand_opening
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
@@ -156,3 +160,39 @@ def test_a_box_too_wide_for_the_hand_is_refused_with_its_widths():
         f"{NO_GRASP}k is a box (box 0.09 x 0.06 x 0.14 m): the faces within 0.80 rad of straight in are 90 mm across, "
         "wider than the open hand (74 mm between the fingers); the face the hand fits (60 mm across) is turned "
         "1.20 rad from straight in")
+
+
+def test_a_box_is_carried_to_its_slot_in_mujoco_physics():
+    """relocation.relocate on the simulator's core (test_execution.SimArm: every physics step watched): the fixed box
+    and every generated one the planner certifies. The box closed on by the fingers (the simulator grasps what
+    stands between them: before, cylinders only), on its slot within PLACE_TOL, upright and square to the shelf,
+    held within MAX_SLIP, nothing else moved, no contact of the arm or the box but the intended ones."""
+    boxes = [{"size": [0.05, 0.07, 0.14], "yaw": 0.3, "xy": [0.70, -0.05]}] + [drawn_box(seed) for seed in SEEDS]
+    carried = 0
+    for box in boxes:
+        scenario = box_scene(box)
+        planner, sim = MotionPlanner(scenario, PARAMS), Jaco2Sim(scenario)
+        if planner.certify("k", []).label != Label.OBSTACLE:
+            continue
+        start = {p.id: np.array(p.position) for p in sim.object_poses()}
+        arm = SimArm(sim)
+        plan = relocate(planner, arm, "k", [])
+        arm._step(500)
+        pose = {p.id: p for p in sim.object_poses()}
+        slot = scenario.slot(plan.slot_index)
+        at = np.array(pose["k"].position)
+        assert math.dist(at[:2], slot) <= PLACE_TOL and at[2] == pytest.approx(scenario.shelf.bottom_z, abs=0.001), \
+            (box, at, slot)
+        w, x, y, z = pose["k"].quat_wxyz
+        assert 1 - 2 * (x * x + y * y) > 0.995, box  # upright: its z axis within 5.7 deg of the vertical
+        turn = math.remainder(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)), math.pi / 2)
+        assert abs(turn) <= PARAMS.stpik.grasp_yaw_tol + PARAMS.stpik.final_tol_ori, (box, turn)
+        for other in ("b1", "T"):
+            assert np.linalg.norm(np.array(pose[other].position) - start[other]) < 0.005, (box, other)
+        assert arm.unintended == {}, (box, arm.unintended)
+        assert arm.slip["k"] <= MAX_SLIP, (box, arm.slip)
+        print(f"{box}: at {np.round(at, 4).tolist()} (slot {slot}), turned {turn:+.3f} rad, "
+              f"slip {arm.slip['k'] * 1000:.1f} mm")
+        carried += 1
+    print(f"boxes carried in MuJoCo's physics: {carried}")
+    assert carried >= 2
