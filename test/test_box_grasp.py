@@ -24,6 +24,7 @@ from relocation_common.feasibility import NO_GRASP, Label
 from relocation_common.scenario import Scenario, parse_scenario
 from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation, relocate
 from stpik_motion_planner.model.grasp import approach_yaw, grasp_standoff, hand_opening
+from stpik_motion_planner.model.scene_update import merge_perceived
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.results import PlanningError
@@ -196,3 +197,15 @@ def test_a_box_is_carried_to_its_slot_in_mujoco_physics():
         carried += 1
     print(f"boxes carried in MuJoCo's physics: {carried}")
     assert carried >= 2
+
+
+def test_a_box_turned_in_place_is_a_new_scene_for_the_planner():
+    """Its faces, so its lanes, turn with it: a perceived box turned 0.2 rad about its own centre replaces the
+    planner's (model.scene_update), one turned by a quarter turn is the same box; before, only a move of its centre
+    counted and the planner kept grasping the old face."""
+    scenario = box_scene({"size": [0.05, 0.07, 0.14], "yaw": 0.3, "xy": [0.70, -0.05]})
+    current = {o.id: dataclasses.replace(o, support_z=scenario.shelf.top_z) for o in scenario.objects}
+    turned = dataclasses.replace(current["k"], yaw=0.5)
+    assert merge_perceived(scenario.shelf, current, [turned]).changed == ["k"]
+    quarter = dataclasses.replace(current["k"], yaw=0.3 - math.pi / 2, size=(0.07, 0.05, 0.14))
+    assert merge_perceived(scenario.shelf, current, [quarter]).changed == []
