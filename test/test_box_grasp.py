@@ -158,8 +158,8 @@ def test_a_box_too_wide_for_the_hand_is_refused_with_its_widths():
     # its 60 mm faces are square to yaw 1.2 (approached along its x): beyond the second tier's 0.8 rad
     turned = MotionPlanner(box_scene({"size": [0.09, 0.06, 0.14], "yaw": 1.2, "xy": [0.70, -0.05]}), PARAMS)
     assert turned.feasibility("k", []).message == (
-        f"{NO_GRASP}k is a box (box 0.09 x 0.06 x 0.14 m): the faces within 0.80 rad of straight in are 90 mm across, "
-        "wider than the open hand (74 mm between the fingers); the face the hand fits (60 mm across) is turned "
+        f"{NO_GRASP}k is a box (box 0.09 x 0.06 x 0.14 m): the narrowest face within 0.80 rad of straight in is 90 mm "
+        "across, wider than the open hand (74 mm between the fingers); the face the hand fits (60 mm across) is turned "
         "1.20 rad from straight in")
 
 

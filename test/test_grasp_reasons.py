@@ -54,7 +54,7 @@ def test_a_box_has_the_lanes_of_the_faces_the_hand_fits_and_no_other(boxes):
     but at its mid-height the hand meets the top board: no lane any removal clears, answered without a grasp."""
     a = boxes.feasibility("o9", [])
     assert a.label == Label.UNFEASIBLE and a.message.startswith(
-        f"{NO_GRASP}o9 is a box (box 0.08 x 0.06 x 0.18 m): the faces within 0.80 rad of straight in are 80 mm "
+        f"{NO_GRASP}o9 is a box (box 0.08 x 0.06 x 0.18 m): the narrowest face within 0.80 rad of straight in is 80 mm "
         "across, wider than the open hand"), a.message
     assert a.blockers == () and a.attempts == 0
     lanes = boxes.lane_blockers()

@@ -46,5 +46,5 @@ def test_the_notes_name_what_the_hand_cannot_grasp_with_the_planner_s_reason():
     assert "o7 needs one of {o4, o6, o9} moved" in optimum.reason, optimum.reason
     notes = scene_notes(problem, oracle)
     assert notes.startswith("never relocated, the hand cannot grasp them: o9 (no grasp: o9 is a box (box 0.08 x "
-                            "0.06 x 0.18 m): the faces within 0.80 rad of straight in are 80 mm across"), notes
+                            "0.06 x 0.18 m): the narrowest face within 0.80 rad of straight in is 80 mm across"), notes
     assert "o7" not in notes and "o8" not in notes

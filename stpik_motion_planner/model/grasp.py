@@ -93,14 +93,15 @@ def box_refusal(o: ShelfObject, max_yaw: float) -> str:
         return ""
     narrow = min(face_yaws(o), key=lambda y: grasp_extent(o, y)[1])  # the straighter of its two yaws
 
-    def across(yaw: float) -> str:
+    def across(yaw: float, which: str) -> str:
         half_depth, width = grasp_extent(o, yaw)
-        return f"{width * 1000:.0f} mm across, wider than the open hand " \
+        return f"{width * 1000:.0f} mm across{which}, wider than the open hand " \
                f"({hand_opening(grasp_standoff(half_depth)) * 1000:.0f} mm between the fingers)"
 
     if not hand_fits(o, narrow):
-        return f"{NO_GRASP}{o.id} is a box {across(narrow).replace('across', 'across every face')} ({o.describe()})"
-    within = f"the faces within {max_yaw:.2f} rad of straight in are {across(faces[0])}" if faces else \
+        return f"{NO_GRASP}{o.id} is a box {across(narrow, ' every face')} ({o.describe()})"
+    within = f"the narrowest face within {max_yaw:.2f} rad of straight in is " \
+        f"{across(min(faces, key=lambda y: grasp_extent(o, y)[1]), '')}" if faces else \
         f"no face is within {max_yaw:.2f} rad of straight in"
     return (f"{NO_GRASP}{o.id} is a box ({o.describe()}): {within}; the face the hand fits "
             f"({grasp_extent(o, narrow)[1] * 1000:.0f} mm across) is turned {abs(narrow):.2f} rad from straight in")
