@@ -3,8 +3,8 @@
 Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel), the floor, the
 pedestal under the robot and every object of the scene, listed in the scenario or not, as the primitive it is
 (`object_obstacle`: a cylinder standing or lying, an oriented box; a conservative object is its bounding box);
-objects already relocated may stand on the bottom shelf (`placed`, each as the vertical cylinder that holds it at any
-turn: `upright_radius`). The set of removed objects is a parameter of
+objects already relocated may stand on the bottom shelf (`placed`: a bottle as its cylinder, a box as the upright
+box that holds it as the side grasp placed it, `grasp.placed_sides`). The set of removed objects is a parameter of
 every query (`CollisionScene.obstacles(removed)`). A numpy AABB broad phase keeps only the capsule/obstacle pairs
 closer than an activation distance; fcl computes their exact distances and witness points (in the base frame). fcl
 returns -1 on penetration.
@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 from relocation_common import robot_description as rd
 from relocation_common.geometry import wxyz_matrix
 from relocation_common.scenario import Scenario, ShelfObject
+from stpik_motion_planner.model.grasp import placed_sides
 from stpik_motion_planner.model.kinematics import Kinematics
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
@@ -137,6 +138,19 @@ def shelf_boards(scenario: Scenario) -> list[Obstacle]:
     ]
 
 
+def placed_obstacle(o: ShelfObject, x: float, y: float, z0: float, turn: float) -> Obstacle:
+    """An object the side grasp placed standing on the board at z0, centred on (x, y), named "placed:<id>" (a
+    query's `skip` names it so): a bottle as its cylinder; a box as the upright box of `grasp.placed_sides` (square
+    to the shelf, holding it turned by up to `turn` rad)."""
+    name = f"placed:{o.id}"
+    if o.shape != "box":
+        return cylinder(name, name, x, y, z0, o.radius, o.height)
+    half = np.array([*placed_sides(o, turn), o.height]) / 2
+    centre = np.array([x, y, z0 + o.height / 2])
+    obj = fcl.CollisionObject(fcl.Box(*(2 * half)), fcl.Transform(np.eye(3), centre))
+    return Obstacle(name, name, obj, centre - half, centre + half)
+
+
 def upright_radius(o: ShelfObject) -> float:
     """Radius of the vertical cylinder about a standing object's centre that holds it at any turn about the
     vertical: a cylinder's radius, a box's half-diagonal (a box in its slot stands turned as the hand held it)."""
@@ -144,13 +158,13 @@ def upright_radius(o: ShelfObject) -> float:
 
 
 class CollisionScene:
-    """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`:
-    (id, (x, y)) of objects standing on the bottom shelf (centred there, `upright_radius`); `lying`: bottles of the
-    top shelf that do not stand as perception saw them (scene_update.lying_pose); `gone`: objects that left the shelf
-    (on the floor), no obstacle."""
+    """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`: (id,
+    (x, y)) of objects standing on the bottom shelf (centred there; a box turned up to `placed_turn` rad from square to
+    the shelf: `placed_obstacle`); `lying`: bottles of the top shelf that do not stand as perception saw them
+    (scene_update.lying_pose); `gone`: objects that left the shelf (on the floor), no obstacle."""
 
     def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = (),
-                 lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> None:
+                 lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = (), placed_turn: float = 0.0) -> None:
         self.scenario = scenario
         self.boards = shelf_boards(scenario)
         z0 = scenario.shelf.top_z
@@ -159,10 +173,7 @@ class CollisionScene:
                         if b.id in lying else object_obstacle(b, z0)
                         for b in scenario.objects if b.id not in gone}
         zb = scenario.shelf.bottom_z
-        self.placed = []
-        for oid, (x, y) in placed:
-            b = scenario.object(oid)
-            self.placed.append(cylinder(f"placed:{oid}", f"placed:{oid}", x, y, zb, upright_radius(b), b.height))
+        self.placed = [placed_obstacle(scenario.object(oid), x, y, zb, placed_turn) for oid, (x, y) in placed]
         self._cache: dict[tuple[frozenset, frozenset], ObstacleSet] = {}
 
     def obstacles(self, removed: Iterable[str] = frozenset(), exclude: Iterable[str] = frozenset()) -> ObstacleSet:

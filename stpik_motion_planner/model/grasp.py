@@ -194,6 +194,17 @@ def yaw_tiers(n: int, max_yaw: float, wide_n: int, wide_max_yaw: float) -> list[
     return [first, wide] if wide else [first]
 
 
+def placed_sides(o: ShelfObject, turn: float) -> tuple[float, float]:
+    """(side along x, side along y) of the upright rectangle about its slot that holds a box the side grasp placed
+    there: held square to the hand and released pointing straight in (yaw 0), so its width across the fingers along
+    y and its depth along x, for whichever face the hand fits it was held by (the widest and the deepest of them),
+    turned by up to `turn` rad (the grasp's and the place's yaw tolerances)."""
+    held = [grasp_extent(o, y) for y in face_yaws(o) if hand_fits(o, y)] or [grasp_extent(o, y) for y in face_yaws(o)]
+    a, b = max(h[0] for h in held), max(h[1] for h in held) / 2
+    c, s = math.cos(turn), math.sin(turn)
+    return 2 * (a * c + b * s), 2 * (b * c + a * s)
+
+
 def grasp_yaw_tiers(o: ShelfObject, n: int, max_yaw: float, wide_n: int, wide_max_yaw: float) -> list[list[float]]:
     """The approach yaws of object `o` in the order they are tried: a cylinder's `yaw_tiers`; a box's face yaws
     (`face_yaws`) the open hand fits (`hand_fits`), within max_yaw first, then (with a second tier, wide_n > 0)

@@ -25,7 +25,6 @@ from stpik_motion_planner.model.collision import (
     HandProxy,
     Lying,
     ObstacleSet,
-    upright_radius,
 )
 from stpik_motion_planner.model.grasp import approach_yaw, carry_heights, grasp_refusal, grasp_yaw_tiers, home_pose
 from stpik_motion_planner.model.kinematics import Kinematics
@@ -114,7 +113,8 @@ class PlanningContext:
     def collision_scene(self, placed: Sequence[tuple[str, tuple[float, float]]] = ()) -> CollisionScene:
         """The scenario's collision scene with `placed` on the bottom shelf, the lying bottles as they lie and the
         gone ones left out."""
-        return CollisionScene(self.scenario, placed, self.lying, self.gone)
+        stpik = self.params.stpik  # a placed box turned by the grasp's and the place's yaw tolerances at most
+        return CollisionScene(self.scenario, placed, self.lying, self.gone, stpik.grasp_yaw_tol + stpik.final_tol_ori)
 
     def not_graspable(self, object_id: str) -> str:
         """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): off the shelf, or
@@ -134,11 +134,12 @@ class PlanningContext:
         return [(oid, self.scenario.slot(k)) for oid, k in zip(sorted(removed), slots)]
 
     def placed_key(self, placed: Iterable[tuple[str, tuple[float, float]]]) -> str:
-        """The objects on the bottom shelf as geometry (where, which size: collision.upright_radius), whatever their
-        names: a carry planned for a removed set and the same carry in a relocation order see the same scene, so
-        draw the same samples."""
-        return repr(sorted((round(x, 4), round(y, 4), upright_radius(self.scenario.object(o)),
-                            self.scenario.object(o).height) for o, (x, y) in placed))
+        """The objects on the bottom shelf as geometry (where, which size: a bottle's radius, a box's size), whatever
+        their names: a carry planned for a removed set and the same carry in a relocation order see the same scene,
+        so draw the same samples."""
+        objs = [(x, y, self.scenario.object(o)) for o, (x, y) in placed]
+        return repr(sorted((round(x, 4), round(y, 4), b.size if b.shape == "box" else b.radius, b.height)
+                           for x, y, b in objs))
 
     def carry_heights(self, object_id: str) -> tuple[float, float]:
         """(lift, release height) of the object carried at its real size (grasp.carry_heights); WorkspaceError if
