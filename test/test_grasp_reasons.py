@@ -75,7 +75,7 @@ def test_a_bottle_lying_from_the_start_is_answered_no_grasp():
     planner = MotionPlanner(LYING, PlannerParams.load())
     a = planner.feasibility("o7", [])
     assert a.label == Label.UNFEASIBLE and a.message == f"{NO_GRASP}o7 is lying on its side: the side grasp takes " \
-        "standing cylinders only", a.message
+        "standing objects only", a.message
     assert planner.lane_blockers()["o7"] == ()
     lying = planner.scene.bottles["o7"]
     o7 = LYING.object("o7")

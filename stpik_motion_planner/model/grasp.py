@@ -118,7 +118,7 @@ def grasp_refusal(o: ShelfObject, max_yaw: float = math.pi) -> str:
     if o.shape == "box":
         return box_refusal(o, max_yaw)
     if o.axis_tilt > UPRIGHT_TILT:
-        return f"{NO_GRASP}{o.id} is lying on its side: the side grasp takes standing cylinders only"
+        return f"{NO_GRASP}{o.id} is lying on its side: the side grasp takes standing objects only"
     opening = hand_opening(grasp_standoff(o.radius))
     if not hand_fits(o, 0.0):
         return (f"{NO_GRASP}{o.id} is {2 * o.radius * 1000:.0f} mm wide, wider than the open hand "

@@ -123,7 +123,7 @@ class PlanningContext:
         if object_id in self.gone:
             return f"{object_id} left the shelf: nothing to grasp"
         if object_id in self.lying:
-            return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing cylinders only"
+            return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing objects only"
         p = self.params
         return grasp_refusal(self.scenario.object(object_id), p.wide_max_yaw if p.wide_yaws else p.max_yaw)
 
