@@ -219,13 +219,18 @@ def capsule_spec(name: str, link: str, p0: ArrayLike, p1: ArrayLike, radius: flo
 
 
 def carried_bottle(radius: float, height: float, standoff: float = 0.0,
-                   clearance: float | None = None) -> CapsuleSpec:
-    """The grasped bottle at its real size: a cylinder on link 7 (tool y is vertical, the bottle's centre `standoff`
-    beyond the tool origin along tool z, the tool at its mid-height, as `grasp.side_grasp` places it).
+                   clearance: float | None = None, tilt: float = 0.0) -> CapsuleSpec:
+    """The grasped bottle at its real size: a cylinder on link 7 (its axis along tool y, tilted by `tilt` towards
+    tool z for a grasp from above: grasp.held_tilt; the bottle's centre `standoff` beyond the tool origin along tool
+    z, the tool at its mid-height, as `grasp.side_grasp` places it).
     `clearance`: its bound to obstacles (None: the arm's). Contact where it is intended (the board the bottle stands
     on while it is lifted) is exempted by the caller with the `skip` of a query, never by shrinking the model."""
     half = height / 2
     z = rd.D67 + standoff
+    if tilt:
+        a, b = half * math.cos(tilt), half * math.sin(tilt)
+        return capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -a, z - b), (0, a, z + b), radius, cylinder=True,
+                            clearance=clearance)
     return capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -half, z), (0, half, z), radius, cylinder=True,
                         clearance=clearance)
 
@@ -257,6 +262,14 @@ def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0) -> fcl.CollisionGeometry:
 
 HAND_PARTS = ("palm", "finger_1", "finger_2", "finger_3")
 CARRIED = "carried"  # name of the attached bottle's shape
+
+
+def approach_skip(o: ShelfObject) -> dict[str, frozenset[str]]:
+    """What the hand may touch on the straight approach to a grasp of `o` and on its lift: the object (the palm and
+    fingers); for a grasp from above of a lying cylinder, the fingers also the board it lies on, which they come
+    grasp.FINGER_FLOOR near."""
+    board = frozenset(["board:top_shelf"]) if o.lying else frozenset()
+    return {n: frozenset([o.id]) | (board if n.startswith("finger") else frozenset()) for n in HAND_PARTS}
 
 
 class ArmGeometry:
@@ -382,6 +395,9 @@ class HandProxy:
     # the stub stands for the forearm near the hand; at a staging pose low in front of the bottom shelf it points
     # back at the pedestal, which the real forearm (rising to the elbow) stays far above: STPIK checks the arm
     STUB_IGNORES = ("board:pedestal",)
+    # nor does it stand for the forearm of a hand tilted down more than STUB_TILT (a grasp from above: grasp.py): the
+    # forearm then bends at the wrist (joint 6) to come in under the board above, where STPIK checks it
+    STUB_TILT = math.sin(math.radians(30))
 
     def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = (), attached_margin: float | None = None
                  ) -> None:
@@ -420,7 +436,7 @@ class HandProxy:
             o = obs.items[k]
             s = self.specs[c]
             if k in out or skip and _key(o) in skip.get(s.name, ()) or \
-                    s.name == "forearm_stub" and o.name in self.STUB_IGNORES:
+                    s.name == "forearm_stub" and (o.name in self.STUB_IGNORES or -r_tool[2, 2] > self.STUB_TILT):
                 continue
             if c not in posed:
                 self.objs[c].setTransform(fcl.Transform(r_tool @ s.rot, r_tool @ s.centre + p7))
@@ -449,12 +465,13 @@ class HandProxy:
 
 
 def _path_poses(poses: Sequence[ArrayLike], resolution: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses (a yaw change
-    counts 0.25 m per rad), both ends of each segment included."""
+    """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses, or (x, y, z,
+    yaw, pitch) ones (a yaw or pitch change counts 0.25 m per rad), both ends of each segment included."""
     from stpik_motion_planner.model.grasp import pose_matrix
 
     for a, b in zip(poses[:-1], poses[1:]):
         a, b = np.asarray(a, float), np.asarray(b, float)
-        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / resolution)))
+        turn = abs(b[3] - a[3]) if len(a) < 5 else max(abs(b[3] - a[3]), abs(b[4] - a[4]))
+        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * turn) / resolution)))
         for k in range(n + 1):
             yield pose_matrix(a + (b - a) * k / n)

@@ -26,7 +26,15 @@ from stpik_motion_planner.model.collision import (
     Lying,
     ObstacleSet,
 )
-from stpik_motion_planner.model.grasp import approach_yaw, carry_heights, grasp_refusal, grasp_yaw_tiers, home_pose
+from stpik_motion_planner.model.grasp import (
+    approach_yaw,
+    carry_heights,
+    grasp_refusal,
+    grasp_yaw_tiers,
+    home_pose,
+    lying_pitch,
+    tool_rotation,
+)
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import QueryStats
@@ -125,7 +133,23 @@ class PlanningContext:
         if object_id in self.lying:
             return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing objects only"
         p = self.params
-        return grasp_refusal(self.scenario.object(object_id), p.wide_max_yaw if p.wide_yaws else p.max_yaw)
+        o, max_yaw = self.scenario.object(object_id), p.wide_max_yaw if p.wide_yaws else p.max_yaw
+        why = grasp_refusal(o, max_yaw)
+        if why or not o.lying:
+            return why
+        return lying_pitch(self.scenario.shelf, o, p.pre_grasp_distance, self.ceiling_clearance)[2]
+
+    def grasp_pitch(self, object_id: str) -> float:
+        """The pitch of the grasp of `object_id`: a lying cylinder's grasp from above (grasp.lying_pitch), else 0."""
+        o = self.scenario.object(object_id)
+        if not o.lying:
+            return 0.0
+        return lying_pitch(self.scenario.shelf, o, self.params.pre_grasp_distance, self.ceiling_clearance)[0]
+
+    @property
+    def ceiling_clearance(self) -> float:
+        """What the hand keeps under the board above at a grasp from above: STPIK's bound and activation band."""
+        return self.params.stpik.clearance + self.params.stpik.act
 
     def placed_default(self, removed: frozenset[str], slot_index: int) -> Placed:
         """Bottles assumed on the bottom shelf: the removed ones, in sorted order, in the slots other than
@@ -166,13 +190,14 @@ class PlanningContext:
     # ---------------------------------------------------------------- the STPIK check
     def track(self, q0: np.ndarray, path: Sequence[np.ndarray], obs: ObstacleSet, deadline: float,
               stats: QueryStats, skip: dict[str, frozenset[str]] | None = None, arm: ArmGeometry | None = None,
-              speed: float | None = None, ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0
-              ) -> StpikResult:
-        """STPIK tracking `path` from q0 (Eq. 9-10; with `arm`, the arm holding a bottle), its time and rejection
-        counted in `stats`."""
+              speed: float | None = None, ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0,
+              from_rest: bool = False) -> StpikResult:
+        """STPIK tracking `path` from q0 (Eq. 9-10; with `arm`, the arm holding a bottle; `from_rest`: Stpik.track's),
+        its time and rejection counted in `stats`."""
         t = time.perf_counter()
         stpik = self.stpik if arm is None else Stpik(self.kin, arm, self.params.stpik)
-        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel, yaw_tol=yaw_tol)
+        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel, yaw_tol=yaw_tol,
+                        from_rest=from_rest)
         stats.stpik_time += time.perf_counter() - t
         if not r.ok:
             stats.stpik_reject.append(r.reason)
@@ -213,12 +238,16 @@ def proxy_boxes(ctx: PlanningContext, tool_path: Sequence[np.ndarray]) -> tuple[
     poses = []
     for a, b in zip(tool_path[:-1], tool_path[1:]):
         a, b = np.asarray(a, float), np.asarray(b, float)
-        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / res)))
+        turn = abs(b[3] - a[3]) if len(a) < 5 else max(abs(b[3] - a[3]), abs(b[4] - a[4]))
+        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * turn) / res)))
         poses.append(a + (b - a) * (np.arange(n + 1) / n)[:, None])
     pose = np.vstack(poses)
-    c, s = np.cos(pose[:, 3]), np.sin(pose[:, 3])
-    rot = np.zeros((len(pose), 3, 3))  # grasp.side_rotation of each yaw
-    rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 0], rot[:, 1, 2], rot[:, 2, 1] = -s, c, c, s, 1.0
+    if pose.shape[1] > 4:  # a grasp from above: grasp.tool_rotation of each yaw and pitch
+        rot = np.array([tool_rotation(y, pitch) for y, pitch in pose[:, 3:5]])
+    else:
+        c, s = np.cos(pose[:, 3]), np.sin(pose[:, 3])
+        rot = np.zeros((len(pose), 3, 3))  # grasp.side_rotation of each yaw
+        rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 0], rot[:, 1, 2], rot[:, 2, 1] = -s, c, c, s, 1.0
     p7 = pose[:, :3] - rot[:, :, 2] * rd.D67  # link 7's origin (HandProxy.hits)
     p0 = np.einsum("nij,cj->nci", rot, proxy.p0) + p7[:, None]
     p1 = np.einsum("nij,cj->nci", rot, proxy.p1) + p7[:, None]

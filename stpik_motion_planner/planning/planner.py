@@ -120,7 +120,8 @@ class MotionPlanner(PlanningContext):
                 try:
                     box = sc.object(oid).shape == "box"
                     for yaw in self.all_yaws(oid) if box else [0.0]:  # a box: each face it may be held by
-                        stage, _ = place_poses(sc, oid, (x, y), release, p.stage_distance, yaw)
+                        stage, _ = place_poses(sc, oid, (x, y), release, p.stage_distance, yaw,
+                                               self.grasp_pitch(oid))
                         check_pose(stage, f"staging pose of {oid} for {where}")
                 except WorkspaceError as e:
                     out.append(str(e))
