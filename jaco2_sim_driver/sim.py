@@ -247,15 +247,17 @@ class Jaco2Sim:
         mujoco.mj_forward(self.model, self.data)
 
     def bottle_between_fingers(self) -> str | None:
-        """Id of the bottle (a cylinder) whose axis passes through the grasp centre (within GRASP_RADIAL_TOL across
-        it, the grasp centre within its height) with the hand's finger-spread axis along the bottle axis, or None."""
+        """Id of the object between the fingers, or None: a bottle (cylinder) whose axis passes through the grasp
+        centre (within GRASP_RADIAL_TOL across it), or a box whose footprint holds the grasp centre (the side grasp
+        takes it by a face the hand fits: its centre may be farther than a bottle's axis); either with the grasp
+        centre within its height and the hand's finger-spread axis along its own z (a cylinder's axis, a box's
+        vertical)."""
         c, r = self.data.site_xpos[self._site], self.data.site_xmat[self._site].reshape(3, 3)
         best, best_d = None, GRASP_RADIAL_TOL
         for oid, b in self._bodies.items():
             obj = self.scenario.world_object(oid)
-            if obj.shape != "cylinder":
-                continue
-            axis = self.data.xmat[b].reshape(3, 3)[:, 2]
+            frame = self.data.xmat[b].reshape(3, 3)
+            axis = frame[:, 2]
             if abs(float(axis @ r[:, 1])) < GRASP_TILT_COS:
                 continue
             d = c - self.data.xpos[b]
@@ -263,6 +265,9 @@ class Jaco2Sim:
             if not 0.2 * obj.height <= s <= 0.9 * obj.height:
                 continue
             radial = float(np.linalg.norm(d - s * axis))
+            if obj.shape == "box":
+                u, v, _ = frame.T @ d
+                radial = 0.0 if abs(u) <= obj.size[0] / 2 and abs(v) <= obj.size[1] / 2 else math.inf
             if radial < best_d:
                 best, best_d = oid, radial
         return best

@@ -12,7 +12,7 @@ a suspicion (the lane passed the screen but STPIK or RRT-Connect failed there): 
 answer whose sets are all certain: from `removed` or any superset of it, relocating the object needs one of the listed
 lanes cleared. Empty `blockers` = no information.
 
-An object the hand cannot grasp (a box, a lying bottle, one wider than the open hand...) is answered g_U with a
+An object the hand cannot grasp (a lying bottle, one wider than the open hand, a box too wide...) is answered g_U with a
 message starting NO_GRASP and the reason: it stays an obstacle, never relocated, whatever is removed.
 
 Certification (docs/motion_planner.md, "Lazy certification"). A feasible answer is the pick (home -> pre-grasp ->

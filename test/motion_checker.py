@@ -14,7 +14,8 @@ Pairs and what is asked of them:
   contact; the smallest distance is the clearance reported.
 - near pairs (no clearance asked, contact still counted): the hand (wrist, palm, fingers) and the bottle it is
   picking during the approach, the hand and the bottle it just released during the retreat, the wrist and palm and
-  the bottle they hold.
+  the bottle they hold; the fingers and the board a lying bottle lies on while they pick it from above (the
+  approach) and lift it (within `support_band` of the grasp): the grasp from above closes them over that board.
 - exempt: the fingers and the bottle they hold (the grasp is contact); the held bottle and the board it stands
   on while the tool is within `support_band` of where it grasped it (the lift) or released it (the place), if it
   does not enter that board by more than `support_tol`.
@@ -69,6 +70,8 @@ class Report:
     min_near: float = math.inf  # near pairs (m)
     min_near_at: str = ""
     support_depth: float = 0.0  # deepest entry of a held bottle into its support board while exempt (m)
+    min_floor: float = math.inf  # the fingers over the board a lying bottle lies on, picked from above (m; near pairs)
+    min_floor_at: str = ""
 
     @property
     def max_depth(self) -> float:
@@ -87,6 +90,8 @@ class Report:
         if other.min_near < self.min_near:
             self.min_near, self.min_near_at = other.min_near, other.min_near_at
         self.support_depth = max(self.support_depth, other.support_depth)
+        if other.min_floor < self.min_floor:
+            self.min_floor, self.min_floor_at = other.min_floor, other.min_floor_at
 
     def summary(self) -> str:
         return (f"{self.segments} segments, {self.samples} samples, {len(self.contacts)} contacts "
@@ -94,7 +99,9 @@ class Report:
                 f"({self.min_clearance_at}), arm {self.min_arm * 1000:.1f} mm ({self.min_arm_at}), "
                 f"carried bottle {self.min_carried * 1000:.1f} mm ({self.min_carried_at}),"
                 f" near pairs {self.min_near * 1000:.1f} mm ({self.min_near_at}), "
-                f"support entry {self.support_depth * 1000:.1f} mm")
+                f"support entry {self.support_depth * 1000:.1f} mm" +
+                (f", fingers over the board under a lying bottle {self.min_floor * 1000:.1f} mm ({self.min_floor_at})"
+                 if self.min_floor_at else ""))
 
 
 def _quat(rot) -> np.ndarray:
@@ -126,6 +133,8 @@ class MotionChecker:
         self._free = {b.id: m.jnt_qposadr[m.body_jntadr[m.body(b.id).id]] for b in scenario.world}
         self.arm = [gid(n) for n in ARM_GEOMS]
         self.world = [gid(n) for n in ("floor", "pedestal") + BOARDS]
+        self._fingers = {gid(n) for n in FINGER_GEOMS}
+        self._lying = {b.id for b in scenario.world if b.lying}
         self.floor = gid("floor")
         self.held: str | None = None
         self._rel: tuple[np.ndarray, np.ndarray] | None = None
@@ -219,12 +228,16 @@ class MotionChecker:
         for t, q in zip(traj.times, traj.positions):
             self.set_q(q)
             rep.samples += 1
-            pairs = pairs_pick if (picking and t >= approach_from - 1e-9) else pairs_free
+            approaching = picking and t >= approach_from - 1e-9
+            pairs = pairs_pick if approaching else pairs_free
             a_ids = np.array([p[0] for p in pairs])
             b_ids = np.array([p[1] for p in pairs])
             gap = self._gap(a_ids, b_ids)
             support_ok = (self._support is not None and self.held is not None
                           and np.linalg.norm(self.tool() - self._support[0]) <= self.support_band)
+            # the fingers over the board a lying bottle lies on, picked from above and lifted: a near pair
+            floor = self._board_below(self.bottle_pose(picking)[0]) if approaching and picking in self._lying else \
+                self._support[1] if support_ok and self.held in self._lying and self._support else None
             for k in np.nonzero(gap < self.distmax)[0]:
                 a, b, kind = pairs[k]
                 dist = mujoco.mj_geomDistance(m, d, int(a), int(b), self.distmax, fromto)
@@ -239,6 +252,10 @@ class MotionChecker:
                     key = (int(a), int(b))
                     if key not in deepest or dist < deepest[key].distance:
                         deepest[key] = Contact(segment, float(t), self.name(a), self.name(b), float(dist))
+                if b == floor and a in self._fingers:
+                    if dist < rep.min_floor:
+                        rep.min_floor, rep.min_floor_at = dist, where
+                    continue
                 if kind == "near":
                     if dist < rep.min_near:
                         rep.min_near, rep.min_near_at = dist, where

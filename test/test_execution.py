@@ -156,6 +156,7 @@ class SimArm:
         self.unintended: dict[tuple[str, str], float] = {}
         self.slip: dict[str, float] = {}
         self._rel = None
+        self._rest_z = 0.0
         self.current = None  # the bottle grasped last
 
     def _hand_frame(self, oid):
@@ -169,6 +170,7 @@ class SimArm:
             if self._rel is None or self._rel[0] != held:
                 self._rel = (held, self._hand_frame(held))
                 self.current = held
+                self._rest_z = float(d.xpos[self.body_of[held]][2])  # its frame's height where it rests
             slip = float(np.linalg.norm(self._hand_frame(held) - self._rel[1]))
             self.slip[held] = max(self.slip.get(held, 0.0), slip)
         if d.ncon == 0:
@@ -183,8 +185,8 @@ class SimArm:
                     continue
                 if carried and b in self.fingers or a in self.fingers and self.bottle.get(b) == self.current:
                     continue  # the fingers on the bottle they grasp, hold and let go
-                if carried and b == self.top and d.xpos[self.body_of[held]][2] < self.sim.scenario.shelf.top_z + 1e-3:
-                    continue  # still standing on the board it is lifted from
+                if carried and b == self.top and d.xpos[self.body_of[held]][2] < self._rest_z + 1e-3:
+                    continue  # still resting on the board it is lifted from (standing, or lying: its frame higher)
                 key = tuple(sorted((self.name(a), self.name(b))))
                 self.unintended[key] = min(self.unintended.get(key, 0.0), float(d.contact.dist[k]))
                 break

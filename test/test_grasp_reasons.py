@@ -1,11 +1,12 @@
 """What the side grasp cannot take, and the collision model of what it does not take (stpik_motion_planner.model:
 grasp.grasp_refusal, collision.object_obstacle).
 
-A box, a bottle lying from the start, a jar wider than the open hand and a conservative object are answered
-UNFEASIBLE with a message starting "no grasp: " and no lane any removal clears; each is in the collision scene as
-the primitive it is (checked against python-fcl's own distances to the primitive placed by the object model). Before,
-the planner modelled every object as an upright cylinder of its radius (a box had radius 0: a segment) and answered
-the pick of a box or of a lying bottle as for a standing bottle.
+A box too wide across every face the hand can approach, a bottle lying from the start, a jar wider than the open hand
+and a conservative object are answered UNFEASIBLE with a message starting "no grasp: " and no lane any removal
+clears; a box with a face the hand fits has the lane of that face only (its relocation: test_box_grasp.py). Each is in
+the collision scene as the primitive it is (checked against python-fcl's own distances to the primitive placed by
+the object model). Before, the planner modelled every object as an upright cylinder of its radius (a box had radius
+0: a segment) and answered the pick of a box or of a lying bottle as for a standing bottle.
 """
 from __future__ import annotations
 
@@ -46,23 +47,36 @@ def test_the_hand_opening_comes_from_the_finger_capsules():
     assert grasp_refusal(bottle) == ""
 
 
-def test_a_box_is_answered_no_grasp_and_has_no_lane(boxes):
-    for oid in ("o7", "o8", "o9"):
-        a = boxes.feasibility(oid, [])
-        assert a.label == Label.UNFEASIBLE and a.message.startswith(f"{NO_GRASP}{oid} is a box"), a.message
-        assert a.blockers == () and a.attempts == 0
+def test_a_box_has_the_lanes_of_the_faces_the_hand_fits_and_no_other(boxes):
+    """shapes_box_10's boxes: o9 (80 x 60 mm, yaw -1.25) shows only its 80 mm faces within 0.8 rad of straight in:
+    no grasp. o7 (60 x 90 mm, yaw 1.43) has one lane, square to its 90 mm side (yaw 1.43 - pi/2), the fingers across
+    its 60 mm; it is blocked by o4, o6 and o9. o8 (50 x 50 x 100 mm) has the lane of its face at yaw -1.36 + pi/2,
+    but at its mid-height the hand meets the top board: no lane any removal clears, answered without a grasp."""
+    a = boxes.feasibility("o9", [])
+    assert a.label == Label.UNFEASIBLE and a.message.startswith(
+        f"{NO_GRASP}o9 is a box (box 0.08 x 0.06 x 0.18 m): the narrowest face within 0.80 rad of straight in is 80 mm "
+        "across, wider than the open hand"), a.message
+    assert a.blockers == () and a.attempts == 0
     lanes = boxes.lane_blockers()
-    assert lanes["o7"] == lanes["o8"] == lanes["o9"] == ()
+    assert lanes["o9"] == () and lanes["o8"] == ()
+    o7 = BOXES.object("o7")
+    assert boxes.yaw_tiers("o7") == [[pytest.approx(o7.yaw - math.pi / 2)]]
+    (lane,) = lanes["o7"]
+    assert lane.certain and lane.objects == {"o4", "o6", "o9"} and lane.lane == "yaw -0.14", lane
+    a = boxes.feasibility("o7", [])
+    assert a.label == Label.UNFEASIBLE and a.blockers == (lane,), a
+    assert boxes.feasibility("o8", []).message == "no collision-free pre-grasp and approach for any yaw"
     assert lanes["T"], "the target keeps its lanes"
 
 
 def test_a_bottle_lying_from_the_start_is_answered_no_grasp():
     """lying_start_8's o7 lies on the board from the start (the file says so; perception never told the planner):
-    before, it was modelled standing and answered as a standing bottle."""
+    before, it was modelled standing and answered as a standing bottle. The shelf's 0.26 m of headroom leave no room
+    for the grasp from above (test_lying_grasp.py)."""
     planner = MotionPlanner(LYING, PlannerParams.load())
     a = planner.feasibility("o7", [])
-    assert a.label == Label.UNFEASIBLE and a.message == f"{NO_GRASP}o7 is lying on its side: the side grasp takes " \
-        "standing cylinders only", a.message
+    assert a.label == Label.UNFEASIBLE and a.message.startswith(
+        f"{NO_GRASP}o7 lies on the top shelf with 0.26 m of headroom; a grasp from above needs 0.45 m"), a.message
     assert planner.lane_blockers()["o7"] == ()
     lying = planner.scene.bottles["o7"]
     o7 = LYING.object("o7")

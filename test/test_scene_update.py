@@ -80,7 +80,7 @@ def test_a_bottle_lying_across_a_lane_blocks_it_and_its_phantom_is_gone():
     assert all("o3" in b.objects for b in answer.blockers), answer.blockers
     lying = service.feasibility("o3", [])[1]
     assert lying.label == Label.UNFEASIBLE and lying.message == ("no grasp: o3 is lying on its side: the side grasp "
-                                                                 "takes standing cylinders only")
+                                                                 "takes standing objects only")
     lanes, _ = service.feasibility("", [], all_lanes=True)
     assert lanes["o3"] == ()  # never graspable: no lane any removal clears
     box = service.planner.scene.bottles["o3"]  # the lying cylinder, nothing standing at o3's old place

@@ -34,15 +34,17 @@ def test_the_problem_of_a_scene_holds_its_unlisted_objects_with_their_estimates(
 
 
 def test_the_notes_name_what_the_hand_cannot_grasp_with_the_planner_s_reason():
-    """shapes_box_10: its three boxes stay obstacles; each of T's lanes holds o7 or a bottle held by the boxes, which
-    the A* proves from the lanes alone (before, the boxes were answered as bottles of radius 0, some feasible)."""
+    """shapes_box_10: o9 stays an obstacle (its faces within the yaw range are 80 mm across, wider than the open
+    hand); each of T's lanes holds o9 or a box or bottle held by it (o7's one lane needs o4, o6 or o9 gone; o8 has no
+    lane: at its mid-height the hand meets the board), which the A* proves from the lanes alone (before, the boxes
+    were answered as bottles of radius 0, some feasible; then every box was refused)."""
     planner = MotionPlanner(BOXES, PlannerParams.load())
     problem = RelocationProblem.from_scenario(BOXES)
     oracle = CachedOracle(planner)
-    optimum = astar.solve(problem, oracle)  # the boxes have no lane: every lane through one is closed for good
-    assert not optimum.found and optimum.oracle_calls == 0 and "o7 has no lane" in optimum.reason, optimum.reason
+    optimum = astar.solve(problem, oracle)  # o9 has no lane: every lane through it is closed for good
+    assert not optimum.found and optimum.oracle_calls == 0 and "o9 has no lane" in optimum.reason, optimum.reason
+    assert "o7 needs one of {o4, o6, o9} moved" in optimum.reason, optimum.reason
     notes = scene_notes(problem, oracle)
-    assert notes.startswith("never relocated, the hand cannot grasp them: o7 (no grasp: o7 is a box (box 0.06 x "
-                            "0.09 x 0.14 m): the side grasp takes standing cylinders only); o8 (no grasp: o8 is a "
-                            "box"), notes
-    assert "o9 (no grasp: o9 is a box" in notes
+    assert notes.startswith("never relocated, the hand cannot grasp them: o9 (no grasp: o9 is a box (box 0.08 x "
+                            "0.06 x 0.18 m): the narrowest face within 0.80 rad of straight in is 80 mm across"), notes
+    assert "o7" not in notes and "o8" not in notes

@@ -21,6 +21,8 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
 from relocation_common.scenario import Scenario, ScenarioError, Shelf, UnknownObjectError
+from stpik_motion_planner.model.collision import upright_radius
+from stpik_motion_planner.model.grasp import grasp_refusal
 from stpik_motion_planner.planning.params import node_parameters
 
 ON_BOARD = 0.01  # m: a bottle whose base is this close to a board's surface stands on it (scene_update.ON_SHELF)
@@ -111,7 +113,9 @@ def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: M
     goal's len(removed_ids): the slot a certified answer planned the carry to) when it is free, else the first
     free one (relocation_common.feasibility.destination_slot). ValueError when every slot is taken."""
     placed = placed_bottles(scenario.shelf, scenario.slots, seen, relocated)
-    free = free_slots(scenario.slots, placed, 2 * max(b.radius for b in scenario.objects))
+    # as wide as the widest object the hand can place (a box: its half-diagonal, at any turn)
+    wide = max((upright_radius(b) for b in scenario.objects if not grasp_refusal(b)), default=0.0)
+    free = free_slots(scenario.slots, placed, 2 * max(wide, max(b.radius for b in scenario.objects)))
     if not free:
         taken = ", ".join(i for i, _ in placed)
         raise ValueError(f"no free slot on the bottom shelf: all {len(scenario.slots)} slots are taken ({taken})")

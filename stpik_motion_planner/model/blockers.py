@@ -1,13 +1,13 @@
 """Which bottles block each grasp lane: the grasp/approach screen of feasibility (paper Sect. 4.1,
 step 1) asked per bottle instead of once for all.
 
-A lane is one approach yaw of `grasp.yaw_tiers` (both tiers). `planning.pick.candidates` keeps a lane when the hand
-proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for palm and fingers on
-the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each of them, so the
-lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the screen with
-`removed` gone exactly when all of its blockers are in `removed` (a *certain* BlockerSet). A lane the proxy cannot
-use whatever is removed (out of the planner's workspace or reach, a board, the grasped bottle itself in the way) is
-no lane. Computed once per (scene, object) with every bottle present; a query subtracts its removed set.
+A lane is one approach yaw of `grasp.grasp_yaw_tiers` (both tiers; a box's face yaws). `planning.pick.candidates` keeps
+a lane when the hand proxy is clear at its pre-grasp and along the straight approach (the grasped bottle ignored for
+palm and fingers on the approach). Collision of the proxy with a set of obstacles is the OR of its collisions with each
+of them, so the lane's blockers are exact: the bottles the proxy meets there, each tested alone. The lane passes the
+screen with `removed` gone exactly when all of its blockers are in `removed` (a *certain* BlockerSet). A lane the proxy
+cannot use whatever is removed (out of the planner's workspace or reach, a board, the grasped bottle itself in the way)
+is no lane. Computed once per (scene, object) with every bottle present; a query subtracts its removed set.
 
 When the screen passes and STPIK or RRT-Connect still fail, the lane gets an *uncertain* set: the bottles within
 SUSPECT_MARGIN of the proxy along it (suspects, not a claim).
@@ -22,7 +22,7 @@ import numpy as np
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet
 from relocation_common.scenario import Scenario
-from stpik_motion_planner.model.collision import HAND_PARTS, CollisionScene, HandProxy, ObstacleSet
+from stpik_motion_planner.model.collision import CollisionScene, HandProxy, ObstacleSet, approach_skip
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, side_grasp
 
 Lanes = tuple[tuple[Grasp, frozenset[str]], ...]  # (grasp, its blockers with every bottle present) per lane
@@ -94,30 +94,34 @@ class Screened(Protocol):
     def rrt(self) -> Box:
         """The Cartesian planner."""
 
-    def all_yaws(self) -> list[float]:
-        """Every approach yaw of both tiers, in the order they are tried."""
+    def all_yaws(self, object_id: str) -> list[float]:
+        """Every approach yaw of the object of both tiers, in the order they are tried."""
 
     def not_graspable(self, object_id: str) -> str:
         """Why the side grasp cannot take `object_id` ('' if it may)."""
+
+    @property
+    def ceiling_clearance(self) -> float:
+        """What the hand keeps under the board above at a grasp from above."""
 
 
 def _lanes(planner: Screened, object_id: str) -> list[Grasp]:
     """The object's grasps for every yaw inside the arm's reach and the Cartesian planner's box."""
     p = planner.params
     out = []
-    for yaw in planner.all_yaws():
+    for yaw in planner.all_yaws(object_id):
         try:
-            g = side_grasp(planner.scenario, object_id, yaw, p.pre_grasp_distance)
+            g = side_grasp(planner.scenario, object_id, yaw, p.pre_grasp_distance, planner.ceiling_clearance)
         except WorkspaceError:
             continue
-        if planner.rrt.contains(g.pre_grasp):
+        if planner.rrt.contains(g.pre_grasp[:4 if len(g.pre_grasp) < 5 else 3]):  # from above: any yaw
             out.append(g)
     return out
 
 
 def _blocked(planner: Screened, hand: HandProxy, g: Grasp, obs: ObstacleSet) -> bool:
     """The screen of one lane against `obs`: the proxy meets it at the pre-grasp or along the approach."""
-    skip = {n: frozenset([g.object_id]) for n in HAND_PARTS}
+    skip = approach_skip(planner.scenario.object(g.object_id))
     return hand.collides(*pose_matrix(g.pre_grasp), obs) or not hand.path_clear([g.pre_grasp, g.grasp], obs,
                                                                                 planner.params.resolution, skip)
 
@@ -141,7 +145,7 @@ def _lane_blockers(planner: Screened, hand: HandProxy, g: Grasp) -> frozenset[st
     if not _blocked(planner, hand, g, everything):
         return frozenset()
     # the proxy's contact with a set of obstacles is the OR of its contacts with each: one pass collects them all
-    skip = {n: frozenset([g.object_id]) for n in HAND_PARTS}
+    skip = approach_skip(planner.scenario.object(g.object_id))
     near = ObstacleSet([o for o in _near(hand, g, everything) if o.object_id in scene.bottles])
     met = hand.hits(*pose_matrix(g.pre_grasp), near) | hand.path_hits([g.pre_grasp, g.grasp], near,
                                                                        planner.params.resolution, skip)

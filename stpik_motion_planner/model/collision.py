@@ -3,7 +3,8 @@
 Obstacles are the shelf boards (top shelf, ceiling board, bottom shelf, side panels, back panel), the floor, the
 pedestal under the robot and every object of the scene, listed in the scenario or not, as the primitive it is
 (`object_obstacle`: a cylinder standing or lying, an oriented box; a conservative object is its bounding box);
-bottles already relocated may stand on the bottom shelf (`placed`). The set of removed objects is a parameter of
+objects already relocated may stand on the bottom shelf (`placed`: a bottle as its cylinder, a box as the upright
+box that holds it as the side grasp placed it, `grasp.placed_sides`). The set of removed objects is a parameter of
 every query (`CollisionScene.obstacles(removed)`). A numpy AABB broad phase keeps only the capsule/obstacle pairs
 closer than an activation distance; fcl computes their exact distances and witness points (in the base frame). fcl
 returns -1 on penetration.
@@ -21,6 +22,7 @@ from numpy.typing import ArrayLike
 from relocation_common import robot_description as rd
 from relocation_common.geometry import wxyz_matrix
 from relocation_common.scenario import Scenario, ShelfObject
+from stpik_motion_planner.model.grasp import placed_sides
 from stpik_motion_planner.model.kinematics import Kinematics
 
 PENETRATION = -1.0  # what fcl.distance returns for intersecting shapes
@@ -136,13 +138,33 @@ def shelf_boards(scenario: Scenario) -> list[Obstacle]:
     ]
 
 
+def placed_obstacle(o: ShelfObject, x: float, y: float, z0: float, turn: float) -> Obstacle:
+    """An object the side grasp placed standing on the board at z0, centred on (x, y), named "placed:<id>" (a
+    query's `skip` names it so): a bottle as its cylinder; a box as the upright box of `grasp.placed_sides` (square
+    to the shelf, holding it turned by up to `turn` rad)."""
+    name = f"placed:{o.id}"
+    if o.shape != "box":
+        return cylinder(name, name, x, y, z0, o.radius, o.height)
+    half = np.array([*placed_sides(o, turn), o.height]) / 2
+    centre = np.array([x, y, z0 + o.height / 2])
+    obj = fcl.CollisionObject(fcl.Box(*(2 * half)), fcl.Transform(np.eye(3), centre))
+    return Obstacle(name, name, obj, centre - half, centre + half)
+
+
+def upright_radius(o: ShelfObject) -> float:
+    """Radius of the vertical cylinder about a standing object's centre that holds it at any turn about the
+    vertical: a cylinder's radius, a box's half-diagonal (a box in its slot stands turned as the hand held it)."""
+    return math.hypot(o.size[0], o.size[1]) / 2 if o.shape == "box" else o.radius
+
+
 class CollisionScene:
-    """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`:
-    (id, (x, y)) of bottles standing on the bottom shelf; `lying`: bottles of the top shelf that do not stand as
-    perception saw them (scene_update.lying_pose); `gone`: objects that left the shelf (on the floor), no obstacle."""
+    """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`: (id,
+    (x, y)) of objects standing on the bottom shelf (centred there; a box turned up to `placed_turn` rad from square to
+    the shelf: `placed_obstacle`); `lying`: bottles of the top shelf that do not stand as perception saw them
+    (scene_update.lying_pose); `gone`: objects that left the shelf (on the floor), no obstacle."""
 
     def __init__(self, scenario: Scenario, placed: Sequence[tuple[str, tuple[float, float]]] = (),
-                 lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = ()) -> None:
+                 lying: Mapping[str, Lying] | None = None, gone: Iterable[str] = (), placed_turn: float = 0.0) -> None:
         self.scenario = scenario
         self.boards = shelf_boards(scenario)
         z0 = scenario.shelf.top_z
@@ -151,10 +173,7 @@ class CollisionScene:
                         if b.id in lying else object_obstacle(b, z0)
                         for b in scenario.objects if b.id not in gone}
         zb = scenario.shelf.bottom_z
-        self.placed = []
-        for oid, (x, y) in placed:
-            b = scenario.object(oid)
-            self.placed.append(cylinder(f"placed:{oid}", f"placed:{oid}", x, y, zb, b.radius, b.height))
+        self.placed = [placed_obstacle(scenario.object(oid), x, y, zb, placed_turn) for oid, (x, y) in placed]
         self._cache: dict[tuple[frozenset, frozenset], ObstacleSet] = {}
 
     def obstacles(self, removed: Iterable[str] = frozenset(), exclude: Iterable[str] = frozenset()) -> ObstacleSet:
@@ -182,10 +201,12 @@ class CapsuleSpec:
     length: float
     cylinder: bool = False  # a cylinder between p0 and p1 instead of a capsule (for obstacles)
     clearance: float | None = None  # its own clearance bound to obstacles (None: the planner's)
+    box: tuple[float, float, float] | None = None  # a box of these sides (x, y, z of `rot`) instead (`radius`:
+    # half its diagonal across z, for the broad phase and the self-distances, which see it as that capsule)
 
 
 def capsule_spec(name: str, link: str, p0: ArrayLike, p1: ArrayLike, radius: float, cylinder: bool = False,
-                 clearance: float | None = None) -> CapsuleSpec:
+                 clearance: float | None = None, box: tuple[float, float, float] | None = None) -> CapsuleSpec:
     """CapsuleSpec of the segment p0-p1 of radius `radius` in `link`'s frame."""
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     axis = p1 - p0
@@ -194,22 +215,46 @@ def capsule_spec(name: str, link: str, p0: ArrayLike, p1: ArrayLike, radius: flo
     x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
     x /= np.linalg.norm(x)
     return CapsuleSpec(name, link, p0, p1, radius, np.column_stack([x, np.cross(z, x), z]), (p0 + p1) / 2, length,
-                       cylinder, clearance)
+                       cylinder, clearance, box)
 
 
 def carried_bottle(radius: float, height: float, standoff: float = 0.0,
-                   clearance: float | None = None) -> CapsuleSpec:
-    """The grasped bottle at its real size: a cylinder on link 7 (tool y is vertical, the bottle's centre `standoff`
-    beyond the tool origin along tool z, the tool at its mid-height, as `grasp.side_grasp` places it).
+                   clearance: float | None = None, tilt: float = 0.0) -> CapsuleSpec:
+    """The grasped bottle at its real size: a cylinder on link 7 (its axis along tool y, tilted by `tilt` towards
+    tool z for a grasp from above: grasp.held_tilt; the bottle's centre `standoff` beyond the tool origin along tool
+    z, the tool at its mid-height, as `grasp.side_grasp` places it).
     `clearance`: its bound to obstacles (None: the arm's). Contact where it is intended (the board the bottle stands
     on while it is lifted) is exempted by the caller with the `skip` of a query, never by shrinking the model."""
     half = height / 2
     z = rd.D67 + standoff
+    if tilt:
+        a, b = half * math.cos(tilt), half * math.sin(tilt)
+        return capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -a, z - b), (0, a, z + b), radius, cylinder=True,
+                            clearance=clearance)
     return capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -half, z), (0, half, z), radius, cylinder=True,
                         clearance=clearance)
 
 
+def carried_box(depth: float, width: float, height: float, standoff: float, turn: float,
+                clearance: float | None = None) -> CapsuleSpec:
+    """The grasped box at its real size as `grasp.side_grasp` takes it: `depth` along the approach (tool z),
+    `width` across it (tool x, the fingers' closing direction), `height` along tool y (vertical), its centre
+    `standoff` beyond the tool origin along tool z at the tool's height, turned by `turn` (rad, counter-clockwise
+    seen from above) from square to the hand (the tool's yaw error at the grasp). Named and exempted as
+    `carried_bottle`."""
+    half = height / 2
+    z = rd.D67 + standoff
+    # capsule_spec's frame of a segment along link y: its x is link z (the approach), its y link x (closing), its z
+    # link y (up): a turn seen from above is a turn about its z
+    spec = capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, -half, z), (0, half, z), math.hypot(depth, width) / 2,
+                        clearance=clearance, box=(depth, width, height))
+    c, s = math.cos(turn), math.sin(turn)
+    return replace(spec, rot=spec.rot @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
+
+
 def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0) -> fcl.CollisionGeometry:
+    if s.box is not None:
+        return fcl.Box(*(np.asarray(s.box, float) + 2 * inflate))
     if s.cylinder:
         return fcl.Cylinder(s.radius + inflate, s.length + 2 * inflate)
     return fcl.Capsule(s.radius + inflate, s.length)
@@ -217,6 +262,14 @@ def _fcl_shape(s: CapsuleSpec, inflate: float = 0.0) -> fcl.CollisionGeometry:
 
 HAND_PARTS = ("palm", "finger_1", "finger_2", "finger_3")
 CARRIED = "carried"  # name of the attached bottle's shape
+
+
+def approach_skip(o: ShelfObject) -> dict[str, frozenset[str]]:
+    """What the hand may touch on the straight approach to a grasp of `o` and on its lift: the object (the palm and
+    fingers); for a grasp from above of a lying cylinder, the fingers also the board it lies on, which they come
+    grasp.FINGER_FLOOR near."""
+    board = frozenset(["board:top_shelf"]) if o.lying else frozenset()
+    return {n: frozenset([o.id]) | (board if n.startswith("finger") else frozenset()) for n in HAND_PARTS}
 
 
 class ArmGeometry:
@@ -342,6 +395,9 @@ class HandProxy:
     # the stub stands for the forearm near the hand; at a staging pose low in front of the bottom shelf it points
     # back at the pedestal, which the real forearm (rising to the elbow) stays far above: STPIK checks the arm
     STUB_IGNORES = ("board:pedestal",)
+    # nor does it stand for the forearm of a hand tilted down more than STUB_TILT (a grasp from above: grasp.py): the
+    # forearm then bends at the wrist (joint 6) to come in under the board above, where STPIK checks it
+    STUB_TILT = math.sin(math.radians(30))
 
     def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = (), attached_margin: float | None = None
                  ) -> None:
@@ -380,7 +436,7 @@ class HandProxy:
             o = obs.items[k]
             s = self.specs[c]
             if k in out or skip and _key(o) in skip.get(s.name, ()) or \
-                    s.name == "forearm_stub" and o.name in self.STUB_IGNORES:
+                    s.name == "forearm_stub" and (o.name in self.STUB_IGNORES or -r_tool[2, 2] > self.STUB_TILT):
                 continue
             if c not in posed:
                 self.objs[c].setTransform(fcl.Transform(r_tool @ s.rot, r_tool @ s.centre + p7))
@@ -409,12 +465,13 @@ class HandProxy:
 
 
 def _path_poses(poses: Sequence[ArrayLike], resolution: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses (a yaw change
-    counts 0.25 m per rad), both ends of each segment included."""
+    """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses, or (x, y, z,
+    yaw, pitch) ones (a yaw or pitch change counts 0.25 m per rad), both ends of each segment included."""
     from stpik_motion_planner.model.grasp import pose_matrix
 
     for a, b in zip(poses[:-1], poses[1:]):
         a, b = np.asarray(a, float), np.asarray(b, float)
-        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / resolution)))
+        turn = abs(b[3] - a[3]) if len(a) < 5 else max(abs(b[3] - a[3]), abs(b[4] - a[4]))
+        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * turn) / resolution)))
         for k in range(n + 1):
             yield pose_matrix(a + (b - a) * k / n)

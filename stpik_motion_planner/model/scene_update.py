@@ -18,6 +18,8 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping, NamedTuple
 
+import numpy as np
+
 from relocation_common.geometry import quat_wxyz, wxyz_matrix
 from relocation_common.scenario import Shelf, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT
@@ -122,12 +124,17 @@ def _superseded(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: lis
 
 def _differs(was: ShelfObject | None, now: ShelfObject, was_lying: Lying | None, now_lying: Lying | None) -> bool:
     """A perceived bottle differs from the planner's: new, moved more than MOVED, or standing <-> lying, or lying
-    otherwise (its top moved more than MOVED)."""
+    otherwise (its top moved more than MOVED); a box also turned so that its corners moved more than MOVED (the
+    faces the side grasp takes it by turn with it)."""
     if was is None or (was_lying is None) != (now_lying is None):
         return True
     if was_lying is not None and now_lying is not None:
         return math.dist(_top(was_lying, now.height), _top(now_lying, now.height)) > MOVED or \
             math.dist(was_lying.base, now_lying.base) > MOVED
+    if now.shape == was.shape == "box":  # each corner of its footprint to the nearest of the planner's
+        a, b = np.asarray(now.footprint().corners), np.asarray(was.footprint().corners)
+        if float(np.max(np.min(np.linalg.norm(a[:, None] - b[None], axis=2), axis=1))) > MOVED:
+            return True
     return math.hypot(now.x - was.x, now.y - was.y) > MOVED
 
 

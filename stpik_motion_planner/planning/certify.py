@@ -29,7 +29,8 @@ def _plan_rest(ctx: PlanningContext, object_id: str, removed: frozenset[str], q_
     k = len(removed)
     try:
         placed = ctx.placed_default(removed, k)
-        _, retreat = plan_carry(ctx, object_id, removed, carry_goal(ctx, object_id, k), q_grasp, placed)
+        goal = carry_goal(ctx, object_id, k, ctx.grasp_yaw(q_grasp))
+        _, retreat = plan_carry(ctx, object_id, removed, goal, q_grasp, placed)
         plan_home(ctx, retreat.trajectory.positions[-1], removed | {object_id},
                   placed + [(object_id, ctx.scenario.slot(k))])
     except (PlanningError, WorkspaceError, ValueError) as e:

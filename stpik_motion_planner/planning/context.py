@@ -19,8 +19,22 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, UnknownObjectError
 from relocation_common.shelf_object import objects_key
-from stpik_motion_planner.model.collision import ArmGeometry, CollisionScene, HandProxy, Lying, ObstacleSet
-from stpik_motion_planner.model.grasp import carry_heights, grasp_refusal, home_pose, yaw_tiers
+from stpik_motion_planner.model.collision import (
+    ArmGeometry,
+    CollisionScene,
+    HandProxy,
+    Lying,
+    ObstacleSet,
+)
+from stpik_motion_planner.model.grasp import (
+    approach_yaw,
+    carry_heights,
+    grasp_refusal,
+    grasp_yaw_tiers,
+    home_pose,
+    lying_pitch,
+    tool_rotation,
+)
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import QueryStats
@@ -35,7 +49,7 @@ from stpik_motion_planner.planning.stpik import Stpik, StpikResult
 UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance")
 SEEDED_AS = {"certify_relocation": True}
 UNSEEDED_STPIK = ("grasp_yaw_tol",)
-Placed = list[tuple[str, tuple[float, float]]]  # bottles on the bottom shelf: (id, slot xy)
+Placed = list[tuple[str, tuple[float, float]]]  # objects on the bottom shelf: (id, slot xy)
 
 
 class PlanningContext:
@@ -107,17 +121,35 @@ class PlanningContext:
     def collision_scene(self, placed: Sequence[tuple[str, tuple[float, float]]] = ()) -> CollisionScene:
         """The scenario's collision scene with `placed` on the bottom shelf, the lying bottles as they lie and the
         gone ones left out."""
-        return CollisionScene(self.scenario, placed, self.lying, self.gone)
+        stpik = self.params.stpik  # a placed box turned by the grasp's and the place's yaw tolerances at most
+        return CollisionScene(self.scenario, placed, self.lying, self.gone, stpik.grasp_yaw_tol + stpik.final_tol_ori)
 
     def not_graspable(self, object_id: str) -> str:
         """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): off the shelf, or
-        "no grasp: " and why (lying as perceived, or grasp.grasp_refusal: a box, a conservative object, lying, too
-        wide for the open hand)."""
+        "no grasp: " and why (lying as perceived, or grasp.grasp_refusal: a conservative object, lying, too wide
+        for the open hand, a box too wide across every face the approach yaws of both tiers can take it by)."""
         if object_id in self.gone:
             return f"{object_id} left the shelf: nothing to grasp"
         if object_id in self.lying:
-            return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing cylinders only"
-        return grasp_refusal(self.scenario.object(object_id))
+            return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing objects only"
+        p = self.params
+        o, max_yaw = self.scenario.object(object_id), p.wide_max_yaw if p.wide_yaws else p.max_yaw
+        why = grasp_refusal(o, max_yaw)
+        if why or not o.lying:
+            return why
+        return lying_pitch(self.scenario.shelf, o, p.pre_grasp_distance, self.ceiling_clearance)[2]
+
+    def grasp_pitch(self, object_id: str) -> float:
+        """The pitch of the grasp of `object_id`: a lying cylinder's grasp from above (grasp.lying_pitch), else 0."""
+        o = self.scenario.object(object_id)
+        if not o.lying:
+            return 0.0
+        return lying_pitch(self.scenario.shelf, o, self.params.pre_grasp_distance, self.ceiling_clearance)[0]
+
+    @property
+    def ceiling_clearance(self) -> float:
+        """What the hand keeps under the board above at a grasp from above: STPIK's bound and activation band."""
+        return self.params.stpik.clearance + self.params.stpik.act
 
     def placed_default(self, removed: frozenset[str], slot_index: int) -> Placed:
         """Bottles assumed on the bottom shelf: the removed ones, in sorted order, in the slots other than
@@ -126,10 +158,12 @@ class PlanningContext:
         return [(oid, self.scenario.slot(k)) for oid, k in zip(sorted(removed), slots)]
 
     def placed_key(self, placed: Iterable[tuple[str, tuple[float, float]]]) -> str:
-        """The bottles on the bottom shelf as geometry (where, which size), whatever their names: a carry planned
-        for a removed set and the same carry in a relocation order see the same scene, so draw the same samples."""
-        return repr(sorted((round(x, 4), round(y, 4), self.scenario.object(o).radius, self.scenario.object(o).height)
-                           for o, (x, y) in placed))
+        """The objects on the bottom shelf as geometry (where, which size: a bottle's radius, a box's size), whatever
+        their names: a carry planned for a removed set and the same carry in a relocation order see the same scene,
+        so draw the same samples."""
+        objs = [(x, y, self.scenario.object(o)) for o, (x, y) in placed]
+        return repr(sorted((round(x, 4), round(y, 4), b.size if b.shape == "box" else b.radius, b.height)
+                           for x, y, b in objs))
 
     def carry_heights(self, object_id: str) -> tuple[float, float]:
         """(lift, release height) of the object carried at its real size (grasp.carry_heights); WorkspaceError if
@@ -138,25 +172,32 @@ class PlanningContext:
         return carry_heights(self.scenario, object_id, p.carried_clearance + p.stpik.act, p.lift, p.drop)
 
     # ---------------------------------------------------------------- the approach yaws
-    def yaw_tiers(self) -> list[list[float]]:
-        """The approach yaws, tier by tier (grasp.yaw_tiers)."""
+    def yaw_tiers(self, object_id: str) -> list[list[float]]:
+        """The approach yaws of `object_id`, tier by tier (grasp.grasp_yaw_tiers: a box's face yaws)."""
         p = self.params
-        return yaw_tiers(p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw)
+        return grasp_yaw_tiers(self.scenario.object(object_id), p.n_yaws, p.max_yaw, p.wide_yaws, p.wide_max_yaw)
 
-    def all_yaws(self) -> list[float]:
-        """Every approach yaw of both tiers, in the order they are tried (the lanes of blockers.py)."""
-        return [y for tier in self.yaw_tiers() for y in tier]
+    def all_yaws(self, object_id: str) -> list[float]:
+        """Every approach yaw of `object_id` of both tiers, in the order they are tried (the lanes of
+        blockers.py)."""
+        return [y for tier in self.yaw_tiers(object_id) for y in tier]
+
+    def grasp_yaw(self, q_grasp: object) -> float:
+        """The approach yaw of the tool at the grasp configuration `q_grasp` (which face of a box the hand holds)."""
+        self.kin.update(check_q(q_grasp), jacobians=False)
+        return approach_yaw(self.kin.tool_pose()[0])
 
     # ---------------------------------------------------------------- the STPIK check
     def track(self, q0: np.ndarray, path: Sequence[np.ndarray], obs: ObstacleSet, deadline: float,
               stats: QueryStats, skip: dict[str, frozenset[str]] | None = None, arm: ArmGeometry | None = None,
-              speed: float | None = None, ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0
-              ) -> StpikResult:
-        """STPIK tracking `path` from q0 (Eq. 9-10; with `arm`, the arm holding a bottle), its time and rejection
-        counted in `stats`."""
+              speed: float | None = None, ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0,
+              from_rest: bool = False) -> StpikResult:
+        """STPIK tracking `path` from q0 (Eq. 9-10; with `arm`, the arm holding a bottle; `from_rest`: Stpik.track's),
+        its time and rejection counted in `stats`."""
         t = time.perf_counter()
         stpik = self.stpik if arm is None else Stpik(self.kin, arm, self.params.stpik)
-        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel, yaw_tol=yaw_tol)
+        r = stpik.track(q0, path, obs, deadline, skip, speed=speed, ramp=ramp, accel=accel, yaw_tol=yaw_tol,
+                        from_rest=from_rest)
         stats.stpik_time += time.perf_counter() - t
         if not r.ok:
             stats.stpik_reject.append(r.reason)
@@ -197,12 +238,16 @@ def proxy_boxes(ctx: PlanningContext, tool_path: Sequence[np.ndarray]) -> tuple[
     poses = []
     for a, b in zip(tool_path[:-1], tool_path[1:]):
         a, b = np.asarray(a, float), np.asarray(b, float)
-        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * abs(b[3] - a[3])) / res)))
+        turn = abs(b[3] - a[3]) if len(a) < 5 else max(abs(b[3] - a[3]), abs(b[4] - a[4]))
+        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * turn) / res)))
         poses.append(a + (b - a) * (np.arange(n + 1) / n)[:, None])
     pose = np.vstack(poses)
-    c, s = np.cos(pose[:, 3]), np.sin(pose[:, 3])
-    rot = np.zeros((len(pose), 3, 3))  # grasp.side_rotation of each yaw
-    rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 0], rot[:, 1, 2], rot[:, 2, 1] = -s, c, c, s, 1.0
+    if pose.shape[1] > 4:  # a grasp from above: grasp.tool_rotation of each yaw and pitch
+        rot = np.array([tool_rotation(y, pitch) for y, pitch in pose[:, 3:5]])
+    else:
+        c, s = np.cos(pose[:, 3]), np.sin(pose[:, 3])
+        rot = np.zeros((len(pose), 3, 3))  # grasp.side_rotation of each yaw
+        rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 0], rot[:, 1, 2], rot[:, 2, 1] = -s, c, c, s, 1.0
     p7 = pose[:, :3] - rot[:, :, 2] * rd.D67  # link 7's origin (HandProxy.hits)
     p0 = np.einsum("nij,cj->nci", rot, proxy.p0) + p7[:, None]
     p1 = np.einsum("nij,cj->nci", rot, proxy.p1) + p7[:, None]

@@ -49,7 +49,9 @@ def home_via_stage(ctx: PlanningContext, q_from: np.ndarray, obs: ObstacleSet, p
     for oid, xy in placed:
         try:
             _, release = ctx.carry_heights(oid)
-            stage = np.array(place_poses(ctx.scenario, oid, xy, release, p.stage_distance)[0])
+            # the staging pose: the same whichever face of a box the hand holds (grasp yaw 0 for any)
+            stage = np.array(place_poses(ctx.scenario, oid, xy, release, p.stage_distance, 0.0,
+                                         ctx.grasp_pitch(oid))[0])
         except WorkspaceError:
             continue
         if np.linalg.norm(pos - stage[:3]) > 2 * p.stpik.final_tol_pos or \
@@ -69,7 +71,8 @@ def stage_reference(ctx: PlanningContext, stage: np.ndarray, placed: Placed) -> 
     key = (tuple(np.round(stage, 6)), ctx.placed_key(placed))
     if key not in ctx.stage_refs:
         obs = ctx.collision_scene(placed).obstacles(frozenset())
-        r = ctx.track(rd.Q_HOME, [ctx.home, stage], obs, time.perf_counter() + ctx.params.carry_timeout,
+        home = ctx.home if len(stage) < 5 else np.array([*ctx.home, 0.0])  # a stage tilted up (grasp.place_poses)
+        r = ctx.track(rd.Q_HOME, [home, stage], obs, time.perf_counter() + ctx.params.carry_timeout,
                       QueryStats())
         ctx.stage_refs[key] = list(r.q) if r.ok else None
     return ctx.stage_refs[key]

@@ -25,8 +25,8 @@ import numpy as np
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import FeasibilityAnswer, Label
 from stpik_motion_planner.model.blockers import answer_blockers
-from stpik_motion_planner.model.collision import HAND_PARTS, HandProxy, ObstacleSet
-from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, side_grasp
+from stpik_motion_planner.model.collision import HandProxy, ObstacleSet, approach_skip
+from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, pose_pitch, side_grasp
 from stpik_motion_planner.planning.certify import certify as certify_rest
 from stpik_motion_planner.planning.context import PlanningContext, draw_seed, near_objects
 from stpik_motion_planner.planning.results import PlanningError, QueryStats, Segment
@@ -83,7 +83,7 @@ def pick(ctx: PlanningContext, object_id: str, removed: frozenset[str], deadline
         return None, 0, str(e)
     obs = ctx.scene.obstacles(removed)
     attempts, last = 0, ""
-    for tier, yaws in enumerate(ctx.yaw_tiers()):
+    for tier, yaws in enumerate(ctx.yaw_tiers(object_id)):
         cands = candidates(ctx, object_id, obs, yaws)
         if not cands:
             continue
@@ -106,7 +106,7 @@ def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], ob
     (trajectory or None, attempts, the grasp used or the last failure). The grasp configuration goes to
     ctx.pick_end; uncertified, the objects the motion comes near to ctx.pick_near (context.near_objects)."""
     p = ctx.params
-    skip = {n: frozenset([object_id]) for n in HAND_PARTS}
+    skip = approach_skip(ctx.scenario.object(object_id))
     attempts, last = 0, ""
     while attempts < budget:
         g = cands[attempts % len(cands)]
@@ -144,16 +144,16 @@ def candidates(ctx: PlanningContext, object_id: str, obs: ObstacleSet, yaws: lis
                ) -> list[Grasp]:
     """Grasps (of `yaws`, default every tier's) whose pre-grasp and straight approach are clear for the hand
     (the target excluded for the palm and fingers on the approach only)."""
-    skip = {n: frozenset([object_id]) for n in HAND_PARTS}
+    skip = approach_skip(ctx.scenario.object(object_id))
     out = []
-    for yaw in ctx.all_yaws() if yaws is None else yaws:
+    for yaw in ctx.all_yaws(object_id) if yaws is None else yaws:
         try:
-            g = side_grasp(ctx.scenario, object_id, yaw, ctx.params.pre_grasp_distance)
+            g = side_grasp(ctx.scenario, object_id, yaw, ctx.params.pre_grasp_distance, ctx.ceiling_clearance)
         except WorkspaceError:
             if yaw == 0.0:
                 raise
             continue
-        if not ctx.rrt.contains(g.pre_grasp):
+        if not ctx.rrt.contains(g.pre_grasp[:4 if len(g.pre_grasp) < 5 else 3]):  # from above: any yaw (direct)
             continue
         if ctx.hand.collides(*pose_matrix(g.pre_grasp), obs):
             continue
@@ -163,8 +163,11 @@ def candidates(ctx: PlanningContext, object_id: str, obs: ObstacleSet, yaws: lis
 
 
 def front_of_shelf(ctx: PlanningContext, pose: Pose) -> np.ndarray:
-    """In front of the shelf at the height and lateral position of `pose` (the start of a direct entry)."""
+    """In front of the shelf at the height and lateral position of `pose` (the start of a direct entry): on the
+    line of its approach, or straight in (along x) for a grasp from above, whose approach comes down."""
     x = min(pose[0], ctx.scenario.shelf.x_front - 0.06)
+    if len(pose) > 4:
+        return np.array([x, *pose[1:]])
     return np.array([x, pose[1] - (pose[0] - x) * math.tan(pose[3]), pose[2], pose[3]])
 
 
@@ -172,15 +175,23 @@ def cartesian_path(ctx: PlanningContext, start: Pose, goal: Pose, obs: ObstacleS
                    hand: HandProxy, max_checks: int, deadline: float, stats: QueryStats, first: bool,
                    rng: np.random.Generator | None = None) -> list[np.ndarray] | None:
     """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on
-    later attempts RRT-Connect."""
+    later attempts RRT-Connect. A goal from above (its pitch: grasp.tool_rotation) is reached tilted from the start
+    on: the hand tilts at the start, and RRT-Connect plans (x, y, z, yaw) at that pitch."""
+    pitch = pose_pitch(goal)
+    if pitch:
+        start = np.array([*start[:4], 0.0]) if len(start) < 5 else np.asarray(start, float)
     if first and ctx.params.direct_first:
         direct = [np.asarray(start, float), front_of_shelf(ctx, goal), np.asarray(goal, float)]
         if hand.path_clear(direct, obs, ctx.params.resolution):
             stats.direct_paths += 1
             return direct
+    if not ctx.rrt.contains(goal[:4]):  # a grasp from above turned beyond the planner's yaws: the direct path only
+        return None
     t = time.perf_counter()
-    path = ctx.rrt.plan(start, goal, lambda s: not hand.collides(*pose_matrix(s), obs), max_checks, deadline,
-                        draw_seed(rng))
+    path = ctx.rrt.plan(start[:4], goal[:4], lambda s: not hand.collides(*pose_matrix((*s, pitch)), obs), max_checks,
+                        deadline, draw_seed(rng))
     stats.rrt_time += time.perf_counter() - t
     stats.rrt_calls += 1
+    if pitch and path is not None:
+        path = [np.asarray(start, float)] + [np.array([*s, pitch]) for s in path]
     return path

@@ -21,7 +21,7 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
 from relocation_common.scenario import Scenario
 from stpik_motion_planner.model.blockers import lane_blockers
-from stpik_motion_planner.model.collision import Lying, ObstacleSet
+from stpik_motion_planner.model.collision import Lying, ObstacleSet, upright_radius
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, place_poses
 from stpik_motion_planner.planning import carry, home, pick
 from stpik_motion_planner.planning.context import Placed, PlanningContext
@@ -68,11 +68,12 @@ class MotionPlanner(PlanningContext):
         Raises PlanningError naming the stage that failed (a slot or a pose out of reach included, before any
         planning)."""
         removed = self.check_question(object_id, removed)
-        goal = carry.carry_goal(self, object_id, slot_index)
+        carry.carry_goal(self, object_id, slot_index, 0.0)  # the slot and its poses checked before any planning
         if q_start is None:
             q_start = self.pick_end.get((object_id, removed))
             if q_start is None:
                 q_start = self.plan_pick(object_id, removed) and self.pick_end[(object_id, removed)]
+        goal = carry.carry_goal(self, object_id, slot_index, self.grasp_yaw(q_start))  # the face held
         return carry.plan_carry(self, object_id, removed, goal, q_start, placed)
 
     def plan_home(self, q_from: object, removed: Iterable[str] = frozenset(),
@@ -99,8 +100,8 @@ class MotionPlanner(PlanningContext):
         hand = max(abs(c.p1[0]) + c.radius for c in rd.CAPSULES if c.name.startswith("finger"))
         sizes: dict[tuple[float, float], str] = {}
         for b in sc.objects:
-            if not self.not_graspable(b.id):  # never carried (a box, a lying bottle...): never placed
-                sizes.setdefault((b.radius, b.height), b.id)
+            if not self.not_graspable(b.id):  # never carried (a lying bottle, a wide box...): never placed
+                sizes.setdefault((upright_radius(b), b.height), b.id)
         out = []
         for k, (x, y) in enumerate(sc.slots):
             where = f"slot {k} {(round(x, 3), round(y, 3))}"
@@ -117,8 +118,11 @@ class MotionPlanner(PlanningContext):
                 except WorkspaceError:
                     continue  # a bottle that cannot be carried at all is answered UNFEASIBLE, not placed
                 try:
-                    stage, _ = place_poses(sc, oid, (x, y), release, p.stage_distance)
-                    check_pose(stage, f"staging pose of {oid} for {where}")
+                    box = sc.object(oid).shape == "box"
+                    for yaw in self.all_yaws(oid) if box else [0.0]:  # a box: each face it may be held by
+                        stage, _ = place_poses(sc, oid, (x, y), release, p.stage_distance, yaw,
+                                               self.grasp_pitch(oid))
+                        check_pose(stage, f"staging pose of {oid} for {where}")
                 except WorkspaceError as e:
                     out.append(str(e))
                     break

@@ -138,8 +138,10 @@ class CartesianRRT:
         self.checks = 0
 
     def contains(self, pose: ArrayLike) -> bool:
-        """The pose is inside the planner's box."""
-        return bool(np.all(np.asarray(pose) >= self.lo - 1e-9) and np.all(np.asarray(pose) <= self.hi + 1e-9))
+        """The pose is inside the planner's box (its position only, for 3 numbers)."""
+        p = np.asarray(pose)
+        n = len(p)
+        return bool(np.all(p >= self.lo[:n] - 1e-9) and np.all(p <= self.hi[:n] + 1e-9))
 
     def plan(self, start: ArrayLike, goal: ArrayLike, valid: Callable[[np.ndarray], bool], max_checks: int,
              deadline: float, seed: int | None = None) -> list[np.ndarray] | None:

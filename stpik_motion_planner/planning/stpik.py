@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
 from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, ObstacleSet, Skip
-from stpik_motion_planner.model.grasp import side_rotation
+from stpik_motion_planner.model.grasp import pose_pitch, tool_rotation
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.budget import check_deadline
 
@@ -145,6 +145,7 @@ class _Run:
     min_clear: float = math.inf
     min_self: float = math.inf
     yaw_tol: float = 0.0  # > 0: the goal's yaw tolerance once the settle time is spent (Stpik.track)
+    from_rest: bool = False  # the accel limit holds from the first step (Stpik.track)
 
 
 class _Reject(Exception):
@@ -156,7 +157,8 @@ class _Reject(Exception):
 
 
 class Stpik:
-    """Tracks a Cartesian path [(x, y, z, yaw), ...] from a start configuration; see the module docstring."""
+    """Tracks a Cartesian path [(x, y, z, yaw), ...] (or [(x, y, z, yaw, pitch), ...]: grasp.tool_rotation) from a
+    start configuration; see the module docstring."""
 
     def __init__(self, kin: Kinematics, arm: ArmGeometry, params: StpikParams) -> None:
         self.kin, self.arm, self.p = kin, arm, params
@@ -171,12 +173,14 @@ class Stpik:
         times = [0.0]
         for a, b in zip(path[:-1], path[1:]):
             dur = max(np.linalg.norm(b[:3] - a[:3]) / speed, abs(b[3] - a[3]) / p.yaw_speed, 1e-6)
+            if len(a) > 4:  # the pitch of a grasp from above turns at the yaw's speed
+                dur = max(dur, abs(b[4] - a[4]) / p.yaw_speed)
             times.append(times[-1] + dur)
         return np.array(times)
 
     def track(self, q0: ArrayLike, path: Sequence[ArrayLike], obs: ObstacleSet, deadline: float,
               skip: Skip | None = None, posture: ArrayLike | None = None, speed: float | None = None,
-              ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0) -> StpikResult:
+              ramp: float = 0.0, accel: float = 0.0, yaw_tol: float = 0.0, from_rest: bool = False) -> StpikResult:
         """Closed-loop IK (Eq. 9) with the hierarchy of Eq. 10 along `path`, from q0.
         `yaw_tol` > 0 (rad): a goal not reached within final_tol_ori when the settle time is spent is still
         reached if the tool is within final_tol_pos, its tilt within final_tol_ori and its rotation about the
@@ -187,14 +191,15 @@ class Stpik:
         once. `accel` > 0 (rad/s^2): no joint velocity changes faster, also when a set-based task enters (a task
         entering changed the wrist's speed by 0.85 rad/s within one step: in the simulator the fingers then hit the
         bottle they held, 200-350 N, and it moved 18-25 mm in the hand for a few ms); the joint-limit tasks then
-        enter early enough to stop within that acceleration. Both for a hand holding a bottle."""
+        enter early enough to stop within that acceleration. Both for a hand holding a bottle. `from_rest`: the arm
+        is at rest at q0, so `accel` holds from the first step too (without it the first step is free)."""
         p = self.p
         waypoints = [np.asarray(w, float) for w in path]
         times = self._reference(waypoints, speed)
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
         # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
         bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
-        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol)
+        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol, from_rest=from_rest)
         run.qs.append(run.q.copy())
         nominal = times[-1] + ramp * (len(waypoints) - 1)  # a ramp adds about `ramp` s per segment
         max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
@@ -224,7 +229,7 @@ class Stpik:
         a, b = path[run.seg], path[min(run.seg + 1, last)]
         t0, t1 = times[run.seg], times[min(run.seg + 1, last)]
         if run.tau >= times[-1]:
-            ref, vel = path[-1], np.zeros(4)
+            ref, vel = path[-1], np.zeros(len(path[-1]))
         else:
             f = (run.tau - t0) / (t1 - t0)
             ref, vel = a + f * (b - a), (b - a) / (t1 - t0)
@@ -245,7 +250,7 @@ class Stpik:
         rot, pos = kin.tool_pose()
         jt = kin.frame_jacobian(kin.tool_fid)
         e_p = ref[:3] - pos
-        e_o = pin.log3(side_rotation(ref[3]) @ rot.T)
+        e_o = pin.log3(tool_rotation(ref[3], pose_pitch(ref)) @ rot.T)
         ep_n, eo_n = math.sqrt(e_p.dot(e_p)), math.sqrt(e_o.dot(e_o))  # np.linalg.norm's own formula
         if run.tau >= t_end and ep_n < p.final_tol_pos and eo_n < p.final_tol_ori:
             raise _Reject("reached")
@@ -261,9 +266,11 @@ class Stpik:
         cands = self._set_tasks(run, obs, skip)
         # Eq. 9 references of the equality tasks
         w_d = np.array([0.0, 0.0, vel[3]])
+        if len(vel) > 4:  # the pitch turns about tool x, horizontal: (-sin yaw, cos yaw, 0)
+            w_d += vel[4] * np.array([-math.sin(ref[3]), math.cos(ref[3]), 0.0])
         eq_levels = [(jt[:3], vel[:3] + p.k_pos * e_p), (jt[3:], w_d + p.k_ori * e_o),
                      (None, p.k_posture * (posture - q))]
-        prev = run.qdots[-1] if run.qdots else None
+        prev = run.qdots[-1] if run.qdots else (np.zeros(rd.N_JOINTS) if run.from_rest else None)
         qdot = self._solve(cands, eq_levels, prev, accel)
         ratio = float(np.max(np.abs(qdot) / rd.QDOT_MAX))  # Table 7: the robot's
         scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
