@@ -113,9 +113,9 @@ def box_refusal(o: ShelfObject, max_yaw: float) -> str:
             f"({grasp_extent(o, narrow)[1] * 1000:.0f} mm across) is turned {abs(narrow):.2f} rad from straight in")
 
 
-def grasp_refusal(o: ShelfObject, max_yaw: float = math.pi) -> str:
+def grasp_refusal(o: ShelfObject, face_limit: float | None = None) -> str:
     """Why the grasps cannot take `o` ("no grasp: ..."), or "" when they may (module docstring): a conservative
-    object, a box too wide across every face within `max_yaw` of straight in (`box_refusal`; default: any face),
+    object, a box too wide across every face within `face_limit` rad of straight in (`box_refusal`; None: any face),
     a cylinder leaning (its axis more than UPRIGHT_TILT from the vertical and not flat), or a cylinder wider than
     the open hand where its axis comes to rest (`hand_fits`). The headroom of a lying one's grasp from above is
     the shelf's: `lying_pitch`."""
@@ -123,7 +123,7 @@ def grasp_refusal(o: ShelfObject, max_yaw: float = math.pi) -> str:
         return (f"{NO_GRASP}{o.id} is a conservative obstacle (an unfitted cluster's bounding box, "
                 f"{o.describe()}): an obstacle only")
     if o.shape == "box":
-        return box_refusal(o, max_yaw)
+        return box_refusal(o, math.pi if face_limit is None else face_limit)
     if o.axis_tilt > UPRIGHT_TILT and not (o.lying and o.tilt is None):
         return f"{NO_GRASP}{o.id} leans: the grasps take standing cylinders and cylinders lying flat only"
     opening = hand_opening(grasp_standoff(o.radius))
