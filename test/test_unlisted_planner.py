@@ -112,13 +112,10 @@ def _replay(sc: Scenario, told: bool) -> tuple[tuple[str, ...] | None, Report]:
     return r.sequence, rep
 
 
-@pytest.mark.slow
-def test_planned_motions_never_touch_the_unlisted_bottle():
-    """The two shipped scenes with an unlisted bottle and seeded variants of x1's place in the first: the planner told
-    of x1 plans nothing that touches it (nor anything else); the planner of the scenario file alone drives into it
-    in both shipped scenes (34 mm in paper_experiment_10_unlisted, 2.6 mm in hidden_unlisted_10)."""
+def _never_touched(scenes: list[Scenario]) -> list[bool]:
+    """Each scene replayed told of x1 (no contact at all) and not told: whether that planner touched x1."""
     touched, found = [], 0
-    for sc in [SC, HIDDEN] + [_variant(s) for s in VARIANT_SEEDS]:
+    for sc in scenes:
         seq, rep = _replay(sc, told=True)
         print(f"x1 at ({sc.unlisted[0].x}, {sc.unlisted[0].y}): told {seq}: {rep.summary()}")
         assert rep.contacts == [], "\n".join(map(str, rep.contacts))
@@ -128,5 +125,20 @@ def test_planned_motions_never_touch_the_unlisted_bottle():
         print(f"  not told {old_seq}: {len(hits)} contacts with x1, deepest "
               f"{max((-c.distance for c in hits), default=0) * 1000:.1f} mm")
         touched.append(bool(hits))
-    assert touched[0] and touched[1], "the scenario file's planner touches x1 in both shipped scenes"
     print(f"told of x1: {found} of {len(touched)} scenes retrieved, 0 contacts; not told: {sum(touched)} touch x1")
+    return touched
+
+
+@pytest.mark.slow
+def test_planned_motions_never_touch_the_unlisted_bottle():
+    """The two shipped scenes with an unlisted bottle and a seeded variant of x1's place in the first (the other
+    variants: -m extended): the planner told of x1 plans nothing that touches it (nor anything else); the planner
+    of the scenario file alone drives into it in both shipped scenes (34 mm in paper_experiment_10_unlisted, 2.6 mm
+    in hidden_unlisted_10)."""
+    touched = _never_touched([SC, HIDDEN, _variant(VARIANT_SEEDS[0])])
+    assert touched[0] and touched[1], "the scenario file's planner touches x1 in both shipped scenes"
+
+
+@pytest.mark.extended
+def test_planned_motions_never_touch_the_unlisted_bottle_in_the_other_variants():
+    _never_touched([_variant(s) for s in VARIANT_SEEDS[1:]])
