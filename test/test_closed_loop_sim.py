@@ -102,8 +102,10 @@ def _tips(sim, oid) -> bool:
 # simulator's ground truth as /sim/objects carries it (service.update_scene) before every perception of the loop, its
 # planner relocates on the simulator's core (test_execution.SimArm: every physics step watched), the re-planner asks
 # its answers. headroom_lying_6 with o1 standing in front of T (T's every lane needs o1 gone: o1, T); after o1's
-# relocation o2 is tipped over towards +y (disturbance.tip) and lies across the front of T.
+# relocation a bottle of the front row is tipped over towards T's lane (disturbance.tip) and lies across its front:
+# each of the two beside o1's place (all there are, none dropped).
 PARAMS = dataclasses.replace(PlannerParams.load(), timeout=300.0, carry_timeout=300.0)  # the work budgets decide
+TIPS = (("o2", math.pi / 2), ("o3", -math.pi / 2))  # (bottle, direction of its tip)
 
 
 def tipped_scene(ceiling_z: float) -> Scenario:
@@ -119,7 +121,8 @@ def tipped_scene(ceiling_z: float) -> Scenario:
 class InProcessLoop:
     """Motion planner (MotionPlannerService), simulator and closed loop in one process (the comment above)."""
 
-    def __init__(self, scenario: Scenario) -> None:
+    def __init__(self, scenario: Scenario, tip: tuple[str, float]) -> None:
+        self.tip = tip
         self.sim = Jaco2Sim(scenario)
         self.sim.step(500)
         self.arm = SimArm(self.sim)
@@ -138,8 +141,8 @@ class InProcessLoop:
         except PlanningError as e:
             return False, str(e)
         self.arm._step(500)
-        if len(self.relocations) == 1:  # o2 tips over into T's lane
-            dist.tip(self.sim, "o2", math.pi / 2)
+        if len(self.relocations) == 1:  # a bottle tips over into T's lane
+            dist.tip(self.sim, *self.tip)
             self.sim.step(1500)
         return True, "relocated"
 
@@ -159,33 +162,43 @@ class InProcessLoop:
         return loop.run(first[0], scene)
 
 
-def test_a_bottle_tipped_into_the_target_s_lane_is_relocated_from_above_and_t_retrieved():
-    """0.48 m of headroom: the re-plan asks the motion planner about the lying o2 like any other bottle; its grasp
-    from above relocates it standing to a slot, then T. Before, every re-plan banned the tipped o2 ("the side grasp
-    takes standing bottles only") and the run ended with no sequence."""
-    loop = InProcessLoop(tipped_scene(0.50))
+@pytest.mark.parametrize("tip", TIPS)
+def test_a_bottle_tipped_into_the_target_s_lane_is_relocated_from_above_and_t_retrieved(tip):
+    """0.48 m of headroom: the re-plan asks the motion planner about the lying bottle like any other; its grasp
+    from above relocates it standing to a slot, then T. Before, every re-plan banned the tipped bottle ("the side
+    grasp takes standing bottles only") and the run ended with no sequence."""
+    loop, oid = InProcessLoop(tipped_scene(0.50), tip), tip[0]
     result = loop.run()
     print(result.message, [r.line() for r in result.replans], loop.arm.slip)
     assert result.success, result.message
-    assert loop.relocations == ["o1", "o2", "T"], loop.relocations
-    assert "o2 tipped over" in result.replans[0].reason and result.replans[0].sequence == ("o2", "T")
+    assert loop.relocations == ["o1", oid, "T"], loop.relocations
+    assert f"{oid} tipped over" in result.replans[0].reason and result.replans[0].sequence == (oid, "T")
     sh = loop.sim.scenario.shelf
-    for p in loop.sim.object_poses():  # no false success: o1, o2 and T stand on the bottom shelf in the simulator
+    for p in loop.sim.object_poses():  # no false success: o1, the tipped one and T stand on the bottom shelf
         o = ground_truth(loop.sim.scenario, p, unlisted_density())  # a cylinder: either end down (no cap modelled)
-        if p.id in ("o1", "o2", "T"):
+        if p.id in ("o1", oid, "T"):
             assert o.support_z == pytest.approx(sh.bottom_z, abs=0.005) and o.axis_tilt < 0.1, o
         else:
             assert o.support_z == pytest.approx(sh.top_z, abs=0.005) and o.axis_tilt < 0.1, o
     assert loop.arm.unintended == {}, loop.arm.unintended
 
 
-def test_under_the_shipped_shelf_s_board_the_give_up_names_the_headroom():
-    """0.26 m of headroom: the motion planner refuses the lying o2 with the headroom a grasp from above needs, and
-    the re-plan's "no sequence" line says so (before: "the side grasp takes standing bottles only")."""
-    loop = InProcessLoop(tipped_scene(0.28))
+@pytest.mark.parametrize("tip", TIPS)
+def test_under_the_shipped_shelf_s_board_a_lying_bottle_stays_and_the_give_up_names_the_headroom(tip):
+    """0.26 m of headroom: the motion planner refuses the lying bottle with the headroom a grasp from above needs.
+    o2 lying closes every lane of T: the re-plan's "no sequence" line names the headroom (before: "the side grasp
+    takes standing bottles only"). o3 lying leaves T's lanes from the right open: retrieved around it (o2, o4, T),
+    o3 left lying where it fell."""
+    loop, oid = InProcessLoop(tipped_scene(0.28), tip), tip[0]
     result = loop.run()
+    truth = {p.id: ground_truth(loop.sim.scenario, p, unlisted_density()) for p in loop.sim.object_poses()}
+    assert truth[oid].lying and truth[oid].support_z == pytest.approx(loop.sim.scenario.shelf.top_z, abs=0.005)
+    if oid == "o3":
+        assert result.success and loop.relocations == ["o1", "o2", "o4", "T"], (loop.relocations, result.message)
+        assert truth["T"].support_z == pytest.approx(loop.sim.scenario.shelf.bottom_z, abs=0.005)
+        return
     assert not result.success and loop.relocations == ["o1"], (loop.relocations, result.message)
     assert result.message.startswith("no sequence remains: T cannot be reached") and \
-        "every lane of T holds an object the hand cannot grasp (o2)" in result.message and \
-        f"{NO_GRASP}o2 lies on the top shelf with 0.26 m of headroom; a grasp from above needs 0.45 m" \
+        f"every lane of T holds an object the hand cannot grasp ({oid})" in result.message and \
+        f"{NO_GRASP}{oid} lies on the top shelf with 0.26 m of headroom; a grasp from above needs 0.45 m" \
         in result.message, result.message
