@@ -165,9 +165,10 @@ def failed_step(message: str, out: Path) -> str:
     if message.startswith("the target cannot be retrieved"):
         return ("no relocation sequence frees the target on this shelf (the reason above, from the exact solver); "
                 "move the bottles named there by hand or check the layout; see docs/motion_planner.md")
-    if "on its side" in message:
-        return ("a bottle lies on its side on the top shelf (the side grasp takes standing bottles only): stand it "
-                "up by hand, then run the demo again; see docs/closed_loop.md")
+    if "of headroom; a grasp from above needs" in message or " leans: " in message:
+        return ("a bottle lies on the top shelf where the hand cannot take it (too little headroom under the board "
+                "above for the grasp from above, or leaning): stand it up by hand, then run the demo again; see "
+                "docs/closed_loop.md")
     if "cannot be reached" in message or "no sequence remains" in message:
         return "no collision-free way to the target remains on this shelf: see docs/closed_loop.md"
     if "went away" in message:

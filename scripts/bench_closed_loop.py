@@ -11,7 +11,7 @@ joint state) and the gripper empty
 (no bottle within 0.1 m of the tool). Printed: success rate, re-plans, extra relocations against the undisturbed
 optimum, wall time, the failures' reasons. A failed run is counted as "no retrieval exists" only when
 `prove` shows it: the exact blocker A* on the run's final simulator scene (in-process motion planner, the bottles
-where the simulator left them, no option banned but lying bottles', which no grasp takes) finds no sequence;
+where the simulator left them as its scene update reads them, no option banned) finds no sequence;
 success is given over all runs and over those where a retrieval existed. Every run is appended to `--out` (JSON
 lines) as it ends, so a grid cut short keeps its runs and the same command goes on where it stopped; `--table FILE`
 prints the table of such a file (`--prove`: proving its failed runs first, kept in FILE.proofs.json).
@@ -32,11 +32,12 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from qtree_task_planner.executive.closed_loop import (
-    Option,
     SeenObject,
     Tolerances,
     board_of,
@@ -46,12 +47,12 @@ from qtree_task_planner.executive.replan import GeometryCache, replan
 from relocation_app.client import RelocationClient
 from relocation_app.final_state import final_state
 from relocation_app.graph import Graph
-from relocation_common.geometry import quat_xyzw
+from relocation_common.geometry import quat_xyzw, wxyz_matrix
 from relocation_common.paths import resolve_scenario
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
-from relocation_common.shelf_object import tilt_of_quaternion
-from stpik_motion_planner.model.collision import Lying
+from relocation_common.shelf_object import at_pose, tilt_of_quaternion
+from stpik_motion_planner.model.scene_update import merge_perceived
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 
@@ -158,21 +159,23 @@ def _seen(o: dict) -> SeenObject:
                       tilt=tilt_of_quaternion(w, x, y, z), radius=o["radius"], height=o["height"])
 
 
-def _lying(o: dict) -> Lying:
-    """A bottle lying on the board as the simulator left it (the planner models it: collision.lying_cylinder)."""
+def _object(sc, o: dict):
+    """A bottle of the run's final scene as the simulator's ground truth gives it (shelf_object.at_pose: the primitive
+    at its measured centre and orientation), standing, lying or leaning."""
     x, y, z, w = o["orientation"]
-    px, py, pz = o["position"]
-    return Lying((px, py, pz), (w, x, y, z))
+    rot = wxyz_matrix((w, x, y, z))
+    return at_pose(sc.world_object(o["id"]), np.asarray(o["position"], float) + rot[:, 2] * o["height"] / 2, rot)
 
 
 def prove(row: dict, draws: int = 1) -> str:
     """Does a retrieval exist in the run's final simulator scene? The exact blocker A* (Eq. 8, replan over a fresh
-    GeometryCache) on the in-process motion planner with the bottles where the simulator left them (a lying one
-    as the lying cylinder it is), no option banned but the lying bottles' (the side grasp takes standing bottles
-    only), the bottom shelf's free slots as the limit; once per planner draw (`draws` >= 1: the config's `seed`,
-    then the next ones; each draw gives every question other samples). 'no retrieval exists (proven: <why>)' when
-    no draw finds one, else 'a retrieval existed: <sequence> (weight w)', with 'in k/N planner draws' for N > 1:
-    a retrieval that few draws find is a question at the planner's limit, not the executor's."""
+    GeometryCache) on the in-process motion planner with the bottles where the simulator left them, as its scene
+    update reads them (scene_update.merge_perceived: a bottle lying flat answered by the grasp from above, one
+    leaning an obstacle as it leans), no option banned, the bottom shelf's free slots as the limit; once per planner
+    draw (`draws` >= 1: the config's `seed`, then the next ones; each draw gives every question other samples).
+    'no retrieval exists (proven: <why>)' when no draw finds one, else 'a retrieval existed: <sequence> (weight w)',
+    with 'in k/N planner draws' for N > 1: a retrieval that few draws find is a question at the planner's limit,
+    not the executor's."""
     sc = load_scenario(resolve_scenario(row["scene"]))
     scene = {o["id"]: _seen(o) for o in row.get("final_scene", [])}
     if not scene:
@@ -184,19 +187,14 @@ def prove(row: dict, draws: int = 1) -> str:
         return "a retrieval existed: the target is on the bottom shelf"
     if rp.problem is None:
         return f"no retrieval exists (proven: {rp.reason})"
-    if sc.target_id in rp.tipped:
-        return f"no retrieval exists (proven: the target {sc.target_id} lies on its side; the grasps take standing " \
-               "bottles only)"
-    lying = {o["id"]: _lying(o) for o in row["final_scene"] if o["id"] in rp.tipped}
     base = PlannerParams.load()
+    m = merge_perceived(sc.shelf, {b.id: b for b in sc.objects}, [_object(sc, o) for o in row["final_scene"]],
+                        base.flat_tilt)
     found, why = [], ""
     for k in range(draws):
-        mp = MotionPlanner(sc, dataclasses.replace(base, seed=base.seed + k))
-        for b in rp.bottles:
-            if b.id not in rp.tipped:
-                mp.update_object(b.id, b.x, b.y)
-        mp.set_scenario(mp.scenario, lying)
-        answer = replan(rp, {Option(i, None) for i in rp.tipped}, GeometryCache(Patient(mp)))
+        mp = MotionPlanner(sc.with_objects(m.bottles.values()), dataclasses.replace(base, seed=base.seed + k))
+        mp.set_scenario(mp.scenario, m.lying, m.gone)
+        answer = replan(rp, (), GeometryCache(Patient(mp)))
         if isinstance(answer, str):
             why = why or answer
         else:

@@ -101,7 +101,8 @@ class MotionPlannerService:
     # -- the scene ------------------------------------------------------------------------------------------
     def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene") -> list[str]:
         """Objects as perceived (ros_conversions.msg_to_objects) resting on the top shelf replace the planner's:
-        standing, or lying (an obstacle as it lies, never graspable), listed in the scenario or not (`listed`
+        standing, lying flat (tipped over: the grasp from above takes it where the headroom allows), or leaning (an
+        obstacle as it leans, never graspable), listed in the scenario or not (`listed`
         false: an object the scenario does not name, an obstacle as its primitive, relocatable when the side grasp
         takes it); bottles seen off the shelf leave the planner's scene; the rest stays
         (scene_update.merge_perceived). The ids that changed; ScenarioError for a scene that cannot be
@@ -111,8 +112,8 @@ class MotionPlannerService:
         bases = [(b.id, float(c[0]), float(c[1]), float(c[2])) for b, c in ((b, b.base()) for b in bottles)]
         check_scene(self.base, bases, source, unlisted={b.id for b in bottles if not b.listed})
         self.scene.update(bases)
-        m = merge_perceived(self.base.shelf, self.bottles, bottles, self._held, self.planner.lying,
-                            self.planner.gone)
+        m = merge_perceived(self.base.shelf, self.bottles, bottles, self.planner.params.flat_tilt, self._held,
+                            self.planner.lying, self.planner.gone)
         back = [i for i in m.seen if i in self.relocated]  # seen back on the top shelf: it can be relocated again
         for i in back:
             self.relocated.pop(i)

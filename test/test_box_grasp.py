@@ -235,6 +235,6 @@ def test_a_box_turned_in_place_is_a_new_scene_for_the_planner():
     scenario = box_scene({"size": [0.05, 0.07, 0.14], "yaw": 0.3, "xy": [0.70, -0.05]})
     current = {o.id: dataclasses.replace(o, support_z=scenario.shelf.top_z) for o in scenario.objects}
     turned = dataclasses.replace(current["k"], yaw=0.5)
-    assert merge_perceived(scenario.shelf, current, [turned]).changed == ["k"]
+    assert merge_perceived(scenario.shelf, current, [turned], PARAMS.flat_tilt).changed == ["k"]
     quarter = dataclasses.replace(current["k"], yaw=0.3 - math.pi / 2, size=(0.07, 0.05, 0.14))
-    assert merge_perceived(scenario.shelf, current, [quarter]).changed == []
+    assert merge_perceived(scenario.shelf, current, [quarter], PARAMS.flat_tilt).changed == []

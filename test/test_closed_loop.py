@@ -26,7 +26,7 @@ from qtree_task_planner.executive.retrieval import execute, execute_sequence
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.search import astar
-from relocation_common.feasibility import BlockerSet, FeasibilityAnswer, Label, destination_slot
+from relocation_common.feasibility import NO_GRASP, BlockerSet, FeasibilityAnswer, Label, destination_slot
 from relocation_common.scenario import parse_scenario
 from relocation_common.shelf_object import tilt_of_quaternion
 
@@ -41,6 +41,7 @@ OBJECTS = [{"id": "a", "weight": 0.3, "xy": [0.55, -0.12]}, {"id": "b", "weight"
 SCENARIO = parse_scenario({"name": "lanes", "shelf": SHELF, "marker": MARKER, "target": "T", "objects": OBJECTS})
 TOP, BOTTOM = SHELF["top_z"], SHELF["bottom_z"]
 LANE = 0.05  # m: an object blocks another when in front of it and nearer its lane's axis than this
+LOW_SHELF = "lies on the top shelf with 0.26 m of headroom; a grasp from above needs 0.45 m"  # grasp.lying_pitch's
 
 
 class FakeShelf:
@@ -56,6 +57,7 @@ class FakeShelf:
         self.questions: list[tuple[str, frozenset]] = []
         self.perceived = 0
         self.hide_bottom = False
+        self.headroom = False  # True: room above the top shelf, a lying bottle is taken from above like a standing one
 
     def on_top(self):
         return {o for o, s in self.scene.items() if abs(s.z - TOP) < 0.01 and s.tilt < 0.3}
@@ -99,7 +101,10 @@ class FakeShelf:
 
     def feasibility(self, obj, removed):
         self.questions.append((obj, frozenset(removed)))
-        if obj not in self.on_top() or self.scene[obj].tilt > 0.3:
+        o = self.scene[obj]
+        if o.tilt > 0.3 and abs(o.z - TOP - o.radius) < 0.01 and not self.headroom:  # the motion planner's words
+            return FeasibilityAnswer(Label.UNFEASIBLE, message=f"{NO_GRASP}{obj} {LOW_SHELF}")
+        if obj not in self.on_top() or (o.tilt > 0.3 and not self.headroom):
             return FeasibilityAnswer(Label.UNFEASIBLE, message="not standing on the top shelf")
         lanes = self.blockers(obj, removed)
         if lanes:
@@ -315,9 +320,10 @@ def test_the_executor_expects_the_certified_slot_the_motion_planner_uses():
     assert len(result.replans) == 1, [r.reason for r in result.replans]  # b's failure only
 
 
-def test_a_tipped_bottle_is_never_proposed_for_relocation():
-    """The benchmark: o1 tipped into the target's lane, the re-plan proposed relocating it, and its grasp closed on
-    nothing three times (a lying bottle). Now every re-plan bans relocating a lying bottle (it stays an obstacle)."""
+def test_a_tipped_bottle_is_asked_about_like_any_other():
+    """d tipped over where it stood (out of T's lane): no option of the re-plan is banned for it (before, every
+    re-plan banned relocating a lying bottle); the A* asks about it as about any other object when a sequence needs
+    it, and T's way is clear without it."""
     shelf = FakeShelf()
     cache = GeometryCache(shelf)
     seq, _, _ = first_plan(shelf, cache)
@@ -326,7 +332,22 @@ def test_a_tipped_bottle_is_never_proposed_for_relocation():
     result = ClosedLoopExecutor(shelf.scenario, shelf.relocate, shelf.perceive,
                                 lambda rp, banned: asked.append(banned) or replan(rp, banned, cache)).run(seq)
     assert result.success and result.replans and "d tipped over" in result.replans[0].reason, result.message
-    assert asked and all(Option("d", None) in banned for banned in asked)
+    assert asked and not any(b.object_id == "d" for banned in asked for b in banned), asked
+    assert "d" not in [o for o, _ in shelf.relocations]
+
+
+def test_a_bottle_tipped_into_the_target_s_lane_is_taken_from_above_where_the_headroom_allows():
+    """With room above the top shelf the motion planner answers a lying bottle as one it can grasp (from above):
+    e tipped into T's only lane after b's relocation is relocated, then T (before: banned, "no sequence")."""
+    shelf = LyingBlocks()
+    shelf.headroom = True
+    cache = GeometryCache(shelf)
+    seq, _, _ = first_plan(shelf, cache)
+    assert tuple(seq) == ("b", "T")
+    shelf.disturb[0] = lambda s: s.put("e", 0.66, 0.0, TOP + 0.033, tilt=math.pi / 2)
+    result = executor(shelf, cache).run(seq)
+    assert result.success, result.message
+    assert [o for o, _ in shelf.relocations] == ["b", "e", "T"] and "e tipped over" in result.replans[0].reason
 
 
 HIDDEN = SeenObject("h", 0.70, 0.0, TOP, 0.31, listed=False, weight_note="0.52 L x 600 kg/m3 = 0.31 kg")
@@ -403,9 +424,10 @@ def test_a_give_up_names_the_bottles_a_lying_one_holds_for_good():
     assert tuple(seq) == ("a", "c", "b", "T")
     shelf.disturb[0] = lambda s: s.put("c", 0.55, 0.12, TOP + 0.033, tilt=math.pi / 2)
     result = executor(shelf, cache).run(seq)
-    assert not result.success and ("every lane of T holds a bottle lying on its side (c) or one that can never be "
-                                   "moved because each of its lanes holds such a bottle (b)") in result.message, \
+    assert not result.success and ("every lane of T holds an object the hand cannot grasp (c) or one that can never "
+                                   "be moved because each of its lanes holds such an object (b)") in result.message, \
         result.message
+    assert f"the hand cannot grasp it: c ({NO_GRASP}c {LOW_SHELF})" in result.message, result.message
 
 
 def test_the_q_tree_is_retrained_on_a_replan_only_when_asked():
@@ -558,8 +580,8 @@ def test_a_tipped_target_cannot_be_retrieved_says_why():
 
 
 class LyingBlocks(FakeShelf):
-    """As the motion planner: a bottle lying on the top shelf is still an obstacle in the lanes through it (never
-    graspable), and the lane screen is offered (one geometric lane per object)."""
+    """As the motion planner: a bottle lying on the top shelf is still an obstacle in the lanes through it (graspable
+    only with `headroom`), and the lane screen is offered (one geometric lane per object)."""
 
     def on_top(self):
         return {o for o, s in self.scene.items() if TOP - 0.01 < s.z < TOP + 0.05}
@@ -574,8 +596,9 @@ class LyingBlocks(FakeShelf):
 
 
 @pytest.mark.parametrize("tip, says", [
-    (("e", 0.66, 0.0), "every lane of T holds a bottle lying on its side (e), and the side grasp takes standing"),
-    (("T", 0.77, 0.0), "T itself lies on its side"),
+    (("e", 0.66, 0.0), f"every lane of T holds an object the hand cannot grasp (e); never relocated, the hand cannot "
+                       f"grasp it: e ({NO_GRASP}e {LOW_SHELF})"),
+    (("T", 0.77, 0.0), f"removed: {NO_GRASP}T {LOW_SHELF})"),  # the A*'s: T unfeasible from every set reached
     (("a", 0.55, -0.12), None),  # out of T's lane: b's relocation left T free, and a is not named
 ])
 def test_a_give_up_names_the_lying_bottle_that_closed_the_way(tip, says):

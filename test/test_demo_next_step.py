@@ -23,11 +23,14 @@ def test_no_sequence_at_all_and_a_target_off_the_shelf_have_their_own_steps():
 
 
 def test_a_lying_bottle_in_the_way_is_to_be_stood_up():
-    """The benchmark's most common give-up (replan.lying_reason): the step named the docs only."""
+    """The benchmark's most common give-up (replan.held_reason, the motion planner's headroom): the step named the
+    docs only."""
     message = ("no sequence remains: T cannot be reached: no feasible relocation sequence over the 4 obstacles on the "
-               "top shelf (0 planner calls); every lane of T holds a bottle lying on its side (o1), and the side grasp "
-               "takes standing bottles only (re-planned because relocating o4 failed: relocated o4 to slot 0, but the "
-               "scene shows: o1 moved 49 mm (no longer standing on its board))")
+               "top shelf (3 planner calls); every lane of T holds an object the hand cannot grasp (o1); never "
+               "relocated, the hand cannot grasp it: o1 (no grasp: o1 lies on the top shelf with 0.26 m of headroom; "
+               "a grasp from above needs 0.45 m (the hand straight down, its finger tips 19 mm over the bottle before "
+               "it comes down and 19 mm under the board above)) (re-planned because relocating o4 failed: relocated o4 "
+               "to slot 0, but the scene shows: o1 moved 49 mm (no longer standing on its board))")
     assert "stand it up by hand" in _next_step(message, OUT)
     assert "stand it up" not in _next_step("no sequence remains: T cannot be reached: no feasible relocation "
                                            "sequence over the 4 obstacles on the top shelf (3 planner calls)", OUT)

@@ -556,13 +556,12 @@ class ClosedLoopExecutor:
         """A new sequence for `rp` (recorded in out.replans), or GiveUp with the reason in one line."""
         if len(out.replans) >= self.max_replans:
             raise GiveUp(f"gave up after {len(out.replans)} re-plans (max_replans); last: {reason}")
-        # a bottle lying on the top shelf cannot be grasped (the grasps are for standing bottles: three attempts of
-        # the benchmark closed on nothing): never proposed, it stays an obstacle
-        lying = {Option(o, None) for o in rp.tipped}
-        answer = self.replan(rp, frozenset(self._banned) | lying)
+        # a bottle tipped over is asked about like any other (no ban of its own): the motion planner answers its
+        # grasp from above where the headroom allows, else "no grasp: " with the headroom it needs
+        answer = self.replan(rp, frozenset(self._banned))
         again = {b for b in self._banned if self._failures.get(b.object_id, 0) < self.max_attempts}
         if isinstance(answer, str) and again:  # no sequence avoids them: give up only when none remains at all
-            retry = self.replan(rp, frozenset(self._banned - again) | lying)
+            retry = self.replan(rp, frozenset(self._banned - again))
             if not isinstance(retry, str):
                 self._banned -= again
                 answer, reason = retry, f"{reason}; no sequence avoids the failed option" + \
@@ -599,10 +598,11 @@ class _Done(GiveUp):
 
 
 def _stayed(obj: str, before: Scene, after: Scene, tol: Tolerances) -> bool:
-    """True when `obj` stands where it stood before a failed relocation (within tol.still, not tipped): the failure
-    is the option's (no grasp, no path) and the option is marked; a bottle moved by the attempt is not."""
+    """True when `obj` rests where it rested before a failed relocation (within tol.still, standing or lying as it
+    was): the failure is the option's (no grasp, no path) and the option is marked; a bottle moved or tipped by the
+    attempt is not."""
     was, now = before.get(obj), after.get(obj)
-    return was is not None and now is not None and now.tilt <= tol.tilt and \
+    return was is not None and now is not None and (now.tilt > tol.tilt) == (was.tilt > tol.tilt) and \
         math.hypot(now.x - was.x, now.y - was.y) <= tol.still and abs(_support(now) - _support(was)) <= tol.board
 
 

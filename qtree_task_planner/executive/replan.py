@@ -3,7 +3,8 @@
 A feasibility answer (relocate o with a set removed, from home) depends on the geometry of the objects still on
 the top shelf: o and every object not removed. `GeometryCache` keys each answer by those objects and the
 *version* of each one's pose; a version changes only when the object is perceived to have moved (more than
-`tol` m, by default the tolerance within which closed_loop.verify_relocation says a bottle stayed) or tipped.
+`tol` m, by default the tolerance within which closed_loop.verify_relocation says a bottle stayed) or tipped (a
+tipped bottle's answers are asked again: the motion planner's grasp from above, or its reason why not).
 So after a disturbance only the answers in which a moved object was still present are asked again; those
 where it was already removed, and everything about undisturbed parts of the shelf, stay.
 Relocating an object does not change anyone's answers: a question after it is the old question with one more
@@ -253,10 +254,12 @@ class SlotLimit:
 
 def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache) -> ReplanAnswer | str:
     """The least-weight sequence (Eq. 8) for the remaining problem that avoids failed options and fits the free
-    slots: (sequence, weight, planner calls it cost), or the reason there is none in one line (the lying bottles'
-    part, `lying_reason`, else the A*'s own, exact.why_none: the target without a lane, a blocking cycle). The
-    cache first takes the perceived geometry, so answers about moved objects are asked again and the others
-    reused."""
+    slots: (sequence, weight, planner calls it cost), or the reason there is none in one line (what the objects the
+    hand cannot grasp have to do with it, `held_reason`, else the A*'s own, exact.why_none: the target without a
+    lane, a blocking cycle; then the motion planner's reasons for those objects, `grasp_reason`). A bottle tipped
+    over is asked about like any other: the motion planner's answer decides (its grasp from above where the
+    headroom allows; "no grasp: " and the headroom it needs where not). The cache first takes the perceived
+    geometry, so answers about moved objects are asked again and the others reused."""
     if rp.problem is None:
         return rp.reason
     banned = tuple(banned)
@@ -278,57 +281,58 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
                 why.append(f"failed options: {', '.join(sorted(b.object_id for b in banned))}")
             return (f"{t} cannot be reached: every sequence left needs a failed option or more slots than are free "
                     f"(the best without those limits, {' '.join(free.sequence)}, {'; '.join(why)})")
-    because = lying_reason(rp, cache) or (f"; {r.reason.removeprefix('no sequence: ')}" if r.reason else "")
-    return (f"{t} cannot be reached: no feasible relocation sequence over the {n} obstacle{'s' * (n != 1)} "
-            f"on the top shelf ({cache.calls - calls0} planner calls){because}{grasp_reason(rp, cache)}")
-
-
-def grasp_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
-    """What a failed re-plan's line adds about the obstacles the hand cannot grasp (never relocated: oracles.no_grasp
-    over the answers about each object as it is now and the objects without a lane; the lying ones are
-    lying_reason's), or ""."""
-    if rp.problem is None:
-        return ""
-    on_shelf = frozenset(rp.problem.ids)
-    mine = [o for o in rp.problem.obstacles if o not in rp.tipped]
-    known = [(k[0], a) for k, a in cache.table.items() if cache.key(k[0], ())[1] <= k[1]]  # its pose as now
     lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset())
-    why = no_grasp(mine, lanes, known, lambda o: cache.feasibility(o, rp.gone, on_shelf))
-    return f"; never relocated, the hand cannot grasp {'it' if len(why) == 1 else 'them'}: " + "; ".join(
-        f"{o} ({m})" for o, m in why.items()) if why else ""
+    cannot = not_graspable(rp, cache, lanes)
+    because = held_reason(t, lanes or {}, frozenset(cannot) - {t}) or \
+        (f"; {r.reason.removeprefix('no sequence: ')}" if r.reason else "")
+    return (f"{t} cannot be reached: no feasible relocation sequence over the {n} obstacle{'s' * (n != 1)} "
+            f"on the top shelf ({cache.calls - calls0} planner calls){because}"
+            f"{grasp_reason({o: m for o, m in cannot.items() if o != t})}")
 
 
-def lying_reason(rp: RemainingProblem, cache: GeometryCache) -> str:
-    """What the bottles lying on the top shelf have to do with a failed re-plan, for its one line ("" without
-    any): the target lying; every lane of the target holding a lying bottle; every lane of the target holding a
-    bottle that can never be moved because of them (`never_free`); or only their names. From the planner's lane
-    screen (no planner call). The side grasp takes standing bottles only (closed_loop.RemainingProblem.tipped are
-    banned options), so a lying bottle stays where it is."""
-    if not rp.tipped or rp.problem is None:
+def not_graspable(rp: RemainingProblem, cache: GeometryCache, lanes: Lanes | None) -> dict[str, str]:
+    """object -> the motion planner's "no grasp: " reason, for the objects on the top shelf (the target too) the
+    hand cannot grasp as they are now (oracles.no_grasp over the answers about each object at its present pose and
+    the objects without a lane): a standing one too wide, a box, a bottle lying under a board too low for the grasp
+    from above, one leaning."""
+    if rp.problem is None:
+        return {}
+    on_shelf = frozenset(rp.problem.ids)
+    known = [(k[0], a) for k, a in cache.table.items() if cache.key(k[0], ())[1] <= k[1]]  # its pose as now
+    return no_grasp(rp.problem.ids, lanes, known, lambda o: cache.feasibility(o, rp.gone, on_shelf))
+
+
+def grasp_reason(cannot: Mapping[str, str]) -> str:
+    """What a failed re-plan's line adds about the obstacles the hand cannot grasp (`not_graspable`; the target's
+    reason is the A*'s), or ""."""
+    return f"; never relocated, the hand cannot grasp {'it' if len(cannot) == 1 else 'them'}: " + "; ".join(
+        f"{o} ({m})" for o, m in cannot.items()) if cannot else ""
+
+
+def held_reason(t: str, lanes: Lanes, cannot: frozenset[str]) -> str:
+    """What the obstacles the hand cannot grasp (`cannot`) have to do with a failed re-plan, from the planner's lane
+    screen (no planner call; "" when nothing): every lane of the target `t` holding one; every lane of it holding
+    one or an object that can never be moved because of them (`never_free`)."""
+    if not cannot:
         return ""
-    t, lying = rp.problem.target, frozenset(rp.tipped)
-    if t in lying:
-        return f"; {t} itself lies on its side, and the side grasp takes standing bottles only"
-    lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset()) or {}
     t_lanes = lanes.get(t)
-    if t_lanes and all(b.certain and b.objects & lying for b in t_lanes):
-        inside = sorted(frozenset().union(*(b.objects for b in t_lanes)) & lying)
-        return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(inside)}), and the side grasp "
-                "takes standing bottles only")
-    stuck = never_free(lanes, lying)
+    if t_lanes and all(b.certain and b.objects & cannot for b in t_lanes):
+        inside = sorted(frozenset().union(*(b.objects for b in t_lanes)) & cannot)
+        return f"; every lane of {t} holds an object the hand cannot grasp ({', '.join(inside)})"
+    stuck = never_free(lanes, cannot)
     if t in stuck:
-        held = ", ".join(sorted(stuck - lying - {t}))
-        return (f"; every lane of {t} holds a bottle lying on its side ({', '.join(sorted(lying))}) or one that can "
-                f"never be moved because each of its lanes holds such a bottle ({held}), and the side grasp takes "
-                "standing bottles only")
-    return f"; lying on its side, not graspable: {', '.join(sorted(lying))}"
+        held = ", ".join(sorted(stuck - cannot - {t}))
+        return (f"; every lane of {t} holds an object the hand cannot grasp ({', '.join(sorted(cannot))}) or one "
+                f"that can never be moved because each of its lanes holds such an object ({held})")
+    return ""
 
 
-def never_free(lanes: Lanes, lying: frozenset[str]) -> frozenset[str]:
-    """The objects that can never be relocated because of the lying ones: those, and (to a fixpoint) every object
-    each of whose lanes holds one of them (lanes: LaneOracle.lane_blockers; only certain blocker sets count: such
-    a lane is clear exactly when all its blockers are gone, and a lying bottle never goes)."""
-    stuck = set(lying)
+def never_free(lanes: Lanes, cannot: frozenset[str]) -> frozenset[str]:
+    """The objects that can never be relocated because of those the hand cannot grasp (`cannot`): those, and (to a
+    fixpoint) every object each of whose lanes holds one of them (lanes: LaneOracle.lane_blockers; only certain
+    blocker sets count: such a lane is clear exactly when all its blockers are gone, and an object no grasp takes
+    never goes)."""
+    stuck = set(cannot)
     grew = True
     while grew:
         grew = False

@@ -3,7 +3,9 @@
 Perception sees the bottles on the top shelf; the planner keeps the scenario's shelf and slots and its last pose
 of every bottle. A perceived bottle (not the one being carried) resting on the top shelf (its support within
 ON_SHELF of the board, inside its edges) replaces the planner's when it moved more than MOVED or changed how it
-rests: standing (its axis within UPRIGHT_TILT of the vertical), or lying (tipped over: an obstacle as the cylinder
+rests: standing (its axis within UPRIGHT_TILT of the vertical), lying flat (tipped over: its axis within the planner's
+`flat_tilt` of horizontal, as a measured pose never is exactly; `laid_flat` makes it the lying ShelfObject a scenario
+gives, which the grasp from above takes where the headroom allows), or leaning (neither: an obstacle as the cylinder
 it is, never graspable). A bottle seen below the bottom board or outside the shelf below the top board left the
 shelf (dropped to the floor): gone from the scene, no obstacle. Bottles on the bottom shelf (relocated), lifted or
 not seen keep their last pose (hidden behind others, or in the hand).
@@ -16,13 +18,14 @@ be a phantom obstacle no relocation removes. Otherwise it keeps its last pose, a
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Iterable, Mapping, NamedTuple
 
 import numpy as np
 
 from relocation_common.geometry import quat_wxyz, wxyz_matrix
 from relocation_common.scenario import Shelf, ShelfObject
-from relocation_common.shelf_object import UPRIGHT_TILT
+from relocation_common.shelf_object import DECIMALS, UPRIGHT_TILT, half_turn
 from stpik_motion_planner.model.collision import Lying
 
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
@@ -62,10 +65,21 @@ def left_the_shelf(shelf: Shelf, bottle: ShelfObject) -> bool:
     return s < shelf.bottom_z - ON_SHELF or (not _inside(shelf, bottle) and s < shelf.top_z - ON_SHELF)
 
 
+def laid_flat(bottle: ShelfObject, flat_tilt: float) -> ShelfObject:
+    """A perceived cylinder lying with its axis within `flat_tilt` (rad) of horizontal as one lying exactly flat
+    (`tilt` None, its axis's yaw modulo pi), about the same centre: its support one radius below it (its ends move
+    by at most half its length times sin(flat_tilt)); any other object unchanged."""
+    if bottle.shape != "cylinder" or not bottle.lying or bottle.tilt is None or \
+            abs(bottle.tilt - math.pi / 2) > flat_tilt:
+        return bottle
+    z = float(bottle.centre()[2]) - bottle.radius
+    return replace(bottle, tilt=None, yaw=round(half_turn(bottle.yaw), DECIMALS), support_z=round(z, DECIMALS))
+
+
 def lying_pose(bottle: ShelfObject) -> Lying | None:
-    """The collision model's pose of a bottle that does not stand (its axis more than UPRIGHT_TILT from the
-    vertical): its base centre and orientation; None for a standing one."""
-    if bottle.axis_tilt <= UPRIGHT_TILT:
+    """The collision model's pose of a bottle that leans (its axis more than UPRIGHT_TILT from the vertical, not
+    lying flat): its base centre and orientation; None for a standing or a flat one (its ShelfObject models it)."""
+    if bottle.axis_tilt <= UPRIGHT_TILT or (bottle.lying and bottle.tilt is None):
         return None
     w, x, y, z = quat_wxyz(bottle.rotation())
     bx, by, bz = (float(v) for v in bottle.base())
@@ -73,11 +87,11 @@ def lying_pose(bottle: ShelfObject) -> Lying | None:
 
 
 def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: Iterable[ShelfObject],
-                    held: str | None = None, lying: Mapping[str, Lying] | None = None,
+                    flat_tilt: float, held: str | None = None, lying: Mapping[str, Lying] | None = None,
                     gone: Iterable[str] = ()) -> Merged:
-    """The planner's scene (`current` bottles, the `lying` and `gone` ones) after the `perceived` objects (as
-    relocation_common.ros_conversions.msg_to_objects gives them); `held`: the bottle being carried, ignored
-    (module docstring)."""
+    """The planner's scene (`current` bottles, the leaning ones in `lying`, the `gone` ones) after the `perceived`
+    objects (as relocation_common.ros_conversions.msg_to_objects gives them; `flat_tilt`: laid_flat's); `held`: the
+    bottle being carried, ignored (module docstring)."""
     bottles, lying, gone = dict(current), dict(lying or {}), set(gone)
     changed, seen = [], set()
     perceived = list(perceived)
@@ -85,7 +99,7 @@ def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived:
         changed.append(i)
         del bottles[i]
         lying.pop(i, None)
-    for b in perceived:
+    for b in (laid_flat(b, flat_tilt) for b in perceived):
         i = b.id
         if i == held:
             continue
@@ -123,16 +137,17 @@ def _superseded(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: lis
 
 
 def _differs(was: ShelfObject | None, now: ShelfObject, was_lying: Lying | None, now_lying: Lying | None) -> bool:
-    """A perceived bottle differs from the planner's: new, moved more than MOVED, or standing <-> lying, or lying
-    otherwise (its top moved more than MOVED); a box also turned so that its corners moved more than MOVED (the
-    faces the side grasp takes it by turn with it)."""
-    if was is None or (was_lying is None) != (now_lying is None):
+    """A perceived bottle differs from the planner's: new, moved more than MOVED, or standing <-> lying flat <->
+    leaning, or leaning otherwise (its top moved more than MOVED); a box or a flat lying cylinder also turned so that
+    the corners of its footprint moved more than MOVED (the faces the side grasp takes a box by and the axis the grasp
+    from above closes across turn with it)."""
+    if was is None or was.lying != now.lying or (was_lying is None) != (now_lying is None):
         return True
     if was_lying is not None and now_lying is not None:
         return math.dist(_top(was_lying, now.height), _top(now_lying, now.height)) > MOVED or \
             math.dist(was_lying.base, now_lying.base) > MOVED
-    if now.shape == was.shape == "box":  # each corner of its footprint to the nearest of the planner's
-        a, b = np.asarray(now.footprint().corners), np.asarray(was.footprint().corners)
+    a, b = np.asarray(now.footprint().corners), np.asarray(was.footprint().corners)
+    if len(a) and len(b):  # each corner of its footprint to the nearest of the planner's
         if float(np.max(np.min(np.linalg.norm(a[:, None] - b[None], axis=2), axis=1))) > MOVED:
             return True
     return math.hypot(now.x - was.x, now.y - was.y) > MOVED

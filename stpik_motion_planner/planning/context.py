@@ -16,7 +16,6 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from relocation_common import robot_description as rd
-from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, UnknownObjectError
 from relocation_common.shelf_object import objects_key
 from stpik_motion_planner.model.collision import (
@@ -44,9 +43,10 @@ from stpik_motion_planner.planning.stpik import Stpik, StpikResult
 # left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
 # first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
 # tolerance (stpik.*), so that every path that converged without it is drawn and ends as before; reuse_distance
-# (what an answer reports, not how it is planned). certify_relocation is in the seed as true (SEEDED_AS): a lazy
+# (what an answer reports, not how it is planned); flat_tilt (how a perceived pose is read: the scene it gives is in the
+# seed). certify_relocation is in the seed as true (SEEDED_AS): a lazy
 # pick draws what the eager one drew, so the lane a certification accepts is the eager answer's
-UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance")
+UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance", "flat_tilt")
 SEEDED_AS = {"certify_relocation": True}
 UNSEEDED_STPIK = ("grasp_yaw_tol",)
 Placed = list[tuple[str, tuple[float, float]]]  # objects on the bottom shelf: (id, slot xy)
@@ -61,7 +61,7 @@ class PlanningContext:
         self.params = params if params is not None else PlannerParams.load()  # config/motion_planner.yaml
         seed_ompl(self.params.seed)
         self.kin = Kinematics()
-        self.lying: dict[str, Lying] = {}  # bottles of the top shelf that do not stand (set_scenario)
+        self.lying: dict[str, Lying] = {}  # bottles of the top shelf that lean (neither stand nor lie flat)
         self.gone: frozenset[str] = frozenset()  # bottles that left the shelf
         self.scene = self.collision_scene()
         self.arm = ArmGeometry(self.kin)
@@ -125,13 +125,13 @@ class PlanningContext:
         return CollisionScene(self.scenario, placed, self.lying, self.gone, stpik.grasp_yaw_tol + stpik.final_tol_ori)
 
     def not_graspable(self, object_id: str) -> str:
-        """Why the side grasp cannot take `object_id` whatever is removed ('' if it may): off the shelf, or
-        "no grasp: " and why (lying as perceived, or grasp.grasp_refusal: a conservative object, lying, too wide
-        for the open hand, a box too wide across every face the approach yaws of both tiers can take it by)."""
+        """Why the grasps cannot take `object_id` whatever is removed ('' if they may): off the shelf, or
+        "no grasp: " and why (grasp.grasp_refusal: a conservative object, a cylinder leaning as perceived, too wide
+        for the open hand, a box too wide across every face the approach yaws of both tiers can take it by; a
+        cylinder lying flat, from the scenario or tipped over as perceived: grasp.lying_pitch, the headroom or the
+        reach of the grasp from above)."""
         if object_id in self.gone:
             return f"{object_id} left the shelf: nothing to grasp"
-        if object_id in self.lying:
-            return f"{NO_GRASP}{object_id} is lying on its side: the side grasp takes standing objects only"
         p = self.params
         o, max_yaw = self.scenario.object(object_id), p.wide_max_yaw if p.wide_yaws else p.max_yaw
         why = grasp_refusal(o, max_yaw)

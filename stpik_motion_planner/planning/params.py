@@ -60,6 +60,7 @@ class PlannerParams:
     screen_at_clearance: bool  # the grasp screen's hand proxy inflated by at least stpik.clearance
     certify_relocation: bool  # every feasible answer certified (eager); false: the pick, certified when asked (lazy)
     reuse_distance: float  # m: objects farther from a pick's motion entered none of its checks (its `near` set)
+    flat_tilt: float  # rad: a perceived cylinder's axis this close to horizontal lies flat (scene_update.laid_flat)
     workspace_lo: tuple[float, ...]  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple[float, ...]
     stpik: StpikParams
@@ -67,7 +68,7 @@ class PlannerParams:
     def __post_init__(self) -> None:
         """Every setting checked once, with its name in the error (ValueError)."""
         positive = ("timeout", "pre_grasp_distance", "resolution", "joint_resolution",
-                    "stage_distance", "carry_timeout", "carried_clearance")
+                    "stage_distance", "carry_timeout", "carried_clearance", "flat_tilt")
         non_negative = ("max_yaw", "wide_max_yaw", "hand_margin", "lift", "drop", "carry_ramp", "carry_accel",
                         "reuse_distance")
         for k in positive + non_negative:

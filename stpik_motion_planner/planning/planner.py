@@ -130,8 +130,9 @@ class MotionPlanner(PlanningContext):
 
     def set_scenario(self, scenario: Scenario, lying: Mapping[str, Lying] | None = None,
                      gone: Iterable[str] = ()) -> None:
-        """Replace the scene (same shelf; e.g. bottles as perceived): `lying`, the bottles of the top shelf that do
-        not stand (obstacles as the cylinders they are, never graspable); `gone`, those that left the shelf (no
+        """Replace the scene (same shelf; e.g. bottles as perceived): `lying`, the bottles of the top shelf that lean,
+        neither standing nor lying flat (scene_update.lying_pose: obstacles as the cylinders they are, never
+        graspable); `gone`, those that left the shelf (no
         obstacle, never graspable). Cached grasp ends are dropped."""
         self.scenario = scenario
         self.lying, self.gone = dict(lying or {}), frozenset(gone)
