@@ -38,6 +38,7 @@ from .paths import config_file
 
 STOP_POLL = 0.2  # s: how often a node's main loop looks for SIGINT/SIGTERM
 STOP_GRACE = 5  # s (whole): a node still running this long after SIGINT/SIGTERM is ended by SIGALRM (run_node)
+CALLBACK_GRACE = 2.5  # s a stopping node waits for its running callbacks (a training writing its checkpoint)
 _stopped_by: list[str] = []  # the signal that ended run_node's loop (SIGINT, SIGTERM)
 
 
@@ -146,6 +147,7 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None, th
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     executor = SingleThreadedExecutor() if threads == 1 else MultiThreadedExecutor(num_threads=threads)
+    settled = True
     try:
         node = node_factory()
         executor.add_node(node)
@@ -158,23 +160,36 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None, th
             raise
     finally:
         rclpy.try_shutdown()  # running callbacks see rclpy.ok() false; every executor is woken
-        _wait_for_callbacks(executor, 1.0)
-        executor.shutdown(timeout_sec=1.0)
+        settled = _wait_for_callbacks(executor, CALLBACK_GRACE)
+        executor.shutdown(timeout_sec=1.0 if settled else 0.0)
         if node is not None:
             close = getattr(node, "close", None)
             if close is not None:
                 close()
+            if not settled and _stopped_by:
+                node.get_logger().info(f"stopped; a callback still running after {CALLBACK_GRACE} s is not waited for")
             node.destroy_node()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    if not settled and _stopped_by:
+        _leave_running_callbacks()
 
 
-def _wait_for_callbacks(executor: Executor, timeout: float) -> None:
+def _leave_running_callbacks() -> None:
+    """Exit 0 now, leaving the callbacks still running (a perception frame that took 3-6 s at a load of 5): the
+    interpreter's exit would wait for them (concurrent.futures joins the executor's pool threads), past STOP_GRACE,
+    and SIGALRM would end a clean stop with -14."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+def _wait_for_callbacks(executor: Executor, timeout: float) -> bool:
     """After shutdown: until the callbacks a MultiThreadedExecutor's pool still runs have ended (at most `timeout`
     s), then their errors are taken (a callback that published after the context went away fails, as expected).
     rclpy neither waits nor takes them: the perception node printed "The following exception was never retrieved:
     cannot use Destroyable ..." (a callback ending after shutdown() destroyed the executor's guard condition) or
-    "... publisher's context is invalid" on SIGINT and SIGTERM."""
+    "... publisher's context is invalid" on SIGINT and SIGTERM. True when none is running any more."""
     deadline = time.monotonic() + timeout
     futures = list(getattr(executor, "_futures", ()))
     while any(not f.done() for f in futures) and time.monotonic() < deadline:
@@ -182,6 +197,7 @@ def _wait_for_callbacks(executor: Executor, timeout: float) -> None:
     for f in futures:
         if f.done():
             f.exception()  # taken: not printed when the task is collected
+    return all(f.done() for f in futures)
 
 
 def node_main(name: str, node_factory: Callable[[], Node], args: list[str] | None = None, threads: int = 4,
