@@ -192,3 +192,18 @@ def test_a_listed_bottle_not_identified_is_kept_at_its_last_pose_not_made_unlist
             o = next(o for o in published if o.id == i)
             assert math.hypot(o.x - b.x, o.y - b.y) <= 0.010
         assert not [o.id for o in published if not o.listed]
+
+
+def test_a_listed_bottle_lying_along_the_front_edge_is_itself_not_an_unlisted_object():
+    """headroom_lying_6 as its simulator renders it: o1 lies across T's front, its axis along the front edge (0.69 m,
+    7 cm behind it). Perception must publish it as o1, lying, and nothing unlisted. Before, the 'inside the shelf'
+    check took a lying bottle's bounding circle (8.7 cm) for its depth and refused the fit: o1 missing and the
+    same bottle published as u1, which the demo then could never retrieve T past ("o1 needs u1 moved")."""
+    s = load_scenario("config/scenarios/headroom_lying_6.yaml")
+    f, vis = render_scene(s)
+    r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    assert vis["o1"] >= VISIBLE
+    assert "o1" in r.objects and r.objects["o1"].lying, r.missing.get("o1")
+    o1 = s.object("o1")
+    assert math.hypot(r.objects["o1"].x - o1.x, r.objects["o1"].y - o1.y) <= 0.015
+    assert not r.unlisted, {i: (o.x, o.y) for i, o in r.unlisted.items()}

@@ -98,8 +98,9 @@ def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float)
     """Listed fits outside the shelf, and pairs on one board that overlap by more than 2 tol: id -> why."""
     sh, out = scenario.shelf, {}
     for i, d in found.items():
-        r = d.reach
-        if not (sh.x_front + r - tol <= d.x <= sh.x_back - r + tol and sh.y_min + r - tol <= d.y <= sh.y_max - r + tol):
+        hx, hy = d.half_extent  # not the bounding circle: a bottle lying along the front edge is inside the shelf
+        if not (sh.x_front + hx - tol <= d.x <= sh.x_back - hx + tol
+                and sh.y_min + hy - tol <= d.y <= sh.y_max - hy + tol):
             out[i] = f"fit at ({d.x:.3f}, {d.y:.3f}) is not inside the shelf: not this object"
     ids = [i for i in found if i not in out]
     for a, i in enumerate(ids):

@@ -62,6 +62,15 @@ class PerceivedObject:
             return math.hypot(self.radius, self.height / 2) if self.lying else self.radius
         return math.hypot(self.size[0], self.size[1]) / 2
 
+    @property
+    def half_extent(self) -> tuple[float, float]:
+        """Half the footprint's extent along the base frame's x and y (m): its axis-aligned bounding box."""
+        if self.shape == CYLINDER and not self.lying:
+            return self.radius, self.radius
+        a, b = (self.height / 2, self.radius) if self.shape == CYLINDER else (self.size[0] / 2, self.size[1] / 2)
+        c, s = abs(math.cos(self.yaw)), abs(math.sin(self.yaw))
+        return c * a + s * b, s * a + c * b
+
 
 def inside(o: PerceivedObject, points: np.ndarray, tol: float) -> np.ndarray:
     """Bool per point (N x 3, base frame): within the object's primitive grown by `tol`."""
