@@ -17,12 +17,11 @@ import math
 import numpy as np
 import pytest
 from motion_checker import MotionChecker, Report, replay_relocation
-from test_execution import MAX_SLIP, SimArm
+from test_execution import carried_to_slot
 
-from jaco2_sim_driver.sim import Jaco2Sim
 from relocation_common.feasibility import NO_GRASP, Label
 from relocation_common.scenario import Scenario, parse_scenario
-from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation, relocate
+from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation
 from stpik_motion_planner.model.grasp import approach_yaw, grasp_standoff, hand_opening
 from stpik_motion_planner.model.scene_update import merge_perceived
 from stpik_motion_planner.planning.params import PlannerParams
@@ -200,29 +199,14 @@ def test_a_box_is_carried_to_its_slot_in_mujoco_physics(limit):
     for box in boxes:
         if limit is not None and carried >= limit:  # the default run: the first `limit`; -m extended: all
             break
-        scenario = box_scene(box)
-        planner, sim = MotionPlanner(scenario, PARAMS), Jaco2Sim(scenario)
-        if planner.certify("k", []).label != Label.OBSTACLE:
+        end = carried_to_slot(box_scene(box), "k", PARAMS, PLACE_TOL)
+        if end is None:
             continue
-        start = {p.id: np.array(p.position) for p in sim.object_poses()}
-        arm = SimArm(sim)
-        plan = relocate(planner, arm, "k", [])
-        arm._step(500)
-        pose = {p.id: p for p in sim.object_poses()}
-        slot = scenario.slot(plan.slot_index)
-        at = np.array(pose["k"].position)
-        assert math.dist(at[:2], slot) <= PLACE_TOL and at[2] == pytest.approx(scenario.shelf.bottom_z, abs=0.001), \
-            (box, at, slot)
-        w, x, y, z = pose["k"].quat_wxyz
+        w, x, y, z = end[0].quat_wxyz
         assert 1 - 2 * (x * x + y * y) > 0.995, box  # upright: its z axis within 5.7 deg of the vertical
         turn = math.remainder(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)), math.pi / 2)
         assert abs(turn) <= PARAMS.stpik.grasp_yaw_tol + PARAMS.stpik.final_tol_ori, (box, turn)
-        for other in ("b1", "T"):
-            assert np.linalg.norm(np.array(pose[other].position) - start[other]) < 0.005, (box, other)
-        assert arm.unintended == {}, (box, arm.unintended)
-        assert arm.slip["k"] <= MAX_SLIP, (box, arm.slip)
-        print(f"{box}: at {np.round(at, 4).tolist()} (slot {slot}), turned {turn:+.3f} rad, "
-              f"slip {arm.slip['k'] * 1000:.1f} mm")
+        print(f"{box}: turned {turn:+.3f} rad")
         carried += 1
     print(f"boxes carried in MuJoCo's physics: {carried}")
     assert carried >= (limit or 2)

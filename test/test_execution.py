@@ -231,6 +231,32 @@ def _upright(sim, oid) -> float:
 MAX_SLIP = 0.005  # m of the bottle in the hand between the grasp and the release
 
 
+def carried_to_slot(scenario, oid: str, params: PlannerParams, place_tol: float, still=("b1", "T")):
+    """relocation.relocate of `oid` on the simulator's core (SimArm: every physics step watched) when the planner
+    certifies it, else None: (its pose at the end, its slot). Checked here: on the bottom shelf within place_tol of
+    its slot, the `still` objects moved less than 5 mm, no contact of the arm or the object but the intended ones,
+    held within MAX_SLIP; the caller checks the pose's orientation."""
+    from relocation_common.feasibility import Label
+
+    planner, sim = MotionPlanner(scenario, params), Jaco2Sim(scenario)
+    if planner.certify(oid, []).label != Label.OBSTACLE:
+        return None
+    start = {p.id: np.array(p.position) for p in sim.object_poses()}
+    arm = SimArm(sim)
+    plan = relocate(planner, arm, oid, [])
+    arm._step(500)
+    pose = {p.id: p for p in sim.object_poses()}
+    slot = scenario.slot(plan.slot_index)
+    at = np.array(pose[oid].position)
+    assert np.linalg.norm(at[:2] - slot) <= place_tol and abs(at[2] - scenario.shelf.bottom_z) <= 0.001, (at, slot)
+    for other in still:
+        assert np.linalg.norm(np.array(pose[other].position) - start[other]) < 0.005, other
+    assert arm.unintended == {}, arm.unintended
+    assert arm.slip[oid] <= MAX_SLIP, arm.slip
+    print(f"{oid}: at {np.round(at, 4).tolist()} (slot {slot}), slip {arm.slip[oid] * 1000:.1f} mm")
+    return pose[oid], slot
+
+
 @pytest.mark.parametrize("sequence", [("o2", "o3"), pytest.param(("o2", "o3", "o6", "T"), marks=pytest.mark.extended)],
                          ids=["first_two", "whole"])
 def test_planned_relocations_move_bottles_to_their_slots_in_mujoco(sequence):

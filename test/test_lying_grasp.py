@@ -18,12 +18,11 @@ import math
 import numpy as np
 import pytest
 from motion_checker import MotionChecker, Report, replay_relocation
-from test_execution import MAX_SLIP, SimArm
+from test_execution import carried_to_slot
 
-from jaco2_sim_driver.sim import Jaco2Sim
 from relocation_common.feasibility import NO_GRASP, Label
 from relocation_common.scenario import Scenario, load_scenario, parse_scenario
-from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation, relocate
+from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation
 from stpik_motion_planner.model.grasp import FINGER_FLOOR
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
@@ -155,26 +154,12 @@ def test_a_lying_bottle_is_carried_to_its_slot_in_mujoco_physics(limit):
         if limit is not None and carried >= limit:  # the default run: the first `limit`; -m extended: all
             break
         bottle = drawn_bottle(seed)
-        scenario = lying_scene(bottle, seed)
-        planner, sim = MotionPlanner(scenario, PARAMS), Jaco2Sim(scenario)
-        if planner.certify("L", []).label != Label.OBSTACLE:
+        end = carried_to_slot(lying_scene(bottle, seed), "L", PARAMS, PLACE_TOL)
+        if end is None:
             continue
-        start = {p.id: np.array(p.position) for p in sim.object_poses()}
-        arm = SimArm(sim)
-        plan = relocate(planner, arm, "L", [])
-        arm._step(500)
-        pose = {p.id: p for p in sim.object_poses()}
-        slot = scenario.slot(plan.slot_index)
-        at = np.array(pose["L"].position)
-        assert math.dist(at[:2], slot) <= PLACE_TOL and at[2] == pytest.approx(scenario.shelf.bottom_z, abs=0.001), \
-            (seed, at, slot)
-        w, x, y, z = pose["L"].quat_wxyz
+        w, x, y, z = end[0].quat_wxyz
         assert 1 - 2 * (x * x + y * y) >= UPRIGHT, seed  # standing: its axis within 5 deg of the vertical
-        for other in ("b1", "T"):
-            assert np.linalg.norm(np.array(pose[other].position) - start[other]) < 0.005, (seed, other)
-        assert arm.unintended == {}, (seed, arm.unintended)
-        assert arm.slip["L"] <= MAX_SLIP, (seed, arm.slip)
-        print(f"seed {seed} {bottle}: at {np.round(at, 4).tolist()} (slot {slot}), slip {arm.slip['L'] * 1000:.1f} mm")
+        print(f"seed {seed} {bottle}: standing")
         carried += 1
     print(f"lying bottles carried in MuJoCo's physics: {carried}")
     assert carried >= (limit or 4)
