@@ -48,6 +48,8 @@ FINGERS_OPEN = 0.02  # rad of finger hinge: open
 POLL = 0.01  # s (wall) between looks at the arm or the fingers while a service or the fingers action waits
 MAX_LAG = 0.5  # s of simulated time the loop may fall behind before it stops trying to catch up
 MAX_BATCH = 20  # steps (ms) per tick at most: a late thread gets the GIL back late
+IDLE_BATCH = 2  # steps (ms) an idle loop sleeps until they are due: a wake-up per step or more cost a fifth of a core
+IDLE_MIN = 0.0002  # s, the shortest sleep of an idle loop
 
 
 @dataclass(frozen=True)
@@ -353,6 +355,18 @@ class SimDriver:
             self._sim0, self._wall0 = t, time.monotonic()
             target = t
         return min(int((target - t) / float(self.sim.model.opt.timestep)), MAX_BATCH)
+
+    def idle_time(self) -> float:
+        """Wall seconds an idle loop (its tick stepped nothing) sleeps: until IDLE_BATCH steps are due, at least
+        IDLE_MIN; IDLE_MIN when running as fast as possible. A command that comes meanwhile waits at most that long
+        (the Kinova driver's own control loop runs at 100 Hz)."""
+        r = self.params.real_time_factor
+        if r <= 0:
+            return IDLE_MIN
+        with self.lock:
+            due = self._sim0 + (time.monotonic() - self._wall0) * r
+            lag = self.sim.time + IDLE_BATCH * float(self.sim.model.opt.timestep) - due
+        return max(IDLE_MIN, lag / r)
 
     def snapshot(self) -> Snapshot:
         """The arm now (call with the lock held, or from the loop's thread)."""
