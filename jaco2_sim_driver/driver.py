@@ -28,6 +28,8 @@ from numpy.typing import ArrayLike
 
 from relocation_common import kinova as units
 from relocation_common.arm_interface import ArmInterface
+from relocation_common.config import node_section
+from relocation_common.paths import config_file
 from relocation_common.robot_description import BASE_LINK, FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX
 from relocation_common.scenario import load_scenario
 
@@ -138,10 +140,12 @@ class SimDriver:
 
     def disturbances(self, drop_probability: float, drop_seed: int, plan: disturbance.DisturbancePlan | None) -> None:
         """Drop the carried bottle with `drop_probability` per carry (seeded) and apply `plan` at its moments
-        (counted from now: the next grasp is carry 1)."""
+        (counted from now: the next grasp is carry 1; a relocation has ended with the arm within the motion
+        planner's home_tol of home, read from config/motion_planner.yaml)."""
         self._drop = (drop_probability, drop_seed, plan)
         self.dropper = disturbance.CarryDropper(drop_probability, drop_seed)
-        self.schedule = disturbance.DisturbanceSchedule(plan) if plan is not None else None
+        home_tol = float(node_section(config_file("motion_planner.yaml"), "motion_planner")["home_tol"])
+        self.schedule = disturbance.DisturbanceSchedule(plan, home_tol) if plan is not None else None
 
     def disturb(self, parent: str, child: str, translation: Iterable[float], rotation_xyzw: Iterable[float]) -> None:
         """A disturbance command as a transform (the node's /sim/disturb): child `bottle_<id>` or `grasped`;

@@ -77,7 +77,8 @@ class MotionPlannerNode(Node):
         self.core = MotionPlannerService(load_scenario(params["scenario"] or None), planner_params,
                                          float(params["home_tol"]), log=self._log,
                                          journal=Journal(params["journal_path"] if params["serve_relocation"] else ""),
-                                         recover_near=float(params["recover_near"]))
+                                         recover_near=float(params["recover_near"]),
+                                         phantom_scenes=params["phantom_scenes"])
         self.link: RosArmLink | None = None  # nothing in a feasibility-only replica (serve_relocation false)
         self.asked, self.answered, self.last_answer = 0, 0, (0.0, "none yet")  # feasibility, for the health
         self.scene_seen = threading.Event()  # a scene came on scene_topic (_on_scene)
@@ -156,7 +157,9 @@ class MotionPlannerNode(Node):
         """Bottles on the top shelf (standing or lying) replace the planner's, bottles off the shelf leave it; the
         rest of the scene stays (service.update_scene)."""
         try:  # without the target too: perception's scene once the target is relocated, out of its view
-            changed = self.core.update_scene(msg_to_objects(msg, require_target=False), f"scene on {self.scene_topic}")
+            stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+            changed = self.core.update_scene(msg_to_objects(msg, require_target=False), f"scene on {self.scene_topic}",
+                                             stamp if stamp != (0, 0) else None)
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return

@@ -39,7 +39,7 @@ from stpik_motion_planner.execution.relocation import Progress, recover, relocat
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm
 from stpik_motion_planner.model.blockers import lane_blockers
 from stpik_motion_planner.model.scene_update import merge_perceived
-from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams, node_parameters
 from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.results import PlanningError
 
@@ -67,12 +67,19 @@ class Outcome:
 
 class MotionPlannerService:
     """The node's behaviour (the module docstring). `home_tol`: relocation.relocate's, `recover_near`:
-    relocation.recover's `near` (rad; None: config/motion_planner.yaml's)."""
+    relocation.recover's `near` (rad; None: config/motion_planner.yaml's); `phantom_scenes`: scene_update's (None:
+    config/motion_planner.yaml's)."""
 
     def __init__(self, scenario: Scenario, params: PlannerParams, home_tol: float | None = None,
                  log: Callable[[str, str], None] = lambda *_: None, journal: Journal | None = None,
-                 recover_near: float | None = None) -> None:
+                 recover_near: float | None = None, phantom_scenes: int | None = None) -> None:
         self.base, self.log, self.home_tol, self.recover_near = scenario, log, home_tol, recover_near
+        n = node_parameters()["phantom_scenes"] if phantom_scenes is None else phantom_scenes
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise ValueError(f"motion planner parameter phantom_scenes must be an integer >= 1, got {n!r}")
+        self.phantom_scenes = n
+        self._missing: dict[str, int] = {}  # unlisted id -> counted scenes in a row without it (scene_update)
+        self._scene_stamp: object = None  # the stamp of the last scene (a scene received again counts once)
         self.planner = MotionPlanner(scenario, params)
         self.plan_lock = threading.Lock()  # MotionPlanner is not thread-safe
         self.bottles = {b.id: b for b in scenario.objects}
@@ -99,21 +106,31 @@ class MotionPlannerService:
             self._ready.set()
 
     # -- the scene ------------------------------------------------------------------------------------------
-    def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene") -> list[str]:
+    def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene",
+                     stamp: object = None) -> list[str]:
         """Objects as perceived (ros_conversions.msg_to_objects) resting on the top shelf replace the planner's:
         standing, lying flat (tipped over: the grasp from above takes it where the headroom allows), or leaning (an
         obstacle as it leans, never graspable), listed in the scenario or not (`listed`
         false: an object the scenario does not name, an obstacle as its primitive, relocatable when the side grasp
         takes it); bottles seen off the shelf leave the planner's scene; the rest stays
-        (scene_update.merge_perceived). The ids that changed; ScenarioError for a scene that cannot be
+        (scene_update.merge_perceived), but an unlisted object left out of `phantom_scenes` scenes in a row with its
+        place in view is dropped (`stamp`: the message's; one received again counts once, None: every scene
+        counts). The ids that changed; ScenarioError for a scene that cannot be
         (scene_check: a listed id the scenario does not have, an unlisted one it has, an id twice, poses far from
         the shelf): the whole message is dropped, nothing changes."""
         bottles = list(perceived)
         bases = [(b.id, float(c[0]), float(c[1]), float(c[2])) for b, c in ((b, b.base()) for b in bottles)]
         check_scene(self.base, bases, source, unlisted={b.id for b in bottles if not b.listed})
         self.scene.update(bases)
+        counted = stamp is None or stamp != self._scene_stamp
+        self._scene_stamp = stamp
         m = merge_perceived(self.base.shelf, self.bottles, bottles, self.planner.params.flat_tilt, self._held,
-                            self.planner.lying, self.planner.gone)
+                            self.planner.lying, self.planner.gone, self._missing,
+                            self.phantom_scenes if counted else None, kept=set(self.relocated))
+        self._missing = m.missing
+        dropped = [i for i in m.changed if i not in m.bottles and i in self.bottles]
+        if dropped:
+            self.log("info", f"unlisted objects no longer in {source} dropped from the planner's scene: {dropped}")
         back = [i for i in m.seen if i in self.relocated]  # seen back on the top shelf: it can be relocated again
         for i in back:
             self.relocated.pop(i)

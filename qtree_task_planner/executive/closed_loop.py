@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 from qtree_task_planner.problem import ProblemError, RelocationProblem
 from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
-from relocation_common.shelf_object import UPRIGHT_TILT, support_height
+from relocation_common.shelf_object import UPRIGHT_TILT, Footprint, support_height
 
 
 # ------------------------------------------------------------------------------------------------ the scene
@@ -39,7 +39,8 @@ from relocation_common.shelf_object import UPRIGHT_TILT, support_height
 class SeenObject:
     """An object as perceived: centre of its base (base frame, m), tilt of its axis from the vertical (rad; 0 for a
     perception that only sees upright bottles), and what ObjectState carries besides (weight phi, target, size,
-    shape; `listed` false: the scenario does not list it, `weight_note` says how its weight was estimated)."""
+    shape; `listed` false: the scenario does not list it, `weight_note` says how its weight was estimated; a box's
+    `size` and the `yaw` of a box or of a lying cylinder's axis, as ShelfObject has them: its `footprint`)."""
 
     id: str
     x: float
@@ -54,6 +55,18 @@ class SeenObject:
     shape: str = "cylinder"
     listed: bool = True
     weight_note: str = ""
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    yaw: float = 0.0
+
+    def footprint(self) -> Footprint:
+        """Its outline on its board (ShelfObject.footprint): a standing cylinder's base circle, a box's rectangle, a
+        lying cylinder's rectangle centred half its length along its axis from its base centre (x, y)."""
+        lying = self.shape == "cylinder" and self.tilt > UPRIGHT_TILT
+        along = self.height / 2 * math.sin(self.tilt) if lying else 0.0
+        o = ShelfObject(self.id, self.label, TARGET_RGB, self.weight, self.x + along * math.cos(self.yaw),
+                        self.y + along * math.sin(self.yaw), self.radius, self.height, shape=self.shape, size=self.size,
+                        yaw=self.yaw, lying=lying, tilt=self.tilt if lying else None)
+        return o.footprint()
 
 
 Scene = Mapping[str, SeenObject]
@@ -69,14 +82,14 @@ def seen_object(o: ShelfObject) -> SeenObject:
     (a lying cylinder's lower end face), the tilt of its axis."""
     x, y, z = (float(v) for v in o.base())
     return SeenObject(o.id, x, y, z, o.weight, o.is_target, o.axis_tilt, o.radius, o.height, o.label, o.shape,
-                      o.listed, o.weight_note)
+                      o.listed, o.weight_note, o.size, o.yaw)
 
 
 def scene_from_scenario(scenario: Scenario) -> dict[str, SeenObject]:
     """The scenario's bottles where it puts them: upright on the top shelf (the world the first plan assumes)."""
     z = scenario.shelf.top_z
     return scene_of(SeenObject(b.id, b.x, b.y, z, b.weight, b.is_target, 0.0, b.radius, b.height, b.label, b.shape,
-                               b.listed, b.weight_note) for b in scenario.objects)
+                               b.listed, b.weight_note, b.size, b.yaw) for b in scenario.objects)
 
 
 @dataclass(frozen=True)
@@ -247,10 +260,17 @@ class RemainingProblem:
 
 
 def free_slots(scenario: Scenario, scene: Scene, tol: Tolerances = Tolerances()) -> tuple[int, ...]:
-    """Indices of the scenario's slots that no bottle on the bottom shelf occupies (nearer than two radii)."""
-    below = [o for o in scene.values() if board_of(o, scenario, tol) == "bottom"]
-    return tuple(k for k, (x, y) in enumerate(scenario.slots)
-                 if all(math.hypot(o.x - x, o.y - y) >= 2 * o.radius for o in below))
+    """Indices of the scenario's slots that no object on the bottom shelf occupies: one is taken when an object as
+    wide as it, centred on the slot at any turn (a disc of its footprint's outer radius), would overlap its footprint
+    (two radii for a standing bottle; a box or a lying bottle by its rectangle, as the scene gives its size)."""
+    below = [o.footprint() for o in scene.values() if board_of(o, scenario, tol) == "bottom"]
+    return tuple(k for k, slot in enumerate(scenario.slots)
+                 if not any(f.overlaps(Footprint(slot, _outer_radius(f), ())) for f in below))
+
+
+def _outer_radius(f: Footprint) -> float:
+    """Radius of the smallest disc about the footprint's centre that holds it."""
+    return max((math.dist(f.centre, c) for c in f.corners), default=f.radius)
 
 
 def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Iterable[str],
