@@ -174,6 +174,15 @@ class RelocationProblem:
         return "unlisted (obstacles, weight estimated): " + ", ".join(
             f"{o} phi {self.weights[o]:.2f} ({note})" for o, note in sorted(self.estimated.items()))
 
+    def costs_line(self) -> str:
+        """One line for the log and the result: the obstacles whose cost differs from their weight (an action factor
+        other than 1), weight x factor = cost ("" without any)."""
+        costed = [o for o in self.obstacles if self.costs[o] != self.weights[o]]
+        if not costed:
+            return ""
+        return "costed (weight x action factor): " + ", ".join(
+            f"{o} {self.weights[o]:.2f} x {self.costs[o] / self.weights[o]:.2f} = {self.costs[o]:.2f}" for o in costed)
+
     def weight(self, sequence: Iterable[str]) -> float:
         """Eq. 8: total weight sum phi_i of the obstacles in a sequence (the target's weight does not count)."""
         return float(sum(self.weights[o] for o in sequence if o != self.target))

@@ -4,8 +4,8 @@
 Search (Lazy Shortest Path, Dellin & Srinivasa 2016). The cost of a removed set R is g(R) = sum of phi over R
 (Eq. 8: the order does not change the weight), phi_i being obstacle i's cost (its weight times its action's factor:
 problem.py, "One action model"; the weight at factor 1). A* runs on the optimistic graph G of knowledge.py: an edge
-"remove o from R" or "relocate T from R" is there unless an answer or a certain blocker claim says it is unfeasible; nothing
-is asked during this search. Its heuristic h (knowledge.py, 2.: the objects every path must remove before the
+"remove o from R" or "relocate T from R" is there unless an answer or a certain blocker claim says it is unfeasible;
+nothing is asked during this search. Its heuristic h (knowledge.py, 2.: the objects every path must remove before the
 target, its lanes' own needs) is admissible on G, and it removes after R only the objects D(R) of knowledge.py,
 3. (objects some claim not yet held on the way to the target names, all objects where an unexplained answer is in
 reach), which keeps every optimal path of G. Ties of f go to the paths with fewer unverified edges (those
