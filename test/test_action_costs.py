@@ -102,3 +102,18 @@ def test_the_factors_come_from_the_shipped_file_and_bad_ones_are_refused():
         RelocationProblem(("a",), {"a": 0.3}, "T", costs={"a": 0.0})
     with pytest.raises(ProblemError, match="action_set"):
         RelocationProblem(("a",), {"a": 0.3}, "T", action_set=("fly",))
+
+
+def test_a_re_plan_costs_a_bottle_lying_on_the_shelf_as_a_top_grasp():
+    """closed_loop.remaining_problem with the factors: headroom_lying_6's o1 lies (perceived tilted), so the re-plan's
+    A* costs it as a grasp from above; without them (the paper's problem) it costs its weight."""
+    from qtree_task_planner.executive.closed_loop import remaining_problem, scene_of, seen_object
+    from relocation_common.scenario import load_scenario
+
+    sc = load_scenario("config/scenarios/headroom_lying_6.yaml")
+    scene = scene_of(seen_object(o) for o in sc.objects)  # as perception sees them: o1 lying
+    rp = remaining_problem(sc, scene, (), action_cost=FACTORS)
+    assert rp.tipped == ("o1",) and rp.problem is not None
+    assert rp.problem.costs["o1"] == pytest.approx(0.30 * 1.5) and rp.problem.costs["o2"] == pytest.approx(0.25)
+    plain = remaining_problem(sc, scene, ()).problem
+    assert plain is not None and not plain.costed
