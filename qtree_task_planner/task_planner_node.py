@@ -198,7 +198,7 @@ class TaskPlannerNode(Node):
         def on_solved(exact: AStarResult) -> None:
             fill_optimum(result, exact)
             notes[0] = scene_notes(problem, oracle)
-            cost = f" cost {exact.total_cost}" if exact.total_cost != exact.total_weight else ""
+            cost = f" cost {exact.total_cost}" if exact.total_cost is not None else ""
             self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight}{cost} ({oracle.calls} "
                                    f"planner calls; {service.summary()}){'; ' * bool(notes[0])}{notes[0]}")
             fb.phase = "training"

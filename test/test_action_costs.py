@@ -44,7 +44,7 @@ PARAMS = TrainingParams.defaults().replace(seed=0, max_episodes=3000)
 
 
 @pytest.mark.parametrize("costs, best, weight, cost", [
-    (PAPER, {("a", "T")}, 0.3, 0.3),  # the paper's: a (0.3) is lighter than b + c (0.4)
+    (PAPER, {("a", "T")}, 0.3, None),  # the paper's: a (0.3) is lighter than b + c (0.4); no cost reported
     (FACTORS, {("b", "c", "T"), ("c", "b", "T")}, 0.4, 0.4),  # a from above costs 0.45: b and c are cheaper
 ])
 def test_a_cost_factor_changes_the_optimum_and_every_solver_agrees(costs, best, weight, cost):
@@ -52,14 +52,16 @@ def test_a_cost_factor_changes_the_optimum_and_every_solver_agrees(costs, best, 
     results = [solve(p, TwoLanes()) for solve in (astar.solve, exact.solve, exact.brute_force)]
     for r in results:
         assert r.sequence in best and r.total_weight == pytest.approx(weight) and r.total_cost == pytest.approx(cost)
+        assert ("total_cost" in r.to_dict()) == (cost is not None)
     opt = results[0]
     learned = train(p, TwoLanes(), PARAMS, optimal_weight=opt.total_weight, optimal_cost=opt.total_cost)
     assert learned.sequence in best and learned.total_cost == pytest.approx(cost), learned.sequence
+    assert learned.total_weight == pytest.approx(weight)
     assert learned.e_1st is not None  # the greedy path reached the optimum's cost during training
 
 
-def test_results_keep_eq_8_s_weight_and_add_the_cost_only_where_it_differs():
-    """a taken alone: weight 0.3, cost 0.45 (FACTORS) when it is forced (b unreachable)."""
+def test_results_keep_eq_8_s_weight_and_add_the_cost_of_a_costed_problem():
+    """a taken alone: weight 0.3, cost 0.45 (FACTORS); the paper's problem reports no cost."""
     p = problem(FACTORS)
     only_a = RelocationProblem(("a",), {"a": 0.3}, "T").with_actions({"a": TOP_GRASP}, FACTORS)
     r = astar.solve(only_a, TwoLanes())

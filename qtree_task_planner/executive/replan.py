@@ -353,7 +353,7 @@ def relearn(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache
     the re-plan's own oracle (failed options and slots beyond the free ones g_U, answers of unchanged geometry
     reused), after the A* found `exact` (its optimum: the E_1st reference). The learned sequence is kept when it
     costs no more than the A*'s (the problem's costs: the weight at factor 1; as retrieval.chosen_sequence), else
-    the A*'s, and the note says which, with both weights (and costs, when they differ), the episodes and whether
+    the A*'s, and the note says which, with both weights (and costs, in a costed problem), the episodes and whether
     Eq. 16 was met. keep_going() False stops training (a cancelled goal).
     The calls are the A*'s and training's together."""
     if rp.problem is None:
@@ -368,13 +368,14 @@ def relearn(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache
     if not r.found or r.total_weight is None:
         return seq, weight, calls, f"Q-Tree retrained: no sequence in {steady}; executing the A*'s optimum"
     mine = rp.problem.cost(r.sequence or ())
-    learned = f"learned {' '.join(r.sequence or ())} ({_amount(r.total_weight, mine)}) in {steady}"
+    costed = rp.problem.costed
+    learned = f"learned {' '.join(r.sequence or ())} ({_amount(r.total_weight, mine, costed)}) in {steady}"
     if mine <= cost + 1e-9:
         return tuple(r.sequence or ()), r.total_weight, calls, f"Q-Tree retrained: {learned}, executed"
     return seq, weight, calls, f"Q-Tree retrained: {learned}; executing the A*'s optimum " \
-        f"({_amount(weight, cost).removeprefix('weight ')}) instead"
+        f"({_amount(weight, cost, costed).removeprefix('weight ')}) instead"
 
 
-def _amount(weight: float, cost: float) -> str:
-    """'weight 0.50', or 'weight 0.50, cost 0.75' when an action factor other than 1 made them differ."""
-    return f"weight {weight:.2f}" + (f", cost {cost:.2f}" if cost != weight else "")
+def _amount(weight: float, cost: float, costed: bool) -> str:
+    """'weight 0.50', or in a costed problem (an action factor other than 1) 'weight 0.50, cost 0.75'."""
+    return f"weight {weight:.2f}" + (f", cost {cost:.2f}" if costed else "")

@@ -181,7 +181,7 @@ def chosen_sequence(learned: Sequence[str] | None, learned_weight: float | None,
                     learned_cost: float | None = None, optimal_cost: float | None = None) -> tuple[list[str], str]:
     """(the sequence to execute, a note for the user): the learned one only when its cost (learned_cost and
     optimal_cost; Eq. 8's weight when they are not given: every action factor 1) equals the proven optimum's, or when
-    asked for (execute_learned); else the optimum, saying so with both weights (and costs, when they differ)."""
+    asked for (execute_learned); else the optimum, saying so with both weights (and costs, when given)."""
     learned_seq, optimum_seq = list(learned or ()), list(optimum or ())
     if execute_optimum or not learned_seq:
         return optimum_seq, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
@@ -192,7 +192,7 @@ def chosen_sequence(learned: Sequence[str] | None, learned_weight: float | None,
     assert optimal_weight is not None and learned_weight is not None
 
     def amount(weight: float, cost: float | None) -> str:
-        return f"weight {weight:.2f}" + (f", cost {cost:.2f}" if cost is not None and cost != weight else "")
+        return f"weight {weight:.2f}" + (f", cost {cost:.2f}" if cost is not None else "")
 
     return optimum_seq, (f"executed the exact optimum {' '.join(optimum_seq)} ({amount(optimal_weight, optimal_cost)})"
                          f" instead of the learned {' '.join(learned_seq)} ({amount(learned_weight, learned_cost)}); "

@@ -77,8 +77,9 @@ class TrainingResult:
     params: TrainingParams
     certify_calls: int = 0  # certifications asked of the oracle by this run (not answered by the cache)
     relabelled: int = 0  # learned edges a failed certification turned unfeasible
-    total_cost: float | None = None  # `sequence`'s total cost (problem.RelocationProblem.cost; the weight at factor 1)
-    optimal_cost: float | None = None  # the optimum's total cost E_1st was measured against
+    total_cost: float | None = None  # `sequence`'s total cost (problem.RelocationProblem.cost) in a costed problem (an
+    # action factor other than 1), else None: the costs are the weights
+    optimal_cost: float | None = None  # the optimum's total cost E_1st was measured against (a costed problem)
     elapsed_s: float = field(default=0.0, compare=False)
     tree: QTree | None = field(default=None, compare=False, repr=False)
 
@@ -108,8 +109,8 @@ class TrainingResult:
             "elapsed_s": self.elapsed_s,
             "params": self.params.to_dict(),
             "q_sum_history": self.q_sum_history,
-            **costs_dict(self.total_weight, self.total_cost, "total"),
-            **costs_dict(self.optimal_weight, self.optimal_cost, "optimal"),
+            **({} if self.total_cost is None else {"total_cost": self.total_cost}),
+            **({} if self.optimal_cost is None else {"optimal_cost": self.optimal_cost}),
         }
 
 
@@ -167,12 +168,6 @@ def train(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, para
         if gc_enabled:
             gc.enable()
     return run.result()
-
-
-def costs_dict(weight: float | None, cost: float | None, name: str) -> dict[str, float]:
-    """{f"{name}_cost": cost} when the cost differs from the weight (an action factor other than 1 applied), else {}:
-    the paper's results keep their fields."""
-    return {} if cost is None or cost == weight else {f"{name}_cost": cost}
 
 
 class _Run:
@@ -269,8 +264,8 @@ class _Run:
             params=self.params,
             certify_calls=self.cache.cert_calls - self.cert0,
             relabelled=self.relabelled,
-            total_cost=self.problem.cost(seq) if seq is not None else None,
-            optimal_cost=self.optimal_cost,
+            total_cost=self.problem.cost(seq) if seq is not None and self.problem.costed else None,
+            optimal_cost=self.optimal_cost if self.problem.costed else None,
             elapsed_s=self.elapsed(),
             tree=tree,
         )

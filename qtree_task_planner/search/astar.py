@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.search.exact import ExactResult, as_problem, why_none
+from qtree_task_planner.search.exact import ExactResult, as_problem, total_cost, why_none
 from qtree_task_planner.search.knowledge import DEPTH, Knowledge
 from relocation_common.feasibility import (
     FeasibilityAnswer,
@@ -135,7 +135,7 @@ def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, dept
         calls += asked
         if ok:
             seq = tuple(o for o, _ in path)
-            return AStarResult(seq, problem.weight(seq), calls, expanded, "", problem.cost(seq), blocker_calls,
+            return AStarResult(seq, problem.weight(seq), calls, expanded, "", total_cost(problem, seq), blocker_calls,
                                searches)
 
 

@@ -52,8 +52,8 @@ class ExactResult:
     oracle_calls: int  # distinct (object, removed set) questions asked
     sets_settled: int
     reason: str = ""  # why there is no sequence (why_none), one line; empty when found
-    total_cost: float | None = None  # the sequence's total cost (problem.RelocationProblem.cost: the weight at
-    # factor 1), what the search minimised
+    total_cost: float | None = None  # the sequence's total cost (problem.RelocationProblem.cost), what the search
+    # minimised; None for a problem whose costs are its weights (every action factor 1: the paper's)
 
     @property
     def found(self) -> bool:
@@ -65,7 +65,7 @@ class ExactResult:
         out = {"found": self.found, "sequence": list(self.sequence) if self.sequence is not None else None,
                "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
                "sets_settled": self.sets_settled}
-        if self.total_cost is not None and self.total_cost != self.total_weight:  # an action factor other than 1
+        if self.total_cost is not None:  # a costed problem (an action factor other than 1)
             out["total_cost"] = self.total_cost
         return out if self.found else {**out, "reason": self.reason}
 
@@ -198,7 +198,7 @@ def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle) -> E
                 continue
             if obj == target:
                 return ExactResult(seq + (target,), problem.weight(seq), calls, len(settled),
-                                   total_cost=problem.cost(seq))
+                                   total_cost=total_cost(problem, seq))
             new_seq = seq + (obj,)
         settled[state] = (cost, new_seq)
         heapq.heappush(queue, (cost, next(tie), state, new_seq, target))
@@ -244,4 +244,10 @@ def brute_force(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle
     calls = cache.calls - calls0
     if best is None:
         return ExactResult(None, None, calls, len(reachable))
-    return ExactResult(best[1], problem.weight(best[1]), calls, len(reachable), total_cost=best[0])
+    return ExactResult(best[1], problem.weight(best[1]), calls, len(reachable), total_cost=total_cost(problem, best[1]))
+
+
+def total_cost(problem: RelocationProblem, sequence: Sequence[str]) -> float | None:
+    """A result's total cost (ExactResult.total_cost): the sequence's for a costed problem, None for one whose costs
+    are its weights."""
+    return problem.cost(sequence) if problem.costed else None
