@@ -69,7 +69,7 @@ class ServiceOracle:
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
         """Eq. 11's label of relocating `object_id` after `removed` (and the lane blockers the planner saw, the
-        objects a feasible pick comes near)."""
+        objects a feasible pick comes near, the action a feasible answer is for)."""
         return self._ask(object_id, removed, False)
 
     def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
@@ -83,7 +83,7 @@ class ServiceOracle:
         resp = self._call(req, f"the certification of {object_id!r}" if certify else repr(object_id))
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
                                  blockers=blockers_from_msgs(resp.blockers),
-                                 near=near_from_fields(resp.near_known, resp.near_ids))
+                                 near=near_from_fields(resp.near_known, resp.near_ids), action=resp.action)
 
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None

@@ -61,7 +61,7 @@ from qtree_task_planner.learning.q_tree import QTree
 from qtree_task_planner.learning.training import EpisodeStats
 from qtree_task_planner.markers import scene_markers
 from qtree_task_planner.oracles import CachedOracle
-from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from qtree_task_planner.ros_clients import (
     Relocator,
     SceneWatch,
@@ -95,6 +95,7 @@ class TaskPlannerNode(Node):
         super().__init__("task_planner")
         declare_parameters(self)  # config/task_planner.yaml: training parameters and the node's own
         check_node_parameters(self.p)  # ParameterError naming the first unusable one (main(): one line, exit 2)
+        self._action_cost = ActionCosts.from_parameters(self.p)  # relocating i costs phi_i x its action's factor
 
         self._scenes = SceneWatch()  # the latest scene and when it came
         log = self.get_logger()
@@ -135,7 +136,7 @@ class TaskPlannerNode(Node):
                                             self.get_clock().now)
         if warning:
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
-        return RelocationProblem.from_bottles(msg_to_objects(msg)), msg
+        return RelocationProblem.from_bottles(msg_to_objects(msg), self._action_cost), msg
 
     def _params(self, goal: TrainPlanner.Goal) -> TrainingParams:
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
@@ -197,7 +198,8 @@ class TaskPlannerNode(Node):
         def on_solved(exact: AStarResult) -> None:
             fill_optimum(result, exact)
             notes[0] = scene_notes(problem, oracle)
-            self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight} ({oracle.calls} "
+            cost = f" cost {exact.total_cost}" if exact.total_cost is not None else ""
+            self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight}{cost} ({oracle.calls} "
                                    f"planner calls; {service.summary()}){'; ' * bool(notes[0])}{notes[0]}")
             fb.phase = "training"
 
@@ -226,7 +228,8 @@ class TaskPlannerNode(Node):
         fb.phase = "executing"  # then each check and re-plan (_run)
         self._run(goal_handle, fb, result, scene, oracle, params, until, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
-            else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
+            else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned"),
+            learned_cost=r.total_cost, optimal_cost=optimum.total_cost))
         return notes[0]
 
     def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
@@ -267,7 +270,8 @@ class TaskPlannerNode(Node):
                       closed_loop=self.p("closed_loop"), cancelled=lambda: goal_handle.is_cancel_requested,
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen,
-                      retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until)
+                      retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until,
+                      action_cost=self._action_cost)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         publish(out, running=False)
 

@@ -1,10 +1,11 @@
 """motion_planner node: a thin ROS 2 shell over stpik_motion_planner.service.MotionPlannerService (paper Sect. 4.1).
 
 - service `~/plan_feasibility` (PlanFeasibility): Eq. 11's answer g_U / g_O / g_T for (object, removed set),
-  with the home -> grasp trajectory unless the request asks for the label only, and the objects the pick comes near
-  (`near_ids`); with `certify`, the certification of the whole relocation (docs/motion_planner.md, "Lazy
-  certification"); a bad request answers ok=false with the reason, the node keeps serving. Served by its own
-  executor thread (SideNode), not the main executor.
+  with the home -> grasp trajectory unless the request asks for the label only, the action a feasible answer is for
+  (`action`: side_grasp or top_grasp) and the objects the pick comes near (`near_ids`); with `certify`, the
+  certification of the whole relocation (docs/motion_planner.md, "Lazy certification"); a bad request answers
+  ok=false with the reason, the node keeps serving. Served by its own executor thread (SideNode), not the main
+  executor.
 - action `~/relocate` (RelocateObject): plan the pick, stream joint velocities at 100 Hz with feedback from the
   joint states, close the gripper, plan and stream the carry to the next slot of the bottom shelf, release,
   retreat, plan and stream the way home (service.py, streaming.py). Feedback by phase; cancel stops the arm; a
@@ -213,7 +214,7 @@ class MotionPlannerNode(Node):
             res.message = "lanes only"
             return res
         res.label, res.planning_time = int(ans.label), float(ans.planning_time)
-        res.attempts, res.message = int(ans.attempts), ans.message
+        res.attempts, res.message, res.action = int(ans.attempts), ans.message, ans.action
         if not req.label_only:  # training asks for the label only; execution for the trajectory too
             res.trajectory = trajectory_to_msg(ans.trajectory)
         res.blockers = blockers_to_msgs(ans.blockers)

@@ -28,8 +28,8 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
-from qtree_task_planner.problem import ProblemError, RelocationProblem
-from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
+from qtree_task_planner.problem import ActionCosts, ProblemError, RelocationProblem
+from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot, pick_action
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT, Footprint, support_height
 
@@ -274,11 +274,14 @@ def _outer_radius(f: Footprint) -> float:
 
 
 def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Iterable[str],
-                      tolerances: Tolerances = Tolerances()) -> RemainingProblem:
+                      tolerances: Tolerances = Tolerances(), action_cost: ActionCosts | None = None
+                      ) -> RemainingProblem:
     """The retrieval problem left in `perceived_scene`: objects resting on the top shelf (at their perceived poses,
     newly seen ones included with their perceived weight) are in; relocated ones and anything else off the top
-    shelf or unseen are out. No problem (reason given) when the target is unseen, off the shelf, or already on the
-    bottom shelf (`target_retrieved`; also when it is in `relocated` and not seen: the bottom shelf out of view)."""
+    shelf or unseen are out. With `action_cost`, each obstacle costs its weight times the factor of the pick its pose
+    takes (a tipped one: top_grasp; problem.RelocationProblem.with_actions). No problem (reason given) when the target
+    is unseen, off the shelf, or already on the bottom shelf (`target_retrieved`; also when it is in `relocated` and
+    not seen: the bottom shelf out of view)."""
     relocated, tol = tuple(relocated), tolerances
     known = set(scenario.ids)
     top = {oid: o for oid, o in perceived_scene.items() if board_of(o, scenario, tol) == "top"}
@@ -307,6 +310,8 @@ def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Ite
         problem = RelocationProblem.from_bottles(bottles)
     except ProblemError as e:
         return replace(base, bottles=bottles, reason=f"the perceived scene is not a problem: {e}")
+    if action_cost is not None:
+        problem = problem.with_actions({b.id: pick_action(b.id in base.tipped) for b in bottles}, action_cost)
     return replace(base, problem=problem, bottles=bottles)
 
 
@@ -435,7 +440,8 @@ class ClosedLoopExecutor:
     slots. slot_of(problem) -> the slot index the next relocation goes to (default: the motion planner's rule,
     relocation_common.feasibility.destination_slot: slot len(removed), the one its certified answer planned the
     carry to, when it is free, else the first free one). on_step(step) after each relocation and
-    on_replan(record) after each re-plan (feedback).
+    on_replan(record) after each re-plan (feedback). action_cost: the remaining problems' obstacles costed by the
+    pick their poses take (remaining_problem), else their weights.
     bottom_seen False: perception does not see the bottom shelf (verify_relocation); a relocated bottle that is
     not seen counts as relocated. perceive() raising ValueError, TimeoutError or RuntimeError (no scene) ends the
     run with its message.
@@ -447,7 +453,8 @@ class ClosedLoopExecutor:
                  on_step: Callable[[Step], None] = lambda step: None,
                  on_replan: Callable[[ReplanRecord], None] = lambda record: None,
                  slot_of: Callable[[RemainingProblem], int] | None = None, bottom_seen: bool = True,
-                 on_progress: Callable[[ExecutionResult], None] = lambda result: None) -> None:
+                 on_progress: Callable[[ExecutionResult], None] = lambda result: None,
+                 action_cost: ActionCosts | None = None) -> None:
         if max_replans < 0 or max_attempts < 1:
             raise ValueError(f"need max_replans >= 0 and max_attempts >= 1, got {max_replans}, {max_attempts}")
         self.scenario, self.relocate, self.perceive, self.replan = scenario, relocate, perceive, replan
@@ -456,6 +463,7 @@ class ClosedLoopExecutor:
         self.slot_of = slot_of
         self.bottom_seen = bottom_seen
         self.on_progress = on_progress
+        self.action_cost = action_cost
 
     def run(self, sequence: Iterable[str], scene: Scene | None = None) -> ExecutionResult:
         """Relocate `sequence` (obstacles, then the target) starting from `scene` (default: perceive()); the
@@ -544,7 +552,7 @@ class ClosedLoopExecutor:
         A relocated bottle seen back on the top shelf is no longer relocated (the motion planner must see it)."""
         out.relocated[:] = [o for o in out.relocated
                             if o not in scene or board_of(scene[o], self.scenario, self.tol) != "top"]
-        rp = remaining_problem(self.scenario, scene, out.relocated, self.tol)
+        rp = remaining_problem(self.scenario, scene, out.relocated, self.tol, self.action_cost)
         self._top |= {b.id for b in rp.bottles}  # an object off the top shelf is sent as removed only if it was on it
         # ... in the feasibility questions too: an unlisted object never seen on the top shelf (perception's glimpse
         # of the carried bottle or the hand, named anew) is one the motion planner never had, and it refuses the

@@ -10,6 +10,7 @@ from typing import Callable
 
 from qtree_task_planner.executive.keeper import check_checkpoint_path
 from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.problem import ActionCosts
 from relocation_common.config import ParameterError
 
 SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
@@ -22,6 +23,7 @@ POSITIVE_SECONDS = (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_t
 def check_node_parameters(p: Callable[[str], object]) -> None:
     """ParameterError naming the first unusable parameter; p(name) is the parameter's value."""
     TrainingParams.from_dict({f: p(f) for f in TrainingParams.fields()})
+    ActionCosts.from_parameters(p)
     for name, lo in POSITIVE_SECONDS:
         v = p(name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
