@@ -600,7 +600,7 @@ class ClosedLoopExecutor:
         out.pushes.append(got)
         self.on_push(got)
         self.on_progress(out)
-        return after, self._problem(after, out), got.line()
+        return after, self._problem(after, out), got.what()
 
     @staticmethod
     def _tried(out: ExecutionResult, why: str | None) -> str:

@@ -54,12 +54,16 @@ class PushRecord:
     seen: tuple[float, float] | None
     refused: tuple[str, ...]
 
-    def line(self) -> str:
-        """'pushed X out of T's lanes (predicted end (x, y)); re-planned' (or why the push failed)."""
-        what = f"pushed {self.object_id} out of {self.clear_for}'s lanes (predicted end ({self.end[0]:.3f}, " \
+    def what(self) -> str:
+        """'pushed X out of T's lanes (predicted end (x, y))', or 'push of X out of T's lanes failed: why'."""
+        if not self.ok:
+            return f"push of {self.object_id} out of {self.clear_for}'s lanes failed: {self.message}"
+        return f"pushed {self.object_id} out of {self.clear_for}'s lanes (predicted end ({self.end[0]:.3f}, " \
                f"{self.end[1]:.3f}))"
-        return f"{what}; re-planned" if self.ok else f"push of {self.object_id} out of {self.clear_for}'s lanes " \
-            f"failed: {self.message}; re-planned"
+
+    def line(self) -> str:
+        """One line for the log and the report: `what`, then '; re-planned'."""
+        return f"{self.what()}; re-planned"
 
     def to_dict(self) -> dict[str, Any]:
         """An entry of the result's (and report.json's) `pushes`."""
@@ -80,20 +84,29 @@ def candidates(needs: Sequence[tuple[str, str]], weights: Mapping[str, float], f
     return sorted(((c, p, f) for (p, f), c in out.items()), key=lambda e: e[0])
 
 
-class Pusher:
-    """Pushes for the closed loop (module doc). ask(object, clear_for, removed) -> PushAnswer; execute(object,
-    clear_for, removed) -> (ok, message); needs(rp) -> the proof's pairs "X needs T moved" of a remaining problem
-    with no sequence (replan.blocking_pairs); factor(): the push factor of the action costs, read when a push is
-    first weighed; max_pushes: pushes executed per goal at most."""
+@dataclass(frozen=True)
+class PushActions:
+    """What the node gives for pushes: ask(object, clear_for, removed) -> PushAnswer (the push question),
+    execute(object, clear_for, removed) -> (ok, message) (the push executed), factor() -> the push factor of the
+    action costs (read when a push is first weighed), max_pushes (pushes executed per goal at most)."""
 
-    def __init__(self, ask: Callable[[str, str, frozenset[str]], PushAnswer],
-                 execute: Callable[[str, str, list[str]], tuple[bool, str]],
-                 needs: Callable[[Any], Sequence[tuple[str, str]]], factor: Callable[[], float],
-                 max_pushes: int) -> None:
-        if isinstance(max_pushes, bool) or not isinstance(max_pushes, int) or max_pushes < 0:
-            raise ValueError(f"max_pushes must be an integer >= 0, got {max_pushes!r}")
-        self.ask, self.execute, self.needs, self.factor = ask, execute, needs, factor
-        self.max_pushes = max_pushes
+    ask: Callable[[str, str, frozenset[str]], PushAnswer]
+    execute: Callable[[str, str, list[str]], tuple[bool, str]]
+    factor: Callable[[], float]
+    max_pushes: int
+
+    def __post_init__(self) -> None:
+        if isinstance(self.max_pushes, bool) or not isinstance(self.max_pushes, int) or self.max_pushes < 0:
+            raise ValueError(f"max_pushes must be an integer >= 0, got {self.max_pushes!r}")
+
+
+class Pusher:
+    """Pushes for the closed loop (module doc) through `actions`; needs(rp) -> the proof's pairs "X needs T moved"
+    of a remaining problem with no sequence (replan.blocking_pairs)."""
+
+    def __init__(self, actions: PushActions, needs: Callable[[Any], Sequence[tuple[str, str]]]) -> None:
+        self.ask, self.execute, self.factor = actions.ask, actions.execute, actions.factor
+        self.max_pushes, self.needs = actions.max_pushes, needs
         self.executed = 0
         self._failed: set[tuple[str, str]] = set()  # executed, failed, the object left where it was
 
@@ -106,8 +119,12 @@ class Pusher:
         pairs = self.needs(rp)
         if not pairs:
             return "the proof names no pair \"X needs T moved\" that a push could open"
+        try:
+            factor = self.factor()
+        except ValueError as e:  # relocation_common.config.ParameterError
+            return f"no push factor: {e}"
         refused = []
-        for cost, pushed, clear_for in candidates(pairs, weights, self.factor()):
+        for cost, pushed, clear_for in candidates(pairs, weights, factor):
             if (pushed, clear_for) in self._failed:
                 refused.append(f"{pushed} out of {clear_for}'s lanes (failed before)")
                 continue

@@ -13,6 +13,8 @@ from qtree_task_planner.learning.params import TrainingParams
 from relocation_common.config import ParameterError
 
 SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
+PUSH_FACTOR = "action_cost.push"  # the push factor of the action costs (a push of an object costs its weight times
+# it; config/task_planner.yaml, `action_cost`), read by `push_factor` when a push is first weighed
 POSITIVE_SECONDS = (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_timeout", 1e-3),
                     ("feasibility_margin", 0.0), ("planner_wait", 0.0), ("relocate_timeout", 1e-3),
                     ("relocate_silence", 1e-3), ("scene_after_wait", 0.0), ("scene_outage_wait", 0.0))  # (name,
@@ -37,7 +39,18 @@ def check_node_parameters(p: Callable[[str], object]) -> None:
     every = p("checkpoint_every")
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
         raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
+    pushes = p("max_pushes")
+    if isinstance(pushes, bool) or not isinstance(pushes, int) or pushes < 0:
+        raise ParameterError(f"max_pushes must be an integer >= 0 (pushes per goal; 0: none), got {pushes!r}")
     path = p("checkpoint_path")
     if not isinstance(path, str):
         raise ParameterError(f"checkpoint_path must be a string (a file name, or empty), got {path!r}")
     check_checkpoint_path(path)
+
+
+def push_factor(p: Callable[[str], object]) -> float:
+    """The push factor of the action costs (PUSH_FACTOR); ParameterError when it is not a positive number."""
+    v = p(PUSH_FACTOR)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise ParameterError(f"{PUSH_FACTOR} must be a positive number (a push costs the weight times it), got {v!r}")
+    return float(v)
