@@ -55,7 +55,13 @@ from qtree_task_planner.executive.retrieval import (
     solve_then_train,
     training_outcome,
 )
-from qtree_task_planner.executive.settings import PUSH_FACTOR, SCENE_SOURCES, check_node_parameters, push_factor
+from qtree_task_planner.executive.settings import (
+    PUSH_FACTOR,
+    SCENE_SOURCES,
+    check_node_parameters,
+    push_factor,
+    pushes_on,
+)
 from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.q_tree import QTree
@@ -234,8 +240,8 @@ class TaskPlannerNode(Node):
         return notes[0]
 
     def _pushes(self) -> bool:
-        """Whether the execution pushes when no pick sequence remains (closed loop, max_pushes > 0)."""
-        return bool(self.p("closed_loop")) and self.p("max_pushes") > 0
+        """Whether the execution pushes when no pick sequence remains (settings.pushes_on)."""
+        return pushes_on(self.p)
 
     def _push_factor(self) -> float:
         """The push factor of the action costs (settings.push_factor); ParameterError when this node has none."""

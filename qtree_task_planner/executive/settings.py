@@ -54,3 +54,10 @@ def push_factor(p: Callable[[str], object]) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
         raise ParameterError(f"{PUSH_FACTOR} must be a positive number (a push costs the weight times it), got {v!r}")
     return float(v)
+
+
+def pushes_on(p: Callable[[str], object]) -> bool:
+    """Whether an execution pushes when no pick sequence remains: closed loop only (an open-loop run never does),
+    and max_pushes > 0."""
+    pushes = p("max_pushes")
+    return bool(p("closed_loop")) and isinstance(pushes, int) and pushes > 0
