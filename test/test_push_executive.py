@@ -230,3 +230,18 @@ def test_the_relocator_sends_the_push_as_a_relocate_object_goal():
     assert relocator.relocate("c", [], cancelled=lambda: False) == (True, "pushed")
     assert [(g.object_id, list(g.removed_ids), g.action, g.clear_for) for g in goals] == [
         ("b", ["a"], "push", "T"), ("c", [], "", "")]
+
+
+def test_the_demo_report_lists_each_push_and_a_first_plan_without_sequence_executes_nothing_else():
+    """report.json's `pushes` (the execution's) and the summary's lines; chosen_sequence of no sequence at all."""
+    from qtree_task_planner.executive.retrieval import chosen_sequence
+    from relocation_app import run_report
+    out = run(PushShelf(), [])
+    report = {"final_scene": {}, "learned_sequence": None, "disturbances": [], "replans": out.to_dict()["replans"],
+              "pushes": out.to_dict()["pushes"], "respawns": [], "end": {"kind": "success", "exit_code": 0},
+              "success": True, "message": out.message, "wall_time_s": 1.0, "out": "out"}
+    lines = run_report.summary(report)
+    assert "pushed b out of T's lanes (predicted end (0.550, 0.100)); re-planned" in lines
+    assert "re-plan: pushed b out of T's lanes (predicted end (0.550, 0.100)) -> T (0.00)" in lines, lines
+    assert out.message == "target T retrieved after 0 relocations, 1 push and 2 re-plans"
+    assert chosen_sequence(None, None, None, None, execute_optimum=False, execute_learned=False) == ([], "")

@@ -544,10 +544,12 @@ class ClosedLoopExecutor:
         rp = replace(rp, gone=frozenset(o for o in rp.gone if o in self.scenario.ids or o in self._top))
         if rp.target_retrieved:
             out.success = True
+            k, n = len(out.pushes), len(out.replans)
             out.message = (f"target {self.scenario.target_id} retrieved after {len(out.relocated) - 1} relocations"
-                           + (f" and {len(out.replans)} re-plan{'s' * (len(out.replans) != 1)}" if out.replans
-                              else "") + (" (it left the top shelf; its place on the bottom shelf was not seen: "
-                                          "unverified)" if self.scenario.target_id in out.unverified else ""))
+                           + (f", {k} push{'es' * (k != 1)}" if k else "")
+                           + (f" and {n} re-plan{'s' * (n != 1)}" if n else "")
+                           + (" (it left the top shelf; its place on the bottom shelf was not seen: unverified)"
+                              if self.scenario.target_id in out.unverified else ""))
             raise _Done
         if rp.problem is None:
             raise GiveUp(rp.reason)
