@@ -245,3 +245,12 @@ def test_the_demo_report_lists_each_push_and_a_first_plan_without_sequence_execu
     assert "re-plan: pushed b out of T's lanes (predicted end (0.550, 0.100)) -> T (0.00)" in lines, lines
     assert out.message == "target T retrieved after 0 relocations, 1 push and 2 re-plans"
     assert chosen_sequence(None, None, None, None, execute_optimum=False, execute_learned=False) == ([], "")
+
+
+def test_a_push_done_without_effect_is_not_asked_again():
+    """The motion planner says "pushed" and the next scene shows b where it was: that push is not asked again (the
+    loop went on to T's push instead of spending max_pushes on the same one)."""
+    shelf = PushShelf(ineffective=True)
+    shelf.do_push = lambda obj, clear_for, removed: (shelf.pushes.append((obj, clear_for)), (True, "pushed"))[1]
+    out = run(shelf, [], max_pushes=3)
+    assert not out.success and shelf.pushes == [("b", "T"), ("T", "b")], shelf.pushes

@@ -597,7 +597,7 @@ class ClosedLoopExecutor:
         now = after.get(got.object_id)
         seen = (now.x, now.y) if now is not None and board_of(now, self.scenario, self.tol) == "top" else None
         got = replace(got, seen=seen)
-        if not got.ok and _stayed(got.object_id, scene, after, self.tol):
+        if _stayed(got.object_id, scene, after, self.tol):  # failed, or "done" and nothing moved: not asked again
             self.pusher.failed(got.object_id, got.clear_for)
         out.pushes.append(got)
         self.on_push(got)

@@ -8,7 +8,7 @@ candidates are asked cheapest first, a push of an object costing its weight time
 of an action, Eq. 8, with the factor of the action kind; config/task_planner.yaml). The first feasible push is
 executed (RelocateObject, action "push"); the closed loop then waits for the next scene and re-plans from what the
 world shows (the pushed object where it really ended), as after a relocation. At most `max_pushes` pushes are
-executed per goal; a push that failed with the object where it was is not asked again.
+executed per goal; a push that left the object where it was (failed, or done without effect) is not asked again.
 
 Nothing here talks to ROS: the node supplies `ask` (ros_clients.ServiceOracle.push: PlanFeasibility, action
 "push") and `execute` (ros_clients.Relocator.push: RelocateObject, action "push").
@@ -108,7 +108,7 @@ class Pusher:
         self.ask, self.execute, self.factor = actions.ask, actions.execute, actions.factor
         self.max_pushes, self.needs = actions.max_pushes, needs
         self.executed = 0
-        self._failed: set[tuple[str, str]] = set()  # executed, failed, the object left where it was
+        self._failed: set[tuple[str, str]] = set()  # executed, the object left where it was
 
     def push(self, rp: Any, weights: Mapping[str, float], removed: frozenset[str]) -> PushRecord | str:
         """Ask the candidates of the remaining problem `rp` (its pairs from `needs`; `weights`: each object's
@@ -138,5 +138,5 @@ class Pusher:
         return "every push refused: " + "; ".join(refused)
 
     def failed(self, pushed: str, clear_for: str) -> None:
-        """A push executed without effect (the object where it was): not asked again in this goal."""
+        """A push executed without effect (the object where it was, failed or not): not asked again in this goal."""
         self._failed.add((pushed, clear_for))
