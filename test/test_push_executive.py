@@ -254,3 +254,14 @@ def test_a_push_done_without_effect_is_not_asked_again():
     shelf.do_push = lambda obj, clear_for, removed: (shelf.pushes.append((obj, clear_for)), (True, "pushed"))[1]
     out = run(shelf, [], max_pushes=3)
     assert not out.success and shelf.pushes == [("b", "T"), ("T", "b")], shelf.pushes
+
+
+def test_a_push_stopped_without_the_motion_planner_ends_the_run():
+    """As a relocation's: a push that stopped with no motion planner to recover with (its words, STOPPED) ends the
+    run with that reason instead of re-planning over an arm in an unknown state."""
+    shelf = PushShelf()
+    shelf.do_push = lambda obj, clear_for, removed: (False, "the motion planner went away (relocate action server "
+                                                            "gone)")
+    out = run(shelf, [])
+    assert not out.success and out.message == "pushing 'b' failed: the motion planner went away (relocate action " \
+        "server gone)", out.message

@@ -246,8 +246,17 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
                         raise GiveUp(f"re-plan failed {REPLAN_TRIES} times without a feasibility answer: {e}") from None
             raise AssertionError("unreachable")
 
+        def push(object_id: str, clear_for: str, removed: list[str]) -> tuple[bool, str]:
+            assert pushes is not None
+            before_each()
+            ok, message = pushes.execute(object_id, clear_for, removed)
+            if not ok and any(w in message for w in STOPPED):  # as a relocation's
+                raise GiveUp(f"pushing {object_id!r} failed: {message}")
+            return ok, message
+
         pusher = None if pushes is None else Pusher(
-            dataclasses.replace(pushes, ask=through(pushes.ask, until_planner)), lambda rp: blocking_pairs(rp, cache))
+            dataclasses.replace(pushes, ask=through(pushes.ask, until_planner), execute=push),
+            lambda rp: blocking_pairs(rp, cache))
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen, on_progress=on_progress, pusher=pusher,
