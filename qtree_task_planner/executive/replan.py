@@ -29,7 +29,7 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp
 from qtree_task_planner.search import astar
-from qtree_task_planner.search.exact import no_sequence
+from qtree_task_planner.search.exact import Claim, blocking_needs, no_sequence
 from relocation_common.feasibility import (
     FeasibilityAnswer,
     FeasibilityOracle,
@@ -39,6 +39,7 @@ from relocation_common.feasibility import (
     ask_many,
     certifies,
     certify_many,
+    claims,
     in_flight,
     is_pick,
 )
@@ -292,6 +293,25 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
     return (f"{t} cannot be reached: no feasible relocation sequence with {action_set(rp.problem.action_set)} over the "
             f"{n} obstacle{'s' * (n != 1)} on the top shelf ({cache.calls - calls0} planner calls){because}"
             f"{grasp_reason({o: m for o, m in cannot.items() if o != t})}")
+
+
+def blocking_pairs(rp: RemainingProblem, cache: GeometryCache) -> tuple[tuple[str, str], ...]:
+    """The pairs (X, Y) "X needs Y moved" of the blocking cycle a failed re-plan's proof names (exact.blocking_needs
+    over the same certain claims at the problem's start: the planner's lane blockers and the answers about each
+    object with nothing more removed, from the cache: no planner call beyond the lane screen); () when the proof
+    has no such cycle. What a push can open (qtree_task_planner.executive.push)."""
+    if rp.problem is None:
+        return ()
+    on_shelf = frozenset(rp.problem.ids)
+    claimed: dict[str, list[Claim]] = {}
+    for o, sets in (RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset()) or {}).items():
+        if sets == () or claims(sets):  # as astar.Knowledge.lanes_known: () = no lane at all
+            claimed.setdefault(o, []).append((frozenset(), tuple(b.objects for b in sets)))
+    for o in rp.problem.ids:
+        a = cache.table.get(cache.key(o, on_shelf))
+        if a is not None and Label(a.label) == Label.UNFEASIBLE and claims(a.blockers):
+            claimed.setdefault(o, []).append((frozenset(), tuple(b.objects for b in a.blockers)))
+    return tuple((x, y) for x, stuck in blocking_needs(rp.problem.target, claimed) for y in stuck)
 
 
 def not_graspable(rp: RemainingProblem, cache: GeometryCache, lanes: Lanes | None) -> dict[str, str]:

@@ -28,7 +28,8 @@ from qtree_task_planner.executive.closed_loop import (
     remaining_problem,
 )
 from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
-from qtree_task_planner.executive.replan import GeometryCache, relearn, replan
+from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushRecord
+from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, relearn, replan
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
@@ -114,14 +115,16 @@ def proven_none(params: TrainingParams, planner_calls: int) -> TrainingResult:
     return TrainingResult(None, None, 0, False, 0, 0, planner_calls, None, None, False, 0, 0, [], params)
 
 
-def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: bool) -> tuple[bool, str] | None:
+def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: bool, push: bool = False
+                     ) -> tuple[bool, str] | None:
     """(success, message) when the goal ends after training, None when it goes on to execute. Cancelled; no
-    sequence at all (the exact solver's one-line reason, exact.why_none); not executed (trained; or training found
-    none within E_max while the proven optimum exists: said, with the optimum). Training without a sequence but with
-    an optimum goes on: the optimum is executed (chosen_sequence says so)."""
+    sequence at all (the exact solver's one-line reason, exact.why_none; `push`: the closed loop pushes, so an
+    execution goes on with no sequence: its first re-plan proves the same and pushes); not executed (trained; or
+    training found none within E_max while the proven optimum exists: said, with the optimum). Training without a
+    sequence but with an optimum goes on: the optimum is executed (chosen_sequence says so)."""
     if trained.cancelled:
         return False, "cancelled"
-    if not (trained.found or optimum.found):
+    if not (trained.found or optimum.found) and not (push and execute):
         return False, f"the target cannot be retrieved: {optimum.reason or 'no sequence'}"
     if execute:
         return None
@@ -183,6 +186,8 @@ def chosen_sequence(learned: Sequence[str] | None, learned_weight: float | None,
     optimal_cost; Eq. 8's weight when they are not given: every action factor 1) equals the proven optimum's, or when
     asked for (execute_learned); else the optimum, saying so with both weights (and costs, when given)."""
     learned_seq, optimum_seq = list(learned or ()), list(optimum or ())
+    if not (learned_seq or optimum_seq):  # none at all: the closed loop starts with a re-plan (and pushes)
+        return [], ""
     if execute_optimum or not learned_seq:
         return optimum_seq, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
     mine = learned_cost if learned_cost is not None else learned_weight
@@ -206,7 +211,8 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True,
             retrain: TrainingParams | None = None, until_planner: UntilPlanner | None = None,
             on_progress: Callable[[ExecutionResult], None] = lambda out: None,
-            action_cost: ActionCosts | None = None) -> ExecutionResult:
+            action_cost: ActionCosts | None = None, pushes: PushActions | None = None,
+            on_push: Callable[[PushRecord], None] = lambda p: None) -> ExecutionResult:
     """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
     checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
     with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
@@ -216,7 +222,9 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     through feasibility outages as training does (outage.until_available: a motion planner that died is waited for,
     planner_wait), else a question without an answer is asked again REPLAN_TRIES times. on_progress: the execution
     so far, after each relocation and re-plan (closed loop). action_cost: the re-plans' costs (the factor of the pick
-    each object's pose takes: closed_loop.remaining_problem), else their weights."""
+    each object's pose takes: closed_loop.remaining_problem), else their weights. pushes: when a re-plan proves no
+    sequence, a push out of its blocking cycle (executive.push; closed loop only: an open-loop run never pushes); an
+    empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
         cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry(), oracle.certified)
@@ -248,10 +256,21 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
                         raise GiveUp(f"re-plan failed {REPLAN_TRIES} times without a feasibility answer: {e}") from None
             raise AssertionError("unreachable")
 
+        def push(object_id: str, clear_for: str, removed: list[str]) -> tuple[bool, str]:
+            assert pushes is not None
+            before_each()
+            ok, message = pushes.execute(object_id, clear_for, removed)
+            if not ok and any(w in message for w in STOPPED):  # as a relocation's
+                raise GiveUp(f"pushing {object_id!r} failed: {message}")
+            return ok, message
+
+        pusher = None if pushes is None else Pusher(
+            dataclasses.replace(pushes, ask=through(pushes.ask, until_planner), execute=push),
+            lambda rp: blocking_pairs(rp, cache))
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen, on_progress=on_progress,
-                                  action_cost=action_cost).run(sequence, scene)
+                                  action_cost=action_cost, pusher=pusher, on_push=on_push).run(sequence, scene)
     why = check_capacity(sequence, len(free_slots(scenario, scene)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")
@@ -266,6 +285,20 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each)
     return ExecutionResult(ok, message + (f" (unverified: {', '.join(unverified)})" if ok and unverified else ""),
                            relocated, unverified=unverified)
+
+
+def through(ask: Callable[[str, str, frozenset[str]], PushAnswer], until_planner: UntilPlanner | None
+            ) -> Callable[[str, str, frozenset[str]], PushAnswer]:
+    """The push question through feasibility outages as a re-plan's (`until_planner`); a planner gone, or no
+    answer, ends the run with the reason (GiveUp)."""
+    def asked(object_id: str, clear_for: str, removed: frozenset[str]) -> PushAnswer:
+        def once() -> PushAnswer:
+            return ask(object_id, clear_for, removed)
+        try:
+            return once() if until_planner is None else until_planner(once)
+        except (PlannerGone, PlannerUnavailable) as e:
+            raise GiveUp(f"push question about {object_id!r} stopped: {e}") from None
+    return asked
 
 
 REPLAN_TRIES = 3  # re-plans cut short by a missing feasibility answer before the closed loop gives up

@@ -39,7 +39,17 @@ def check_node_parameters(p: Callable[[str], object]) -> None:
     every = p("checkpoint_every")
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
         raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
+    pushes = p("max_pushes")
+    if isinstance(pushes, bool) or not isinstance(pushes, int) or pushes < 0:
+        raise ParameterError(f"max_pushes must be an integer >= 0 (pushes per goal; 0: none), got {pushes!r}")
     path = p("checkpoint_path")
     if not isinstance(path, str):
         raise ParameterError(f"checkpoint_path must be a string (a file name, or empty), got {path!r}")
     check_checkpoint_path(path)
+
+
+def pushes_on(p: Callable[[str], object]) -> bool:
+    """Whether an execution pushes when no pick sequence remains: closed loop only (an open-loop run never does),
+    and max_pushes > 0."""
+    pushes = p("max_pushes")
+    return bool(p("closed_loop")) and isinstance(pushes, int) and pushes > 0

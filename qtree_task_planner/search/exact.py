@@ -122,9 +122,40 @@ def _cycle(target: str, lanes: Mapping[str, Sequence[Claim]], limit: int = 8) ->
     object that can never leave before the target, because each of its lanes needs the target or another such
     object moved, or it has no lane ('' otherwise; at most `limit` explanations). Objects without a claim count as
     able to leave (optimistic)."""
+    walk = _cycle_walk(target, lanes)
+    if walk is None:
+        return ""
+    first, free, by_lane, behind = walk
+    parts = [f"lane {_set(lane)}: {_needs(x, first, free)}" for lane, x in by_lane]
+    parts += [_needs(y, first, free) for y in behind]
+    more = f"; {len(parts) - limit} more" if len(parts) > limit else ""
+    return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
+        "; ".join(parts[:limit]) + more + ")"
+
+
+def blocking_needs(target: str, lanes: Mapping[str, Sequence[Claim]]) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """The blocking cycle `_cycle` names, as data: (x, the objects x needs moved) for each object explained there
+    ("x needs T moved", "x needs one of {a, b} moved"), in the line's order (an object with no lane at all
+    left out); () when there is no cycle. What a push can open (qtree_task_planner.executive.push)."""
+    walk = _cycle_walk(target, lanes)
+    if walk is None:
+        return ()
+    first, free, by_lane, behind = walk
+    out: dict[str, tuple[str, ...]] = {}
+    for x in [x for _, x in by_lane] + behind:
+        out.setdefault(x, tuple(_stuck(x, first, free)))
+    return tuple((x, stuck) for x, stuck in out.items() if stuck)
+
+
+def _cycle_walk(target: str, lanes: Mapping[str, Sequence[Claim]]
+                ) -> tuple[dict[str, tuple[frozenset[str], ...]], set[str], list[tuple[frozenset[str], str]],
+                           list[str]] | None:
+    """The blocking cycle of `_cycle` (None: there is none): each object's first lanes (claimed at the empty set),
+    the objects that can leave, (lane of the target, the object of it that cannot leave) for each lane, then every
+    object stuck behind those, each once."""
     first = {o: v[0] for o, v in ((o, [ls for s, ls in c if not s]) for o, c in lanes.items()) if v}
     if not first.get(target):
-        return ""
+        return None
     free = {m for ls in first.values() for lane in ls for m in lane if m not in first} - {target}
     grown = True
     while grown:  # the objects that can leave, grown to a fixpoint
@@ -134,30 +165,34 @@ def _cycle(target: str, lanes: Mapping[str, Sequence[Claim]], limit: int = 8) ->
                 free.add(o)
                 grown = True
     if any(set(lane) <= free for lane in first[target]):
-        return ""
-    parts, told = [], {target}
+        return None
+    by_lane, told = [], {target}
     for lane in sorted({frozenset(lane) for lane in first[target]}, key=lambda ls: (len(ls), sorted(ls))):
         x = next(m for m in sorted(lane) if m not in free)
-        parts.append(f"lane {_set(lane)}: {_needs(x, first, free)}")
+        by_lane.append((lane, x))
         told.add(x)
+    behind = []
     todo = sorted({m for lane in first[target] for m in lane if m not in free})
     seen = set(todo) | {target}
     while todo:  # every object stuck behind those, each explained once
         y = todo.pop(0)
         if y not in told:
-            parts.append(_needs(y, first, free))
+            behind.append(y)
             told.add(y)
         for m in sorted({m for lane in first[y] for m in lane if m not in free} - seen):
             seen.add(m)
             todo.append(m)
-    more = f"; {len(parts) - limit} more" if len(parts) > limit else ""
-    return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
-        "; ".join(parts[:limit]) + more + ")"
+    return first, free, by_lane, behind
+
+
+def _stuck(x: str, first: Mapping[str, tuple[frozenset[str], ...]], free: set[str]) -> list[str]:
+    """The objects in x's lanes that cannot leave first (sorted)."""
+    return sorted({m for lane in first[x] for m in lane if m not in free})
 
 
 def _needs(x: str, first: Mapping[str, tuple[frozenset[str], ...]], free: set[str]) -> str:
     """'x needs T moved', 'x needs one of {a, b} moved' (the objects stuck in its lanes) or 'x has no lane'."""
-    stuck = sorted({m for lane in first[x] for m in lane if m not in free})
+    stuck = _stuck(x, first, free)
     if not first[x]:
         return f"{x} has no lane"
     return f"{x} needs {stuck[0]} moved" if len(stuck) == 1 else f"{x} needs one of {_set(stuck)} moved"
