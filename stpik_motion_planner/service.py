@@ -121,7 +121,7 @@ class MotionPlannerService:
         bottles = list(perceived)
         bases = [(b.id, float(c[0]), float(c[1]), float(c[2])) for b, c in ((b, b.base()) for b in bottles)]
         check_scene(self.base, bases, source, unlisted={b.id for b in bottles if not b.listed})
-        self.scene.update(bases)
+        self.scene.update(bottles)
         counted = stamp is None or stamp != self._scene_stamp
         self._scene_stamp = stamp
         m = merge_perceived(self.base.shelf, self.bottles, bottles, self.planner.params.flat_tilt, self._held,
@@ -212,9 +212,9 @@ class MotionPlannerService:
         progress = Progress()
         try:
             arm.wait_for_state(STATE_WAIT)
-            before = dict(self.scene.seen)
+            before = {i: b.point for i, b in self.scene.seen.items()}
             self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated, len(removed_ids))
-            self._running = running = Running(progress, self._slot, [(b.id, b.x, b.y, b.z) for b in before.values()])
+            self._running = running = Running(progress, self._slot, [(i, *p) for i, p in before.items()])
 
             def on_change() -> None:  # a motion about to start, or the release
                 if progress.released:
@@ -290,7 +290,7 @@ class MotionPlannerService:
         note = f"the motion planner restarted during this relocation ({what})"
         if not run.progress.released:
             return Outcome("aborted", f"interrupted: {note}")
-        before = {i: goal_check.SeenBottle(i, x, y, z) for i, x, y, z in run.before}
+        before = {i: (x, y, z) for i, x, y, z in run.before}
         success, message = goal_check.outcome(self.scene, before, self.base, object_id, run.slot, self.checks,
                                               source, ok)
         return Outcome("succeeded" if success else "aborted", f"{message} ({note})")

@@ -30,6 +30,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from qtree_task_planner.executive.push import Pusher, PushRecord
 from qtree_task_planner.problem import ActionCosts, ProblemError, RelocationProblem
+from relocation_common import placement
 from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot, pick_action
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT, Footprint, support_height
@@ -115,13 +116,10 @@ def _support(o: SeenObject) -> float:
 
 
 def board_of(o: SeenObject, scenario: Scenario, tol: Tolerances) -> str | None:
-    """'top' or 'bottom' when the object rests on that board of the shelf (within its extent), else None."""
-    sh = scenario.shelf
-    inside = sh.x_front - o.radius <= o.x <= sh.x_back + o.radius and sh.y_min - o.radius <= o.y <= sh.y_max + o.radius
-    if not inside:
-        return None
-    s = _support(o)
-    return "top" if abs(s - sh.top_z) <= tol.board else "bottom" if abs(s - sh.bottom_z) <= tol.board else None
+    """'top' or 'bottom' when the object rests on that board of the shelf, standing or lying, else None: its
+    support within tol.board of the board, its footprint's centre over it (relocation_common.placement.board_of,
+    the motion planner's rule)."""
+    return placement.board_of(scenario.shelf, o.footprint().centre, _support(o), tol.board)
 
 
 def _at(o: SeenObject) -> str:
@@ -261,17 +259,12 @@ class RemainingProblem:
 
 
 def free_slots(scenario: Scenario, scene: Scene, tol: Tolerances = Tolerances()) -> tuple[int, ...]:
-    """Indices of the scenario's slots that no object on the bottom shelf occupies: one is taken when an object as
-    wide as it, centred on the slot at any turn (a disc of its footprint's outer radius), would overlap its footprint
-    (two radii for a standing bottle; a box or a lying bottle by its rectangle, as the scene gives its size)."""
+    """Indices of the scenario's slots that no object on the bottom shelf occupies: one is taken when the widest
+    object of the scenario, standing on the slot at any turn, would overlap an object's footprint there (a standing
+    bottle's circle; a box or a lying bottle by its rectangle, as the scene gives its size). The rule is
+    relocation_common.placement's: the motion planner's destination reads the same."""
     below = [o.footprint() for o in scene.values() if board_of(o, scenario, tol) == "bottom"]
-    return tuple(k for k, slot in enumerate(scenario.slots)
-                 if not any(f.overlaps(Footprint(slot, _outer_radius(f), ())) for f in below))
-
-
-def _outer_radius(f: Footprint) -> float:
-    """Radius of the smallest disc about the footprint's centre that holds it."""
-    return max((math.dist(f.centre, c) for c in f.corners), default=f.radius)
+    return placement.free_slots(scenario.slots, below, placement.slot_radius(scenario.objects))
 
 
 def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Iterable[str],

@@ -151,12 +151,6 @@ def placed_obstacle(o: ShelfObject, x: float, y: float, z0: float, turn: float) 
     return Obstacle(name, name, obj, centre - half, centre + half)
 
 
-def upright_radius(o: ShelfObject) -> float:
-    """Radius of the vertical cylinder about a standing object's centre that holds it at any turn about the
-    vertical: a cylinder's radius, a box's half-diagonal (a box in its slot stands turned as the hand held it)."""
-    return math.hypot(o.size[0], o.size[1]) / 2 if o.shape == "box" else o.radius
-
-
 class CollisionScene:
     """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`: (id,
     (x, y)) of objects standing on the bottom shelf (centred there; a box turned up to `placed_turn` rad from square to

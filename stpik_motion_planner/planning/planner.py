@@ -19,9 +19,10 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
+from relocation_common.placement import upright_radius
 from relocation_common.scenario import Scenario
 from stpik_motion_planner.model.blockers import lane_blockers
-from stpik_motion_planner.model.collision import Lying, ObstacleSet, upright_radius
+from stpik_motion_planner.model.collision import Lying, ObstacleSet
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, place_poses
 from stpik_motion_planner.planning import carry, home, pick
 from stpik_motion_planner.planning.context import Placed, PlanningContext
