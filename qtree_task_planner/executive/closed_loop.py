@@ -30,7 +30,6 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from qtree_task_planner.executive.push import Pusher, PushRecord
 from qtree_task_planner.problem import ActionCosts, ProblemError, RelocationProblem
-from relocation_common import placement
 from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot, pick_action
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT, Footprint, support_height
@@ -117,9 +116,9 @@ def _support(o: SeenObject) -> float:
 
 def board_of(o: SeenObject, scenario: Scenario, tol: Tolerances) -> str | None:
     """'top' or 'bottom' when the object rests on that board of the shelf, standing or lying, else None: its
-    support within tol.board of the board, its footprint's centre over it (relocation_common.placement.board_of,
-    the motion planner's rule)."""
-    return placement.board_of(scenario.shelf, o.footprint().centre, _support(o), tol.board)
+    support within tol.board of the board, its footprint's centre over it (Shelf.board_of, the motion planner's
+    rule)."""
+    return scenario.shelf.board_of(o.footprint().centre, _support(o), tol.board)
 
 
 def _at(o: SeenObject) -> str:
@@ -262,9 +261,8 @@ def free_slots(scenario: Scenario, scene: Scene, tol: Tolerances = Tolerances())
     """Indices of the scenario's slots that no object on the bottom shelf occupies: one is taken when the widest
     object of the scenario, standing on the slot at any turn, would overlap an object's footprint there (a standing
     bottle's circle; a box or a lying bottle by its rectangle, as the scene gives its size). The rule is
-    relocation_common.placement's: the motion planner's destination reads the same."""
-    below = [o.footprint() for o in scene.values() if board_of(o, scenario, tol) == "bottom"]
-    return placement.free_slots(scenario.slots, below, placement.slot_radius(scenario.objects))
+    Scenario.free_slots: the motion planner's destination reads the same."""
+    return scenario.free_slots(o.footprint() for o in scene.values() if board_of(o, scenario, tol) == "bottom")
 
 
 def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Iterable[str],

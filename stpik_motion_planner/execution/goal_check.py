@@ -4,10 +4,10 @@ The task planner's `removed_ids` is what it believes (Sect. 4.2: the objects rel
 driver's ground truth or perception) is what is. Before the motion: a removed bottle that still stands on the top
 shelf, or a goal object that already stands on the bottom shelf, refuses the goal with the reason (planning with a
 bottle that is there as if it were gone knocks it over). The destination is a free slot of the bottom shelf: slots
-taken by an object of the scene resting there, standing or lying (its footprint: relocation_common.placement, the
-rule the task planner's free slots read too), or by one this node placed and the scene does not show, are skipped;
-slot len(removed), the one a certified feasible answer planned the carry to, when it is free (docs/motion_planner.md,
-"The certified slot"). After the
+taken by an object of the scene resting there, standing or lying (its footprint; the rule the task planner's free
+slots read too: relocation_common.scenario, Shelf.board_of and Scenario.free_slots), or by one this node placed and
+the scene does not show, are skipped; slot len(removed), the one a certified feasible answer planned the carry to,
+when it is free (docs/motion_planner.md, "The certified slot"). After the
 motion: the moved bottle stands at its slot (when the scene shows it; perception sees the top shelf only) and no
 other bottle moved more than the tolerance; otherwise the relocation is not a success and the result says what
 moved (a bottle that tipped over on the bottom shelf is relocated but not placed as asked: not a success, said so);
@@ -22,8 +22,7 @@ from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping, Sequence
 
 from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
-from relocation_common.placement import BOTTOM, TOP, board_of, free_slots, slot_radius
-from relocation_common.scenario import Scenario, ScenarioError, Shelf, ShelfObject, UnknownObjectError
+from relocation_common.scenario import BOTTOM, TOP, Scenario, ScenarioError, Shelf, ShelfObject, UnknownObjectError
 from relocation_common.shelf_object import UPRIGHT_TILT, Footprint
 from stpik_motion_planner.planning.params import node_parameters
 
@@ -85,13 +84,13 @@ class SceneWatch:
 
 
 def on_top_shelf(shelf: Shelf, b: SeenBottle) -> bool:
-    """Resting on the top shelf's board, standing or lying (relocation_common.placement.board_of)."""
-    return board_of(shelf, b.footprint.centre, b.support, ON_BOARD) == TOP
+    """Resting on the top shelf's board, standing or lying (Shelf.board_of)."""
+    return shelf.board_of(b.footprint.centre, b.support, ON_BOARD) == TOP
 
 
 def on_bottom_shelf(shelf: Shelf, b: SeenBottle) -> bool:
     """Resting on the bottom shelf's board, standing or lying (tipped over there): relocated."""
-    return board_of(shelf, b.footprint.centre, b.support, ON_BOARD) == BOTTOM
+    return shelf.board_of(b.footprint.centre, b.support, ON_BOARD) == BOTTOM
 
 
 def refusal(shelf: Shelf, object_id: str, removed: Sequence[str], seen: Mapping[str, SeenBottle],
@@ -131,12 +130,11 @@ def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: M
     """(the slot, the objects on the bottom shelf: id and footprint centre) from the scene and what the node placed:
     slot `n_removed` (the goal's len(removed_ids): the slot a certified answer planned the carry to) when it is free,
     else the first free one (relocation_common.feasibility.destination_slot); a slot is free when no object's
-    footprint comes within the widest object's radius of it (relocation_common.placement.free_slots, as the task
-    planner counts them). ValueError when every slot is taken."""
-    radius = slot_radius(scenario.objects)
-    below = placed_bottles(scenario.shelf, scenario.slots, seen, relocated, radius)
+    footprint comes within the widest object's radius of it (Scenario.free_slots, as the task planner counts them).
+    ValueError when every slot is taken."""
+    below = placed_bottles(scenario.shelf, scenario.slots, seen, relocated, scenario.slot_radius)
     placed = [(i, f.centre) for i, f in below]
-    free = free_slots(scenario.slots, (f for _, f in below), radius)
+    free = scenario.free_slots(f for _, f in below)
     if not free:
         taken = ", ".join(i for i, _ in placed)
         raise ValueError(f"no free slot on the bottom shelf: all {len(scenario.slots)} slots are taken ({taken})")

@@ -19,7 +19,6 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
-from relocation_common.placement import upright_radius
 from relocation_common.scenario import Scenario
 from stpik_motion_planner.model.blockers import lane_blockers
 from stpik_motion_planner.model.collision import Lying, ObstacleSet
@@ -102,7 +101,7 @@ class MotionPlanner(PlanningContext):
         sizes: dict[tuple[float, float], str] = {}
         for b in sc.objects:
             if not self.not_graspable(b.id):  # never carried (a lying bottle, a wide box...): never placed
-                sizes.setdefault((upright_radius(b), b.height), b.id)
+                sizes.setdefault((b.upright_radius, b.height), b.id)
         out = []
         for k, (x, y) in enumerate(sc.slots):
             where = f"slot {k} {(round(x, 3), round(y, 3))}"
