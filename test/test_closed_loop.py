@@ -15,6 +15,7 @@ from qtree_task_planner.executive.closed_loop import (
     Option,
     SeenObject,
     Tolerances,
+    board_of,
     check_capacity,
     free_slots,
     remaining_problem,
@@ -163,6 +164,21 @@ def test_verification_off_slot_on_the_bottom_shelf():
     v = verify_relocation("b", slot0(), before, dict(before, b=SeenObject("b", x + 0.05, y, z)))
     assert [d.kind for d in v.differences] == ["not_at_slot"] and "5.0 cm from its slot" in v.summary()
     assert verify_relocation("b", slot0(), before, dict(before, b=SeenObject("b", x + 0.02, y, z))).ok
+
+
+def test_a_bottle_that_tipped_over_at_its_slot_is_relocated_and_the_difference_says_tipped():
+    """b tipped over at its slot (axis along x, its footprint centred on the slot; SeenObject: its base centre, the
+    lower end face, a radius above the board). It rests on the bottom shelf (relocated: board_of), its slot is
+    taken, and the check is not ok (success semantics unchanged) with a line that says so (before: 'b is not on the
+    bottom shelf')."""
+    before = scene_from_scenario(SCENARIO)
+    x, y, z = slot0()
+    tipped = SeenObject("b", x - 0.08, y, z + 0.033, tilt=math.pi / 2, radius=0.033, height=0.16)
+    assert board_of(tipped, SCENARIO, Tolerances()) == "bottom"
+    assert 0 not in free_slots(SCENARIO, dict(before, b=tipped))
+    v = verify_relocation("b", slot0(), before, dict(before, b=tipped))
+    assert [d.kind for d in v.differences] == ["not_at_slot"]
+    assert v.summary() == f"b tipped over on the bottom shelf (90 deg), lying 0.0 cm from its slot ({x:.3f}, {y:.3f})"
 
 
 def test_tolerances_are_validated_and_tilt_is_read_from_a_quaternion():

@@ -2,11 +2,13 @@
 motion (stpik_motion_planner.execution.goal_check), and scene updates against the scenario
 (relocation_common.scene_check)."""
 import math
+import threading
 from dataclasses import replace
 
 import pytest
 
 from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import msg_to_objects, objects_to_msg
 from relocation_common.scenario import ScenarioError, load_scenario
 from relocation_common.scene_check import check_scene, foreign_ids
 from relocation_common.shelf_object import Footprint
@@ -185,3 +187,50 @@ def test_without_a_scene_before_the_motion_the_scene_after_decides():
     threading.Timer(0.4, lambda: watch.update(placed)).start()
     assert gc.outcome(watch, {}, SC, "o2", 0, dict(VALUES, outcome_timeout=3.0), "t") == (
         True, "relocated o2 to slot 0 (the other bottles not checked: no scene on t before the motion)")
+
+
+# -- objects lying on the bottom shelf -----------------------------------------------------------------------------
+BOX10 = load_scenario("config/scenarios/world/shapes_box_10.yaml")
+
+
+def _lying_scene(sc, lying_id, x, y, yaw):
+    """The motion planner's scene of `sc` (as the ground truth's message gives it: ros_conversions) with `lying_id`
+    lying on the bottom shelf, its footprint centred at (x, y), its axis at `yaw`."""
+    lying = replace(sc.object(lying_id), x=x, y=y, yaw=yaw, lying=True, support_z=sc.shelf.bottom_z)
+    objects = [lying if b.id == lying_id else replace(b, support_z=sc.shelf.top_z) for b in sc.objects]
+    return {o.id: gc.seen_bottle(o) for o in msg_to_objects(objects_to_msg(objects), require_target=False)}
+
+
+@pytest.mark.parametrize("yaw", [math.pi / 2, 0.0, 0.6])
+def test_a_bottle_lying_on_the_bottom_shelf_takes_the_slots_it_covers(yaw):
+    """A bottle lying at (0.72, 0.12) on the bottom shelf of shapes_box_10, between slots 1, 3, 7 and 9: its base
+    centre is a radius above the board, so the old check found it on no shelf and every one of the 10 slots free
+    (the next carry was planned into it). It is on the bottom shelf, and the destination never is a slot its
+    footprint comes within the widest object's radius of (checked against the footprint itself)."""
+    seen = _lying_scene(BOX10, "o1", 0.72, 0.12, yaw)
+    assert gc.on_bottom_shelf(BOX10.shelf, seen["o1"]) and not gc.on_top_shelf(BOX10.shelf, seen["o1"])
+    chosen = {gc.destination(BOX10, seen, {}, n)[0] for n in range(len(BOX10.slots))}
+    foot = seen["o1"].footprint
+    covered = {k for k, xy in enumerate(BOX10.slots) if foot.overlaps(Footprint(xy, BOX10.slot_radius, ()))}
+    assert {1, 7} <= covered and not chosen & covered, (chosen, covered)
+    assert chosen == set(range(len(BOX10.slots))) - covered
+    assert "already relocated" in gc.refusal(BOX10.shelf, "o1", [], seen, {})  # lying there, it is relocated
+
+
+def test_a_bottle_that_tipped_over_at_its_slot_is_on_the_bottom_shelf_tipped():
+    """o2 relocated to slot 1 and tipped over there (its axis along x, its footprint centred on the slot). Before,
+    the outcome said 'o2 is 87 mm from its slot' and the next carry's destination was slot 1 again. Now: on the
+    bottom shelf, tipped (still not a success: not placed as asked), and its slot taken."""
+    seen = _lying_scene(BOX10, "o2", *BOX10.slots[1], 0.0)
+    assert gc.on_bottom_shelf(BOX10.shelf, seen["o2"])
+    before = {b.id: (b.x, b.y, BOX10.shelf.top_z) for b in BOX10.objects}
+    problems = gc.outcome_problems(BOX10.shelf, before, seen, "o2", BOX10.slots[1], 0.015, 0.02)
+    assert problems == ["o2 tipped over on the bottom shelf (90 deg), lying 0 mm from its slot (0.760, 0.060)"]
+    assert gc.destination(BOX10, seen, {}, 1)[0] != 1
+    watch = gc.SceneWatch()
+    tipped = replace(BOX10.object("o2"), x=BOX10.slots[1][0], y=BOX10.slots[1][1], lying=True,
+                     support_z=BOX10.shelf.bottom_z)
+    after = [tipped if b.id == "o2" else replace(b, support_z=BOX10.shelf.top_z) for b in BOX10.objects]
+    threading.Timer(0.4, lambda: watch.update(msg_to_objects(objects_to_msg(after)))).start()
+    assert gc.outcome(watch, before, BOX10, "o2", 1, dict(VALUES, outcome_timeout=3.0), "t") == (
+        False, "relocated o2 to slot 1, but the scene shows: " + problems[0])
