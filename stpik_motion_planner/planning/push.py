@@ -190,7 +190,8 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
         r3 = ctx.track(r2.q[-1], [contact, end], without, deadline, stats, arm=arm, speed=pp.speed, ramp=p.carry_ramp)
         if not r3.ok:
             return [], f"STPIK rejected the push: {r3.reason}"
-        r4 = ctx.track(r3.q[-1], [end, pre], after_obs, deadline, stats, skip, arm=arm, speed=p.stpik.approach_speed)
+        r4 = ctx.track(r3.q[-1], [end, pre], after_obs, deadline, stats, skip, arm=arm, speed=p.stpik.approach_speed,
+                       ramp=p.carry_ramp)
         if not r4.ok:
             return [], f"STPIK rejected the retreat: {r4.reason}"
         home = way_home(ctx, r4.q[-1], list(r1.q), after_obs, arm, deadline)
