@@ -1,6 +1,7 @@
 """The push (stpik_motion_planner/planning/push.py) replayed in MuJoCo's physics: on generated "X beside T" layouts
-(test/push_layouts.py; seeds fixed before any result: 0-3 by default, 0-11 with -m extended) the planner's push of
-X out of T's lanes is followed by the time-scaled follower on the simulator's core, every physics step watched. Asked
+(test/push_layouts.py; seeds fixed before any result: 0-3 by default, 4-11 with -m extended) the planner's push of
+X out of T's lanes is carried out by execution.push.push (what the motion_planner node runs for a RelocateObject
+goal with action "push") with the time-scaled follower on the simulator's core, every physics step watched. Asked
 of each push: no contact of the arm or hand with anything but X, X upright at the end, X's simulated end pose within
 END_TOL of the one the planner predicted, nothing else moved. The rate and each failure with its reason are printed;
 a push with a wrong prediction (the predicted end moved by 2 END_TOL) is shown to fail the same check."""
@@ -17,6 +18,7 @@ from push_layouts import beside_layout
 from jaco2_sim_driver.sim import Jaco2Sim
 from relocation_common.feasibility import Label
 from stpik_motion_planner.execution.follower import TrajectoryFollower
+from stpik_motion_planner.execution.push import push
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.push import PushPlan
@@ -32,8 +34,8 @@ EXTENDED_SEEDS = tuple(range(4, 12))
 
 
 class PushWatch:
-    """Follows a push's segments on the simulator's core (the gripper shut first, opened at the end), every physics
-    step watched: the deepest contact of each pair of an arm geom and anything but the pushed object."""
+    """relocation.Arm on the simulator's core (100 Hz commands from the follower), every physics step watched: the
+    deepest contact of each pair of an arm geom and anything but the pushed object."""
 
     def __init__(self, sim: Jaco2Sim, pushed: str) -> None:
         self.sim = sim
@@ -42,6 +44,7 @@ class PushWatch:
         self.arm = {m.geom(n).id for n in ARM}
         self.allowed = m.geom(f"{pushed}_geom").id
         self.unintended: dict[tuple[str, str], float] = {}
+        self.phases: list[str] = []
 
     def step(self, n: int) -> None:
         d = self.sim.data
@@ -53,19 +56,30 @@ class PushWatch:
                 key = tuple(sorted((self.name(g1), self.name(g2))))
                 self.unintended[key] = min(self.unintended.get(key, 0.0), float(d.contact.dist[k]))
 
-    def follow(self, plan: PushPlan) -> None:
-        self.sim.gripper_close()
+    # relocation.Arm: what execution.push.push drives
+    def measured(self) -> np.ndarray:
+        return self.sim.q
+
+    def follow(self, traj, phase: str) -> None:
+        self.phases.append(phase)
+        f = TrajectoryFollower(traj)
+        while (status := f.update(self.sim.q, DT)) == f.RUNNING:
+            self.sim.set_velocity(f.command(self.sim.q))
+            self.step(10)
+        self.sim.stop()
+        self.step(20)
+        assert status == f.SETTLED, f"{phase}: {f.reason}"
+
+    def gripper(self, action: str, phase: str) -> None:
+        self.phases.append(phase)
+        if action == "open":
+            self.sim.gripper_open()
+        else:
+            assert action == "shut" and self.sim.gripper_close() is None, "the push's hand closed on something"
         self.step(300)
-        for seg in plan.segments:
-            f = TrajectoryFollower(seg.trajectory)
-            while (status := f.update(self.sim.q, DT)) == f.RUNNING:
-                self.sim.set_velocity(f.command(self.sim.q))
-                self.step(10)
-            self.sim.stop()
-            self.step(20)
-            assert status == f.SETTLED, f"{seg.name}: {f.reason}"
-        self.sim.gripper_open()
-        self.step(300)
+
+    def phase(self, phase: str) -> None:
+        self.phases.append(phase)
 
 
 def push_problems(sim: Jaco2Sim, watch: PushWatch, plan: PushPlan, start: dict[str, np.ndarray],
@@ -94,14 +108,16 @@ def pushed_in_mujoco(seed: int, wrong: float = 0.0) -> tuple[str, list[str]]:
     physics; `wrong` (m) moves the predicted end along the push (a wrong prediction, for the check's own test)."""
     sc = beside_layout(seed)
     planner = MotionPlanner(sc, PARAMS)
-    ans, plan = planner.push_feasibility("X", "T", [])
-    if plan is None:
-        assert ans.label == Label.UNFEASIBLE and ans.message
+    ans, _ = planner.push_feasibility("X", "T", [])
+    if ans.label == Label.UNFEASIBLE:
+        assert ans.message
         return f"refused: {ans.message}", []
     sim = Jaco2Sim(sc)
     start = {p.id: np.array(p.position) for p in sim.object_poses()}
     watch = PushWatch(sim, "X")
-    watch.follow(plan)
+    plan = push(planner, watch, "X", "T", [])  # what a RelocateObject goal with action "push" runs
+    assert watch.phases == ["plan_push", "shut", "approach_push", "push", "retreat_push", "home_push", "open",
+                            "pushed"], watch.phases
     watch.step(300)
     predicted = (plan.end[0] + wrong * math.cos(plan.yaw), plan.end[1] + wrong * math.sin(plan.yaw), plan.end[2])
     at = {p.id: np.array(p.position) for p in sim.object_poses()}["X"]
