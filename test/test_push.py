@@ -1,4 +1,4 @@
-"""The push (stpik_motion_planner/planning/push.py) replayed in MuJoCo's physics: on generated "X beside T" layouts
+"""The push (stpik_motion_planner/planning/push/) replayed in MuJoCo's physics: on generated "X beside T" layouts
 (test/push_layouts.py; seeds fixed before any result: 0-3 by default, 4-11 with -m extended) the planner's push of
 X out of T's lanes is carried out by execution.push.push (what the motion_planner node runs for a RelocateObject
 goal with action "push") with the time-scaled follower on the simulator's core, every physics step watched. Asked

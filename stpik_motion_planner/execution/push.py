@@ -1,6 +1,6 @@
 """One push on a real or simulated arm (ROS-free): what a RelocateObject goal with action "push" carries out.
 
-plan the push (planning/push.py: home -> contact -> push -> retreat -> home) -> [the way home first, if the arm is
+plan the push (planning/push/: home -> contact -> push -> retreat -> home) -> [the way home first, if the arm is
 away from it] -> shut the gripper (closed on nothing) -> approach -> push -> retreat -> home -> open the gripper.
 Nothing moves before the whole push is planned. After a failure or a cancel, `recover_push` goes back along the
 motions made, newest first (the same paths; back along the push the hand leaves the object where it is), and opens

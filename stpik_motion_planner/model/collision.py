@@ -275,7 +275,7 @@ def approach_skip(o: ShelfObject) -> dict[str, frozenset[str]]:
 def closed_fingers() -> dict[str, CapsuleSpec]:
     """The description's finger capsules (their radius) with the fingers closed on nothing, as the simulator's
     hinges turn them (robot_description.FINGER_HINGES, FINGER_CLOSED): from the hinge to the tip, which comes to
-    about 2 mm from the tool axis, 20 mm beyond the grasp centre. The hand of a push (planning/push.py)."""
+    about 2 mm from the tool axis, 20 mm beyond the grasp centre. The hand of a push (planning/push/)."""
     out = {}
     for k, (x, y, sign) in enumerate(rd.FINGER_HINGES):
         c = next(c for c in rd.CAPSULES if c.name == f"finger_{k + 1}")

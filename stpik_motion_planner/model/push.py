@@ -1,4 +1,4 @@
-"""The geometry of a push (planning/push.py): a standing cylinder slid along the top shelf by the closed finger tips.
+"""The geometry of a push (planning/push/): a standing cylinder slid along the top shelf by the closed finger tips.
 
 The hand comes in horizontally (or tilted down by `pitch`, grasp.tool_rotation) along the push direction `u` (yaw
 `yaw`), its fingers closed on nothing (collision.closed_fingers): the three tips lead, about 2 mm from the tool axis

@@ -34,12 +34,12 @@ def node_parameters(path: str | Path | None = None) -> dict[str, Any]:
 
 @dataclass
 class PushParams:
-    """The push of a standing cylinder out of another object's grasp lanes (planning/push.py; the push.* keys)."""
+    """The push of a standing cylinder out of another object's grasp lanes (planning/push/; the push.* keys)."""
 
     contact_height: float  # fraction of the pushed object's height at which the closed finger tips touch it
     distances: tuple[float, ...]  # m the object is pushed, the candidates tried least first
     directions: tuple[float, ...]  # rad from straight back (+x), turned away from the object the push clears for
-    margin: float  # m the pushed object's swept footprint keeps from every other object and the shelf's panels
+    sweep_margin: float  # m the pushed object's swept footprint keeps from every other object and the shelf's panels
     contact_gap: float  # m between the finger tips and the object at the contact pose (the push starts there)
     speed: float  # m/s of the tool along the push (quasi-static: the object stops when the hand does)
 
@@ -48,7 +48,7 @@ class PushParams:
         if not (isinstance(self.contact_height, (int, float)) and 0.0 < self.contact_height < 1.0):
             raise ValueError(f"motion planner parameter push.contact_height must be in (0, 1), got "
                              f"{self.contact_height!r}")
-        for k in ("margin", "contact_gap", "speed"):
+        for k in ("sweep_margin", "contact_gap", "speed"):
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 \
                     or (v == 0 and k == "speed"):

@@ -1,23 +1,5 @@
-"""The push (docs/motion_planner.md, "The push"): a standing cylinder X slid along the top shelf by the closed hand,
-out of the grasp lanes of another object C, when the side grasp of either needs the other gone.
-
-1. Where to: for each distance of push.distances (least first) and each direction of push.directions (an angle from
-   straight back, +x, turned away from C; both ways when C is straight in front or behind), X translated by d
-   (quasi-static, model/push.py) must stay on the shelf and sweep clear of every object present by push.margin, and
-   open a lane of C: a lane (model/blockers.py's screen) that X blocks where it stands and no longer blocks where
-   it ends, with no blocker it did not have before (removed objects gone).
-2. The motion, for the candidates in that order until one plans: home -> pre-contact pose (the pick's Cartesian
-   path: the direct path first, then RRT-Connect, for the closed hand's proxy) -> contact pose (the finger tips
-   push.contact_gap short of X, at push.contact_height of its height, no lower than the palm's clearance over the
-   board allows) -> the straight push by the gap plus d at push.speed -> straight back to the pre-contact pose with X
-   at its end pose -> home back along the first leg. Every leg is tracked by STPIK (Eq. 9-10) with the closed
-   hand's capsules (collision.closed_fingers) against every object present; the hand may touch X from the
-   pre-contact pose on (the approach, the push, the retreat), and during the push X is no obstacle of the arm
-   (it moves with the tips).
-The answer is g_O with the whole motion (home -> ... -> home; the gripper shut before it, opened after it), the end
-pose of X, and the lane it opens; or g_U with the reason: X lying, not a cylinder, blocking no lane of C, no
-direction and distance that opens one, or no motion for any that does.
-"""
+"""The motion of a push and its answer (the package docstring, step 2): approach, push, retreat, way home, each
+tracked by STPIK with the closed hand; `plan_push` over the candidates of target.py, `push_feasibility` the answer."""
 from __future__ import annotations
 
 import math
@@ -29,8 +11,6 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import FeasibilityAnswer, Label
-from relocation_common.scenario import Scenario
-from stpik_motion_planner.model.blockers import static_lanes
 from stpik_motion_planner.model.collision import (
     ArmGeometry,
     CollisionScene,
@@ -40,10 +20,11 @@ from stpik_motion_planner.model.collision import (
     closed_fingers,
 )
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, pose_matrix
-from stpik_motion_planner.model.push import contact_pose, moved, sweep_problem
+from stpik_motion_planner.model.push import contact_pose, moved
 from stpik_motion_planner.planning.context import PlanningContext
 from stpik_motion_planner.planning.home import joint_motion_clear, joint_valid, plan_joint, time_joint_path
 from stpik_motion_planner.planning.pick import cartesian_path
+from stpik_motion_planner.planning.push.target import candidates, end_xy, refusal
 from stpik_motion_planner.planning.results import QueryStats, Segment
 from stpik_motion_planner.planning.trajectory import Trajectory
 
@@ -70,74 +51,6 @@ class PushPlan:
         for s in self.segments[1:]:
             t = t.then(s.trajectory)
         return t
-
-
-class _Moved:
-    """The lane screen's view of the planner (blockers.Screened) with the pushed object at its end pose."""
-
-    def __init__(self, ctx: PlanningContext, scenario: Scenario) -> None:
-        self.params, self.hand, self.hand_margin, self.rrt = ctx.params, ctx.hand, ctx.hand_margin, ctx.rrt
-        self.scenario = scenario
-        self.scene = CollisionScene(scenario, (), ctx.lying, ctx.gone)
-        self.all_yaws, self.not_graspable = ctx.all_yaws, ctx.not_graspable
-        self.ceiling_clearance = ctx.ceiling_clearance
-
-
-def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: frozenset[str]) -> str:
-    """Why no push of `object_id` can clear the lanes of `clear_for` whatever its direction ('' if one may)."""
-    o = ctx.scenario.object(object_id)
-    if object_id in ctx.gone:
-        return f"no push: {object_id} left the shelf"
-    if o.lying or object_id in ctx.lying:
-        return f"no push: {object_id} lies (the push slides a standing cylinder)"
-    if o.shape != "cylinder" or o.conservative:
-        return f"no push: {object_id} is not a cylinder (the push slides a standing cylinder)"
-    if not any(object_id in bl for _, bl in static_lanes(ctx, clear_for)):
-        return f"no push: no grasp lane of {clear_for} is blocked by {object_id}"
-    return ""
-
-
-def opened_lane(ctx: PlanningContext, clear_for: str, removed: frozenset[str], object_id: str,
-                after: _Moved) -> str:
-    """The name of a lane of `clear_for` that `object_id` blocks where it stands and not at its end pose, with no
-    blocker the lane did not have ('' if none); a lane then clear with `removed` gone first."""
-    before = {g.yaw: bl for g, bl in static_lanes(ctx, clear_for)}
-    found = []
-    for g, bl in static_lanes(after, clear_for):
-        was = before.get(g.yaw)
-        if was is not None and object_id in was and object_id not in bl and bl - removed <= was - removed:
-            found.append((bool(bl - removed), f"yaw {g.yaw:+.2f}"))
-    return min(found)[1] if found else ""
-
-
-def candidates(ctx: PlanningContext, object_id: str, clear_for: str, removed: frozenset[str]
-               ) -> tuple[list[tuple[float, float, str]], str]:
-    """([(yaw, distance, lane opened)] in the order tried, least distance first; why none if empty)."""
-    p = ctx.params.push
-    o, c = ctx.scenario.object(object_id), ctx.scenario.object(clear_for)
-    side = o.y - c.y
-    signs = [1.0 if side > 0 else -1.0] if abs(side) > 1e-3 else [1.0, -1.0]
-    present = frozenset(b.id for b in ctx.scenario.objects) - removed - ctx.gone
-    out, why = [], {}
-    for d in p.distances:
-        for a in p.directions:
-            for sg in signs if a else [1.0]:
-                yaw = sg * a
-                end = end_xy(o.x, o.y, yaw, d)
-                bad = sweep_problem(ctx.scene, o, end, present, p.margin)
-                if bad:
-                    why[(yaw, d)] = bad
-                    continue
-                lane = opened_lane(ctx, clear_for, removed, object_id, _Moved(ctx, moved(ctx.scenario, object_id,
-                                                                                         *end)))
-                if not lane:
-                    why[(yaw, d)] = f"{clear_for}'s lanes still blocked by {object_id}"
-                    continue
-                out.append((yaw, d, lane))
-    if out:
-        return out, ""
-    kinds = sorted(set(why.values()))
-    return [], f"no push direction clears {clear_for}'s lanes: {'; '.join(kinds[:3])}"
 
 
 def contact_height(ctx: PlanningContext, object_id: str) -> float:
@@ -194,7 +107,7 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
                        ramp=p.carry_ramp)
         if not r4.ok:
             return [], f"STPIK rejected the retreat: {r4.reason}"
-        home = way_home(ctx, r4.q[-1], list(r1.q), after_obs, arm, deadline)
+        home = way_home(ctx, r4.q[-1], list(r1.q), after_obs, arm, deadline, rng)
         if home is None:
             return [], "no way home after the push"
         return [Segment("approach", Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_contact").then(
@@ -205,20 +118,15 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     return [], last
 
 
-def end_xy(x: float, y: float, yaw: float, distance: float) -> tuple[float, float]:
-    """Where the pushed object's axis ends: (x, y) translated by `distance` along `yaw` (quasi-static)."""
-    return x + distance * math.cos(yaw), y + distance * math.sin(yaw)
-
-
 def way_home(ctx: PlanningContext, q: np.ndarray, out: list[np.ndarray], obs: ObstacleSet, arm: ArmGeometry,
-             deadline: float) -> Trajectory | None:
-    """From the pre-contact pose home: back along the tracked way there (`out`, home first) when that is still clear
-    with the object at its end pose (every IK step, the closed hand), else joint-space RRT-Connect (the open hand's
-    model, which holds the closed one's tips)."""
-    back = [q] + out[::-1]
-    if joint_motion_clear(ctx, q, out[-1], obs) and all(joint_valid(ctx, x, obs, arm) for x in out[::2]):
-        return time_joint_path(back, 0.9 * rd.QDOT_MAX, ctx.params.stpik.dt).resample()
-    traj = plan_joint(ctx, q, rd.Q_HOME, obs, 4 * ctx.params.rrt_max_checks, deadline)
+             deadline: float, rng: np.random.Generator | None) -> Trajectory | None:
+    """From the pre-contact pose home, the closed hand's capsules checked at STPIK's clearance: back along the tracked
+    way there (`out`, home first) when that is still clear with the object at its end pose (every other IK step),
+    else joint-space RRT-Connect."""
+    # no margin over STPIK's clearance: the palm ends the push at that bound over the board (the contact height)
+    if joint_motion_clear(ctx, q, out[-1], obs, 0.0, arm) and all(joint_valid(ctx, x, obs, arm) for x in out[::2]):
+        return time_joint_path([q] + out[::-1], 0.9 * rd.QDOT_MAX, ctx.params.stpik.dt).resample()
+    traj = plan_joint(ctx, q, rd.Q_HOME, obs, 4 * ctx.params.rrt_max_checks, deadline, 0.0, rng, arm)
     return None if traj is None else traj.resample()
 
 
