@@ -18,8 +18,14 @@ OTHERS = 3  # bottles besides X and T
 
 
 def beside_layout(seed: int) -> Scenario:
-    """The layout of `seed`: T at x 0.68-0.76, y -0.15..0.15; X beside it on a random side, 5-15 mm apart; OTHERS
-    bottles elsewhere on the top shelf, at least 30 mm from every other (never in contact)."""
+    """The layout of `seed` (beside_data) as a scenario."""
+    data = beside_data(seed)
+    return parse_scenario(data, data["name"])
+
+
+def beside_data(seed: int) -> dict:
+    """The layout of `seed` as scenario YAML data: T at x 0.68-0.76, y -0.15..0.15; X beside it on a random side,
+    5-15 mm apart; OTHERS bottles elsewhere on the top shelf, at least 30 mm from every other (never in contact)."""
     rng = random.Random(f"push-beside:{seed}")
     with open(default_scenario()) as f:
         data = yaml.safe_load(f)
@@ -37,4 +43,4 @@ def beside_layout(seed: int) -> Scenario:
     out["name"] = f"push_beside_s{seed}"
     out["objects"] = [{"id": i, "weight": 0.3, "xy": [round(x, 4), round(y, 4)]} if i != "T" else
                       {"id": i, "xy": [round(x, 4), round(y, 4)]} for i, (x, y) in pos.items()]
-    return parse_scenario(out, out["name"])
+    return out
