@@ -13,6 +13,7 @@ checked as test/test_push.py checks it. Printed: one row per layout, and the cou
 
     .venv/bin/python scripts/bench_push.py                  # every shipped scene, seeds 0-3, 12 mm
     .venv/bin/python scripts/bench_push.py --seeds 0-7 --amplitude 0.02
+    .venv/bin/python scripts/bench_push.py --scenes '*random5/*.yaml'   # the generated scenes of the closed loop
 """
 from __future__ import annotations
 
@@ -109,10 +110,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0-3")
     ap.add_argument("--amplitude", type=float, default=0.012)
+    ap.add_argument("--scenes", default="*.yaml", help="glob under config/scenarios (e.g. '*random5/*.yaml')")
     args = ap.parse_args()
     lo, hi = (int(x) for x in args.seeds.split("-"))
     params = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
-    scenes = sorted((ROOT / "config" / "scenarios").glob("*.yaml"))
+    scenes = sorted((ROOT / "config" / "scenarios").glob(args.scenes))
     rows = []
     for path in scenes:
         for seed in range(lo, hi + 1):

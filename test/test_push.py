@@ -13,10 +13,14 @@ import math
 import mujoco
 import numpy as np
 import pytest
+import yaml
 from push_layouts import beside_layout
 
 from jaco2_sim_driver.sim import Jaco2Sim
+from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.feasibility import Label
+from relocation_common.paths import config_file
+from relocation_common.scenario import parse_scenario
 from stpik_motion_planner.execution.follower import TrajectoryFollower
 from stpik_motion_planner.execution.push import push
 from stpik_motion_planner.planning.params import PlannerParams
@@ -151,3 +155,14 @@ def test_a_wrong_prediction_fails_the_physics_check():
     what, problems = pushed_in_mujoco(DEFAULT_SEEDS[0], wrong=2 * END_TOL)
     assert what.startswith("planned"), what
     assert any("from its predicted pose" in p for p in problems), problems
+
+
+def test_a_push_in_the_back_row_plans_its_way_home():
+    """scenario3_15 perturbed (seed 0, 12 mm): 'o14 needs T moved' at the back of the shelf. With the others gone,
+    the push of o14 plans; its way home starts with the palm at STPIK's clearance over the board (a way home that
+    asked 5 mm more refused every candidate: "no way home after the push")."""
+    data = jitter_scene(yaml.safe_load(config_file("scenarios/scenario3_15.yaml").read_text()), 0.012, 0)
+    planner = MotionPlanner(parse_scenario(data, data["name"]), PARAMS)
+    others = [o.id for o in planner.scenario.objects if o.id not in ("o14", "T")]
+    ans, plan = planner.push_feasibility("o14", "T", others)
+    assert ans.label == Label.OBSTACLE and plan is not None, ans.message
