@@ -29,14 +29,14 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "test")]
 
-from test_push import PushWatch, push_problems  # noqa: E402
+from test_push import PushWatch, push_problems  # noqa: E402  (after the sys.path insert)
 
-from jaco2_sim_driver.sim import Jaco2Sim  # noqa: E402
-from relocation_app.evaluation.scenes.jitter import jitter_scene  # noqa: E402
-from relocation_common.feasibility import Label  # noqa: E402
-from relocation_common.scenario import parse_scenario  # noqa: E402
-from stpik_motion_planner.planning.params import PlannerParams  # noqa: E402
-from stpik_motion_planner.planning.planner import MotionPlanner  # noqa: E402
+from jaco2_sim_driver.sim import Jaco2Sim  # noqa: E402  (after the sys.path insert)
+from relocation_app.evaluation.scenes.jitter import jitter_scene  # noqa: E402  (after the sys.path insert)
+from relocation_common.feasibility import Label  # noqa: E402  (after the sys.path insert)
+from relocation_common.scenario import parse_scenario  # noqa: E402  (after the sys.path insert)
+from stpik_motion_planner.planning.params import PlannerParams  # noqa: E402  (after the sys.path insert)
+from stpik_motion_planner.planning.planner import MotionPlanner  # noqa: E402  (after the sys.path insert)
 
 SAFETY_NET = 600.0  # s: the wall-clock nets raised (the work budgets decide the answers)
 
