@@ -7,10 +7,12 @@ import dataclasses
 import math
 import time
 
+import numpy as np
 import pytest
 from push_layouts import beside_layout
 from test_streaming import FakeLink, arm
 
+from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from stpik_motion_planner.execution.goal_check import OUTCOME_SETTLE
 from stpik_motion_planner.execution.relocation import PUSH_PHASES
@@ -88,3 +90,22 @@ def test_a_push_whose_object_ends_elsewhere_fails_its_outcome(service):
 
     out = service.push(a, "X", [], "T", ok=perceive)
     assert out.status == "aborted" and "from its predicted end pose" in out.message, out.message
+
+
+def test_a_lying_object_is_not_pushed_and_says_why():
+    from relocation_common.paths import config_file
+    from relocation_common.scenario import load_scenario
+
+    s = MotionPlannerService(load_scenario(config_file("scenarios/headroom_lying_6.yaml")), PARAMS)
+    ans, plan = s.push_feasibility("o1", [], "T")
+    assert ans.label == Label.UNFEASIBLE and plan is None and "o1 lies" in ans.message, ans.message
+
+
+def test_a_push_cancelled_during_the_push_goes_back_and_opens_the_gripper(service):
+    link = FakeLink(kinova=True)
+    a, feedback, _ = arm(link, cancelled=lambda: "push" in link.paths)  # cancelled once the push starts
+    out = service.push(a, "X", [], "T")
+    assert out.status == "canceled", out.message
+    assert "recovered: arm back home along the push of X, gripper open" in out.message
+    assert link.paths[:2] == ["approach_push", "push"] and link.paths[2:] == ["recover_push"] * 2
+    assert float(np.max(np.abs(link.q - rd.Q_HOME))) < 0.02
