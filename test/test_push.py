@@ -39,7 +39,8 @@ EXTENDED_SEEDS = tuple(range(4, 12))
 
 class PushWatch:
     """relocation.Arm on the simulator's core (100 Hz commands from the follower), every physics step watched: the
-    deepest contact of each pair of an arm geom and anything but the pushed object."""
+    deepest contact of each pair of an arm geom and anything but the pushed object (which only the fingers and the
+    palm may touch)."""
 
     def __init__(self, sim: Jaco2Sim, pushed: str) -> None:
         self.sim = sim
@@ -47,6 +48,7 @@ class PushWatch:
         self.name = lambda g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
         self.arm = {m.geom(n).id for n in ARM}
         self.allowed = m.geom(f"{pushed}_geom").id
+        self.hand = {m.geom(n).id for n in ARM if n.startswith("finger") or n == "palm"}
         self.unintended: dict[tuple[str, str], float] = {}
         self.phases: list[str] = []
 
@@ -55,8 +57,8 @@ class PushWatch:
         for _ in range(n):
             self.sim.step(1)
             for k, (g1, g2) in enumerate(d.contact.geom.tolist()[:d.ncon]):
-                if (g1 in self.arm) == (g2 in self.arm) or self.allowed in (g1, g2):
-                    continue  # arm-arm pairs are the self-collision check's; X is the one the hand may touch
+                if (g1 in self.arm) == (g2 in self.arm) or {g1, g2} <= self.hand | {self.allowed}:
+                    continue  # arm-arm pairs are the self-collision check's; X is what the fingers and palm may touch
                 key = tuple(sorted((self.name(g1), self.name(g2))))
                 self.unintended[key] = min(self.unintended.get(key, 0.0), float(d.contact.dist[k]))
 
@@ -107,9 +109,10 @@ def push_problems(sim: Jaco2Sim, watch: PushWatch, plan: PushPlan, start: dict[s
     return out
 
 
-def pushed_in_mujoco(seed: int, wrong: float = 0.0) -> tuple[str, list[str]]:
+def pushed_in_mujoco(seed: int, wrong: float = 0.0, touched: str = "X") -> tuple[str, list[str]]:
     """('planned' or 'refused: why', problems) of the push of X out of T's lanes on layout `seed`, replayed in
-    physics; `wrong` (m) moves the predicted end along the push (a wrong prediction, for the check's own test)."""
+    physics; `wrong` (m) moves the predicted end along the push (a wrong prediction), `touched` names the object the
+    hand may touch (another than X: every touch of X is a contact), both for the check's own tests."""
     sc = beside_layout(seed)
     planner = MotionPlanner(sc, PARAMS)
     ans, _ = planner.push_feasibility("X", "T", [])
@@ -118,7 +121,7 @@ def pushed_in_mujoco(seed: int, wrong: float = 0.0) -> tuple[str, list[str]]:
         return f"refused: {ans.message}", []
     sim = Jaco2Sim(sc)
     start = {p.id: np.array(p.position) for p in sim.object_poses()}
-    watch = PushWatch(sim, "X")
+    watch = PushWatch(sim, touched)
     plan = push(planner, watch, "X", "T", [])  # what a RelocateObject goal with action "push" runs
     assert watch.phases == ["plan_push", "shut", "approach_push", "push", "retreat_push", "home_push", "open",
                             "pushed"], watch.phases
@@ -155,6 +158,14 @@ def test_a_wrong_prediction_fails_the_physics_check():
     what, problems = pushed_in_mujoco(DEFAULT_SEEDS[0], wrong=2 * END_TOL)
     assert what.startswith("planned"), what
     assert any("from its predicted pose" in p for p in problems), problems
+
+
+def test_a_touch_of_another_object_fails_the_physics_check():
+    """The contact watch sees the hand's contacts: the same push, with T as the one object the hand may touch,
+    fails on its contacts with X."""
+    what, problems = pushed_in_mujoco(DEFAULT_SEEDS[0], touched="T")
+    assert what.startswith("planned"), what
+    assert any(p.startswith("contact") and "X_geom" in p and "finger_sim" in p for p in problems), problems
 
 
 def test_a_push_in_the_back_row_plans_its_way_home():
