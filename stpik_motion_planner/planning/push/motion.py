@@ -34,8 +34,9 @@ PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 @dataclass
 class PushPlan:
     """A planned push of `object_id` out of the lanes of `clear_for`: direction `yaw` (rad), `distance` (m), X's
-    predicted end pose `end` (x, y, z of its base, shelf frame), the lane of C it opens, and the motion's segments
-    (approach, push, retreat, home; the gripper shut before the first, opened after the last)."""
+    predicted end pose `end` (x, y, z of its base in the scene's frame, the robot base's, as ObjectState), the lane
+    of C it opens, and the motion's segments (approach, push, retreat, home; the gripper shut before the first,
+    opened after the last)."""
 
     object_id: str
     clear_for: str
@@ -62,7 +63,7 @@ def contact_height(ctx: PlanningContext, object_id: str) -> float:
 
 def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], yaw: float, distance: float,
                 deadline: float, stats: QueryStats) -> tuple[list[Segment], str]:
-    """The push's motion for one candidate (the module docstring, step 2): (segments, '') or ([], why not)."""
+    """The push's motion for one candidate (the package docstring, step 2): (segments, '') or ([], why not)."""
     p, pp = ctx.params, ctx.params.push
     o = ctx.scenario.object(object_id)
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0])  # a horizontal hand: (x, y, z, yaw) poses
