@@ -43,6 +43,7 @@ from visualization_msgs.msg import Marker
 from relocation_common import arm_interface
 from relocation_common.arm_interface import ArmInterface
 from relocation_common.config import ParameterError
+from relocation_common.feasibility import PUSH
 from relocation_common.node import Health, SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import (
     NO_ANSWER,
@@ -58,7 +59,7 @@ from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.ros_interface import RosArmLink, trajectory_to_msg
-from stpik_motion_planner.service import MotionPlannerService
+from stpik_motion_planner.service import MotionPlannerService, Outcome
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 # Requests queue here while one is planned: the default depth 10 dropped all but 11 of 50 concurrent requests
@@ -181,11 +182,20 @@ class MotionPlannerNode(Node):
         return res
 
     def _feasibility(self, req: PlanFeasibility.Request) -> tuple:
-        """core.feasibility of the request. A question naming an object the planner does not know, asked before any
-        scene came (a client that discovered the scene's publisher sooner: an unlisted object it saw), waits up to
-        scene_wait for that scene and is asked again."""
+        """core.feasibility of the request ((lanes, answer, the push's plan or None)), or core.push_feasibility for
+        action "push". A question naming an object the planner does not know, asked before any scene came (a client
+        that discovered the scene's publisher sooner: an unlisted object it saw), waits up to scene_wait for that
+        scene and is asked again."""
+        if req.action not in ("", PUSH):
+            raise ValueError(f"action must be '' (a pick) or 'push', got {req.action!r}")
+
         def ask() -> tuple:
-            return self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes, req.certify)
+            if req.action == PUSH:
+                lanes = self.core.feasibility("", list(req.removed_ids), None, True)[0] if req.all_lanes else {}
+                return (lanes, *self.core.push_feasibility(req.object_id, list(req.removed_ids), req.clear_for,
+                                                           req.timeout))
+            return (*self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes,
+                                           req.certify), None)
 
         try:
             return ask()
@@ -196,7 +206,7 @@ class MotionPlannerNode(Node):
 
     def _answer(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         try:
-            lanes, ans = self._feasibility(req)
+            lanes, ans, push = self._feasibility(req)
         except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
             res.message = str(e)
             self.get_logger().warning(f"feasibility request refused: {e}")
@@ -219,6 +229,10 @@ class MotionPlannerNode(Node):
             res.trajectory = trajectory_to_msg(ans.trajectory)
         res.blockers = blockers_to_msgs(ans.blockers)
         res.near_known, res.near_ids = near_to_fields(ans.near)
+        if push is not None:  # a feasible push: its action and the pushed object's predicted pose
+            res.action = PUSH
+            res.end_pose.position.x, res.end_pose.position.y, res.end_pose.position.z = map(float, push.end)
+            res.end_pose.orientation.w = 1.0  # standing, as it stood (quasi-static, no rotation kept)
         return res
 
     def _on_goal(self, goal: RelocateObject.Goal) -> GoalResponse:
@@ -237,8 +251,15 @@ class MotionPlannerNode(Node):
                           self._log)
         req = goal_handle.request
         self.relocation = f"relocating {req.object_id} (removed {list(req.removed_ids)})"
-        outcome = self.core.relocate(arm, req.object_id, list(req.removed_ids), f"the scene on {self.scene_topic}",
-                                     rclpy.ok)
+        source = f"the scene on {self.scene_topic}"
+        if req.action == PUSH:
+            self.relocation = f"pushing {req.object_id} out of the lanes of {req.clear_for}"
+            outcome = self.core.push(arm, req.object_id, list(req.removed_ids), req.clear_for, source, rclpy.ok)
+        elif req.action:
+            outcome = Outcome("aborted", f"relocation goal refused: action must be '' (pick and place) or 'push', "
+                                         f"got {req.action!r}")
+        else:
+            outcome = self.core.relocate(arm, req.object_id, list(req.removed_ids), source, rclpy.ok)
         self.relocation = f"idle; last: {req.object_id} {outcome.status}: {outcome.message[:120]}"
         {"succeeded": goal_handle.succeed, "canceled": goal_handle.canceled, "aborted": goal_handle.abort}[
             outcome.status]()
