@@ -29,7 +29,7 @@ from typing import Collection, Iterable, Mapping, NamedTuple
 import numpy as np
 
 from relocation_common.geometry import quat_wxyz, wxyz_matrix
-from relocation_common.scenario import Shelf, ShelfObject
+from relocation_common.scenario import TOP, Shelf, ShelfObject
 from relocation_common.shelf_object import DECIMALS, UPRIGHT_TILT, Footprint, half_turn
 from stpik_motion_planner.model.collision import Lying
 
@@ -62,8 +62,8 @@ def _support(bottle: ShelfObject) -> float:
 
 def on_top_shelf(shelf: Shelf, bottle: ShelfObject) -> bool:
     """True if `bottle` (as perceived: its support_z) rests on the top shelf, within its edges (standing or
-    lying)."""
-    return abs(_support(bottle) - shelf.top_z) < ON_SHELF and _inside(shelf, bottle)
+    lying: Shelf.board_of, the rule of the goal checks and of the task planner)."""
+    return shelf.board_of((bottle.x, bottle.y), _support(bottle), ON_SHELF) == TOP
 
 
 def left_the_shelf(shelf: Shelf, bottle: ShelfObject) -> bool:
