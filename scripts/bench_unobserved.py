@@ -1,0 +1,240 @@
+#!/usr/bin/env python3
+"""Benchmark: how much of the planned motion passes through shelf space the camera never observed
+(docs/perception.md, "Unobserved space"). Not a timed test.
+
+Per layout (shipped scenes, and perturbed copies: `scenes jitter`, 12 mm, seeds fixed before any result): the
+project's simulated camera renders the shelf with the arm at home; perception (Perception.process, its own camera
+pose and shelf-corrected intrinsics) gives the frame; `ObservedSpace` integrates it into a voxel map of the top
+compartment. The retrieval is solved by the blocker A* with the real motion planner in-process (the scenario's
+listed objects plus the unlisted ones perception saw: what the planner would hold), and each relocation is planned
+(relocation.plan_relocation: pick, carry, retreat, home), in order. Before each relocation a new frame is rendered
+with the objects relocated so far gone from the top shelf and integrated (the closed loop's view after each one).
+
+Per motion: the voxels of the compartment swept by the arm's collision capsules (robot_description.CAPSULES, the
+planner's envelope of the open hand) and, during the carry, the carried object (its primitive attached to the hand
+as at the end of the pick), sampled every `--step` rad of the largest joint's motion. Of those, the NEVER OBSERVED
+ones outside every object the planner holds on the top shelf (those are obstacles it already avoids): space the
+planner took as free without anyone having seen it. Also counted: swept voxels inside an object the simulator
+builds but the planner does not hold (a hidden, unlisted object: a contact the assumption hides).
+
+    .venv/bin/python scripts/bench_unobserved.py                              # the default set below
+    .venv/bin/python scripts/bench_unobserved.py --scenes paper_experiment_10 --jitter-seeds ""  # one scene
+    .venv/bin/python scripts/bench_unobserved.py --out rows.jsonl             # resumable; --table rows.jsonl
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node runs (perception_aruco/__init__.py)
+
+import numpy as np  # noqa: E402  (after the BLAS thread setting)
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT), str(ROOT / "test")]   # this checkout first; perception_scenes (the tests' renderer)
+
+SCENES = ("paper_experiment_10", "scenario1_5", "scenario2_10", "scenario3_15", "paper1_5", "paper2_10",
+          "paper3_15", "world/hidden_unlisted_10", "world/paper_experiment_10_unlisted")
+JITTERED = ("paper_experiment_10", "scenario2_10", "scenario3_15", "paper2_10")
+PHASES = ("pick", "carry", "retreat", "home")
+SAFETY_NET = 300.0  # s: the planner's wall-clock safety nets, far above its work budgets on a loaded machine
+
+
+def samples(positions: np.ndarray, step: float) -> np.ndarray:
+    """The rows of a joint path at which the largest joint has moved `step` rad since the last one (and the ends)."""
+    q = np.asarray(positions, float)
+    cum = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(q, axis=0)).max(axis=1))])
+    idx = np.searchsorted(cum, np.arange(0.0, cum[-1], step))
+    return q[np.unique(np.r_[idx, len(q) - 1])]
+
+
+def swept(space, positions: np.ndarray, step: float, carried=None) -> np.ndarray:
+    """Bool over the map: the voxels the arm's capsules (and `carried`: (shape, dims, pose in the hand's frame))
+    cover along the path."""
+    from perception_aruco.objects.self_filter import arm_segments, link_frames
+    from relocation_common.robot_description import LINK_NAMES
+    out = np.zeros(space.shape, bool)
+    for q in samples(positions, step):
+        space.mark_capsules(out, arm_segments(q))
+        if carried is not None:
+            shape, dims, rel = carried
+            space.mark_primitive(out, link_frames(q)[LINK_NAMES[-1]] @ rel, shape, dims)
+    return out
+
+
+def pose(o) -> np.ndarray:
+    """4x4 pose of an object's primitive centre (base frame)."""
+    t = np.eye(4)
+    t[:3, :3], t[:3, 3] = o.rotation(), o.centre()
+    return t
+
+
+def objects_mask(space, objects) -> np.ndarray:
+    """Bool over the map: inside any of these objects' primitives."""
+    out = np.zeros(space.shape, bool)
+    for o in objects:
+        space.mark_primitive(out, pose(o), o.shape, o.size)
+    return out
+
+
+def look(perception, space, scenario, gone: set[str], notes: list[str]) -> dict:
+    """Render the shelf without the `gone` objects (arm at home), perceive it, integrate it; the perceived
+    objects by id (none when the frame is refused, said in `notes`)."""
+    from perception_scenes import render_scene
+
+    from perception_aruco.aruco import PerceptionError
+    from perception_aruco.shelf import corrected_K
+    from relocation_common.robot_description import Q_HOME
+    frame, _ = render_scene(scenario.with_objects([o for o in scenario.objects if o.id not in gone]))
+    try:
+        r = perception.process(frame.rgb, frame.depth, frame.K, q=Q_HOME)
+    except PerceptionError as e:
+        notes.append(f"frame refused ({type(e).__name__}: {e}): not integrated")
+        return {}
+    space.integrate(frame.depth, corrected_K(frame.K, r.shelf.intrinsics), r.T_base_camera)
+    return r.objects
+
+
+def one(path: str, voxel: float, step: float) -> dict:
+    """Solve, plan and measure one layout (module docstring)."""
+    from perception_aruco.objects.model import to_shelf_object
+    from perception_aruco.objects.self_filter import link_frames
+    from perception_aruco.observed_space import ObservedSpace
+    from perception_aruco.pipeline import Perception
+    from qtree_task_planner.oracles import CachedOracle
+    from qtree_task_planner.problem import RelocationProblem
+    from qtree_task_planner.search import astar
+    from relocation_common.robot_description import LINK_NAMES
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.execution.relocation import plan_relocation
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
+    from stpik_motion_planner.planning.results import PlanningError
+
+    sim = load_scenario(path)
+    space = ObservedSpace.top_compartment(sim.shelf, voxel)
+    perception, notes = Perception(sim), []
+    t0 = time.perf_counter()
+    seen = look(perception, space, sim, set(), notes)
+    first_unobserved = float(space.unobserved.mean())
+    unlisted = [dataclasses.replace(to_shelf_object(o), weight=min(1.0, max(o.weight, 0.01)))
+                for o in seen.values() if not o.listed]
+    plan_scene = sim.with_objects(list(sim.objects) + unlisted)
+    hidden = objects_mask(space, [o for o in sim.unlisted if not any(
+        np.hypot(o.x - u.x, o.y - u.y) < 0.05 for u in unlisted)])
+    params = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
+    planner = MotionPlanner(plan_scene, params)
+    result = astar.solve(RelocationProblem.from_scenario(plan_scene), CachedOracle(planner))
+    row = {"layout": sim.name, "objects": len(plan_scene.objects), "unlisted_seen": len(unlisted),
+           "hidden": len(sim.unlisted) - len(unlisted), "found": bool(result.found),
+           "sequence": list(result.sequence or ()), "first_unobserved": round(first_unobserved, 3), "motions": [],
+           "notes": notes}
+    if not result.found:
+        row["notes"].append("no retrieval: " + (getattr(result, "reason", "") or "no sequence"))
+        return row
+    done: list[str] = []
+    by_id = {o.id: o for o in plan_scene.objects}
+    for oid in result.sequence:
+        if done:
+            look(perception, space, sim, set(done), notes)
+        try:
+            plan = plan_relocation(planner, oid, done)
+        except PlanningError as e:
+            row["notes"].append(f"{oid} not planned: {e}")
+            break
+        known = objects_mask(space, [o for o in plan_scene.objects if o.id not in done])
+        unseen = space.unobserved & ~known
+        o = by_id[oid]
+        rel = np.linalg.inv(link_frames(plan.pick.positions[-1])[LINK_NAMES[-1]]) @ pose(o)
+        for phase, traj in zip(PHASES, (plan.pick, plan.carry, plan.retreat, plan.home)):
+            s = swept(space, traj.positions, step, (o.shape, o.size, rel) if phase == "carry" else None)
+            row["motions"].append({"object": oid, "phase": phase, "swept": int(s.sum()),
+                                   "unobserved": int((s & unseen).sum()), "hidden": int((s & hidden).sum())})
+        done.append(oid)
+    row["last_unobserved"] = round(float(space.unobserved.mean()), 3)
+    row["wall"] = round(time.perf_counter() - t0, 1)
+    return row
+
+
+def table(rows: list[dict], voxel: float) -> str:
+    """One markdown row per layout, one per phase over them all, and the notes."""
+    cm3 = voxel ** 3 * 1e6
+    lines = ["| layout | objects (unlisted seen / hidden) | relocations | compartment never observed (first / last "
+             "frame) | motions in the compartment | through never-observed space | never-observed share of the "
+             "swept volume | largest in one motion (cm3) | through a hidden object |", "|---|---|---|---|---|---|---|"
+             "---|---|"]
+    for r in rows:
+        ms = [m for m in r["motions"] if m["swept"]]
+        through = [m for m in ms if m["unobserved"]]
+        share = sum(m["unobserved"] for m in ms) / max(1, sum(m["swept"] for m in ms))
+        lines.append(f"| {r['layout']} | {r['objects']} ({r['unlisted_seen']} / {r['hidden']}) | "
+                     f"{len(r['sequence']) if r['found'] else 'none'} | {100 * r['first_unobserved']:.0f} % / "
+                     f"{100 * r.get('last_unobserved', r['first_unobserved']):.0f} % | {len(ms)} | {len(through)} | "
+                     f"{100 * share:.1f} % | {max((m['unobserved'] for m in ms), default=0) * cm3:.0f} | "
+                     f"{sum(bool(m['hidden']) for m in ms)} |")
+    lines += ["", "| phase | motions in the compartment | through never-observed space | never-observed share of the "
+              "swept volume |", "|---|---|---|---|"]
+    every = [m for r in rows for m in r["motions"] if m["swept"]]
+    for phase in ("pick", "carry", "retreat", "home", "all"):
+        ms = [m for m in every if phase in (m["phase"], "all")]
+        n = sum(bool(m["unobserved"]) for m in ms)
+        share = sum(m["unobserved"] for m in ms) / max(1, sum(m["swept"] for m in ms))
+        lines.append(f"| {phase} | {len(ms)} | {n} ({100 * n / max(1, len(ms)):.0f} %) | {100 * share:.1f} % |")
+    notes = [f"- {r['layout']}: {n}" for r in rows for n in r["notes"]]
+    return "\n".join(lines + (["", "Notes:"] + notes if notes else []))
+
+
+def layouts(scenes, jittered, seeds, amplitude: float, tmp: str) -> list[str]:
+    """The scenario files: the shipped scenes, then the perturbed copies."""
+    from relocation_app.evaluation.scenes.jitter import make_jitter
+    from relocation_common.paths import resolve_scenario
+    out = [str(resolve_scenario(s)) for s in scenes]
+    for s in jittered:
+        out += [str(p) for p in make_jitter(s, amplitude, seeds, tmp)]
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", nargs="*", default=list(SCENES))
+    ap.add_argument("--jittered", nargs="*", default=list(JITTERED), help="scenes whose perturbed copies are run")
+    ap.add_argument("--jitter-seeds", default="0,1", help="comma-separated (fixed before any result); '' = none")
+    ap.add_argument("--amplitude", type=float, default=0.012, help="m: the jitter's largest move of a bottle")
+    ap.add_argument("--voxel", type=float, default=0.01, help="m: the observed-space map's voxel side")
+    ap.add_argument("--step", type=float, default=0.01, help="rad: the largest joint's motion between samples")
+    ap.add_argument("--out", default=None, help="JSON lines, appended per layout; layouts in it are not run again")
+    ap.add_argument("--table", default=None, help="print the table of an --out file and stop")
+    a = ap.parse_args()
+    if a.table:
+        print(table([json.loads(x) for x in Path(a.table).read_text().splitlines() if x.strip()], a.voxel))
+        return 0
+    out = Path(a.out) if a.out else None
+    rows = [json.loads(x) for x in out.read_text().splitlines() if x.strip()] if out and out.exists() else []
+    seeds = [int(s) for s in a.jitter_seeds.split(",") if s.strip()]
+    with tempfile.TemporaryDirectory() as tmp:
+        for path in layouts(a.scenes, a.jittered if seeds else [], seeds, a.amplitude, tmp):
+            if any(r.get("path") == Path(path).stem for r in rows):
+                continue
+            try:
+                row = one(path, a.voxel, a.step)
+            except Exception as e:  # one layout's failure is a row with its reason, the others still run
+                row = {"layout": Path(path).stem, "objects": 0, "unlisted_seen": 0, "hidden": 0, "found": False,
+                       "sequence": [], "first_unobserved": 0.0, "motions": [], "notes": [f"crashed: {e!r}"]}
+            row["path"] = Path(path).stem
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+            if out:
+                with out.open("a") as f:
+                    f.write(json.dumps(row) + "\n")
+    print(table(rows, a.voxel))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
