@@ -101,8 +101,31 @@ def look(perception, space, scenario, gone: set[str], notes: list[str]) -> dict:
     return r.objects
 
 
-def one(path: str, voxel: float, step: float) -> dict:
-    """Solve, plan and measure one layout (module docstring)."""
+def figure(space, scenario, path: str) -> None:
+    """The never-observed share of each column seen from above (objects outlined) and of each row seen from the
+    side, as a PNG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    hi = space.lo + np.asarray(space.shape) * space.voxel
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4.2), gridspec_kw={"width_ratios": [1, 1.3]})
+    u = space.unobserved
+    im = ax[0].imshow(u.mean(axis=2).T, origin="lower", extent=(space.lo[0], hi[0], space.lo[1], hi[1]),
+                      vmin=0, vmax=1, cmap="magma")
+    for o in scenario.objects:
+        ax[0].add_patch(plt.Circle((o.x, o.y), max(o.radius, 0.02), fill=False, color="c"))
+    ax[0].set(title="from above (share of each column)", xlabel="x (m)", ylabel="y (m)")
+    ax[1].imshow(u.mean(axis=1).T, origin="lower", extent=(space.lo[0], hi[0], space.lo[2], hi[2]), vmin=0, vmax=1,
+                 cmap="magma", aspect="auto")
+    ax[1].set(title="from the side (share of each row)", xlabel="x (m)", ylabel="z (m)")
+    fig.colorbar(im, ax=ax, shrink=0.8)
+    fig.suptitle(f"{scenario.name}, top compartment: never observed from the camera at home ({100 * u.mean():.0f} %)")
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def one(path: str, voxel: float, step: float, picture: str | None = None) -> dict:
+    """Solve, plan and measure one layout (module docstring); `picture`: the first frame's map drawn there."""
     from perception_aruco.objects.model import to_shelf_object
     from perception_aruco.objects.self_filter import link_frames
     from perception_aruco.observed_space import ObservedSpace
@@ -123,6 +146,8 @@ def one(path: str, voxel: float, step: float) -> dict:
     t0 = time.perf_counter()
     seen = look(perception, space, sim, set(), notes)
     first_unobserved = float(space.unobserved.mean())
+    if picture:
+        figure(space, sim, picture)
     unlisted = [dataclasses.replace(to_shelf_object(o), weight=min(1.0, max(o.weight, 0.01)))
                 for o in seen.values() if not o.listed]
     plan_scene = sim.with_objects(list(sim.objects) + unlisted)
@@ -209,6 +234,7 @@ def main() -> int:
     ap.add_argument("--voxel", type=float, default=0.01, help="m: the observed-space map's voxel side")
     ap.add_argument("--step", type=float, default=0.01, help="rad: the largest joint's motion between samples")
     ap.add_argument("--out", default=None, help="JSON lines, appended per layout; layouts in it are not run again")
+    ap.add_argument("--figure", default=None, help="PNG: the first layout's map after its first frame")
     ap.add_argument("--table", default=None, help="print the table of an --out file and stop")
     a = ap.parse_args()
     if a.table:
@@ -222,7 +248,7 @@ def main() -> int:
             if any(r.get("path") == Path(path).stem for r in rows):
                 continue
             try:
-                row = one(path, a.voxel, a.step)
+                row = one(path, a.voxel, a.step, a.figure if not rows else None)
             except Exception as e:  # one layout's failure is a row with its reason, the others still run
                 row = {"layout": Path(path).stem, "objects": 0, "unlisted_seen": 0, "hidden": 0, "found": False,
                        "sequence": [], "first_unobserved": 0.0, "motions": [], "notes": [f"crashed: {e!r}"]}
