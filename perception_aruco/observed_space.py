@@ -16,6 +16,7 @@ mesh or point cloud built first; it is not installed here (a 400 MB wheel, docs/
 from __future__ import annotations
 
 import math
+from typing import Iterable
 
 import numpy as np
 
@@ -79,7 +80,7 @@ class ObservedSpace:
         """The centres (..., 3) of the voxels of an index range."""
         return self.centres.reshape(*self.shape, 3)[index]
 
-    def mark_capsules(self, out: np.ndarray, segments) -> None:
+    def mark_capsules(self, out: np.ndarray, segments: Iterable[tuple[np.ndarray, np.ndarray, float]]) -> None:
         """Set `out` (bool over the grid) where a voxel centre is inside one of the capsules (p0, p1, radius)."""
         for p0, p1, r in segments:
             p0, p1 = np.asarray(p0, float), np.asarray(p1, float)

@@ -31,6 +31,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the perception node runs (perception_aruco/__init__.py)
 
@@ -142,7 +143,8 @@ def one(path: str, voxel: float, step: float, picture: str | None = None) -> dic
 
     sim = load_scenario(path)
     space = ObservedSpace.top_compartment(sim.shelf, voxel)
-    perception, notes = Perception(sim), []
+    perception = Perception(sim)
+    notes: list[str] = []
     t0 = time.perf_counter()
     seen = look(perception, space, sim, set(), notes)
     first_unobserved = float(space.unobserved.mean())
@@ -156,7 +158,7 @@ def one(path: str, voxel: float, step: float, picture: str | None = None) -> dic
     params = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
     planner = MotionPlanner(plan_scene, params)
     result = astar.solve(RelocationProblem.from_scenario(plan_scene), CachedOracle(planner))
-    row = {"layout": sim.name, "objects": len(plan_scene.objects), "unlisted_seen": len(unlisted),
+    row: dict[str, Any] = {"layout": sim.name, "objects": len(plan_scene.objects), "unlisted_seen": len(unlisted),
            "hidden": len(sim.unlisted) - len(unlisted), "found": bool(result.found),
            "sequence": list(result.sequence or ()), "first_unobserved": round(first_unobserved, 3), "motions": [],
            "notes": notes}
@@ -165,7 +167,7 @@ def one(path: str, voxel: float, step: float, picture: str | None = None) -> dic
         return row
     done: list[str] = []
     by_id = {o.id: o for o in plan_scene.objects}
-    for oid in result.sequence:
+    for oid in result.sequence or ():
         if done:
             look(perception, space, sim, set(done), notes)
         try:
