@@ -20,6 +20,7 @@ builds but the planner does not hold (a hidden, unlisted object: a contact the a
     .venv/bin/python scripts/bench_unobserved.py                              # the default set below
     .venv/bin/python scripts/bench_unobserved.py --scenes paper_experiment_10 --jitter-seeds ""  # one scene
     .venv/bin/python scripts/bench_unobserved.py --out rows.jsonl             # resumable; --table rows.jsonl
+    .venv/bin/python scripts/bench_unobserved.py --camera-model realsense_d435 --frames 3   # noisy depth, holes
 """
 from __future__ import annotations
 
@@ -84,22 +85,28 @@ def objects_mask(space, objects) -> np.ndarray:
     return out
 
 
-def look(perception, space, scenario, gone: set[str], notes: list[str]) -> dict:
-    """Render the shelf without the `gone` objects (arm at home), perceive it, integrate it; the perceived
-    objects by id (none when the frame is refused, said in `notes`)."""
+def look(perception, space, scenario, gone: set[str], notes: list[str], sensor: str, frames: int, seed: int) -> dict:
+    """Render the shelf without the `gone` objects (arm at home) `frames` times with the camera model `sensor` (seeds
+    seed, seed + 1, ...), perceive each frame and integrate it; the last perceived objects by id (none when every
+    frame is refused, said in `notes`)."""
     from perception_scenes import render_scene
 
+    from jaco2_sim_driver.sensor_model import SensorModel
     from perception_aruco.aruco import PerceptionError
     from perception_aruco.shelf import corrected_K
     from relocation_common.robot_description import Q_HOME
-    frame, _ = render_scene(scenario.with_objects([o for o in scenario.objects if o.id not in gone]))
-    try:
-        r = perception.process(frame.rgb, frame.depth, frame.K, q=Q_HOME)
-    except PerceptionError as e:
-        notes.append(f"frame refused ({type(e).__name__}: {e}): not integrated")
-        return {}
-    space.integrate(frame.depth, corrected_K(frame.K, r.shelf.intrinsics), r.T_base_camera)
-    return r.objects
+    shown = scenario.with_objects([o for o in scenario.objects if o.id not in gone])
+    objects: dict = {}
+    for k in range(frames):
+        frame, _ = render_scene(shown, sensor=SensorModel.named(sensor), seed=seed + k)
+        try:
+            r = perception.process(frame.rgb, frame.depth, frame.K, q=Q_HOME)
+        except PerceptionError as e:
+            notes.append(f"frame refused ({type(e).__name__}: {e}): not integrated")
+            continue
+        space.integrate(frame.depth, corrected_K(frame.K, r.shelf.intrinsics), r.T_base_camera)
+        objects = r.objects
+    return objects
 
 
 def shelf_shadow(sim, voxel: float) -> np.ndarray:
@@ -138,7 +145,7 @@ def figure(space, scenario, path: str) -> None:
     plt.close(fig)
 
 
-def one(path: str, voxel: float, step: float, picture: str | None = None) -> dict:
+def one(path: str, voxel: float, step: float, sensor: str, frames: int, picture: str | None = None) -> dict:
     """Solve, plan and measure one layout (module docstring); `picture`: the first frame's map drawn there."""
     from perception_aruco.objects.model import to_shelf_object
     from perception_aruco.objects.self_filter import link_frames
@@ -159,7 +166,7 @@ def one(path: str, voxel: float, step: float, picture: str | None = None) -> dic
     perception = Perception(sim)
     notes: list[str] = []
     t0 = time.perf_counter()
-    seen = look(perception, space, sim, set(), notes)
+    seen = look(perception, space, sim, set(), notes, sensor, frames, 0)
     first_unobserved = float(space.unobserved.mean())
     if picture:
         figure(space, sim, picture)
@@ -172,8 +179,8 @@ def one(path: str, voxel: float, step: float, picture: str | None = None) -> dic
     params = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
     planner = MotionPlanner(plan_scene, params)
     result = astar.solve(RelocationProblem.from_scenario(plan_scene), CachedOracle(planner))
-    row: dict[str, Any] = {"layout": sim.name, "objects": len(plan_scene.objects), "unlisted_seen": len(unlisted),
-           "hidden": len(sim.unlisted) - len(unlisted), "found": bool(result.found),
+    row: dict[str, Any] = {"layout": sim.name, "camera": f"{sensor} x {frames}", "objects": len(plan_scene.objects),
+           "unlisted_seen": len(unlisted), "hidden": len(sim.unlisted) - len(unlisted), "found": bool(result.found),
            "sequence": list(result.sequence or ()), "first_unobserved": round(first_unobserved, 3), "motions": [],
            "notes": notes}
     if not result.found:
@@ -183,7 +190,7 @@ def one(path: str, voxel: float, step: float, picture: str | None = None) -> dic
     by_id = {o.id: o for o in plan_scene.objects}
     for oid in result.sequence or ():
         if done:
-            look(perception, space, sim, set(done), notes)
+            look(perception, space, sim, set(done), notes, sensor, frames, 100 * len(done))
         try:
             plan = plan_relocation(planner, oid, done)
         except PlanningError as e:
@@ -259,6 +266,8 @@ def main() -> int:
     ap.add_argument("--voxel", type=float, default=0.01, help="m: the observed-space map's voxel side")
     ap.add_argument("--step", type=float, default=0.01, help="rad: the largest joint's motion between samples")
     ap.add_argument("--out", default=None, help="JSON lines, appended per layout; layouts in it are not run again")
+    ap.add_argument("--camera-model", default="ideal", help="ideal or realsense_d435 (jaco2_sim_driver.sensor_model)")
+    ap.add_argument("--frames", type=int, default=1, help="frames integrated per look (seeded 100 k + 0, 1, ...)")
     ap.add_argument("--figure", default=None, help="PNG: the first layout's map after its first frame")
     ap.add_argument("--table", default=None, help="print the table of an --out file and stop")
     a = ap.parse_args()
@@ -273,7 +282,7 @@ def main() -> int:
             if any(r.get("path") == Path(path).stem for r in rows):
                 continue
             try:
-                row = one(path, a.voxel, a.step, a.figure if not rows else None)
+                row = one(path, a.voxel, a.step, a.camera_model, a.frames, a.figure if not rows else None)
             except Exception as e:  # one layout's failure is a row with its reason, the others still run
                 row = {"layout": Path(path).stem, "objects": 0, "unlisted_seen": 0, "hidden": 0, "found": False,
                        "sequence": [], "first_unobserved": 0.0, "motions": [], "notes": [f"crashed: {e!r}"]}
