@@ -65,6 +65,14 @@ class ObservedSpace:
         flat[ok & (z < d - band)] = FREE
         flat[ok & (np.abs(z - d) <= band)] = OCCUPIED
 
+    def state_at(self, points: np.ndarray) -> np.ndarray:
+        """The state of the voxel holding each point (N x 3, base frame); UNOBSERVED outside the grid."""
+        k = np.floor((np.atleast_2d(np.asarray(points, float)) - self.lo) / self.voxel).astype(np.int64)
+        inside = np.all((k >= 0) & (k < np.asarray(self.shape)), axis=1)
+        out = np.full(len(k), UNOBSERVED, np.uint8)
+        out[inside] = self.state[tuple(k[inside].T)]
+        return out
+
     @property
     def unobserved(self) -> np.ndarray:
         """Bool over the grid: never observed."""

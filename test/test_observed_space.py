@@ -65,3 +65,32 @@ def test_a_capsule_and_a_cylinder_cover_their_volume():
     assert abs(cyl.sum() * space.voxel ** 3 - math.pi * 0.03 ** 2 * 0.2) < 0.1 * math.pi * 0.03 ** 2 * 0.2
     xs = space.centres.reshape(*space.shape, 3)[cyl]
     assert np.ptp(xs[:, 0]) > 0.18 and np.ptp(xs[:, 2]) < 0.065
+
+
+def test_a_rendered_bottle_shadows_the_space_behind_it():
+    """The project's simulated camera (depth along the optical axis, OpenCV optical frame): one bottle on the top
+    board; along the camera's ray through its axis, the space past its far side is never observed, its front face is
+    occupied; as far from the camera beside it, the space is free."""
+    from dataclasses import replace
+
+    from perception_scenes import render_scene
+
+    from relocation_common.paths import default_scenario
+    from relocation_common.scenario import load_scenario
+    base = load_scenario(default_scenario())
+    s = base.shelf
+    bottle = replace(base.objects[base.ids.index(base.target_id)], x=s.x_front + 0.12, y=s.y_center)
+    frame, _ = render_scene(base.with_objects([bottle]))
+    space = ObservedSpace.top_compartment(s, 0.01)
+    space.integrate(frame.depth, frame.K, frame.T_base_camera)
+    axis = np.array([bottle.x, bottle.y, s.top_z + 0.6 * bottle.height])
+    ray = axis - frame.T_base_camera[:3, 3]
+    ray /= np.linalg.norm(ray)
+    side = np.cross(ray, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    behind = axis + ray * (bottle.radius + np.array([0.03, 0.05, 0.07]))[:, None]
+    beside = behind + side * (bottle.radius + 0.05)
+    front = axis - ray * (bottle.radius - 0.003)
+    assert np.all(space.state_at(behind) == UNOBSERVED)
+    assert np.all(space.state_at(beside) == FREE)
+    assert np.all(space.state_at(front) == OCCUPIED)
