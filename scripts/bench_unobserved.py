@@ -3,12 +3,13 @@
 (docs/perception.md, "Unobserved space"). Not a timed test.
 
 Per layout (shipped scenes, and perturbed copies: `scenes jitter`, 12 mm, seeds fixed before any result): the
-project's simulated camera renders the shelf with the arm at home; perception (Perception.process, its own camera
-pose and shelf-corrected intrinsics) gives the frame; `ObservedSpace` integrates it into a voxel map of the top
-compartment. The retrieval is solved by the blocker A* with the real motion planner in-process (the scenario's
-listed objects plus the unlisted ones perception saw: what the planner would hold), and each relocation is planned
-(relocation.plan_relocation: pick, carry, retreat, home), in order. Before each relocation a new frame is rendered
-with the objects relocated so far gone from the top shelf and integrated (the closed loop's view after each one).
+project's simulated camera renders the shelf with the arm at home (`--frames`, default confirm_frames); perception
+(Perception.process through the node's SceneMemory, its own camera pose and shelf-corrected intrinsics) takes each
+frame; `ObservedSpace` integrates it into a voxel map of the top compartment. The retrieval is solved by the blocker
+A* with the real motion planner in-process (the scenario's listed objects plus the unlisted ones the node would have
+published: what the planner would hold), and each relocation is planned (relocation.plan_relocation: pick, carry,
+retreat, home), in order. Before each relocation new frames are rendered with the objects relocated so far gone
+from the top shelf and integrated (the closed loop's view after each one).
 
 Per motion: the voxels of the compartment swept by the arm's collision capsules (robot_description.CAPSULES, the
 planner's envelope of the open hand) and, during the carry, the carried object (its primitive attached to the hand
@@ -20,7 +21,7 @@ builds but the planner does not hold (a hidden, unlisted object: a contact the a
     .venv/bin/python scripts/bench_unobserved.py                              # the default set below
     .venv/bin/python scripts/bench_unobserved.py --scenes paper_experiment_10 --jitter-seeds ""  # one scene
     .venv/bin/python scripts/bench_unobserved.py --out rows.jsonl             # resumable; --table rows.jsonl
-    .venv/bin/python scripts/bench_unobserved.py --camera-model realsense_d435 --frames 3   # noisy depth, holes
+    .venv/bin/python scripts/bench_unobserved.py --camera-model realsense_d435   # noisy depth, holes
 """
 from __future__ import annotations
 
@@ -85,10 +86,12 @@ def objects_mask(space, objects) -> np.ndarray:
     return out
 
 
-def look(perception, space, scenario, gone: set[str], notes: list[str], sensor: str, frames: int, seed: int) -> dict:
+def look(perception, memory, space, scenario, gone: set[str], notes: list[str], sensor: str, frames: int,
+         seed: int) -> dict:
     """Render the shelf without the `gone` objects (arm at home) `frames` times with the camera model `sensor` (seeds
-    seed, seed + 1, ...), perceive each frame and integrate it; the last perceived objects by id (none when every
-    frame is refused, said in `notes`)."""
+    seed, seed + 1, ...), perceive each frame through the node's SceneMemory `memory` (an unlisted object is
+    published once confirmed in confirm_frames frames) and integrate it; what the node would publish after the last
+    one, by id (nothing new when every frame is refused, said in `notes`)."""
     from perception_scenes import render_scene
 
     from jaco2_sim_driver.sensor_model import SensorModel
@@ -96,17 +99,17 @@ def look(perception, space, scenario, gone: set[str], notes: list[str], sensor: 
     from perception_aruco.shelf import corrected_K
     from relocation_common.robot_description import Q_HOME
     shown = scenario.with_objects([o for o in scenario.objects if o.id not in gone])
-    objects: dict = {}
+    published: dict = {}
     for k in range(frames):
         frame, _ = render_scene(shown, sensor=SensorModel.named(sensor), seed=seed + k)
         try:
-            r = perception.process(frame.rgb, frame.depth, frame.K, q=Q_HOME)
+            r = perception.process(frame.rgb, frame.depth, frame.K, memory=memory, q=Q_HOME)
         except PerceptionError as e:
             notes.append(f"frame refused ({type(e).__name__}: {e}): not integrated")
             continue
         space.integrate(frame.depth, corrected_K(frame.K, r.shelf.intrinsics), r.T_base_camera)
-        objects = r.objects
-    return objects
+        published = {o.id: o for o in memory.update(r.objects, r.uncounted)[0]}
+    return published
 
 
 def shelf_shadow(sim, voxel: float) -> np.ndarray:
@@ -150,10 +153,12 @@ def one(path: str, voxel: float, step: float, sensor: str, frames: int, picture:
     from perception_aruco.objects.model import to_shelf_object
     from perception_aruco.objects.self_filter import link_frames
     from perception_aruco.observed_space import ObservedSpace
-    from perception_aruco.pipeline import Perception
+    from perception_aruco.pipeline import Perception, SceneMemory
     from qtree_task_planner.oracles import CachedOracle
     from qtree_task_planner.problem import RelocationProblem
     from qtree_task_planner.search import astar
+    from relocation_common.config import node_section
+    from relocation_common.paths import config_file
     from relocation_common.robot_description import LINK_NAMES
     from relocation_common.scenario import load_scenario
     from stpik_motion_planner.execution.relocation import plan_relocation
@@ -164,23 +169,26 @@ def one(path: str, voxel: float, step: float, sensor: str, frames: int, picture:
     sim = load_scenario(path)
     space = ObservedSpace.top_compartment(sim.shelf, voxel)
     perception = Perception(sim)
+    cfg = node_section(config_file("perception.yaml"), "perception")
+    memory = SceneMemory(sim.ids, int(cfg["hold_frames"]), int(cfg["confirm_frames"]))
+    frames = frames or int(cfg["confirm_frames"])
     notes: list[str] = []
     t0 = time.perf_counter()
-    seen = look(perception, space, sim, set(), notes, sensor, frames, 0)
+    seen = look(perception, memory, space, sim, set(), notes, sensor, frames, 0)
     first_unobserved = float(space.unobserved.mean())
     if picture:
         figure(space, sim, picture)
     unlisted = [dataclasses.replace(to_shelf_object(o), weight=min(1.0, max(o.weight, 0.01)))
                 for o in seen.values() if not o.listed]
     plan_scene = sim.with_objects(list(sim.objects) + unlisted)
-    hidden = objects_mask(space, [o for o in sim.unlisted if not any(
-        np.hypot(o.x - u.x, o.y - u.y) < 0.05 for u in unlisted)])
+    unseen_unlisted = [o for o in sim.unlisted if not any(np.hypot(o.x - u.x, o.y - u.y) < 0.05 for u in unlisted)]
+    hidden = objects_mask(space, unseen_unlisted)
     shadow = shelf_shadow(sim, voxel)
     params = dataclasses.replace(PlannerParams.load(), timeout=SAFETY_NET, carry_timeout=SAFETY_NET)
     planner = MotionPlanner(plan_scene, params)
     result = astar.solve(RelocationProblem.from_scenario(plan_scene), CachedOracle(planner))
     row: dict[str, Any] = {"layout": sim.name, "camera": f"{sensor} x {frames}", "objects": len(plan_scene.objects),
-           "unlisted_seen": len(unlisted), "hidden": len(sim.unlisted) - len(unlisted), "found": bool(result.found),
+           "unlisted_seen": len(unlisted), "hidden": len(unseen_unlisted), "found": bool(result.found),
            "sequence": list(result.sequence or ()), "first_unobserved": round(first_unobserved, 3), "motions": [],
            "notes": notes}
     if not result.found:
@@ -190,7 +198,7 @@ def one(path: str, voxel: float, step: float, sensor: str, frames: int, picture:
     by_id = {o.id: o for o in plan_scene.objects}
     for oid in result.sequence or ():
         if done:
-            look(perception, space, sim, set(done), notes, sensor, frames, 100 * len(done))
+            look(perception, memory, space, sim, set(done), notes, sensor, frames, 100 * len(done))
         try:
             plan = plan_relocation(planner, oid, done)
         except PlanningError as e:
@@ -267,7 +275,8 @@ def main() -> int:
     ap.add_argument("--step", type=float, default=0.01, help="rad: the largest joint's motion between samples")
     ap.add_argument("--out", default=None, help="JSON lines, appended per layout; layouts in it are not run again")
     ap.add_argument("--camera-model", default="ideal", help="ideal or realsense_d435 (jaco2_sim_driver.sensor_model)")
-    ap.add_argument("--frames", type=int, default=1, help="frames integrated per look (seeded 100 k + 0, 1, ...)")
+    ap.add_argument("--frames", type=int, default=0, help="frames integrated per look (seeded 100 k + 0, 1, ...); "
+                    "0: config/perception.yaml's confirm_frames (a new unlisted object is published after as many)")
     ap.add_argument("--figure", default=None, help="PNG: the first layout's map after its first frame")
     ap.add_argument("--table", default=None, help="print the table of an --out file and stop")
     a = ap.parse_args()
