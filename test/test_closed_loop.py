@@ -405,12 +405,13 @@ def test_a_new_object_the_hand_cannot_grasp_stays_an_obstacle_and_the_give_up_sa
 def test_a_give_up_without_a_lying_bottle_gives_the_solver_s_reason():
     """The benchmark's moved bottles (random5_03, paper_random5_04, paper_random5_06: a bottle moved next to T) ended
     "no feasible relocation sequence over the 4 obstacles (0 planner calls)" and no more, though the A* knew the
-    blocking cycle (exact.why_none). Here T's lane needs b gone and b's needs T gone."""
+    blocking cycle (exact.why_none). Here T's lane needs b gone and b's needs T gone. The line names the actions it
+    is a proof for (before: no action set, as if no other action could exist)."""
     shelf = FakeShelf(lanes={"T": [{"b"}], "b": [{"T"}]})
     answer = replan(remaining_problem(shelf.scenario, shelf.perceive(), ()), (), GeometryCache(shelf))
     assert isinstance(answer, str) and answer.startswith(
-        "T cannot be reached: no feasible relocation sequence over the 5 obstacles on the top shelf (2 planner calls); "
-        "T unfeasible from every set reached") and \
+        "T cannot be reached: no feasible relocation sequence with the actions side_grasp, top_grasp over the 5 "
+        "obstacles on the top shelf (2 planner calls); T unfeasible from every set reached") and \
         "blocking cycle: every lane of T needs an object that cannot leave first (lane {b}: b needs T moved)" in answer
 
 

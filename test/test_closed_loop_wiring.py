@@ -1,5 +1,6 @@
 """The task planner's closed-loop wiring without ROS processes: the scene watch (a scene received after a
 relocation ended), the scene conversion, and retrieval.execute's capacity check before the arm moves."""
+import math
 import threading
 import time
 from dataclasses import replace
@@ -9,13 +10,14 @@ from geometry_msgs.msg import Quaternion
 from rclpy.clock_type import ClockType
 from rclpy.time import Time
 
-from qtree_task_planner.executive.closed_loop import scene_from_scenario
+from qtree_task_planner.executive.closed_loop import free_slots, scene_from_scenario
 from qtree_task_planner.executive.retrieval import execute
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
 from relocation_common.paths import default_scenario
 from relocation_common.ros_conversions import objects_to_msg
 from relocation_common.scenario import ScenarioError, load_scenario
+from stpik_motion_planner.execution.goal_check import SeenBottle, destination
 
 SC = load_scenario(default_scenario())
 
@@ -362,3 +364,24 @@ def test_a_motion_planner_that_died_mid_relocation_is_waited_for_and_the_goal_se
     planner = _RestartedPlanner((True, "unused"))
     ok, message = ros_clients.Relocator(planner, 1.0, 60.0, 0.5, lambda: True).relocate("o2", [], lambda: False)
     assert not ok and "went away" in message and len(planner.goals) == 1
+
+
+def test_free_slots_count_a_box_and_a_lying_bottle_on_the_bottom_shelf_by_their_footprints():
+    """The task planner's free slots read each object's footprint from the scene message. Before, SeenObject had no
+    size: a box (radius 0) left even the slot it stands on free, a lying bottle counted as a standing one at its
+    end face: 8 of the 10 slots were counted free where 4 are. A box at slot 0 takes 0 and the one in front of it (6),
+    as the motion planner's own choice has it (goal_check.destination); a bottle lying along y between slots 1, 3,
+    7 and 9 takes all four."""
+    sc = load_scenario("config/scenarios/world/shapes_box_10.yaml")
+    bottom, slot = sc.shelf.bottom_z, sc.slots
+    lying = (0.5 * (slot[1][0] + slot[7][0]), 0.5 * (slot[1][1] + slot[3][1]))
+    moved = {"o7": replace(sc.object("o7"), x=slot[0][0], y=slot[0][1], support_z=bottom),
+             "o1": replace(sc.object("o1"), x=lying[0], y=lying[1], yaw=math.pi / 2, lying=True, support_z=bottom)}
+    msg = objects_to_msg(moved.get(b.id, replace(b, support_z=sc.shelf.top_z)) for b in sc.objects)
+    free = free_slots(sc, seen_scene(msg))
+    assert set(range(len(slot))) - set(free) == {0, 6, 1, 3, 7, 9}, free
+    box_only = seen_scene(objects_to_msg(replace(moved.get(b.id, b), support_z=bottom if b.id == "o7" else
+                                                 sc.shelf.top_z) for b in sc.objects if b.id != "o1"))
+    seen = {i: SeenBottle(i, o.x, o.y, o.z) for i, o in box_only.items()}
+    planners = {destination(sc, seen, {}, n)[0] for n in range(len(slot))}
+    assert planners == set(free_slots(sc, box_only)) == set(range(len(slot))) - {0, 6}
