@@ -134,9 +134,11 @@ def entry(o: ShelfObject, spec: Spec, rng: random.Random, weighed: bool = True) 
 #   each into a column drawn among those with room left, with a probability in proportion to the room it would
 #   leave; then each column's order from the back is shuffled, the target staying at the back of its own;
 # - boxes stand square to the shelf (yaw 0 or 90 degrees, +-3 degrees), a lying bottle along the column (+-6 degrees);
-# - in a column, objects stand from the back panel (the target as deep as the arm reaches, layout.MAX_REACH: the
-#   others may stand beyond it, out of the hand's reach, as on a real shelf), each DEPTH_GAP (drawn per object) in
-#   front of the one behind, centred in the column within +-3 mm (as far as its width leaves);
+# - in a column, objects stand from the back panel, each DEPTH_GAP (drawn per object) in front of the one behind,
+#   centred in the column within +-3 mm (as far as its width leaves); the target's column and the two beside it
+#   (the hand reaching the target passes by them) are stocked only as deep as the arm reaches (layout.MAX_REACH,
+#   NEAR_ROOM: the room counted for them), the other columns may stand beyond it, out of the hand's reach, as on a
+#   real shelf;
 # - a column is as wide as its widest object; two neighbouring columns stand packed or with an aisle a hand fits in
 #   between them (COLUMN_GAPS, one of the two drawn per pair, then the gap in it); the whole is shifted by a uniform
 #   draw among the offsets that keep it on the shelf with the target's column within TARGET_Y of the shelf's middle.
@@ -170,6 +172,7 @@ def _reach(y: float) -> float:
 
 
 ROOM = X_BACK - X_FRONT  # m of depth a column holds
+NEAR_ROOM = _reach(2 * TARGET_Y) - X_FRONT  # m of depth of the target's column and its neighbours (within reach)
 
 
 def stocked(rng: random.Random, specs: Sequence[Spec], ids: Sequence[str], spare: int) -> list[ShelfObject] | None:
@@ -183,13 +186,17 @@ def stocked(rng: random.Random, specs: Sequence[Spec], ids: Sequence[str], spare
     columns: list[list[int]] = [[] for _ in range(k)]
     depth = [0.0] * k  # m of depth taken, gaps included
     order = [0] + sorted(range(1, len(specs)), key=lambda i: -half[i][0])  # the target, then the deepest first
+    room = [ROOM] * k
     for i in order:
-        left = [ROOM - depth[c] - 2 * half[i][0] - (behind[i] if columns[c] else 0.0) for c in range(k)]
+        left = [room[c] - depth[c] - 2 * half[i][0] - (behind[i] if columns[c] else 0.0) for c in range(k)]
         if max(left) < 0.0:
             return None
         c = rng.choices(range(k), [max(v, 0.0) + 1e-9 * (v >= 0.0) for v in left])[0]
         depth[c] += 2 * half[i][0] + (behind[i] if columns[c] else 0.0)
         columns[c].append(i)
+        if i == 0:  # the target's column and its neighbours: within reach
+            room = [NEAR_ROOM if abs(j - c) <= 1 else ROOM for j in range(k)]
+    near = [room[c] == NEAR_ROOM for c in range(k) if columns[c]]
     columns = [col[:1] + rng.sample(col[1:], len(col) - 1) if 0 in col else rng.sample(col, len(col))
                for col in columns if col]  # in a random order from the back, the target at the back of its own
     widths = [2 * max(half[i][1] for i in col) for col in columns]
@@ -206,16 +213,15 @@ def stocked(rng: random.Random, specs: Sequence[Spec], ids: Sequence[str], spare
     shift = rng.uniform(lo, hi)
     placed: list[ShelfObject] = []
     at: dict[int, ShelfObject] = {}
-    for col, centre, width in zip(columns, centres, widths):
+    for col, centre, width, within in zip(columns, centres, widths, near):
         front = X_BACK
         for n, i in enumerate(col):
             slack = min(max(0.0, width / 2 - half[i][1]), 0.003)
             y = centre + shift + rng.uniform(-slack, slack)
             x = front - half[i][0] - (behind[i] if n else 0.0)
-            if i == 0:  # the target within the arm's reach
-                x = min(x, _reach(y))
+            x = min(x, _reach(y)) if within else x
             o = shelf_object(specs[i], ids[i], round(x, 3), round(y, 3), yaws[i])
-            if not fits(o, placed, reach=i == 0):
+            if not fits(o, placed, reach=within):
                 return None
             placed.append(o)
             at[i] = o

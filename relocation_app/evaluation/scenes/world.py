@@ -19,6 +19,7 @@ from __future__ import annotations
 import copy
 import math
 import random
+import textwrap
 from pathlib import Path
 from typing import Any, Callable
 
@@ -50,6 +51,7 @@ from relocation_common.scenario import PALETTE, ShelfObject, parse_scenario
 DIR = "world"
 SEED0 = 36000  # scene k's seeds start at SEED0 + 100 k
 SEEDS_PER_SCENE = 100
+SPARES = (0, 1, 2)  # spare columns of a columns layout, tried in turn (each over the scene's seeds)
 
 # name -> (obstacles, unlisted objects, description, layout: "uniform" or "columns")
 RECIPES: dict[str, tuple[tuple[Spec, ...], tuple[Spec, ...], str, str]] = {
@@ -73,18 +75,19 @@ RETRIEVABLE_SCENES = {name: Purpose(f"{n} objects of mixed shapes, colours repea
                       for name, n in (("crowd_20", 20), ("crowd_30", 30))}
 
 
-def recipe_scene(name: str, seed: int) -> dict | None:
-    """The scene `name` of RECIPES drawn with `seed` (module docstring), or None when its objects do not fit."""
+def recipe_scene(name: str, seed: int, spare: int = 0) -> dict | None:
+    """The scene `name` of RECIPES drawn with `seed` (module docstring; `spare`: the columns beyond the fewest, for
+    the columns layout), or None when its objects do not fit."""
     obstacles, unlisted, description, layout = RECIPES[name]
     rng = random.Random(seed)
     specs, ids = (BOTTLE,) + obstacles, ["T"] + [f"o{k + 1}" for k in range(len(obstacles))]
-    got = stocked(rng, specs, ids, 0) if layout == "columns" else uniform_layout(rng, specs, ids)
+    got = stocked(rng, specs, ids, spare) if layout == "columns" else uniform_layout(rng, specs, ids)
     if got is None:
         return None
     target, placed = got[0], list(got)
     objects = [entry(o, spec, rng) for o, spec in zip(got[1:], obstacles)]
     objects.append({"id": "T", "xy": [target.x, target.y]})
-    data: dict[str, Any] = {"name": name, "description": f"{description} Drawn with seed {seed}.",
+    data: dict[str, Any] = {"name": name, "description": f"{description} Drawn with seed {seed}{spared(spare)}.",
                             "shelf": dict(SHELF), "defaults": {"radius": 0.033, "height": 0.16},
                             **copy.deepcopy(MARKERS), "target": "T", "objects": objects, "slots": "auto"}
     if name == "same_colour_10":
@@ -142,12 +145,12 @@ def behind(rng: random.Random, listed: list[ShelfObject], spec: Spec) -> Callabl
     return draw
 
 
-def admitted(name: str, seed: int, log: Callable[[str], None]) -> dict | None:
-    """The scene `name` drawn with `seed` when it meets the scene's definition (module docstring), else None, the
-    reason logged."""
-    data = unlisted_in_the_way(seed) if name == ORDER[0] else recipe_scene(name, seed)
+def admitted(name: str, seed: int, spare: int, log: Callable[[str], None]) -> dict | None:
+    """The scene `name` drawn with `seed` (and `spare`, recipe_scene) when it meets the scene's definition (module
+    docstring), else None, the reason logged."""
+    data = unlisted_in_the_way(seed) if name == ORDER[0] else recipe_scene(name, seed, spare)
     if data is None:
-        log(f"{name} seed {seed}: refused (fit): the objects do not fit")
+        log(f"{name} seed {seed}{spared(spare)}: refused (fit): the objects do not fit")
         return None
     if name == "hidden_unlisted_10":
         why = hidden(data)
@@ -157,21 +160,27 @@ def admitted(name: str, seed: int, log: Callable[[str], None]) -> dict | None:
     if name in RETRIEVABLE_SCENES:
         from relocation_app.evaluation.feasibility_cache import planner_params
         v = judge(data, RETRIEVABLE_SCENES[name], planner_params())
-        log(f"{name} seed {seed}: " + (f"admitted, optimum {' '.join(v.sequence or ())} ({v.weight:.2f}), "
-                                       f"{v.planner_calls} planner calls, {v.seconds:.0f} s" if v.admitted else
-                                       f"refused ({v.stage}): {v.reason[:300]} ({v.seconds:.0f} s)"))
+        said = (f"admitted, optimum {' '.join(v.sequence or ())} ({v.weight:.2f}), {v.planner_calls} planner calls"
+                if v.admitted else f"refused ({v.stage}): {v.reason[:300]}")
+        log(f"{name} seed {seed}{spared(spare)}: {said} ({v.seconds:.0f} s)")
         if not v.admitted:
             return None
     return data
 
 
-def header(name: str, seed: int, first: int) -> str:
+def spared(spare: int) -> str:
+    """', N spare columns' for the log and the header (nothing for none)."""
+    return f", {spare} spare column{'s' * (spare > 1)}" if spare else ""
+
+
+def header(name: str, seed: int, spare: int, first: int) -> str:
     """The scene file's header: who made it, the seed kept and the rule that admitted it."""
     made = f"# Test and benchmark scene (docs/scenarios.md), made by {made_by('world')}\n"
     if name in RETRIEVABLE_SCENES:
-        return (made + f"# (relocation_app/evaluation/scenes/world.py): seed {seed}, the first from {first} whose "
-                "layout fits and\n# meets its purpose (admission.py): " + RETRIEVABLE_SCENES[name].text + ".\n"
-                "# Format: docs/scenarios.md.")
+        rule = (f"(relocation_app/evaluation/scenes/world.py): seed {seed}{spared(spare)}, the first (spare columns "
+                f"{', '.join(map(str, SPARES))} in turn, each over seeds {first}+{SEEDS_PER_SCENE}) whose layout fits "
+                f"and meets its purpose (admission.py): {RETRIEVABLE_SCENES[name].text}. Format: docs/scenarios.md.")
+        return made + "\n".join("# " + line for line in textwrap.wrap(rule, 116))
     hides = " and hides the unlisted bottle" if name == "hidden_unlisted_10" else ""
     return (made + f"# (relocation_app/evaluation/scenes/world.py): seed {seed}, the first from {first} whose "
             f"layout fits{hides}. Format: docs/scenarios.md.")
@@ -179,16 +188,21 @@ def header(name: str, seed: int, first: int) -> str:
 
 def make_world(out: Path, names: tuple[str, ...] = ORDER, log: Callable[[str], None] = print) -> list[Path]:
     """Write the scenes `names` (ORDER) into `out`: for each, the first seed from its own that gives a layout
-    meeting its definition (module docstring). RuntimeError when none of SEEDS_PER_SCENE does."""
+    meeting its definition (module docstring); a columns layout tries the seeds with each of SPARES spare columns
+    in turn. RuntimeError when none does."""
     written = []
     for name in names:
         first = SEED0 + 100 * ORDER.index(name)
-        for seed in range(first, first + SEEDS_PER_SCENE):
-            data = admitted(name, seed, log)
+        data = None
+        for spare in SPARES if RECIPES.get(name, ((), (), "", ""))[3] == "columns" else (0,):
+            for seed in range(first, first + SEEDS_PER_SCENE):
+                data = admitted(name, seed, spare, log)
+                if data is not None:
+                    break
             if data is not None:
                 break
-        else:
+        if data is None:
             raise RuntimeError(f"{name}: no layout in seeds {first}+{SEEDS_PER_SCENE}")
-        written.append(write_scene(data, out / f"{name}.yaml", header(name, seed, first)))
-        log(f"{name}: seed {seed}")
+        written.append(write_scene(data, out / f"{name}.yaml", header(name, seed, spare, first)))
+        log(f"{name}: seed {seed}{spared(spare)}")
     return written
