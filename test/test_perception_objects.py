@@ -207,3 +207,19 @@ def test_a_listed_bottle_lying_along_the_front_edge_is_itself_not_an_unlisted_ob
     o1 = s.object("o1")
     assert math.hypot(r.objects["o1"].x - o1.x, r.objects["o1"].y - o1.y) <= 0.015
     assert not r.unlisted, {i: (o.x, o.y) for i, o in r.unlisted.items()}
+
+
+def test_a_listed_box_is_identified_as_itself():
+    """The demo on world/crowd_20 with perception: both listed boxes (o18, o19) were published as unlisted objects
+    u1 and u3 at their own poses and sizes, and reported missing: the size cost knew cylinders only (a box has no
+    radius). A listed box fitted as a box of its size, seen where the scenario puts it, is that box."""
+    layout = generated_layout(BASE, 3, 5, taken=[(0.75, -0.05, 0.1)])
+    box = extra(BASE, "bx", BOX, 0.75, -0.05, (0.06, 0.10, 0.12), -0.4, False, PALETTE["purple"], listed=True)
+    s = with_objects(BASE, [*layout, box])
+    f, vis = render_scene(s)
+    r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    assert vis["bx"] >= VISIBLE
+    assert "bx" in r.objects, (r.missing.get("bx"), {u.id: (u.shape, u.x, u.y) for u in r.unlisted.values()})
+    o = r.objects["bx"]
+    assert o.listed and o.shape == BOX and math.hypot(o.x - 0.75, o.y + 0.05) <= 0.015, o
+    assert not r.unlisted, r.unlisted
