@@ -107,7 +107,8 @@ def part_of(f: Fitted, listed: Iterable[PerceivedObject], params: ObjectParams, 
 
 
 def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float) -> dict[str, str]:
-    """Listed fits outside the shelf, and pairs on one board that overlap by more than 2 tol: id -> why."""
+    """Listed fits outside the shelf, and pairs on one board whose footprints overlap by more than 2 tol (each shrunk
+    by tol still sharing area): id -> why."""
     sh, out = scenario.shelf, {}
     for i, d in found.items():
         hx, hy = d.half_extent  # not the bounding circle: a bottle lying along the front edge is inside the shelf
@@ -115,14 +116,23 @@ def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float)
                 and sh.y_min + hy - tol <= d.y <= sh.y_max - hy + tol):
             out[i] = f"fit at ({d.x:.3f}, {d.y:.3f}) is not inside the shelf: not this object"
     ids = [i for i in found if i not in out]
+    shrunk = {i: _outline(found[i]).footprint(-tol) for i in ids}  # overlapping by more than 2 tol: sharing area
     for a, i in enumerate(ids):
         for j in ids[a + 1:]:
             di, dj = found[i], found[j]
-            gap = math.hypot(di.x - dj.x, di.y - dj.y) - di.reach - dj.reach
-            if abs(di.z - dj.z) <= BOARD_APART and gap < -2 * tol and not (di.lying or dj.lying):
-                why = f"overlaps {{}} by {-gap * 1000:.0f} mm: identity in doubt"
+            if abs(di.z - dj.z) <= BOARD_APART and not (di.lying or dj.lying) and shrunk[i].overlaps(shrunk[j]):
+                gap = math.hypot(di.x - dj.x, di.y - dj.y) - di.reach - dj.reach
+                by = f" by {-gap * 1000:.0f} mm" if di.shape == dj.shape == CYLINDER else ""
+                why = f"overlaps {{}}{by}: identity in doubt"
                 out[i], out[j] = why.format(j), why.format(i)
     return out
+
+
+def _outline(o: PerceivedObject) -> ShelfObject:
+    """A perceived object as the ShelfObject whose footprint (ShelfObject.footprint) it has: a box's rectangle, not
+    its bounding circle."""
+    return ShelfObject(o.id, o.label, o.rgb, 1.0, o.x, o.y, o.radius, o.height, False, o.shape, o.size, o.yaw,
+                       o.lying, support_z=o.z)
 
 
 def _why_missing(j: int, b: ShelfObject, cost: np.ndarray, taken: dict[int, str], fitted: list[Fitted],
