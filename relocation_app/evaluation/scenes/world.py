@@ -7,7 +7,8 @@ Every layout is drawn by this generator from a seed: the objects of a scene's re
 either at uniformly drawn free spots of the top shelf within the arm's reach (placing.uniform_layout, GAP apart, the
 target at the back as layout.free_scene puts it) or, for the crowded scenes, stocked in columns (placing.stocked),
 weights uniform in [0.05, 0.95]; the hidden scene's unlisted bottle at spots drawn just behind a listed one as the
-camera sees it (`behind`). For each scene the seeds are tried in order from its own first seed (SEED0 + 100 k) until
+camera sees it (`behind`). For each scene the seeds are tried in order from its own first seed (SEED0 + 100 k; a
+columns layout with 0, then 1, then 2 spare columns, SPARES, each over SEEDS_PER_SCENE seeds) until
 a layout meets the scene's definition: all the objects fit; for `hidden_unlisted_10` the unlisted bottle shows no
 pixel to the camera with the arm at home while every listed bottle does (admission.hidden); for the scenes of
 `RETRIEVABLE_SCENES` (crowd_20, crowd_30: the demo's 20- and 30-object scenes) the target is retrievable, proven by
