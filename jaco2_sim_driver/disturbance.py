@@ -469,10 +469,11 @@ def _move_somewhere(sim: SimState, object_id: str, where: tuple[float, float]) -
 class DisturbanceSchedule:
     """Applies a DisturbancePlan while an execution goes on, from what the simulator shows (the driver calls
     `update` once per loop): carry j begins with the (j+1)-th grasp, and relocation i has ended once the (i+1)-th
-    carried bottle was released (or dropped) and the arm is back within `home_tol` rad of home. A drop happens
-    `drop_delay` s after its carry's grasp; a disturbance whose moment has passed is recorded as skipped."""
+    carried bottle was released (or dropped) and the arm is back within `home_tol` rad of home (the motion
+    planner's home_tol, config/motion_planner.yaml: its relocation ends there). A drop happens `drop_delay` s after
+    its carry's grasp; a disturbance whose moment has passed is recorded as skipped."""
 
-    def __init__(self, plan: DisturbancePlan, home_tol: float = 0.05, drop_delay: float = 0.5) -> None:
+    def __init__(self, plan: DisturbancePlan, home_tol: float, drop_delay: float = 0.5) -> None:
         self.plan, self.home_tol, self.drop_delay = plan, home_tol, drop_delay
         self.pending = list(plan.disturbances)
         self.records: list[dict[str, Any]] = []  # the report's `disturbances`, in the order they happened

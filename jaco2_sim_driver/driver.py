@@ -28,6 +28,8 @@ from numpy.typing import ArrayLike
 
 from relocation_common import kinova as units
 from relocation_common.arm_interface import ArmInterface
+from relocation_common.config import node_section
+from relocation_common.paths import config_file
 from relocation_common.robot_description import BASE_LINK, FINGER_JOINT_NAMES, JOINT_NAMES, PREFIX
 from relocation_common.scenario import load_scenario
 
@@ -48,6 +50,8 @@ FINGERS_OPEN = 0.02  # rad of finger hinge: open
 POLL = 0.01  # s (wall) between looks at the arm or the fingers while a service or the fingers action waits
 MAX_LAG = 0.5  # s of simulated time the loop may fall behind before it stops trying to catch up
 MAX_BATCH = 20  # steps (ms) per tick at most: a late thread gets the GIL back late
+IDLE_BATCH = 2  # steps (ms) an idle loop sleeps until they are due: a wake-up per step or more cost a fifth of a core
+IDLE_MIN = 0.0002  # s, the shortest sleep of an idle loop
 
 
 @dataclass(frozen=True)
@@ -136,10 +140,12 @@ class SimDriver:
 
     def disturbances(self, drop_probability: float, drop_seed: int, plan: disturbance.DisturbancePlan | None) -> None:
         """Drop the carried bottle with `drop_probability` per carry (seeded) and apply `plan` at its moments
-        (counted from now: the next grasp is carry 1)."""
+        (counted from now: the next grasp is carry 1; a relocation has ended with the arm within the motion
+        planner's home_tol of home, read from config/motion_planner.yaml)."""
         self._drop = (drop_probability, drop_seed, plan)
         self.dropper = disturbance.CarryDropper(drop_probability, drop_seed)
-        self.schedule = disturbance.DisturbanceSchedule(plan) if plan is not None else None
+        home_tol = float(node_section(config_file("motion_planner.yaml"), "motion_planner")["home_tol"])
+        self.schedule = disturbance.DisturbanceSchedule(plan, home_tol) if plan is not None else None
 
     def disturb(self, parent: str, child: str, translation: Iterable[float], rotation_xyzw: Iterable[float]) -> None:
         """A disturbance command as a transform (the node's /sim/disturb): child `bottle_<id>` or `grasped`;
@@ -353,6 +359,18 @@ class SimDriver:
             self._sim0, self._wall0 = t, time.monotonic()
             target = t
         return min(int((target - t) / float(self.sim.model.opt.timestep)), MAX_BATCH)
+
+    def idle_time(self) -> float:
+        """Wall seconds an idle loop (its tick stepped nothing) sleeps: until IDLE_BATCH steps are due, at least
+        IDLE_MIN; IDLE_MIN when running as fast as possible. A command that comes meanwhile waits at most that long
+        (the Kinova driver's own control loop runs at 100 Hz)."""
+        r = self.params.real_time_factor
+        if r <= 0:
+            return IDLE_MIN
+        with self.lock:
+            due = self._sim0 + (time.monotonic() - self._wall0) * r
+            lag = self.sim.time + IDLE_BATCH * float(self.sim.model.opt.timestep) - due
+        return max(IDLE_MIN, lag / r)
 
     def snapshot(self) -> Snapshot:
         """The arm now (call with the lock held, or from the loop's thread)."""

@@ -234,7 +234,7 @@ class Jaco2SimDriver(Node):
                     raise
                 return
             if tick.steps <= 0:
-                time.sleep(0.0003)
+                time.sleep(self.core.idle_time())
 
     def _publish_tick(self, tick: Tick) -> None:
         if tick.state is not None:

@@ -1,9 +1,9 @@
 """The task planner's clients over ROS, outside the node file (the node and relocation_app.client use them).
 
 - ServiceOracle: the feasibility oracle (Eq. 11) over the motion planner's PlanFeasibility service, with the
-  outage rules of docs/reliability.md ("Dead planner").
-- Relocator: one RelocateObject goal to the motion planner, watched (shutdown, server gone, silence, cancel,
-  timeout: qtree_task_planner.executive.retrieval.relocation_stop).
+  outage rules of docs/reliability.md ("Dead planner"); also the push question (action "push").
+- Relocator: one RelocateObject goal to the motion planner (a relocation, or a push: action "push"), watched
+  (shutdown, server gone, silence, cancel, timeout: qtree_task_planner.executive.retrieval.relocation_stop).
 - SceneWatch: the latest scene message and when it arrived; `checked(...)` is the one a goal starts from,
   `after(t, ...)` waits for one received later (closed-loop execution: a scene perceived after a relocation ended).
 - through_outages: a call to the feasibility service's work carried through planner outages with feedback.
@@ -29,6 +29,7 @@ from rclpy.time import Time
 
 from qtree_task_planner.executive.closed_loop import SeenObject, seen_object
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, until_available
+from qtree_task_planner.executive.push import PUSH, PushAnswer
 from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.executive.retrieval import check_scene, relocation_stop
 from qtree_task_planner.learning.params import TrainingParams
@@ -69,7 +70,7 @@ class ServiceOracle:
 
     def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
         """Eq. 11's label of relocating `object_id` after `removed` (and the lane blockers the planner saw, the
-        objects a feasible pick comes near)."""
+        objects a feasible pick comes near, the action a feasible answer is for)."""
         return self._ask(object_id, removed, False)
 
     def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
@@ -83,7 +84,19 @@ class ServiceOracle:
         resp = self._call(req, f"the certification of {object_id!r}" if certify else repr(object_id))
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
                                  blockers=blockers_from_msgs(resp.blockers),
-                                 near=near_from_fields(resp.near_known, resp.near_ids))
+                                 near=near_from_fields(resp.near_known, resp.near_ids), action=resp.action)
+
+    def push(self, object_id: str, clear_for: str, removed: frozenset[str]) -> PushAnswer:
+        """Can `object_id` be pushed out of the grasp lanes of `clear_for` (PlanFeasibility, action "push")? A
+        planner that refuses the question, or answers it as a pick (one that does not plan pushes: its answer's
+        action is not "push"), says no, with why."""
+        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout,
+                                      label_only=True, action=PUSH, clear_for=clear_for)
+        try:
+            resp = self._call(req, f"the push of {object_id!r}")
+        except ValueError as e:
+            return PushAnswer(False, str(e), None)
+        return push_answer(Label(resp.label), resp.action, resp.message, resp.end_pose.position)
 
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None
@@ -120,6 +133,16 @@ class ServiceOracle:
         if not resp.ok:
             raise ValueError(f"motion planner refused the query for {what}: {resp.message}")
         return resp
+
+
+def push_answer(label: Label, action: str, message: str, end: Any) -> PushAnswer:
+    """A PlanFeasibility response to a push question as a PushAnswer (end: its end_pose.position)."""
+    if label == Label.UNFEASIBLE:
+        return PushAnswer(False, message, None)
+    if action != PUSH:
+        return PushAnswer(False, f"the motion planner answered a {action or 'pick'}, not a push (it does not plan "
+                          f"pushes): {message}", None)
+    return PushAnswer(True, message, (float(end.x), float(end.y)))
 
 
 T = TypeVar("T")
@@ -214,14 +237,16 @@ class Relocator:
         self.client, self.server_wait, self.limit, self.silence, self.ok = client, server_wait, limit, silence, ok
         self.resume_wait = resume_wait
 
-    def relocate(self, object_id: str, removed: list[str], cancelled: Callable[[], bool]) -> tuple[bool, str]:
-        """Relocate one object after `removed`: (success, message). A motion planner that went away (its server
+    def relocate(self, object_id: str, removed: list[str], cancelled: Callable[[], bool], action: str = "",
+                 clear_for: str = "") -> tuple[bool, str]:
+        """Relocate one object after `removed` (action "push": push it out of the grasp lanes of `clear_for`):
+        (success, message). A motion planner that went away (its server
         gone, or silent and deaf to the cancel) is waited for up to `resume_wait` s from then and the same goal
         sent again: a restarted motion planner answers it for the interrupted relocation (its journal; the
         message then says it was lost). Else the message is why it stopped."""
         lost_at: float | None = None
         while True:
-            ok, message, lost = self._once(object_id, removed, cancelled)
+            ok, message, lost = self._once(object_id, removed, cancelled, action, clear_for)
             if not lost or self.resume_wait <= 0:
                 break
             lost_at = lost_at if lost_at is not None else time.monotonic()
@@ -240,7 +265,8 @@ class Relocator:
                 return True
         return False
 
-    def _once(self, object_id: str, removed: list[str], cancelled: Callable[[], bool]) -> tuple[bool, str, bool]:
+    def _once(self, object_id: str, removed: list[str], cancelled: Callable[[], bool], action: str,
+              clear_for: str) -> tuple[bool, str, bool]:
         """One RelocateObject goal, watched until its result (relocation_stop): (success, message, the motion
         planner went away: its server gone, or silent and no result after the cancel)."""
         if not self.client.wait_for_server(timeout_sec=self.server_wait):
@@ -265,8 +291,8 @@ class Relocator:
         def on_feedback(_: object) -> None:
             heard[0] = time.monotonic()
 
-        sent = self.client.send_goal_async(RelocateObject.Goal(object_id=object_id, removed_ids=list(removed)),
-                                           feedback_callback=on_feedback)
+        goal = RelocateObject.Goal(object_id=object_id, removed_ids=list(removed), action=action, clear_for=clear_for)
+        sent = self.client.send_goal_async(goal, feedback_callback=on_feedback)
         sent.add_done_callback(on_goal)
         start = time.monotonic()
         while not done.wait(0.1):
@@ -388,27 +414,53 @@ UNSEEN_TARGET = (". Perception publishes no scene while it does not see the targ
 Relocate = Callable[[str, list[str]], tuple[bool, str]]  # relocate(object_id, removed) -> (success, message)
 
 
+Push = Callable[[str, str, list[str]], tuple[bool, str]]  # push(object_id, clear_for, removed) -> (success, message)
+
+
+class Watched:
+    """relocate / push / perceive for the closed loop: perceive() is the latest scene received after the last
+    relocation or push ended, waiting up to `wait` s for one that shows a relocated bottle gone from the top shelf
+    (left_top; after a push, the first one: the pushed object stays on the top shelf), and, when no scene comes at
+    all (perception restarting), up to `outage` s for the first one (SceneWatch.after). The target is checked like
+    any bottle: perception publishes its scene without the target once the motion planner says it placed it
+    (perception_node, relocated_topic). `perception`: the timeout's line says that perception publishes no scene
+    while it does not see the target (else it does not hold). push_one: the push executed (Relocator, action
+    "push"); None: the node does not push."""
+
+    def __init__(self, relocate_one: Relocate, scenes: SceneWatch, wait: float, top_z: float, perception: bool = False,
+                 outage: float = 0.0, push_one: Push | None = None) -> None:
+        self.relocate_one, self.push_one, self.scenes = relocate_one, push_one, scenes
+        self.wait, self.top_z, self.perception, self.outage = wait, top_z, perception, outage
+        self.ended, self.left = time.monotonic(), ""  # when the last relocation or push ended; the bottle that left
+
+    def relocate(self, object_id: str, removed: list[str]) -> tuple[bool, str]:
+        """One relocation (relocate_one), its end noted."""
+        self.left = object_id
+        try:
+            return self.relocate_one(object_id, removed)
+        finally:
+            self.ended = time.monotonic()
+
+    def push(self, object_id: str, clear_for: str, removed: list[str]) -> tuple[bool, str]:
+        """One push (push_one), its end noted."""
+        if self.push_one is None:
+            raise ValueError("this task planner does not push (no push_one)")
+        self.left = ""  # nothing leaves the top shelf: the first scene after it is the one
+        try:
+            return self.push_one(object_id, clear_for, removed)
+        finally:
+            self.ended = time.monotonic()
+
+    def perceive(self) -> dict[str, SeenObject]:
+        """The scene after the last relocation or push (the class doc)."""
+        try:
+            return seen_scene(self.scenes.after(self.ended, self.wait, left_top(self.left, self.top_z), self.outage))
+        except TimeoutError as e:
+            raise TimeoutError(f"{e}{UNSEEN_TARGET if self.perception else ''}") from None
+
+
 def watched(relocate_one: Relocate, scenes: SceneWatch, wait: float, top_z: float, perception: bool = False,
             outage: float = 0.0) -> tuple[Relocate, Callable[[], dict[str, SeenObject]]]:
-    """(relocate, perceive) for the closed loop: perceive() is the latest scene received after the last relocation
-    ended, waiting up to `wait` s for one that shows the relocated bottle gone from the top shelf (left_top), and,
-    when no scene comes at all (perception restarting), up to `outage` s for the first one (SceneWatch.after). The
-    target is checked like any bottle: perception publishes its scene without the target once the motion planner
-    says it placed it (perception_node, relocated_topic). `perception`: the timeout's line says that perception
-    publishes no scene while it does not see the target (else it does not hold)."""
-    ended: list[Any] = [time.monotonic(), ""]  # when the last relocation ended, its object
-
-    def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
-        ended[1] = object_id
-        try:
-            return relocate_one(object_id, removed)
-        finally:
-            ended[0] = time.monotonic()
-
-    def perceive() -> dict[str, SeenObject]:
-        try:
-            return seen_scene(scenes.after(ended[0], wait, left_top(ended[1], top_z), outage))
-        except TimeoutError as e:
-            raise TimeoutError(f"{e}{UNSEEN_TARGET if perception else ''}") from None
-
-    return relocate, perceive
+    """(relocate, perceive) of a Watched (its doc) that does not push."""
+    w = Watched(relocate_one, scenes, wait, top_z, perception, outage)
+    return w.relocate, w.perceive

@@ -45,6 +45,7 @@ from visualization_msgs.msg import MarkerArray
 from qtree_task_planner.executive.closed_loop import ExecutionResult
 from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
+from qtree_task_planner.executive.push import PUSH, PushActions
 from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.executive.retrieval import (
     chosen_sequence,
@@ -54,18 +55,23 @@ from qtree_task_planner.executive.retrieval import (
     solve_then_train,
     training_outcome,
 )
-from qtree_task_planner.executive.settings import SCENE_SOURCES, check_node_parameters
+from qtree_task_planner.executive.settings import (
+    SCENE_SOURCES,
+    check_node_parameters,
+    pushes_on,
+)
 from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.q_tree import QTree
 from qtree_task_planner.learning.training import EpisodeStats
 from qtree_task_planner.markers import scene_markers
 from qtree_task_planner.oracles import CachedOracle
-from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from qtree_task_planner.ros_clients import (
     Relocator,
     SceneWatch,
     ServiceOracle,
+    Watched,
     fill_optimum,
     fill_training_result,
     goal_health,
@@ -73,7 +79,6 @@ from qtree_task_planner.ros_clients import (
     seen_scene,
     through_outages,
     train_goal,
-    watched,
 )
 from qtree_task_planner.search.astar import AStarResult
 from relocation_common.config import ParameterError
@@ -95,6 +100,7 @@ class TaskPlannerNode(Node):
         super().__init__("task_planner")
         declare_parameters(self)  # config/task_planner.yaml: training parameters and the node's own
         check_node_parameters(self.p)  # ParameterError naming the first unusable one (main(): one line, exit 2)
+        self._action_cost = ActionCosts.from_parameters(self.p)  # relocating i costs phi_i x its action's factor
 
         self._scenes = SceneWatch()  # the latest scene and when it came
         log = self.get_logger()
@@ -135,7 +141,7 @@ class TaskPlannerNode(Node):
                                             self.get_clock().now)
         if warning:
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
-        return RelocationProblem.from_bottles(msg_to_objects(msg)), msg
+        return RelocationProblem.from_bottles(msg_to_objects(msg), self._action_cost), msg
 
     def _params(self, goal: TrainPlanner.Goal) -> TrainingParams:
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
@@ -197,7 +203,8 @@ class TaskPlannerNode(Node):
         def on_solved(exact: AStarResult) -> None:
             fill_optimum(result, exact)
             notes[0] = scene_notes(problem, oracle)
-            self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight} ({oracle.calls} "
+            cost = f" cost {exact.total_cost}" if exact.total_cost is not None else ""
+            self.get_logger().info(f"exact optimum: {exact.sequence} weight {exact.total_weight}{cost} ({oracle.calls} "
                                    f"planner calls; {service.summary()}){'; ' * bool(notes[0])}{notes[0]}")
             fb.phase = "training"
 
@@ -217,25 +224,34 @@ class TaskPlannerNode(Node):
                                    f"({service.summary()})" if r.found else
                                    f"training found no sequence in {r.episodes} episodes (the exact optimum exists)")
             self._publish_scene(scene, r.sequence or result.optimal_sequence, r.tree, problem.ids)
-        stop = training_outcome(r, optimum, execute=goal_handle.request.execute)  # the exact solver's why_none
+        stop = training_outcome(r, optimum, execute=goal_handle.request.execute,  # the exact solver's why_none
+                                push=self._pushes())  # ... or the closed loop's pushes go on
         if stop is not None:
             result.success, result.message = stop
             if not stop[0] and not r.cancelled and not optimum.found:
                 result.message += planner_foreign_ids(service, problem.ids)
             return notes[0]
         fb.phase = "executing"  # then each check and re-plan (_run)
-        self._run(goal_handle, fb, result, scene, oracle, params, until, *chosen_sequence(
+        self._run(goal_handle, fb, result, scene, oracle, service, params, until, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
-            else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned")))
+            else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned"),
+            learned_cost=r.total_cost, optimal_cost=optimum.total_cost))
+        if not result.success and not optimum.found and not r.found:  # no sequence at the start, pushes tried
+            result.message += planner_foreign_ids(service, problem.ids)
         return notes[0]
 
+    def _pushes(self) -> bool:
+        """Whether the execution pushes when no pick sequence remains (settings.pushes_on)."""
+        return pushes_on(self.p)
+
     def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
-             scene: ObjectArray, oracle: CachedOracle, params: TrainingParams, until: UntilPlanner, sequence: list[str],
-             note: str) -> None:
+             scene: ObjectArray, oracle: CachedOracle, service: ReplicaOracle, params: TrainingParams,
+             until: UntilPlanner, sequence: list[str], note: str) -> None:
         """Execute (retrieval.execute, `closed_loop`; `replan_q_tree`: each re-plan also retrains the Q-Tree with the
         goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
-        executor's: for the closed loop, its scene waits, checks and re-plans)."""
+        executor's: for the closed loop, its scene waits, checks and re-plans). Pushes (`max_pushes`, closed loop
+        only): asked of `service`, executed through the Relocator (action "push")."""
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_objects(scene))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         spent = {"relocate_s": 0.0}  # the relocations' own time: the rest of the execution is the executor's
@@ -247,8 +263,17 @@ class TaskPlannerNode(Node):
             finally:
                 spent["relocate_s"] += time.monotonic() - t
 
-        relocate, perceive = watched(relocate_timed, self._scenes, self.p("scene_after_wait"), scenario.shelf.top_z,
-                                     perception=not seen, outage=self.p("scene_outage_wait"))
+        def push_timed(object_id: str, clear_for: str, removed: list[str]) -> tuple[bool, str]:
+            t = time.monotonic()
+            try:
+                return self._push_one(goal_handle, object_id, clear_for, removed)
+            finally:
+                spent["relocate_s"] += time.monotonic() - t
+
+        w = Watched(relocate_timed, self._scenes, self.p("scene_after_wait"), scenario.shelf.top_z,
+                    perception=not seen, outage=self.p("scene_outage_wait"), push_one=push_timed)
+        pushes = PushActions(service.push, w.push, lambda: self._action_cost.push, self.p("max_pushes")) \
+            if self._pushes() else None
 
         def phase(text: str) -> None:
             fb.phase = text
@@ -263,11 +288,12 @@ class TaskPlannerNode(Node):
                                                                 "execution_s": time.monotonic() - t0, **spent})))
 
         t0 = time.monotonic()
-        out = execute(scenario, sequence, seen_scene(scene), relocate, perceive, oracle,
+        out = execute(scenario, sequence, seen_scene(scene), w.relocate, w.perceive, oracle,
                       closed_loop=self.p("closed_loop"), cancelled=lambda: goal_handle.is_cancel_requested,
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen,
-                      retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until)
+                      retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until,
+                      action_cost=self._action_cost, pushes=pushes, on_push=lambda record: phase(record.line()))
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         publish(out, running=False)
 
@@ -281,6 +307,13 @@ class TaskPlannerNode(Node):
         self.get_logger().info(f"relocating {object_id} (removed so far: {removed})")
         self._relocating.publish(String(data=object_id))
         return self._relocator.relocate(object_id, removed, cancelled=lambda: goal_handle.is_cancel_requested)
+
+    def _push_one(self, goal_handle: ServerGoalHandle, object_id: str, clear_for: str, removed: list[str]
+                  ) -> tuple[bool, str]:
+        self.get_logger().info(f"pushing {object_id} out of {clear_for}'s lanes (removed so far: {removed})")
+        self._relocating.publish(String(data=object_id))
+        return self._relocator.relocate(object_id, removed, cancelled=lambda: goal_handle.is_cancel_requested,
+                                        action=PUSH, clear_for=clear_for)
 
     # -- visualisation --------------------------------------------------------------------------------------
     def _publish_scene(self, scene: ObjectArray, sequence: Sequence[str], tree: QTree | None = None,

@@ -27,8 +27,9 @@ from typing import Callable
 from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
-from qtree_task_planner.problem import ProblemError, RelocationProblem
+from qtree_task_planner.problem import ActionCosts, ProblemError, RelocationProblem
 from qtree_task_planner.search import astar, exact
+from qtree_task_planner.search.exact import no_sequence
 from relocation_app.progress import Progress
 from relocation_common.config import ParameterError
 from relocation_common.scenario import ScenarioError, UnknownObjectError, load_scenario
@@ -109,7 +110,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def _load(args):
     scenario = load_scenario(args.scenario)
-    problem = RelocationProblem.from_scenario(scenario)
+    # each obstacle costed by the pick its pose takes (config/task_planner.yaml action_cost; the --params file's)
+    problem = RelocationProblem.from_scenario(scenario, ActionCosts.from_yaml(getattr(args, "params", None)))
     if args.oracle is None:
         args.oracle = "blocking" if getattr(scenario, "blocking", None) is not None else "planner"
     oracle = ORACLES[args.oracle](scenario, args)
@@ -157,15 +159,16 @@ def _train(args) -> int:
                           max_steps=args.max_steps, beta=args.beta, quiet_episodes=args.quiet_episodes,
                           seed=args.seed)
     scenario, problem, oracle = _load(args)
-    optimum = None
+    optimum = cost = None
     solved = None
     if args.solve_first:
         solved = _exact(problem, oracle, args.solver)
-        optimum = solved["total_weight"]
+        optimum, cost = solved["total_weight"], solved.get("total_cost", solved["total_weight"])
     callback, bar = (None, None) if args.no_progress else _progress_bar(params.max_episodes)
     t0 = time.perf_counter()
     try:
-        result = train(problem, CachedOracle(oracle), params, optimal_weight=optimum, callback=callback)
+        result = train(problem, CachedOracle(oracle), params, optimal_weight=optimum, optimal_cost=cost,
+                       callback=callback)
     finally:
         if bar is not None:
             bar.close()
@@ -192,7 +195,7 @@ def _solve(args) -> int:
         data = {"scenario": scenario.name, "oracle": args.oracle, **_exact(problem, oracle, args.solver)}
     except WorkspaceError as e:  # a grasp out of the arm's reach (its distance against the arm's)
         data = {"scenario": scenario.name, "oracle": args.oracle, "solver": args.solver, "found": False,
-                "sequence": None, "reason": f"no sequence: out of reach: {e}"}
+                "sequence": None, "reason": f"{no_sequence(problem.action_set)}out of reach: {e}"}
     _emit(data, args.json)
     if not data["found"]:
         print(f"qtree: {' '.join(str(data['reason']).split())}", file=sys.stderr)

@@ -438,7 +438,7 @@ def _report(out: Path, a, used, res, end: End | None, final: dict | None, w: _Wa
               "interrupted": final["interrupted"], "respawns": list(events),
               "last_known": run_report.where(a.scenario, final["after"], final["age"], fs.get("at_hand", [])),
               "disturbances": list(w.disturbances) if w is not None else [], "replans": run.get("replans", []),
-              "steps": run.get("steps", []), "final_scene": fs, "recording": recording}
+              "pushes": run.get("pushes", []), "steps": run.get("steps", []), "final_scene": fs, "recording": recording}
     run_report.write(out, report)
     if res is not None:
         run_report.learning_curve(res.q_sum_history, out / "learning_curve.png", f"{used.policy} / {used.search}")

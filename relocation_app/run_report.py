@@ -111,6 +111,8 @@ def summary(report: dict) -> list[str]:
         lines.append(f"re-plan: {r['reason']} -> " + (f"{' '.join(r['sequence'])} ({r['weight']:.2f})"
                                                       if r.get("sequence") else r.get("failure", ""))
                      + (f"; {r['note']}" if r.get("note") else ""))
+    for p in report.get("pushes", []):
+        lines.append(p["line"])
     for e in report["respawns"]:
         lines.append(f"node {e['node']} {e['event']} at {e['t']:.0f} s" + (f" (exit {e['code']})" if e["code"]
                                                                           is not None else "") + f": {e['note']}")

@@ -12,6 +12,11 @@ a suspicion (the lane passed the screen but STPIK or RRT-Connect failed there): 
 answer whose sets are all certain: from `removed` or any superset of it, relocating the object needs one of the listed
 lanes cleared. Empty `blockers` = no information.
 
+Actions (docs/qtree.md, "One action model"). A feasible answer names its action: `SIDE_GRASP` (a standing cylinder or
+box, taken from the side as in the paper), `TOP_GRASP` (a cylinder lying flat, taken from above) or `PUSH` (a
+non-prehensile push, asked for by name); the pick an object's pose takes is `pick_action`, so the task planner knows
+each pick's kind, and its cost, before it asks.
+
 An object the hand cannot grasp (a lying bottle, one wider than the open hand, a box too wide...) is answered g_U with a
 message starting NO_GRASP and the reason: it stays an obstacle, never relocated, whatever is removed.
 
@@ -38,6 +43,24 @@ from typing import Any, Callable, Iterable, Mapping, Protocol, Sequence
 NO_GRASP = "no grasp: "  # the start of the g_U message of an object the hand cannot grasp (module docstring)
 OUTCOME_UNKNOWN = "outcome unknown"  # the end of a RelocateObject result whose outcome no scene showed (the motion
 # planner's goal_check.outcome: not a success; the task planner's closed loop looks at its own scene)
+
+
+SIDE_GRASP = "side_grasp"  # PlanFeasibility's `action` of a feasible pick of a standing object
+TOP_GRASP = "top_grasp"  # ... of a cylinder lying flat (the grasp from above)
+PUSH = "push"  # ... of a push (PlanFeasibility request action "push")
+PICK_ACTIONS = (SIDE_GRASP, TOP_GRASP)  # the pick actions: an object's pose takes one of them (`pick_action`)
+ACTIONS = PICK_ACTIONS + (PUSH,)  # every action kind of the action model
+
+
+def pick_action(lying: bool) -> str:
+    """The pick an object's pose takes (module docstring, "Actions"): TOP_GRASP for a cylinder lying flat, SIDE_GRASP
+    for a standing object (a leaning one is no grasp at all: the planner says so)."""
+    return TOP_GRASP if lying else SIDE_GRASP
+
+
+def action_set(actions: Sequence[str]) -> str:
+    """How a proof names the actions it covers: 'the actions side_grasp, top_grasp'."""
+    return "the action" + ("s " if len(actions) != 1 else " ") + ", ".join(actions)
 
 
 class Label(IntEnum):
@@ -78,6 +101,7 @@ class FeasibilityAnswer:
     trajectory: Any = None  # the motion planner's joint trajectory on success
     blockers: tuple[BlockerSet, ...] = ()  # unfeasible answers: one set per candidate grasp lane (see above)
     near: frozenset[str] | None = None  # a feasible pick alone: the objects near its motion (module doc); None: final
+    action: str = ""  # a feasible answer's action (SIDE_GRASP, TOP_GRASP, PUSH; module doc, "Actions"); "" unknown
 
 
 class FeasibilityOracle(Protocol):

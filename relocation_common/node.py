@@ -15,7 +15,7 @@ import threading
 import time
 from contextlib import contextmanager
 from types import FrameType
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, Mapping
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -70,6 +70,9 @@ def declare_parameters(node: Node, shared: tuple[str, ...] = ()) -> dict[str, An
     and for an override (-p, --params-file) that names a parameter the node does not have (a typo is never silently
     ignored). Returns {name: value}.
 
+    A nested mapping is declared as ROS reads it from a params file: one parameter per leaf, its keys joined by dots
+    (`action_cost: {top_grasp: 1.5}` -> `action_cost.top_grasp`; flat_parameters).
+
     Read-only (ParameterDescriptor.read_only): a node checks its parameters once, at start, and some are read again
     while it runs; `ros2 param set` is refused ("parameter is read-only") instead of bypassing those checks. Set
     them with -p or --params-file and restart the node."""
@@ -82,12 +85,25 @@ def declare_parameters(node: Node, shared: tuple[str, ...] = ()) -> dict[str, An
             raise ParameterError(f"parameter(s) {', '.join(twice)} in both config/{name}.yaml and config/{f}: "
                                  f"keep them in config/{f} only")
         defaults.update(more)
+    defaults = flat_parameters(defaults)
     for k, v in defaults.items():
         node.declare_parameter(k, v, ParameterDescriptor(read_only=True))
     unknown = sorted(set(node._parameter_overrides) - set(node._parameters))
     if unknown:
         raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(defaults))}")
     return {k: node.get_parameter(k).value for k in defaults}
+
+
+def flat_parameters(section: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A params-file section with its nested mappings flattened to dotted names, as rcl does: {"a": {"b": 1}} ->
+    {"a.b": 1}."""
+    out: dict[str, Any] = {}
+    for k, v in section.items():
+        if isinstance(v, Mapping):
+            out.update(flat_parameters(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
 
 
 class SideNode:

@@ -3,6 +3,15 @@
 Every part of the system (task planner, motion planner, simulator, perception) reads a scene through
 `load_scenario`. Frames: everything is in the robot base frame (x forward to the shelf, z up, metres).
 The format is documented in docs/scenarios.md; the object model (ShelfObject) is relocation_common.shelf_object's.
+
+Where an object rests, and which slots of the bottom shelf are free, is one rule for every caller (the motion
+planner's destination, stpik_motion_planner.execution.goal_check, and the task planner's free slots,
+qtree_task_planner.executive.closed_loop, read a scene through these, so that they agree on every scene):
+`Shelf.board_of`: an object rests on a board when its lowest point is within a tolerance of the board's surface and
+the centre of its footprint is over the board (a lying bottle's base centre is a radius above its board and its end
+face half its length from its footprint's centre: neither says where it lies). `Scenario.free_slots`: a slot is
+taken when the widest listed object standing on it at any turn (`slot_radius`) would overlap the footprint of an
+object on the bottom shelf (ShelfObject.footprint: a standing bottle's circle, a lying bottle's or a box's rectangle).
 """
 from __future__ import annotations
 
@@ -15,7 +24,7 @@ from typing import Any, Iterable, Iterator, Mapping
 
 from .config import ConfigError, read_yaml, short
 from .paths import default_scenario, resolve_scenario
-from .shelf_object import DECIMALS, SHAPES, ShelfObject, estimated_weight, half_turn, unlisted_density
+from .shelf_object import DECIMALS, SHAPES, Footprint, ShelfObject, estimated_weight, half_turn, unlisted_density
 
 __all__ = ["PALETTE", "TARGET_COLOR", "TARGET_RGB", "Marker", "Scenario", "ScenarioError", "Shelf", "ShelfObject",
            "UnknownObjectError", "load_scenario", "parse_scenario"]
@@ -42,6 +51,7 @@ PALETTE: dict[str, tuple[float, float, float]] = {
     "gray": (0.50, 0.50, 0.50),
 }
 TARGET_COLOR = "green"
+TOP, BOTTOM = "top", "bottom"  # Shelf.board_of's boards
 TARGET_RGB = (0.10, 0.75, 0.15)
 
 
@@ -83,6 +93,17 @@ class Shelf:
     def y_max(self) -> float:
         """Largest y of the shelf (m)."""
         return self.y_center + self.width / 2
+
+    def board_of(self, centre: tuple[float, float], support: float, tolerance: float) -> str | None:
+        """TOP or BOTTOM when an object whose footprint is centred at `centre` (x, y) and whose lowest point is at
+        height `support` rests on that board, standing or lying (within `tolerance` m of its surface, its centre
+        over the board: the module docstring), else None (lifted, fallen, off the shelf)."""
+        x, y = centre
+        if not (self.x_front <= x <= self.x_back and self.y_min <= y <= self.y_max):
+            return None
+        if abs(support - self.top_z) <= tolerance:
+            return TOP
+        return BOTTOM if abs(support - self.bottom_z) <= tolerance else None
 
 
 @dataclass(frozen=True)
@@ -188,6 +209,19 @@ class Scenario:
     def markers(self) -> tuple[Marker, ...]:
         """Every ArUco marker on the shelf: `marker` first, then the further ones of `markers:`."""
         return (self.marker, *self.more_markers)
+
+    @property
+    def slot_radius(self) -> float:
+        """The room an object placed in a slot takes about the slot: the widest listed object standing, at any turn
+        (ShelfObject.upright_radius; the same for the scenario file and a scene of it, `with_objects`, as perceived
+        by ground truth)."""
+        return max((o.upright_radius for o in self.objects if o.listed), default=0.0)
+
+    def free_slots(self, below: Iterable[Footprint]) -> tuple[int, ...]:
+        """Indices of the slots that no footprint of `below` (the objects on the bottom shelf) overlaps within
+        `slot_radius` of the slot (the module docstring)."""
+        taken, r = list(below), self.slot_radius
+        return tuple(k for k, xy in enumerate(self.slots) if not any(f.overlaps(Footprint(xy, r, ())) for f in taken))
 
     def slot(self, n_relocated: int) -> tuple[float, float]:
         """Destination on the bottom shelf of the object relocated after n_relocated others (fills in order)."""

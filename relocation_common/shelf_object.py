@@ -120,6 +120,12 @@ class ShelfObject:
         return self._support() + 2 * self.half_height
 
     @property
+    def upright_radius(self) -> float:
+        """Radius of the vertical cylinder about the object standing that holds it at any turn about the vertical:
+        a cylinder's radius, a box's half-diagonal (a box in its slot stands turned as the hand held it)."""
+        return math.hypot(self.size[0], self.size[1]) / 2 if self.shape == "box" else self.radius
+
+    @property
     def volume(self) -> float:
         """m^3."""
         if self.shape == "box":

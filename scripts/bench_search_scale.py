@@ -215,8 +215,8 @@ def old_solve(problem: RelocationProblem, oracle: Any) -> astar.AStarResult:
         path, n = old_optimistic(problem.obstacles, problem.weights, problem.target, kb)
         searches, expanded = searches + 1, expanded + n
         if path is None:
-            return astar.AStarResult(None, None, calls, expanded, why_none(problem.target, answers, kb.claims), 1,
-                                     searches)
+            return astar.AStarResult(None, None, calls, expanded, why_none(problem.target, answers, kb.claims),
+                                     blocker_calls=1, searches=searches)
         ok = True
         for o, s in path:  # the unasked edges in order, up to the first g_U
             if (o, s) not in kb.answers:
@@ -227,7 +227,7 @@ def old_solve(problem: RelocationProblem, oracle: Any) -> astar.AStarResult:
                     break
         if ok:
             seq = tuple(o for o, _ in path)
-            return astar.AStarResult(seq, problem.weight(seq), calls, expanded, "", 1, searches)
+            return astar.AStarResult(seq, problem.weight(seq), calls, expanded, "", blocker_calls=1, searches=searches)
 
 
 # ------------------------------------------------------------------------------------------------------ running

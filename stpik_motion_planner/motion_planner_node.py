@@ -1,10 +1,11 @@
 """motion_planner node: a thin ROS 2 shell over stpik_motion_planner.service.MotionPlannerService (paper Sect. 4.1).
 
 - service `~/plan_feasibility` (PlanFeasibility): Eq. 11's answer g_U / g_O / g_T for (object, removed set),
-  with the home -> grasp trajectory unless the request asks for the label only, and the objects the pick comes near
-  (`near_ids`); with `certify`, the certification of the whole relocation (docs/motion_planner.md, "Lazy
-  certification"); a bad request answers ok=false with the reason, the node keeps serving. Served by its own
-  executor thread (SideNode), not the main executor.
+  with the home -> grasp trajectory unless the request asks for the label only, the action a feasible answer is for
+  (`action`: side_grasp or top_grasp) and the objects the pick comes near (`near_ids`); with `certify`, the
+  certification of the whole relocation (docs/motion_planner.md, "Lazy certification"); a bad request answers
+  ok=false with the reason, the node keeps serving. Served by its own executor thread (SideNode), not the main
+  executor.
 - action `~/relocate` (RelocateObject): plan the pick, stream joint velocities at 100 Hz with feedback from the
   joint states, close the gripper, plan and stream the carry to the next slot of the bottom shelf, release,
   retreat, plan and stream the way home (service.py, streaming.py). Feedback by phase; cancel stops the arm; a
@@ -42,6 +43,7 @@ from visualization_msgs.msg import Marker
 from relocation_common import arm_interface
 from relocation_common.arm_interface import ArmInterface
 from relocation_common.config import ParameterError
+from relocation_common.feasibility import PUSH
 from relocation_common.node import Health, SideNode, declare_parameters, node_main
 from relocation_common.ros_conversions import (
     NO_ANSWER,
@@ -57,7 +59,7 @@ from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.ros_interface import RosArmLink, trajectory_to_msg
-from stpik_motion_planner.service import MotionPlannerService
+from stpik_motion_planner.service import MotionPlannerService, Outcome
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 # Requests queue here while one is planned: the default depth 10 dropped all but 11 of 50 concurrent requests
@@ -77,7 +79,8 @@ class MotionPlannerNode(Node):
         self.core = MotionPlannerService(load_scenario(params["scenario"] or None), planner_params,
                                          float(params["home_tol"]), log=self._log,
                                          journal=Journal(params["journal_path"] if params["serve_relocation"] else ""),
-                                         recover_near=float(params["recover_near"]))
+                                         recover_near=float(params["recover_near"]),
+                                         phantom_scenes=params["phantom_scenes"])
         self.link: RosArmLink | None = None  # nothing in a feasibility-only replica (serve_relocation false)
         self.asked, self.answered, self.last_answer = 0, 0, (0.0, "none yet")  # feasibility, for the health
         self.scene_seen = threading.Event()  # a scene came on scene_topic (_on_scene)
@@ -156,7 +159,9 @@ class MotionPlannerNode(Node):
         """Bottles on the top shelf (standing or lying) replace the planner's, bottles off the shelf leave it; the
         rest of the scene stays (service.update_scene)."""
         try:  # without the target too: perception's scene once the target is relocated, out of its view
-            changed = self.core.update_scene(msg_to_objects(msg, require_target=False), f"scene on {self.scene_topic}")
+            stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+            changed = self.core.update_scene(msg_to_objects(msg, require_target=False), f"scene on {self.scene_topic}",
+                                             stamp if stamp != (0, 0) else None)
         except ScenarioError as e:
             self.get_logger().warning(f"scene ignored: {e}", throttle_duration_sec=5.0)
             return
@@ -177,11 +182,20 @@ class MotionPlannerNode(Node):
         return res
 
     def _feasibility(self, req: PlanFeasibility.Request) -> tuple:
-        """core.feasibility of the request. A question naming an object the planner does not know, asked before any
-        scene came (a client that discovered the scene's publisher sooner: an unlisted object it saw), waits up to
-        scene_wait for that scene and is asked again."""
+        """core.feasibility of the request ((lanes, answer, the push's plan or None)), or core.push_feasibility for
+        action "push". A question naming an object the planner does not know, asked before any scene came (a client
+        that discovered the scene's publisher sooner: an unlisted object it saw), waits up to scene_wait for that
+        scene and is asked again."""
+        if req.action not in ("", PUSH):
+            raise ValueError(f"action must be '' (a pick) or 'push', got {req.action!r}")
+
         def ask() -> tuple:
-            return self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes, req.certify)
+            if req.action == PUSH:
+                lanes = self.core.feasibility("", list(req.removed_ids), None, True)[0] if req.all_lanes else {}
+                return (lanes, *self.core.push_feasibility(req.object_id, list(req.removed_ids), req.clear_for,
+                                                           req.timeout))
+            return (*self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes,
+                                           req.certify), None)
 
         try:
             return ask()
@@ -192,7 +206,7 @@ class MotionPlannerNode(Node):
 
     def _answer(self, req: PlanFeasibility.Request, res: PlanFeasibility.Response) -> PlanFeasibility.Response:
         try:
-            lanes, ans = self._feasibility(req)
+            lanes, ans, push = self._feasibility(req)
         except (UnknownObjectError, ScenarioError, ValueError, TypeError) as e:
             res.message = str(e)
             self.get_logger().warning(f"feasibility request refused: {e}")
@@ -210,11 +224,15 @@ class MotionPlannerNode(Node):
             res.message = "lanes only"
             return res
         res.label, res.planning_time = int(ans.label), float(ans.planning_time)
-        res.attempts, res.message = int(ans.attempts), ans.message
+        res.attempts, res.message, res.action = int(ans.attempts), ans.message, ans.action
         if not req.label_only:  # training asks for the label only; execution for the trajectory too
             res.trajectory = trajectory_to_msg(ans.trajectory)
         res.blockers = blockers_to_msgs(ans.blockers)
         res.near_known, res.near_ids = near_to_fields(ans.near)
+        if push is not None:  # a feasible push: its action and the pushed object's predicted pose
+            res.action = PUSH
+            res.end_pose.position.x, res.end_pose.position.y, res.end_pose.position.z = map(float, push.end)
+            res.end_pose.orientation.w = 1.0  # standing, as it stood (quasi-static, no rotation kept)
         return res
 
     def _on_goal(self, goal: RelocateObject.Goal) -> GoalResponse:
@@ -233,8 +251,15 @@ class MotionPlannerNode(Node):
                           self._log)
         req = goal_handle.request
         self.relocation = f"relocating {req.object_id} (removed {list(req.removed_ids)})"
-        outcome = self.core.relocate(arm, req.object_id, list(req.removed_ids), f"the scene on {self.scene_topic}",
-                                     rclpy.ok)
+        source = f"the scene on {self.scene_topic}"
+        if req.action == PUSH:
+            self.relocation = f"pushing {req.object_id} out of the lanes of {req.clear_for}"
+            outcome = self.core.push(arm, req.object_id, list(req.removed_ids), req.clear_for, source, rclpy.ok)
+        elif req.action:
+            outcome = Outcome("aborted", f"relocation goal refused: action must be '' (pick and place) or 'push', "
+                                         f"got {req.action!r}")
+        else:
+            outcome = self.core.relocate(arm, req.object_id, list(req.removed_ids), source, rclpy.ok)
         self.relocation = f"idle; last: {req.object_id} {outcome.status}: {outcome.message[:120]}"
         {"succeeded": goal_handle.succeed, "canceled": goal_handle.canceled, "aborted": goal_handle.abort}[
             outcome.status]()

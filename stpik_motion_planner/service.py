@@ -21,6 +21,7 @@ view instead of publishing no scene).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -34,13 +35,15 @@ from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
 from relocation_common.scenario import Scenario, ShelfObject, UnknownObjectError
 from relocation_common.scene_check import check_scene
 from stpik_motion_planner.execution import goal_check
+from stpik_motion_planner.execution import push as pushing
 from stpik_motion_planner.execution.journal import Journal, JournalError, Running, near_recorded
 from stpik_motion_planner.execution.relocation import Progress, recover, relocate
 from stpik_motion_planner.execution.streaming import Aborted, Cancelled, StreamedArm
 from stpik_motion_planner.model.blockers import lane_blockers
 from stpik_motion_planner.model.scene_update import merge_perceived
-from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams, node_parameters
 from stpik_motion_planner.planning.planner import MotionPlanner
+from stpik_motion_planner.planning.push import PushPlan
 from stpik_motion_planner.planning.results import PlanningError
 
 STATE_WAIT = 5.0  # s a relocation waits for the first joint state (discovery of the driver right after start-up)
@@ -67,12 +70,19 @@ class Outcome:
 
 class MotionPlannerService:
     """The node's behaviour (the module docstring). `home_tol`: relocation.relocate's, `recover_near`:
-    relocation.recover's `near` (rad; None: config/motion_planner.yaml's)."""
+    relocation.recover's `near` (rad; None: config/motion_planner.yaml's); `phantom_scenes`: scene_update's (None:
+    config/motion_planner.yaml's)."""
 
     def __init__(self, scenario: Scenario, params: PlannerParams, home_tol: float | None = None,
                  log: Callable[[str, str], None] = lambda *_: None, journal: Journal | None = None,
-                 recover_near: float | None = None) -> None:
+                 recover_near: float | None = None, phantom_scenes: int | None = None) -> None:
         self.base, self.log, self.home_tol, self.recover_near = scenario, log, home_tol, recover_near
+        n = node_parameters()["phantom_scenes"] if phantom_scenes is None else phantom_scenes
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise ValueError(f"motion planner parameter phantom_scenes must be an integer >= 1, got {n!r}")
+        self.phantom_scenes = n
+        self._missing: dict[str, int] = {}  # unlisted id -> counted scenes in a row without it (scene_update)
+        self._scene_stamp: object = None  # the stamp of the last scene (a scene received again counts once)
         self.planner = MotionPlanner(scenario, params)
         self.plan_lock = threading.Lock()  # MotionPlanner is not thread-safe
         self.bottles = {b.id: b for b in scenario.objects}
@@ -99,21 +109,31 @@ class MotionPlannerService:
             self._ready.set()
 
     # -- the scene ------------------------------------------------------------------------------------------
-    def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene") -> list[str]:
+    def update_scene(self, perceived: Iterable[ShelfObject], source: str = "the scene",
+                     stamp: object = None) -> list[str]:
         """Objects as perceived (ros_conversions.msg_to_objects) resting on the top shelf replace the planner's:
         standing, lying flat (tipped over: the grasp from above takes it where the headroom allows), or leaning (an
         obstacle as it leans, never graspable), listed in the scenario or not (`listed`
         false: an object the scenario does not name, an obstacle as its primitive, relocatable when the side grasp
         takes it); bottles seen off the shelf leave the planner's scene; the rest stays
-        (scene_update.merge_perceived). The ids that changed; ScenarioError for a scene that cannot be
+        (scene_update.merge_perceived), but an unlisted object left out of `phantom_scenes` scenes in a row with its
+        place in view is dropped (`stamp`: the message's; one received again counts once, None: every scene
+        counts). The ids that changed; ScenarioError for a scene that cannot be
         (scene_check: a listed id the scenario does not have, an unlisted one it has, an id twice, poses far from
         the shelf): the whole message is dropped, nothing changes."""
         bottles = list(perceived)
         bases = [(b.id, float(c[0]), float(c[1]), float(c[2])) for b, c in ((b, b.base()) for b in bottles)]
         check_scene(self.base, bases, source, unlisted={b.id for b in bottles if not b.listed})
-        self.scene.update(bases)
+        self.scene.update(bottles)
+        counted = stamp is None or stamp != self._scene_stamp
+        self._scene_stamp = stamp
         m = merge_perceived(self.base.shelf, self.bottles, bottles, self.planner.params.flat_tilt, self._held,
-                            self.planner.lying, self.planner.gone)
+                            self.planner.lying, self.planner.gone, self._missing,
+                            self.phantom_scenes if counted else None, kept=set(self.relocated))
+        self._missing = m.missing
+        dropped = [i for i in m.changed if i not in m.bottles and i in self.bottles]
+        if dropped:
+            self.log("info", f"unlisted objects no longer in {source} dropped from the planner's scene: {dropped}")
         back = [i for i in m.seen if i in self.relocated]  # seen back on the top shelf: it can be relocated again
         for i in back:
             self.relocated.pop(i)
@@ -143,6 +163,19 @@ class MotionPlannerService:
             answer = None if all_lanes and not object_id else ask(
                 object_id, removed, float(timeout) if timeout is not None and timeout > 0 else None)
         return lanes, answer
+
+    def push_feasibility(self, object_id: str, removed: Iterable[str], clear_for: str, timeout: float | None = None
+                         ) -> tuple[FeasibilityAnswer, PushPlan | None]:
+        """The answer for a push of `object_id` out of the grasp lanes of `clear_for` with `removed` gone
+        (MotionPlanner.push_feasibility: g_O with the whole motion and the plan, whose `end` is the predicted pose;
+        g_U with the reason and None). Errors as `feasibility`."""
+        if timeout is not None and not math.isfinite(timeout):
+            raise ValueError(f"timeout must be a finite number of seconds (<= 0: the default), got {timeout}")
+        if not isinstance(clear_for, str) or not clear_for:
+            raise ValueError("a push question names the object whose lanes it clears (clear_for)")
+        with self.plan_lock:
+            return self.planner.push_feasibility(object_id, clear_for, list(removed),
+                                                 float(timeout) if timeout is not None and timeout > 0 else None)
 
     # -- relocation -----------------------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -189,15 +222,91 @@ class MotionPlannerService:
                 self._held = None
                 self._write_journal(None)
 
+    def push(self, arm: StreamedArm, object_id: str, removed_ids: Iterable[str], clear_for: str,
+             source: str = "the scene", ok: Callable[[], bool] = lambda: True) -> Outcome:
+        """Push `object_id` out of the grasp lanes of `clear_for` with `arm` (execution.push: planned as the
+        feasibility answer, then shut, approach, push, retreat, home, open); after a failure or a cancel, back along
+        the motions made (recover_push). Afterwards the planner models the object at the push's predicted end pose,
+        until a scene says where it is (update_scene). Success only if the scene from `source` shows it within
+        slot_tolerance of that pose on the top shelf and no other object moved more than outcome_tolerance. Never
+        raises."""
+        removed = list(removed_ids)
+        with self._relocating, _Heartbeat(arm):
+            if not self._ready.is_set():
+                arm.phase("recover")
+                self._ready.wait()
+            progress = Progress()
+            try:
+                with self.plan_lock:
+                    self.planner.check_question(object_id, removed)
+                    self.planner.check_question(clear_for, removed)
+                arm.wait_for_state(STATE_WAIT)
+                before = dict(self.scene.seen)
+                self._held = object_id
+                made = pushing.push(self.planner, arm, object_id, clear_for, removed, home_tol=self.home_tol,
+                                    lock=self.plan_lock, progress=progress)
+                self._pushed(made)
+                self._held = None
+                return self._push_outcome(before, made, source, ok)
+            except Cancelled:
+                arm.stop()
+                return Outcome("canceled", "cancelled: arm stopped" + self._recover_push(arm, progress))
+            except Exception as e:  # planning, the arm, bad input; a bug ends the goal with its reason, not the node
+                arm.stop()
+                known = isinstance(e, (Aborted, PlanningError, UnknownObjectError, ValueError, TypeError))
+                message = str(e) if known else f"internal error: {type(e).__name__}: {e}"
+                self.log("error", f"push of {object_id} aborted: {message}")
+                return Outcome("aborted", message + self._recover_push(arm, progress))
+            finally:
+                self._held = None
+
+    def _pushed(self, made: PushPlan) -> None:
+        """The pushed object stands at the push's predicted end pose in the planner's scene (until a scene)."""
+        x, y = made.end[:2]
+        with self.plan_lock:
+            self.planner.update_object(made.object_id, x, y)
+            b = self.bottles.get(made.object_id)
+            if b is not None:
+                self.bottles[made.object_id] = dataclasses.replace(b, x=x, y=y)
+
+    def _push_outcome(self, before: dict[str, goal_check.SeenBottle], made: PushPlan, source: str,
+                      ok: Callable[[], bool]) -> Outcome:
+        """The push's outcome against the first scene after it (execution.push.push_problems)."""
+        done = (f"pushed {made.object_id} {made.distance * 1000:.0f} mm (yaw {made.yaw:+.2f}): "
+                f"{made.clear_for}'s lane {made.lane} open")
+        after = self.scene.after(time.monotonic() + goal_check.OUTCOME_SETTLE, self.checks["outcome_timeout"], ok)
+        if after is None:
+            return Outcome("aborted", f"{done}, but no scene on {source} within outcome_timeout after the motion: "
+                                      f"{goal_check.OUTCOME_UNKNOWN}")
+        problems = pushing.push_problems(self.base.shelf, before, after, made, self.checks["outcome_tolerance"],
+                                         self.checks["slot_tolerance"])
+        if problems:
+            return Outcome("aborted", f"{done}, but the scene shows: {'; '.join(problems)}")
+        return Outcome("succeeded", done)
+
+    def _recover_push(self, arm: StreamedArm, progress: Progress) -> str:
+        """After a failed or cancelled push: execution.push.recover_push, not cancellable. The text added."""
+        if not arm.link.ok() or not progress.moves:
+            return ""
+        try:
+            arm = arm.uncancellable()
+            arm.wait_for_state(RECOVERY_STATE_WAIT)
+            what = pushing.recover_push(arm, progress)
+        except Exception as e:
+            self.log("error", f"recovery after the failed push failed: {e}")
+            return f"; recovery failed: {e}"
+        self.log("info", f"recovered: {what}")
+        return f"; recovered: {what}"
+
     def _relocate(self, arm: StreamedArm, object_id: str, removed_ids: list[str], source: str,
                   ok: Callable[[], bool]) -> Outcome:
         """The relocation of a checked goal, its journal kept, then its outcome (relocate's docstring)."""
         progress = Progress()
         try:
             arm.wait_for_state(STATE_WAIT)
-            before = dict(self.scene.seen)
+            before = {i: b.point for i, b in self.scene.seen.items()}
             self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated, len(removed_ids))
-            self._running = running = Running(progress, self._slot, [(b.id, b.x, b.y, b.z) for b in before.values()])
+            self._running = running = Running(progress, self._slot, [(i, *p) for i, p in before.items()])
 
             def on_change() -> None:  # a motion about to start, or the release
                 if progress.released:
@@ -273,7 +382,7 @@ class MotionPlannerService:
         note = f"the motion planner restarted during this relocation ({what})"
         if not run.progress.released:
             return Outcome("aborted", f"interrupted: {note}")
-        before = {i: goal_check.SeenBottle(i, x, y, z) for i, x, y, z in run.before}
+        before = {i: (x, y, z) for i, x, y, z in run.before}
         success, message = goal_check.outcome(self.scene, before, self.base, object_id, run.slot, self.checks,
                                               source, ok)
         return Outcome("succeeded" if success else "aborted", f"{message} ({note})")

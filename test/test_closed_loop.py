@@ -15,6 +15,7 @@ from qtree_task_planner.executive.closed_loop import (
     Option,
     SeenObject,
     Tolerances,
+    board_of,
     check_capacity,
     free_slots,
     remaining_problem,
@@ -163,6 +164,21 @@ def test_verification_off_slot_on_the_bottom_shelf():
     v = verify_relocation("b", slot0(), before, dict(before, b=SeenObject("b", x + 0.05, y, z)))
     assert [d.kind for d in v.differences] == ["not_at_slot"] and "5.0 cm from its slot" in v.summary()
     assert verify_relocation("b", slot0(), before, dict(before, b=SeenObject("b", x + 0.02, y, z))).ok
+
+
+def test_a_bottle_that_tipped_over_at_its_slot_is_relocated_and_the_difference_says_tipped():
+    """b tipped over at its slot (axis along x, its footprint centred on the slot; SeenObject: its base centre, the
+    lower end face, a radius above the board). It rests on the bottom shelf (relocated: board_of), its slot is
+    taken, and the check is not ok (success semantics unchanged) with a line that says so (before: 'b is not on the
+    bottom shelf')."""
+    before = scene_from_scenario(SCENARIO)
+    x, y, z = slot0()
+    tipped = SeenObject("b", x - 0.08, y, z + 0.033, tilt=math.pi / 2, radius=0.033, height=0.16)
+    assert board_of(tipped, SCENARIO, Tolerances()) == "bottom"
+    assert 0 not in free_slots(SCENARIO, dict(before, b=tipped))
+    v = verify_relocation("b", slot0(), before, dict(before, b=tipped))
+    assert [d.kind for d in v.differences] == ["not_at_slot"]
+    assert v.summary() == f"b tipped over on the bottom shelf (90 deg), lying 0.0 cm from its slot ({x:.3f}, {y:.3f})"
 
 
 def test_tolerances_are_validated_and_tilt_is_read_from_a_quaternion():
@@ -424,12 +440,13 @@ def test_a_new_object_the_hand_cannot_grasp_stays_an_obstacle_and_the_give_up_sa
 def test_a_give_up_without_a_lying_bottle_gives_the_solver_s_reason():
     """The benchmark's moved bottles (random5_03, paper_random5_04, paper_random5_06: a bottle moved next to T) ended
     "no feasible relocation sequence over the 4 obstacles (0 planner calls)" and no more, though the A* knew the
-    blocking cycle (exact.why_none). Here T's lane needs b gone and b's needs T gone."""
+    blocking cycle (exact.why_none). Here T's lane needs b gone and b's needs T gone. The line names the actions it
+    is a proof for (before: no action set, as if no other action could exist)."""
     shelf = FakeShelf(lanes={"T": [{"b"}], "b": [{"T"}]})
     answer = replan(remaining_problem(shelf.scenario, shelf.perceive(), ()), (), GeometryCache(shelf))
     assert isinstance(answer, str) and answer.startswith(
-        "T cannot be reached: no feasible relocation sequence over the 5 obstacles on the top shelf (2 planner calls); "
-        "T unfeasible from every set reached") and \
+        "T cannot be reached: no feasible relocation sequence with the actions side_grasp, top_grasp over the 5 "
+        "obstacles on the top shelf (2 planner calls); T unfeasible from every set reached") and \
         "blocking cycle: every lane of T needs an object that cannot leave first (lane {b}: b needs T moved)" in answer
 
 

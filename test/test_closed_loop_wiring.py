@@ -1,5 +1,6 @@
 """The task planner's closed-loop wiring without ROS processes: the scene watch (a scene received after a
 relocation ended), the scene conversion, and retrieval.execute's capacity check before the arm moves."""
+import math
 import threading
 import time
 from dataclasses import replace
@@ -9,13 +10,14 @@ from geometry_msgs.msg import Quaternion
 from rclpy.clock_type import ClockType
 from rclpy.time import Time
 
-from qtree_task_planner.executive.closed_loop import scene_from_scenario
+from qtree_task_planner.executive.closed_loop import free_slots, scene_from_scenario
 from qtree_task_planner.executive.retrieval import execute
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
 from relocation_common.paths import default_scenario
-from relocation_common.ros_conversions import objects_to_msg
+from relocation_common.ros_conversions import msg_to_objects, objects_to_msg
 from relocation_common.scenario import ScenarioError, load_scenario
+from stpik_motion_planner.execution.goal_check import destination
 
 SC = load_scenario(default_scenario())
 
@@ -362,3 +364,95 @@ def test_a_motion_planner_that_died_mid_relocation_is_waited_for_and_the_goal_se
     planner = _RestartedPlanner((True, "unused"))
     ok, message = ros_clients.Relocator(planner, 1.0, 60.0, 0.5, lambda: True).relocate("o2", [], lambda: False)
     assert not ok and "went away" in message and len(planner.goals) == 1
+
+
+@pytest.fixture(scope="module")
+def shapes_box():
+    """shapes_box_10 and a motion planner service of it (no node: its core)."""
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.service import MotionPlannerService
+    sc = load_scenario("config/scenarios/world/shapes_box_10.yaml")
+    return sc, MotionPlannerService(sc, PlannerParams.load())
+
+
+def _both_planners_free_slots(shapes_box, objects):
+    """(the task planner's free slots, the slots the motion planner's destination can choose) of a scene message
+    holding `objects`, each read as its node reads it (ros_clients.seen_scene; msg_to_objects into the motion
+    planner service's update_scene, then goal_check.destination as its relocations ask it)."""
+    sc, service = shapes_box
+    msg = objects_to_msg(objects)
+    service.update_scene(msg_to_objects(msg, require_target=False))
+    chosen = set()
+    for n in range(len(sc.slots)):
+        try:
+            chosen.add(destination(service.base, service.scene.seen, service.relocated, n)[0])
+        except ValueError:  # no free slot
+            break
+    return set(free_slots(sc, seen_scene(msg))), chosen
+
+
+def test_free_slots_count_a_box_and_a_lying_bottle_on_the_bottom_shelf_by_their_footprints(shapes_box):
+    """The task planner's free slots read each object's footprint from the scene message. Before, SeenObject had no
+    size: a box (radius 0) left even the slot it stands on free, a lying bottle counted as a standing one at its
+    end face: 8 of the 10 slots were counted free where 4 are. A box at slot 0 takes 0 and the one in front of it (6);
+    a bottle lying along y at (0.72, 0.12), between slots 1, 3, 7 and 9, takes all four, for the motion planner's
+    destination too (it read the lying bottle's base centre, a radius above the board: not on the bottom shelf, all
+    10 slots free)."""
+    sc = shapes_box[0]
+    bottom, slot = sc.shelf.bottom_z, sc.slots
+    lying = (0.5 * (slot[1][0] + slot[7][0]), 0.5 * (slot[1][1] + slot[3][1]))
+    assert lying == pytest.approx((0.72, 0.12))
+    moved = {"o7": replace(sc.object("o7"), x=slot[0][0], y=slot[0][1], support_z=bottom),
+             "o1": replace(sc.object("o1"), x=lying[0], y=lying[1], yaw=math.pi / 2, lying=True, support_z=bottom)}
+    objects = [moved.get(b.id, replace(b, support_z=sc.shelf.top_z)) for b in sc.objects]
+    task, motion = _both_planners_free_slots(shapes_box, objects)
+    assert set(range(len(slot))) - task == {0, 6, 1, 3, 7, 9}, task
+    assert motion == task, (motion, task)
+    box_only = [o for o in objects if o.id != "o1"]
+    assert _both_planners_free_slots(shapes_box, box_only) == (set(range(len(slot))) - {0, 6},) * 2
+
+
+LAYOUTS = 60  # generated bottom-shelf layouts (seeds 0 .. LAYOUTS - 1, fixed before any result)
+
+
+def _bottom_layout(sc, rng):
+    """1 to 5 objects of `sc` on its bottom shelf, none overlapping another: each at a slot (jittered up to 15 mm)
+    or anywhere on the board, at any yaw, a cylinder lying with probability 1/2; the rest where the scenario has
+    them on the top shelf."""
+    sh, out = sc.shelf, {}
+    for o in rng.sample(list(sc.objects), rng.randint(1, 5)):
+        for _ in range(50):
+            if rng.random() < 0.5:
+                x, y = rng.choice(sc.slots)
+                x, y = x + rng.uniform(-0.015, 0.015), y + rng.uniform(-0.015, 0.015)
+            else:
+                x, y = rng.uniform(sh.x_front + 0.05, sh.x_back - 0.05), rng.uniform(sh.y_min + 0.1, sh.y_max - 0.1)
+            lying = o.shape == "cylinder" and rng.random() < 0.5
+            p = replace(o, x=x, y=y, yaw=rng.uniform(-math.pi / 2, math.pi / 2), lying=lying, support_z=sh.bottom_z)
+            if not any(p.footprint().overlaps(q.footprint()) for q in out.values()):
+                out[o.id] = p
+                break
+    return [out.get(b.id, replace(b, support_z=sh.top_z)) for b in sc.objects], out
+
+
+def test_the_task_planners_free_slots_and_the_motion_planners_destination_agree_on_generated_layouts(shapes_box):
+    """On LAYOUTS generated bottom shelves of shapes_box_10 (standing and lying bottles, boxes; seeds fixed before
+    any result), the slots the motion planner's destination can choose are the task planner's free slots, each read
+    from the same scene message as its node reads it. On the old code they differed on 57 of the 60 layouts: on all
+    41 with a lying bottle below (the motion planner read its base centre, a radius above the board: not on the
+    bottom shelf; the task planner took the lying bottle's own length as the width of the object to place), and
+    where a standing bottle took two radii of the widest object for the motion planner, its own for the task
+    planner."""
+    import random
+    sc = shapes_box[0]
+    differ, lying_takes = [], 0
+    for seed in range(LAYOUTS):
+        objects, below = _bottom_layout(sc, random.Random(seed))
+        task, motion = _both_planners_free_slots(shapes_box, objects)
+        if task != motion:
+            differ.append(f"seed {seed}: task planner {sorted(task)}, motion planner {sorted(motion)}")
+        lying_takes += any(o.lying and len(free_slots(sc, seen_scene(objects_to_msg([o])))) < len(sc.slots)
+                           for o in below.values())
+    print(f"\n{LAYOUTS} layouts: {len(differ)} differ; {lying_takes} with a lying bottle that takes a slot")
+    assert lying_takes >= LAYOUTS // 4  # the layouts exercise lying bottles on slots
+    assert not differ, "\n".join(differ)

@@ -7,6 +7,7 @@ import pytest
 import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver import disturbance as dist
 from jaco2_sim_driver.sim import Jaco2Sim
+from relocation_app.final_state import HOME_TOL
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import load_scenario
 
@@ -200,7 +201,7 @@ def test_schedule_applies_each_disturbance_at_its_moment(fresh):
     plan = dist.DisturbancePlan(0, (dist.Disturbance("nudge", "after", 0, choice=0.99, amount=0.01),
                                     dist.Disturbance("drop", "during", 1),
                                     dist.Disturbance("drop", "during", 0)))
-    schedule = dist.DisturbanceSchedule(plan, drop_delay=10.0)  # the drop of carry 1 never gets due
+    schedule = dist.DisturbanceSchedule(plan, HOME_TOL, drop_delay=10.0)  # the drop of carry 1 never gets due
     assert schedule.update(fresh) == []
     _hold(fresh)  # carry 1
     assert schedule.update(fresh) == []

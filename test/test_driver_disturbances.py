@@ -8,6 +8,7 @@ from jaco2_sim_driver.disturbance import DisturbancePlan
 from jaco2_sim_driver.driver import SimDriver
 from jaco2_sim_driver.params import DriverParams
 from jaco2_sim_driver.sim import Jaco2Sim
+from relocation_app.final_state import HOME_TOL
 from relocation_common.arm_interface import ArmInterface
 from relocation_common.paths import default_scenario
 from relocation_common.robot_description import BASE_LINK, Q_HOME
@@ -57,3 +58,23 @@ def test_the_plan_and_drop_parameters_are_checked_and_taken():
     core = SimDriver.from_params(PARAMS.replace(disturbance_plan=plan.to_json(), real_time_factor=0.0),
                                  ArmInterface.load())
     assert core.schedule is not None and core.schedule.plan == plan and core.dropper.probability == 0.0
+
+
+def test_a_relocation_ends_for_the_plan_with_the_arm_within_the_motion_planner_s_home_tol(core):
+    """The schedule's "relocation i ended" (the arm back home after a release) is the motion planner's home_tol, read
+    from config/motion_planner.yaml. Before, the schedule kept its own 0.05 rad (the planner's value when it was
+    written; the planner's went down to 0.03): an arm 0.04 rad off home counted as home, while the planner still
+    brought it there."""
+    core.reset()
+    core.disturbances(0.0, 0, DisturbancePlan.draw(1, seed=3, relocations=1))
+    assert core.schedule is not None
+    try:
+        for off, home in ((HOME_TOL + 0.01, False), (HOME_TOL - 0.01, True)):
+            core.sim.q_home = Q_HOME + np.eye(7)[3] * off
+            core.sim.home()  # the arm at q_home: `off` from Q_HOME at the elbow
+            core.sim.q_home = np.asarray(Q_HOME, float)
+            assert core.schedule.at_home(core.sim) is home, off
+    finally:
+        core.sim.q_home = np.asarray(Q_HOME, float)
+        core.disturbances(PARAMS.drop_probability, PARAMS.drop_seed, PARAMS.plan())
+        core.reset()

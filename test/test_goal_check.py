@@ -2,25 +2,38 @@
 motion (stpik_motion_planner.execution.goal_check), and scene updates against the scenario
 (relocation_common.scene_check)."""
 import math
+import threading
+from dataclasses import replace
 
 import pytest
 
 from relocation_common.paths import default_scenario
+from relocation_common.ros_conversions import msg_to_objects, objects_to_msg
 from relocation_common.scenario import ScenarioError, load_scenario
 from relocation_common.scene_check import check_scene, foreign_ids
+from relocation_common.shelf_object import Footprint
 from stpik_motion_planner.execution import goal_check as gc
 from stpik_motion_planner.execution.relocation import plan_relocation
 
 SC = load_scenario(default_scenario())
 SHELF, SLOTS = SC.shelf, SC.slots
-CLEAR = 2 * 0.033
+RADIUS = SC.slot_radius
+
+
+def _standing(**moved):
+    """Every bottle standing where the scenario has it; `moved`: id -> (x, y, z of its base)."""
+    at = {i: dict(x=x, y=y, support_z=z) for i, (x, y, z) in moved.items()}
+    return [replace(b, **at.get(b.id, dict(support_z=SHELF.top_z))) for b in SC.objects]
 
 
 def _scene(**moved):
-    """Every bottle where the scenario has it; `moved`: id -> (x, y, z)."""
-    seen = {b.id: gc.SeenBottle(b.id, b.x, b.y, SHELF.top_z) for b in SC.objects}
-    seen.update({i: gc.SeenBottle(i, *xyz) for i, xyz in moved.items()})
-    return seen
+    """The motion planner's scene of `_standing(**moved)`: id -> SeenBottle."""
+    return {o.id: gc.seen_bottle(o) for o in _standing(**moved)}
+
+
+def _points(scene):
+    """`before` of the outcome check: id -> base centre."""
+    return {i: b.point for i, b in scene.items()}
 
 
 def test_removed_bottles_still_standing_refuse_the_goal_with_their_names():
@@ -41,14 +54,14 @@ def test_an_object_already_on_the_bottom_shelf_is_refused():
 def test_the_destination_is_a_free_slot_of_the_scene_not_the_count_of_removed():
     """o2 then o3 both sent with removed=[]: the old node put o3 into slot 0 where o2 stood (shoved 69 mm)."""
     scene = _scene(o2=(*SLOTS[0], SHELF.bottom_z))
-    placed = gc.placed_bottles(SHELF, SLOTS, scene, {})
-    assert placed == [("o2", SLOTS[0])]
-    assert gc.free_slots(SLOTS, placed, CLEAR)[0] == 1
+    placed = gc.placed_bottles(SHELF, SLOTS, scene, {}, RADIUS)
+    assert [(i, f.centre) for i, f in placed] == [("o2", SLOTS[0])]
+    assert SC.free_slots(f for _, f in placed)[0] == 1
     # this node placed o5 in slot 1 and the scene (perception: top shelf only) does not show it
-    placed = gc.placed_bottles(SHELF, SLOTS, {k: v for k, v in scene.items() if k != "o5"}, {"o5": 1})
-    assert gc.free_slots(SLOTS, placed, CLEAR)[0] == 2
-    full = [(f"b{k}", xy) for k, xy in enumerate(SLOTS)]
-    assert gc.free_slots(SLOTS, full, CLEAR) == []
+    placed = gc.placed_bottles(SHELF, SLOTS, {k: v for k, v in scene.items() if k != "o5"}, {"o5": 1}, RADIUS)
+    assert SC.free_slots(f for _, f in placed)[0] == 2
+    full = [Footprint(xy, RADIUS, ()) for xy in SLOTS]
+    assert SC.free_slots(full) == ()
     with pytest.raises(ValueError, match="no free slot"):  # every slot taken by bottles this node placed
         gc.destination(SC, {}, {f"b{k}": k for k in range(len(SLOTS))}, 0)
 
@@ -76,7 +89,7 @@ def test_plan_relocation_goes_to_the_slot_given_with_the_bottles_placed():
 
 
 def test_the_outcome_names_every_bottle_that_moved_and_a_misplaced_one():
-    before = _scene()
+    before = _points(_scene())
     slot = SLOTS[0]
     good = _scene(o2=(slot[0] + 0.004, slot[1], SHELF.bottom_z), o6=(0.8 + 0.003, 0.0, SHELF.top_z))
     assert gc.outcome_problems(SHELF, before, good, "o2", slot, 0.015, 0.02) == []
@@ -88,7 +101,7 @@ def test_the_outcome_names_every_bottle_that_moved_and_a_misplaced_one():
     off = gc.outcome_problems(SHELF, before, _scene(o2=(slot[0], slot[1] + 0.05, SHELF.bottom_z)), "o2", slot,
                               0.015, 0.02)
     assert off == [f"o2 is 50 mm from its slot ({slot[0]:.3f}, {slot[1]:.3f})"]
-    assert gc.outcome_problems(SHELF, before, before, "o2", slot, 0.015, 0.02) == ["o2 is still on the top shelf"]
+    assert gc.outcome_problems(SHELF, before, _scene(), "o2", slot, 0.015, 0.02) == ["o2 is still on the top shelf"]
     assert gc.outcome_problems(SHELF, before, {}, "o2", slot, 0.015, 0.02) == []  # nothing seen: nothing contradicts
 
 
@@ -148,14 +161,14 @@ def test_the_outcome_waits_for_a_scene_after_the_motion():
     assert gc.outcome(watch, {}, SC, "o2", 0, VALUES, "/sim/objects") == (
         False, "relocated o2 to slot 0, but no scene on /sim/objects within outcome_timeout after the motion: "
                "outcome unknown")
-    before = _scene()
-    watch.update((b.id, b.x, b.y, b.z) for b in before.values())  # received before the motion ended: not used
+    before = _points(_scene())
+    watch.update(_standing())  # received before the motion ended: not used
     ok, msg = gc.outcome(watch, before, SC, "o2", 0, VALUES, "/sim/objects")
     assert not ok and msg.endswith("but no scene on /sim/objects within outcome_timeout after the motion: outcome "
                                    "unknown"), msg
     import threading
-    after = _scene(o2=(*SLOTS[0], SHELF.bottom_z), o1=(0.69 + 0.03, -0.21, SHELF.top_z))
-    threading.Timer(0.4, lambda: watch.update((b.id, b.x, b.y, b.z) for b in after.values())).start()
+    after = _standing(o2=(*SLOTS[0], SHELF.bottom_z), o1=(0.69 + 0.03, -0.21, SHELF.top_z))
+    threading.Timer(0.4, lambda: watch.update(after)).start()
     values = dict(VALUES, outcome_timeout=3.0)
     assert gc.outcome(watch, before, SC, "o2", 0, values, "t") == (False, "relocated o2 to slot 0, but the scene "
                                                                           "shows: o1 moved 30 mm")
@@ -166,11 +179,58 @@ def test_without_a_scene_before_the_motion_the_scene_after_decides():
     the others cannot be. The old check answered success without waiting for any scene."""
     import threading
     watch = gc.SceneWatch()
-    still_there = _scene()  # o2 still standing on the top shelf: not a success
-    threading.Timer(0.4, lambda: watch.update((b.id, b.x, b.y, b.z) for b in still_there.values())).start()
+    still_there = _standing()  # o2 still standing on the top shelf: not a success
+    threading.Timer(0.4, lambda: watch.update(still_there)).start()
     ok, msg = gc.outcome(watch, {}, SC, "o2", 0, dict(VALUES, outcome_timeout=3.0), "t")
     assert (ok, msg) == (False, "relocated o2 to slot 0, but the scene shows: o2 is still on the top shelf")
-    placed = _scene(o2=(*SLOTS[0], SHELF.bottom_z))
-    threading.Timer(0.4, lambda: watch.update((b.id, b.x, b.y, b.z) for b in placed.values())).start()
+    placed = _standing(o2=(*SLOTS[0], SHELF.bottom_z))
+    threading.Timer(0.4, lambda: watch.update(placed)).start()
     assert gc.outcome(watch, {}, SC, "o2", 0, dict(VALUES, outcome_timeout=3.0), "t") == (
         True, "relocated o2 to slot 0 (the other bottles not checked: no scene on t before the motion)")
+
+
+# -- objects lying on the bottom shelf -----------------------------------------------------------------------------
+BOX10 = load_scenario("config/scenarios/world/shapes_box_10.yaml")
+
+
+def _lying_scene(sc, lying_id, x, y, yaw):
+    """The motion planner's scene of `sc` (as the ground truth's message gives it: ros_conversions) with `lying_id`
+    lying on the bottom shelf, its footprint centred at (x, y), its axis at `yaw`."""
+    lying = replace(sc.object(lying_id), x=x, y=y, yaw=yaw, lying=True, support_z=sc.shelf.bottom_z)
+    objects = [lying if b.id == lying_id else replace(b, support_z=sc.shelf.top_z) for b in sc.objects]
+    return {o.id: gc.seen_bottle(o) for o in msg_to_objects(objects_to_msg(objects), require_target=False)}
+
+
+@pytest.mark.parametrize("yaw", [math.pi / 2, 0.0, 0.6])
+def test_a_bottle_lying_on_the_bottom_shelf_takes_the_slots_it_covers(yaw):
+    """A bottle lying at (0.72, 0.12) on the bottom shelf of shapes_box_10, between slots 1, 3, 7 and 9: its base
+    centre is a radius above the board, so the old check found it on no shelf and every one of the 10 slots free
+    (the next carry was planned into it). It is on the bottom shelf, and the destination never is a slot its
+    footprint comes within the widest object's radius of (checked against the footprint itself)."""
+    seen = _lying_scene(BOX10, "o1", 0.72, 0.12, yaw)
+    assert gc.on_bottom_shelf(BOX10.shelf, seen["o1"]) and not gc.on_top_shelf(BOX10.shelf, seen["o1"])
+    chosen = {gc.destination(BOX10, seen, {}, n)[0] for n in range(len(BOX10.slots))}
+    foot = seen["o1"].footprint
+    covered = {k for k, xy in enumerate(BOX10.slots) if foot.overlaps(Footprint(xy, BOX10.slot_radius, ()))}
+    assert {1, 7} <= covered and not chosen & covered, (chosen, covered)
+    assert chosen == set(range(len(BOX10.slots))) - covered
+    assert "already relocated" in gc.refusal(BOX10.shelf, "o1", [], seen, {})  # lying there, it is relocated
+
+
+def test_a_bottle_that_tipped_over_at_its_slot_is_on_the_bottom_shelf_tipped():
+    """o2 relocated to slot 1 and tipped over there (its axis along x, its footprint centred on the slot). Before,
+    the outcome said 'o2 is 87 mm from its slot' and the next carry's destination was slot 1 again. Now: on the
+    bottom shelf, tipped (still not a success: not placed as asked), and its slot taken."""
+    seen = _lying_scene(BOX10, "o2", *BOX10.slots[1], 0.0)
+    assert gc.on_bottom_shelf(BOX10.shelf, seen["o2"])
+    before = {b.id: (b.x, b.y, BOX10.shelf.top_z) for b in BOX10.objects}
+    problems = gc.outcome_problems(BOX10.shelf, before, seen, "o2", BOX10.slots[1], 0.015, 0.02)
+    assert problems == ["o2 tipped over on the bottom shelf (90 deg), lying 0 mm from its slot (0.760, 0.060)"]
+    assert gc.destination(BOX10, seen, {}, 1)[0] != 1
+    watch = gc.SceneWatch()
+    tipped = replace(BOX10.object("o2"), x=BOX10.slots[1][0], y=BOX10.slots[1][1], lying=True,
+                     support_z=BOX10.shelf.bottom_z)
+    after = [tipped if b.id == "o2" else replace(b, support_z=BOX10.shelf.top_z) for b in BOX10.objects]
+    threading.Timer(0.4, lambda: watch.update(msg_to_objects(objects_to_msg(after)))).start()
+    assert gc.outcome(watch, before, BOX10, "o2", 1, dict(VALUES, outcome_timeout=3.0), "t") == (
+        False, "relocated o2 to slot 1, but the scene shows: " + problems[0])

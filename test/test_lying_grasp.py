@@ -20,7 +20,8 @@ import pytest
 from motion_checker import MotionChecker, Report, replay_relocation
 from test_execution import carried_to_slot
 
-from relocation_common.feasibility import NO_GRASP, Label
+from qtree_task_planner.problem import ActionCosts, RelocationProblem
+from relocation_common.feasibility import NO_GRASP, SIDE_GRASP, TOP_GRASP, Label
 from relocation_common.scenario import Scenario, load_scenario, parse_scenario
 from stpik_motion_planner.execution.relocation import RelocationPlan, plan_relocation
 from stpik_motion_planner.model.grasp import FINGER_FLOOR
@@ -87,6 +88,26 @@ def test_a_lying_bottle_under_the_shipped_shelf_s_board_is_refused_with_the_head
                          "0.45 m (the hand straight down, its finger tips 19 mm over the bottle before it comes down "
                          "and 19 mm under the board above)"), a.message
     assert planner.lane_blockers()["o7"] == ()
+
+
+def test_a_feasible_answer_names_its_action_as_the_task_planner_costs_it():
+    """headroom_lying_6: the feasibility answer of the lying o1 says top_grasp (the grasp from above), of a standing
+    bottle side_grasp, of an unfeasible question nothing; the task planner's problem costs each obstacle by the same
+    action, known from its pose before asking (problem.RelocationProblem.from_scenario; before, answers named no
+    action and every relocation cost its weight)."""
+    scenario = load_scenario("config/scenarios/headroom_lying_6.yaml")
+    planner = MotionPlanner(scenario, PARAMS)
+    lying, standing = planner.feasibility("o1", []), planner.feasibility("o2", [])
+    assert (lying.label, lying.action) == (Label.OBSTACLE, TOP_GRASP), lying
+    assert (standing.label, standing.action) == (Label.OBSTACLE, SIDE_GRASP), standing
+    assert planner.certify("o1", []).action == TOP_GRASP
+    blocked = planner.feasibility("T", [])
+    assert blocked.label == Label.UNFEASIBLE and blocked.action == "", blocked
+    factors = ActionCosts(side_grasp=1.0, top_grasp=1.5, push=2.0)
+    problem = RelocationProblem.from_scenario(scenario, factors)
+    for oid, answer in (("o1", lying), ("o2", standing)):
+        assert problem.costs[oid] == pytest.approx(scenario.object(oid).weight * factors.factor(answer.action))
+    assert problem.costs["o1"] == pytest.approx(0.45) and problem.weights["o1"] == pytest.approx(0.30)
 
 
 def test_generated_lying_bottles_are_relocated_standing_touching_nothing_in_mujoco():

@@ -102,7 +102,8 @@ def test_feasibility_service_answers_as_the_core(graph):
 
 
 def test_a_certify_request_answers_as_the_core_and_a_pick_names_what_it_comes_near(graph):
-    """PlanFeasibility's certify (the whole relocation) and near_ids (the pick's near set), as the core gives them."""
+    """PlanFeasibility's certify (the whole relocation), near_ids (the pick's near set) and action (a feasible
+    answer's), as the core gives them."""
     core = MotionPlanner(SCENARIO, PlannerParams.load())
     for object_id, removed in [("o6", ("o2",)), ("T", ("o2", "o6")), ("T", ())]:
         req = PlanFeasibility.Request(object_id=object_id, removed_ids=list(removed), timeout=5.0, label_only=True)
@@ -113,6 +114,7 @@ def test_a_certify_request_answers_as_the_core_and_a_pick_names_what_it_comes_ne
         assert pick.ok and cert.ok and (Label(pick.label), Label(cert.label)) == (want.label, want_cert.label)
         assert pick.near_known == (want.label != Label.UNFEASIBLE) and not cert.near_known
         assert frozenset(pick.near_ids) == (want.near or frozenset())
+        assert (pick.action, cert.action) == (want.action, want_cert.action)  # side_grasp, or "" when unfeasible
     assert want.label == Label.UNFEASIBLE and not pick.near_ids  # T with nothing removed: blocked
 
 

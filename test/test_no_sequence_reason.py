@@ -1,4 +1,5 @@
-"""Why there is no sequence (docs/motion_planner.md): the exact solvers' result and `qtree solve` say it in one line."""
+"""Why there is no sequence (docs/motion_planner.md): the exact solvers' result and `qtree solve` say it in one line,
+naming the action set it is a proof for (before: "no sequence: ...", a proof for no stated set of actions)."""
 from __future__ import annotations
 
 import json
@@ -41,9 +42,20 @@ class NoGrasp:
 def test_the_objects_no_grasp_reached_are_named_with_the_planners_reason():
     for solve in (astar.solve, exact.solve):
         r = solve(problem(), NoGrasp())
-        assert r.reason.startswith("no sequence: T unfeasible from every set reached"), r.reason
+        assert r.reason.startswith("no sequence with the actions side_grasp, top_grasp: T unfeasible from every set "
+                                   "reached"), r.reason
         assert "STPIK rejected the approach of T" in r.reason
     assert "never feasible: o1 (STPIK rejected the approach of o1)" in exact.solve(problem(), NoGrasp()).reason
+
+
+def test_the_proof_names_the_action_set_of_the_problem():
+    """The reason is a proof over the problem's actions (problem.RelocationProblem.action_set): said first, by both
+    solvers, for the pick actions by default and for whatever set the problem states."""
+    oracle = BlockingOracle.from_relation({"T": ["o1"], "o1": ["T"]}, "T", IDS)
+    for solve in (astar.solve, exact.solve):
+        assert solve(problem(), oracle).reason.startswith("no sequence with the actions side_grasp, top_grasp: ")
+        only_side = RelocationProblem(IDS[:-1], {"o1": 0.2, "o2": 0.3, "o3": 0.4}, "T", action_set=("side_grasp",))
+        assert solve(only_side, oracle).reason.startswith("no sequence with the action side_grasp: ")
 
 
 def test_a_solved_problem_has_no_reason():
@@ -58,7 +70,7 @@ def test_qtree_solve_prints_the_reason(tmp_path, capsys):
     path.write_text(yaml.safe_dump(data))
     assert main(["solve", "--scenario", str(path), "--json", str(tmp_path / "out.json")]) == 0
     err = capsys.readouterr().err
-    assert "qtree: no sequence: " in err and "blocking cycle" in err
+    assert "qtree: no sequence with the actions side_grasp, top_grasp: " in err and "blocking cycle" in err
     assert "blocking cycle" in json.loads((tmp_path / "out.json").read_text())["reason"]
 
 

@@ -1,9 +1,9 @@
 """One source for every parameter of the motion planner: config/motion_planner.yaml (as
-qtree_task_planner.learning.params.TrainingParams does). PlannerParams (with StpikParams, stpik.*) and FollowerParams
-(follower.*) load from the file; every field has exactly one key there and every key exactly one reader; no field
-carries a default of its own; no other dataclass field or function argument of stpik_motion_planner keeps a second
-value of a key; and what is built without parameters uses the file's (a bare `MotionPlanner(scenario)` planned with
-3 approach yaws and no certification while the file said 5 and true)."""
+qtree_task_planner.learning.params.TrainingParams does). PlannerParams (with StpikParams, stpik.*, and PushParams,
+push.*) and FollowerParams (follower.*) load from the file; every field has exactly one key there and every key
+exactly one reader; no field carries a default of its own; no other dataclass field or function argument of
+stpik_motion_planner keeps a second value of a key; and what is built without parameters uses the file's (a bare
+`MotionPlanner(scenario)` planned with 3 approach yaws and no certification while the file said 5 and true)."""
 import ast
 import dataclasses
 from pathlib import Path
@@ -17,7 +17,7 @@ from relocation_common.scenario import load_scenario
 from stpik_motion_planner.execution import goal_check
 from stpik_motion_planner.execution.follower import FollowerParams, TrajectoryFollower
 from stpik_motion_planner.execution.streaming import StreamParams
-from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams, PushParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.stpik import StpikParams
 from stpik_motion_planner.planning.trajectory import Trajectory
@@ -58,17 +58,17 @@ def test_every_key_is_given_once():
     assert sorted(k for k in set(keys) if keys.count(k) > 1) == []
 
 
-@pytest.mark.parametrize("klass,nested", [(PlannerParams, StpikParams), (FollowerParams, None)])
+@pytest.mark.parametrize("klass,nested", [(PlannerParams, (StpikParams, PushParams)), (FollowerParams, ())])
 def test_each_dataclass_loads_every_field_from_the_file_and_has_no_default(klass, nested):
     keys = set(_keys())
-    fields = [f for f in dataclasses.fields(klass) if f.name != "stpik"] + list(
-        dataclasses.fields(nested) if nested else ())
+    fields = [f for f in dataclasses.fields(klass) if f.name not in ("stpik", "push")] + [
+        f for n in nested for f in dataclasses.fields(n)]
     assert [f.name for f in fields if _has_default(f) and f.name not in SHARED] == [], "fields with a default"
     own = [k for k in klass.keys() if k.rsplit(".", 1)[-1] not in SHARED]
     assert sorted(set(own) - keys) == [], f"{klass.__name__} keys missing from config/{FILE}"
     loaded, values = klass.load(), _values()
     for k in own:
-        obj = loaded.stpik if k.startswith("stpik.") else loaded
+        obj = loaded.stpik if k.startswith("stpik.") else loaded.push if k.startswith("push.") else loaded
         assert _same(getattr(obj, k.rsplit(".", 1)[-1]), values[k]), k
 
 
@@ -122,7 +122,8 @@ def test_the_scan_finds_a_second_value():
 
 def _flat(p: PlannerParams) -> dict:
     d = dataclasses.asdict(p)
-    return {**{k: v for k, v in d.items() if k != "stpik"}, **{f"stpik.{k}": v for k, v in d["stpik"].items()}}
+    return {**{k: v for k, v in d.items() if k not in ("stpik", "push")},
+            **{f"{n}.{k}": v for n in ("stpik", "push") for k, v in d[n].items()}}
 
 
 def _same_params(a: PlannerParams, b: PlannerParams) -> bool:

@@ -10,6 +10,7 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import BlockingOracle, CachedOracle
 from qtree_task_planner.problem import RelocationProblem
 from relocation_common.config import ParameterError, node_section
+from relocation_common.node import flat_parameters
 from relocation_common.paths import config_file
 from relocation_common.scenario import ScenarioError, load_scenario
 
@@ -94,7 +95,7 @@ def test_checkpoint_path_checks(tmp_path):
         check_checkpoint_path(str(tmp_path))
 
 
-NODE_PARAMS = node_section(config_file("task_planner.yaml"), "task_planner")
+NODE_PARAMS = flat_parameters(node_section(config_file("task_planner.yaml"), "task_planner"))  # as the node declares
 
 
 @pytest.mark.parametrize("name,value,words", [
@@ -103,7 +104,8 @@ NODE_PARAMS = node_section(config_file("task_planner.yaml"), "task_planner")
     ("feasibility_timeout", True, "feasibility_timeout must be a finite number"),
     ("scene_source", "camera", "scene_source must be one of perception, sim"),
     ("replicas", 65, "replicas must be an integer in 1..64"), ("checkpoint_every", 0, "checkpoint_every must be"),
-    ("checkpoint_path", "/", "is a directory")])
+    ("checkpoint_path", "/", "is a directory"), ("action_cost.top_grasp", 0.0, r"action_cost.top_grasp must be"),
+    ("action_cost.push", 11.0, r"action_cost.push must be a number in \(0, 10\]")])
 def test_node_parameters_name_the_first_unusable_one(name, value, words):
     check_node_parameters(NODE_PARAMS.__getitem__)  # config/task_planner.yaml as it is: usable
     with pytest.raises(ParameterError, match=words):

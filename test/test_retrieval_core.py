@@ -55,7 +55,8 @@ def test_no_training_when_the_exact_solve_proves_there_is_no_sequence():
     assert not optimum.found and "blocking cycle" in optimum.reason
     assert r.episodes == 0 and not r.found and not r.cancelled
     ok, message = training_outcome(r, optimum, execute=True)
-    assert not ok and message.startswith("the target cannot be retrieved: no sequence: blocking cycle"), message
+    assert not ok and message.startswith("the target cannot be retrieved: no sequence with the actions side_grasp, "
+                                         "top_grasp: blocking cycle"), message
 
 
 def test_execution_stops_at_the_first_failure_and_on_cancel():

@@ -34,7 +34,7 @@ def perceived(b, base_z, quat=(1.0, 0.0, 0.0, 0.0)):
 
 def test_a_bottle_moved_on_the_top_shelf_replaces_the_planners():
     o1 = replace(CURRENT["o1"], x=CURRENT["o1"].x + 0.02)
-    merged, _, _, changed, seen = merge_perceived(SC.shelf, CURRENT, [o1, CURRENT["o2"]], FLAT)
+    merged, _, _, changed, seen, _ = merge_perceived(SC.shelf, CURRENT, [o1, CURRENT["o2"]], FLAT)
     assert changed == ["o1"] and merged["o1"].x == o1.x and seen == {"o1", "o2"}
     assert merged["o3"] is CURRENT["o3"]  # not seen: keeps its last pose
 
@@ -48,9 +48,9 @@ def test_lifted_held_or_off_shelf_bottles_are_ignored():
     lifted = replace(CURRENT["o1"], x=CURRENT["o1"].x + 0.05)
     held = replace(CURRENT["o2"], x=CURRENT["o2"].x + 0.05)
     bottom = replace(CURRENT["o3"], x=CURRENT["o3"].x + 0.05)
-    merged, lying, gone, changed, seen = merge_perceived(SC.shelf, CURRENT, [perceived(lifted, TOP + 0.03), held,
-                                                                            perceived(bottom, SC.shelf.bottom_z)],
-                                                         FLAT, held="o2")
+    merged, lying, gone, changed, seen, _ = merge_perceived(SC.shelf, CURRENT, [perceived(lifted, TOP + 0.03), held,
+                                                                               perceived(bottom, SC.shelf.bottom_z)],
+                                                            FLAT, held="o2")
     assert changed == [] and seen == set() and merged == CURRENT and lying == {} and gone == frozenset()
 
 
@@ -157,3 +157,19 @@ def test_bottles_lying_in_mujoco_lie_flat_in_the_planner_as_there_and_are_taken_
               f"{next(t for t in truth if t.id == oid).axis_tilt:.4f} rad)")
         assert ends <= MODEL_TOL, (oid, ends)
     assert service.planner.not_graspable("o1") == "" and service.planner.grasp_pitch("o1") > 0
+
+
+def test_an_unlisted_object_left_out_is_counted_only_in_view_and_with_no_relocation_running():
+    """scene_update's phantom rule (merge_perceived's `missing`, `phantom_scenes`): u1 stands in front of the shelf
+    with nothing before it, u2 behind o4. A scene without either counts for u1 only (u2 may be hidden); during a
+    relocation (`held`) it counts for none; the count reaching phantom_scenes drops u1. Before, both stayed."""
+    u1 = replace(CURRENT["o1"], id="u1", listed=False, x=0.68, y=-0.10)
+    u2 = replace(CURRENT["o1"], id="u2", listed=False, x=0.90, y=-0.08)
+    current = {**CURRENT, "u1": u1, "u2": u2}
+    scene = list(CURRENT.values())
+    m = merge_perceived(SC.shelf, current, scene, FLAT, missing={}, phantom_scenes=2)
+    assert m.missing == {"u1": 1} and m.changed == [] and {"u1", "u2"} <= set(m.bottles)
+    during = merge_perceived(SC.shelf, m.bottles, scene, FLAT, held="o1", missing=m.missing, phantom_scenes=2)
+    assert during.missing == {"u1": 1} and during.changed == []
+    m = merge_perceived(SC.shelf, m.bottles, scene, FLAT, missing=m.missing, phantom_scenes=2)
+    assert m.changed == ["u1"] and "u1" not in m.bottles and "u2" in m.bottles and m.missing == {}

@@ -77,7 +77,8 @@ class _Client:
 
     def call_async(self, req):
         self.requests.append(req)
-        return _Future(PlanFeasibility.Response(ok=True, label=PlanFeasibility.Response.OBSTACLE, attempts=1))
+        return _Future(PlanFeasibility.Response(ok=True, label=PlanFeasibility.Response.OBSTACLE, attempts=1,
+                                                action="top_grasp"))
 
     def remove_pending_request(self, fut):
         pass
@@ -89,6 +90,7 @@ def test_task_planner_oracle_asks_for_the_label_only():
     client = _Client()
     ans = ServiceOracle(client, timeout=1.0, margin=1.0).feasibility("o1", frozenset({"o2"}))
     assert ans.label.name == "OBSTACLE" and ans.trajectory is None
+    assert ans.action == "top_grasp"  # the feasible answer's action, read from the response
     assert [(r.object_id, list(r.removed_ids), r.label_only) for r in client.requests] == [("o1", ["o2"], True)]
 
 

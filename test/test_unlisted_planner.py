@@ -26,7 +26,7 @@ from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
 from relocation_common.scene_check import check_scene
 from stpik_motion_planner.execution.relocation import plan_relocation
-from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.planning.params import PlannerParams, node_parameters
 from stpik_motion_planner.service import MotionPlannerService
 
 PATH = "config/scenarios/world/paper_experiment_10_unlisted.yaml"
@@ -142,3 +142,34 @@ def test_planned_motions_never_touch_the_unlisted_bottle():
 @pytest.mark.extended
 def test_planned_motions_never_touch_the_unlisted_bottle_in_the_other_variants():
     _never_touched([_variant(s) for s in VARIANT_SEEDS[1:]])
+
+
+def test_an_unlisted_object_perception_no_longer_publishes_leaves_the_scene_after_phantom_scenes_in_view():
+    """Perception published u1 (in the front row, nothing between it and the shelf's front) and x1 (behind o2 and o6),
+    then neither, nor the listed o3. After phantom_scenes scenes in a row (config/motion_planner.yaml) u1 is gone from
+    the planner's scene, not before; a scene received again (same stamp) counts once; x1, hidden, and o3, listed,
+    keep their last poses; one this node placed on the bottom shelf is kept. Before, u1 stayed forever: a phantom
+    published once stayed in the planner's scene, an obstacle no relocation removes."""
+    n = node_parameters()["phantom_scenes"]
+    truth = {o.id: o for o in ground_truth(SC)}
+    u1 = dataclasses.replace(truth["x1"], id="u1", x=0.67, y=0.14)  # between o3 and o4, in front
+    later = [o for i, o in truth.items() if i not in ("x1", "o3")]
+    for placed in (False, True):
+        s = service(SC, told=False)
+        assert {"u1", "x1"} <= set(s.update_scene([*truth.values(), u1], stamp=(1, 0)))
+        if placed:
+            s.relocated["u1"] = 0
+        for k in range(n - 1):
+            s.update_scene(later, stamp=(2 + k, 0))
+            s.update_scene(later, stamp=(2 + k, 0))  # republished: the same scene again
+        assert "u1" in s.planner.scene.bottles
+        changed = s.update_scene(later, stamp=(n + 1, 0))
+        assert ("u1" in changed) is not placed and ("u1" in s.planner.scene.bottles) is placed, changed
+        assert "x1" in s.planner.scene.bottles and s.planner.scenario.object("o3") == SC.object("o3")
+    s = service(SC, told=False)
+    s.update_scene([*truth.values(), u1], stamp=(1, 0))
+    s.update_scene(later, stamp=(2, 0))
+    s.update_scene([*later, u1], stamp=(3, 0))  # seen again: its count starts over
+    for k in range(n - 1):
+        s.update_scene(later, stamp=(4 + k, 0))
+    assert "u1" in s.planner.scene.bottles

@@ -28,10 +28,11 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
-from qtree_task_planner.problem import ProblemError, RelocationProblem
-from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
+from qtree_task_planner.executive.push import Pusher, PushRecord
+from qtree_task_planner.problem import ActionCosts, ProblemError, RelocationProblem
+from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot, pick_action
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
-from relocation_common.shelf_object import UPRIGHT_TILT, support_height
+from relocation_common.shelf_object import UPRIGHT_TILT, Footprint, support_height
 
 
 # ------------------------------------------------------------------------------------------------ the scene
@@ -39,7 +40,8 @@ from relocation_common.shelf_object import UPRIGHT_TILT, support_height
 class SeenObject:
     """An object as perceived: centre of its base (base frame, m), tilt of its axis from the vertical (rad; 0 for a
     perception that only sees upright bottles), and what ObjectState carries besides (weight phi, target, size,
-    shape; `listed` false: the scenario does not list it, `weight_note` says how its weight was estimated)."""
+    shape; `listed` false: the scenario does not list it, `weight_note` says how its weight was estimated; a box's
+    `size` and the `yaw` of a box or of a lying cylinder's axis, as ShelfObject has them: its `footprint`)."""
 
     id: str
     x: float
@@ -54,6 +56,18 @@ class SeenObject:
     shape: str = "cylinder"
     listed: bool = True
     weight_note: str = ""
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    yaw: float = 0.0
+
+    def footprint(self) -> Footprint:
+        """Its outline on its board (ShelfObject.footprint): a standing cylinder's base circle, a box's rectangle, a
+        lying cylinder's rectangle centred half its length along its axis from its base centre (x, y)."""
+        lying = self.shape == "cylinder" and self.tilt > UPRIGHT_TILT
+        along = self.height / 2 * math.sin(self.tilt) if lying else 0.0
+        o = ShelfObject(self.id, self.label, TARGET_RGB, self.weight, self.x + along * math.cos(self.yaw),
+                        self.y + along * math.sin(self.yaw), self.radius, self.height, shape=self.shape, size=self.size,
+                        yaw=self.yaw, lying=lying, tilt=self.tilt if lying else None)
+        return o.footprint()
 
 
 Scene = Mapping[str, SeenObject]
@@ -69,14 +83,14 @@ def seen_object(o: ShelfObject) -> SeenObject:
     (a lying cylinder's lower end face), the tilt of its axis."""
     x, y, z = (float(v) for v in o.base())
     return SeenObject(o.id, x, y, z, o.weight, o.is_target, o.axis_tilt, o.radius, o.height, o.label, o.shape,
-                      o.listed, o.weight_note)
+                      o.listed, o.weight_note, o.size, o.yaw)
 
 
 def scene_from_scenario(scenario: Scenario) -> dict[str, SeenObject]:
     """The scenario's bottles where it puts them: upright on the top shelf (the world the first plan assumes)."""
     z = scenario.shelf.top_z
     return scene_of(SeenObject(b.id, b.x, b.y, z, b.weight, b.is_target, 0.0, b.radius, b.height, b.label, b.shape,
-                               b.listed, b.weight_note) for b in scenario.objects)
+                               b.listed, b.weight_note, b.size, b.yaw) for b in scenario.objects)
 
 
 @dataclass(frozen=True)
@@ -101,13 +115,10 @@ def _support(o: SeenObject) -> float:
 
 
 def board_of(o: SeenObject, scenario: Scenario, tol: Tolerances) -> str | None:
-    """'top' or 'bottom' when the object rests on that board of the shelf (within its extent), else None."""
-    sh = scenario.shelf
-    inside = sh.x_front - o.radius <= o.x <= sh.x_back + o.radius and sh.y_min - o.radius <= o.y <= sh.y_max + o.radius
-    if not inside:
-        return None
-    s = _support(o)
-    return "top" if abs(s - sh.top_z) <= tol.board else "bottom" if abs(s - sh.bottom_z) <= tol.board else None
+    """'top' or 'bottom' when the object rests on that board of the shelf, standing or lying, else None: its
+    support within tol.board of the board, its footprint's centre over it (Shelf.board_of, the motion planner's
+    rule)."""
+    return scenario.shelf.board_of(o.footprint().centre, _support(o), tol.board)
 
 
 def _at(o: SeenObject) -> str:
@@ -161,7 +172,8 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
                       after_scene: Scene, tolerances: Tolerances = Tolerances(), bottom_seen: bool = True
                       ) -> Verification:
     """Check a scene perceived after relocating `planned_object` against the plan: that object upright on the bottom
-    shelf at `slot_pose` (x, y, z of the board's surface) within tolerances.slot; every other object of
+    shelf at `slot_pose` (x, y, z of the board's surface) within tolerances.slot (one that tipped over there is
+    relocated, `board_of`, but not as planned: a difference that says so); every other object of
     `before_scene` where it was (tolerances.still in xy, board in z, still standing); the target present. Returns
     every difference found, one line each, and the new objects (`new_objects`: not a difference, a re-plan).
     `bottom_seen` False (a camera that does not see the bottom shelf): a bottle not seen there is no difference
@@ -174,7 +186,12 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
             diffs.append(Difference("not_seen", planned_object, f"{planned_object} is not seen after its relocation"))
     else:
         off = math.hypot(moved.x - sx, moved.y - sy)
-        if abs(_support(moved) - sz) > tol.board or moved.tilt > tol.tilt:
+        if abs(_support(moved) - sz) <= tol.board and moved.tilt > tol.tilt:  # relocated, but lying: not as planned
+            at = moved.footprint().centre
+            diffs.append(Difference("not_at_slot", planned_object, f"{planned_object} tipped over on the bottom shelf "
+                                    f"({math.degrees(moved.tilt):.0f} deg), lying {100 * math.dist(at, (sx, sy)):.1f} "
+                                    f"cm from its slot ({sx:.3f}, {sy:.3f})"))
+        elif abs(_support(moved) - sz) > tol.board or moved.tilt > tol.tilt:
             lying = f", tipped {math.degrees(moved.tilt):.0f} deg" if moved.tilt > tol.tilt else ""
             diffs.append(Difference("not_at_slot", planned_object,
                                     f"{planned_object} is not on the bottom shelf: at {_at(moved)}{lying}"))
@@ -247,18 +264,22 @@ class RemainingProblem:
 
 
 def free_slots(scenario: Scenario, scene: Scene, tol: Tolerances = Tolerances()) -> tuple[int, ...]:
-    """Indices of the scenario's slots that no bottle on the bottom shelf occupies (nearer than two radii)."""
-    below = [o for o in scene.values() if board_of(o, scenario, tol) == "bottom"]
-    return tuple(k for k, (x, y) in enumerate(scenario.slots)
-                 if all(math.hypot(o.x - x, o.y - y) >= 2 * o.radius for o in below))
+    """Indices of the scenario's slots that no object on the bottom shelf occupies: one is taken when the widest
+    object of the scenario, standing on the slot at any turn, would overlap an object's footprint there (a standing
+    bottle's circle; a box or a lying bottle by its rectangle, as the scene gives its size). The rule is
+    Scenario.free_slots: the motion planner's destination reads the same."""
+    return scenario.free_slots(o.footprint() for o in scene.values() if board_of(o, scenario, tol) == "bottom")
 
 
 def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Iterable[str],
-                      tolerances: Tolerances = Tolerances()) -> RemainingProblem:
+                      tolerances: Tolerances = Tolerances(), action_cost: ActionCosts | None = None
+                      ) -> RemainingProblem:
     """The retrieval problem left in `perceived_scene`: objects resting on the top shelf (at their perceived poses,
     newly seen ones included with their perceived weight) are in; relocated ones and anything else off the top
-    shelf or unseen are out. No problem (reason given) when the target is unseen, off the shelf, or already on the
-    bottom shelf (`target_retrieved`; also when it is in `relocated` and not seen: the bottom shelf out of view)."""
+    shelf or unseen are out. With `action_cost`, each obstacle costs its weight times the factor of the pick its pose
+    takes (a tipped one: top_grasp; problem.RelocationProblem.with_actions). No problem (reason given) when the target
+    is unseen, off the shelf, or already on the bottom shelf (`target_retrieved`; also when it is in `relocated` and
+    not seen: the bottom shelf out of view)."""
     relocated, tol = tuple(relocated), tolerances
     known = set(scenario.ids)
     top = {oid: o for oid, o in perceived_scene.items() if board_of(o, scenario, tol) == "top"}
@@ -287,6 +308,8 @@ def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Ite
         problem = RelocationProblem.from_bottles(bottles)
     except ProblemError as e:
         return replace(base, bottles=bottles, reason=f"the perceived scene is not a problem: {e}")
+    if action_cost is not None:
+        problem = problem.with_actions({b.id: pick_action(b.id in base.tipped) for b in bottles}, action_cost)
     return replace(base, problem=problem, bottles=bottles)
 
 
@@ -393,12 +416,14 @@ class ExecutionResult:
     replans: list[ReplanRecord] = field(default_factory=list)
     unverified: list[str] = field(default_factory=list)  # relocated, but no scene showed where they stand
     new_objects: list[str] = field(default_factory=list)
+    pushes: list[PushRecord] = field(default_factory=list)  # executed (executive.push)
 
     def to_dict(self) -> dict[str, Any]:
-        """For the result and report.json (`replans`, `unverified`, `new_objects`)."""
+        """For the result and report.json (`replans`, `unverified`, `new_objects`, `pushes`)."""
         return {"success": self.success, "message": self.message, "relocated": list(self.relocated),
                 "steps": [s.to_dict() for s in self.steps], "replans": [r.to_dict() for r in self.replans],
-                "unverified": list(self.unverified), "new_objects": list(self.new_objects)}
+                "unverified": list(self.unverified), "new_objects": list(self.new_objects),
+                "pushes": [p.to_dict() for p in self.pushes]}
 
 
 class GiveUp(Exception):
@@ -415,10 +440,14 @@ class ClosedLoopExecutor:
     slots. slot_of(problem) -> the slot index the next relocation goes to (default: the motion planner's rule,
     relocation_common.feasibility.destination_slot: slot len(removed), the one its certified answer planned the
     carry to, when it is free, else the first free one). on_step(step) after each relocation and
-    on_replan(record) after each re-plan (feedback).
+    on_replan(record) after each re-plan (feedback). action_cost: the remaining problems' obstacles costed by the
+    pick their poses take (remaining_problem), else their weights.
     bottom_seen False: perception does not see the bottom shelf (verify_relocation); a relocated bottle that is
     not seen counts as relocated. perceive() raising ValueError, TimeoutError or RuntimeError (no scene) ends the
-    run with its message.
+    run with its message. pusher (executive.push.Pusher; None: no pushes): when a re-plan proves that no sequence
+    remains, the cheapest feasible push out of the proof's blocking cycle is executed, then the next scene is
+    perceived and the rest re-planned from it (on_push(record) after each); an empty `sequence` to `run` (the first
+    plan found none) starts with that re-plan.
     """
 
     def __init__(self, scenario: Scenario, relocate: Callable[[str, list[str]], tuple[bool, str]],
@@ -427,7 +456,9 @@ class ClosedLoopExecutor:
                  on_step: Callable[[Step], None] = lambda step: None,
                  on_replan: Callable[[ReplanRecord], None] = lambda record: None,
                  slot_of: Callable[[RemainingProblem], int] | None = None, bottom_seen: bool = True,
-                 on_progress: Callable[[ExecutionResult], None] = lambda result: None) -> None:
+                 on_progress: Callable[[ExecutionResult], None] = lambda result: None,
+                 action_cost: ActionCosts | None = None, pusher: Pusher | None = None,
+                 on_push: Callable[[PushRecord], None] = lambda record: None) -> None:
         if max_replans < 0 or max_attempts < 1:
             raise ValueError(f"need max_replans >= 0 and max_attempts >= 1, got {max_replans}, {max_attempts}")
         self.scenario, self.relocate, self.perceive, self.replan = scenario, relocate, perceive, replan
@@ -436,6 +467,8 @@ class ClosedLoopExecutor:
         self.slot_of = slot_of
         self.bottom_seen = bottom_seen
         self.on_progress = on_progress
+        self.action_cost = action_cost
+        self.pusher, self.on_push = pusher, on_push
 
     def run(self, sequence: Iterable[str], scene: Scene | None = None) -> ExecutionResult:
         """Relocate `sequence` (obstacles, then the target) starting from `scene` (default: perceive()); the
@@ -455,12 +488,16 @@ class ClosedLoopExecutor:
 
     def _run(self, seq: list[str], scene: dict[str, SeenObject], out: ExecutionResult) -> None:
         rp = self._problem(scene, out)
-        assert rp.problem is not None
+        problem = rp.problem
+        assert problem is not None
         why = check_capacity(seq, len(rp.free_slots))
-        if why:
-            seq = self._replan(f"capacity: {why}", rp, out)
-        elif _invalid(seq, rp.problem):
-            seq = self._replan(f"the sequence does not fit the scene: {_invalid(seq, rp.problem)}", rp, out)
+        if not seq:
+            seq, scene, rp = self._replan(NONE_AT_START, scene, rp, out)
+        elif why:
+            seq, scene, rp = self._replan(f"capacity: {why}", scene, rp, out)
+        elif _invalid(seq, problem):
+            seq, scene, rp = self._replan(f"the sequence does not fit the scene: {_invalid(seq, problem)}", scene, rp,
+                                          out)
         while True:
             if self.cancelled():
                 raise GiveUp(f"cancelled after relocating {out.relocated}")
@@ -502,11 +539,11 @@ class ClosedLoopExecutor:
             if not ok:
                 if stayed:  # the option failed; else the bottle was dropped or knocked: the re-plan asks about its
                     self._fail(obj, gone, message)  # new pose (a bottle on the bottom shelf is relocated, above)
-                seq = self._replan(f"relocating {obj} failed: {message}", rp, out)
+                seq, scene, rp = self._replan(f"relocating {obj} failed: {message}", scene, rp, out)
             else:
                 assert check is not None  # a new object is no fault of the relocation: the rest is re-planned
-                seq = self._replan(f"the world differs after relocating {obj}: {check.summary()}" if not check.ok
-                                   else "; ".join(d.line for d in new), rp, out)
+                seq, scene, rp = self._replan(f"the world differs after relocating {obj}: {check.summary()}"
+                                              if not check.ok else "; ".join(d.line for d in new), scene, rp, out)
 
     def _on_top(self, new: tuple[Difference, ...], scene: Scene) -> tuple[Difference, ...]:
         """The new objects that rest on the top shelf: an object first seen elsewhere (a relocated bottle the
@@ -524,7 +561,7 @@ class ClosedLoopExecutor:
         A relocated bottle seen back on the top shelf is no longer relocated (the motion planner must see it)."""
         out.relocated[:] = [o for o in out.relocated
                             if o not in scene or board_of(scene[o], self.scenario, self.tol) != "top"]
-        rp = remaining_problem(self.scenario, scene, out.relocated, self.tol)
+        rp = remaining_problem(self.scenario, scene, out.relocated, self.tol, self.action_cost)
         self._top |= {b.id for b in rp.bottles}  # an object off the top shelf is sent as removed only if it was on it
         # ... in the feasibility questions too: an unlisted object never seen on the top shelf (perception's glimpse
         # of the carried bottle or the hand, named anew) is one the motion planner never had, and it refuses the
@@ -535,10 +572,12 @@ class ClosedLoopExecutor:
         rp = replace(rp, gone=frozenset(o for o in rp.gone if self._sent_as_gone(o, scene, out)))
         if rp.target_retrieved:
             out.success = True
+            k, n = len(out.pushes), len(out.replans)
             out.message = (f"target {self.scenario.target_id} retrieved after {len(out.relocated) - 1} relocations"
-                           + (f" and {len(out.replans)} re-plan{'s' * (len(out.replans) != 1)}" if out.replans
-                              else "") + (" (it left the top shelf; its place on the bottom shelf was not seen: "
-                                          "unverified)" if self.scenario.target_id in out.unverified else ""))
+                           + (f", {k} push{'es' * (k != 1)}" if k else "")
+                           + (f" and {n} re-plan{'s' * (n != 1)}" if n else "")
+                           + (" (it left the top shelf; its place on the bottom shelf was not seen: unverified)"
+                              if self.scenario.target_id in out.unverified else ""))
             raise _Done
         if rp.problem is None:
             raise GiveUp(rp.reason)
@@ -561,8 +600,56 @@ class ClosedLoopExecutor:
         self._failures[obj] = self._failures.get(obj, 0) + 1
         self._banned.add(Option(obj, None if self._failures[obj] >= self.max_attempts else removed))
 
-    def _replan(self, reason: str, rp: RemainingProblem, out: ExecutionResult) -> list[str]:
-        """A new sequence for `rp` (recorded in out.replans), or GiveUp with the reason in one line."""
+    def _replan(self, reason: str, scene: dict[str, SeenObject], rp: RemainingProblem, out: ExecutionResult
+                ) -> tuple[list[str], dict[str, SeenObject], RemainingProblem]:
+        """(a new sequence for `rp`, the scene and the remaining problem it is for), or GiveUp with the reason in
+        one line. When no sequence remains, a push out of the proof's blocking cycle (`pusher`), then the scene
+        after it re-planned, as often as pushes are executed."""
+        while True:
+            answer = self._solve(reason, rp, out)
+            if not isinstance(answer, str):
+                return answer, scene, rp
+            pushed = self._push(scene, rp, out) if self.pusher is not None else None
+            if pushed is None or isinstance(pushed, str):
+                tried = self._tried(out, pushed)
+                if not out.steps and not out.pushes and reason == NONE_AT_START:
+                    raise GiveUp(f"the target cannot be retrieved: {answer}{tried}")
+                raise GiveUp(f"no sequence remains: {answer} (re-planned because {reason}){tried}")
+            scene, rp, reason = pushed
+
+    def _push(self, scene: Scene, rp: RemainingProblem, out: ExecutionResult
+              ) -> tuple[dict[str, SeenObject], RemainingProblem, str] | str:
+        """The cheapest feasible push (executive.push.Pusher), executed, and (the scene after it, its remaining
+        problem, the push's line as the next re-plan's reason); or why no push was executed."""
+        assert self.pusher is not None
+        if self.cancelled():
+            raise GiveUp(f"cancelled after relocating {out.relocated}")
+        got = self.pusher.push(rp, {b.id: b.weight for b in rp.bottles}, rp.gone)
+        if isinstance(got, str):
+            return got
+        after = self._perceive(f"after pushing {got.object_id}")
+        now = after.get(got.object_id)
+        seen = (now.x, now.y) if now is not None and board_of(now, self.scenario, self.tol) == "top" else None
+        got = replace(got, seen=seen)
+        if _stayed(got.object_id, scene, after, self.tol):  # failed, or "done" and nothing moved: not asked again
+            self.pusher.failed(got.object_id, got.clear_for)
+        out.pushes.append(got)
+        self.on_push(got)
+        self.on_progress(out)
+        return after, self._problem(after, out), got.what()
+
+    @staticmethod
+    def _tried(out: ExecutionResult, why: str | None) -> str:
+        """What the "no sequence" end adds about pushes: those executed, and why no further one ("" without a
+        pusher)."""
+        if why is None:
+            return ""
+        done = f"; pushes executed: {'; '.join(p.line() for p in out.pushes)}" if out.pushes else ""
+        return f"{done}; no {'further ' * bool(out.pushes)}push: {why}"
+
+    def _solve(self, reason: str, rp: RemainingProblem, out: ExecutionResult) -> list[str] | str:
+        """A new sequence for `rp` (recorded in out.replans), the proof's one-line reason there is none, or GiveUp
+        (the re-plan budget, a sequence that cannot be executed)."""
         if len(out.replans) >= self.max_replans:
             raise GiveUp(f"gave up after {len(out.replans)} re-plans (max_replans); last: {reason}")
         # a bottle tipped over is asked about like any other (no ban of its own): the motion planner answers its
@@ -579,7 +666,7 @@ class ClosedLoopExecutor:
             out.replans.append(ReplanRecord(reason, None, None, 0, answer))
             self.on_replan(out.replans[-1])
             self.on_progress(out)
-            raise GiveUp(f"no sequence remains: {answer} (re-planned because {reason})")
+            return answer
         seq, weight, calls, *note = answer
         problem = rp.problem
         assert problem is not None
@@ -595,6 +682,7 @@ class ClosedLoopExecutor:
         return list(seq)
 
 
+NONE_AT_START = "the first plan found no sequence"  # the reason of the re-plan `run` starts with for an empty sequence
 TRANSIENT = ("safety net", "did not settle", "tracking error", "stalled at", "no joint state from the driver",
              "restarted during this relocation")  # the motion planner's words for a relocation that ran out of time
 # (budget.SafetyNetTimeout, execution.TrajectoryFollower, a driver starved under load) or that its restart

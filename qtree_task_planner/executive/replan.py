@@ -29,14 +29,17 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp
 from qtree_task_planner.search import astar
+from qtree_task_planner.search.exact import Claim, blocking_needs, no_sequence
 from relocation_common.feasibility import (
     FeasibilityAnswer,
     FeasibilityOracle,
     Label,
     Query,
+    action_set,
     ask_many,
     certifies,
     certify_many,
+    claims,
     in_flight,
     is_pick,
 )
@@ -253,8 +256,9 @@ class SlotLimit:
 
 
 def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache) -> ReplanAnswer | str:
-    """The least-weight sequence (Eq. 8) for the remaining problem that avoids failed options and fits the free
-    slots: (sequence, weight, planner calls it cost), or the reason there is none in one line (what the objects the
+    """The least-cost sequence (Eq. 8 with the problem's costs: the weight at factor 1) for the remaining problem that
+    avoids failed options and fits the free slots: (sequence, Eq. 8's weight, planner calls it cost), or the reason
+    there is none in one line, naming the actions it is a proof for (the problem's action_set; what the objects the
     hand cannot grasp have to do with it, `held_reason`, else the A*'s own, exact.why_none: the target without a
     lane, a blocking cycle; then the motion planner's reasons for those objects, `grasp_reason`). A bottle tipped
     over is asked about like any other: the motion planner's answer decides (its grasp from above where the
@@ -279,15 +283,35 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
                 why.append(f"needs {len(free.sequence)} slots, {len(rp.free_slots)} free")
             if banned:
                 why.append(f"failed options: {', '.join(sorted(b.object_id for b in banned))}")
-            return (f"{t} cannot be reached: every sequence left needs a failed option or more slots than are free "
-                    f"(the best without those limits, {' '.join(free.sequence)}, {'; '.join(why)})")
+            return (f"{t} cannot be reached with {action_set(rp.problem.action_set)}: every sequence left needs a "
+                    f"failed option or more slots than are free (the best without those limits, "
+                    f"{' '.join(free.sequence)}, {'; '.join(why)})")
     lanes = RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset())
     cannot = not_graspable(rp, cache, lanes)
     because = held_reason(t, lanes or {}, frozenset(cannot) - {t}) or \
-        (f"; {r.reason.removeprefix('no sequence: ')}" if r.reason else "")
-    return (f"{t} cannot be reached: no feasible relocation sequence over the {n} obstacle{'s' * (n != 1)} "
-            f"on the top shelf ({cache.calls - calls0} planner calls){because}"
+        (f"; {r.reason.removeprefix(no_sequence(rp.problem.action_set))}" if r.reason else "")
+    return (f"{t} cannot be reached: no feasible relocation sequence with {action_set(rp.problem.action_set)} over the "
+            f"{n} obstacle{'s' * (n != 1)} on the top shelf ({cache.calls - calls0} planner calls){because}"
             f"{grasp_reason({o: m for o, m in cannot.items() if o != t})}")
+
+
+def blocking_pairs(rp: RemainingProblem, cache: GeometryCache) -> tuple[tuple[str, str], ...]:
+    """The pairs (X, Y) "X needs Y moved" of the blocking cycle a failed re-plan's proof names (exact.blocking_needs
+    over the same certain claims at the problem's start: the planner's lane blockers and the answers about each
+    object with nothing more removed, from the cache: no planner call beyond the lane screen); () when the proof
+    has no such cycle. What a push can open (qtree_task_planner.executive.push)."""
+    if rp.problem is None:
+        return ()
+    on_shelf = frozenset(rp.problem.ids)
+    claimed: dict[str, list[Claim]] = {}
+    for o, sets in (RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset()) or {}).items():
+        if sets == () or claims(sets):  # as astar.Knowledge.lanes_known: () = no lane at all
+            claimed.setdefault(o, []).append((frozenset(), tuple(b.objects for b in sets)))
+    for o in rp.problem.ids:
+        a = cache.table.get(cache.key(o, on_shelf))
+        if a is not None and Label(a.label) == Label.UNFEASIBLE and claims(a.blockers):
+            claimed.setdefault(o, []).append((frozenset(), tuple(b.objects for b in a.blockers)))
+    return tuple((x, y) for x, stuck in blocking_needs(rp.problem.target, claimed) for y in stuck)
 
 
 def not_graspable(rp: RemainingProblem, cache: GeometryCache, lanes: Lanes | None) -> dict[str, str]:
@@ -348,20 +372,30 @@ def relearn(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache
     """The Q-Tree trained again on the remaining problem (Eq. 7, `params`: policy, search, E_max, Eq. 16), asking
     the re-plan's own oracle (failed options and slots beyond the free ones g_U, answers of unchanged geometry
     reused), after the A* found `exact` (its optimum: the E_1st reference). The learned sequence is kept when it
-    weighs no more than the A*'s (as retrieval.chosen_sequence), else the A*'s, and the note says which, with
-    both weights, the episodes and whether Eq. 16 was met. keep_going() False stops training (a cancelled goal).
+    costs no more than the A*'s (the problem's costs: the weight at factor 1; as retrieval.chosen_sequence), else
+    the A*'s, and the note says which, with both weights (and costs, in a costed problem), the episodes and whether
+    Eq. 16 was met. keep_going() False stops training (a cancelled goal).
     The calls are the A*'s and training's together."""
     if rp.problem is None:
         raise ValueError(f"no problem to train on: {rp.reason}")
     seq, weight, calls = exact[:3]
+    cost = rp.problem.cost(seq)
     calls0 = cache.calls
-    r = train(rp.problem, RemainingOracle(rp, cache, tuple(banned)), params, optimal_weight=weight,
+    r = train(rp.problem, RemainingOracle(rp, cache, tuple(banned)), params, optimal_weight=weight, optimal_cost=cost,
               callback=lambda stats: keep_going(), callback_every=50)
     calls += cache.calls - calls0
     steady = f"{r.e_ss} episodes" + ("" if r.converged else " (E_max or stopped, Eq. 16 not met)")
     if not r.found or r.total_weight is None:
         return seq, weight, calls, f"Q-Tree retrained: no sequence in {steady}; executing the A*'s optimum"
-    learned = f"learned {' '.join(r.sequence or ())} (weight {r.total_weight:.2f}) in {steady}"
-    if r.total_weight <= weight + 1e-9:
+    mine = rp.problem.cost(r.sequence or ())
+    costed = rp.problem.costed
+    learned = f"learned {' '.join(r.sequence or ())} ({_amount(r.total_weight, mine, costed)}) in {steady}"
+    if mine <= cost + 1e-9:
         return tuple(r.sequence or ()), r.total_weight, calls, f"Q-Tree retrained: {learned}, executed"
-    return seq, weight, calls, f"Q-Tree retrained: {learned}; executing the A*'s optimum ({weight:.2f}) instead"
+    return seq, weight, calls, f"Q-Tree retrained: {learned}; executing the A*'s optimum " \
+        f"({_amount(weight, cost, costed).removeprefix('weight ')}) instead"
+
+
+def _amount(weight: float, cost: float, costed: bool) -> str:
+    """'weight 0.50', or in a costed problem (an action factor other than 1) 'weight 0.50, cost 0.75'."""
+    return f"weight {weight:.2f}" + (f", cost {cost:.2f}" if costed else "")

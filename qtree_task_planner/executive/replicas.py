@@ -21,6 +21,7 @@ from collections import deque
 from typing import Callable, Protocol, Sequence, TypeVar
 
 from qtree_task_planner.executive.outage import PlannerUnavailable
+from qtree_task_planner.executive.push import PushAnswer
 from qtree_task_planner.oracles import Lanes
 from relocation_common.feasibility import (
     CertifyingOracle,
@@ -43,6 +44,10 @@ class Replica(FeasibilityOracle, CertifyingOracle, LaneOracle, Protocol):
 
     def ready(self, timeout: float) -> bool:
         """Whether the service is up, waiting up to `timeout` s for it."""
+        ...
+
+    def push(self, object_id: str, clear_for: str, removed: frozenset[str]) -> PushAnswer:
+        """The push question (qtree_task_planner.executive.push)."""
         ...
 
 
@@ -135,6 +140,10 @@ class ReplicaOracle:
         """The certification of (object_id, removed) from the first replica that is up (failover); a replica that
         does not certify gives final answers (feasibility.certify_many)."""
         return self._one(lambda r: certify_many(r, [(object_id, removed)])[0], f"the certification of {object_id!r}")
+
+    def push(self, object_id: str, clear_for: str, removed: frozenset[str]) -> PushAnswer:
+        """The push question (qtree_task_planner.executive.push) of the first replica that is up."""
+        return self._one(lambda r: r.push(object_id, clear_for, removed), f"the push of {object_id!r}")
 
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers, from the first replica that is up."""

@@ -28,12 +28,13 @@ from qtree_task_planner.executive.closed_loop import (
     remaining_problem,
 )
 from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
-from qtree_task_planner.executive.replan import GeometryCache, relearn, replan
+from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushRecord
+from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, relearn, replan
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
 from qtree_task_planner.oracles import CachedOracle, no_grasp
-from qtree_task_planner.problem import RelocationProblem
+from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from qtree_task_planner.search import astar
 from qtree_task_planner.search.exact import ExactResult
 from relocation_common.feasibility import LaneOracle
@@ -100,7 +101,8 @@ def solve_then_train(problem: RelocationProblem, oracle: CachedOracle, params: T
         keep(ck)
 
     def run() -> TrainingResult:
-        return train(problem, oracle, params, optimal_weight=optimum.total_weight, callback=on_episode,
+        return train(problem, oracle, params, optimal_weight=optimum.total_weight, optimal_cost=optimum.total_cost,
+                     callback=on_episode,
                      callback_every=episode_every, resume=state["ck"], checkpoint_every=checkpoint_every,
                      on_checkpoint=on_checkpoint)
 
@@ -113,14 +115,16 @@ def proven_none(params: TrainingParams, planner_calls: int) -> TrainingResult:
     return TrainingResult(None, None, 0, False, 0, 0, planner_calls, None, None, False, 0, 0, [], params)
 
 
-def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: bool) -> tuple[bool, str] | None:
+def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: bool, push: bool = False
+                     ) -> tuple[bool, str] | None:
     """(success, message) when the goal ends after training, None when it goes on to execute. Cancelled; no
-    sequence at all (the exact solver's one-line reason, exact.why_none); not executed (trained; or training found
-    none within E_max while the proven optimum exists: said, with the optimum). Training without a sequence but with
-    an optimum goes on: the optimum is executed (chosen_sequence says so)."""
+    sequence at all (the exact solver's one-line reason, exact.why_none; `push`: the closed loop pushes, so an
+    execution goes on with no sequence: its first re-plan proves the same and pushes); not executed (trained; or
+    training found none within E_max while the proven optimum exists: said, with the optimum). Training without a
+    sequence but with an optimum goes on: the optimum is executed (chosen_sequence says so)."""
     if trained.cancelled:
         return False, "cancelled"
-    if not (trained.found or optimum.found):
+    if not (trained.found or optimum.found) and not (push and execute):
         return False, f"the target cannot be retrieved: {optimum.reason or 'no sequence'}"
     if execute:
         return None
@@ -133,10 +137,11 @@ def training_outcome(trained: TrainingResult, optimum: ExactResult, *, execute: 
 
 def scene_notes(problem: RelocationProblem, oracle: CachedOracle) -> str:
     """One line for the log and the TrainPlanner result (after the exact solve): the scene's objects the scenario does
-    not list with their estimated weights (problem.unlisted_line), and the obstacles the hand cannot grasp with the
+    not list with their estimated weights (problem.unlisted_line), the obstacles whose cost differs from their
+    weight (problem.costs_line), and the obstacles the hand cannot grasp with the
     motion planner's reason (oracles.no_grasp over the answers at the start and the objects without a lane: such an
     answer costs no planning); "" when there are neither. A planner gone meanwhile leaves its part out (a note)."""
-    parts = [problem.unlisted_line()]
+    parts = [problem.unlisted_line(), problem.costs_line()]
     try:
         why = no_grasp(problem.obstacles, oracle.lane_blockers(frozenset()),
                        [(o, a) for (o, r), a in oracle.table.items() if not r],
@@ -175,19 +180,28 @@ def execute_sequence(sequence: Sequence[str], relocate_one: Callable[[str, list[
 
 
 def chosen_sequence(learned: Sequence[str] | None, learned_weight: float | None, optimum: Sequence[str] | None,
-                    optimal_weight: float | None, *,
-                    execute_optimum: bool, execute_learned: bool) -> tuple[list[str], str]:
-    """(the sequence to execute, a note for the user): the learned one only when its weight (Eq. 8) equals the
-    proven optimum's, or when asked for (execute_learned); else the optimum, saying so with both weights."""
+                    optimal_weight: float | None, *, execute_optimum: bool, execute_learned: bool,
+                    learned_cost: float | None = None, optimal_cost: float | None = None) -> tuple[list[str], str]:
+    """(the sequence to execute, a note for the user): the learned one only when its cost (learned_cost and
+    optimal_cost; Eq. 8's weight when they are not given: every action factor 1) equals the proven optimum's, or when
+    asked for (execute_learned); else the optimum, saying so with both weights (and costs, when given)."""
     learned_seq, optimum_seq = list(learned or ()), list(optimum or ())
+    if not (learned_seq or optimum_seq):  # none at all: the closed loop starts with a re-plan (and pushes)
+        return [], ""
     if execute_optimum or not learned_seq:
         return optimum_seq, "" if execute_optimum else "executed the exact optimum (training found no sequence)"
-    if execute_learned or not optimum_seq or optimal_weight is None or learned_weight is None \
-            or learned_weight <= optimal_weight + 1e-9:
+    mine = learned_cost if learned_cost is not None else learned_weight
+    best = optimal_cost if optimal_cost is not None else optimal_weight
+    if execute_learned or not optimum_seq or best is None or mine is None or mine <= best + 1e-9:
         return learned_seq, ""
-    return optimum_seq, (f"executed the exact optimum {' '.join(optimum_seq)} (weight {optimal_weight:.2f}) instead "
-                         f"of the learned {' '.join(learned_seq)} (weight {learned_weight:.2f}); execute_learned "
-                         "forces the learned")
+    assert optimal_weight is not None and learned_weight is not None
+
+    def amount(weight: float, cost: float | None) -> str:
+        return f"weight {weight:.2f}" + (f", cost {cost:.2f}" if cost is not None else "")
+
+    return optimum_seq, (f"executed the exact optimum {' '.join(optimum_seq)} ({amount(optimal_weight, optimal_cost)})"
+                         f" instead of the learned {' '.join(learned_seq)} ({amount(learned_weight, learned_cost)}); "
+                         "execute_learned forces the learned")
 
 
 def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
@@ -196,7 +210,9 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             before_each: Callable[[], None] = lambda: None, on_step: Callable[[Step], None] = lambda s: None,
             on_replan: Callable[[ReplanRecord], None] = lambda r: None, bottom_seen: bool = True,
             retrain: TrainingParams | None = None, until_planner: UntilPlanner | None = None,
-            on_progress: Callable[[ExecutionResult], None] = lambda out: None) -> ExecutionResult:
+            on_progress: Callable[[ExecutionResult], None] = lambda out: None,
+            action_cost: ActionCosts | None = None, pushes: PushActions | None = None,
+            on_push: Callable[[PushRecord], None] = lambda p: None) -> ExecutionResult:
     """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
     checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
     with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
@@ -205,7 +221,10 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     params (replan.relearn; the user's `replan_q_tree`), else the A* alone. until_planner: each re-plan goes
     through feasibility outages as training does (outage.until_available: a motion planner that died is waited for,
     planner_wait), else a question without an answer is asked again REPLAN_TRIES times. on_progress: the execution
-    so far, after each relocation and re-plan (closed loop)."""
+    so far, after each relocation and re-plan (closed loop). action_cost: the re-plans' costs (the factor of the pick
+    each object's pose takes: closed_loop.remaining_problem), else their weights. pushes: when a re-plan proves no
+    sequence, a push out of its blocking cycle (executive.push; closed loop only: an open-loop run never pushes); an
+    empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push."""
     if closed_loop:
         cache = GeometryCache(oracle.oracle)
         cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry(), oracle.certified)
@@ -237,9 +256,21 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
                         raise GiveUp(f"re-plan failed {REPLAN_TRIES} times without a feasibility answer: {e}") from None
             raise AssertionError("unreachable")
 
+        def push(object_id: str, clear_for: str, removed: list[str]) -> tuple[bool, str]:
+            assert pushes is not None
+            before_each()
+            ok, message = pushes.execute(object_id, clear_for, removed)
+            if not ok and any(w in message for w in STOPPED):  # as a relocation's
+                raise GiveUp(f"pushing {object_id!r} failed: {message}")
+            return ok, message
+
+        pusher = None if pushes is None else Pusher(
+            dataclasses.replace(pushes, ask=through(pushes.ask, until_planner), execute=push),
+            lambda rp: blocking_pairs(rp, cache))
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
-                                  bottom_seen=bottom_seen, on_progress=on_progress).run(sequence, scene)
+                                  bottom_seen=bottom_seen, on_progress=on_progress,
+                                  action_cost=action_cost, pusher=pusher, on_push=on_push).run(sequence, scene)
     why = check_capacity(sequence, len(free_slots(scenario, scene)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")
@@ -254,6 +285,20 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each)
     return ExecutionResult(ok, message + (f" (unverified: {', '.join(unverified)})" if ok and unverified else ""),
                            relocated, unverified=unverified)
+
+
+def through(ask: Callable[[str, str, frozenset[str]], PushAnswer], until_planner: UntilPlanner | None
+            ) -> Callable[[str, str, frozenset[str]], PushAnswer]:
+    """The push question through feasibility outages as a re-plan's (`until_planner`); a planner gone, or no
+    answer, ends the run with the reason (GiveUp)."""
+    def asked(object_id: str, clear_for: str, removed: frozenset[str]) -> PushAnswer:
+        def once() -> PushAnswer:
+            return ask(object_id, clear_for, removed)
+        try:
+            return once() if until_planner is None else until_planner(once)
+        except (PlannerGone, PlannerUnavailable) as e:
+            raise GiveUp(f"push question about {object_id!r} stopped: {e}") from None
+    return asked
 
 
 REPLAN_TRIES = 3  # re-plans cut short by a missing feasibility answer before the closed loop gives up

@@ -10,6 +10,7 @@ from typing import Callable
 
 from qtree_task_planner.executive.keeper import check_checkpoint_path
 from qtree_task_planner.learning.params import TrainingParams
+from qtree_task_planner.problem import ActionCosts
 from relocation_common.config import ParameterError
 
 SCENE_SOURCES = {"perception": "/scene/objects", "sim": "/sim/objects"}  # scene_source -> topic
@@ -22,6 +23,7 @@ POSITIVE_SECONDS = (("scene_max_age", 0.0), ("scene_wait", 0.0), ("feasibility_t
 def check_node_parameters(p: Callable[[str], object]) -> None:
     """ParameterError naming the first unusable parameter; p(name) is the parameter's value."""
     TrainingParams.from_dict({f: p(f) for f in TrainingParams.fields()})
+    ActionCosts.from_parameters(p)
     for name, lo in POSITIVE_SECONDS:
         v = p(name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
@@ -37,7 +39,17 @@ def check_node_parameters(p: Callable[[str], object]) -> None:
     every = p("checkpoint_every")
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
         raise ParameterError(f"checkpoint_every must be an integer >= 1 (episodes), got {every!r}")
+    pushes = p("max_pushes")
+    if isinstance(pushes, bool) or not isinstance(pushes, int) or pushes < 0:
+        raise ParameterError(f"max_pushes must be an integer >= 0 (pushes per goal; 0: none), got {pushes!r}")
     path = p("checkpoint_path")
     if not isinstance(path, str):
         raise ParameterError(f"checkpoint_path must be a string (a file name, or empty), got {path!r}")
     check_checkpoint_path(path)
+
+
+def pushes_on(p: Callable[[str], object]) -> bool:
+    """Whether an execution pushes when no pick sequence remains: closed loop only (an open-loop run never does),
+    and max_pushes > 0."""
+    pushes = p("max_pushes")
+    return bool(p("closed_loop")) and isinstance(pushes, int) and pushes > 0

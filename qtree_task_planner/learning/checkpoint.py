@@ -39,12 +39,15 @@ class CheckpointError(RuntimeError):
 
 
 def problem_hash(problem: RelocationProblem) -> str:
-    """sha256 of the problem the Q-Tree learns: obstacle ids in order, their weights, the target.
+    """sha256 of the problem the Q-Tree learns: obstacle ids in order, their weights, the target, and their costs when
+    they differ from the weights (an action factor other than 1: the rewards of Eq. 13 differ).
 
     Poses are not part of it: perception jitters them by millimetres between frames, and the tree's state space
     is the set of ids. The feasibility answers stored with the tree belong to the scene they were asked in."""
     data = {"obstacles": list(problem.obstacles), "weights": [float(problem.weights[o]) for o in problem.obstacles],
             "target": problem.target}
+    if problem.costed:  # a paper problem's hash (and its checkpoints) unchanged
+        data["costs"] = [float(problem.costs[o]) for o in problem.obstacles]
     return hashlib.sha256(_canonical(data)).hexdigest()
 
 

@@ -8,7 +8,8 @@ feasibility oracle once (the paper's MP_q accounting); afterwards the edge remem
   known feasible edges, 0 when it has none. A target edge and an unfeasible edge have no next node (terminal),
   so their max term is 0.
 - Eq. 13: r = -phi_i when obstacle i is relocated, -10 when the chosen action is unfeasible, +100 when the target
-  is relocated.
+  is relocated; with the action model, -phi_i is the obstacle's cost (phi_i x its action's factor:
+  qtree_task_planner.problem, "One action model"), the weight itself at factor 1.
 - Pruning: an action found unfeasible at a node is never offered at that node again.
 - Eq. 15: Q_sum = sum over all edges of |Q(s, a)|, kept up to date incrementally.
 """
@@ -68,7 +69,7 @@ class QTree:
         self.n_objects = len(self.ids)
         self._actions = tuple(range(self.n_objects))
         self.target = problem.n
-        self.phi = [problem.weights[o] for o in problem.obstacles] + [0.0]
+        self.phi = [problem.costs[o] for o in problem.obstacles] + [0.0]  # Eq. 13's -phi_i: the costs
         self.root = Node(0, (), 0)
         self.nodes = [self.root]
         self.mp_q = 0  # new edges = motion-planner queries as the paper counts them

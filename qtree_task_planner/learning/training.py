@@ -77,6 +77,9 @@ class TrainingResult:
     params: TrainingParams
     certify_calls: int = 0  # certifications asked of the oracle by this run (not answered by the cache)
     relabelled: int = 0  # learned edges a failed certification turned unfeasible
+    total_cost: float | None = None  # `sequence`'s total cost (problem.RelocationProblem.cost) in a costed problem (an
+    # action factor other than 1), else None: the costs are the weights
+    optimal_cost: float | None = None  # the optimum's total cost E_1st was measured against (a costed problem)
     elapsed_s: float = field(default=0.0, compare=False)
     tree: QTree | None = field(default=None, compare=False, repr=False)
 
@@ -106,11 +109,13 @@ class TrainingResult:
             "elapsed_s": self.elapsed_s,
             "params": self.params.to_dict(),
             "q_sum_history": self.q_sum_history,
+            **({} if self.total_cost is None else {"total_cost": self.total_cost}),
+            **({} if self.optimal_cost is None else {"optimal_cost": self.optimal_cost}),
         }
 
 
 def train(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, params: TrainingParams, *,
-          optimal_weight: float | None = None,
+          optimal_weight: float | None = None, optimal_cost: float | None = None,
           callback: Callable[[EpisodeStats], bool | None] | None = None, callback_every: int = 10,
           resume: Checkpoint | None = None, checkpoint_every: int = 0,
           on_checkpoint: Callable[[Checkpoint], None] | None = None) -> TrainingResult:
@@ -119,7 +124,10 @@ def train(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, para
     oracle: any object with feasibility(object_id, removed: frozenset) -> FeasibilityAnswer; wrapped in a
         CachedOracle unless it is one already (pass a shared CachedOracle to reuse answers across runs;
         planner_calls counts only the calls made during this run).
-    optimal_weight: the minimum total weight (exact.solve) to report E_1st; None leaves E_1st None.
+    optimal_weight: the optimum's total weight (Eq. 8; exact.solve), reported; E_1st is the first episode whose
+        greedy sequence costs no more than `optimal_cost`, the optimum's total cost (problem.RelocationProblem.cost:
+        the weight when every action factor is 1, so a problem without a factor other than 1 may give the weight
+        alone; ValueError for one with such a factor). Neither: E_1st None.
     callback: called with the last episode's stats every `callback_every` episodes, when training stops, and
         after an episode that asked the oracle for more than CALLBACK_S seconds since the last call (a slow
         planner); returning False stops training there (cancelled=True).
@@ -139,8 +147,13 @@ def train(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, para
         problem = RelocationProblem.from_scenario(problem)
     if callback_every < 1:
         raise ValueError(f"callback_every must be >= 1, got {callback_every}")
+    if optimal_cost is None and optimal_weight is not None:
+        if problem.costed:
+            raise ValueError("the problem's costs are not its weights (an action factor other than 1): give "
+                             "optimal_cost, the optimum's total cost, for E_1st")
+        optimal_cost = optimal_weight
     cache = oracle if isinstance(oracle, CachedOracle) else CachedOracle(oracle)
-    run = _Run(problem, params, cache, optimal_weight)
+    run = _Run(problem, params, cache, optimal_weight, optimal_cost)
     gc_enabled = gc.isenabled()
     gc.disable()
     try:
@@ -163,8 +176,9 @@ class _Run:
     cancelled, E_1st, and the planner calls and seconds of the runs before a resume)."""
 
     def __init__(self, problem: RelocationProblem, params: TrainingParams, cache: CachedOracle,
-                 optimal_weight: float | None) -> None:
+                 optimal_weight: float | None, optimal_cost: float | None) -> None:
         self.problem, self.params, self.cache, self.optimal_weight = problem, params, cache, optimal_weight
+        self.optimal_cost = optimal_cost
         self.calls0 = cache.calls
         self.t0 = time.perf_counter()
         self.tree = KernelTree(problem, cache, params.alpha, params.gamma)
@@ -250,18 +264,21 @@ class _Run:
             params=self.params,
             certify_calls=self.cache.cert_calls - self.cert0,
             relabelled=self.relabelled,
+            total_cost=self.problem.cost(seq) if seq is not None and self.problem.costed else None,
+            optimal_cost=self.optimal_cost if self.problem.costed else None,
             elapsed_s=self.elapsed(),
             tree=tree,
         )
 
 
-def _optimal_path_test(problem: RelocationProblem, optimal_weight: float | None) -> kernel.PathTest | None:
-    """For the kernel's E_1st: path_ok(actions) -> the sequence's Eq. 8 weight is the optimum; None without one."""
-    if optimal_weight is None:
+def _optimal_path_test(problem: RelocationProblem, optimal_cost: float | None) -> kernel.PathTest | None:
+    """For the kernel's E_1st: path_ok(actions) -> the sequence's total cost (Eq. 8 with the costs: the weight at
+    factor 1) is the optimum's; None without one."""
+    if optimal_cost is None:
         return None
 
     def path_ok(actions: tuple[int, ...], ids: tuple[str, ...] = problem.ids) -> bool:
-        return problem.weight(tuple(ids[a] for a in actions)) <= optimal_weight + WEIGHT_TOL
+        return problem.cost(tuple(ids[a] for a in actions)) <= optimal_cost + WEIGHT_TOL
     return path_ok
 
 
@@ -290,7 +307,7 @@ def _run_batches(run: _Run, callback: Callable[[EpisodeStats], bool | None] | No
     p, tree = run.params, run.tree
     buf = _Buffers(p)
     tree.push_state(run.rng, run.episode, run.prev_sum, run.quiet, run.converged, run.e_1st)
-    path_ok = _optimal_path_test(run.problem, run.optimal_weight) if run.e_1st is None else None
+    path_ok = _optimal_path_test(run.problem, run.optimal_cost) if run.e_1st is None else None
     if on_checkpoint is None:
         checkpoint_every = 0
     while run.episode < p.max_episodes and not run.converged:

@@ -2,9 +2,10 @@
 (docs/qtree.md). exact.solve (uniform-cost search) stays the reference.
 
 Search (Lazy Shortest Path, Dellin & Srinivasa 2016). The cost of a removed set R is g(R) = sum of phi over R
-(Eq. 8: the order does not change the weight). A* runs on the optimistic graph G of knowledge.py: an edge "remove o
-from R" or "relocate T from R" is there unless an answer or a certain blocker claim says it is unfeasible; nothing
-is asked during this search. Its heuristic h (knowledge.py, 2.: the objects every path must remove before the
+(Eq. 8: the order does not change the weight), phi_i being obstacle i's cost (its weight times its action's factor:
+problem.py, "One action model"; the weight at factor 1). A* runs on the optimistic graph G of knowledge.py: an edge
+"remove o from R" or "relocate T from R" is there unless an answer or a certain blocker claim says it is unfeasible;
+nothing is asked during this search. Its heuristic h (knowledge.py, 2.: the objects every path must remove before the
 target, its lanes' own needs) is admissible on G, and it removes after R only the objects D(R) of knowledge.py,
 3. (objects some claim not yet held on the way to the target names, all objects where an unexplained answer is in
 reach), which keeps every optimal path of G. Ties of f go to the paths with fewer unverified edges (those
@@ -28,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 from qtree_task_planner.problem import RelocationProblem
-from qtree_task_planner.search.exact import ExactResult, as_problem, why_none
+from qtree_task_planner.search.exact import ExactResult, as_problem, total_cost, why_none
 from qtree_task_planner.search.knowledge import DEPTH, Knowledge
 from relocation_common.feasibility import (
     FeasibilityAnswer,
@@ -107,12 +108,13 @@ def _path(target: str, last: frozenset[str], closed: Mapping[frozenset[str], tup
 
 
 def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, depth: int = DEPTH) -> AStarResult:
-    """Minimum-weight feasible relocation sequence (Eq. 8), proven, asking the oracle lazily (module doc).
+    """Minimum-cost feasible relocation sequence (Eq. 8 with the costs: the weight at factor 1), proven, asking the
+    oracle lazily (module doc).
 
     oracle: feasibility(object_id, removed) -> FeasibilityAnswer (blockers used when given); an optional
     lane_blockers(removed) (relocation_common.feasibility.LaneOracle) is called once, at the empty set."""
     problem = as_problem(problem)
-    obstacles, target, phi = problem.obstacles, problem.target, problem.weights
+    obstacles, target, phi = problem.obstacles, problem.target, problem.costs
     kb = Knowledge(phi, target, depth)
     blocker_calls = 0
     lanes = getattr(oracle, "lane_blockers", None)
@@ -126,13 +128,15 @@ def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle, dept
         path, n = optimistic(obstacles, phi, target, kb)
         searches, expanded = searches + 1, expanded + n
         if path is None:
-            return AStarResult(None, None, calls, expanded, why_none(target, answers, kb.claims), blocker_calls,
-                               searches)
+            return AStarResult(None, None, calls, expanded, why_none(target, answers, kb.claims,
+                                                                     actions=problem.action_set),
+                               blocker_calls=blocker_calls, searches=searches)
         asked, ok = _verify(path, target, kb, oracle, answers)
         calls += asked
         if ok:
             seq = tuple(o for o, _ in path)
-            return AStarResult(seq, problem.weight(seq), calls, expanded, "", blocker_calls, searches)
+            return AStarResult(seq, problem.weight(seq), calls, expanded, "", total_cost(problem, seq), blocker_calls,
+                               searches)
 
 
 def _verify(path: list[Query], target: str, kb: Knowledge, oracle: FeasibilityOracle,

@@ -1,4 +1,6 @@
-"""The exact minimum-weight answer: the relocation sequence of least total weight (Eq. 8) that frees the target.
+"""The exact minimum-weight answer: the relocation sequence of least total weight (Eq. 8) that frees the target;
+with the action model, of least total cost (each obstacle's weight times its action's factor: problem.py, "One action
+model"), the same sequence when every factor is 1. Eq. 8's weight is reported, the cost beside it when it differs.
 
 Feasibility depends only on the set of removed objects, so the search runs over removed sets. `solve` is a
 uniform-cost search (Dijkstra; weights phi_i > 0) with lazy edge evaluation in the spirit of Lazy Shortest
@@ -10,8 +12,8 @@ replicas (docs/architecture.md) is asked the next cheapest queued questions toge
 
 `brute_force` enumerates every set reachable by feasible single removals (reachable.py, asking everything) for
 tests. When no sequence exists, `why_none` says why in one line from what the search learned (docs/motion_planner.md,
-"Why there is no sequence"): the target's own answer, a blocking cycle of certain lane blockers (through the
-target or not), the objects no grasp ever reached.
+"Why there is no sequence"), naming the actions it is a proof for (the problem's action_set): the target's own
+answer, a blocking cycle of certain lane blockers (through the target or not), the objects no grasp ever reached.
 """
 from __future__ import annotations
 
@@ -24,10 +26,12 @@ from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.search.reachable import reachable_sets
 from relocation_common.feasibility import (
+    PICK_ACTIONS,
     FeasibilityAnswer,
     FeasibilityOracle,
     Label,
     Query,
+    action_set,
     ask_many,
     claims,
     in_flight,
@@ -48,6 +52,8 @@ class ExactResult:
     oracle_calls: int  # distinct (object, removed set) questions asked
     sets_settled: int
     reason: str = ""  # why there is no sequence (why_none), one line; empty when found
+    total_cost: float | None = None  # the sequence's total cost (problem.RelocationProblem.cost), what the search
+    # minimised; None for a problem whose costs are its weights (every action factor 1: the paper's)
 
     @property
     def found(self) -> bool:
@@ -59,6 +65,8 @@ class ExactResult:
         out = {"found": self.found, "sequence": list(self.sequence) if self.sequence is not None else None,
                "total_weight": self.total_weight, "oracle_calls": self.oracle_calls,
                "sets_settled": self.sets_settled}
+        if self.total_cost is not None:  # a costed problem (an action factor other than 1)
+            out["total_cost"] = self.total_cost
         return out if self.found else {**out, "reason": self.reason}
 
 
@@ -67,8 +75,10 @@ def _set(s: Iterable[str]) -> str:
 
 
 def why_none(target: str, asked: Mapping[Query, FeasibilityAnswer], lanes: Mapping[str, Sequence[Claim]] | None = None,
-             limit: int = 4) -> str:
-    """One line saying why no sequence frees `target`, from the answers asked ((object, removed) -> answer) and
+             limit: int = 4, actions: Sequence[str] = PICK_ACTIONS) -> str:
+    """One line saying why no sequence of `actions` (the problem's action_set: what it is a proof for, named first:
+    "no sequence with the actions side_grasp, top_grasp: ...") frees `target`, from the answers asked ((object,
+    removed) -> answer) and
     certain lane claims (object -> [(removed, lane sets)], e.g. astar.Knowledge.claims; the answers' own certain
     blockers are added): the target's answer from the largest set reached; a blocking cycle (every lane of the
     target needs an object that can never leave first: each of its lanes needs the target or another such object
@@ -98,7 +108,13 @@ def why_none(target: str, asked: Mapping[Query, FeasibilityAnswer], lanes: Mappi
     if stuck:
         more = f"; {len(stuck) - limit} more" if len(stuck) > limit else ""
         parts.append("never feasible: " + "; ".join(stuck[:limit]) + more)
-    return "no sequence: " + (". ".join(parts) if parts else "nothing was feasible to ask")
+    return no_sequence(actions) + (". ".join(parts) if parts else "nothing was feasible to ask")
+
+
+def no_sequence(actions: Sequence[str]) -> str:
+    """The start of a "no sequence" proof, naming the actions it covers: 'no sequence with the actions side_grasp,
+    top_grasp: '."""
+    return f"no sequence with {action_set(actions)}: "
 
 
 def _cycle(target: str, lanes: Mapping[str, Sequence[Claim]], limit: int = 8) -> str:
@@ -106,9 +122,40 @@ def _cycle(target: str, lanes: Mapping[str, Sequence[Claim]], limit: int = 8) ->
     object that can never leave before the target, because each of its lanes needs the target or another such
     object moved, or it has no lane ('' otherwise; at most `limit` explanations). Objects without a claim count as
     able to leave (optimistic)."""
+    walk = _cycle_walk(target, lanes)
+    if walk is None:
+        return ""
+    first, free, by_lane, behind = walk
+    parts = [f"lane {_set(lane)}: {_needs(x, first, free)}" for lane, x in by_lane]
+    parts += [_needs(y, first, free) for y in behind]
+    more = f"; {len(parts) - limit} more" if len(parts) > limit else ""
+    return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
+        "; ".join(parts[:limit]) + more + ")"
+
+
+def blocking_needs(target: str, lanes: Mapping[str, Sequence[Claim]]) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """The blocking cycle `_cycle` names, as data: (x, the objects x needs moved) for each object explained there
+    ("x needs T moved", "x needs one of {a, b} moved"), in the line's order (an object with no lane at all
+    left out); () when there is no cycle. What a push can open (qtree_task_planner.executive.push)."""
+    walk = _cycle_walk(target, lanes)
+    if walk is None:
+        return ()
+    first, free, by_lane, behind = walk
+    out: dict[str, tuple[str, ...]] = {}
+    for x in [x for _, x in by_lane] + behind:
+        out.setdefault(x, tuple(_stuck(x, first, free)))
+    return tuple((x, stuck) for x, stuck in out.items() if stuck)
+
+
+def _cycle_walk(target: str, lanes: Mapping[str, Sequence[Claim]]
+                ) -> tuple[dict[str, tuple[frozenset[str], ...]], set[str], list[tuple[frozenset[str], str]],
+                           list[str]] | None:
+    """The blocking cycle of `_cycle` (None: there is none): each object's first lanes (claimed at the empty set),
+    the objects that can leave, (lane of the target, the object of it that cannot leave) for each lane, then every
+    object stuck behind those, each once."""
     first = {o: v[0] for o, v in ((o, [ls for s, ls in c if not s]) for o, c in lanes.items()) if v}
     if not first.get(target):
-        return ""
+        return None
     free = {m for ls in first.values() for lane in ls for m in lane if m not in first} - {target}
     grown = True
     while grown:  # the objects that can leave, grown to a fixpoint
@@ -118,30 +165,34 @@ def _cycle(target: str, lanes: Mapping[str, Sequence[Claim]], limit: int = 8) ->
                 free.add(o)
                 grown = True
     if any(set(lane) <= free for lane in first[target]):
-        return ""
-    parts, told = [], {target}
+        return None
+    by_lane, told = [], {target}
     for lane in sorted({frozenset(lane) for lane in first[target]}, key=lambda ls: (len(ls), sorted(ls))):
         x = next(m for m in sorted(lane) if m not in free)
-        parts.append(f"lane {_set(lane)}: {_needs(x, first, free)}")
+        by_lane.append((lane, x))
         told.add(x)
+    behind = []
     todo = sorted({m for lane in first[target] for m in lane if m not in free})
     seen = set(todo) | {target}
     while todo:  # every object stuck behind those, each explained once
         y = todo.pop(0)
         if y not in told:
-            parts.append(_needs(y, first, free))
+            behind.append(y)
             told.add(y)
         for m in sorted({m for lane in first[y] for m in lane if m not in free} - seen):
             seen.add(m)
             todo.append(m)
-    more = f"; {len(parts) - limit} more" if len(parts) > limit else ""
-    return f"blocking cycle: every lane of {target} needs an object that cannot leave first (" + \
-        "; ".join(parts[:limit]) + more + ")"
+    return first, free, by_lane, behind
+
+
+def _stuck(x: str, first: Mapping[str, tuple[frozenset[str], ...]], free: set[str]) -> list[str]:
+    """The objects in x's lanes that cannot leave first (sorted)."""
+    return sorted({m for lane in first[x] for m in lane if m not in free})
 
 
 def _needs(x: str, first: Mapping[str, tuple[frozenset[str], ...]], free: set[str]) -> str:
     """'x needs T moved', 'x needs one of {a, b} moved' (the objects stuck in its lanes) or 'x has no lane'."""
-    stuck = sorted({m for lane in first[x] for m in lane if m not in free})
+    stuck = _stuck(x, first, free)
     if not first[x]:
         return f"{x} has no lane"
     return f"{x} needs {stuck[0]} moved" if len(stuck) == 1 else f"{x} needs one of {_set(stuck)} moved"
@@ -153,12 +204,13 @@ def as_problem(problem: RelocationProblem | Scenario) -> RelocationProblem:
 
 
 def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle) -> ExactResult:
-    """Minimum-weight feasible relocation sequence by lazy uniform-cost search over removed sets.
+    """Minimum-cost (Eq. 8; the weight at factor 1) feasible relocation sequence by lazy uniform-cost search over
+    removed sets.
 
     oracle: feasibility(object_id, removed: frozenset) -> FeasibilityAnswer. oracle_calls counts the questions
     this search asks (each (object, set) at most once, so a CachedOracle in front changes nothing here)."""
     problem = as_problem(problem)
-    obstacles, target, phi = problem.obstacles, problem.target, problem.weights
+    obstacles, target, phi = problem.obstacles, problem.target, problem.costs
     calls = 0
     known: dict[Query, FeasibilityAnswer] = {}  # (object, set) -> answer
     settled: dict[frozenset[str], tuple[float, tuple[str, ...]]] = {}
@@ -180,14 +232,15 @@ def solve(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle) -> E
             if label == Label.UNFEASIBLE:
                 continue
             if obj == target:
-                return ExactResult(seq + (target,), problem.weight(seq), calls, len(settled))
+                return ExactResult(seq + (target,), problem.weight(seq), calls, len(settled),
+                                   total_cost=total_cost(problem, seq))
             new_seq = seq + (obj,)
         settled[state] = (cost, new_seq)
         heapq.heappush(queue, (cost, next(tie), state, new_seq, target))
         for o in obstacles:
             if o not in state and (state | {o}) not in settled:
                 heapq.heappush(queue, (cost + phi[o], next(tie), state, new_seq, o))
-    return ExactResult(None, None, calls, len(settled), why_none(target, known))
+    return ExactResult(None, None, calls, len(settled), why_none(target, known, actions=problem.action_set))
 
 
 def _ask_next(queue: list[Entry], question: Query, oracle: FeasibilityOracle, known: dict[Query, FeasibilityAnswer],
@@ -220,10 +273,16 @@ def brute_force(problem: RelocationProblem | Scenario, oracle: FeasibilityOracle
     best = None
     for s, seq in reachable.items():
         if cache.feasibility(problem.target, s).label == Label.TARGET:
-            w = problem.weight(seq)
-            if best is None or w < best[0]:
-                best = (w, seq + (problem.target,))
+            c = problem.cost(seq)
+            if best is None or c < best[0]:
+                best = (c, seq + (problem.target,))
     calls = cache.calls - calls0
     if best is None:
         return ExactResult(None, None, calls, len(reachable))
-    return ExactResult(best[1], best[0], calls, len(reachable))
+    return ExactResult(best[1], problem.weight(best[1]), calls, len(reachable), total_cost=total_cost(problem, best[1]))
+
+
+def total_cost(problem: RelocationProblem, sequence: Sequence[str]) -> float | None:
+    """A result's total cost (ExactResult.total_cost): the sequence's for a costed problem, None for one whose costs
+    are its weights."""
+    return problem.cost(sequence) if problem.costed else None

@@ -71,6 +71,7 @@ def scenario_content(scenario) -> dict:
 SAFETY_NETS = ("timeout", "carry_timeout")  # wall-clock limits that never change an answer (they raise instead)
 NOT_LABELS = ("reuse_distance",)  # what an answer reports besides its label (its near set), not in the tables
 SCENE_READING = ("flat_tilt",)  # how a perceived pose is read (the scene it gives is in the key), no answer's
+PUSH = ("push",)  # the push's settings (push.*): no pick's answer, and the tables hold picks (planning/push/)
 
 
 def planner_content(params) -> dict:
@@ -85,7 +86,7 @@ def planner_content(params) -> dict:
             return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
         return v
     from relocation_common import robot_description as rd
-    content = {k: v for k, v in plain(params).items() if k not in SAFETY_NETS + NOT_LABELS + SCENE_READING}
+    content = {k: v for k, v in plain(params).items() if k not in SAFETY_NETS + NOT_LABELS + SCENE_READING + PUSH}
     content["stpik"]["qdot_max"] = plain(rd.QDOT_MAX)  # the robot's joint speed limits (Table 7) change answers too
     return content
 

@@ -4,12 +4,14 @@ The task planner's `removed_ids` is what it believes (Sect. 4.2: the objects rel
 driver's ground truth or perception) is what is. Before the motion: a removed bottle that still stands on the top
 shelf, or a goal object that already stands on the bottom shelf, refuses the goal with the reason (planning with a
 bottle that is there as if it were gone knocks it over). The destination is a free slot of the bottom shelf: slots
-occupied by a bottle of the scene, or by one this node placed and the scene does not show, are skipped; slot
-len(removed), the one a certified feasible answer planned the carry to, when it is free (docs/motion_planner.md,
-"The certified slot"). After the
+taken by an object of the scene resting there, standing or lying (its footprint; the rule the task planner's free
+slots read too: relocation_common.scenario, Shelf.board_of and Scenario.free_slots), or by one this node placed and
+the scene does not show, are skipped; slot len(removed), the one a certified feasible answer planned the carry to,
+when it is free (docs/motion_planner.md, "The certified slot"). After the
 motion: the moved bottle stands at its slot (when the scene shows it; perception sees the top shelf only) and no
 other bottle moved more than the tolerance; otherwise the relocation is not a success and the result says what
-moved; with no scene after the motion, the outcome is unknown, never a success (docs/reliability.md, "Never report
+moved (a bottle that tipped over on the bottom shelf is relocated but not placed as asked: not a success, said so);
+with no scene after the motion, the outcome is unknown, never a success (docs/reliability.md, "Never report
 success that is not true").
 """
 from __future__ import annotations
@@ -20,23 +22,43 @@ from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping, Sequence
 
 from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot
-from relocation_common.scenario import Scenario, ScenarioError, Shelf, UnknownObjectError
-from stpik_motion_planner.model.collision import upright_radius
-from stpik_motion_planner.model.grasp import grasp_refusal
+from relocation_common.scenario import BOTTOM, TOP, Scenario, ScenarioError, Shelf, ShelfObject, UnknownObjectError
+from relocation_common.shelf_object import UPRIGHT_TILT, Footprint
 from stpik_motion_planner.planning.params import node_parameters
 
-ON_BOARD = 0.01  # m: a bottle whose base is this close to a board's surface stands on it (scene_update.ON_SHELF)
+ON_BOARD = 0.01  # m: an object whose lowest point is this close to a board rests on it (scene_update.ON_SHELF)
 OUTCOME_SETTLE = 0.3  # s after the motion: the scene that shows the outcome is received after this (bottles settled)
+
+
+Point = tuple[float, float, float]  # an object's base centre (base frame, m): what `outcome_problems` compares
 
 
 @dataclass(frozen=True)
 class SeenBottle:
-    """A bottle of the scene: (x, y) of its frame, z of its base (ObjectState.pose), base frame, metres."""
+    """An object of the scene (base frame, metres): `x, y, z` the centre of its base (ShelfObject.base: a lying
+    bottle's lower end face), `support` the height of its lowest point, `tilt` its axis from the vertical (rad), and
+    its `footprint` on the board it rests on (`seen_bottle`)."""
 
     id: str
     x: float
     y: float
     z: float
+    support: float
+    tilt: float
+    footprint: Footprint
+
+    @property
+    def point(self) -> Point:
+        """Its base centre."""
+        return self.x, self.y, self.z
+
+
+def seen_bottle(o: ShelfObject) -> SeenBottle:
+    """A perceived object (ros_conversions.msg_to_objects: its support_z set) as the checks read it."""
+    x, y, z = (float(v) for v in o.base())
+    if o.support_z is None:
+        raise ValueError(f"object {o.id!r} of the scene has no support_z")
+    return SeenBottle(o.id, x, y, z, o.support_z, o.axis_tilt, o.footprint())
 
 
 class SceneWatch:
@@ -47,9 +69,9 @@ class SceneWatch:
         self.at = -math.inf
         self._clock = clock
 
-    def update(self, bottles: Iterable[tuple[str, float, float, float]]) -> None:
-        """A new scene: (id, x, y, base z) of each bottle (checked by scene_check first)."""
-        self.seen, self.at = {i: SeenBottle(i, x, y, z) for i, x, y, z in bottles}, self._clock()
+    def update(self, objects: Iterable[ShelfObject]) -> None:
+        """A new scene: its objects as perceived (checked by scene_check first)."""
+        self.seen, self.at = {o.id: seen_bottle(o) for o in objects}, self._clock()
 
     def after(self, t: float, timeout: float, ok: Callable[[], bool] = lambda: True) -> dict[str, SeenBottle] | None:
         """The first scene received after clock time t; None after `timeout` s or once ok() is false."""
@@ -61,18 +83,14 @@ class SceneWatch:
         return dict(self.seen)
 
 
-def _inside(shelf: Shelf, b: SeenBottle) -> bool:
-    return shelf.x_front < b.x < shelf.x_back and shelf.y_min < b.y < shelf.y_max
-
-
 def on_top_shelf(shelf: Shelf, b: SeenBottle) -> bool:
-    """Standing on the top shelf's board (as scene_update.on_top_shelf)."""
-    return abs(b.z - shelf.top_z) < ON_BOARD and _inside(shelf, b)
+    """Resting on the top shelf's board, standing or lying (Shelf.board_of)."""
+    return shelf.board_of(b.footprint.centre, b.support, ON_BOARD) == TOP
 
 
 def on_bottom_shelf(shelf: Shelf, b: SeenBottle) -> bool:
-    """Standing on the bottom shelf's board: relocated."""
-    return abs(b.z - shelf.bottom_z) < ON_BOARD and _inside(shelf, b)
+    """Resting on the bottom shelf's board, standing or lying (tipped over there): relocated."""
+    return shelf.board_of(b.footprint.centre, b.support, ON_BOARD) == BOTTOM
 
 
 def refusal(shelf: Shelf, object_id: str, removed: Sequence[str], seen: Mapping[str, SeenBottle],
@@ -109,13 +127,14 @@ def goal_refusal(scenario: Scenario, object_id: str, removed: Sequence[str], see
 
 def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: Mapping[str, int],
                 n_removed: int) -> tuple[int, list[tuple[str, tuple[float, float]]]]:
-    """(the slot, the bottles on the bottom shelf) from the scene and what the node placed: slot `n_removed` (the
-    goal's len(removed_ids): the slot a certified answer planned the carry to) when it is free, else the first
-    free one (relocation_common.feasibility.destination_slot). ValueError when every slot is taken."""
-    placed = placed_bottles(scenario.shelf, scenario.slots, seen, relocated)
-    # as wide as the widest object the hand can place (a box: its half-diagonal, at any turn)
-    wide = max((upright_radius(b) for b in scenario.objects if not grasp_refusal(b)), default=0.0)
-    free = free_slots(scenario.slots, placed, 2 * max(wide, max(b.radius for b in scenario.objects)))
+    """(the slot, the objects on the bottom shelf: id and footprint centre) from the scene and what the node placed:
+    slot `n_removed` (the goal's len(removed_ids): the slot a certified answer planned the carry to) when it is free,
+    else the first free one (relocation_common.feasibility.destination_slot); a slot is free when no object's
+    footprint comes within the widest object's radius of it (Scenario.free_slots, as the task planner counts them).
+    ValueError when every slot is taken."""
+    below = placed_bottles(scenario.shelf, scenario.slots, seen, relocated, scenario.slot_radius)
+    placed = [(i, f.centre) for i, f in below]
+    free = scenario.free_slots(f for _, f in below)
     if not free:
         taken = ", ".join(i for i, _ in placed)
         raise ValueError(f"no free slot on the bottom shelf: all {len(scenario.slots)} slots are taken ({taken})")
@@ -123,39 +142,39 @@ def destination(scenario: Scenario, seen: Mapping[str, SeenBottle], relocated: M
 
 
 def placed_bottles(shelf: Shelf, slots: Sequence[tuple[float, float]], seen: Mapping[str, SeenBottle],
-                   relocated: Mapping[str, int]) -> list[tuple[str, tuple[float, float]]]:
-    """(id, (x, y)) of the bottles on the bottom shelf: as the scene shows them, else where this node put them."""
-    placed = [(i, (b.x, b.y)) for i, b in seen.items() if on_bottom_shelf(shelf, b)]
+                   relocated: Mapping[str, int], radius: float) -> list[tuple[str, Footprint]]:
+    """(id, footprint) of the objects on the bottom shelf, standing or lying: as the scene shows them, else where
+    this node put them (a disc of `radius` about the slot)."""
+    placed = [(i, b.footprint) for i, b in seen.items() if on_bottom_shelf(shelf, b)]
     shown = {i for i, _ in placed}
-    placed += [(i, slots[k]) for i, k in relocated.items() if i not in shown and i not in seen and k < len(slots)]
-    return sorted(placed)
+    placed += [(i, Footprint(slots[k], radius, ())) for i, k in relocated.items()
+               if i not in shown and i not in seen and k < len(slots)]
+    return sorted(placed, key=lambda p: p[0])
 
 
-def free_slots(slots: Sequence[tuple[float, float]], placed: Sequence[tuple[str, tuple[float, float]]],
-               clearance: float) -> list[int]:
-    """The slots with no placed bottle's axis within `clearance` (two radii: the bottles would touch)."""
-    return [k for k, (x, y) in enumerate(slots)
-            if all(math.hypot(x - px, y - py) >= clearance for _, (px, py) in placed)]
-
-
-def outcome_problems(shelf: Shelf, before: Mapping[str, SeenBottle], after: Mapping[str, SeenBottle],
+def outcome_problems(shelf: Shelf, before: Mapping[str, Point], after: Mapping[str, SeenBottle],
                      object_id: str, slot: tuple[float, float], tolerance: float, slot_tolerance: float) -> list[str]:
-    """What is wrong after relocating object_id to `slot` (empty: the relocation did what it says). Bottles in
-    both scenes that moved more than `tolerance` (m, 3D); the moved bottle farther than `slot_tolerance` from the
-    slot on the bottom shelf (when `after` shows it), or still on the top shelf."""
+    """What is wrong after relocating object_id to `slot` (empty: the relocation did what it says). Objects in
+    both scenes whose base centre (`before`: id -> it) moved more than `tolerance` (m, 3D); the moved bottle
+    farther than `slot_tolerance` from the slot on the bottom shelf (when `after` shows it), tipped over there, or
+    still on the top shelf."""
     problems = []
     b = after.get(object_id)
     if b is not None:
-        off = math.dist((b.x, b.y, b.z), (slot[0], slot[1], shelf.bottom_z))
+        off = math.dist(b.point, (slot[0], slot[1], shelf.bottom_z))
         if on_top_shelf(shelf, b):
             problems.append(f"{object_id} is still on the top shelf")
+        elif on_bottom_shelf(shelf, b) and b.tilt > UPRIGHT_TILT:
+            off = math.dist(b.footprint.centre, slot)
+            problems.append(f"{object_id} tipped over on the bottom shelf ({math.degrees(b.tilt):.0f} deg), lying "
+                            f"{off * 1000:.0f} mm from its slot ({slot[0]:.3f}, {slot[1]:.3f})")
         elif off > slot_tolerance:
             problems.append(f"{object_id} is {off * 1000:.0f} mm from its slot ({slot[0]:.3f}, {slot[1]:.3f})")
     for i in sorted(set(before) & set(after) - {object_id}):
-        p, q = before[i], after[i]
-        d = math.dist((p.x, p.y, p.z), (q.x, q.y, q.z))
+        p, q = before[i], after[i].point
+        d = math.dist(p, q)
         if d > tolerance:
-            fell = " (no longer standing on its board)" if abs(q.z - p.z) > ON_BOARD else ""
+            fell = " (no longer standing on its board)" if abs(q[2] - p[2]) > ON_BOARD else ""
             problems.append(f"{i} moved {d * 1000:.0f} mm{fell}")
     return problems
 
@@ -178,13 +197,14 @@ def check_parameters(values: Mapping[str, float]) -> None:
             raise ValueError(f"parameter {k} must be > 0, got {v!r}")
 
 
-def outcome(watch: SceneWatch, before: Mapping[str, SeenBottle], scenario: Scenario, object_id: str, slot: int,
+def outcome(watch: SceneWatch, before: Mapping[str, Point], scenario: Scenario, object_id: str, slot: int,
             values: Mapping[str, float], source: str, ok: Callable[[], bool] = lambda: True) -> tuple[bool, str]:
     """(success, result message) of a relocation whose motion just ended: the first scene received OUTCOME_SETTLE s
-    later against `before` (outcome_problems; `values`: the PARAMETERS). Success only after that look at the world:
-    a scene that does not come within outcome_timeout (none at all, or the source silent: perception restarting)
-    leaves the outcome unknown, not a success (the message ends with OUTCOME_UNKNOWN; the task planner looks at its
-    own scene). Without a scene before the motion only the moved bottle is checked (the message says so)."""
+    later against `before` (each object's base centre; outcome_problems; `values`: the PARAMETERS). Success only
+    after that look at the world: a scene that does not come within outcome_timeout (none at all, or the source
+    silent: perception restarting) leaves the outcome unknown, not a success (the message ends with OUTCOME_UNKNOWN;
+    the task planner looks at its own scene). Without a scene before the motion only the moved bottle is checked
+    (the message says so)."""
     done = f"relocated {object_id} to slot {slot}"
     after = watch.after(time.monotonic() + OUTCOME_SETTLE, float(values["outcome_timeout"]), ok)
     if after is None:

@@ -32,6 +32,9 @@ from stpik_motion_planner.planning.trajectory import Trajectory
 # progress (0..1) of the whole relocation at the start of each phase, in order
 PHASES = {"plan_pick": 0.0, "approach": 0.05, "grasp": 0.35, "plan_carry": 0.4, "carry": 0.45, "release": 0.7,
           "retreat": 0.72, "plan_home": 0.8, "home": 0.82, "done": 1.0, "recover": 1.0}
+# ... and of a push (execution/push.py): the gripper shut, the approach, the push, the retreat, the way home, opened
+PUSH_PHASES = {"plan_push": 0.0, "shut": 0.05, "approach_push": 0.1, "push": 0.4, "retreat_push": 0.6,
+               "home_push": 0.7, "open": 0.95, "pushed": 1.0, "recover_push": 1.0}
 
 
 class Arm(Protocol):
@@ -44,7 +47,8 @@ class Arm(Protocol):
         """Execute a planned motion until it settles; raises on failure."""
 
     def gripper(self, action: str, phase: str) -> None:
-        """'close' (must grasp) or 'open'; returns once the fingers may be moved away; raises on failure."""
+        """'close' (must grasp), 'shut' (closed on nothing: a push's hand) or 'open'; returns once the fingers may be
+        moved away; raises on failure."""
 
     def phase(self, phase: str) -> None:
         """A planning phase starts (progress reporting)."""

@@ -22,7 +22,7 @@ from relocation_common import kinova
 from relocation_common import robot_description as rd
 from relocation_common.arm_interface import ArmInterface
 from stpik_motion_planner.execution.follower import FollowerParams, TrajectoryFollower
-from stpik_motion_planner.execution.relocation import PHASES
+from stpik_motion_planner.execution.relocation import PHASES, PUSH_PHASES
 from stpik_motion_planner.planning.params import node_parameters
 from stpik_motion_planner.planning.trajectory import Trajectory
 
@@ -108,10 +108,12 @@ class ArmLink(Protocol):
 
 
 def progress(phase: str, within: float = 0.0) -> float:
-    """The whole relocation's progress (0..1) at `within` (0..1) of `phase` (relocation.PHASES)."""
-    names = list(PHASES)
+    """The whole relocation's progress (0..1) at `within` (0..1) of `phase` (relocation.PHASES, or a push's:
+    relocation.PUSH_PHASES)."""
+    table = PUSH_PHASES if phase in PUSH_PHASES else PHASES
+    names = list(table)
     k = names.index(phase)
-    lo, hi = PHASES[phase], PHASES[names[min(k + 1, len(names) - 1)]]
+    lo, hi = table[phase], table[names[min(k + 1, len(names) - 1)]]
     return float(lo + (hi - lo) * within)
 
 
@@ -164,15 +166,23 @@ class StreamedArm:
 
     def gripper(self, action: str, phase: str) -> None:
         """Close or open the fingers and wait until they stop (the module docstring); closing has to stop short of
-        finger_empty_closure, opening has to open, or the relocation aborts."""
+        finger_empty_closure, opening has to open, or the relocation aborts; 'shut' (a push's hand) has to close
+        further than finger_empty_closure (on nothing)."""
         self.phase(phase)
-        closing = action == "close"
+        closing = action in ("close", "shut")
         closed = self.p.finger_closed
         goal = closed if closing else 0.0
         deadline = time.monotonic() + self.p.gripper_timeout
         turns = (self.link.finger_goal(goal, deadline, self.cancelled) if self.link.kinova
                  else self._fingers_command(goal, deadline))
         closure = float(np.mean(turns)) / closed
+        if action == "shut":  # closed on nothing, for a push (execution/push.py)
+            if closure <= self.p.finger_empty_closure:
+                raise Aborted(f"gripper shut for a push: the fingers stopped {closure:.0%} closed (something between "
+                              "them)")
+            self.log("info", f"gripper shut: fingers {closure:.0%} closed")
+            time.sleep(self.p.gripper_settle)
+            return
         if closing and closure > self.p.finger_empty_closure:
             raise Aborted(f"gripper close: the fingers closed on nothing ({closure:.0%} closed)")
         if closing and closure < 0.02:

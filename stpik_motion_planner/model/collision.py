@@ -151,12 +151,6 @@ def placed_obstacle(o: ShelfObject, x: float, y: float, z0: float, turn: float) 
     return Obstacle(name, name, obj, centre - half, centre + half)
 
 
-def upright_radius(o: ShelfObject) -> float:
-    """Radius of the vertical cylinder about a standing object's centre that holds it at any turn about the
-    vertical: a cylinder's radius, a box's half-diagonal (a box in its slot stands turned as the hand held it)."""
-    return math.hypot(o.size[0], o.size[1]) / 2 if o.shape == "box" else o.radius
-
-
 class CollisionScene:
     """Boards and objects of a scenario (every one, listed or not, as its primitive: `object_obstacle`). `placed`: (id,
     (x, y)) of objects standing on the bottom shelf (centred there; a box turned up to `placed_turn` rad from square to
@@ -272,12 +266,35 @@ def approach_skip(o: ShelfObject) -> dict[str, frozenset[str]]:
     return {n: frozenset([o.id]) | (board if n.startswith("finger") else frozenset()) for n in HAND_PARTS}
 
 
-class ArmGeometry:
-    """The arm's capsules (plus attached ones, e.g. a carried bottle), posed from a Kinematics update."""
+def closed_fingers() -> dict[str, CapsuleSpec]:
+    """The description's finger capsules (their radius) with the fingers closed on nothing, as the simulator's
+    hinges turn them (robot_description.FINGER_HINGES, FINGER_CLOSED): from the hinge to the tip, which comes to
+    about 2 mm from the tool axis, 20 mm beyond the grasp centre. The hand of a push (planning/push/)."""
+    out = {}
+    for k, (x, y, sign) in enumerate(rd.FINGER_HINGES):
+        c = next(c for c in rd.CAPSULES if c.name == f"finger_{k + 1}")
+        a = sign * rd.FINGER_CLOSED  # about the link's y axis
+        tx, _, tz = rd.finger_tip(k)
+        tip = (x + tx * math.cos(a) + tz * math.sin(a), y, rd.FINGER_BASE_Z - tx * math.sin(a) + tz * math.cos(a))
+        out[c.name] = capsule_spec(c.name, c.link, (x, y, rd.FINGER_BASE_Z), tip, c.radius)
+    return out
 
-    def __init__(self, kin: Kinematics, attached: Sequence[CapsuleSpec] = ()) -> None:
+
+def _hand_specs(names: Iterable[str], fingers: Mapping[str, CapsuleSpec] | None) -> list[CapsuleSpec]:
+    """The description's capsules of `names`, the fingers replaced by `fingers` (closed_fingers) when given."""
+    by = {c.name: c for c in rd.CAPSULES}
+    return [fingers[n] if fingers and n in fingers else capsule_spec(n, by[n].link, by[n].p0, by[n].p1, by[n].radius)
+            for n in names]
+
+
+class ArmGeometry:
+    """The arm's capsules (plus attached ones, e.g. a carried bottle), posed from a Kinematics update; `fingers`:
+    finger capsules in place of the open ones (closed_fingers)."""
+
+    def __init__(self, kin: Kinematics, attached: Sequence[CapsuleSpec] = (),
+                 fingers: Mapping[str, CapsuleSpec] | None = None) -> None:
         self.kin = kin
-        self.specs = [capsule_spec(c.name, c.link, c.p0, c.p1, c.radius) for c in rd.CAPSULES] + list(attached)
+        self.specs = _hand_specs([c.name for c in rd.CAPSULES], fingers) + list(attached)
         self.n = len(self.specs)
         self.fids = [kin.fid[s.link] for s in self.specs]
         self.radius = np.array([s.radius for s in self.specs])
@@ -399,11 +416,10 @@ class HandProxy:
     # forearm then bends at the wrist (joint 6) to come in under the board above, where STPIK checks it
     STUB_TILT = math.sin(math.radians(30))
 
-    def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = (), attached_margin: float | None = None
-                 ) -> None:
-        """`attached_margin`: inflation of the attached shapes (default `margin`)."""
-        by = {c.name: c for c in rd.CAPSULES}
-        specs = [capsule_spec(n, by[n].link, by[n].p0, by[n].p1, by[n].radius) for n in ("wrist",) + HAND_PARTS]
+    def __init__(self, margin: float, attached: Sequence[CapsuleSpec] = (), attached_margin: float | None = None,
+                 fingers: Mapping[str, CapsuleSpec] | None = None) -> None:
+        """`attached_margin`: inflation of the attached shapes (default `margin`); `fingers`: ArmGeometry's."""
+        specs = _hand_specs(("wrist",) + HAND_PARTS, fingers)
         specs.append(capsule_spec("forearm_stub", rd.LINK_NAMES[6], (0, 0, 0), (0, 0, -self.FOREARM_STUB), 0.04))
         am = margin if attached_margin is None else attached_margin
         margins = [margin] * len(specs) + [am] * len(attached)

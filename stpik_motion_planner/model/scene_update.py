@@ -13,19 +13,24 @@ not seen keep their last pose (hidden behind others, or in the hand).
 Objects the scenario does not list (`listed` false: perception found them, or the simulator's ground truth carries
 them) enter the scene like any other, as the primitive they are. One that is no longer in a scene which holds
 another object where it stood (its footprint overlapped) is dropped: perception named it anew, and kept, it would
-be a phantom obstacle no relocation removes. Otherwise it keeps its last pose, as a listed bottle does.
+be a phantom obstacle no relocation removes. One left out of `phantom_scenes` scenes in a row
+(config/motion_planner.yaml; the scenes that count: no relocation running, the object's place in view, `in_view`)
+is dropped too: perception no longer sees it where nothing could hide it (perception itself holds an unseen object
+at its last pose for its hold_frames first).
+Otherwise, hidden behind another object, it keeps its last pose, as a listed bottle always does (the task planner's
+closed loop reasons about every listed one); so does an object this node placed on the bottom shelf (`kept`).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Iterable, Mapping, NamedTuple
+from typing import Collection, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
 from relocation_common.geometry import quat_wxyz, wxyz_matrix
-from relocation_common.scenario import Shelf, ShelfObject
-from relocation_common.shelf_object import DECIMALS, UPRIGHT_TILT, half_turn
+from relocation_common.scenario import TOP, Shelf, ShelfObject
+from relocation_common.shelf_object import DECIMALS, UPRIGHT_TILT, Footprint, half_turn
 from stpik_motion_planner.model.collision import Lying
 
 MOVED = 0.003  # m: a perceived bottle this far from the planner's scene replaces it
@@ -34,13 +39,15 @@ ON_SHELF = 0.01  # m: a bottle whose support is farther from the top shelf's sur
 
 class Merged(NamedTuple):
     """The planner's scene after a perceived one: every object (the scenario's and the unlisted ones seen), the lying
-    ones, the ones gone from the shelf, the ids that changed, the ids seen resting on the top shelf."""
+    ones, the ones gone from the shelf, the ids that changed, the ids seen resting on the top shelf, and how many
+    counted scenes in a row have left out each unlisted object still kept (the next merge's `missing`)."""
 
     bottles: dict[str, ShelfObject]
     lying: dict[str, Lying]
     gone: frozenset[str]
     changed: list[str]
     seen: set[str]
+    missing: dict[str, int]
 
 
 def _inside(shelf: Shelf, bottle: ShelfObject) -> bool:
@@ -55,8 +62,8 @@ def _support(bottle: ShelfObject) -> float:
 
 def on_top_shelf(shelf: Shelf, bottle: ShelfObject) -> bool:
     """True if `bottle` (as perceived: its support_z) rests on the top shelf, within its edges (standing or
-    lying)."""
-    return abs(_support(bottle) - shelf.top_z) < ON_SHELF and _inside(shelf, bottle)
+    lying: Shelf.board_of, the rule of the goal checks and of the task planner)."""
+    return shelf.board_of((bottle.x, bottle.y), _support(bottle), ON_SHELF) == TOP
 
 
 def left_the_shelf(shelf: Shelf, bottle: ShelfObject) -> bool:
@@ -88,14 +95,18 @@ def lying_pose(bottle: ShelfObject) -> Lying | None:
 
 def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: Iterable[ShelfObject],
                     flat_tilt: float, held: str | None = None, lying: Mapping[str, Lying] | None = None,
-                    gone: Iterable[str] = ()) -> Merged:
+                    gone: Iterable[str] = (), missing: Mapping[str, int] | None = None,
+                    phantom_scenes: int | None = None, kept: Collection[str] = ()) -> Merged:
     """The planner's scene (`current` bottles, the leaning ones in `lying`, the `gone` ones) after the `perceived`
     objects (as relocation_common.ros_conversions.msg_to_objects gives them; `flat_tilt`: laid_flat's); `held`: the
-    bottle being carried, ignored (module docstring)."""
+    bottle being carried, ignored, and the scene no count of `missing` (module docstring); `phantom_scenes` None: this
+    scene counts for none (a scene received again); `kept`: ids never dropped by the count."""
     bottles, lying, gone = dict(current), dict(lying or {}), set(gone)
     changed, seen = [], set()
     perceived = list(perceived)
-    for i in _superseded(shelf, current, perceived, gone):
+    vanished, missing = _vanished(shelf, current, perceived, gone, dict(missing or {}),
+                                  phantom_scenes if held is None else None, set(kept))
+    for i in sorted(set(_superseded(shelf, current, perceived, gone)) | set(vanished)):
         changed.append(i)
         del bottles[i]
         lying.pop(i, None)
@@ -118,7 +129,7 @@ def merge_perceived(shelf: Shelf, current: Mapping[str, ShelfObject], perceived:
             changed.append(i)
             gone.add(i)
             lying.pop(i, None)
-    return Merged(bottles, lying, frozenset(gone), sorted(changed), seen)
+    return Merged(bottles, lying, frozenset(gone), sorted(changed), seen, missing)
 
 
 def _superseded(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: list[ShelfObject],
@@ -134,6 +145,46 @@ def _superseded(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: lis
         if any(abs(_support(b) - board) < ON_SHELF and b.footprint().overlaps(mine) for b in perceived):
             out.append(i)
     return out
+
+
+def _vanished(shelf: Shelf, current: Mapping[str, ShelfObject], perceived: list[ShelfObject], gone: set[str],
+              missing: dict[str, int], phantom_scenes: int | None, kept: set[str]) -> tuple[list[str], dict[str, int]]:
+    """(the unlisted objects to drop, the counts after this scene): each unlisted object of `current` resting on the
+    top shelf that `perceived` leaves out while its place is in view (`in_view`) counts this scene; one counted
+    `phantom_scenes` times in a row is dropped. Seen again, its count ends; hidden (or `phantom_scenes` None: a scene
+    that counts for none), its count stays."""
+    ids = {b.id for b in perceived}
+    counts = {i: n for i, n in missing.items() if i in current and i not in ids and i not in gone}
+    if phantom_scenes is None:
+        return [], counts
+    others = [b for b in perceived if on_top_shelf(shelf, b)] + [
+        o for i, o in current.items() if i not in ids and i not in gone and _rests_on_top(shelf, o)]
+    out = []
+    for i, o in current.items():
+        if o.listed or i in ids or i in gone or i in kept or not _rests_on_top(shelf, o) or \
+                not in_view(shelf, o, [b for b in others if b.id != i]):
+            continue
+        counts[i] = counts.get(i, 0) + 1
+        if counts[i] >= phantom_scenes:
+            out.append(i)
+            del counts[i]
+    return out, counts
+
+
+def _rests_on_top(shelf: Shelf, o: ShelfObject) -> bool:
+    """The planner's object rests on the top shelf (a scenario object without support_z stands there)."""
+    return o.support_z is None or abs(o.support_z - shelf.top_z) < ON_SHELF
+
+
+def in_view(shelf: Shelf, o: ShelfObject, others: Iterable[ShelfObject]) -> bool:
+    """True when no object of `others` stands between `o` and the shelf's open front within o's width: a camera
+    looks into the shelf from its front, and nothing there can hide it (one in front may: then it is not in view)."""
+    f = o.footprint()
+    ys = [c[1] for c in f.corners] or [f.centre[1] - f.radius, f.centre[1] + f.radius]
+    lo, hi = min(ys), max(ys)
+    corridor = Footprint(((shelf.x_front + o.x) / 2, (lo + hi) / 2), 0.0,
+                         ((shelf.x_front, lo), (o.x, lo), (o.x, hi), (shelf.x_front, hi)))
+    return not any(b.footprint().overlaps(corridor) for b in others)
 
 
 def _differs(was: ShelfObject | None, now: ShelfObject, was_lying: Lying | None, now_lying: Lying | None) -> bool:

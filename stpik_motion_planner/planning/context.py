@@ -47,9 +47,10 @@ from stpik_motion_planner.planning.stpik import Stpik, StpikResult
 # first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
 # tolerance (stpik.*), so that every path that converged without it is drawn and ends as before; reuse_distance
 # (what an answer reports, not how it is planned); flat_tilt (how a perceived pose is read: the scene it gives is in the
-# seed). certify_relocation is in the seed as true (SEEDED_AS): a lazy
+# seed); the push's settings (push.*: a pick's draws are those of a planner without the push; a push question's
+# seed has them in its question). certify_relocation is in the seed as true (SEEDED_AS): a lazy
 # pick draws what the eager one drew, so the lane a certification accepts is the eager answer's
-UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance", "flat_tilt")
+UNSEEDED = ("timeout", "carry_timeout", "wide_yaws", "wide_max_yaw", "reuse_distance", "flat_tilt", "push")
 SEEDED_AS = {"certify_relocation": True}
 UNSEEDED_STPIK = ("grasp_yaw_tol",)
 Placed = list[tuple[str, tuple[float, float]]]  # objects on the bottom shelf: (id, slot xy)

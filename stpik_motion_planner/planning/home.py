@@ -79,10 +79,10 @@ def stage_reference(ctx: PlanningContext, stage: np.ndarray, placed: Placed) -> 
 
 
 def joint_motion_clear(ctx: PlanningContext, a: np.ndarray, b: np.ndarray, obs: ObstacleSet,
-                       margin: float = 0.005) -> bool:
-    """The straight joint motion a -> b valid (joint_valid) every joint_resolution."""
+                       margin: float = 0.005, arm: ArmGeometry | None = None) -> bool:
+    """The straight joint motion a -> b valid (joint_valid; `arm` its) every joint_resolution."""
     n = max(1, int(math.ceil(float(np.max(np.abs(b - a))) / ctx.params.joint_resolution)))
-    return all(joint_valid(ctx, a + (b - a) * (k / n), obs, margin=margin) for k in range(1, n + 1))
+    return all(joint_valid(ctx, a + (b - a) * (k / n), obs, arm, margin) for k in range(1, n + 1))
 
 
 def joint_valid(ctx: PlanningContext, q: np.ndarray, obs: ObstacleSet, arm: ArmGeometry | None = None,
@@ -103,14 +103,15 @@ def joint_valid(ctx: PlanningContext, q: np.ndarray, obs: ObstacleSet, arm: ArmG
 
 
 def plan_joint(ctx: PlanningContext, q_from: object, q_to: object, obs: ObstacleSet, max_checks: int,
-               deadline: float, margin: float = 0.005, rng: np.random.Generator | None = None) -> Trajectory | None:
-    """RRT-Connect in joint space (same collision checker), timed within Table 7 at 90 %; `rng`: the
-    question's generator (question_rng), None for OMPL's."""
+               deadline: float, margin: float = 0.005, rng: np.random.Generator | None = None,
+               arm: ArmGeometry | None = None) -> Trajectory | None:
+    """RRT-Connect in joint space (same collision checker; `arm`: joint_valid's), timed within Table 7 at 90 %;
+    `rng`: the question's generator (question_rng), None for OMPL's."""
     q_from, q_to = check_q(q_from), check_q(q_to)
     lo = np.maximum(rd.Q_LOWER, np.minimum(q_from, q_to) - math.pi)
     hi = np.minimum(rd.Q_UPPER, np.maximum(q_from, q_to) + math.pi)
     rrt = JointRRT(lo, hi, ctx.params.joint_resolution, ctx.params.simplify_checks)
-    path = rrt.plan(q_from, q_to, lambda q: joint_valid(ctx, q, obs, margin=margin), max_checks, deadline,
+    path = rrt.plan(q_from, q_to, lambda q: joint_valid(ctx, q, obs, arm, margin), max_checks, deadline,
                     draw_seed(rng))
     if path is None:
         return None

@@ -18,6 +18,7 @@ from stpik_motion_planner.planning.stpik import StpikParams
 
 NODE_NAME = "motion_planner"
 FILE = "motion_planner.yaml"
+PUSH = "push."  # the push's keys (PushParams)
 WHOLE_NUMBERS = ("max_attempts", "n_yaws", "wide_yaws", "seed", "rrt_max_checks", "simplify_checks")
 SWITCHES = ("direct_first", "seed_per_query", "screen_at_clearance", "certify_relocation")
 
@@ -29,6 +30,37 @@ def node_parameters(path: str | Path | None = None) -> dict[str, Any]:
     if path is not None:
         values.update(node_section(path, NODE_NAME))
     return values
+
+
+@dataclass
+class PushParams:
+    """The push of a standing cylinder out of another object's grasp lanes (planning/push/; the push.* keys)."""
+
+    contact_height: float  # fraction of the pushed object's height at which the closed finger tips touch it
+    distances: tuple[float, ...]  # m the object is pushed, the candidates tried least first
+    directions: tuple[float, ...]  # rad from straight back (+x), turned away from the object the push clears for
+    sweep_margin: float  # m the pushed object's swept footprint keeps from every other object and the shelf's panels
+    contact_gap: float  # m between the finger tips and the object at the contact pose (the push starts there)
+    speed: float  # m/s of the tool along the push (quasi-static: the object stops when the hand does)
+
+    def __post_init__(self) -> None:
+        """Every setting checked once, with its name in the error (ValueError)."""
+        if not (isinstance(self.contact_height, (int, float)) and 0.0 < self.contact_height < 1.0):
+            raise ValueError(f"motion planner parameter push.contact_height must be in (0, 1), got "
+                             f"{self.contact_height!r}")
+        for k in ("sweep_margin", "contact_gap", "speed"):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 \
+                    or (v == 0 and k == "speed"):
+                raise ValueError(f"motion planner parameter push.{k} must be a finite number "
+                                 f"{'> 0' if k == 'speed' else '>= 0'}, got {v!r}")
+        d, a = np.asarray(self.distances, float), np.asarray(self.directions, float)
+        if d.ndim != 1 or not len(d) or not np.all(np.isfinite(d) & (d > 0)) or np.any(np.diff(d) <= 0):
+            raise ValueError(f"motion planner parameter push.distances must be positive metres, increasing, got "
+                             f"{self.distances!r}")
+        if a.ndim != 1 or not len(a) or not np.all(np.isfinite(a) & (a >= 0) & (a < math.pi / 2)):
+            raise ValueError(f"motion planner parameter push.directions must be angles in [0, pi/2) rad, got "
+                             f"{self.directions!r}")
 
 
 @dataclass
@@ -64,6 +96,7 @@ class PlannerParams:
     workspace_lo: tuple[float, ...]  # (x, y, z, yaw) box of the Cartesian planner
     workspace_hi: tuple[float, ...]
     stpik: StpikParams
+    push: PushParams
 
     def __post_init__(self) -> None:
         """Every setting checked once, with its name in the error (ValueError)."""
@@ -104,20 +137,24 @@ class PlannerParams:
     @classmethod
     def keys(cls) -> tuple[str, ...]:
         """The flat parameter names (ROS parameters): the planner's own and stpik.* for StpikParams."""
-        return tuple(f.name for f in fields(cls) if f.name != "stpik") + tuple(
-            f"stpik.{f.name}" for f in fields(StpikParams))
+        return tuple(f.name for f in fields(cls) if f.name not in ("stpik", "push")) + tuple(
+            f"stpik.{f.name}" for f in fields(StpikParams)) + tuple(f"{PUSH}{f.name}" for f in fields(PushParams))
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any]) -> PlannerParams:
         """From a flat mapping (ROS parameters) with every key of `keys()`; stpik.* keys go to StpikParams. Unknown
         or missing keys are an error (ValueError)."""
-        own = {f.name for f in fields(cls)} - {"stpik"}
+        own = {f.name for f in fields(cls)} - {"stpik", "push"}
         sp = {f.name for f in fields(StpikParams)}
         kw: dict[str, Any] = {}
         skw: dict[str, Any] = {}
+        pkw: dict[str, Any] = {}
         for k, v in data.items():
             if k.startswith("stpik.") and k[6:] in sp:
                 skw[k[6:]] = v
+            elif k.startswith(PUSH) and k[len(PUSH):] in {f.name for f in fields(PushParams)}:
+                pkw[k[len(PUSH):]] = tuple(float(x) for x in v) if isinstance(v, Sequence) and not isinstance(
+                    v, str) else v
             elif k in own:
                 # a list in YAML, a tuple or array('d') from ROS: one form, so the question's seed is the same
                 kw[k] = tuple(float(x) for x in v) if isinstance(v, Sequence) and not isinstance(v, str) else v
@@ -125,13 +162,14 @@ class PlannerParams:
                 raise ValueError(f"motion planner parameter {k!r} is unknown; known: {sorted(own)} and stpik.*")
         required = [f"stpik.{f.name}" for f in fields(StpikParams)  # the joint speed limits: the robot's if not given
                     if f.default is MISSING and f.default_factory is MISSING]
-        missing = [k for k in cls.keys() if k not in kw and k in own or k in required and k[6:] not in skw]
+        missing = [k for k in cls.keys() if k not in kw and k in own or k in required and k[6:] not in skw
+                   or k.startswith(PUSH) and k[len(PUSH):] not in pkw]
         if missing:
             raise ValueError(f"motion planner parameter(s) missing: {', '.join(missing)}")
         for k in WHOLE_NUMBERS:  # whole numbers only
             if isinstance(kw.get(k), float) and kw[k].is_integer():
                 kw[k] = int(kw[k])
-        return cls(**kw, stpik=StpikParams(**skw))
+        return cls(**kw, stpik=StpikParams(**skw), push=PushParams(**pkw))
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> PlannerParams:

@@ -7,7 +7,9 @@ space for the tool from its home pose to the pre-grasp, keeping the hand clear o
 tracking that path; a rejected path is re-sampled up to max_attempts times (`pick_lanes`); when certifying (a certify
 request, an execution's pick, or every answer with certify_relocation) the rest of the relocation must plan from the
 grasp (certify.py). 4) label g_U / g_O / g_T, planning time, attempts and the joint trajectory (100 Hz, Q convention,
-within Table 7); an uncertified feasible answer names the objects its motion comes near (context.near_objects).
+within Table 7); an uncertified feasible answer names the objects its motion comes near (context.near_objects); a
+feasible one names its action, the pick the object's pose takes (relocation_common.feasibility.pick_action:
+side_grasp standing, top_grasp lying flat).
 
 Budgets are work, not time: validity checks per RRT-Connect attempt (rrt_max_checks), IK steps per STPIK check
 (stpik.step_budget), attempts per query (max_attempts); so a question gets the same answer on an idle and on a
@@ -23,7 +25,7 @@ from typing import Iterable
 import numpy as np
 
 from relocation_common import robot_description as rd
-from relocation_common.feasibility import FeasibilityAnswer, Label
+from relocation_common.feasibility import FeasibilityAnswer, Label, pick_action
 from stpik_motion_planner.model.blockers import answer_blockers
 from stpik_motion_planner.model.collision import HandProxy, ObstacleSet, approach_skip
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, pose_pitch, side_grasp
@@ -37,8 +39,9 @@ Picked = tuple[Trajectory | None, int, str]  # (trajectory or None, attempts, me
 
 def feasibility(ctx: PlanningContext, object_id: str, removed: Iterable[str] = frozenset(),
                 timeout: float | None = None, certify: bool = False) -> FeasibilityAnswer:
-    """g_T / g_O with the home -> pre-grasp -> grasp trajectory (100 Hz) if a path passes the STPIK check (and, with
-    `certify` or certify_relocation, the rest of its relocation plans), g_U otherwise. Raises UnknownObjectError /
+    """g_T / g_O with the home -> pre-grasp -> grasp trajectory (100 Hz) and its action (side_grasp or top_grasp) if a
+    path passes the STPIK check (and, with `certify` or certify_relocation, the rest of its relocation plans), g_U
+    otherwise. Raises UnknownObjectError /
     ValueError / WorkspaceError on bad input, SafetyNetTimeout when the wall-clock `timeout` (default params.timeout)
     ran out before the work budget (no answer)."""
     t0 = time.perf_counter()
@@ -56,7 +59,8 @@ def feasibility(ctx: PlanningContext, object_id: str, removed: Iterable[str] = f
     if traj is None:  # with the lane blockers of the refused pick (docs/motion_planner.md, "Blockers")
         return FeasibilityAnswer(Label.UNFEASIBLE, dt, attempts, msg,
                                  blockers=answer_blockers(ctx, object_id, removed))
-    return FeasibilityAnswer(ok_label, dt, attempts, msg, traj, near=ctx.pick_near.get((object_id, removed)))
+    return FeasibilityAnswer(ok_label, dt, attempts, msg, traj, near=ctx.pick_near.get((object_id, removed)),
+                             action=pick_action(ctx.scenario.object(object_id).lying))
 
 
 def plan_pick(ctx: PlanningContext, object_id: str, removed: Iterable[str] = frozenset()) -> list[Segment]:

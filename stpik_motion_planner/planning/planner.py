@@ -6,6 +6,7 @@ the question's random generator) with the phases as its methods:
   certified (`certify`, the executed pick, every answer with certify_relocation) a pick counts only if the rest of
   its relocation plans (certify.py);
 - `plan_carry` (carry.py): lift, out of the shelf, in to the slot, release, retreat;
+- `push_feasibility` (push.py): a push of a standing cylinder out of another object's grasp lanes;
 - `plan_home` (home.py): back to the home configuration;
 - the scene: `set_scenario`, `update_object` (bottles as perceived), `slot_problems`, `lane_blockers`.
 """
@@ -21,9 +22,9 @@ from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet, FeasibilityAnswer
 from relocation_common.scenario import Scenario
 from stpik_motion_planner.model.blockers import lane_blockers
-from stpik_motion_planner.model.collision import Lying, ObstacleSet, upright_radius
+from stpik_motion_planner.model.collision import Lying, ObstacleSet
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, place_poses
-from stpik_motion_planner.planning import carry, home, pick
+from stpik_motion_planner.planning import carry, home, pick, push
 from stpik_motion_planner.planning.context import Placed, PlanningContext
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import Segment
@@ -55,6 +56,12 @@ class MotionPlanner(PlanningContext):
         only if the carry to slot len(removed), the retreat and the way home plan from its grasp (certify.py); the
         lane an execution's plan_pick takes. Errors as `feasibility`."""
         return pick.feasibility(self, object_id, removed, timeout, certify=True)
+
+    def push_feasibility(self, object_id: str, clear_for: str, removed: Iterable[str] = frozenset(),
+                         timeout: float | None = None) -> tuple[FeasibilityAnswer, push.PushPlan | None]:
+        """A push of `object_id` out of the grasp lanes of `clear_for` (push.py): g_O with the whole motion (home to
+        home) and its plan (the predicted end pose), or g_U with the reason and None. Errors as `feasibility`."""
+        return push.push_feasibility(self, object_id, clear_for, removed, timeout)
 
     def plan_pick(self, object_id: str, removed: Iterable[str] = frozenset()) -> list[Segment]:
         """Home -> pre-grasp -> grasp, then close the gripper (pick.plan_pick). PlanningError if unfeasible."""
@@ -101,7 +108,7 @@ class MotionPlanner(PlanningContext):
         sizes: dict[tuple[float, float], str] = {}
         for b in sc.objects:
             if not self.not_graspable(b.id):  # never carried (a lying bottle, a wide box...): never placed
-                sizes.setdefault((upright_radius(b), b.height), b.id)
+                sizes.setdefault((b.upright_radius, b.height), b.id)
         out = []
         for k, (x, y) in enumerate(sc.slots):
             where = f"slot {k} {(round(x, 3), round(y, 3))}"

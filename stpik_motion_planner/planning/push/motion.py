@@ -1,0 +1,172 @@
+"""The motion of a push and its answer (the package docstring, step 2): approach, push, retreat, way home, each
+tracked by STPIK with the closed hand; `plan_push` over the candidates of target.py, `push_feasibility` the answer."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+
+from relocation_common import robot_description as rd
+from relocation_common.feasibility import FeasibilityAnswer, Label
+from stpik_motion_planner.model.collision import (
+    ArmGeometry,
+    CollisionScene,
+    HandProxy,
+    ObstacleSet,
+    approach_skip,
+    closed_fingers,
+)
+from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, pose_matrix
+from stpik_motion_planner.model.push import contact_pose, moved
+from stpik_motion_planner.planning.context import PlanningContext
+from stpik_motion_planner.planning.home import joint_motion_clear, joint_valid, plan_joint, time_joint_path
+from stpik_motion_planner.planning.pick import cartesian_path
+from stpik_motion_planner.planning.push.target import candidates, end_xy, refusal
+from stpik_motion_planner.planning.results import QueryStats, Segment
+from stpik_motion_planner.planning.trajectory import Trajectory
+
+PALM = next(c for c in rd.CAPSULES if c.name == "palm")
+
+
+@dataclass
+class PushPlan:
+    """A planned push of `object_id` out of the lanes of `clear_for`: direction `yaw` (rad), `distance` (m), X's
+    predicted end pose `end` (x, y, z of its base in the scene's frame, the robot base's, as ObjectState), the lane
+    of C it opens, and the motion's segments (approach, push, retreat, home; the gripper shut before the first,
+    opened after the last)."""
+
+    object_id: str
+    clear_for: str
+    yaw: float
+    distance: float
+    end: tuple[float, float, float]
+    lane: str
+    segments: list[Segment]
+
+    def trajectory(self) -> Trajectory:
+        """The whole motion, home to home."""
+        t = self.segments[0].trajectory
+        for s in self.segments[1:]:
+            t = t.then(s.trajectory)
+        return t
+
+
+def contact_height(ctx: PlanningContext, object_id: str) -> float:
+    """m above the board where the leading finger tip touches: push.contact_height of the object's height, no lower
+    than the palm (below the tool axis by its radius) keeps STPIK's clearance and activation band over the board."""
+    o = ctx.scenario.object(object_id)
+    return max(ctx.params.push.contact_height * o.height, PALM.radius + ctx.ceiling_clearance)
+
+
+def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], yaw: float, distance: float,
+                deadline: float, stats: QueryStats) -> tuple[list[Segment], str]:
+    """The push's motion for one candidate (the package docstring, step 2): (segments, '') or ([], why not)."""
+    p, pp = ctx.params, ctx.params.push
+    o = ctx.scenario.object(object_id)
+    u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0])  # a horizontal hand: (x, y, z, yaw) poses
+    contact = np.array(contact_pose(o, ctx.scenario.shelf.top_z, yaw, 0.0, contact_height(ctx, object_id),
+                                    pp.contact_gap)[:4])
+    pre, end = contact - u * p.pre_grasp_distance, contact + u * (pp.contact_gap + distance)
+    try:
+        for pose, where in ((pre, "pre-contact pose"), (contact, "contact pose"), (end, "end of the push")):
+            check_pose(pose, f"push of {object_id}: {where}")
+    except WorkspaceError as e:
+        return [], str(e)
+    fingers = closed_fingers()
+    hand, arm = HandProxy(ctx.hand_margin, fingers=fingers), ArmGeometry(ctx.kin, fingers=fingers)
+    obs = ctx.scene.obstacles(removed)
+    skip = approach_skip(o)
+    if hand.collides(*pose_matrix(pre), obs) or not hand.path_clear([pre, contact], obs, p.resolution, skip):
+        return [], "no approach: the closed hand meets an object or a board before the contact pose"
+    without = ctx.scene.obstacles(removed | {object_id})
+    if not hand.path_clear([contact, end], without, p.resolution):
+        return [], "the closed hand meets another object or a board along the push"
+    ex, ey = end_xy(o.x, o.y, yaw, distance)
+    after = CollisionScene(moved(ctx.scenario, object_id, ex, ey), (), ctx.lying, ctx.gone)
+    after_obs = after.obstacles(removed)
+    rng = ctx.question_rng("push", object_id, removed, yaw, distance, repr(pp))
+    last = "no approach"
+    for attempt in range(p.max_attempts):
+        path = cartesian_path(ctx, ctx.home, pre, obs, hand, p.rrt_max_checks, deadline, stats, attempt == 0, rng)
+        if path is None:
+            last = "no approach: no Cartesian path to the pre-contact pose"
+            continue
+        r1 = ctx.track(rd.Q_HOME, path, obs, deadline, stats, arm=arm)
+        if not r1.ok:
+            last = f"no approach: STPIK rejected the path to the pre-contact pose: {r1.reason}"
+            continue
+        r2 = ctx.track(r1.q[-1], [pre, contact], obs, deadline, stats, skip, arm=arm, speed=p.stpik.approach_speed)
+        if not r2.ok:
+            return [], f"no approach: STPIK rejected the straight approach to the contact pose: {r2.reason}"
+        r3 = ctx.track(r2.q[-1], [contact, end], without, deadline, stats, arm=arm, speed=pp.speed, ramp=p.carry_ramp)
+        if not r3.ok:
+            return [], f"STPIK rejected the push: {r3.reason}"
+        r4 = ctx.track(r3.q[-1], [end, pre], after_obs, deadline, stats, skip, arm=arm, speed=p.stpik.approach_speed,
+                       ramp=p.carry_ramp)
+        if not r4.ok:
+            return [], f"STPIK rejected the retreat: {r4.reason}"
+        home = way_home(ctx, r4.q[-1], list(r1.q), after_obs, arm, deadline, rng)
+        if home is None:
+            return [], "no way home after the push"
+        return [Segment("approach", Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_contact").then(
+                    Trajectory.from_steps(r2.q, r2.qdot, r2.dt, "approach")).resample(), None),
+                Segment("push", Trajectory.from_steps(r3.q, r3.qdot, r3.dt, "push").resample(), None),
+                Segment("retreat", Trajectory.from_steps(r4.q, r4.qdot, r4.dt, "retreat").resample(), None),
+                Segment("home", home, "open")], ""
+    return [], last
+
+
+def way_home(ctx: PlanningContext, q: np.ndarray, out: list[np.ndarray], obs: ObstacleSet, arm: ArmGeometry,
+             deadline: float, rng: np.random.Generator | None) -> Trajectory | None:
+    """From the pre-contact pose home, the closed hand's capsules checked at STPIK's clearance: back along the tracked
+    way there (`out`, home first) when that is still clear with the object at its end pose (every other IK step),
+    else joint-space RRT-Connect."""
+    # no margin over STPIK's clearance: the palm ends the push at that bound over the board (the contact height)
+    if joint_motion_clear(ctx, q, out[-1], obs, 0.0, arm) and all(joint_valid(ctx, x, obs, arm) for x in out[::2]):
+        return time_joint_path([q] + out[::-1], 0.9 * rd.QDOT_MAX, ctx.params.stpik.dt).resample()
+    traj = plan_joint(ctx, q, rd.Q_HOME, obs, 4 * ctx.params.rrt_max_checks, deadline, 0.0, rng, arm)
+    return None if traj is None else traj.resample()
+
+
+def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Iterable[str], deadline: float,
+              stats: QueryStats) -> tuple[PushPlan | None, int, str]:
+    """(the push, or None; attempts; the message: how, or why not): the module docstring."""
+    removed = ctx.check_question(object_id, removed)
+    if clear_for == object_id:
+        raise ValueError(f"a push of {object_id!r} clears the lanes of another object, not its own")
+    ctx.check_question(clear_for, removed)
+    why = refusal(ctx, object_id, clear_for, removed)
+    if why:
+        return None, 0, why
+    cands, why = candidates(ctx, object_id, clear_for, removed)
+    if not cands:
+        return None, 0, why
+    last, n = "", 0
+    for yaw, d, lane in cands:
+        n += 1
+        segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats)
+        if segments:
+            o = ctx.scenario.object(object_id)
+            end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z)
+            return PushPlan(object_id, clear_for, yaw, d, end, lane, segments), n, (
+                f"push {object_id} {d * 1000:.0f} mm at yaw {yaw:+.2f}: opens {clear_for}'s lane {lane}")
+        last = f"yaw {yaw:+.2f}, {d * 1000:.0f} mm: {why}"
+    return None, n, f"no push of {object_id} plans ({n} candidates opening {clear_for}'s lanes); last: {last}"
+
+
+def push_feasibility(ctx: PlanningContext, object_id: str, clear_for: str, removed: Iterable[str] = frozenset(),
+                     timeout: float | None = None) -> tuple[FeasibilityAnswer, PushPlan | None]:
+    """The feasibility answer of a push (g_O: an action on an obstacle, never the retrieval; g_U with the reason)
+    with its plan. Errors as pick.feasibility."""
+    t0 = time.perf_counter()
+    budget = ctx.params.timeout if timeout is None or timeout <= 0 else float(timeout)
+    stats = QueryStats()
+    ctx.last_stats = stats
+    plan, attempts, msg = plan_push(ctx, object_id, clear_for, removed, t0 + budget, stats)
+    dt = time.perf_counter() - t0
+    if plan is None:
+        return FeasibilityAnswer(Label.UNFEASIBLE, dt, attempts, msg), None
+    return FeasibilityAnswer(Label.OBSTACLE, dt, attempts, msg, plan.trajectory(), near=None), plan

@@ -1,0 +1,87 @@
+"""Where a push takes the object (the package docstring, step 1): the candidates (direction, distance) whose end
+pose keeps the object on the shelf, sweeps clear of the others, and opens a lane of the object the push clears for
+(model/blockers.py's screen on the scene with the object moved); the refusals that hold whatever the direction."""
+from __future__ import annotations
+
+import math
+
+from relocation_common.scenario import Scenario
+from stpik_motion_planner.model.blockers import static_lanes
+from stpik_motion_planner.model.collision import CollisionScene
+from stpik_motion_planner.model.push import moved, sweep_problem
+from stpik_motion_planner.planning.context import PlanningContext
+
+
+def end_xy(x: float, y: float, yaw: float, distance: float) -> tuple[float, float]:
+    """Where the pushed object's axis ends: (x, y) translated by `distance` along `yaw` (quasi-static)."""
+    return x + distance * math.cos(yaw), y + distance * math.sin(yaw)
+
+
+class _Moved:
+    """The lane screen's view of the planner (blockers.Screened) with the pushed object at its end pose."""
+
+    def __init__(self, ctx: PlanningContext, scenario: Scenario) -> None:
+        self.params, self.hand, self.hand_margin, self.rrt = ctx.params, ctx.hand, ctx.hand_margin, ctx.rrt
+        self.scenario = scenario
+        self.scene = CollisionScene(scenario, (), ctx.lying, ctx.gone)
+        self.all_yaws, self.not_graspable = ctx.all_yaws, ctx.not_graspable
+        self.ceiling_clearance = ctx.ceiling_clearance
+
+
+def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: frozenset[str]) -> str:
+    """Why no push of `object_id` can clear the lanes of `clear_for` whatever its direction ('' if one may)."""
+    o = ctx.scenario.object(object_id)
+    if object_id in ctx.gone:
+        return f"no push: {object_id} left the shelf"
+    if o.lying or object_id in ctx.lying:
+        return f"no push: {object_id} lies (the push slides a standing cylinder)"
+    if o.shape != "cylinder" or o.conservative:
+        return f"no push: {object_id} is not a cylinder (the push slides a standing cylinder)"
+    if not any(object_id in bl for _, bl in static_lanes(ctx, clear_for)):
+        return f"no push: no grasp lane of {clear_for} is blocked by {object_id}"
+    return ""
+
+
+def opened_lane(ctx: PlanningContext, clear_for: str, removed: frozenset[str], object_id: str,
+                after: _Moved) -> str:
+    """The name of a lane of `clear_for` that `object_id` blocks where it stands and not at its end pose, with no
+    blocker the lane did not have ('' if none); a lane then clear with `removed` gone first."""
+    before = {g.yaw: bl for g, bl in static_lanes(ctx, clear_for)}
+    found = []
+    for g, bl in static_lanes(after, clear_for):
+        was = before.get(g.yaw)
+        if was is not None and object_id in was and object_id not in bl and bl - removed <= was - removed:
+            found.append((bool(bl - removed), f"yaw {g.yaw:+.2f}"))
+    return min(found)[1] if found else ""
+
+
+def candidates(ctx: PlanningContext, object_id: str, clear_for: str, removed: frozenset[str]
+               ) -> tuple[list[tuple[float, float, str]], str]:
+    """([(yaw, distance, lane opened)] in the order tried, least distance first; why none if empty)."""
+    p = ctx.params.push
+    o, c = ctx.scenario.object(object_id), ctx.scenario.object(clear_for)
+    side = o.y - c.y
+    signs = [1.0 if side > 0 else -1.0] if abs(side) > 1e-3 else [1.0, -1.0]
+    present = frozenset(b.id for b in ctx.scenario.objects) - removed - ctx.gone
+    out, why = [], {}
+    for d in p.distances:
+        for a in p.directions:
+            for sg in signs if a else [1.0]:
+                yaw = sg * a
+                end = end_xy(o.x, o.y, yaw, d)
+                bad = sweep_problem(ctx.scene, o, end, present, p.sweep_margin)
+                if bad:
+                    why[(yaw, d)] = bad
+                    continue
+                lane = opened_lane(ctx, clear_for, removed, object_id, _Moved(ctx, moved(ctx.scenario, object_id,
+                                                                                         *end)))
+                if not lane:
+                    why[(yaw, d)] = f"{clear_for}'s lanes still blocked by {object_id}"
+                    continue
+                out.append((yaw, d, lane))
+    if out:
+        return out, ""
+    kinds = sorted(set(why.values()))
+    return [], f"no push direction clears {clear_for}'s lanes: {'; '.join(kinds[:3])}"
+
+

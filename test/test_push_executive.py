@@ -1,0 +1,263 @@
+"""The task planner's side of a push (qtree_task_planner.executive.push, the closed loop, retrieval.execute and the
+ROS clients) against a fake motion planner.
+
+The fake shelf (test_closed_loop.LyingBlocks: relocations, perception and feasibility from its lanes, with the lane
+screen) also answers the push question and executes a push: the pushed object slides 10 cm along y, out of the
+lanes of the object it clears (that object's lanes lose it), unless `ineffective`. Its
+lanes make the proof's blocking cycle "b needs T moved": T's only lane holds b and b's only lane holds T."""
+from types import SimpleNamespace
+
+import pytest
+from test_closed_loop import OBJECTS, SCENARIO, LyingBlocks
+
+from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor, remaining_problem, scene_from_scenario
+from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, candidates
+from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, replan
+from qtree_task_planner.executive.retrieval import execute, training_outcome
+from qtree_task_planner.executive.settings import pushes_on
+from qtree_task_planner.oracles import CachedOracle
+from qtree_task_planner.search.exact import ExactResult, blocking_needs
+from relocation_common.config import ParameterError
+
+CYCLE = {"T": [{"b"}], "b": [{"T"}]}  # "b needs T moved"
+WEIGHTS = {o["id"]: o.get("weight", 1.0) for o in OBJECTS}
+SLIDE = 0.10  # m along y
+
+
+class PushShelf(LyingBlocks):
+    """LyingBlocks that answers and executes pushes (module doc)."""
+
+    def __init__(self, lanes=None, refuse=(), ineffective=False):
+        super().__init__(lanes={k: [set(b) for b in v] for k, v in (lanes or CYCLE).items()})
+        self.refuse, self.ineffective = set(refuse), ineffective
+        self.push_questions, self.pushes = [], []
+
+    def push(self, obj, clear_for, removed):
+        self.push_questions.append((obj, clear_for, frozenset(removed)))
+        if obj in self.refuse:
+            return PushAnswer(False, f"no push: {obj} is against the back wall", None)
+        o = self.scene[obj]
+        return PushAnswer(True, "push planned", (o.x, o.y + SLIDE))
+
+    def do_push(self, obj, clear_for, removed):
+        self.pushes.append((obj, clear_for, tuple(removed)))
+        o = self.scene[obj]
+        self.put(obj, o.x, o.y + SLIDE, o.z, o.tilt)
+        if not self.ineffective:
+            self.lanes[clear_for] = [b - {obj} for b in self.lanes.get(clear_for, [set()])]
+        return True, "pushed"
+
+
+def actions(shelf, max_pushes=2, factor=2.0):
+    return PushActions(shelf.push, shelf.do_push, lambda: factor, max_pushes)
+
+
+def run(shelf, sequence, max_pushes=2, closed_loop=True):
+    return execute(SCENARIO, sequence, scene_from_scenario(SCENARIO), shelf.relocate, shelf.perceive,
+                   CachedOracle(shelf), closed_loop=closed_loop, cancelled=lambda: False,
+                   pushes=actions(shelf, max_pushes))
+
+
+def test_the_proof_names_its_blocking_pairs_as_data():
+    """exact.blocking_needs is the cycle the "no sequence" line names ("b needs T moved"), and replan.blocking_pairs
+    finds it over the re-plan's cache."""
+    lanes = {"T": [(frozenset(), (frozenset({"b"}),))], "b": [(frozenset(), (frozenset({"T"}),))]}
+    assert blocking_needs("T", lanes) == (("b", ("T",)),)
+    assert blocking_needs("T", {"T": [(frozenset(), (frozenset({"b"}),))]}) == ()  # b can leave: no cycle
+    shelf = PushShelf()
+    cache = GeometryCache(shelf)
+    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
+    answer = replan(rp, (), cache)
+    assert isinstance(answer, str) and "b needs T moved" in answer, answer
+    assert blocking_pairs(rp, cache) == (("b", "T"),)
+
+
+def test_candidates_are_both_directions_cheapest_first():
+    assert candidates([("b", "T")], WEIGHTS, 2.0) == [(1.0, "b", "T"), (2.0, "T", "b")]
+    assert candidates([("T", "a"), ("b", "T")], WEIGHTS, 1.0) == [(0.3, "a", "T"), (0.5, "b", "T"), (1.0, "T", "a"),
+                                                                   (1.0, "T", "b")]
+
+
+def test_no_sequence_at_the_start_leads_to_one_push_then_a_re_plan_that_succeeds():
+    """The first plan proves no sequence ("b needs T moved"): before, the goal ended there. Now the closed loop asks
+    for a push of b clearing T's lanes, executes it, perceives b where it ended and re-plans: T alone."""
+    shelf = PushShelf()
+    out = run(shelf, [])
+    assert out.success, out.message
+    assert shelf.push_questions == [("b", "T", frozenset())] and shelf.pushes == [("b", "T", ())]
+    assert [o for o, _ in shelf.relocations] == ["T"]
+    (p,) = out.pushes
+    assert p.line() == "pushed b out of T's lanes (predicted end (0.550, 0.100)); re-planned"
+    assert p.cost == pytest.approx(0.5 * 2.0) and p.seen == pytest.approx((0.55, 0.10))
+    assert [r.reason for r in out.replans] == ["the first plan found no sequence",
+                                               "pushed b out of T's lanes (predicted end (0.550, 0.100))"]
+    assert out.replans[0].sequence is None and "b needs T moved" in out.replans[0].failure
+    assert out.replans[1].sequence == ("T",)
+    assert out.to_dict()["pushes"][0]["line"] == p.line()
+
+
+def test_no_sequence_in_a_re_plan_leads_to_a_push():
+    """The closed loop's re-plan after a failed relocation (b blocked by T) proves no sequence: a push, then T."""
+    shelf = PushShelf()
+    out = run(shelf, ["b", "T"])
+    assert out.success, out.message
+    assert [o for o, _ in shelf.relocations] == ["b", "T"] and not out.steps[0].ok
+    assert shelf.pushes == [("b", "T", ())]
+    assert out.replans[0].reason.startswith("relocating b failed") and out.replans[0].sequence is None
+
+
+def test_a_refused_push_of_x_leads_to_a_push_of_t():
+    shelf = PushShelf(refuse={"b"})
+    out = run(shelf, [])
+    assert out.success, out.message
+    assert [q[:2] for q in shelf.push_questions] == [("b", "T"), ("T", "b")]
+    assert [p[:2] for p in shelf.pushes] == [("T", "b")]
+    assert [o for o, _ in shelf.relocations] == ["b", "T"]  # T out of b's lanes: b, then T
+    assert out.pushes[0].refused == ("b out of T's lanes (no push: b is against the back wall)",)
+
+
+def test_max_pushes_bounds_the_pushes_and_the_end_says_why():
+    """Pushes that open nothing: at most max_pushes are executed; the "no sequence" end names them and why no
+    further one."""
+    shelf = PushShelf(ineffective=True)
+    out = run(shelf, [], max_pushes=2)
+    assert not out.success and len(shelf.pushes) == 2 and len(out.pushes) == 2
+    assert "no further push: max_pushes (2) spent" in out.message, out.message
+    assert "pushes executed: pushed b out of T's lanes" in out.message
+    assert out.message.startswith("no sequence remains: ")
+    none = run(PushShelf(), [], max_pushes=0)
+    assert not none.success and none.message.startswith("the target cannot be retrieved: ")
+    assert "no push: pushes are off (max_pushes 0)" in none.message
+
+
+def test_every_push_refused_is_said_in_the_end():
+    shelf = PushShelf(refuse={"b", "T"})
+    out = run(shelf, [])
+    assert not out.success and not shelf.pushes
+    assert "no push: every push refused: b out of T's lanes (no push: b is against" in out.message
+    assert "T out of b's lanes (no push: T is against the back wall)" in out.message
+
+
+def test_an_open_loop_run_does_not_push():
+    shelf = PushShelf()
+    out = run(shelf, ["b", "T"], closed_loop=False)
+    assert not out.success and not shelf.push_questions and not shelf.pushes
+    assert not pushes_on({"closed_loop": False, "max_pushes": 2}.get)
+    assert pushes_on({"closed_loop": True, "max_pushes": 2}.get)
+    assert not pushes_on({"closed_loop": True, "max_pushes": 0}.get)
+    none = ExactResult(None, None, 3, 1, "no sequence: blocking cycle")
+    trained = SimpleNamespace(cancelled=False, found=False)
+    assert training_outcome(trained, none, execute=True, push=False) == (
+        False, "the target cannot be retrieved: no sequence: blocking cycle")
+    assert training_outcome(trained, none, execute=True, push=True) is None  # the closed loop pushes
+
+
+def test_a_failed_push_that_left_the_object_is_not_asked_again():
+    shelf = PushShelf()
+    shelf.do_push = lambda obj, clear_for, removed: (shelf.pushes.append((obj, clear_for)), (False, "no contact"))[1]
+    out = run(shelf, [], max_pushes=3)
+    assert not out.success and [p[:2] for p in shelf.pushes] == [("b", "T"), ("T", "b")]
+    assert "b out of T's lanes (failed before)" in out.message and "T out of b's lanes (failed before)" in out.message
+    assert out.pushes[0].line() == "push of b out of T's lanes failed: no contact; re-planned"
+
+
+def test_a_missing_push_factor_is_said():
+    shelf = PushShelf()
+
+    def missing():
+        raise ParameterError("action_cost.push is not a parameter of this task planner")
+    pusher = Pusher(PushActions(shelf.push, shelf.do_push, missing, 2), lambda rp: [("b", "T")])
+    loop = ClosedLoopExecutor(SCENARIO, shelf.relocate, shelf.perceive,
+                              lambda rp, banned: replan(rp, banned, GeometryCache(shelf)), pusher=pusher)
+    out = loop.run([])
+    assert not out.success and "no push: no push factor: action_cost.push is not a parameter" in out.message
+
+
+# ------------------------------------------------------------------------------------------------ ROS clients
+def test_service_oracle_asks_a_push_and_refuses_an_answer_that_is_not_one(monkeypatch):
+    from geometry_msgs.msg import Pose
+    from qtree_relocation_msgs.srv import PlanFeasibility
+
+    from qtree_task_planner.ros_clients import ServiceOracle
+    asked = []
+
+    def answer(action):
+        def call(self, req, what):
+            asked.append(req)
+            pose = Pose()
+            pose.position.x, pose.position.y = 0.61, 0.12
+            return PlanFeasibility.Response(ok=True, label=1, message="ok", action=action, end_pose=pose)
+        return call
+    oracle = ServiceOracle(SimpleNamespace(srv_name="/mp/plan_feasibility"), 5.0, 1.0)
+    monkeypatch.setattr(ServiceOracle, "_call", answer("push"))
+    assert oracle.push("b", "T", frozenset({"a"})) == PushAnswer(True, "ok", (0.61, 0.12))
+    assert (asked[0].object_id, asked[0].action, asked[0].clear_for, list(asked[0].removed_ids)) == \
+        ("b", "push", "T", ["a"])
+    monkeypatch.setattr(ServiceOracle, "_call", answer("side_grasp"))  # a motion planner that does not push
+    got = oracle.push("b", "T", frozenset())
+    assert not got.feasible and "answered a side_grasp, not a push" in got.message
+
+    def refused(self, req, what):
+        raise ValueError("motion planner refused the query for the push of 'b': unknown action")
+    monkeypatch.setattr(ServiceOracle, "_call", refused)
+    assert oracle.push("b", "T", frozenset()) == PushAnswer(
+        False, "motion planner refused the query for the push of 'b': unknown action", None)
+
+
+def test_the_relocator_sends_the_push_as_a_relocate_object_goal():
+    from test_closed_loop_wiring import _Future
+
+    from qtree_task_planner.ros_clients import Relocator
+    goals = []
+
+    class Planner:
+        def wait_for_server(self, timeout_sec):
+            return True
+
+        def server_is_ready(self):
+            return True
+
+        def send_goal_async(self, goal, feedback_callback):
+            goals.append(goal)
+            result = _Future(SimpleNamespace(result=SimpleNamespace(success=True, message="pushed")))
+            return _Future(SimpleNamespace(accepted=True, get_result_async=lambda: result))
+    relocator = Relocator(Planner(), server_wait=1.0, limit=10.0, silence=5.0, ok=lambda: True)
+    assert relocator.relocate("b", ["a"], cancelled=lambda: False, action="push", clear_for="T") == (True, "pushed")
+    assert relocator.relocate("c", [], cancelled=lambda: False) == (True, "pushed")
+    assert [(g.object_id, list(g.removed_ids), g.action, g.clear_for) for g in goals] == [
+        ("b", ["a"], "push", "T"), ("c", [], "", "")]
+
+
+def test_the_demo_report_lists_each_push_and_a_first_plan_without_sequence_executes_nothing_else():
+    """report.json's `pushes` (the execution's) and the summary's lines; chosen_sequence of no sequence at all."""
+    from qtree_task_planner.executive.retrieval import chosen_sequence
+    from relocation_app import run_report
+    out = run(PushShelf(), [])
+    report = {"final_scene": {}, "learned_sequence": None, "disturbances": [], "replans": out.to_dict()["replans"],
+              "pushes": out.to_dict()["pushes"], "respawns": [], "end": {"kind": "success", "exit_code": 0},
+              "success": True, "message": out.message, "wall_time_s": 1.0, "out": "out"}
+    lines = run_report.summary(report)
+    assert "pushed b out of T's lanes (predicted end (0.550, 0.100)); re-planned" in lines
+    assert "re-plan: pushed b out of T's lanes (predicted end (0.550, 0.100)) -> T (0.00)" in lines, lines
+    assert out.message == "target T retrieved after 0 relocations, 1 push and 2 re-plans"
+    assert chosen_sequence(None, None, None, None, execute_optimum=False, execute_learned=False) == ([], "")
+
+
+def test_a_push_done_without_effect_is_not_asked_again():
+    """The motion planner says "pushed" and the next scene shows b where it was: that push is not asked again (the
+    loop went on to T's push instead of spending max_pushes on the same one)."""
+    shelf = PushShelf(ineffective=True)
+    shelf.do_push = lambda obj, clear_for, removed: (shelf.pushes.append((obj, clear_for)), (True, "pushed"))[1]
+    out = run(shelf, [], max_pushes=3)
+    assert not out.success and shelf.pushes == [("b", "T"), ("T", "b")], shelf.pushes
+
+
+def test_a_push_stopped_without_the_motion_planner_ends_the_run():
+    """As a relocation's: a push that stopped with no motion planner to recover with (its words, STOPPED) ends the
+    run with that reason instead of re-planning over an arm in an unknown state."""
+    shelf = PushShelf()
+    shelf.do_push = lambda obj, clear_for, removed: (False, "the motion planner went away (relocate action server "
+                                                            "gone)")
+    out = run(shelf, [])
+    assert not out.success and out.message == "pushing 'b' failed: the motion planner went away (relocate action " \
+        "server gone)", out.message

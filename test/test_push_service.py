@@ -1,0 +1,111 @@
+"""The push through the motion planner's service (ROS-free; the node only translates messages): the feasibility
+answer of action "push" (its end pose, its refusals with reasons) and the RelocateObject action "push" carried out
+on a streamed arm (test_streaming.FakeLink), after which the planner models the pushed object at its end pose."""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+import pytest
+from push_layouts import beside_layout
+from test_streaming import FakeLink, arm
+
+from relocation_common import robot_description as rd
+from relocation_common.feasibility import Label
+from stpik_motion_planner.execution.goal_check import OUTCOME_SETTLE
+from stpik_motion_planner.execution.relocation import PUSH_PHASES
+from stpik_motion_planner.planning.params import PlannerParams
+from stpik_motion_planner.service import MotionPlannerService
+
+PARAMS = dataclasses.replace(PlannerParams.load(), timeout=300.0, carry_timeout=300.0)
+
+
+@pytest.fixture(scope="module")
+def service():
+    return MotionPlannerService(beside_layout(0), PARAMS)
+
+
+def test_a_push_answer_names_the_end_pose_and_a_refusal_its_reason(service):
+    ans, plan = service.push_feasibility("X", [], "T")
+    x = service.planner.scenario.object("X")
+    assert ans.label == Label.OBSTACLE and plan is not None and ans.trajectory is not None
+    assert plan.end[2] == service.base.shelf.top_z and plan.distance > 0
+    assert plan.end[0] == pytest.approx(x.x + plan.distance * math.cos(plan.yaw))
+    lanes = service.planner.lane_blockers([])
+    far = next(i for i, ls in lanes.items() if i not in ("X", "T") and ls and not any("X" in b.objects for b in ls))
+    ans, plan = service.push_feasibility("X", [], far)
+    assert ans.label == Label.UNFEASIBLE and plan is None
+    assert f"no grasp lane of {far} is blocked by X" in ans.message
+    with pytest.raises(ValueError, match="another object"):
+        service.push_feasibility("X", [], "X")
+    with pytest.raises(ValueError, match="clear_for"):
+        service.push_feasibility("X", [], "")
+
+
+def test_a_push_goal_moves_the_object_in_the_planners_scene_and_checks_the_outcome(service):
+    _, plan = service.push_feasibility("X", [], "T")
+    start = {b.id: b for b in service.bottles.values()}
+    z = service.base.shelf.top_z
+    service.update_scene([dataclasses.replace(b, support_z=z) for b in start.values()])
+    link = FakeLink(kinova=True)
+    a, feedback, _ = arm(link)
+    posted = []
+
+    modelled = []
+
+    def perceive():  # the scene after the motion (OUTCOME_SETTLE later): X where the push predicted, 3 mm off
+        posted.append(time.monotonic())
+        o = service.planner.scenario.object("X")
+        modelled.append((o.x, o.y))
+        if posted[-1] - posted[0] > 2 * OUTCOME_SETTLE:
+            service.update_scene([dataclasses.replace(b, x=plan.end[0] + 0.003, y=plan.end[1], support_z=z)
+                                  if b.id == "X" else dataclasses.replace(b, support_z=z) for b in start.values()])
+        return True
+
+    assert service.planner.scenario.object("X").x == start["X"].x
+    out = service.push(a, "X", [], "T", ok=perceive)
+    assert out.status == "succeeded", out.message
+    assert "pushed X" in out.message
+    assert [p for p, _ in feedback if p in PUSH_PHASES and p != "recover_push"][0] == "plan_push"
+    assert {"shut", "approach_push", "push", "retreat_push", "home_push", "open", "pushed"} <= {p for p, _ in feedback}
+    assert modelled[0] == pytest.approx(plan.end[:2])  # after the push, before a scene: modelled at its end pose
+    assert service.planner.scenario.object("X").x == pytest.approx(plan.end[0] + 0.003)  # the scene's, seen after
+
+
+def test_a_push_whose_object_ends_elsewhere_fails_its_outcome(service):
+    _, plan = service.push_feasibility("X", [], "T")
+    z = service.base.shelf.top_z
+    start = {b.id: b for b in service.bottles.values()}
+    link = FakeLink(kinova=True)
+    a, _, _ = arm(link)
+    posted = []
+
+    def perceive():  # X did not move at all
+        posted.append(time.monotonic())
+        if posted[-1] - posted[0] > 2 * OUTCOME_SETTLE:
+            service.update_scene([dataclasses.replace(b, support_z=z) for b in start.values()])
+        return True
+
+    out = service.push(a, "X", [], "T", ok=perceive)
+    assert out.status == "aborted" and "from its predicted end pose" in out.message, out.message
+
+
+def test_a_lying_object_is_not_pushed_and_says_why():
+    from relocation_common.paths import config_file
+    from relocation_common.scenario import load_scenario
+
+    s = MotionPlannerService(load_scenario(config_file("scenarios/headroom_lying_6.yaml")), PARAMS)
+    ans, plan = s.push_feasibility("o1", [], "T")
+    assert ans.label == Label.UNFEASIBLE and plan is None and "o1 lies" in ans.message, ans.message
+
+
+def test_a_push_cancelled_during_the_push_goes_back_and_opens_the_gripper(service):
+    link = FakeLink(kinova=True)
+    a, feedback, _ = arm(link, cancelled=lambda: "push" in link.paths)  # cancelled once the push starts
+    out = service.push(a, "X", [], "T")
+    assert out.status == "canceled", out.message
+    assert "recovered: arm back home along the push of X, gripper open" in out.message
+    assert link.paths[:2] == ["approach_push", "push"] and link.paths[2:] == ["recover_push"] * 2
+    assert float(np.max(np.abs(link.q - rd.Q_HOME))) < 0.02
