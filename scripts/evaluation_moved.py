@@ -60,8 +60,9 @@ def moved(old: str, new: str) -> str:
                  "Complete trees: the paper's scenes against ours"):
         ra, rb = rows(a.get(name, [])), rows(b.get(name, []))
         changed = [(k, ra.get(k), v) for k, v in rb.items() if ra.get(k) != v]
-        lines = [ln for ln in b.get(name, []) if ln.startswith("- ")]
-        changed += [(ln, None, ln) for ln in lines if ln not in a.get(name, [])]
+        before = {ln.split(":")[0]: ln for ln in a.get(name, []) if ln.startswith("- ")}  # a finding by its claim
+        changed += [(ln, before.get(ln.split(":")[0]), ln) for ln in b.get(name, [])
+                    if ln.startswith("- ") and ln not in a.get(name, [])]
         md.append(f"\n**{name}**: {len(changed)} row(s) changed" + (":" if changed else ""))
         for _, before, after in changed:
             md.append(f"- before: {before or '(none)'}\n  after:  {after}")
