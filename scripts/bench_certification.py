@@ -265,6 +265,7 @@ def main() -> None:
     if a.latency:
         print(f"# {time.strftime('%Y-%m-%d %H:%M')}, load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
         print(latency(a.latency, a.rounds))
+        print(f"# {time.strftime('%Y-%m-%d %H:%M')}, load at the end {os.getloadavg()[0]:.1f}")
         return
     if a.summary:
         print(summary([json.loads(x) for x in Path(a.summary).read_text().splitlines() if x.strip()]))

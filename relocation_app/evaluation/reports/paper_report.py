@@ -150,8 +150,7 @@ paper N`, `paper_size.py`; logs in out/paper_search/). Only bottle positions (an
 shelf, bottle size, hand and planner parameters as every other scene. Layouts (a column of up to three bottles
 straight in front of the target plus bottles at random free spots, or the smaller paper scene with bottles added)
 are screened with the planner's grasp-lane screen (`stpik_motion_planner.model.blockers`); promising ones are filled
-with
-the real planner (stopped once the tree passes 2x the paper's) and hill-climbed with it, one bottle moved per step;
+with the real planner (stopped once the tree passes 2x the paper's) and hill-climbed with it, one bottle moved per step;
 weights are then drawn until one target leaf has the least weight (Eq. 8), and perception must locate every bottle
 in the first camera frame (arm at home). With `--strict` the climb keeps only valid scenes: one optimum, every
 bottle seen, and every relocation of the optimum planned six times in a row (OMPL's random stream is per process, so
@@ -178,9 +177,12 @@ fresh fill gives 353 edges / 24 target leaves. A five-obstacle layout with exact
 bottles weigh the same, as two removal chains of 2 and 3 bottles in front of the target would (exactly 83 edges, 10
 leaves); the paper's 84 / 10 / one optimum needs an optimum that Eq. 8 alone does not single out.
 These searches ran with 3 approach yaws up to 0.35 rad. With the default grasp set (5 yaws up to 0.5 rad and a
-second tier), honest lanes and certified relocations (docs/motion_planner.md) the same layouts give the trees of the
-table above: more lanes open, paper3_15 grows past 2x the paper's edges and paper2_10 gains a lighter optimum (o6 o3
-T). A new search with this grasp set (`scenes paper N --resume --strict`) has not been run.
+second tier), honest lanes and certified relocations (docs/motion_planner.md) more lanes open: the first paper1_5
+grew to 129 edges / 40 target leaves, paper2_10 to 3,523 / 616 with a lighter optimum (o6 o3 T), paper3_15 past 2x
+the paper's edges (the table above). paper1_5 was then searched again with the default grasp set (`scenes paper 5
+--resume --strict`): o4 moved 8 mm back and 7 mm to the right gives the table's tree, the same optimum o1 o3 T. A
+fresh 35-minute `scenes paper 10 --strict` search with it found no match (closest 284 edges / 19 target leaves), so
+paper2_10 and paper3_15 keep their layouts; paper3_15 was not searched again (docs/bench/evaluation_2026-12-05.md).
 """
 
 
