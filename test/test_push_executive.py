@@ -11,7 +11,7 @@ import pytest
 from test_closed_loop import OBJECTS, SCENARIO, LyingBlocks
 
 from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor, remaining_problem, scene_from_scenario
-from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, candidates
+from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, candidates, pick_order
 from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, replan
 from qtree_task_planner.executive.retrieval import execute, training_outcome
 from qtree_task_planner.executive.settings import pushes_on
@@ -110,10 +110,12 @@ def test_a_refused_push_of_x_leads_to_a_push_of_t():
     shelf = PushShelf(refuse={"b"})
     out = run(shelf, [])
     assert out.success, out.message
-    assert [q[:2] for q in shelf.push_questions] == [("b", "T"), ("T", "b")]
+    free = frozenset("acde")  # the picks alone take them away first: b's push is asked with them gone too
+    assert shelf.push_questions == [("b", "T", frozenset()), ("b", "T", free), ("T", "b", frozenset())]
     assert [p[:2] for p in shelf.pushes] == [("T", "b")]
     assert [o for o, _ in shelf.relocations] == ["b", "T"]  # T out of b's lanes: b, then T
-    assert out.pushes[0].refused == ("b out of T's lanes (no push: b is against the back wall)",)
+    assert out.pushes[0].refused == ("b out of T's lanes (no push: b is against the back wall; with a, c, d, e gone: "
+                                     "no push: b is against the back wall)",)
 
 
 def test_max_pushes_bounds_the_pushes_and_the_end_says_why():
@@ -135,7 +137,8 @@ def test_every_push_refused_is_said_in_the_end():
     out = run(shelf, [])
     assert not out.success and not shelf.pushes
     assert "no push: every push refused: b out of T's lanes (no push: b is against" in out.message
-    assert "T out of b's lanes (no push: T is against the back wall)" in out.message
+    assert "T out of b's lanes (no push: T is against the back wall; with a, c, d, e gone: no push: T is against the " \
+        "back wall)" in out.message
 
 
 def test_an_open_loop_run_does_not_push():
@@ -166,7 +169,8 @@ def test_a_missing_push_factor_is_said():
 
     def missing():
         raise ParameterError("action_cost.push is not a parameter of this task planner")
-    pusher = Pusher(PushActions(shelf.push, shelf.do_push, missing, 2), lambda rp: [("b", "T")])
+    pusher = Pusher(PushActions(shelf.push, shelf.do_push, missing, 2),
+                    PushProof(lambda rp: [("b", "T")], lambda rp: (), lambda rp, banned, o, s: True))
     loop = ClosedLoopExecutor(SCENARIO, shelf.relocate, shelf.perceive,
                               lambda rp, banned: replan(rp, banned, GeometryCache(shelf)), pusher=pusher)
     out = loop.run([])
