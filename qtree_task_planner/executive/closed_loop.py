@@ -445,8 +445,9 @@ class ClosedLoopExecutor:
     bottom_seen False: perception does not see the bottom shelf (verify_relocation); a relocated bottle that is
     not seen counts as relocated. perceive() raising ValueError, TimeoutError or RuntimeError (no scene) ends the
     run with its message. pusher (executive.push.Pusher; None: no pushes): when a re-plan proves that no sequence
-    remains, the cheapest feasible push out of the proof's blocking cycle is executed, then the next scene is
-    perceived and the rest re-planned from it (on_push(record) after each); an empty `sequence` to `run` (the first
+    remains, the cheapest feasible push out of the proof's blocking cycle is executed (after the relocations of the
+    objects it needs gone first, each verified), then the next scene is perceived and the rest re-planned from it
+    (on_push(record) after each); an empty `sequence` to `run` (the first
     plan found none) starts with that re-plan.
     """
 
