@@ -129,9 +129,10 @@ PREP_CYCLE = {"T": [{"a", "b"}], "b": [{"T"}]}  # "b needs T moved"; a (and c, d
 def test_a_push_that_needs_a_free_object_gone_relocates_it_first():
     """The demo's failure on a perturbed layout: the proof is "lane {a, b}: b needs T moved" with a still on the
     shelf, and the push of b plans only with a gone. Before, the push was asked with nothing removed and every push
-    was refused. Now it is asked again with the objects the picks alone take away first gone (a, c, d, e), shrunk
-    to those it needs (heaviest first: e, a, c, d), a relocated (verified), b pushed, T relocated."""
-    shelf = PushShelf(lanes=PREP_CYCLE, needs_gone={"b": {"a"}})
+    was refused (T's push too: it needs a gone as well). Now it is asked again with the objects the picks alone take
+    away first gone (a, c, d, e), shrunk to those it needs (heaviest first: e, a, c, d), a relocated (verified), b
+    pushed, T relocated."""
+    shelf = PushShelf(lanes=PREP_CYCLE, needs_gone={"b": {"a"}, "T": {"a"}})
     out = run(shelf, [])
     assert out.success, out.message
     f = frozenset
