@@ -17,7 +17,7 @@ from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, r
 from qtree_task_planner.executive.retrieval import execute, training_outcome
 from qtree_task_planner.executive.settings import pushes_on
 from qtree_task_planner.oracles import CachedOracle
-from qtree_task_planner.search.exact import ExactResult, blocking_needs
+from qtree_task_planner.search.exact import ExactResult, blocking_needs, can_leave
 from relocation_common.config import ParameterError
 
 CYCLE = {"T": [{"b"}], "b": [{"T"}]}  # "b needs T moved"
@@ -69,6 +69,8 @@ def test_the_proof_names_its_blocking_pairs_as_data():
     lanes = {"T": [(frozenset(), (frozenset({"b"}),))], "b": [(frozenset(), (frozenset({"T"}),))]}
     assert blocking_needs("T", lanes) == (("b", ("T",)),)
     assert blocking_needs("T", {"T": [(frozenset(), (frozenset({"b"}),))]}) == ()  # b can leave: no cycle
+    with_a = dict(lanes, T=[(frozenset(), (frozenset({"a", "b"}),))], a=[(frozenset(), (frozenset({"c"}),))])
+    assert can_leave("T", with_a) == ("a", "c") and can_leave("T", lanes) == () and can_leave("x", lanes) == ()
     shelf = PushShelf()
     cache = GeometryCache(shelf)
     rp = remaining_problem(SCENARIO, shelf.perceive(), ())
