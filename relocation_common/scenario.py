@@ -24,7 +24,7 @@ from typing import Any, Iterable, Iterator, Mapping
 
 from .config import ConfigError, read_yaml, short
 from .paths import default_scenario, resolve_scenario
-from .shelf_object import SHAPES, Footprint, ShelfObject, estimated_weight, half_turn, unlisted_density
+from .shelf_object import DECIMALS, SHAPES, Footprint, ShelfObject, estimated_weight, half_turn, unlisted_density
 
 __all__ = ["PALETTE", "TARGET_COLOR", "TARGET_RGB", "Marker", "Scenario", "ScenarioError", "Shelf", "ShelfObject",
            "UnknownObjectError", "load_scenario", "parse_scenario"]
@@ -493,7 +493,7 @@ def _shape(o: Mapping[str, Any], where: str, size: tuple[float, float]
         sx, sy, sz = _vec3(o, "size", where)
         if min(sx, sy, sz) <= 0:
             raise ScenarioError(f"{where}: size must be three positive numbers, got {[sx, sy, sz]}")
-        return 0.0, sz, "box", (sx, sy, sz), half_turn(yaw), False
+        return 0.0, sz, "box", (sx, sy, sz), _turned(yaw), False
     if "size" in o:
         raise ScenarioError(f"{where}: a cylinder has radius and height, not size (or give `shape: box`)")
     if "yaw" in o and not lying:
@@ -501,7 +501,13 @@ def _shape(o: Mapping[str, Any], where: str, size: tuple[float, float]
     radius, height = _num(o, "radius", where, size[0]), _num(o, "height", where, size[1])
     if radius <= 0 or height <= 0:
         raise ScenarioError(f"{where}: radius and height must be positive")
-    return radius, height, "cylinder", (0.0, 0.0, 0.0), half_turn(yaw) if lying else 0.0, lying
+    return radius, height, "cylinder", (0.0, 0.0, 0.0), _turned(yaw) if lying else 0.0, lying
+
+
+def _turned(yaw: float) -> float:
+    """A file's yaw in (-pi/2, pi/2], rounded as a measured one is (DECIMALS): a box at 1.601 rad survives the
+    message round trip (-1.540592654 both ways)."""
+    return round(half_turn(yaw), DECIMALS)
 
 
 def _slots(raw: Any, shelf: Shelf, n: int) -> tuple[tuple[tuple[float, float], ...], bool]:

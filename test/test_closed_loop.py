@@ -28,7 +28,7 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.search import astar
 from relocation_common.feasibility import NO_GRASP, BlockerSet, FeasibilityAnswer, Label, destination_slot
-from relocation_common.scenario import parse_scenario
+from relocation_common.scenario import ShelfObject, parse_scenario
 from relocation_common.shelf_object import tilt_of_quaternion
 
 SHELF = {"x_front": 0.45, "depth": 0.40, "width": 0.80, "y_center": 0.0, "board_thickness": 0.02, "top_z": 0.20,
@@ -320,6 +320,25 @@ def test_an_unlisted_object_never_on_the_top_shelf_is_not_sent_as_removed():
     asked = [(o, sorted(r)) for o, r in shelf.questions if "u2" in r]
     assert not asked, f"questions with u2 removed: {asked}"
     assert all("u2" not in removed for _, removed in shelf.relocations), shelf.relocations
+
+
+def test_an_unlisted_object_perception_names_anew_is_not_sent_as_removed():
+    """The demo with perception on world/crowd_20: perception's unlisted u1 on the top shelf was seen next under a new
+    id, u5, where u1 stood; the motion planner drops u1 (scene_update: superseded), but the executor kept u1 as gone
+    and asked about T with u1 removed: "unknown object id 'u1'", the run ended. An unlisted object not in the scene
+    is no longer sent as removed (unless relocated): the planner keeps it at its last pose or has dropped it."""
+    u1 = ShelfObject("u1", "gray", (0.5, 0.5, 0.5), 0.3, 0.66, 0.25, 0.033, 0.16, False, listed=False)
+    shelf = FakeShelf(SCENARIO.with_objects(SCENARIO.objects + (u1,)))  # the node's: the scene it trained on
+    shelf.scene["u1"] = SeenObject("u1", 0.66, 0.25, TOP, weight=0.3, listed=False)
+
+    def renamed(s):
+        s.scene["u5"] = dataclasses.replace(s.scene.pop("u1"), id="u5")
+    shelf.disturb[0] = renamed
+    result = executor(shelf).run(("b", "T"))
+    assert result.success, result.message
+    asked = [(o, sorted(r)) for o, r in shelf.questions if "u1" in r]
+    assert not asked, f"questions with u1 removed: {asked}"
+    assert all("u1" not in removed for _, removed in shelf.relocations), shelf.relocations
 
 
 def test_the_executor_expects_the_certified_slot_the_motion_planner_uses():

@@ -14,15 +14,16 @@ from typing import Iterable
 import numpy as np
 
 from relocation_common.scenario import Scenario, ShelfObject
+from relocation_common.shelf_object import half_turn
 
 from ..localize import FitError, LocalizeParams, circle_points, locate_cylinder
 from ..segmentation import SegmentationParams
 from .clusters import Cluster
 from .fragments import merge_fragments
 from .identity import NO_MATCH, Fitted, Memory, assign, colour_name, listed_costs, unlisted_ids
-from .model import CYLINDER, PerceivedObject, inside, weight_estimate
+from .model import BOX, CYLINDER, PerceivedObject, inside, weight_estimate
 from .params import ObjectParams
-from .primitives import fit_primitive
+from .primitives import Primitive, fit_primitive
 
 BOARD_APART = 0.05  # m: supports further apart than this are different boards
 KEPT = "; a cluster within its last pose: that object, kept there"
@@ -40,12 +41,23 @@ def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.n
     return merge_fragments([fit(c) for c in clusters], lambda c: fit(c, False), seg, params.merge_gap)
 
 
+def box_yaw(p: Primitive, size: tuple[float, float, float]) -> float:
+    """The yaw of fitted box p that lines its sides up with `size` (p's turned a quarter when its sides come in
+    the other order), in (-pi/2, pi/2]."""
+    swapped = (p.size[0] < p.size[1]) != (size[0] < size[1])
+    return half_turn(p.yaw + (math.pi / 2 if swapped else 0.0))
+
+
 def listed_object(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams) -> PerceivedObject:
-    """Listed cylinder b as cluster f shows it: lying where its lying fit puts it (a tipped bottle; one end cap
-    hidden: its known length laid from the other), else standing on the circle of its known radius (FitError when
-    that fit is doubtful)."""
+    """Listed object b as cluster f shows it: a box as its fitted box; a cylinder lying where its lying fit puts it
+    (a tipped bottle; one end cap hidden: its known length laid from the other), else standing on the circle of its
+    known radius (FitError when that fit is doubtful)."""
     p, c = f.prim, f.cluster
     rgb = tuple(float(v) for v in np.clip(c.colour / 255.0, 0, 1))
+    if b.shape == BOX:  # its fitted box (identity.listed_costs: a box of its size), at its known size
+        return PerceivedObject(b.id, b.label, (rgb[0], rgb[1], rgb[2]), b.weight, "", b.is_target, True, BOX, p.x,
+                               p.y, c.support, 0.0, b.height, b.size, box_yaw(p, b.size), False, False, p.rms,
+                               c.size, f.pixel)
     if p.shape == CYLINDER and p.lying:
         x, y, rms, n = p.x, p.y, p.rms, c.size
         if p.ends_seen[0] != p.ends_seen[1] and p.height < b.height:  # one end hidden: the length from the other
@@ -95,7 +107,8 @@ def part_of(f: Fitted, listed: Iterable[PerceivedObject], params: ObjectParams, 
 
 
 def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float) -> dict[str, str]:
-    """Listed fits outside the shelf, and pairs on one board that overlap by more than 2 tol: id -> why."""
+    """Listed fits outside the shelf, and pairs on one board whose footprints overlap by more than 2 tol (each shrunk
+    by tol still sharing area): id -> why."""
     sh, out = scenario.shelf, {}
     for i, d in found.items():
         hx, hy = d.half_extent  # not the bounding circle: a bottle lying along the front edge is inside the shelf
@@ -103,14 +116,23 @@ def _doubtful(found: dict[str, PerceivedObject], scenario: Scenario, tol: float)
                 and sh.y_min + hy - tol <= d.y <= sh.y_max - hy + tol):
             out[i] = f"fit at ({d.x:.3f}, {d.y:.3f}) is not inside the shelf: not this object"
     ids = [i for i in found if i not in out]
+    shrunk = {i: _outline(found[i]).footprint(-tol) for i in ids}  # overlapping by more than 2 tol: sharing area
     for a, i in enumerate(ids):
         for j in ids[a + 1:]:
             di, dj = found[i], found[j]
-            gap = math.hypot(di.x - dj.x, di.y - dj.y) - di.reach - dj.reach
-            if abs(di.z - dj.z) <= BOARD_APART and gap < -2 * tol and not (di.lying or dj.lying):
-                why = f"overlaps {{}} by {-gap * 1000:.0f} mm: identity in doubt"
+            if abs(di.z - dj.z) <= BOARD_APART and not (di.lying or dj.lying) and shrunk[i].overlaps(shrunk[j]):
+                gap = math.hypot(di.x - dj.x, di.y - dj.y) - di.reach - dj.reach
+                by = f" by {-gap * 1000:.0f} mm" if di.shape == dj.shape == CYLINDER else ""
+                why = f"overlaps {{}}{by}: identity in doubt"
                 out[i], out[j] = why.format(j), why.format(i)
     return out
+
+
+def _outline(o: PerceivedObject) -> ShelfObject:
+    """A perceived object as the ShelfObject whose footprint (ShelfObject.footprint) it has: a box's rectangle, not
+    its bounding circle."""
+    return ShelfObject(o.id, o.label, o.rgb, 1.0, o.x, o.y, o.radius, o.height, False, o.shape, o.size, o.yaw,
+                       o.lying, support_z=o.z)
 
 
 def _why_missing(j: int, b: ShelfObject, cost: np.ndarray, taken: dict[int, str], fitted: list[Fitted],

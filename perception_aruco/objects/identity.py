@@ -4,8 +4,9 @@ Listed objects (the scenario's) are matched to clusters as an assignment problem
 on the cost  colour + size + position:
 - colour: the distance of the cluster's colour (normalised by the marker plate) to the object's colour shaded by
   the best gain (segmentation.colour_residuals), over `max_residual`; above 1: not that object;
-- size: the largest difference of radius and half the height (cylinders, standing or lying) over `size_tol`
-  (seen shorter is no difference when the top or a lying one's end may be hidden); above 1: not that object. A
+- size: the largest difference of radius and half the height (cylinders, standing or lying; a box: half its
+  footprint's shorter and longer sides and half its height, fitted as a box) over `size_tol` (seen shorter is no
+  difference when the top or a lying one's end may be hidden); above 1: not that object. A
   cluster no free primitive fitted (a bottle mostly hidden) is that cylinder when a circle of its known radius fits
   its points (localize.locate_cylinder);
 - position: the distance to where the object is expected over `position_scale`: from its last perceived pose (its
@@ -29,7 +30,7 @@ from relocation_common.scenario import PALETTE, TARGET_COLOR, TARGET_RGB, ShelfO
 from ..localize import FitError, LocalizeParams, locate_cylinder
 from ..segmentation import SegmentationParams, colour_residuals
 from .clusters import Cluster
-from .model import CYLINDER, PerceivedObject
+from .model import BOX, CYLINDER, PerceivedObject
 from .params import ObjectParams
 from .primitives import Primitive
 
@@ -73,11 +74,16 @@ def colour_name(colour: np.ndarray, clipped: np.ndarray, seg: SegmentationParams
 
 
 def _size_cost(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams, tol: float) -> float:
-    """Size cost of listed cylinder b for cluster f (module docstring); NO_MATCH when it cannot be b."""
+    """Size cost of listed object b for cluster f (module docstring); NO_MATCH when it cannot be b."""
     p = f.prim
     # seen shorter than it is: a lying one's end, a standing one's top may be hidden by what is nearer
     short = p.lying or not p.top_seen
     dh = max(p.height - b.height, 0.0 if short else b.height - p.height) / 2
+    if b.shape == BOX:  # a box fitted as a box: half its footprint's sides (the shorter, the longer) and height
+        if p.shape != BOX or p.conservative:
+            return NO_MATCH
+        sides = np.abs(np.sort(p.size[:2]) - np.sort(b.size[:2])) / 2
+        return max(float(sides.max()), dh) / tol
     if p.shape == CYLINDER and not p.conservative and (not p.lying or abs(p.radius - b.radius) <= tol):
         return max(abs(p.radius - b.radius), dh) / tol   # a standing cylinder of another radius is another object
     try:  # a sliver, whose free fit is no cylinder of its radius (a box, lying, none): one of the known radius?

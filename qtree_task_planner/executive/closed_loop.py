@@ -572,8 +572,11 @@ class ClosedLoopExecutor:
         self._top |= {b.id for b in rp.bottles}  # an object off the top shelf is sent as removed only if it was on it
         # ... in the feasibility questions too: an unlisted object never seen on the top shelf (perception's glimpse
         # of the carried bottle or the hand, named anew) is one the motion planner never had, and it refuses the
-        # question ("unknown object id 'u2'"), which ended the run
-        rp = replace(rp, gone=frozenset(o for o in rp.gone if o in self.scenario.ids or o in self._top))
+        # question ("unknown object id 'u2'"), which ended the run; and an unlisted object no longer in the scene
+        # (perception named it anew: the motion planner dropped it, scene_update's "superseded") is not gone either:
+        # the planner has dropped it or keeps it at its last pose, an obstacle (sent removed, it asked "unknown
+        # object id 'u1'" on world/crowd_20)
+        rp = replace(rp, gone=frozenset(o for o in rp.gone if self._sent_as_gone(o, scene, out)))
         if rp.target_retrieved:
             out.success = True
             k, n = len(out.pushes), len(out.replans)
@@ -586,6 +589,12 @@ class ClosedLoopExecutor:
         if rp.problem is None:
             raise GiveUp(rp.reason)
         return rp
+
+    def _sent_as_gone(self, oid: str, scene: Scene, out: ExecutionResult) -> bool:
+        """Whether an object off the top shelf goes to the motion planner as removed: a listed one always; an
+        unlisted one once seen on the top shelf and now relocated or seen elsewhere (not one perception renamed)."""
+        listed = oid in self.scenario.ids and self.scenario.world_object(oid).listed
+        return listed or oid in self._top and (oid in scene or oid in out.relocated)
 
     def _fail(self, obj: str, removed: frozenset[str], message: str = "") -> None:
         """Mark the failed option; an object failing max_attempts times is banned with any set. A failure of time

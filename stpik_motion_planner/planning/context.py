@@ -16,6 +16,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from relocation_common import robot_description as rd
+from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, UnknownObjectError
 from relocation_common.shelf_object import objects_key
 from stpik_motion_planner.model.collision import (
@@ -26,12 +27,14 @@ from stpik_motion_planner.model.collision import (
     ObstacleSet,
 )
 from stpik_motion_planner.model.grasp import (
+    WorkspaceError,
     approach_yaw,
     carry_heights,
     grasp_refusal,
     grasp_yaw_tiers,
     home_pose,
     lying_pitch,
+    side_grasp,
     tool_rotation,
 )
 from stpik_motion_planner.model.kinematics import Kinematics
@@ -136,9 +139,22 @@ class PlanningContext:
         p = self.params
         o, max_yaw = self.scenario.object(object_id), p.wide_max_yaw if p.wide_yaws else p.max_yaw
         why = grasp_refusal(o, max_yaw)
-        if why or not o.lying:
+        if why:
             return why
-        return lying_pitch(self.scenario.shelf, o, p.pre_grasp_distance, self.ceiling_clearance)[2]
+        if o.lying:
+            return lying_pitch(self.scenario.shelf, o, p.pre_grasp_distance, self.ceiling_clearance)[2]
+        return self.out_of_reach(object_id)
+
+    def out_of_reach(self, object_id: str) -> str:
+        """"no grasp: " for an obstacle standing where the straight side grasp is out of the arm's workspace (a fact
+        of the shelf, answered g_U; the target out of reach stays an error: WorkspaceError, nothing to solve)."""
+        if object_id == self.scenario.target_id:
+            return ""
+        try:
+            side_grasp(self.scenario, object_id, 0.0, self.params.pre_grasp_distance, self.ceiling_clearance)
+        except WorkspaceError as e:
+            return f"{NO_GRASP}{object_id} stands out of the arm's reach for the side grasp ({e})"
+        return ""
 
     def grasp_pitch(self, object_id: str) -> float:
         """The pitch of the grasp of `object_id`: a lying cylinder's grasp from above (grasp.lying_pitch), else 0."""
