@@ -4,19 +4,20 @@ ROS clients) against a fake motion planner.
 The fake shelf (test_closed_loop.LyingBlocks: relocations, perception and feasibility from its lanes, with the lane
 screen) also answers the push question and executes a push: the pushed object slides 10 cm along y, out of the
 lanes of the object it clears (that object's lanes lose it), unless `ineffective`. Its
-lanes make the proof's blocking cycle "b needs T moved": T's only lane holds b and b's only lane holds T."""
+lanes make the proof's blocking cycle "b needs T moved": T's only lane holds b and b's only lane holds T (or also a,
+which the picks alone can take away first; `needs_gone`: a push the motion planner refuses until those are gone)."""
 from types import SimpleNamespace
 
 import pytest
 from test_closed_loop import OBJECTS, SCENARIO, LyingBlocks
 
 from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor, remaining_problem, scene_from_scenario
-from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, candidates
+from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, candidates, pick_order
 from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, replan
 from qtree_task_planner.executive.retrieval import execute, training_outcome
 from qtree_task_planner.executive.settings import pushes_on
 from qtree_task_planner.oracles import CachedOracle
-from qtree_task_planner.search.exact import ExactResult, blocking_needs
+from qtree_task_planner.search.exact import ExactResult, blocking_needs, can_leave
 from relocation_common.config import ParameterError
 
 CYCLE = {"T": [{"b"}], "b": [{"T"}]}  # "b needs T moved"
@@ -27,15 +28,19 @@ SLIDE = 0.10  # m along y
 class PushShelf(LyingBlocks):
     """LyingBlocks that answers and executes pushes (module doc)."""
 
-    def __init__(self, lanes=None, refuse=(), ineffective=False):
+    def __init__(self, lanes=None, refuse=(), ineffective=False, needs_gone=None):
         super().__init__(lanes={k: [set(b) for b in v] for k, v in (lanes or CYCLE).items()})
         self.refuse, self.ineffective = set(refuse), ineffective
+        self.needs_gone = needs_gone or {}  # object -> the objects its push needs gone (its contact pose, say)
         self.push_questions, self.pushes = [], []
 
     def push(self, obj, clear_for, removed):
         self.push_questions.append((obj, clear_for, frozenset(removed)))
         if obj in self.refuse:
             return PushAnswer(False, f"no push: {obj} is against the back wall", None)
+        if not set(self.needs_gone.get(obj, ())) <= set(removed):
+            return PushAnswer(False, f"no push: the hand's contact pose for {obj} collides with "
+                              f"{', '.join(sorted(set(self.needs_gone[obj]) - set(removed)))}", None)
         o = self.scene[obj]
         return PushAnswer(True, "push planned", (o.x, o.y + SLIDE))
 
@@ -64,6 +69,8 @@ def test_the_proof_names_its_blocking_pairs_as_data():
     lanes = {"T": [(frozenset(), (frozenset({"b"}),))], "b": [(frozenset(), (frozenset({"T"}),))]}
     assert blocking_needs("T", lanes) == (("b", ("T",)),)
     assert blocking_needs("T", {"T": [(frozenset(), (frozenset({"b"}),))]}) == ()  # b can leave: no cycle
+    with_a = dict(lanes, T=[(frozenset(), (frozenset({"a", "b"}),))], a=[(frozenset(), (frozenset({"c"}),))])
+    assert can_leave("T", with_a) == ("a", "c") and can_leave("T", lanes) == () and can_leave("x", lanes) == ()
     shelf = PushShelf()
     cache = GeometryCache(shelf)
     rp = remaining_problem(SCENARIO, shelf.perceive(), ())
@@ -110,10 +117,67 @@ def test_a_refused_push_of_x_leads_to_a_push_of_t():
     shelf = PushShelf(refuse={"b"})
     out = run(shelf, [])
     assert out.success, out.message
-    assert [q[:2] for q in shelf.push_questions] == [("b", "T"), ("T", "b")]
+    free = frozenset("acde")  # the picks alone take them away first: b's push is asked with them gone too
+    assert shelf.push_questions == [("b", "T", frozenset()), ("b", "T", free), ("T", "b", frozenset())]
     assert [p[:2] for p in shelf.pushes] == [("T", "b")]
     assert [o for o, _ in shelf.relocations] == ["b", "T"]  # T out of b's lanes: b, then T
-    assert out.pushes[0].refused == ("b out of T's lanes (no push: b is against the back wall)",)
+    assert out.pushes[0].refused == ("b out of T's lanes (no push: b is against the back wall; with a, c, d, e gone: "
+                                     "no push: b is against the back wall)",)
+
+
+PREP_CYCLE = {"T": [{"a", "b"}], "b": [{"T"}]}  # "b needs T moved"; a (and c, d, e) the picks alone take away first
+
+
+def test_a_push_that_needs_a_free_object_gone_relocates_it_first():
+    """The demo's failure on a perturbed layout: the proof is "lane {a, b}: b needs T moved" with a still on the
+    shelf, and the push of b plans only with a gone. Before, the push was asked with nothing removed and every push
+    was refused (T's push too: it needs a gone as well). Now it is asked again with the objects the picks alone take
+    away first gone (a, c, d, e), shrunk to those it needs (heaviest first: e, a, c, d), a relocated (verified), b
+    pushed, T relocated."""
+    shelf = PushShelf(lanes=PREP_CYCLE, needs_gone={"b": {"a"}, "T": {"a"}})
+    out = run(shelf, [])
+    assert out.success, out.message
+    f = frozenset
+    assert shelf.push_questions == [("b", "T", f()), ("b", "T", f("acde")), ("b", "T", f("acd")), ("b", "T", f("cd")),
+                                    ("b", "T", f("ad")), ("b", "T", f("a"))]  # T's push (cost 2.0) never asked
+    assert [o for o, _ in shelf.relocations] == ["a", "T"] and out.steps[0].ok and out.steps[0].verification.ok
+    assert shelf.pushes == [("b", "T", ("a",))]
+    (p,) = out.pushes
+    assert p.prep == ("a",) and p.cost == pytest.approx(0.5 * 2.0 + 0.3)
+    assert p.line() == "relocated a to free the push; pushed b out of T's lanes (predicted end (0.550, 0.100)); " \
+        "re-planned"
+    assert out.to_dict()["pushes"][0]["prep"] == ["a"]
+    assert out.message == "target T retrieved after 1 relocations, 1 push and 2 re-plans"
+
+
+def test_a_push_with_prep_relocations_costs_them_and_a_cheaper_push_goes_first():
+    """Push factor 1: b's push (0.5) needs a and e gone (0.7): 1.2, T's push alone 1.0: T is pushed, nothing
+    relocated first."""
+    shelf = PushShelf(lanes=PREP_CYCLE, needs_gone={"b": {"a", "e"}})
+    out = execute(SCENARIO, [], scene_from_scenario(SCENARIO), shelf.relocate, shelf.perceive, CachedOracle(shelf),
+                  closed_loop=True, cancelled=lambda: False, pushes=actions(shelf, factor=1.0))
+    assert out.success, out.message
+    assert [q[:2] for q in shelf.push_questions][-1] == ("T", "b") and shelf.pushes == [("T", "b", ())]
+    assert out.pushes[0].prep == () and out.pushes[0].cost == pytest.approx(1.0)
+
+
+def test_a_prep_relocation_that_fails_is_re_planned_and_the_push_freed_in_another_order():
+    """a's relocation fails (its option with nothing removed is marked): the rest is re-planned, no sequence, the
+    push is chosen again: a is pickable only after another object, so d goes first (d, a), then b's push, then T."""
+    shelf = PushShelf(lanes=PREP_CYCLE, needs_gone={"b": {"a"}})
+    shelf.fail["a"] = 1
+    out = run(shelf, [])
+    assert out.success, out.message
+    assert [o for o, _ in shelf.relocations] == ["a", "d", "a", "T"] and not out.steps[0].ok
+    assert out.replans[1].reason == "relocating a failed: no grasp found (STPIK) (relocating a to free the push of " \
+        "b out of T's lanes)", out.replans[1].reason
+    assert out.pushes[0].prep == ("d", "a") and shelf.pushes == [("b", "T", ("a", "d"))]
+
+
+def test_pick_order_is_an_order_in_which_each_is_pickable():
+    after = {"a": {"c"}, "c": set(), "d": {"x"}}  # object -> what must be gone before it
+    assert pick_order(("a", "c"), lambda o, s: after[o] <= s) == ("c", "a")
+    assert pick_order(("a", "c", "d"), lambda o, s: after[o] <= s) == ("c", "a")  # d never: not all
 
 
 def test_max_pushes_bounds_the_pushes_and_the_end_says_why():
@@ -135,7 +199,8 @@ def test_every_push_refused_is_said_in_the_end():
     out = run(shelf, [])
     assert not out.success and not shelf.pushes
     assert "no push: every push refused: b out of T's lanes (no push: b is against" in out.message
-    assert "T out of b's lanes (no push: T is against the back wall)" in out.message
+    assert "T out of b's lanes (no push: T is against the back wall; with a, c, d, e gone: no push: T is against the " \
+        "back wall)" in out.message
 
 
 def test_an_open_loop_run_does_not_push():
@@ -166,7 +231,8 @@ def test_a_missing_push_factor_is_said():
 
     def missing():
         raise ParameterError("action_cost.push is not a parameter of this task planner")
-    pusher = Pusher(PushActions(shelf.push, shelf.do_push, missing, 2), lambda rp: [("b", "T")])
+    pusher = Pusher(PushActions(shelf.push, shelf.do_push, missing, 2),
+                    PushProof(lambda rp: [("b", "T")], lambda rp: (), lambda rp, banned, o, s: True))
     loop = ClosedLoopExecutor(SCENARIO, shelf.relocate, shelf.perceive,
                               lambda rp, banned: replan(rp, banned, GeometryCache(shelf)), pusher=pusher)
     out = loop.run([])

@@ -445,8 +445,9 @@ class ClosedLoopExecutor:
     bottom_seen False: perception does not see the bottom shelf (verify_relocation); a relocated bottle that is
     not seen counts as relocated. perceive() raising ValueError, TimeoutError or RuntimeError (no scene) ends the
     run with its message. pusher (executive.push.Pusher; None: no pushes): when a re-plan proves that no sequence
-    remains, the cheapest feasible push out of the proof's blocking cycle is executed, then the next scene is
-    perceived and the rest re-planned from it (on_push(record) after each); an empty `sequence` to `run` (the first
+    remains, the cheapest feasible push out of the proof's blocking cycle is executed (after the relocations of the
+    objects it needs gone first, each verified), then the next scene is perceived and the rest re-planned from it
+    (on_push(record) after each); an empty `sequence` to `run` (the first
     plan found none) starts with that re-plan.
     """
 
@@ -499,51 +500,57 @@ class ClosedLoopExecutor:
             seq, scene, rp = self._replan(f"the sequence does not fit the scene: {_invalid(seq, problem)}", scene, rp,
                                           out)
         while True:
-            if self.cancelled():
-                raise GiveUp(f"cancelled after relocating {out.relocated}")
-            obj = seq[0]
-            if not rp.free_slots:
-                raise GiveUp(f"no free slot on the bottom shelf for {obj}")
-            # the relocated bottles, then those seen off the top shelf otherwise (dropped to the floor): the motion
-            # planner keeps an unseen bottle at its last pose, and the re-plan's answers had them gone (rp.gone)
-            removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and o in self._top
-                                                                and o not in out.relocated)), rp.gone
-            slot = self.slot_of(rp) if self.slot_of else destination_slot(len(removed), rp.free_slots)
-            ok, message = self.relocate(obj, list(removed))
-            after = self._perceive(f"after relocating {obj}")
-            check = None
-            if ok or message.endswith(OUTCOME_UNKNOWN):  # unknown: the motion planner saw no scene, we look
-                x, y = self.scenario.slots[slot]
-                check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
-                                          self.bottom_seen)
-                check = replace(check, new=self._on_top(check.new, after))
-                if not ok and check.ok:
-                    ok, message = True, f"{message}; the scene after it shows it done"
-            stayed, new = _stayed(obj, scene, after, self.tol), self._on_top(new_objects(scene, after, obj), after)
-            if ok and check is not None and check.unseen_place:
-                out.unverified.append(obj)
-            step = Step(len(out.steps), obj, removed, slot, ok, message, check)
-            out.steps.append(step)
-            self.on_step(step)
-            landed = after.get(obj)
-            if (board_of(landed, self.scenario, self.tol) == "bottom" if landed is not None else
-                    ok and not self.bottom_seen):
-                out.relocated.append(obj)
-            self.on_progress(out)
-            scene = after
-            rp = self._problem(scene, out)
-            if check is not None and check.ok and not new:
+            scene, rp, why = self._relocate(seq[0], scene, rp, out)
+            if why is None:
                 seq = seq[1:]
                 continue
-            out.new_objects += [f"{d.line} after relocating {obj}: re-planned" for d in new]
-            if not ok:
-                if stayed:  # the option failed; else the bottle was dropped or knocked: the re-plan asks about its
-                    self._fail(obj, gone, message)  # new pose (a bottle on the bottom shelf is relocated, above)
-                seq, scene, rp = self._replan(f"relocating {obj} failed: {message}", scene, rp, out)
-            else:
-                assert check is not None  # a new object is no fault of the relocation: the rest is re-planned
-                seq, scene, rp = self._replan(f"the world differs after relocating {obj}: {check.summary()}"
-                                              if not check.ok else "; ".join(d.line for d in new), scene, rp, out)
+            seq, scene, rp = self._replan(why, scene, rp, out)
+
+    def _relocate(self, obj: str, scene: dict[str, SeenObject], rp: RemainingProblem, out: ExecutionResult
+                  ) -> tuple[dict[str, SeenObject], RemainingProblem, str | None]:
+        """Relocate `obj`, perceive and check the scene after it: (that scene, its remaining problem, None when the
+        world is as planned, else the reason to re-plan, one line). A failed option is marked (`_fail`)."""
+        if self.cancelled():
+            raise GiveUp(f"cancelled after relocating {out.relocated}")
+        if not rp.free_slots:
+            raise GiveUp(f"no free slot on the bottom shelf for {obj}")
+        # the relocated bottles, then those seen off the top shelf otherwise (dropped to the floor): the motion
+        # planner keeps an unseen bottle at its last pose, and the re-plan's answers had them gone (rp.gone)
+        removed, gone = tuple(out.relocated) + tuple(sorted(o for o in rp.gone if o in scene and o in self._top
+                                                            and o not in out.relocated)), rp.gone
+        slot = self.slot_of(rp) if self.slot_of else destination_slot(len(removed), rp.free_slots)
+        ok, message = self.relocate(obj, list(removed))
+        after = self._perceive(f"after relocating {obj}")
+        check = None
+        if ok or message.endswith(OUTCOME_UNKNOWN):  # unknown: the motion planner saw no scene, we look
+            x, y = self.scenario.slots[slot]
+            check = verify_relocation(obj, (x, y, self.scenario.shelf.bottom_z), scene, after, self.tol,
+                                      self.bottom_seen)
+            check = replace(check, new=self._on_top(check.new, after))
+            if not ok and check.ok:
+                ok, message = True, f"{message}; the scene after it shows it done"
+        stayed, new = _stayed(obj, scene, after, self.tol), self._on_top(new_objects(scene, after, obj), after)
+        if ok and check is not None and check.unseen_place:
+            out.unverified.append(obj)
+        step = Step(len(out.steps), obj, removed, slot, ok, message, check)
+        out.steps.append(step)
+        self.on_step(step)
+        landed = after.get(obj)
+        if (board_of(landed, self.scenario, self.tol) == "bottom" if landed is not None else
+                ok and not self.bottom_seen):
+            out.relocated.append(obj)
+        self.on_progress(out)
+        rp = self._problem(after, out)
+        if check is not None and check.ok and not new:
+            return after, rp, None
+        out.new_objects += [f"{d.line} after relocating {obj}: re-planned" for d in new]
+        if not ok:
+            if stayed:  # the option failed; else the bottle was dropped or knocked: the re-plan asks about its
+                self._fail(obj, gone, message)  # new pose (a bottle on the bottom shelf is relocated, above)
+            return after, rp, f"relocating {obj} failed: {message}"
+        assert check is not None  # a new object is no fault of the relocation: the rest is re-planned
+        return after, rp, (f"the world differs after relocating {obj}: {check.summary()}" if not check.ok
+                           else "; ".join(d.line for d in new))
 
     def _on_top(self, new: tuple[Difference, ...], scene: Scene) -> tuple[Difference, ...]:
         """The new objects that rest on the top shelf: an object first seen elsewhere (a relocated bottle the
@@ -617,16 +624,27 @@ class ClosedLoopExecutor:
                 raise GiveUp(f"no sequence remains: {answer} (re-planned because {reason}){tried}")
             scene, rp, reason = pushed
 
-    def _push(self, scene: Scene, rp: RemainingProblem, out: ExecutionResult
+    def _push(self, scene: dict[str, SeenObject], rp: RemainingProblem, out: ExecutionResult
               ) -> tuple[dict[str, SeenObject], RemainingProblem, str] | str:
-        """The cheapest feasible push (executive.push.Pusher), executed, and (the scene after it, its remaining
-        problem, the push's line as the next re-plan's reason); or why no push was executed."""
-        assert self.pusher is not None
+        """The cheapest feasible push (executive.push.Pusher), its prep relocations done (each verified; when one
+        fails or the world differs, (the scene after it, its problem, why) to re-plan from), then the push executed,
+        and (the scene after it, its remaining problem, the push's line as the next re-plan's reason); or why no push
+        was executed."""
+        assert self.pusher is not None and rp.problem is not None
         if self.cancelled():
             raise GiveUp(f"cancelled after relocating {out.relocated}")
-        got = self.pusher.push(rp, {b.id: b.weight for b in rp.bottles}, rp.gone)
-        if isinstance(got, str):
-            return got
+        choice = self.pusher.choose(rp, {b.id: b.weight for b in rp.bottles}, rp.problem.costs, rp.gone,
+                                    frozenset(self._banned))
+        if isinstance(choice, str):
+            return choice
+        for i, obj in enumerate(choice.prep):
+            scene, rp, why = self._relocate(obj, scene, rp, out)
+            if why is not None:
+                return scene, rp, f"{why} (relocating {', '.join(choice.prep[:i + 1])} to free the push of " \
+                    f"{choice.object_id} out of {choice.clear_for}'s lanes)"
+        if self.cancelled():
+            raise GiveUp(f"cancelled after relocating {out.relocated}")
+        got = self.pusher.run(choice, rp.gone)
         after = self._perceive(f"after pushing {got.object_id}")
         now = after.get(got.object_id)
         seen = (now.x, now.y) if now is not None and board_of(now, self.scenario, self.tol) == "top" else None

@@ -3,12 +3,17 @@ frees the target (docs/closed_loop.md, "Pushes").
 
 The proof's blocking cycle ("X needs T moved": every lane of X needs T gone and the other way round,
 exact.blocking_needs) is what a non-prehensile push can open: X slid out of T's grasp lanes, or T out of X's. For
-each pair the motion planner is asked for a push of X clearing T's lanes, then of T clearing X's; all the
-candidates are asked cheapest first, a push of an object costing its weight times the push factor (the paper's cost
-of an action, Eq. 8, with the factor of the action kind; config/task_planner.yaml). The first feasible push is
-executed (RelocateObject, action "push"); the closed loop then waits for the next scene and re-plans from what the
-world shows (the pushed object where it really ended), as after a relocation. At most `max_pushes` pushes are
-executed per goal; a push that left the object where it was (failed, or done without effect) is not asked again.
+each pair the motion planner is asked for a push of X clearing T's lanes, then of T clearing X's, with the objects
+already gone removed; a push refused so is asked again with the objects the picks alone can take away first gone
+too (the proof's own fixpoint, exact.can_leave, in an order in which each is pickable: `pick_order`), and when
+feasible, again without each of those, heaviest first, keeping only the ones the push needs gone (its `prep`). A
+push of an object costs its weight times the push factor (the paper's cost of an action, Eq. 8, with the factor of
+the action kind; config/task_planner.yaml), a candidate its prep relocations' pick costs plus its push's; the
+cheapest feasible one is executed: the closed loop relocates its prep objects (verified as every relocation, the
+rest re-planned when one fails or the world differs), then pushes (RelocateObject, action "push"); it then waits for
+the next scene and re-plans from what the world shows (the pushed object where it really ended), as after a
+relocation. At most `max_pushes` pushes are executed per goal; a push that left the object where it was (failed, or
+done without effect) is not asked again.
 
 Nothing here talks to ROS: the node supplies `ask` (ros_clients.ServiceOracle.push: PlanFeasibility, action
 "push") and `execute` (ros_clients.Relocator.push: RelocateObject, action "push").
@@ -41,9 +46,10 @@ class PushOracle(Protocol):
 
 @dataclass(frozen=True)
 class PushRecord:
-    """One push executed: the object, the one whose lanes it clears, its cost (weight x push factor), the predicted
-    end, the motion planner's outcome, where the next scene showed the object (None: not seen on the top shelf),
-    and the candidates refused before it (one line each)."""
+    """One push executed: the object, the one whose lanes it clears, its cost (weight x push factor, plus its prep
+    relocations' costs), the predicted end, the motion planner's outcome, where the next scene showed the object
+    (None: not seen on the top shelf), the candidates refused before it (one line each) and the objects relocated
+    first to free it (`prep`)."""
 
     object_id: str
     clear_for: str
@@ -53,12 +59,15 @@ class PushRecord:
     message: str
     seen: tuple[float, float] | None
     refused: tuple[str, ...]
+    prep: tuple[str, ...]
 
     def what(self) -> str:
-        """'pushed X out of T's lanes (predicted end (x, y))', or 'push of X out of T's lanes failed: why'."""
+        """'pushed X out of T's lanes (predicted end (x, y))', or 'push of X out of T's lanes failed: why'; after
+        'relocated a, b to free the push; ' when it had prep relocations."""
+        first = f"relocated {', '.join(self.prep)} to free the push; " if self.prep else ""
         if not self.ok:
-            return f"push of {self.object_id} out of {self.clear_for}'s lanes failed: {self.message}"
-        return f"pushed {self.object_id} out of {self.clear_for}'s lanes (predicted end ({self.end[0]:.3f}, " \
+            return f"{first}push of {self.object_id} out of {self.clear_for}'s lanes failed: {self.message}"
+        return f"{first}pushed {self.object_id} out of {self.clear_for}'s lanes (predicted end ({self.end[0]:.3f}, " \
                f"{self.end[1]:.3f}))"
 
     def line(self) -> str:
@@ -70,7 +79,7 @@ class PushRecord:
         return {"object": self.object_id, "clear_for": self.clear_for, "cost": self.cost,
                 "predicted_end": list(self.end), "ok": self.ok, "message": self.message,
                 "seen_end": list(self.seen) if self.seen is not None else None, "refused": list(self.refused),
-                "line": self.line()}
+                "prep": list(self.prep), "line": self.line()}
 
 
 def candidates(needs: Sequence[tuple[str, str]], weights: Mapping[str, float], factor: float
@@ -100,42 +109,129 @@ class PushActions:
             raise ValueError(f"max_pushes must be an integer >= 0, got {self.max_pushes!r}")
 
 
-class Pusher:
-    """Pushes for the closed loop (module doc) through `actions`; needs(rp) -> the proof's pairs "X needs T moved"
-    of a remaining problem with no sequence (replan.blocking_pairs)."""
 
-    def __init__(self, actions: PushActions, needs: Callable[[Any], Sequence[tuple[str, str]]]) -> None:
+@dataclass(frozen=True)
+class PushProof:
+    """What the re-plan gives the pushes: needs(rp) -> the proof's pairs "X needs T moved" of a remaining problem
+    with no sequence (replan.blocking_pairs); free(rp) -> the objects the picks alone can take away first, from the
+    same proof (replan.free_first); pickable(rp, banned, object, removed) -> whether relocating `object` with
+    `removed` gone (beyond rp.gone) is feasible, as the re-plan's oracle answers it (failed options `banned` and the
+    free slots counted)."""
+
+    needs: Callable[[Any], Sequence[tuple[str, str]]]
+    free: Callable[[Any], Sequence[str]]
+    pickable: Callable[[Any, frozenset[Any], str, frozenset[str]], bool]
+
+
+@dataclass(frozen=True)
+class PushChoice:
+    """The push chosen (`Pusher.choose`): the object, the one whose lanes it clears, its cost (the prep relocations'
+    costs + the push's), the predicted end, the objects to relocate first in that order (`prep`, each pickable
+    after those before it), and the candidates refused before it (one line each)."""
+
+    object_id: str
+    clear_for: str
+    cost: float
+    end: tuple[float, float]
+    prep: tuple[str, ...]
+    refused: tuple[str, ...]
+
+
+def pick_order(objects: Sequence[str], pickable: Callable[[str, frozenset[str]], bool]) -> tuple[str, ...]:
+    """The objects of `objects` the picks alone take away, one after another, in an order in which each is pickable
+    (pickable(o, those before it)): grown to a fixpoint, the first pickable one in the given order next. All of
+    them when every one can go."""
+    done: list[str] = []
+    while len(done) < len(objects):
+        nxt = next((o for o in objects if o not in done and pickable(o, frozenset(done))), None)
+        if nxt is None:
+            break
+        done.append(nxt)
+    return tuple(done)
+
+
+class Pusher:
+    """Pushes for the closed loop (module doc) through `actions`, from the re-plan's proof (`proof`)."""
+
+    def __init__(self, actions: PushActions, proof: PushProof) -> None:
         self.ask, self.execute, self.factor = actions.ask, actions.execute, actions.factor
-        self.max_pushes, self.needs = actions.max_pushes, needs
+        self.max_pushes, self.proof = actions.max_pushes, proof
         self.executed = 0
         self._failed: set[tuple[str, str]] = set()  # executed, the object left where it was
 
-    def push(self, rp: Any, weights: Mapping[str, float], removed: frozenset[str]) -> PushRecord | str:
-        """Ask the candidates of the remaining problem `rp` (its pairs from `needs`; `weights`: each object's
-        weight) cheapest first with `removed` gone, and execute the first feasible one: its record (`seen` is the
-        caller's, from the scene after it), or why no push was executed (one line)."""
+    def choose(self, rp: Any, weights: Mapping[str, float], costs: Mapping[str, float], removed: frozenset[str],
+               banned: frozenset[Any]) -> PushChoice | str:
+        """The cheapest feasible push of the remaining problem `rp` (`weights`: each object's weight, the push's
+        cost is its weight x the push factor; `costs`: each object's pick cost; `removed`: the objects gone), or
+        why there is none (one line). Candidates in the order of their push's cost; each asked with `removed`
+        gone, and when refused, with the objects the picks alone can take away first gone too (`prep`); then, a
+        feasible one, again without each of those, heaviest first, keeping only those the push needs gone. A
+        candidate's cost is its prep relocations' costs + its push's; the asking stops when no later candidate can
+        cost less than the best found."""
         if self.executed >= self.max_pushes:
             return f"max_pushes ({self.max_pushes}) spent" if self.max_pushes else "pushes are off (max_pushes 0)"
-        pairs = self.needs(rp)
+        pairs = self.proof.needs(rp)
         if not pairs:
             return "the proof names no pair \"X needs T moved\" that a push could open"
         try:
             factor = self.factor()
         except ValueError as e:  # relocation_common.config.ParameterError
             return f"no push factor: {e}"
-        refused = []
+
+        def pickable(o: str, s: frozenset[str]) -> bool:
+            return self.proof.pickable(rp, banned, o, s)
+        free: tuple[str, ...] | None = None  # asked when a push needs it
+        refused: list[str] = []
+        best: PushChoice | None = None
         for cost, pushed, clear_for in candidates(pairs, weights, factor):
+            if best is not None and cost >= best.cost:
+                break
             if (pushed, clear_for) in self._failed:
                 refused.append(f"{pushed} out of {clear_for}'s lanes (failed before)")
                 continue
             answer = self.ask(pushed, clear_for, removed)
-            if not (answer.feasible and answer.end is not None):
-                refused.append(f"{pushed} out of {clear_for}'s lanes ({answer.message or 'unfeasible'})")
+            if answer.feasible and answer.end is not None:
+                return PushChoice(pushed, clear_for, cost, answer.end, (), tuple(refused))
+            if free is None:
+                free = pick_order(tuple(self.proof.free(rp)), pickable)
+            got = self._prepared(pushed, clear_for, removed, tuple(o for o in free if o not in (pushed, clear_for)),
+                                 costs, pickable)
+            if isinstance(got, str):
+                refused.append(f"{pushed} out of {clear_for}'s lanes ({answer.message or 'unfeasible'}{got})")
                 continue
-            self.executed += 1
-            ok, message = self.execute(pushed, clear_for, sorted(removed))
-            return PushRecord(pushed, clear_for, cost, answer.end, ok, message, None, tuple(refused))
-        return "every push refused: " + "; ".join(refused)
+            prep, end = got
+            total = cost + sum(costs[o] for o in prep)
+            if best is None or total < best.cost:
+                best = PushChoice(pushed, clear_for, total, end, prep, tuple(refused))
+        return best if best is not None else "every push refused: " + "; ".join(refused)
+
+    def _prepared(self, pushed: str, clear_for: str, removed: frozenset[str], free: tuple[str, ...],
+                  costs: Mapping[str, float], pickable: Callable[[str, frozenset[str]], bool]
+                  ) -> tuple[tuple[str, ...], tuple[float, float]] | str:
+        """(the objects of `free` the push needs gone, in an order in which each is pickable; its predicted end), or
+        what the push said with all of `free` gone ('; with a, b gone: why'; '' when there is none to remove)."""
+        if not free:
+            return ""
+        answer = self.ask(pushed, clear_for, removed | frozenset(free))
+        if not (answer.feasible and answer.end is not None):
+            return f"; with {', '.join(free)} gone: {answer.message or 'unfeasible'}"
+        prep, end = free, answer.end
+        for o in sorted(free, key=lambda o: (-costs[o], o)):  # heaviest first: the costliest relocation spared first
+            fewer = tuple(p for p in prep if p != o)
+            if len(pick_order(fewer, pickable)) < len(fewer):
+                continue
+            again = self.ask(pushed, clear_for, removed | frozenset(fewer))
+            if again.feasible and again.end is not None:
+                prep, end = fewer, again.end
+        return pick_order(prep, pickable), end
+
+    def run(self, choice: PushChoice, removed: frozenset[str]) -> PushRecord:
+        """Execute the push `choice` with `removed` gone (its prep relocations done): its record (`seen` is the
+        caller's, from the scene after it)."""
+        self.executed += 1
+        ok, message = self.execute(choice.object_id, choice.clear_for, sorted(removed))
+        return PushRecord(choice.object_id, choice.clear_for, choice.cost, choice.end, ok, message, None,
+                          choice.refused, choice.prep)
 
     def failed(self, pushed: str, clear_for: str) -> None:
         """A push executed without effect (the object where it was, failed or not): not asked again in this goal."""

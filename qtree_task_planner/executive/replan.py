@@ -29,7 +29,7 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp
 from qtree_task_planner.search import astar
-from qtree_task_planner.search.exact import Claim, blocking_needs, no_sequence
+from qtree_task_planner.search.exact import Claim, blocking_needs, can_leave, no_sequence
 from relocation_common.feasibility import (
     FeasibilityAnswer,
     FeasibilityOracle,
@@ -297,11 +297,25 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
 
 def blocking_pairs(rp: RemainingProblem, cache: GeometryCache) -> tuple[tuple[str, str], ...]:
     """The pairs (X, Y) "X needs Y moved" of the blocking cycle a failed re-plan's proof names (exact.blocking_needs
-    over the same certain claims at the problem's start: the planner's lane blockers and the answers about each
-    object with nothing more removed, from the cache: no planner call beyond the lane screen); () when the proof
-    has no such cycle. What a push can open (qtree_task_planner.executive.push)."""
+    over the same certain claims at the problem's start: `start_claims`); () when the proof has no such cycle. What
+    a push can open (qtree_task_planner.executive.push)."""
     if rp.problem is None:
         return ()
+    return tuple((x, y) for x, stuck in blocking_needs(rp.problem.target, start_claims(rp, cache)) for y in stuck)
+
+
+def free_first(rp: RemainingProblem, cache: GeometryCache) -> tuple[str, ...]:
+    """The objects of a failed re-plan's proof that the picks alone can take away first (exact.can_leave over
+    `start_claims`): what a push may need gone (qtree_task_planner.executive.push)."""
+    if rp.problem is None:
+        return ()
+    return can_leave(rp.problem.target, start_claims(rp, cache))
+
+
+def start_claims(rp: RemainingProblem, cache: GeometryCache) -> dict[str, list[Claim]]:
+    """The certain claims at the remaining problem's start: the planner's lane blockers and the answers about each
+    object with nothing more removed, from the cache (no planner call beyond the lane screen)."""
+    assert rp.problem is not None
     on_shelf = frozenset(rp.problem.ids)
     claimed: dict[str, list[Claim]] = {}
     for o, sets in (RemainingOracle(rp, cache, (), capacity=False).lane_blockers(frozenset()) or {}).items():
@@ -311,7 +325,7 @@ def blocking_pairs(rp: RemainingProblem, cache: GeometryCache) -> tuple[tuple[st
         a = cache.table.get(cache.key(o, on_shelf))
         if a is not None and Label(a.label) == Label.UNFEASIBLE and claims(a.blockers):
             claimed.setdefault(o, []).append((frozenset(), tuple(b.objects for b in a.blockers)))
-    return tuple((x, y) for x, stuck in blocking_needs(rp.problem.target, claimed) for y in stuck)
+    return claimed
 
 
 def not_graspable(rp: RemainingProblem, cache: GeometryCache, lanes: Lanes | None) -> dict[str, str]:
@@ -399,3 +413,11 @@ def relearn(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache
 def _amount(weight: float, cost: float, costed: bool) -> str:
     """'weight 0.50', or in a costed problem (an action factor other than 1) 'weight 0.50, cost 0.75'."""
     return f"weight {weight:.2f}" + (f", cost {cost:.2f}" if costed else "")
+
+
+def pickable(rp: RemainingProblem, cache: GeometryCache, banned: Iterable[Option], object_id: str,
+             removed: frozenset[str]) -> bool:
+    """Whether the re-plan's oracle (`RemainingOracle`: failed options `banned` and the free slots counted, answers
+    of unchanged geometry reused) answers relocating `object_id` with `removed` gone (beyond rp.gone) feasible: an
+    order in which a push's prep relocations can go (qtree_task_planner.executive.push.pick_order)."""
+    return Label(RemainingOracle(rp, cache, banned).feasibility(object_id, removed).label) != Label.UNFEASIBLE

@@ -28,8 +28,8 @@ from qtree_task_planner.executive.closed_loop import (
     remaining_problem,
 )
 from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
-from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushRecord
-from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, relearn, replan
+from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, PushRecord
+from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, free_first, pickable, relearn, replan
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
@@ -264,9 +264,17 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
                 raise GiveUp(f"pushing {object_id!r} failed: {message}")
             return ok, message
 
+        def can_pick(rp: RemainingProblem, banned: frozenset[Option], object_id: str, removed: frozenset[str]) -> bool:
+            def once() -> bool:
+                return pickable(rp, cache, banned, object_id, removed)
+            try:
+                return once() if until_planner is None else until_planner(once)
+            except (PlannerGone, PlannerUnavailable) as e:
+                raise GiveUp(f"feasibility question about {object_id!r} for a push stopped: {e}") from None
+
         pusher = None if pushes is None else Pusher(
             dataclasses.replace(pushes, ask=through(pushes.ask, until_planner), execute=push),
-            lambda rp: blocking_pairs(rp, cache))
+            PushProof(lambda rp: blocking_pairs(rp, cache), lambda rp: free_first(rp, cache), can_pick))
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen, on_progress=on_progress,

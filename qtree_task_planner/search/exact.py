@@ -153,17 +153,10 @@ def _cycle_walk(target: str, lanes: Mapping[str, Sequence[Claim]]
     """The blocking cycle of `_cycle` (None: there is none): each object's first lanes (claimed at the empty set),
     the objects that can leave, (lane of the target, the object of it that cannot leave) for each lane, then every
     object stuck behind those, each once."""
-    first = {o: v[0] for o, v in ((o, [ls for s, ls in c if not s]) for o, c in lanes.items()) if v}
+    first = _first_lanes(lanes)
     if not first.get(target):
         return None
-    free = {m for ls in first.values() for lane in ls for m in lane if m not in first} - {target}
-    grown = True
-    while grown:  # the objects that can leave, grown to a fixpoint
-        grown = False
-        for o, ls in first.items():
-            if o != target and o not in free and any(set(lane) <= free for lane in ls):
-                free.add(o)
-                grown = True
+    free = _leaving(target, first)
     if any(set(lane) <= free for lane in first[target]):
         return None
     by_lane, told = [], {target}
@@ -183,6 +176,33 @@ def _cycle_walk(target: str, lanes: Mapping[str, Sequence[Claim]]
             seen.add(m)
             todo.append(m)
     return first, free, by_lane, behind
+
+
+def _first_lanes(lanes: Mapping[str, Sequence[Claim]]) -> dict[str, tuple[frozenset[str], ...]]:
+    """Each object's first lanes: those of its first claim made at the empty set."""
+    return {o: v[0] for o, v in ((o, [ls for s, ls in c if not s]) for o, c in lanes.items()) if v}
+
+
+def _leaving(target: str, first: Mapping[str, tuple[frozenset[str], ...]]) -> set[str]:
+    """The objects that can leave before the target: those named in a lane without a claim of their own
+    (optimistic), and, grown to a fixpoint, every object with a lane of such objects only."""
+    free = {m for ls in first.values() for lane in ls for m in lane if m not in first} - {target}
+    grown = True
+    while grown:
+        grown = False
+        for o, ls in first.items():
+            if o != target and o not in free and any(set(lane) <= free for lane in ls):
+                free.add(o)
+                grown = True
+    return free
+
+
+def can_leave(target: str, lanes: Mapping[str, Sequence[Claim]]) -> tuple[str, ...]:
+    """The objects a blocking cycle's proof says can leave first (the picks alone take them away before the
+    target, as far as the certain claims at the empty set tell: `_cycle`'s fixpoint), sorted; () when the target
+    has no claim. What a push may need gone first (qtree_task_planner.executive.push)."""
+    first = _first_lanes(lanes)
+    return tuple(sorted(_leaving(target, first))) if first.get(target) else ()
 
 
 def _stuck(x: str, first: Mapping[str, tuple[frozenset[str], ...]], free: set[str]) -> list[str]:
