@@ -11,11 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from perception_scenes import extra, generated_layout, render_scene, with_objects
+from perception_scenes import extra, generated_layout, perceived, render_scene, with_objects
 
 from jaco2_sim_driver.sensor_model import SensorModel
 from perception_aruco.objects.model import BOX, CYLINDER
-from perception_aruco.pipeline import Perception, SceneMemory
+from perception_aruco.objects.self_filter import arm_segments
+from perception_aruco.pipeline import Perception, SceneMemory, arm_reaches
 from relocation_common.paths import default_scenario
 from relocation_common.robot_description import Q_HOME
 from relocation_common.scenario import PALETTE, load_scenario
@@ -277,3 +278,18 @@ def test_a_track_does_not_jump_44_cm_unless_the_arm_came_near():
         else:
             assert at is None, f"c1 jumped {moved:.3f} m to the teal bottle"
             assert [o for o in r.unlisted.values() if math.hypot(o.x - teal.x, o.y - teal.y) <= 0.01], r.unlisted
+
+
+def test_the_arm_reaches_only_the_objects_near_its_capsules():
+    """PerceptionResult.reached (pipeline.arm_reaches): an object whose last pose stands at the arm's hand (its last
+    capsule's end at the joint state) is reached, one 40 cm from every capsule is not; no joint state: every one."""
+    b = BASE.objects[1]
+    hand = arm_segments(np.asarray(Q_HOME, float))[-1][1]
+    far = next(p for p in ((hand[0], hand[1] + 0.4), (hand[0], hand[1] - 0.4))
+               if all(np.linalg.norm(np.cross(p1 - p0, p0 - np.array([p[0], p[1], hand[2]]))) / np.linalg.norm(p1 - p0)
+                      > 0.3 for p0, p1, _ in arm_segments(np.asarray(Q_HOME, float))))
+    memory = SceneMemory(("a", "b"), 10, 1)
+    memory.update({"a": perceived(replace(b, id="a"), hand[0], hand[1], hand[2] - 0.05),
+                   "b": perceived(replace(b, id="b"), far[0], far[1], hand[2] - 0.05)}, ())
+    assert arm_reaches(memory, ("a", "b"), np.asarray(Q_HOME, float), 0.03) == {"a"}
+    assert arm_reaches(memory, ("a", "b"), None, 0.03) == {"a", "b"}
