@@ -221,7 +221,7 @@ class PerceptionNode(Node):
         if doubt:
             result = PerceptionResult(result.marker, {i: d for i, d in result.objects.items() if i not in doubt},
                                       {**result.missing, **doubt}, result.T_base_camera, result.shelf, result.notes,
-                                      result.uncounted)
+                                      result.uncounted, result.reached)
         self._report_health(result)
         self._publish_debug(color, self.perception.annotate(rgb, result, K))
         self._publish_tf(color, result)
@@ -257,7 +257,7 @@ class PerceptionNode(Node):
 
     def _publish_scene(self, color: Image, result: PerceptionResult) -> None:
         log = self.get_logger()
-        objects, held, lost = self.memory.update(result.objects, result.uncounted)
+        objects, held, lost = self.memory.update(result.objects, result.uncounted, result.reached)
         unlisted = [o for o in objects if not o.listed]
         if unlisted:
             log.info("unlisted objects: " + "; ".join(

@@ -35,7 +35,7 @@ from .objects.clusters import cluster_points, object_mask
 from .objects.find import find_objects
 from .objects.model import PerceivedObject, box_corners
 from .objects.params import ObjectParams
-from .objects.self_filter import arm_in_shelf, arm_in_view
+from .objects.self_filter import arm_in_shelf, arm_in_view, on_arm
 from .segmentation import (
     PlateLevels,
     SegmentationParams,
@@ -75,7 +75,9 @@ class PerceptionResult:
     ones); missing: listed id -> why it was not found; T_base_camera: the camera pose used (marker, corrected by the
     shelf fit); marker: the marker as seen (None when it was not, and the caller's `prior` pose stood in); notes:
     what the checks said; uncounted: the unlisted ids (seen now, or candidates not seen) this frame is no evidence
-    for (SceneMemory.update: the arm's pose unknown, the arm in the shelf, or moving in front of them)."""
+    for (SceneMemory.update: the arm's pose unknown, the arm in the shelf, or moving in front of them); reached: the
+    listed ids whose last pose (the memory's) the arm comes within `arm_near` of at the frame's joint states, every
+    one without a joint state (SceneMemory.update: only their tracks may jump)."""
 
     marker: MarkerObservation | None
     objects: dict[str, PerceivedObject]
@@ -84,6 +86,7 @@ class PerceptionResult:
     shelf: ShelfFit | None
     notes: tuple[str, ...]
     uncounted: frozenset[str]
+    reached: frozenset[str]
 
     @property
     def detections(self) -> dict[str, PerceivedObject]:
@@ -94,6 +97,16 @@ class PerceptionResult:
     def unlisted(self) -> dict[str, PerceivedObject]:
         """The objects the scenario does not list, by id (u1, u2, ...)."""
         return {i: o for i, o in self.objects.items() if not o.listed}
+
+
+def arm_reaches(memory: SceneMemory, ids: tuple[str, ...], q: np.ndarray | None, near: float) -> frozenset[str]:
+    """The listed ids whose last pose (bottom, middle and top of its axis) the arm's capsules at the joint states q
+    come within its footprint's reach + `near` of: it may move them. q None (no joint state): every one."""
+    last = {i: o for i in ids if (o := memory.expected(i)) is not None}
+    if q is None:
+        return frozenset(last)
+    return frozenset(i for i, o in last.items() if on_arm(
+        np.array([[o.x, o.y, o.z + t * o.height] for t in (0.0, 0.5, 1.0)]), q, o.reach + near).any())
 
 
 class Perception:
@@ -163,7 +176,8 @@ class Perception:
         moving = q is not None and len(np.atleast_2d(q)) > 1
         uncounted = frozenset(i for i, o in candidates.items() if in_shelf or (moving and arm_in_view(
             q, box_corners(o), T, corrected_K(K, fit.intrinsics), self.objects.arm_padding)))
-        return PerceptionResult(marker, objects, missing, T, fit, tuple(notes), uncounted)
+        return PerceptionResult(marker, objects, missing, T, fit, tuple(notes), uncounted,
+                                arm_reaches(memory, self.scenario.ids, q, self.objects.arm_near))
 
     def _seen_plates(self, cam: np.ndarray, seen: Seen) -> np.ndarray:
         """HxW bool: pixels on the plates of the markers as seen (camera-frame points `cam`), never bottles: a

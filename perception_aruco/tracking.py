@@ -42,11 +42,17 @@ class SceneMemory:
     unlisted_count: int = 0
     streak: dict[str, int] = field(default_factory=dict)   # candidate id -> frames that counted in a row
     confirmed: set[str] = field(default_factory=set)       # unlisted ids published (confirmed)
+    reached: set[str] = field(default_factory=set)         # ids the arm came near since last seen (it may have moved)
 
     def expected(self, object_id: str) -> PerceivedObject | None:
         """The object's last perceived pose (any age), or None if never seen."""
         seen = self.last_seen.get(object_id)
         return None if seen is None else seen[0]
+
+    def arm_near(self, object_id: str) -> bool:
+        """Whether the arm came near the object's last pose since it was seen there (`update`'s `reached`): only
+        then may its track jump (identity.listed_costs)."""
+        return object_id in self.reached
 
     def held(self) -> dict[str, PerceivedObject]:
         """The listed objects the next frame would still publish at their last pose if not seen in it, by id."""
@@ -65,15 +71,18 @@ class SceneMemory:
         """The ids the next n unlisted objects seen for the first time get (`update` takes them)."""
         return [f"{UNLISTED_PREFIX}{self.unlisted_count + k + 1}" for k in range(n)]
 
-    def update(self, objects: Mapping[str, PerceivedObject], uncounted: Collection[str]) \
-            -> tuple[list[PerceivedObject], list[str], list[str]]:
+    def update(self, objects: Mapping[str, PerceivedObject], uncounted: Collection[str],
+               reached: Collection[str] = ()) -> tuple[list[PerceivedObject], list[str], list[str]]:
         """Record one processed frame; returns (objects to publish: listed in scenario order, then the confirmed
         unlisted by number; held ids; lost ids: listed objects not held, and confirmed unlisted ones dropped in this
-        frame). uncounted: the unlisted ids this frame is no evidence for, seen in it or not (class docstring)."""
+        frame). uncounted: the unlisted ids this frame is no evidence for, seen in it or not (class docstring);
+        reached: the ids whose last pose the arm came near in this frame (PerceptionResult.reached)."""
         self.frame += 1
         for i, o in objects.items():
             self.last_seen[i] = (o, self.frame)
+            self.reached.discard(i)
             self.unlisted_count = max(self.unlisted_count, unlisted_number(i) if i not in self.ids else 0)
+        self.reached |= set(reached)
         for i in [i for i in self.unlisted() if i not in self.confirmed]:
             if i in uncounted:
                 continue

@@ -8,10 +8,14 @@ on the cost  colour + size + position:
   footprint's shorter and longer sides and half its height, fitted as a box) over `size_tol` (seen shorter is no
   difference when the top or a lying one's end may be hidden); above 1: not that object. A
   cluster no free primitive fitted (a bottle mostly hidden) is that cylinder when a circle of its known radius fits
-  its points (localize.locate_cylinder);
-- position: the distance to where the object is expected over `position_scale`: from its last perceived pose (its
-  track) at most 1 (an object moved while unseen, e.g. relocated by the arm, is still that object), else from the
-  scenario's pose in full (objects start where the scenario says); it tells two objects of one colour apart.
+  its points (localize.locate_cylinder), unless its points lie on a straight line `flat_margin` times better than on
+  that circle: a box's flat face, which no cylinder shows (a brown box's face taken by a black bottle 13 cm away);
+- position: the distance to where the object is expected (its last perceived pose, its track; else the scenario's
+  pose: objects start where it says) over `position_scale`, in full; from a track the arm came near since the object
+  was last seen (`Memory.arm_near`: it may have carried or pushed it) at most 1, so an object moved while unseen is
+  still that object. A track never jumps further than a cost of max_cost allows while the arm did not come near it
+  (a cyan bottle taking a teal one's cluster 44 cm away during another object's relocation). It tells two objects of
+  one colour apart.
 A pair costing more than `max_cost` is no match. Clusters left are unlisted objects: one within `unlisted_gate` of
 an unlisted object's last position keeps its id (assignment on the distance), the others get new ids u<k> in order
 of first sight (tracking.SceneMemory).
@@ -35,6 +39,7 @@ from .params import ObjectParams
 from .primitives import Primitive
 
 NO_MATCH = 1e6
+NOISE_FLOOR = 0.0005  # m: the least depth noise a fit's residual is compared with (localize.locate_cylinder's)
 COLOURS = {**PALETTE, TARGET_COLOR: TARGET_RGB}
 
 
@@ -43,6 +48,10 @@ class Memory(Protocol):
 
     def expected(self, object_id: str) -> PerceivedObject | None:
         """The object's last perceived pose, or None."""
+
+    def arm_near(self, object_id: str) -> bool:
+        """Whether the arm came near the object's last perceived pose since it was seen there (it may have moved
+        it)."""
 
     def held(self) -> dict[str, PerceivedObject]:
         """The listed objects still held at their last pose if not seen in this frame, by id."""
@@ -73,7 +82,19 @@ def colour_name(colour: np.ndarray, clipped: np.ndarray, seg: SegmentationParams
     return names[k] if res[k] <= seg.max_residual else ""
 
 
-def _size_cost(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams, tol: float) -> float:
+def flat_face(xy: np.ndarray, centre: np.ndarray, radius: float, margin: float, noise: float) -> bool:
+    """Whether points `xy` (a cluster's side points in x-y) lie on a straight line `margin` times better (rms) than
+    on the circle of `radius` about `centre`: a box's face, not a cylinder's arc (whose bend over the visible chord,
+    its sagitta, the line misses). Both rms over all the points; `noise` (the depth noise) bounds the line's from
+    below, so a sliver too narrow to show its bend is no face."""
+    d = xy - xy.mean(axis=0)
+    line = float(np.linalg.svd(d, compute_uv=False)[-1]) / math.sqrt(len(xy))
+    circle = float(np.sqrt(np.mean((np.linalg.norm(xy - centre, axis=1) - radius) ** 2)))
+    return circle > margin * max(line, noise, NOISE_FLOOR)
+
+
+def _size_cost(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams, tol: float,
+               flat_margin: float) -> float:
     """Size cost of listed object b for cluster f (module docstring); NO_MATCH when it cannot be b."""
     p = f.prim
     # seen shorter than it is: a lying one's end, a standing one's top may be hidden by what is nearer
@@ -89,6 +110,8 @@ def _size_cost(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParam
     try:  # a sliver, whose free fit is no cylinder of its radius (a box, lying, none): one of the known radius?
         centre = locate_cylinder(f.circle_xy, b.radius, camera, loc, b.id)[0]
     except FitError:
+        return NO_MATCH
+    if flat_face(f.circle_xy, centre, b.radius, flat_margin, loc.depth_noise):  # a box's face: no cylinder's
         return NO_MATCH
     # ... holding the whole cluster (a circle of a small radius also fits part of a wide jar's arc)
     spread = float(np.percentile(np.linalg.norm(f.cluster.points[:, :2] - centre, axis=1), 95))
@@ -113,14 +136,15 @@ def listed_costs(fitted: list[Fitted], objects: tuple[ShelfObject, ...], memory:
         for m, f in enumerate(fitted):
             if col[j, m] > 1:
                 continue
-            size = _size_cost(b, f, camera, loc, params.size_tol)
+            size = _size_cost(b, f, camera, loc, params.size_tol, params.flat_margin)
             if size > 1:
                 continue
             dz = 0.0 if ez is None else f.cluster.support - ez
             d = math.sqrt((f.prim.x - ex) ** 2 + (f.prim.y - ey) ** 2 + dz ** 2) / params.position_scale
-            # from the track at most 1: an object moved while unseen (relocated by the arm) is still that object;
-            # from the scenario in full: objects start where it says, and two of one colour are told apart by it
-            cost[j, m] = col[j, m] + size + (min(d, 1.0) if was is not None else d)
+            # in full: objects start where the scenario says and stay where last seen (two of one colour told apart
+            # by it); from a track the arm came near at most 1: an object it moved while unseen is still that object
+            near = was is not None and memory.arm_near(b.id)
+            cost[j, m] = col[j, m] + size + (min(d, 1.0) if near else d)
     return cost
 
 

@@ -31,6 +31,8 @@ class ObjectParams:
     hidden_extent: float
     unlisted_density: float
     size_tol: float
+    flat_margin: float
+    arm_near: float
     cluster_gain_min: float
     cluster_gain_max: float
     position_scale: float
