@@ -138,7 +138,8 @@ def main() -> None:
     old, new = run(Path(a.old), a.scenario, a.checkpoint_every), run(HERE, a.scenario, a.checkpoint_every)
     print(f"scene {a.scenario}: the node's solve_then_train, MotionPlanner in-process, CachedOracle(reuse=True), "
           f"checkpoint every {a.checkpoint_every} episodes; A* {old['solve']['wall']:.1f} / "
-          f"{new['solve']['wall']:.1f} s wall (old / new), optimum {' '.join(new['optimum'])}, learned {' '.join(new['sequence'])}, "
+          f"{new['solve']['wall']:.1f} s wall (old / new), optimum {' '.join(new['optimum'])}, "
+          f"learned {' '.join(new['sequence'])}, "
           f"{new['planner_answers']} planner answers, MP_q {new['mp_q']}, last checkpoint {new['checkpoint_bytes']} B")
     print("| run | part | calls | wall s | CPU s | share of training wall |")
     print("|---|---|---|---|---|---|")
