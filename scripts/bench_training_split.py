@@ -9,7 +9,8 @@ one after the other. Prints the split of the training's wall and CPU time: the p
 kind: refused after the whole attempt budget, refused at once, feasible), its certifications, the checkpoints
 written, and the rest (the Q-Tree's episodes in the C kernel, reuse and claim lookups, feedback); and whether both
 runs agree (sequence, episodes, MP_q, planner answers, the Eq. 15 history, every answer's label, attempts and
-message, the last checkpoint but its wall-clock elapsed_s). Not a timed test: numbers to read (and paste into docs/bench/).
+message, the last checkpoint but its wall-clock elapsed_s). Not a timed test: numbers to read (and paste into
+docs/bench/).
 Usage: .venv/bin/python scripts/bench_training_split.py --old /tmp/old [--scenario scenario3_15]
 """
 from __future__ import annotations
