@@ -1,6 +1,7 @@
 """Q-Tree checkpoints (docs/reliability.md, section 1): atomic save, validated load, and a resumed training equal to an
 uninterrupted one with the same seed (blocking_10, BlockingOracle), after a periodic checkpoint, after a restart from
 disk, and after the planner died in the middle of an episode."""
+import hashlib
 import json
 import os
 
@@ -71,6 +72,17 @@ def test_periodic_checkpoints_and_the_final_one(uninterrupted):
     assert len(c.q_sum_history) == c.episode == 150 and c.q_sum_history == r.q_sum_history[:150]
     assert c.tree["nodes"] and c.planner_calls == len(c.feasibility)
     assert c.problem_hash == problem_hash(PROBLEM)
+
+
+def test_the_file_is_the_canonical_body(uninterrupted, tmp_path):
+    """The payload is encoded once and written as it is: the file's bytes are the canonical JSON (sorted keys, no
+    spaces) of {format, version, sha256 of the payload's canonical JSON, payload}, the format load_checkpoint reads."""
+    ck = uninterrupted[1][2]
+    payload = ck.to_payload()
+    canonical = lambda x: json.dumps(x, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()  # noqa: E731
+    body = {"format": "qtree-checkpoint", "version": 1, "sha256": hashlib.sha256(canonical(payload)).hexdigest(),
+            "payload": payload}
+    assert save_checkpoint(ck, tmp_path / "ck.json").read_bytes() == canonical(body)
 
 
 def test_resume_from_disk_equals_the_uninterrupted_run(uninterrupted, tmp_path):

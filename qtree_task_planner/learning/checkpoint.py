@@ -55,6 +55,14 @@ def _canonical(obj: Any) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
 
 
+def _canonical_body(payload: bytes) -> bytes:
+    """_canonical of the file's body {format, version, sha256, payload} from the payload's canonical bytes, which are
+    hashed and written as they are: the payload (the whole tree, every checkpoint) is encoded once, not twice."""
+    head = _canonical({"format": FORMAT, "version": VERSION, "sha256": hashlib.sha256(payload).hexdigest(),
+                       "payload": None})
+    return head.replace(b'"payload":null', b'"payload":' + payload, 1)
+
+
 @dataclass
 class Checkpoint:
     """The state of a training at the end of an episode (see training.train's resume/on_checkpoint)."""
@@ -176,13 +184,11 @@ def save_checkpoint(ck: Checkpoint, path: str | Path) -> Path:
     """Write atomically: temporary file next to `path`, fsync, os.replace (readers never see half a file)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    payload = ck.to_payload()
-    body = {"format": FORMAT, "version": VERSION, "sha256": hashlib.sha256(_canonical(payload)).hexdigest(),
-            "payload": payload}
+    payload = _canonical(ck.to_payload())
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         with open(tmp, "wb") as f:
-            f.write(_canonical(body))
+            f.write(_canonical_body(payload))
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
