@@ -4,8 +4,8 @@
 120 random questions (object, removed set of 0-6 obstacles; random.Random(0)) on scenario3_15, asked of one
 MotionPlanner in-process; prints the feasible answers' CPU time p50 / p95 and, where the tree has it, the part spent
 on the near set (planning/pick.near_objects, the reuse's). --old DIR runs the same on another checkout, e.g. one
-from before certification was the default (`git archive 7301738^ | tar -x -C /tmp/pre`: its planner was
-stpik_motion_planner/feasibility.py). Not a timed test: numbers to read.
+from before certification was the default (`git archive 7301738^ | tar -x -C /tmp/pre`: its planner was the
+module feasibility.py of the motion planner package then). Not a timed test: numbers to read.
 Usage: .venv/bin/python scripts/bench_pick_cpu.py [--old DIR]
 """
 from __future__ import annotations

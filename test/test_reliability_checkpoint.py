@@ -79,7 +79,10 @@ def test_the_file_is_the_canonical_body(uninterrupted, tmp_path):
     spaces) of {format, version, sha256 of the payload's canonical JSON, payload}, the format load_checkpoint reads."""
     ck = uninterrupted[1][2]
     payload = ck.to_payload()
-    canonical = lambda x: json.dumps(x, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()  # noqa: E731
+
+    def canonical(x):
+        return json.dumps(x, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
+
     body = {"format": "qtree-checkpoint", "version": 1, "sha256": hashlib.sha256(canonical(payload)).hexdigest(),
             "payload": payload}
     assert save_checkpoint(ck, tmp_path / "ck.json").read_bytes() == canonical(body)
