@@ -216,6 +216,20 @@ class RosGraph:
         self.procs.append(p)
         return p
 
+    def relocate_client(self, driver: NodeProcess, planner: NodeProcess, timeout: float = 60.0) -> Any:
+        """The probe's ActionClient of the motion planner's RelocateObject, once its server is there (the driver and
+        the planner alive meanwhile: else their logs)."""
+        from qtree_relocation_msgs.action import RelocateObject
+
+        from relocation_common.node import ActionClient
+
+        client = ActionClient(self.probe.node, RelocateObject, "/motion_planner/relocate")
+        deadline = time.monotonic() + timeout
+        while not client.wait_for_server(timeout_sec=0.5):
+            assert planner.alive and driver.alive, planner.log()[-2000:] + driver.log()[-2000:]
+            assert time.monotonic() < deadline, "relocate action never appeared"
+        return client
+
     def close(self) -> None:
         try:
             for p in reversed(self.procs):
@@ -234,6 +248,14 @@ class RosGraph:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def future_result(fut: Any, timeout: float, what: str = "no result") -> Any:
+    """An rclpy future's result, waited for at most `timeout` s (AssertionError `what` when it does not come)."""
+    done = threading.Event()
+    fut.add_done_callback(lambda _: done.set())
+    assert done.wait(timeout), what
+    return fut.result()
 
 
 def load_script(name: str):

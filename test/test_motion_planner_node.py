@@ -1,11 +1,10 @@
 """motion_planner node as a real process with the MuJoCo driver over DDS: feasibility service, relocation action."""
 import math
-import threading
 import time
 
 import numpy as np
 import pytest
-from ros_procs import REPO, RosGraph
+from ros_procs import REPO, RosGraph, future_result
 
 pytest.importorskip("rclpy")
 from qtree_relocation_msgs.action import RelocateObject
@@ -17,7 +16,6 @@ from visualization_msgs.msg import Marker
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
-from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from relocation_common.paths import default_scenario
 from relocation_common.ros_conversions import msg_to_objects
 from relocation_common.scenario import load_scenario
@@ -42,11 +40,7 @@ def graph(tmp_path_factory):
         g.objects = g.probe.collect("/sim/objects", ObjectArray, LATCHED)
         g.states = g.probe.collect("/j2s7s300_driver/out/joint_state", JointState, 50)
         g.path = g.probe.collect("/motion_planner/path", Marker, LATCHED)
-        g.action = ActionClient(g.probe.node, RelocateObject, "/motion_planner/relocate")
-        deadline = time.monotonic() + 60
-        while not g.action.wait_for_server(timeout_sec=0.5):
-            assert g.planner.alive and g.driver.alive, g.planner.log()[-2000:] + g.driver.log()[-2000:]
-            assert time.monotonic() < deadline, "relocate action never appeared"
+        g.action = g.relocate_client(g.driver, g.planner)
         g.objects.wait(timeout=30)
         g.states.wait(timeout=30)
         yield g
@@ -70,19 +64,12 @@ def _send(g, object_id, removed=()):
     feedback = []
     fut = g.action.send_goal_async(RelocateObject.Goal(object_id=object_id, removed_ids=list(removed)),
                                    feedback_callback=lambda f: feedback.append(f.feedback))
-    done = threading.Event()
-    fut.add_done_callback(lambda _: done.set())
-    assert done.wait(30), "goal response never came"
-    handle = fut.result()
+    handle = future_result(fut, 30, "goal response never came")
     return (handle if handle.accepted else None), feedback
 
 
 def _result(handle, timeout=120.0):
-    fut = handle.get_result_async()
-    done = threading.Event()
-    fut.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout), "no result"
-    return fut.result()
+    return future_result(handle.get_result_async(), timeout)
 
 
 def test_feasibility_service_answers_as_the_core(graph):

@@ -2,13 +2,11 @@
 beside T" layout (test/push_layouts.py, seed 0): PlanFeasibility action "push" answers with the action, the predicted
 end pose and the trajectory; RelocateObject action "push" carries it out (succeeded only if the simulator's scene
 shows X at that pose); afterwards T's side grasp, unfeasible before, is feasible; a bad action is refused."""
-import threading
-import time
 
 import pytest
 import yaml
 from push_layouts import beside_data, beside_layout
-from ros_procs import REPO, RosGraph
+from ros_procs import REPO, RosGraph, future_result
 
 pytest.importorskip("rclpy")
 from qtree_relocation_msgs.action import RelocateObject
@@ -17,7 +15,6 @@ from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 
 from relocation_common.feasibility import Label
-from relocation_common.node import ActionClient  # noqa: E402  (rclpy#1123 fixed)
 from relocation_common.ros_conversions import msg_to_objects
 
 pytestmark = pytest.mark.graph
@@ -40,11 +37,7 @@ def graph(tmp_path_factory):
                             params_file=REPO / "config" / "motion_planner.yaml",
                             params={"scene_topic": "/sim/objects", "scenario": str(scene)})
         g.objects = g.probe.collect("/sim/objects", ObjectArray, LATCHED)
-        g.action = ActionClient(g.probe.node, RelocateObject, "/motion_planner/relocate")
-        deadline = time.monotonic() + 60
-        while not g.action.wait_for_server(timeout_sec=0.5):
-            assert g.planner.alive and g.driver.alive, g.planner.log()[-2000:] + g.driver.log()[-2000:]
-            assert time.monotonic() < deadline, "relocate action never appeared"
+        g.action = g.relocate_client(g.driver, g.planner)
         g.objects.wait(timeout=30)
         yield g
     finally:
@@ -58,16 +51,9 @@ def _ask(g, object_id, action="", clear_for=""):
 
 def _push(g, object_id, clear_for, action="push", timeout=180.0):
     fut = g.action.send_goal_async(RelocateObject.Goal(object_id=object_id, action=action, clear_for=clear_for))
-    done = threading.Event()
-    fut.add_done_callback(lambda _: done.set())
-    assert done.wait(30), "goal response never came"
-    handle = fut.result()
+    handle = future_result(fut, 30, "goal response never came")
     assert handle.accepted
-    res = handle.get_result_async()
-    done = threading.Event()
-    res.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout), "no result"
-    return res.result()
+    return future_result(handle.get_result_async(), timeout)
 
 
 def test_a_push_is_answered_carried_out_and_opens_the_targets_lane(graph):

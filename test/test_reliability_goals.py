@@ -6,7 +6,6 @@ The planner's scene topic is relayed by this test from the driver's ground truth
 show it a scene that differs from the physics in one known way."""
 import copy
 import math
-import threading
 import time
 from dataclasses import replace
 
@@ -18,9 +17,8 @@ from qtree_relocation_msgs.srv import PlanFeasibility
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
-from ros_procs import REPO, RosGraph
+from ros_procs import REPO, RosGraph, future_result
 
-from relocation_common.node import ActionClient
 from relocation_common.paths import default_scenario
 from relocation_common.ros_conversions import msg_to_objects, object_to_msg
 from relocation_common.scenario import load_scenario
@@ -44,11 +42,7 @@ def graph(tmp_path_factory):
         g.mutate = lambda msg: msg
         g.truth = g.probe.collect("/sim/objects", ObjectArray, LATCHED)
         g.probe.node.create_subscription(ObjectArray, "/sim/objects", lambda m: g.pub.publish(g.mutate(m)), LATCHED)
-        g.action = ActionClient(g.probe.node, RelocateObject, "/motion_planner/relocate")
-        deadline = time.monotonic() + 60
-        while not g.action.wait_for_server(timeout_sec=0.5):
-            assert g.planner.alive and g.driver.alive, g.planner.log()[-2000:] + g.driver.log()[-2000:]
-            assert time.monotonic() < deadline, "relocate action never appeared"
+        g.action = g.relocate_client(g.driver, g.planner)
         g.truth.wait(timeout=30)
         yield g
     finally:
@@ -56,10 +50,7 @@ def graph(tmp_path_factory):
 
 
 def _done(fut, timeout):
-    done = threading.Event()
-    fut.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout), "no answer"
-    return fut.result()
+    return future_result(fut, timeout, "no answer")
 
 
 def _relocate(g, object_id, removed=(), timeout=120.0):
