@@ -170,14 +170,22 @@ def through_outages(fn: Callable[[], T], goal_handle: ServerGoalHandle, fb: Trai
                            on_outage=on_outage, on_back=on_back)
 
 
-def goal_health(fb: TrainPlanner.Feedback | None, execution: dict[str, Any]) -> tuple[int, str, dict[str, str]]:
+SCENE_NONE = "none yet"  # goal_health's "scene" before the first scene came
+GOAL_STATUS = "task_planner: goal"  # the name of the task planner's DiagnosticStatus (goal_health)
+
+
+def goal_health(fb: TrainPlanner.Feedback | None, execution: dict[str, Any],
+                scene_age: float | None) -> tuple[int, str, dict[str, str]]:
     """The task planner's status (relocation_common.node.Health): idle, or the goal's phase with its episode and
-    planner calls, and the execution so far (relocated, re-plans); WARN while waiting for a lost planner."""
+    planner calls, and the execution so far (relocated, re-plans); WARN while waiting for a lost planner. Always
+    "scene": how old the latest scene is (SCENE_NONE before the first: a client that sends a goal only once the
+    task planner has a scene does not race its discovery of the scene's publisher, `scene_wait`)."""
+    scene = SCENE_NONE if scene_age is None else f"{scene_age:.1f} s old"
     if fb is None:
-        return 0, "idle: no goal", {"phase": "idle"}
+        return 0, "idle: no goal", {"phase": "idle", "scene": scene}
     replans = execution.get("replans", [])
     values = {"phase": fb.phase, "episode": str(fb.episode), "planner calls": str(fb.planner_calls),
-              "re-plans": str(len(replans)), "relocated": " ".join(execution.get("relocated", []))}
+              "re-plans": str(len(replans)), "relocated": " ".join(execution.get("relocated", [])), "scene": scene}
     if replans:
         last = replans[-1]
         values["last re-plan"] = f"{last['reason'][:200]} -> {' '.join(last['sequence'] or []) or last.get('failure')}"
@@ -337,6 +345,11 @@ class SceneWatch:
     def __init__(self) -> None:
         self.latest: tuple[ObjectArray, float] | None = None  # (msg, received)
         self._changed = threading.Condition()
+
+    def age(self) -> float | None:
+        """Seconds since the latest scene arrived (None before the first)."""
+        latest = self.latest
+        return None if latest is None else time.monotonic() - latest[1]
 
     def put(self, msg: ObjectArray) -> None:
         """A scene arrived."""

@@ -68,6 +68,7 @@ from qtree_task_planner.markers import scene_markers
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from qtree_task_planner.ros_clients import (
+    GOAL_STATUS,
     Relocator,
     SceneWatch,
     ServiceOracle,
@@ -127,7 +128,8 @@ class TaskPlannerNode(Node):
                                     callback_group=reentrant)
         self._fb: TrainPlanner.Feedback | None = None  # the running goal's feedback, for the health
         self._progress: dict[str, Any] = {}  # the execution so far
-        self.health = Health(self, "task_planner: goal", "task planner", lambda: goal_health(self._fb, self._progress))
+        self.health = Health(self, GOAL_STATUS, "task planner",
+                             lambda: goal_health(self._fb, self._progress, self._scenes.age()))
         self.get_logger().info(f"ready: action {self.resolve_topic_name('~/train')}, scene from {self._scene_topic}")
 
     def p(self, name: str) -> Any:

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
+from qtree_task_planner.ros_clients import GOAL_STATUS, SCENE_NONE
 from relocation_app import run_report
 from relocation_app.client import ClientError, RelocationClient
 from relocation_app.final_state import final_state
@@ -132,6 +133,7 @@ class _Watch:
         self.relocating: list[str] = []  # /task_planner/relocating, as they come
         self.pids: dict[str, str] = {}  # /diagnostics status name -> the pid it last gave
         self.phase, self.executing = "", False
+        self.planner_scene = SCENE_NONE  # the task planner's latest scene, as its /diagnostics say (goal_health)
         self.before: dict[str, Any] = {}  # the ground truth when the execution started
         node.create_subscription(String, "/task_planner/execution", self.execution, latched)
         node.create_subscription(String, "/sim/disturbances", lambda m: self.disturbances.append(json.loads(m.data)),
@@ -147,6 +149,8 @@ class _Watch:
     def _on_health(self, msg) -> None:
         for st in msg.status:
             self.pids[st.name] = next((kv.value for kv in st.values if kv.key == "pid"), "")
+            if st.name == GOAL_STATUS:
+                self.planner_scene = next((kv.value for kv in st.values if kv.key == "scene"), SCENE_NONE)
 
     def on_feedback(self, phase: str) -> None:
         self.phase = phase
@@ -247,7 +251,7 @@ def _restarted(g: Graph, w: _Watch) -> None:
     while True:
         g.check_alive()
         p = g.procs.get("task_planner")
-        if p is not None and w.pids.get("task_planner: goal") == str(p.pid):
+        if p is not None and w.pids.get(GOAL_STATUS) == str(p.pid):
             time.sleep(DISCOVERY_SETTLE)
             return
         if time.monotonic() > deadline:
@@ -274,6 +278,9 @@ def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[E
     the training is waited for and the goal sent again (its checkpoint); during the execution the run ends."""
     client.wait_until_ready(120, check=g.check_alive)
     _wait_for(lambda: w.scene.msg is not None and len(w.scene.msg.objects) > 0, 90, g, f"no scene on {w.scene_topic}")
+    # the task planner's own first scene: its discovery of the scene's publisher took longer than its scene_wait at a
+    # load of 27, and a goal sent when the demo's subscription had one was refused "no scene received"
+    _wait_for(lambda: w.planner_scene != SCENE_NONE, 90, g, f"the task planner received no scene on {w.scene_topic}")
     w.before = w.truth.positions()
     print(f"[demo] graph up in {time.monotonic() - t0:.1f} s; training {used.policy}/{used.search} "
           f"through the feasibility service")

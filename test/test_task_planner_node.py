@@ -168,6 +168,20 @@ def test_the_task_planner_reports_its_health_on_diagnostics(graph):
     values = {kv.key: kv.value for kv in st.values}
     assert st.level == b"\x00" and values["pid"] == str(g.procs["task_planner"].pid), (st, values)
     assert values["phase"] == "idle" and st.message.endswith("idle: no goal"), (st.message, values)
+    assert values["scene"].endswith(" s old"), values  # it has had scenes: a client may send a goal
+
+
+def test_the_health_says_whether_the_task_planner_has_a_scene():
+    """A client sends its goal once the task planner has a scene (the demo: its own subscription had one while the
+    task planner, at a load of 27, had not discovered the publisher within scene_wait, and the goal was refused)."""
+    from qtree_relocation_msgs.action import TrainPlanner
+
+    from qtree_task_planner.ros_clients import SCENE_NONE, goal_health
+
+    assert goal_health(None, {}, None)[2]["scene"] == SCENE_NONE
+    assert goal_health(None, {}, 0.25)[2]["scene"] == "0.2 s old"
+    fb = TrainPlanner.Feedback(phase="training", episode=3)
+    assert goal_health(fb, {}, 1.04)[2]["scene"] == "1.0 s old"
 
 
 @pytest.mark.parametrize("fields", [{"alpha": 1.5}, {"policy": "greedy"}, {"gamma": float("nan")}])
