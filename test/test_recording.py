@@ -190,6 +190,21 @@ def test_no_frames_no_video(tmp_path):
 
 # ---------------------------------------------------------------------------------------------- on a graph
 @pytest.mark.graph
+def record_until(rec, least_counts: dict, least: float, timeout: float = 60.0):
+    """Record for at least `least` s and until the bag holds `least_counts` messages per topic (a key matches the
+    topics ending with it), at most `timeout` s: the driver publishes at rates of simulated time, which runs slower
+    than the wall clock on a loaded machine, so a fixed recording time holds a load-dependent number of messages.
+    The counts reached, or None at the timeout."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        time.sleep(0.2)
+        topics = {name: t.count for name, t in list(rec.bag.topics.items())}
+        counts = {k: max((c for name, c in topics.items() if name.endswith(k)), default=0) for k in least_counts}
+        if time.monotonic() - t0 >= least and all(counts[k] >= n for k, n in least_counts.items()):
+            return counts
+    return None
+
+
 def test_driver_run_recorded(tmp_path):
     from ros_procs import REPO, RosGraph
     with RosGraph(tmp_path / "graph") as g:
@@ -198,15 +213,16 @@ def test_driver_run_recorded(tmp_path):
         g.probe.collect("/sim/objects", recording.message_class("qtree_relocation_msgs/msg/ObjectArray")).wait(
             timeout=60)  # the driver is up
         rec = recording.RunRecorder(tmp_path / "bag", video=tmp_path / "run.mp4", domain_id=g.domain_id).start()
-        time.sleep(6.0)
+        counts = record_until(rec, {"/camera/color/image_raw/compressed": 8, "joint_state": 101}, least=6.0)
         summary = rec.stop()
+    assert counts is not None, "the bag did not reach 8 camera frames and 101 joint states in 60 s"
     meta, mcap_summary, msgs, times, records = read_bag(tmp_path / "bag")
     check_metadata(meta, mcap_summary, times, records)
     for topic in ("/tf", "/tf_static", "/robot_description", "/sim/objects", "/camera/color/camera_info",
                   "/camera/color/image_raw/compressed"):
         assert msgs.get(topic), f"nothing on {topic}: {sorted(msgs)}"
     states = [t for t in msgs if t.endswith(("/joint_state", "/joint_states"))]
-    assert states and len(msgs[states[0]]) > 100  # 100 Hz
+    assert states and len(msgs[states[0]]) > 100  # the driver's rate is test_sim_driver_core's
     assert all(len(m.name) == len(m.position) > 0 for m in msgs[states[0]])
     assert "/clock" not in msgs and "/camera/depth/image_rect_raw" not in msgs
     jpg = msgs["/camera/color/image_raw/compressed"][-1]
@@ -225,4 +241,4 @@ def test_driver_run_recorded(tmp_path):
     camera = times["/camera/color/image_raw/compressed"]
     recorded = (max(max(t) for t in times.values()) - camera[0]) * 1e-9
     assert video["duration_s"] == pytest.approx(recorded, abs=0.6)
-    assert len(camera) >= 8  # 2 Hz for about 5 s
+    assert len(camera) >= 8
