@@ -42,7 +42,7 @@ from rclpy.service_introspection import ServiceIntrospectionState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from qtree_task_planner.executive.closed_loop import ExecutionResult
+from qtree_task_planner.executive.closed_loop import ExecutionResult, Tolerances
 from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PUSH, PushActions
@@ -102,6 +102,7 @@ class TaskPlannerNode(Node):
         declare_parameters(self)  # config/task_planner.yaml: training parameters and the node's own
         check_node_parameters(self.p)  # ParameterError naming the first unusable one (main(): one line, exit 2)
         self._action_cost = ActionCosts.from_parameters(self.p)  # relocating i costs phi_i x its action's factor
+        self._tolerances = Tolerances.from_parameters(self.p)  # the closed loop's "as planned"
 
         self._scenes = SceneWatch()  # the latest scene and when it came
         log = self.get_logger()
@@ -295,7 +296,8 @@ class TaskPlannerNode(Node):
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen,
                       retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until,
-                      action_cost=self._action_cost, pushes=pushes, on_push=lambda record: phase(record.line()))
+                      action_cost=self._action_cost, pushes=pushes, on_push=lambda record: phase(record.line()),
+                      tolerances=self._tolerances)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         publish(out, running=False)
 

@@ -39,8 +39,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from qtree_task_planner.executive.closed_loop import (
     SeenObject,
-    Tolerances,
     board_of,
+    configured,
     remaining_problem,
 )
 from qtree_task_planner.executive.replan import GeometryCache, replan
@@ -180,7 +180,7 @@ def prove(row: dict, draws: int = 1) -> str:
     scene = {o["id"]: _seen(o) for o in row.get("final_scene", [])}
     if not scene:
         return "not proven: no final scene recorded"
-    tol = Tolerances()
+    tol = configured()
     relocated = [i for i, o in scene.items() if board_of(o, sc, tol) == "bottom"]
     rp = remaining_problem(sc, scene, relocated, tol)
     if rp.target_retrieved:

@@ -17,6 +17,7 @@ from qtree_task_planner.executive.closed_loop import (
     Tolerances,
     board_of,
     check_capacity,
+    configured,
     free_slots,
     remaining_problem,
     scene_from_scenario,
@@ -27,7 +28,9 @@ from qtree_task_planner.executive.retrieval import execute, execute_sequence
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.search import astar
+from relocation_common.config import ParameterError, node_section
 from relocation_common.feasibility import NO_GRASP, BlockerSet, FeasibilityAnswer, Label, destination_slot
+from relocation_common.paths import config_file
 from relocation_common.scenario import ShelfObject, parse_scenario
 from relocation_common.shelf_object import tilt_of_quaternion
 
@@ -174,7 +177,7 @@ def test_a_bottle_that_tipped_over_at_its_slot_is_relocated_and_the_difference_s
     before = scene_from_scenario(SCENARIO)
     x, y, z = slot0()
     tipped = SeenObject("b", x - 0.08, y, z + 0.033, tilt=math.pi / 2, radius=0.033, height=0.16)
-    assert board_of(tipped, SCENARIO, Tolerances()) == "bottom"
+    assert board_of(tipped, SCENARIO, configured()) == "bottom"
     assert 0 not in free_slots(SCENARIO, dict(before, b=tipped))
     v = verify_relocation("b", slot0(), before, dict(before, b=tipped))
     assert [d.kind for d in v.differences] == ["not_at_slot"]
@@ -182,11 +185,30 @@ def test_a_bottle_that_tipped_over_at_its_slot_is_relocated_and_the_difference_s
 
 
 def test_tolerances_are_validated_and_tilt_is_read_from_a_quaternion():
-    with pytest.raises(ValueError, match="slot"):
-        Tolerances(slot=0)
+    with pytest.raises(ParameterError, match="world_tolerance.slot"):
+        Tolerances(slot=0, still=0.015, board=0.025)
     assert tilt_of_quaternion(1, 0, 0, 0) == 0.0
     s = math.sin(math.pi / 4)
     assert tilt_of_quaternion(s, s, 0, 0) == pytest.approx(math.pi / 2)
+
+
+def test_tolerances_have_one_source_the_task_planner_yaml(tmp_path):
+    """The closed loop's tolerances are config/task_planner.yaml's `world_tolerance` (before: a second set in the
+    dataclass, which the node never read from its parameters): what a caller that passes none gets, what the node's
+    parameters give, and a value changed there changes the check. A file without them is refused by name."""
+    cfg = node_section(config_file("task_planner.yaml"), "task_planner")["world_tolerance"]
+    assert configured() == Tolerances(**cfg)
+    assert Tolerances.from_parameters(lambda name: cfg[name.split(".", 1)[1]]) == configured()
+    before = scene_from_scenario(SCENARIO)
+    x, y, z = slot0()
+    off = dict(before, b=SeenObject("b", x + 0.02, y, z, radius=0.033, height=0.16))  # 2 cm from its slot
+    assert verify_relocation("b", slot0(), before, off).ok
+    tight = Tolerances(**{**cfg, "slot": 0.015})
+    assert [d.kind for d in verify_relocation("b", slot0(), before, off, tight).differences] == ["not_at_slot"]
+    path = tmp_path / "task_planner.yaml"
+    path.write_text("task_planner:\n  ros__parameters:\n    world_tolerance: {slot: 0.03}\n")
+    with pytest.raises(ParameterError, match="world_tolerance must map exactly slot, still, board"):
+        Tolerances.from_yaml(path)
 
 
 # ------------------------------------------------------------------------------------------------ remaining problem

@@ -26,11 +26,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from qtree_task_planner.executive.push import Pusher, PushRecord
 from qtree_task_planner.problem import ActionCosts, ProblemError, RelocationProblem
+from relocation_common.config import ParameterError, node_section
 from relocation_common.feasibility import OUTCOME_UNKNOWN, destination_slot, pick_action
+from relocation_common.paths import config_file
 from relocation_common.scenario import PALETTE, TARGET_RGB, Scenario, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT, Footprint, support_height
 
@@ -95,18 +99,43 @@ def scene_from_scenario(scenario: Scenario) -> dict[str, SeenObject]:
 
 @dataclass(frozen=True)
 class Tolerances:
-    """How far the perceived world may be from the planned one and still be "as planned"."""
+    """How far the perceived world may be from the planned one and still be "as planned": config/task_planner.yaml
+    `world_tolerance` (slot, still, board; the one place of their values); tilt is "standing" as the whole project
+    reads it (relocation_common.shelf_object.UPRIGHT_TILT), not a parameter."""
 
-    slot: float = 0.03  # m in xy: the relocated bottle from its slot
-    still: float = 0.015  # m in xy: every other bottle from where it was
-    board: float = 0.025  # m in z: a bottle's support from a board's surface
+    slot: float  # m in xy: the relocated bottle from its slot
+    still: float  # m in xy: every other bottle from where it was
+    board: float  # m in z: a bottle's support from a board's surface
     tilt: float = UPRIGHT_TILT  # rad: standing upright
 
+    KEYS = ("slot", "still", "board")
+
     def __post_init__(self) -> None:
-        for name in ("slot", "still", "board", "tilt"):
+        for name in (*self.KEYS, "tilt"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"tolerance {name} must be a positive number, got {v!r}")
+                raise ParameterError(f"world_tolerance.{name} must be a positive number (m), got {v!r}")
+
+    @classmethod
+    def from_parameters(cls, p: Callable[[str], Any]) -> "Tolerances":
+        """From a node's parameters: p(name) of `world_tolerance.<key>` (ROS flattens a nested map)."""
+        return cls(**{k: p(f"world_tolerance.{k}") for k in cls.KEYS})
+
+    @classmethod
+    def from_yaml(cls, path: str | Path | None = None, node: str = "task_planner") -> "Tolerances":
+        """`world_tolerance` of a ROS params file's `node` section (default config/task_planner.yaml)."""
+        path = Path(path) if path is not None else config_file("task_planner.yaml")
+        d = node_section(path, node).get("world_tolerance")
+        if not isinstance(d, Mapping) or set(d) != set(cls.KEYS):
+            raise ParameterError(f"{path}: world_tolerance must map exactly {', '.join(cls.KEYS)} to metres, "
+                                 f"got {d!r}")
+        return cls(**{k: d[k] for k in cls.KEYS})
+
+
+@lru_cache(maxsize=1)
+def configured() -> Tolerances:
+    """The tolerances of config/task_planner.yaml: what a caller that passes none gets (read once)."""
+    return Tolerances.from_yaml()
 
 
 def _support(o: SeenObject) -> float:
@@ -169,7 +198,7 @@ class Verification:
 
 
 def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float], before_scene: Scene,
-                      after_scene: Scene, tolerances: Tolerances = Tolerances(), bottom_seen: bool = True
+                      after_scene: Scene, tolerances: Tolerances | None = None, bottom_seen: bool = True
                       ) -> Verification:
     """Check a scene perceived after relocating `planned_object` against the plan: that object upright on the bottom
     shelf at `slot_pose` (x, y, z of the board's surface) within tolerances.slot (one that tipped over there is
@@ -178,7 +207,7 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
     every difference found, one line each, and the new objects (`new_objects`: not a difference, a re-plan).
     `bottom_seen` False (a camera that does not see the bottom shelf): a bottle not seen there is no difference
     (the relocated one must only have left the top shelf)."""
-    tol, diffs = tolerances, []
+    tol, diffs = tolerances or configured(), []
     moved = after_scene.get(planned_object)
     sx, sy, sz = slot_pose
     if moved is None:
@@ -263,16 +292,17 @@ class RemainingProblem:
                 "free_slots": list(self.free_slots), "reason": self.reason}
 
 
-def free_slots(scenario: Scenario, scene: Scene, tol: Tolerances = Tolerances()) -> tuple[int, ...]:
+def free_slots(scenario: Scenario, scene: Scene, tol: Tolerances | None = None) -> tuple[int, ...]:
     """Indices of the scenario's slots that no object on the bottom shelf occupies: one is taken when the widest
     object of the scenario, standing on the slot at any turn, would overlap an object's footprint there (a standing
     bottle's circle; a box or a lying bottle by its rectangle, as the scene gives its size). The rule is
     Scenario.free_slots: the motion planner's destination reads the same."""
+    tol = tol or configured()
     return scenario.free_slots(o.footprint() for o in scene.values() if board_of(o, scenario, tol) == "bottom")
 
 
 def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Iterable[str],
-                      tolerances: Tolerances = Tolerances(), action_cost: ActionCosts | None = None
+                      tolerances: Tolerances | None = None, action_cost: ActionCosts | None = None
                       ) -> RemainingProblem:
     """The retrieval problem left in `perceived_scene`: objects resting on the top shelf (at their perceived poses,
     newly seen ones included with their perceived weight) are in; relocated ones and anything else off the top
@@ -280,7 +310,7 @@ def remaining_problem(scenario: Scenario, perceived_scene: Scene, relocated: Ite
     takes (a tipped one: top_grasp; problem.RelocationProblem.with_actions). No problem (reason given) when the target
     is unseen, off the shelf, or already on the bottom shelf (`target_retrieved`; also when it is in `relocated` and
     not seen: the bottom shelf out of view)."""
-    relocated, tol = tuple(relocated), tolerances
+    relocated, tol = tuple(relocated), tolerances or configured()
     known = set(scenario.ids)
     top = {oid: o for oid, o in perceived_scene.items() if board_of(o, scenario, tol) == "top"}
     moved = {oid: (o.x, o.y) for oid, o in top.items() if oid in known and
@@ -452,7 +482,7 @@ class ClosedLoopExecutor:
     """
 
     def __init__(self, scenario: Scenario, relocate: Callable[[str, list[str]], tuple[bool, str]],
-                 perceive: Callable[[], Scene], replan: Replanner, *, tolerances: Tolerances = Tolerances(),
+                 perceive: Callable[[], Scene], replan: Replanner, *, tolerances: Tolerances | None = None,
                  max_replans: int = 20, max_attempts: int = 2, cancelled: Callable[[], bool] = lambda: False,
                  on_step: Callable[[Step], None] = lambda step: None,
                  on_replan: Callable[[ReplanRecord], None] = lambda record: None,
@@ -463,7 +493,7 @@ class ClosedLoopExecutor:
         if max_replans < 0 or max_attempts < 1:
             raise ValueError(f"need max_replans >= 0 and max_attempts >= 1, got {max_replans}, {max_attempts}")
         self.scenario, self.relocate, self.perceive, self.replan = scenario, relocate, perceive, replan
-        self.tol, self.max_replans, self.max_attempts = tolerances, max_replans, max_attempts
+        self.tol, self.max_replans, self.max_attempts = tolerances or configured(), max_replans, max_attempts
         self.cancelled, self.on_step, self.on_replan = cancelled, on_step, on_replan
         self.slot_of = slot_of
         self.bottom_seen = bottom_seen

@@ -24,7 +24,7 @@ import dataclasses
 import math
 from typing import Callable, Iterable, Mapping, Sequence
 
-from qtree_task_planner.executive.closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances
+from qtree_task_planner.executive.closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances, configured
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp
@@ -52,9 +52,9 @@ class GeometryCache:
     """Feasibility answers kept while the geometry they were computed on is unchanged (module doc). `calls`: real
     planner calls; `hits`: questions answered from the cache."""
 
-    def __init__(self, oracle: FeasibilityOracle, tol: float = Tolerances().still,
-                 tilt_tol: float = Tolerances().tilt) -> None:
-        self.oracle, self.tol, self.tilt_tol = oracle, tol, tilt_tol
+    def __init__(self, oracle: FeasibilityOracle, tolerances: Tolerances | None = None) -> None:
+        tol = tolerances or configured()  # a pose moved by more than `still`, or tipped past `tilt`: a new version
+        self.oracle, self.tol, self.tilt_tol = oracle, tol.still, tol.tilt
         self._ref: dict[str, Pose] = {}
         self._version: dict[str, int] = {}
         self.table: dict[Key, FeasibilityAnswer] = {}

@@ -23,6 +23,7 @@ from qtree_task_planner.executive.closed_loop import (
     ReplanRecord,
     Scene,
     Step,
+    Tolerances,
     check_capacity,
     free_slots,
     remaining_problem,
@@ -212,7 +213,8 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             retrain: TrainingParams | None = None, until_planner: UntilPlanner | None = None,
             on_progress: Callable[[ExecutionResult], None] = lambda out: None,
             action_cost: ActionCosts | None = None, pushes: PushActions | None = None,
-            on_push: Callable[[PushRecord], None] = lambda p: None) -> ExecutionResult:
+            on_push: Callable[[PushRecord], None] = lambda p: None,
+            tolerances: Tolerances | None = None) -> ExecutionResult:
     """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
     checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
     with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
@@ -226,8 +228,8 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     sequence, a push out of its blocking cycle (executive.push; closed loop only: an open-loop run never pushes); an
     empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push."""
     if closed_loop:
-        cache = GeometryCache(oracle.oracle)
-        cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry(), oracle.certified)
+        cache = GeometryCache(oracle.oracle, tolerances)
+        cache.adopt(oracle.table, remaining_problem(scenario, scene, (), tolerances).geometry(), oracle.certified)
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
             before_each()
@@ -278,8 +280,9 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen, on_progress=on_progress,
-                                  action_cost=action_cost, pusher=pusher, on_push=on_push).run(sequence, scene)
-    why = check_capacity(sequence, len(free_slots(scenario, scene)))
+                                  action_cost=action_cost, pusher=pusher, on_push=on_push,
+                                  tolerances=tolerances).run(sequence, scene)
+    why = check_capacity(sequence, len(free_slots(scenario, scene, tolerances)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")
     unverified: list[str] = []  # the motion planner's success without an outcome check (goal_check.outcome)

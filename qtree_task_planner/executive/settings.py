@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from typing import Callable
 
+from qtree_task_planner.executive.closed_loop import Tolerances
 from qtree_task_planner.executive.keeper import check_checkpoint_path
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.problem import ActionCosts
@@ -24,6 +25,7 @@ def check_node_parameters(p: Callable[[str], object]) -> None:
     """ParameterError naming the first unusable parameter; p(name) is the parameter's value."""
     TrainingParams.from_dict({f: p(f) for f in TrainingParams.fields()})
     ActionCosts.from_parameters(p)
+    Tolerances.from_parameters(p)
     for name, lo in POSITIVE_SECONDS:
         v = p(name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < lo:
