@@ -27,6 +27,7 @@ from .aruco import (
     MarkerNotFoundError,
     MarkerObservation,
     MarkerParams,
+    PerceptionError,
     fuse_markers,
 )
 from .debug_image import annotate
@@ -168,6 +169,10 @@ class Perception:
         in_shelf = arm_unknown or arm_in_shelf(q, self.scenario.shelf, self.objects.arm_padding)
         objects, missing, left_out = find_objects(clusters, points, self.scenario, memory, self.seg, self.objects,
                                                   loc, T[:3, 3], fit.noise, new_unlisted=not in_shelf)
+        if left_out and memory.frame == 0:  # nothing earlier explains that space: no scene yet, never a free one
+            raise PerceptionError(f"{left_out} cluster(s) matching no listed object in the first frame, with the arm "
+                                  "in the shelf (new objects are taken with the arm out of it): no scene until the "
+                                  "arm is out of the shelf")
         if left_out:
             notes.append(f"{left_out} cluster(s) matching no known object left out while the arm is in the shelf "
                          "(new objects are taken with the arm out of it)")

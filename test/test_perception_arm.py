@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from perception_scenes import generated_layout, render_scene, with_objects
 
 from jaco2_sim_driver.sensor_model import SensorModel
@@ -23,16 +24,39 @@ SCENE = Path(__file__).resolve().parent.parent / "config" / "scenarios" / "scena
 
 
 def test_no_object_made_of_the_arm_in_the_shelf():
+    """During a carry (the node saw the shelf with the arm at home before: its memory holds that frame)."""
     s = load_scenario(SCENE)
     s = s.with_objects([o for o in s.objects if o.id != "o4"])  # o4: in the hand
+    home, _ = render_scene(s, q=Q_HOME)
     phantoms = []
     for k, sample in enumerate(DATA["samples"]):
         f, _ = render_scene(s, q=np.array(sample["q"]))
         later = np.array(sample["q_later"])
         assert arm_in_shelf(later, s.shelf, 0.02)
-        r = Perception(s).process(f.rgb, f.depth, f.K, q=later)
+        p, memory = Perception(s), SceneMemory(s.ids, 3, 3)
+        r0 = p.process(home.rgb, home.depth, home.K, memory=memory, q=Q_HOME)
+        memory.update(r0.objects, r0.uncounted)
+        r = p.process(f.rgb, f.depth, f.K, memory=memory, q=later)
         phantoms += [f"t={sample['t']} {i} at ({o.x:.3f}, {o.y:.3f})" for i, o in r.unlisted.items()]
     assert not phantoms, phantoms
+
+
+def test_a_first_frame_with_the_arm_in_the_shelf_and_an_unknown_cluster_is_refused():
+    """On the blocking shelves the arm at home reaches into the top compartment (its hand above the bottles), so new
+    objects are not taken there; at 424 x 240 the orange o6, behind o2 and o3 and under the hand, shows as two
+    fragments of 13-15 pixels that no listed object takes. Before, the frame was published with o6 missing and no
+    object in its place (occupied space published as free: the robustness benchmark's two silently wrong cases).
+    Now a first frame (nothing earlier explains that space) is refused with the reason."""
+    from dataclasses import replace
+
+    from jaco2_sim_driver.camera import render_frame
+    from jaco2_sim_driver.params import CameraSpec
+    from perception_aruco.aruco import PerceptionError
+    s = load_scenario("blocking_10")
+    assert arm_in_shelf(Q_HOME, s.shelf, 0.02)
+    f = render_frame(s, q=Q_HOME, camera=replace(CameraSpec.configured(), width=424, height=240))
+    with pytest.raises(PerceptionError, match="no scene until the arm is out of the shelf"):
+        Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
 
 
 def test_the_joint_states_around_a_frame():
