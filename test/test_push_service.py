@@ -174,7 +174,8 @@ def test_a_planner_killed_mid_push_brings_the_arm_home_with_the_fingers_open(tmp
 def test_a_planner_killed_on_the_retreat_goes_on_home_and_models_the_object_pushed(tmp_path):
     """Killed 0.3 s into the retreat (the object at its predicted end pose): the new process goes on along the
     planned retreat and way home (never back into the object), opens the fingers, and models the object at the
-    push's predicted end pose until a scene says where it is."""
+    push's predicted end pose until a scene says where it is; the push goal sent again is answered by the scene
+    now (X seen 3 mm from its predicted end: succeeded, saying the planner restarted)."""
     dead, text = _killed_during("retreat_push", 0.3, tmp_path / "j")
     s, link = _restarted(dead, text, tmp_path / "j2")
     assert s.interrupted is not None and s.interrupted.push is not None, "the push was not in the journal"
@@ -185,3 +186,16 @@ def test_a_planner_killed_on_the_retreat_goes_on_home_and_models_the_object_push
     assert float(np.max(np.abs(link.q - rd.Q_HOME))) < 0.02 and _open(link)
     x = s.planner.scenario.object("X")
     assert (x.x, x.y) == pytest.approx(end[:2])
+    z = s.base.shelf.top_z
+    seen = [dataclasses.replace(b, x=end[0] + 0.003, y=end[1], support_z=z) if b.id == "X" else
+            dataclasses.replace(b, support_z=z) for b in beside_layout(0).objects]
+    posted: list[float] = []
+
+    def perceive():  # the first scene after the goal, OUTCOME_SETTLE later
+        posted.append(time.monotonic())
+        if posted[-1] - posted[0] > 2 * OUTCOME_SETTLE:
+            s.update_scene(seen)
+        return True
+
+    out = s.push(a, "X", [], "T", ok=perceive)
+    assert out.status == "succeeded" and "restarted during this push" in out.message, out.message

@@ -78,18 +78,19 @@ def recover_push(arm: Arm, progress: Progress, on_change: Callable[[], None] = l
     """A safe state after a failed, cancelled or interrupted push (the module docstring): the arm home from where it
     is, then the gripper opened (nothing held; the next grasp needs it open). Once the retreat started and the plan
     `made` is known: on along the planned motion the arm is on (its sample nearest the arm within `near` rad; None:
-    config/motion_planner.yaml's recover_near) and the rest of the plan; else back along the motions made, newest
-    first. Each motion gone back along leaves `progress.moves` (then on_change()). What was done; raises (the arm's
+    config/motion_planner.yaml's recover_near) and the rest of the plan, each recorded in `progress.moves` before it
+    starts (a recovery killed in turn is taken up again from there); else back along the motions made, newest first,
+    each gone back along leaving `progress.moves`. on_change() after each change. What was done; raises (the arm's
     error) if it could not."""
     if not progress.moves:
         return "arm stopped (it had not moved towards the object)"
     near = float(node_parameters()["recover_near"]) if near is None else near
     on = after_push(progress, made, arm.measured(), near) if made is not None else None
     if on is not None:
-        for traj in on:
+        for phase, traj in on:
+            progress.moves.append((phase, traj))
+            on_change()
             arm.follow(traj, "recover_push")
-        progress.moves = []
-        on_change()
         arm.gripper("open", "recover_push")
         return f"{progress.object_id} was pushed; arm on along its way home, gripper open"
     for _, traj in reversed(list(progress.moves)):
@@ -106,10 +107,12 @@ def pushed(progress: Progress) -> bool:
     return any(phase in AFTER_PUSH for phase, _ in progress.moves)
 
 
-def after_push(progress: Progress, made: PushPlan, q: np.ndarray, near: float) -> list[Trajectory] | None:
+def after_push(progress: Progress, made: PushPlan, q: np.ndarray, near: float
+               ) -> list[tuple[str, Trajectory]] | None:
     """The rest of the push's plan from where the arm is, once its retreat was started (`progress`): the planned
     retreat or way home with the sample nearest q (largest joint difference; the later motion on a tie) if within
-    `near`, from that sample, then the planned motions after it. None before the retreat, or off both."""
+    `near`, from that sample, then the planned motions after it, each with its phase. None before the retreat, or
+    off both."""
     if not pushed(progress):
         return None
     segs = [s for s in made.segments if PHASE[s.name] in AFTER_PUSH]
@@ -123,7 +126,9 @@ def after_push(progress: Progress, made: PushPlan, q: np.ndarray, near: float) -
             best = (float(d[k]), i, k)
     if best is None:
         return None
-    return [segs[best[1]].trajectory.from_sample(best[2])] + [s.trajectory for s in segs[best[1] + 1:]]
+    first = segs[best[1]]
+    return [(PHASE[first.name], first.trajectory.from_sample(best[2]))] + [(PHASE[s.name], s.trajectory)
+                                                                           for s in segs[best[1] + 1:]]
 
 
 def push_problems(shelf: Shelf, before: Mapping[str, Point], after: Mapping[str, SeenBottle], made: PushPlan,
