@@ -17,8 +17,8 @@
   on the top shelf are ignored; bottles not seen keep their last pose.
 - `~/relocated` (std_msgs/String, latched): JSON {"relocated": {id: slot}}, the bottles this node placed on the
   bottom shelf (perception publishes its scene without a relocated target, out of the camera's view).
-- `journal_path`: the relocation journal; started after a process that died mid-relocation, the node first brings
-  the arm back from it (service.py), goals waiting meanwhile.
+- `journal_path`: the relocation (and push) journal; started after a process that died mid-relocation or mid-push,
+  the node first brings the arm back from it (service.py), goals waiting meanwhile.
 - /diagnostics: "motion_planner: ..." (relocation_common.node.Health): feasibility questions in flight and answered,
   the last answer, the relocation running, the recovery after a restart.
 """
@@ -94,7 +94,9 @@ class MotionPlannerNode(Node):
             self.core.on_relocated = self._publish_relocated
             self._publish_relocated(self.core.relocated)
             if self.core.interrupted is not None:  # a previous process died mid-relocation: the arm back first
-                self.relocation = f"recovering the relocation of {self.core.interrupted.progress.object_id}"
+                run = self.core.interrupted
+                self.relocation = (f"recovering the {'relocation' if run.push is None else 'push'} of "
+                                   f"{run.progress.object_id}")
                 threading.Thread(target=self._recover_interrupted, name="restart recovery", daemon=True).start()
         self.create_subscription(ObjectArray, params["scene_topic"], self._on_scene, SCENE_QOS,
                                  callback_group=MutuallyExclusiveCallbackGroup())

@@ -10,14 +10,16 @@ load can take the planner's whole wall-clock safety net (carry_timeout, 60 s) wi
 planner takes `relocate_silence` (10 s) without feedback for a planner that is gone. Logging goes to
 `log(level, text)` (the node's logger).
 
-A process that dies mid-relocation leaves the arm where it stopped, perhaps holding a bottle. The relocation's
-progress is kept in a journal (`execution.journal`, the node's `journal_path`) before each motion and at the
-release; a new process reads it and `recover_interrupted` brings the arm back as after a cancel. A goal sent again
-for that object then answers for the interrupted relocation: released before the death, the outcome checked
-against the scene now; not released, aborted with what the recovery did (the task planner re-plans as after any
-failed relocation). Goals wait (with feedback) until that recovery has ended. `on_relocated(relocated)` is called
-when the bottles this node placed change (the node publishes them: perception leaves a relocated target out of
-view instead of publishing no scene).
+A process that dies mid-relocation leaves the arm where it stopped, perhaps holding a bottle; one that dies
+mid-push leaves it in the shelf with the fingers shut. The relocation's or the push's progress is kept in a journal
+(`execution.journal`, the node's `journal_path`) before each motion and at the release (a push: its plan, before
+the arm moves); a new process reads it and `recover_interrupted` brings the arm back as after a cancel (a push: home
+from where the arm is, the gripper opened, the pushed object modelled at its predicted end once its retreat had
+started). A goal sent again for that object (and action) then answers for the interrupted one: released (a push:
+its retreat started) before the death, the outcome checked against the scene now; else aborted with what the
+recovery did (the task planner re-plans as after any failed relocation). Goals wait (with feedback) until that
+recovery has ended. `on_relocated(relocated)` is called when the bottles this node placed change (the node publishes
+them: perception leaves a relocated target out of view instead of publishing no scene).
 """
 from __future__ import annotations
 
@@ -225,26 +227,37 @@ class MotionPlannerService:
     def push(self, arm: StreamedArm, object_id: str, removed_ids: Iterable[str], clear_for: str,
              source: str = "the scene", ok: Callable[[], bool] = lambda: True) -> Outcome:
         """Push `object_id` out of the grasp lanes of `clear_for` with `arm` (execution.push: planned as the
-        feasibility answer, then shut, approach, push, retreat, home, open); after a failure or a cancel, back along
-        the motions made (recover_push). Afterwards the planner models the object at the push's predicted end pose,
-        until a scene says where it is (update_scene). Success only if the scene from `source` shows it within
-        slot_tolerance of that pose on the top shelf and no other object moved more than outcome_tolerance. Never
+        feasibility answer, then shut, approach, push, retreat, home, open), journalled as a relocation is (the
+        module docstring); after a failure or a cancel, recover_push. Afterwards the planner models the object at
+        the push's predicted end pose, until a scene says where it is (update_scene). Success only if the scene from
+        `source` shows it within slot_tolerance of that pose on the top shelf and no other object moved more than
+        outcome_tolerance. A goal for the push a previous process left answers for it (`_resumed_outcome`). Never
         raises."""
         removed = list(removed_ids)
         with self._relocating, _Heartbeat(arm):
             if not self._ready.is_set():
                 arm.phase("recover")
                 self._ready.wait()
+            resumed = self._resumed_outcome(object_id, source, ok, push=True)
+            if resumed is not None:
+                return resumed
             progress = Progress()
             try:
                 with self.plan_lock:
                     self.planner.check_question(object_id, removed)
                     self.planner.check_question(clear_for, removed)
                 arm.wait_for_state(STATE_WAIT)
-                before = dict(self.scene.seen)
+                before = {i: b.point for i, b in self.scene.seen.items()}
+                self._running = running = Running(progress, -1, [(i, *p) for i, p in before.items()], None)
+
+                def on_plan(made: PushPlan) -> None:  # planned, before the arm moves
+                    running.push = made
+                    self._write_journal(running)
+
                 self._held = object_id
                 made = pushing.push(self.planner, arm, object_id, clear_for, removed, home_tol=self.home_tol,
-                                    lock=self.plan_lock, progress=progress)
+                                    lock=self.plan_lock, progress=progress,
+                                    on_change=lambda: self._write_journal(running), on_plan=on_plan)
                 self._pushed(made)
                 self._held = None
                 return self._push_outcome(before, made, source, ok)
@@ -259,6 +272,7 @@ class MotionPlannerService:
                 return Outcome("aborted", message + self._recover_push(arm, progress))
             finally:
                 self._held = None
+                self._write_journal(None)
 
     def _pushed(self, made: PushPlan) -> None:
         """The pushed object stands at the push's predicted end pose in the planner's scene (until a scene)."""
@@ -269,7 +283,7 @@ class MotionPlannerService:
             if b is not None:
                 self.bottles[made.object_id] = dataclasses.replace(b, x=x, y=y)
 
-    def _push_outcome(self, before: dict[str, goal_check.SeenBottle], made: PushPlan, source: str,
+    def _push_outcome(self, before: dict[str, goal_check.Point], made: PushPlan, source: str,
                       ok: Callable[[], bool]) -> Outcome:
         """The push's outcome against the first scene after it (execution.push.push_problems)."""
         done = (f"pushed {made.object_id} {made.distance * 1000:.0f} mm (yaw {made.yaw:+.2f}): "
@@ -285,13 +299,16 @@ class MotionPlannerService:
         return Outcome("succeeded", done)
 
     def _recover_push(self, arm: StreamedArm, progress: Progress) -> str:
-        """After a failed or cancelled push: execution.push.recover_push, not cancellable. The text added."""
+        """After a failed, cancelled or interrupted push (the running one, `_running`): execution.push.recover_push,
+        not cancellable, its journal kept. The text added."""
         if not arm.link.ok() or not progress.moves:
             return ""
+        made = self._running.push if self._running is not None else None
         try:
             arm = arm.uncancellable()
             arm.wait_for_state(RECOVERY_STATE_WAIT)
-            what = pushing.recover_push(arm, progress)
+            what = pushing.recover_push(arm, progress, lambda: self._write_journal(self._running), made,
+                                        self.recover_near)
         except Exception as e:
             self.log("error", f"recovery after the failed push failed: {e}")
             return f"; recovery failed: {e}"
@@ -306,7 +323,7 @@ class MotionPlannerService:
             arm.wait_for_state(STATE_WAIT)
             before = {i: b.point for i, b in self.scene.seen.items()}
             self._slot, placed = goal_check.destination(self.base, self.scene.seen, self.relocated, len(removed_ids))
-            self._running = running = Running(progress, self._slot, [(i, *p) for i, p in before.items()])
+            self._running = running = Running(progress, self._slot, [(i, *p) for i, p in before.items()], None)
 
             def on_change() -> None:  # a motion about to start, or the release
                 if progress.released:
@@ -345,44 +362,62 @@ class MotionPlannerService:
 
     # -- a relocation a previous process left (the module docstring) ----------------------------------------
     def recover_interrupted(self, arm: StreamedArm) -> str:
-        """Bring the arm back from the relocation the journal says a previous process did not finish (as after a
-        cancel: the bottle set down where it was picked, or after the release, the arm home); goals wait for it.
-        A journal whose motions the arm is nowhere near (a new world) is dropped. What was done, one line."""
+        """Bring the arm back from the relocation or push the journal says a previous process did not finish (as
+        after a cancel: the bottle set down where it was picked, or after the release, the arm home; a push: the arm
+        home from where it is, the gripper opened, and once its retreat had started the pushed object modelled at
+        its predicted end pose until a scene); goals wait for it. A journal whose motions the arm is nowhere near (a
+        new world) is dropped. What was done, one line."""
         run = self.interrupted
         if run is None:
             self._ready.set()
             return "nothing to recover"
+        kind = "relocation" if run.push is None else "push"
         try:
             arm.wait_for_state(RESTART_STATE_WAIT)
             q = arm.measured()
             if not near_recorded(run.progress, q):
-                what = (f"the journal's relocation of {run.progress.object_id} is not where the arm is (a new "
+                what = (f"the journal's {kind} of {run.progress.object_id} is not where the arm is (a new "
                         "world?): dropped")
             else:
                 self._slot, self._running = run.slot, run
-                what = self._recover(arm, run.progress).lstrip("; ")
+                if run.push is None:
+                    what = self._recover(arm, run.progress).lstrip("; ")
+                else:
+                    done = pushing.pushed(run.progress)
+                    what = self._recover_push(arm, run.progress).lstrip("; ")
+                    if done:
+                        self._pushed(run.push)
                 self._resumed = (run, what)
         except Exception as e:  # the driver gone, the planner: said; the next goal starts from where the arm is
-            what = f"recovery of the interrupted relocation of {run.progress.object_id} failed: {e}"
+            what = f"recovery of the interrupted {kind} of {run.progress.object_id} failed: {e}"
         finally:
             self.interrupted = None
+            self._running = None
             self._write_journal(None)
             self._ready.set()
-        self.log("warning", f"restarted during the relocation of {run.progress.object_id}: {what}")
+        self.log("warning", f"restarted during the {kind} of {run.progress.object_id}: {what}")
         return what
 
-    def _resumed_outcome(self, object_id: str, source: str, ok: Callable[[], bool]) -> Outcome | None:
-        """The answer for the relocation a previous process left, to a goal for the same object (None for any
-        other goal, which forgets it): released before the death, the outcome against the scene now (success only
-        if the world confirms it); else aborted, saying what the recovery did (the task planner re-plans)."""
+    def _resumed_outcome(self, object_id: str, source: str, ok: Callable[[], bool], push: bool = False
+                         ) -> Outcome | None:
+        """The answer for the relocation (`push`: the push) a previous process left, to a goal of the same kind for
+        the same object (None for any other goal, which forgets it): released (a push: its retreat started) before
+        the death, the outcome against the scene now (success only if the world confirms it); else aborted, saying
+        what the recovery did (the task planner re-plans)."""
         resumed, self._resumed = self._resumed, None
-        if resumed is None or resumed[0].progress.object_id != object_id:
+        if resumed is None or resumed[0].progress.object_id != object_id or (resumed[0].push is not None) != push:
             return None
         run, what = resumed
+        before = {i: (x, y, z) for i, x, y, z in run.before}
+        if run.push is not None:
+            note = f"the motion planner restarted during this push ({what})"
+            if not pushing.pushed(run.progress):
+                return Outcome("aborted", f"interrupted: {note}")
+            out = self._push_outcome(before, run.push, source, ok)
+            return Outcome(out.status, f"{out.message} ({note})")
         note = f"the motion planner restarted during this relocation ({what})"
         if not run.progress.released:
             return Outcome("aborted", f"interrupted: {note}")
-        before = {i: (x, y, z) for i, x, y, z in run.before}
         success, message = goal_check.outcome(self.scene, before, self.base, object_id, run.slot, self.checks,
                                               source, ok)
         return Outcome("succeeded" if success else "aborted", f"{message} ({note})")

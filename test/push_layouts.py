@@ -27,20 +27,59 @@ def beside_data(seed: int) -> dict:
     """The layout of `seed` as scenario YAML data: T at x 0.68-0.76, y -0.15..0.15; X beside it on a random side,
     5-15 mm apart; OTHERS bottles elsewhere on the top shelf, at least 30 mm from every other (never in contact)."""
     rng = random.Random(f"push-beside:{seed}")
+    data, sc = _base()
+    pos, _ = _t_and_x(rng)
+    return _layout(data, f"push_beside_s{seed}", _others(rng, sc, pos, OTHERS + 2))
+
+
+def held_lane_layout(seed: int) -> Scenario:
+    """The layout of `seed` (held_lane_data) as a scenario."""
+    data = held_lane_data(seed)
+    return parse_scenario(data, data["name"])
+
+
+def held_lane_data(seed: int) -> dict:
+    """"X beside T, B across" as scenario YAML data: T and X drawn as in beside_data, a bottle B on the far side of T
+    from X (0.105-0.15 m across, 0.02 m nearer the front to 0.05 m farther back): where the widest grasp lane of T on
+    that side comes in, the lane the shortest push of X opens; OTHERS - 1 bottles elsewhere, at least 30 mm from
+    every other. The layouts where the shortest push of X opens a lane B still holds while a longer one may open a
+    free lane."""
+    rng = random.Random(f"push-held-lane:{seed}")
+    data, sc = _base()
+    pos, side = _t_and_x(rng)
+    tx, ty = pos["T"]
+    pos["B"] = (tx + rng.uniform(-0.02, 0.05), ty - side * rng.uniform(0.105, 0.15))
+    return _layout(data, f"push_held_lane_s{seed}", _others(rng, sc, pos, OTHERS + 2))
+
+
+def _base() -> tuple[dict, Scenario]:
     with open(default_scenario()) as f:
         data = yaml.safe_load(f)
-    sc = parse_scenario(data, "base")
-    s = sc.shelf
+    return data, parse_scenario(data, "base")
+
+
+def _t_and_x(rng: random.Random) -> tuple[dict[str, tuple[float, float]], float]:
+    """T at x 0.68-0.76, y -0.15..0.15 and X beside it on a random side (the side's sign), 5-15 mm apart."""
     tx, ty = rng.uniform(0.68, 0.76), rng.uniform(-0.15, 0.15)
     side = rng.choice((-1.0, 1.0))
     gap = rng.uniform(0.005, 0.015)
-    pos = {"T": (tx, ty), "X": (tx + rng.uniform(-0.01, 0.01), ty + side * (2 * RADIUS + gap))}
-    while len(pos) < OTHERS + 2:
+    return {"T": (tx, ty), "X": (tx + rng.uniform(-0.01, 0.01), ty + side * (2 * RADIUS + gap))}, side
+
+
+def _others(rng: random.Random, sc: Scenario, pos: dict[str, tuple[float, float]], n: int
+            ) -> dict[str, tuple[float, float]]:
+    """`pos` filled up to `n` bottles o<k> drawn on the top shelf, at least 30 mm from every other."""
+    s = sc.shelf
+    while len(pos) < n:
         x, y = rng.uniform(s.x_front + 0.05, s.x_front + s.depth - 0.05), rng.uniform(-0.33, 0.33)
         if all(math.hypot(x - px, y - py) >= 2 * RADIUS + 0.03 for px, py in pos.values()):
             pos[f"o{len(pos) - 1}"] = (x, y)
+    return pos
+
+
+def _layout(data: dict, name: str, pos: dict[str, tuple[float, float]]) -> dict:
     out = copy.deepcopy(data)
-    out["name"] = f"push_beside_s{seed}"
+    out["name"] = name
     out["objects"] = [{"id": i, "weight": 0.3, "xy": [round(x, 4), round(y, 4)]} if i != "T" else
                       {"id": i, "xy": [round(x, 4), round(y, 4)]} for i, (x, y) in pos.items()]
     return out

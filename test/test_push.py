@@ -4,7 +4,9 @@ X out of T's lanes is carried out by execution.push.push (what the motion_planne
 goal with action "push") with the time-scaled follower on the simulator's core, every physics step watched. Asked
 of each push: no contact of the arm or hand with anything but X, X upright at the end, X's simulated end pose within
 END_TOL of the one the planner predicted, nothing else moved. The rate and each failure with its reason are printed;
-a push with a wrong prediction (the predicted end moved by 2 END_TOL) is shown to fail the same check."""
+a push with a wrong prediction (the predicted end moved by 2 END_TOL) is shown to fail the same check. On "X beside T,
+B across" layouts (held_lane_layout, seeds fixed before any result) the push chosen opens a lane then free of every
+other bottle before a shorter one that opens a lane B still holds."""
 from __future__ import annotations
 
 import dataclasses
@@ -14,18 +16,20 @@ import mujoco
 import numpy as np
 import pytest
 import yaml
-from push_layouts import beside_layout
+from push_layouts import beside_layout, held_lane_layout
 
 from jaco2_sim_driver.sim import Jaco2Sim
 from relocation_app.evaluation.scenes.jitter import jitter_scene
 from relocation_common.feasibility import Label
 from relocation_common.paths import config_file
-from relocation_common.scenario import parse_scenario
+from relocation_common.scenario import Scenario, parse_scenario
 from stpik_motion_planner.execution.follower import TrajectoryFollower
 from stpik_motion_planner.execution.push import push
+from stpik_motion_planner.model.push import moved
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.push import PushPlan
+from stpik_motion_planner.planning.push.target import candidates, end_xy
 
 DT = 0.01
 PARAMS = dataclasses.replace(PlannerParams.load(), timeout=300.0, carry_timeout=300.0)
@@ -35,6 +39,7 @@ STILL = 0.005  # m any other object may move
 ARM = ("upper_arm", "forearm", "wrist", "palm", "finger_sim_1", "finger_sim_2", "finger_sim_3")
 DEFAULT_SEEDS = (0, 1, 2, 3)
 EXTENDED_SEEDS = tuple(range(4, 12))
+HELD_LANE_SEEDS = tuple(range(8))
 
 
 class PushWatch:
@@ -109,11 +114,12 @@ def push_problems(sim: Jaco2Sim, watch: PushWatch, plan: PushPlan, start: dict[s
     return out
 
 
-def pushed_in_mujoco(seed: int, wrong: float = 0.0, touched: str = "X") -> tuple[str, list[str]]:
-    """('planned' or 'refused: why', problems) of the push of X out of T's lanes on layout `seed`, replayed in
+def pushed_in_mujoco(seed: int, wrong: float = 0.0, touched: str = "X", layout=beside_layout
+                     ) -> tuple[str, list[str]]:
+    """('planned' or 'refused: why', problems) of the push of X out of T's lanes on `layout`(seed), replayed in
     physics; `wrong` (m) moves the predicted end along the push (a wrong prediction), `touched` names the object the
     hand may touch (another than X: every touch of X is a contact), both for the check's own tests."""
-    sc = beside_layout(seed)
+    sc = layout(seed)
     planner = MotionPlanner(sc, PARAMS)
     ans, _ = planner.push_feasibility("X", "T", [])
     if ans.label == Label.UNFEASIBLE:
@@ -177,3 +183,47 @@ def test_a_push_in_the_back_row_plans_its_way_home():
     others = [o.id for o in planner.scenario.objects if o.id not in ("o14", "T")]
     ans, plan = planner.push_feasibility("o14", "T", others)
     assert ans.label == Label.OBSTACLE and plan is not None, ans.message
+
+
+def opened_lanes(sc: Scenario, yaw: float, distance: float) -> dict[str, frozenset[str]]:
+    """The lanes of T a push of X by `distance` along `yaw` opens (X among their blockers before, not after, and no
+    new blocker: the planner's lane screen, MotionPlanner.lane_blockers, on the scene before and with X moved) ->
+    the bottles still blocking each after the push (empty: the lane free, T's side grasp with nothing relocated)."""
+    before = {b.lane: b.objects for b in MotionPlanner(sc, PARAMS).lane_blockers()["T"]}
+    x = sc.object("X")
+    after = MotionPlanner(moved(sc, "X", *end_xy(x.x, x.y, yaw, distance)), PARAMS).lane_blockers()["T"]
+    return {b.lane: b.objects for b in after
+            if "X" in before.get(b.lane, frozenset()) and "X" not in b.objects and b.objects <= before[b.lane]}
+
+
+def test_a_push_that_frees_a_lane_is_taken_before_a_shorter_one_into_a_held_lane():
+    """held_lane_layout seeds 0-7 (fixed before any result). A layout counts where the shortest candidate push of X
+    (least distance, then push.directions' order) opens only lanes of T another bottle still holds while a longer
+    one opens a lane then free, and a push plans: there the push planned opens a free lane (T's side grasp needs no
+    further relocation), and it ends in MuJoCo where predicted, touching nothing but X. The old order (least
+    distance first) took the shortest. At least one layout counts."""
+    counted = []
+    for seed in HELD_LANE_SEEDS:
+        sc = held_lane_layout(seed)
+        planner = MotionPlanner(sc, PARAMS)
+        cands = sorted(candidates(planner, "X", "T", frozenset())[0], key=lambda c: c[1])  # stable: directions next
+        shortest = opened_lanes(sc, cands[0][0], cands[0][1]) if cands else {}
+        free = next(((c[0], c[1]) for c in cands[1:] if frozenset() in opened_lanes(sc, c[0], c[1]).values()), None)
+        print(f"seed {seed}: {len(cands)} candidates; the shortest {cands[0][:2] if cands else None} opens "
+              f"{shortest}; the first that opens a free lane: {free}")
+        if not (shortest and all(shortest.values()) and free):
+            continue
+        ans, plan = planner.push_feasibility("X", "T", [])
+        if plan is None:  # no motion for any candidate: no choice to check
+            print(f"  no push plans: {ans.message}")
+            continue
+        lanes = opened_lanes(sc, plan.yaw, plan.distance)
+        counted.append(seed)
+        print(f"  planned: {ans.message}; lanes opened {lanes}")
+        assert lanes.get(plan.lane) == frozenset(), (seed, ans.message, lanes)
+        assert plan.distance >= cands[0][1], (seed, ans.message)
+        what, problems = pushed_in_mujoco(seed, layout=held_lane_layout)
+        print(f"  in MuJoCo: {what}" + (f"; FAILED: {problems}" if problems else ""))
+        assert what.startswith("planned") and not problems, (seed, what, problems)
+    print(f"layouts where the shortest push opens a held lane and a longer one a free lane, a push planned: {counted}")
+    assert counted, "no layout where the shortest push opens a held lane and a longer one a free one"

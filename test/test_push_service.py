@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,8 +15,11 @@ from test_streaming import FakeLink, arm
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
+from relocation_common.kinova import joint_to_turns
 from stpik_motion_planner.execution.goal_check import OUTCOME_SETTLE
+from stpik_motion_planner.execution.journal import Journal
 from stpik_motion_planner.execution.relocation import PUSH_PHASES
+from stpik_motion_planner.execution.streaming import StreamParams
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.service import MotionPlannerService
 
@@ -109,3 +113,89 @@ def test_a_push_cancelled_during_the_push_goes_back_and_opens_the_gripper(servic
     assert "recovered: arm back home along the push of X, gripper open" in out.message
     assert link.paths[:2] == ["approach_push", "push"] and link.paths[2:] == ["recover_push"] * 2
     assert float(np.max(np.abs(link.q - rd.Q_HOME))) < 0.02
+
+
+def _killed_during(phase: str, after: float, journal: Path) -> tuple[FakeLink, str]:
+    """A push carried out by a service with a journal at `journal`, its process "killed" `after` s into `phase`:
+    the link goes dead then (no recovery runs: the node is shutting down), and the journal is taken as it was at that
+    moment (what a SIGKILL leaves). (the dead link: where the arm and the fingers stopped; that journal's text)."""
+    s = MotionPlannerService(beside_layout(0), PARAMS, journal=Journal(journal))
+    link = FakeLink()
+    left: list[str] = []
+    started: list[float] = []
+
+    def dying() -> bool:  # polled by the arm every command
+        if phase in link.paths and not left:
+            started.append(time.monotonic())
+            if started[-1] - started[0] >= after:
+                left.append(journal.read_text() if journal.exists() else "")  # none yet: none left
+                link.alive = False
+        return False
+
+    a, _, _ = arm(link, cancelled=dying)
+    out = s.push(a, "X", [], "T")
+    assert out.status == "aborted" and left, out.message
+    return link, left[0]
+
+
+def _restarted(dead: FakeLink, text: str, journal: Path) -> tuple[MotionPlannerService, FakeLink]:
+    """A new process on the journal `text`, the arm and the fingers where the dead one left them."""
+    if text:
+        journal.write_text(text)
+    link = FakeLink()
+    link.q, link.fingers, link.target = dead.q.copy(), dead.fingers.copy(), dead.target
+    return MotionPlannerService(beside_layout(0), PARAMS, journal=Journal(journal)), link
+
+
+def _open(link: FakeLink) -> bool:
+    return bool(np.all(joint_to_turns(link.fingers) < 0.1 * StreamParams.load().finger_closed))
+
+
+def test_a_planner_killed_mid_push_brings_the_arm_home_with_the_fingers_open(tmp_path):
+    """Killed 0.5 s into the push itself (the arm in the shelf, the fingers shut): the push is in the journal, and
+    the new process brings the arm home from where it is (back along the push and the approach) and opens the
+    fingers before any goal; the push goal sent again is aborted, saying so (the object's end is not known: the
+    task planner re-plans from the scene). Before, a push was not journalled: the new process had nothing to
+    recover and its next goal started with the arm in the shelf, the fingers shut."""
+    dead, text = _killed_during("push", 0.5, tmp_path / "j")
+    assert not _open(dead) and float(np.max(np.abs(dead.q - rd.Q_HOME))) > 0.1
+    s, link = _restarted(dead, text, tmp_path / "j2")
+    assert s.interrupted is not None, "the push was not in the journal"
+    a, _, _ = arm(link)
+    what = s.recover_interrupted(a)
+    assert "arm back home along the push of X, gripper open" in what, what
+    assert float(np.max(np.abs(link.q - rd.Q_HOME))) < 0.02 and _open(link)
+    assert set(link.paths) == {"recover_push"}
+    assert Journal(tmp_path / "j2").load()[1] is None
+    out = s.push(a, "X", [], "T")
+    assert out.status == "aborted" and "interrupted: the motion planner restarted during this push" in out.message
+
+
+def test_a_planner_killed_on_the_retreat_goes_on_home_and_models_the_object_pushed(tmp_path):
+    """Killed 0.3 s into the retreat (the object at its predicted end pose): the new process goes on along the
+    planned retreat and way home (never back into the object), opens the fingers, and models the object at the
+    push's predicted end pose until a scene says where it is; the push goal sent again is answered by the scene
+    now (X seen 3 mm from its predicted end: succeeded, saying the planner restarted)."""
+    dead, text = _killed_during("retreat_push", 0.3, tmp_path / "j")
+    s, link = _restarted(dead, text, tmp_path / "j2")
+    assert s.interrupted is not None and s.interrupted.push is not None, "the push was not in the journal"
+    end = s.interrupted.push.end
+    a, _, _ = arm(link)
+    what = s.recover_interrupted(a)
+    assert "X was pushed; arm on along its way home, gripper open" in what, what
+    assert float(np.max(np.abs(link.q - rd.Q_HOME))) < 0.02 and _open(link)
+    x = s.planner.scenario.object("X")
+    assert (x.x, x.y) == pytest.approx(end[:2])
+    z = s.base.shelf.top_z
+    seen = [dataclasses.replace(b, x=end[0] + 0.003, y=end[1], support_z=z) if b.id == "X" else
+            dataclasses.replace(b, support_z=z) for b in beside_layout(0).objects]
+    posted: list[float] = []
+
+    def perceive():  # the first scene after the goal, OUTCOME_SETTLE later
+        posted.append(time.monotonic())
+        if posted[-1] - posted[0] > 2 * OUTCOME_SETTLE:
+            s.update_scene(seen)
+        return True
+
+    out = s.push(a, "X", [], "T", ok=perceive)
+    assert out.status == "succeeded" and "restarted during this push" in out.message, out.message

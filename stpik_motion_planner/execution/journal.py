@@ -1,12 +1,18 @@
-"""The motion planner's journal: what a new process needs after the old one died mid-relocation (ROS-free).
+"""The motion planner's journal: what a new process needs after the old one died mid-relocation or mid-push
+(ROS-free).
 
 A relocation's `Progress` (the object, the removed set, the bottles placed, the motions followed so far, whether the
 bottle was released) is written before each motion and at the release, with the slot and the scene seen before the
-motion (for the outcome check), and the bottles this node placed on the bottom shelf (`relocated`). The file is
-JSON, written atomically (temporary file, fsync, os.replace), so a SIGKILL at any moment leaves the previous
-entry or the new one, never half of one. A new process reads it (`load`): `running` not None means a relocation was
-interrupted; `relocation.recover` brings the arm back along the recorded motions (the bottle set down where it was
-picked, or, once released, the arm home), as after a cancel. docs/reliability.md, "A node that dies".
+motion (for the outcome check), and the bottles this node placed on the bottom shelf (`relocated`). A push is
+journalled the same way (execution.push: its `Progress`, each motion recorded before it starts, the approach before
+the gripper shuts) with its plan (`Running.push`: the object's predicted end pose, the lane, every planned motion),
+written once planned, before the arm moves; `push.recover_push` then brings the arm home from where it is (on
+along the retreat and the way home once the object was pushed, else back along the motions made) and opens the
+fingers. The file is JSON, written atomically (temporary file, fsync, os.replace), so a SIGKILL at any moment leaves
+the previous entry or the new one, never half of one. A new process reads it (`load`): `running` not None means a
+relocation (or push) was interrupted; `relocation.recover` brings the arm back along the recorded motions (the
+bottle set down where it was picked, or, once released, the arm home), as after a cancel. docs/reliability.md, "A
+node that dies".
 """
 from __future__ import annotations
 
@@ -20,6 +26,8 @@ from typing import Any
 import numpy as np
 
 from stpik_motion_planner.execution.relocation import Progress
+from stpik_motion_planner.planning.push import PushPlan
+from stpik_motion_planner.planning.results import Segment
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 FORMAT = "qtree-motion-planner-journal/1"
@@ -28,11 +36,13 @@ NEAR_RECORDED = 0.2  # rad (largest joint): an arm this close to a recorded moti
 
 @dataclass
 class Running:
-    """An unfinished relocation: its progress, its slot, the scene before its motion ((id, x, y, base z))."""
+    """An unfinished relocation or push: its progress, its slot (a push: -1), the scene before its motion ((id, x,
+    y, base z)), and for a push its plan (None: a relocation)."""
 
     progress: Progress
     slot: int
     before: list[tuple[str, float, float, float]]
+    push: PushPlan | None
 
 
 class JournalError(ValueError):
@@ -56,7 +66,8 @@ class Journal:
                                "carried": p.carried,
                                "placed": [[i, list(xy)] for i, xy in p.placed], "slot": running.slot,
                                "before": [list(b) for b in running.before],
-                               "moves": [[phase, _trajectory(t)] for phase, t in p.moves]}
+                               "moves": [[phase, _trajectory(t)] for phase, t in p.moves],
+                               "push": None if running.push is None else _push(running.push)}
         self.path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=self.path.name + ".")
         try:
@@ -86,7 +97,8 @@ class Journal:
                                 [(str(phase), _from(t)) for phase, t in r["moves"]], bool(r["released"]),
                                 bool(r["carried"]))
             before = [(str(i), float(x), float(y), float(z)) for i, x, y, z in r["before"]]
-            return relocated, Running(progress, int(r["slot"]), before)
+            push = None if r.get("push") is None else _push_from(r["push"])
+            return relocated, Running(progress, int(r["slot"]), before, push)
         except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
             raise JournalError(f"journal {self.path} unreadable: {type(e).__name__}: {e}") from None
 
@@ -111,3 +123,16 @@ def _trajectory(t: Trajectory) -> dict[str, Any]:
 def _from(d: dict[str, Any]) -> Trajectory:
     return Trajectory(np.asarray(d["times"], float), np.asarray(d["positions"], float).reshape(-1, 7),
                       np.asarray(d["velocities"], float).reshape(-1, 7), tuple(d["joint_names"]))
+
+
+def _push(m: PushPlan) -> dict[str, Any]:
+    return {"object_id": m.object_id, "clear_for": m.clear_for, "yaw": m.yaw, "distance": m.distance,
+            "end": list(m.end), "lane": m.lane,
+            "segments": [[g.name, _trajectory(g.trajectory), g.gripper_after] for g in m.segments]}
+
+
+def _push_from(d: dict[str, Any]) -> PushPlan:
+    x, y, z = (float(v) for v in d["end"])
+    return PushPlan(str(d["object_id"]), str(d["clear_for"]), float(d["yaw"]), float(d["distance"]), (x, y, z),
+                    str(d["lane"]), [Segment(str(n), _from(t), None if g is None else str(g))
+                                     for n, t, g in d["segments"]])

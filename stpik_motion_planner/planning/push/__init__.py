@@ -5,7 +5,9 @@ out of the grasp lanes of another object C, when the side grasp of either needs 
    straight back, +x, turned away from C; both ways when C is straight in front or behind), X translated by d
    (quasi-static, model/push.py) must stay on the shelf and sweep clear of every object present by
    push.sweep_margin, and open a lane of C: a lane (model/blockers.py's screen) that X blocks where it stands and no
-   longer blocks where it ends, with no blocker it did not have before (removed objects gone).
+   longer blocks where it ends, with no blocker it did not have before (removed objects gone). The candidates are
+   ordered lexicographically: first those whose opened lane is then free of every other object (C's side grasp
+   needs no further relocation), then the least distance, then the directions' order.
 2. The motion, for the candidates in that order until one plans: home -> pre-contact pose (the pick's Cartesian
    path: the direct path first, then RRT-Connect, for the closed hand's proxy) -> contact pose (the finger tips
    push.contact_gap short of X, at push.contact_height of its height, no lower than the palm's clearance over the
@@ -15,8 +17,8 @@ out of the grasp lanes of another object C, when the side grasp of either needs 
    pre-contact pose on (the approach, the push, the retreat), and during the push X is no obstacle of the arm
    (it moves with the tips).
 The answer is g_O with the whole motion (home -> ... -> home; the gripper shut before it, opened after it), the end
-pose of X, and the lane it opens; or g_U with the reason: X lying, not a cylinder, blocking no lane of C, no
-direction and distance that opens one, or no motion for any that does.
+pose of X, and the lane it opens (then free, or still held by whom); or g_U with the reason: X lying, not a
+cylinder, blocking no lane of C, no direction and distance that opens one, or no motion for any that does.
 """
 from stpik_motion_planner.planning.push.motion import PushPlan, plan_push, push_feasibility
 

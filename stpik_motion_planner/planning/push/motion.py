@@ -145,14 +145,15 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
     if not cands:
         return None, 0, why
     last, n = "", 0
-    for yaw, d, lane in cands:
+    for yaw, d, lane, held in cands:
         n += 1
         segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats)
         if segments:
             o = ctx.scenario.object(object_id)
             end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z)
+            then = f"still held by {', '.join(sorted(held))}" if held else "then free"
             return PushPlan(object_id, clear_for, yaw, d, end, lane, segments), n, (
-                f"push {object_id} {d * 1000:.0f} mm at yaw {yaw:+.2f}: opens {clear_for}'s lane {lane}")
+                f"push {object_id} {d * 1000:.0f} mm at yaw {yaw:+.2f}: opens {clear_for}'s lane {lane}, {then}")
         last = f"yaw {yaw:+.2f}, {d * 1000:.0f} mm: {why}"
     return None, n, f"no push of {object_id} plans ({n} candidates opening {clear_for}'s lanes); last: {last}"
 

@@ -1,6 +1,8 @@
 """Where a push takes the object (the package docstring, step 1): the candidates (direction, distance) whose end
 pose keeps the object on the shelf, sweeps clear of the others, and opens a lane of the object the push clears for
-(model/blockers.py's screen on the scene with the object moved); the refusals that hold whatever the direction."""
+(model/blockers.py's screen on the scene with the object moved), ordered lexicographically: first those that open a
+lane then free of every other object (the side grasp of C needs no further relocation), then the least distance;
+the refusals that hold whatever the direction."""
 from __future__ import annotations
 
 import math
@@ -43,21 +45,29 @@ def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: froze
 
 
 def opened_lane(ctx: PlanningContext, clear_for: str, removed: frozenset[str], object_id: str,
-                after: _Moved) -> str:
-    """The name of a lane of `clear_for` that `object_id` blocks where it stands and not at its end pose, with no
-    blocker the lane did not have ('' if none); a lane then clear with `removed` gone first."""
+                after: _Moved) -> tuple[str, frozenset[str]]:
+    """(the name of a lane of `clear_for` that `object_id` blocks where it stands and not at its end pose, with no
+    blocker the lane did not have, '' if none; the objects but `removed` that still block it there): a lane then
+    free is named when there is one."""
     before = {g.yaw: bl for g, bl in static_lanes(ctx, clear_for)}
     found = []
     for g, bl in static_lanes(after, clear_for):
         was = before.get(g.yaw)
         if was is not None and object_id in was and object_id not in bl and bl - removed <= was - removed:
-            found.append((bool(bl - removed), f"yaw {g.yaw:+.2f}"))
-    return min(found)[1] if found else ""
+            found.append((g.yaw, f"yaw {g.yaw:+.2f}", bl - removed))
+    if not found:
+        return "", frozenset()
+    _, lane, held = min(found, key=lambda f: (bool(f[2]), f[1]))
+    return lane, held
 
 
 def candidates(ctx: PlanningContext, object_id: str, clear_for: str, removed: frozenset[str]
-               ) -> tuple[list[tuple[float, float, str]], str]:
-    """([(yaw, distance, lane opened)] in the order tried, least distance first; why none if empty)."""
+               ) -> tuple[list[tuple[float, float, str, frozenset[str]]], str]:
+    """([(yaw, distance, lane opened, the objects still blocking it)] in the order tried, why none if empty):
+    lexicographically, the pushes that open a lane then free of every other object first (`removed` gone: the side
+    grasp of `clear_for` needs no further relocation), then the least distance, then push.directions' order. The
+    shortest push that opens a lane still held by another object is tried only after every one that opens a free
+    lane."""
     p = ctx.params.push
     o, c = ctx.scenario.object(object_id), ctx.scenario.object(clear_for)
     side = o.y - c.y
@@ -73,15 +83,13 @@ def candidates(ctx: PlanningContext, object_id: str, clear_for: str, removed: fr
                 if bad:
                     why[(yaw, d)] = bad
                     continue
-                lane = opened_lane(ctx, clear_for, removed, object_id, _Moved(ctx, moved(ctx.scenario, object_id,
-                                                                                         *end)))
+                lane, held = opened_lane(ctx, clear_for, removed, object_id,
+                                         _Moved(ctx, moved(ctx.scenario, object_id, *end)))
                 if not lane:
                     why[(yaw, d)] = f"{clear_for}'s lanes still blocked by {object_id}"
                     continue
-                out.append((yaw, d, lane))
+                out.append((yaw, d, lane, held))
     if out:
-        return out, ""
+        return sorted(out, key=lambda c: bool(c[3])), ""  # stable: the least distance next, then the direction
     kinds = sorted(set(why.values()))
     return [], f"no push direction clears {clear_for}'s lanes: {'; '.join(kinds[:3])}"
-
-
