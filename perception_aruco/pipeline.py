@@ -137,9 +137,10 @@ class Perception:
         out over all of them; None: not filtered, said in notes). arm_unknown: the arm moved and no joint state at or
         after the frame's stamp came yet (tracking.JointHistory.unknown_at): no new objects from this frame.
         The result's `uncounted`: the new unlisted objects (seen now, or candidates the memory counts) this frame
-        is no evidence for: the arm's pose unknown, the arm in the shelf, or moving (q of more than one row) in
-        front of them (self_filter.arm_in_view); SceneMemory.update publishes a new one after `confirm_frames`
-        frames that count."""
+        is no evidence for: the arm's pose unknown, the arm in the shelf within `arm_reach` of them, or moving (q of
+        more than one row) in front of them (self_filter.arm_in_view); SceneMemory.update publishes a new one after
+        `confirm_frames` frames that count. A first frame (an empty memory) with clusters left out near the arm is
+        refused: nothing earlier explains that space."""
         rgb, depth = check_images(rgb, depth)
         K = np.asarray(K, float).reshape(3, 3)
         notes: list[str] = []
@@ -166,9 +167,14 @@ class Perception:
                       min_pixels=max(12, round(self.loc.min_pixels * area)),
                       min_inliers=max(10, round(self.loc.min_inliers * area)))
         memory = memory if memory is not None else SceneMemory(self.scenario.ids, 0, 1)
-        in_shelf = arm_unknown or arm_in_shelf(q, self.scenario.shelf, self.objects.arm_padding)
+        in_shelf = arm_in_shelf(q, self.scenario.shelf, self.objects.arm_padding)
+
+        def near_arm(pts: np.ndarray) -> bool:
+            """Points the arm may have made (its body, the object in its hand, a piece they cut out of another): the
+            arm's pose unknown, or the arm in the shelf within arm_reach of them."""
+            return arm_unknown or (in_shelf and bool(on_arm(pts, q, self.objects.arm_reach).any()))
         objects, missing, left_out = find_objects(clusters, points, self.scenario, memory, self.seg, self.objects,
-                                                  loc, T[:3, 3], fit.noise, new_unlisted=not in_shelf)
+                                                  loc, T[:3, 3], fit.noise, new_unlisted=lambda pts: not near_arm(pts))
         if left_out and memory.frame == 0:  # nothing earlier explains that space: no scene yet, never a free one
             raise PerceptionError(f"{left_out} cluster(s) matching no listed object in the first frame, with the arm "
                                   "in the shelf (new objects are taken with the arm out of it): no scene until the "
@@ -179,7 +185,7 @@ class Perception:
         candidates = {**memory.pending(), **{i: o for i, o in objects.items()
                                              if not o.listed and i not in memory.confirmed}}
         moving = q is not None and len(np.atleast_2d(q)) > 1
-        uncounted = frozenset(i for i, o in candidates.items() if in_shelf or (moving and arm_in_view(
+        uncounted = frozenset(i for i, o in candidates.items() if near_arm(box_corners(o)) or (moving and arm_in_view(
             q, box_corners(o), T, corrected_K(K, fit.intrinsics), self.objects.arm_padding)))
         return PerceptionResult(marker, objects, missing, T, fit, tuple(notes), uncounted,
                                 arm_reaches(memory, self.scenario.ids, q, self.objects.arm_near))

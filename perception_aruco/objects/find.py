@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Iterable
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -149,12 +149,13 @@ def _why_missing(j: int, b: ShelfObject, cost: np.ndarray, taken: dict[int, str]
 
 def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Scenario, memory: Memory,
                  seg: SegmentationParams, params: ObjectParams, loc: LocalizeParams, camera: np.ndarray,
-                 noise: float, new_unlisted: bool = True) -> tuple[dict[str, PerceivedObject], dict[str, str], int]:
+                 noise: float, new_unlisted: Callable[[np.ndarray], bool] = lambda points: True
+                 ) -> tuple[dict[str, PerceivedObject], dict[str, str], int]:
     """(objects by id: listed ones first in scenario order, then unlisted; missing listed id -> reason; clusters
-    left out). new_unlisted False (the arm moves in view): a cluster that is no listed object and no known unlisted
-    one is left out, not made a new object (counted): the moving arm's body between joint states, the object in its
-    hand and the pieces it cuts out of others are where such clusters come from; new objects are taken from frames
-    with the arm still."""
+    left out). new_unlisted(points) False (the arm in the shelf, near those points): a cluster that is no listed
+    object and no known unlisted one is left out, not made a new object (counted): the arm's body between joint
+    states, the object in its hand and the pieces it cuts out of others are where such clusters come from; new
+    objects there are taken from frames with the arm away."""
     fitted = fit_clusters(clusters, image_points, camera, seg, params, loc, noise)
     cost = listed_costs(fitted, scenario.objects, memory, seg, params, loc, camera)
     found: dict[str, PerceivedObject] = {}
@@ -175,7 +176,8 @@ def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Sc
         if b.id not in found and b.id not in missing:
             missing[b.id] = _why_missing(j, b, cost, taken, fitted, params.max_cost)
     held = [o for i, o in memory.held().items() if i not in found]
-    rest = []
+    rest: list[PerceivedObject] = []
+    rest_points: list[np.ndarray] = []
     for m, f in enumerate(fitted):
         if m in taken or part_of(f, found.values(), params, params.absorb_tol) is not None:
             continue
@@ -185,8 +187,10 @@ def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Sc
             missing[at] = why + ("" if why.endswith(KEPT) else KEPT)
             continue
         rest.append(unlisted_object(f, params, seg, room_above(f.cluster.support, scenario)))
+        rest_points.append(f.cluster.points)
     ids = unlisted_ids(rest, memory, params.unlisted_gate)
     known = memory.unlisted()
     objects = {b.id: found[b.id] for b in scenario.objects if b.id in found}
-    objects.update({i: replace(o, id=i) for i, o in zip(ids, rest) if new_unlisted or i in known})
+    objects.update({i: replace(o, id=i) for i, o, pts in zip(ids, rest, rest_points)
+                    if i in known or new_unlisted(pts)})
     return objects, missing, sum(1 for i in ids if i not in objects)

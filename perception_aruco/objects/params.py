@@ -22,6 +22,7 @@ class ObjectParams:
     min_cluster_pixels: int
     wall_noise: float
     arm_padding: float
+    arm_reach: float
     radius_min: float
     radius_max: float
     size_min: float
