@@ -47,6 +47,7 @@ from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PUSH, PushActions
 from qtree_task_planner.executive.replicas import ReplicaOracle
+from qtree_task_planner.executive.resume import StartPoint, start_point
 from qtree_task_planner.executive.retrieval import (
     chosen_sequence,
     execute,
@@ -120,6 +121,8 @@ class TaskPlannerNode(Node):
             resume_wait=self.p("planner_wait"))
         self._scene_topic = SCENE_SOURCES.get(self.p("scene_source")) or self.p("scene_topic")
         self.create_subscription(ObjectArray, self._scene_topic, self._scenes.put, SCENE_QOS)
+        self._placed: dict[str, int] | None = None  # the motion planner's ~/relocated (None before the first)
+        self.create_subscription(String, self.p("relocated_topic"), self._on_placed, SCENE_QOS)
         self._markers = self.create_publisher(MarkerArray, "~/markers", SCENE_QOS)
         self._relocating = self.create_publisher(String, "~/relocating", SCENE_QOS)
         self._execution = self.create_publisher(String, "~/execution", SCENE_QOS)  # ExecutionResult.to_dict() JSON
@@ -137,13 +140,35 @@ class TaskPlannerNode(Node):
         return self.get_parameter(name).value
 
     # -- inputs ---------------------------------------------------------------------------------------------
-    def _problem(self) -> tuple[RelocationProblem, ObjectArray]:
-        """The scene as a problem; ScenarioError when it is missing, stale, empty or invalid (retrieval.check_scene)."""
+    def _on_placed(self, msg: String) -> None:
+        try:
+            self._placed = {str(k): int(v) for k, v in dict(json.loads(msg.data)["relocated"]).items()}
+        except (ValueError, KeyError, TypeError) as e:
+            self.get_logger().error(f"{self.p('relocated_topic')}: not {{\"relocated\": {{id: slot}}}}: {e}")
+
+    def _problem(self) -> tuple[RelocationProblem | None, ObjectArray, StartPoint | None]:
+        """The scene as a problem, and where the goal starts when the world changed before it (executive.resume:
+        bottles the motion planner placed, objects off the top shelf; then the problem is the top shelf's, None
+        when the target was already retrieved or none is left); ScenarioError when the scene is missing, stale,
+        empty or invalid (retrieval.check_scene)."""
         msg, warning = self._scenes.checked(self._scene_topic, self.p("scene_max_age"), self.p("scene_wait"),
                                             self.get_clock().now)
         if warning:
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
-        return RelocationProblem.from_bottles(msg_to_objects(msg), self._action_cost), msg
+        deadline = time.monotonic() + self.p("scene_wait")  # the latched ~/relocated, as the first scene
+        while self._placed is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if self._placed is None:
+            self.get_logger().warning(f"nothing on {self.p('relocated_topic')} within scene_wait: taken as no bottle "
+                                      "placed by the motion planner")
+        objects, scenario = msg_to_objects(msg, require_target=False), load_scenario(self.p("scenario") or None)
+        if any(o.is_target for o in objects):  # else (a relocated target out of view) the scenario's own objects
+            scenario = scenario.with_objects(objects)
+        start = start_point(scenario, seen_scene(msg), self._placed or {}, self._action_cost)
+        if start is None:
+            return RelocationProblem.from_bottles(msg_to_objects(msg), self._action_cost), msg, None
+        self.get_logger().info(start.line)
+        return start.problem, msg, start
 
     def _params(self, goal: TrainPlanner.Goal) -> TrainingParams:
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
@@ -176,10 +201,16 @@ class TaskPlannerNode(Node):
 
     def _train_and_execute(self, goal_handle: ServerGoalHandle, result: TrainPlanner.Result) -> str:
         params = self._params(goal_handle.request)
-        problem, scene = self._problem()
+        problem, scene, start = self._problem()
         self._publish_scene(scene, ())
         fb = self._fb = TrainPlanner.Feedback(phase="exact optimum")
         self._progress = {}
+        before = start.before if start is not None else ()
+        if problem is None:  # the target retrieved before this goal, or no problem left (start.line says which)
+            assert start is not None
+            self._publish_start(start)
+            result.success, result.message = start.retrieved, start.line
+            return ""
         last = [0.0]
 
         def on_answer() -> None:  # progress of the exact solve (no episodes yet): planner calls, twice a second
@@ -196,7 +227,8 @@ class TaskPlannerNode(Node):
         if missing:  # asked anyway (it may be starting); the others answer meanwhile
             self.get_logger().warning(f"feasibility service(s) not available at the start of the goal: "
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
-        resume = self._keeper.resume_point(problem, params, oracle)
+        resume = self._keeper.resume_point(problem, params, oracle, changed="the relocations done before this goal"
+                                           if start is not None else "")
 
         until: UntilPlanner = lambda fn: through_outages(  # noqa: E731 (through planner outages: training, re-plans)
             fn, goal_handle, fb, service, self.get_logger(), self.p("planner_wait"), self._keeper.kept_where)
@@ -234,7 +266,7 @@ class TaskPlannerNode(Node):
                 result.message += planner_foreign_ids(service, problem.ids)
             return notes[0]
         fb.phase = "executing"  # then each check and re-plan (_run)
-        self._run(goal_handle, fb, result, scene, oracle, service, params, until, *chosen_sequence(
+        self._run(goal_handle, fb, result, scene, oracle, service, params, until, before, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned"),
             learned_cost=r.total_cost, optimal_cost=optimum.total_cost))
@@ -248,12 +280,13 @@ class TaskPlannerNode(Node):
 
     def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
              scene: ObjectArray, oracle: CachedOracle, service: ReplicaOracle, params: TrainingParams,
-             until: UntilPlanner, sequence: list[str], note: str) -> None:
+             until: UntilPlanner, before: Sequence[str], sequence: list[str], note: str) -> None:
         """Execute (retrieval.execute, `closed_loop`; `replan_q_tree`: each re-plan also retrains the Q-Tree with the
         goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
         executor's: for the closed loop, its scene waits, checks and re-plans). Pushes (`max_pushes`, closed loop
-        only): asked of `service`, executed through the Relocator (action "push")."""
+        only): asked of `service`, executed through the Relocator (action "push"). `before`: the relocations done
+        before this goal (executive.resume), sent as removed."""
         scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_objects(scene))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         spent = {"relocate_s": 0.0}  # the relocations' own time: the rest of the execution is the executor's
@@ -295,9 +328,17 @@ class TaskPlannerNode(Node):
                       before_each=lambda: goal_handle.publish_feedback(fb), on_step=lambda st: phase(st.line()),
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen,
                       retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until,
-                      action_cost=self._action_cost, pushes=pushes, on_push=lambda record: phase(record.line()))
+                      action_cost=self._action_cost, pushes=pushes, on_push=lambda record: phase(record.line()),
+                      before=before)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         publish(out, running=False)
+
+    def _publish_start(self, start: StartPoint) -> None:
+        """~/execution for a goal that relocates nothing (its start point ended it): what was relocated before."""
+        out = ExecutionResult(start.retrieved, start.line, list(start.before))
+        self._progress = out.to_dict()
+        self._execution.publish(String(data=json.dumps({**self._progress, "sequence": [], "note": "", "running": False,
+                                                        "execution_s": 0.0, "relocate_s": 0.0})))
 
     def _keep(self, ck: Checkpoint) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""

@@ -163,11 +163,12 @@ def planner_foreign_ids(oracle: LaneOracle, ids: Iterable[str]) -> str:
 
 
 def execute_sequence(sequence: Sequence[str], relocate_one: Callable[[str, list[str]], tuple[bool, str]],
-                     cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None
-                     ) -> tuple[bool, str, list[str]]:
-    """Relocate the learned sequence in order (the target last): (success, message, relocated ids). Stops at the
-    first failure or on cancel, saying which object and why."""
-    removed: list[str] = []
+                     cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None,
+                     before: Sequence[str] = ()) -> tuple[bool, str, list[str]]:
+    """Relocate the learned sequence in order (the target last): (success, message, relocated ids, after `before`:
+    those relocated before, sent as removed). Stops at the first failure or on cancel, saying which object and
+    why."""
+    removed: list[str] = list(before)
     for object_id in sequence:
         before_each()
         if cancelled():
@@ -212,8 +213,9 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             retrain: TrainingParams | None = None, until_planner: UntilPlanner | None = None,
             on_progress: Callable[[ExecutionResult], None] = lambda out: None,
             action_cost: ActionCosts | None = None, pushes: PushActions | None = None,
-            on_push: Callable[[PushRecord], None] = lambda p: None) -> ExecutionResult:
-    """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
+            on_push: Callable[[PushRecord], None] = lambda p: None, before: Sequence[str] = ()) -> ExecutionResult:
+    """Execute `sequence` from `scene` (the scene it was planned on), after the relocations `before` (done before
+    this goal: executive.resume; sent as removed). closed_loop: closed_loop.ClosedLoopExecutor,
     checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
     with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
     open-loop execution (execute_sequence) after the same capacity check: a sequence needing more slots than
@@ -278,7 +280,7 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen, on_progress=on_progress,
-                                  action_cost=action_cost, pusher=pusher, on_push=on_push).run(sequence, scene)
+                                  action_cost=action_cost, pusher=pusher, on_push=on_push).run(sequence, scene, before)
     why = check_capacity(sequence, len(free_slots(scenario, scene)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")
@@ -290,7 +292,7 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             unverified.append(object_id)
         return ok, message
 
-    ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each)
+    ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each, before)
     return ExecutionResult(ok, message + (f" (unverified: {', '.join(unverified)})" if ok and unverified else ""),
                            relocated, unverified=unverified)
 

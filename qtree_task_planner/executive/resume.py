@@ -1,0 +1,60 @@
+"""A goal that starts where an earlier one stopped, ROS-free (docs/reliability.md, "A node that dies").
+
+A task planner respawned during an execution gets its goal again while the world is no longer the scenario's: the
+bottles relocated before its death stand on the bottom shelf (the motion planner placed them: its ~/relocated says
+which, in slot order), the relocation that was in flight ended as the motion planner left it. `start_point` says what
+the new goal starts from: the retrieval problem of the top shelf as it is now (`closed_loop.remaining_problem`, the
+closed loop's own rule: a bottle counts as relocated only when the scene does not show it on the top shelf), the
+relocations done before it (the executor sends them as removed, so the motion planner's slot numbering goes on), or
+that the target was already retrieved (seen on the bottom shelf; or, with a camera that does not see it, placed
+there by the motion planner and gone from the top shelf: the closed loop's rule after a relocation). A scene with
+every bottle on the top shelf and nothing placed is a fresh start (None): the goal trains as always.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+from qtree_task_planner.executive.closed_loop import Scene, Tolerances, board_of, remaining_problem
+from qtree_task_planner.problem import ActionCosts, RelocationProblem
+from relocation_common.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class StartPoint:
+    """Where a goal starts when the world changed before it: the problem left on the top shelf (None: `retrieved`,
+    or no problem, `line` says why), the relocations done before it (slot order), one line for the log."""
+
+    problem: RelocationProblem | None
+    before: tuple[str, ...]
+    retrieved: bool
+    line: str
+
+
+def relocated_before(scenario: Scenario, scene: Scene, placed: Mapping[str, int],
+                     tol: Tolerances = Tolerances()) -> tuple[str, ...]:
+    """The bottles the motion planner placed on the bottom shelf (`placed`: id -> slot, its ~/relocated) that the
+    scene does not show on the top shelf, in slot order (a placed bottle seen back on the top shelf is not
+    relocated: the closed loop's rule)."""
+    return tuple(o for o, _ in sorted(placed.items(), key=lambda kv: (kv[1], kv[0]))
+                 if o not in scene or board_of(scene[o], scenario, tol) != "top")
+
+
+def start_point(scenario: Scenario, scene: Scene, placed: Mapping[str, int], action_cost: ActionCosts | None,
+                tol: Tolerances = Tolerances()) -> StartPoint | None:
+    """What a goal starts from (module doc); None when nothing was relocated and every object of the scene rests on
+    the top shelf (a fresh start)."""
+    before = relocated_before(scenario, scene, placed, tol)
+    off = sorted(o for o, seen in scene.items() if board_of(seen, scenario, tol) != "top")
+    if not before and not off:
+        return None
+    rp = remaining_problem(scenario, scene, before, tol, action_cost)
+    done = (f"relocated before this goal: {', '.join(before)} (the motion planner placed them; not on the top shelf)"
+            if before else "nothing relocated before this goal")
+    elsewhere = f"; off the top shelf: {', '.join(off)}" if off else ""
+    if rp.problem is None:
+        return StartPoint(None, before, rp.target_retrieved, f"the world changed before this goal: {done}{elsewhere}; "
+                          f"{rp.reason}")
+    return StartPoint(rp.problem, before, False, f"the world changed before this goal: {done}{elsewhere}; the "
+                      f"retrieval re-planned from the scene as it is now: {len(rp.problem.obstacles)} obstacle(s) on "
+                      f"the top shelf ({', '.join(rp.problem.obstacles) or 'none'}), target {rp.problem.target}")
