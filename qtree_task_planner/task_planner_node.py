@@ -30,6 +30,7 @@ import time
 from typing import Any, Sequence
 
 import rclpy
+from action_msgs.msg import GoalStatus, GoalStatusArray
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
@@ -47,7 +48,7 @@ from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PUSH, PushActions
 from qtree_task_planner.executive.replicas import ReplicaOracle
-from qtree_task_planner.executive.resume import StartPoint, start_point
+from qtree_task_planner.executive.resume import StartPoint, WithGone, start_point
 from qtree_task_planner.executive.retrieval import (
     chosen_sequence,
     execute,
@@ -70,6 +71,7 @@ from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from qtree_task_planner.ros_clients import (
     GOAL_STATUS,
+    MOTION_WAIT,
     Relocator,
     SceneWatch,
     ServiceOracle,
@@ -91,6 +93,7 @@ from relocation_common.scenario import ScenarioError, load_scenario
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+ACTIVE = (GoalStatus.STATUS_ACCEPTED, GoalStatus.STATUS_EXECUTING, GoalStatus.STATUS_CANCELING)  # a goal running
 FEEDBACK_EVERY = 10  # episodes between training feedbacks (and after a slow planner answer: training.CALLBACK_S)
 
 
@@ -123,6 +126,9 @@ class TaskPlannerNode(Node):
         self.create_subscription(ObjectArray, self._scene_topic, self._scenes.put, SCENE_QOS)
         self._placed: dict[str, int] | None = None  # the motion planner's ~/relocated (None before the first)
         self.create_subscription(String, self.p("relocated_topic"), self._on_placed, SCENE_QOS)
+        self._motions: list[int] = []  # the statuses of the motion planner's relocate goals (its action's status)
+        self.create_subscription(GoalStatusArray, self.p("relocate_action") + "/_action/status", self._on_motions,
+                                 SCENE_QOS)
         self._markers = self.create_publisher(MarkerArray, "~/markers", SCENE_QOS)
         self._relocating = self.create_publisher(String, "~/relocating", SCENE_QOS)
         self._execution = self.create_publisher(String, "~/execution", SCENE_QOS)  # ExecutionResult.to_dict() JSON
@@ -146,6 +152,29 @@ class TaskPlannerNode(Node):
         except (ValueError, KeyError, TypeError) as e:
             self.get_logger().error(f"{self.p('relocated_topic')}: not {{\"relocated\": {{id: slot}}}}: {e}")
 
+    def _on_motions(self, msg: GoalStatusArray) -> None:
+        self._motions = [st.status for st in msg.status_list]
+
+    def _motion_ended(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback) -> None:
+        """Before a goal reads its scene: a relocate goal of the motion planner still running (its client, an earlier
+        task planner, died) is waited for up to relocate_timeout, so no second motion starts while the arm moves and
+        the goal plans on a scene perceived after it (up to scene_after_wait s for one); said in the feedback."""
+        if not any(st in ACTIVE for st in self._motions):
+            return
+        fb.phase = MOTION_WAIT
+        self.get_logger().warning(f"{fb.phase} (an earlier goal's): no motion is started before it ends")
+        goal_handle.publish_feedback(fb)
+        deadline = time.monotonic() + self.p("relocate_timeout")
+        while any(st in ACTIVE for st in self._motions):
+            if time.monotonic() > deadline or goal_handle.is_cancel_requested or not rclpy.ok():
+                raise Cancelled(f"the motion planner's relocation in flight did not end within relocate_timeout "
+                                f"{self.p('relocate_timeout'):g} s" if time.monotonic() > deadline else "cancelled")
+            time.sleep(0.1)
+        try:
+            self._scenes.after(time.monotonic(), self.p("scene_after_wait"))
+        except TimeoutError as e:
+            self.get_logger().warning(f"after the relocation in flight: {e}")
+
     def _problem(self) -> tuple[RelocationProblem | None, ObjectArray, StartPoint | None]:
         """The scene as a problem, and where the goal starts when the world changed before it (executive.resume:
         bottles the motion planner placed, objects off the top shelf; then the problem is the top shelf's, None
@@ -155,12 +184,12 @@ class TaskPlannerNode(Node):
                                             self.get_clock().now)
         if warning:
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
-        deadline = time.monotonic() + self.p("scene_wait")  # the latched ~/relocated, as the first scene
-        while self._placed is None and time.monotonic() < deadline:
-            time.sleep(0.05)
-        if self._placed is None:
-            self.get_logger().warning(f"nothing on {self.p('relocated_topic')} within scene_wait: taken as no bottle "
-                                      "placed by the motion planner")
+        topic, deadline = self.p("relocated_topic"), time.monotonic() + self.p("scene_wait")
+        while self._placed is None and self.count_publishers(topic) and time.monotonic() < deadline:
+            time.sleep(0.05)  # the latched ~/relocated of a motion planner just discovered, as the first scene
+        if self._placed is None and self.count_publishers(topic):
+            self.get_logger().warning(f"nothing on {topic} within scene_wait: taken as no bottle placed by the motion "
+                                      "planner")
         objects, scenario = msg_to_objects(msg, require_target=False), load_scenario(self.p("scenario") or None)
         if any(o.is_target for o in objects):  # else (a relocated target out of view) the scenario's own objects
             scenario = scenario.with_objects(objects)
@@ -201,9 +230,11 @@ class TaskPlannerNode(Node):
 
     def _train_and_execute(self, goal_handle: ServerGoalHandle, result: TrainPlanner.Result) -> str:
         params = self._params(goal_handle.request)
+        fb = self._fb = TrainPlanner.Feedback(phase="exact optimum")
+        self._motion_ended(goal_handle, fb)
         problem, scene, start = self._problem()
         self._publish_scene(scene, ())
-        fb = self._fb = TrainPlanner.Feedback(phase="exact optimum")
+        fb.phase = "exact optimum"
         self._progress = {}
         before = start.before if start is not None else ()
         if problem is None:  # the target retrieved before this goal, or no problem left (start.line says which)
@@ -222,7 +253,8 @@ class TaskPlannerNode(Node):
             ServiceOracle(c, self.p("feasibility_timeout"), self.p("feasibility_margin"), on_answer=on_answer,
                           stop=lambda: fb.phase == "exact optimum" and (goal_handle.is_cancel_requested
                                                                        or not rclpy.ok())) for c in self._feas])
-        oracle = CachedOracle(service, reuse=self.p("reuse_answers"))  # answers reused across questions
+        asked = service if not before else WithGone(service, frozenset(before))  # the planners, told what is gone
+        oracle = CachedOracle(asked, reuse=self.p("reuse_answers"))  # answers reused across questions
         missing = [c.srv_name for c in self._feas if not c.service_is_ready()]
         if missing:  # asked anyway (it may be starting); the others answer meanwhile
             self.get_logger().warning(f"feasibility service(s) not available at the start of the goal: "
@@ -287,7 +319,9 @@ class TaskPlannerNode(Node):
         executor's: for the closed loop, its scene waits, checks and re-plans). Pushes (`max_pushes`, closed loop
         only): asked of `service`, executed through the Relocator (action "push"). `before`: the relocations done
         before this goal (executive.resume), sent as removed."""
-        scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_objects(scene))
+        base, objects = load_scenario(self.p("scenario") or None), msg_to_objects(scene)
+        ids = {o.id for o in objects}  # and the listed bottles relocated before this goal that the scene leaves out
+        scenario = base.with_objects(objects + tuple(base.object(o) for o in before if o in base.ids and o not in ids))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         spent = {"relocate_s": 0.0}  # the relocations' own time: the rest of the execution is the executor's
 

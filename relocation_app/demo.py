@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
-from qtree_task_planner.ros_clients import GOAL_STATUS, SCENE_NONE
+from qtree_task_planner.ros_clients import GOAL_STATUS, MOTION_WAIT, SCENE_NONE
 from relocation_app import run_report
 from relocation_app.client import ClientError, RelocationClient
 from relocation_app.final_state import final_state
@@ -43,7 +43,7 @@ from relocation_app.run_report import End
 from relocation_common.feasibility import default_replicas
 from relocation_common.paths import default_scenario, resolve_scenario
 
-TRAINING = ("exact optimum", "training", "waiting for planner")  # the feedback phases before the execution
+TRAINING = ("exact optimum", "training", "waiting for planner", MOTION_WAIT)  # the feedback phases before the execution
 SETTLE_WAIT = 200.0  # s the demo waits for the motion planner's relocation in flight when the task planner died
 RESTART_WAIT = 120.0  # s for a respawned task planner to say it is up (its /diagnostics status with its new pid)
 DISCOVERY_SETTLE = 3.0  # s after that before the goal is sent again
@@ -302,7 +302,8 @@ def _send(client, on_feedback, check, goal: dict, again: bool) -> None:
 def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[End | None, Any]:
     """Wait for the graph and a scene, train (and execute) through the client; (an End when the run ended
     otherwise than with the goal's result, the TrainPlanner result or None). A task planner that died during
-    the training is waited for and the goal sent again (its checkpoint); during the execution the run ends."""
+    the training is waited for and the goal sent again (its checkpoint); during the execution too, once the motion
+    planner's relocation in flight has ended (`_lost_in_execution`)."""
     client.wait_until_ready(120, check=g.check_alive)
     _wait_for(lambda: w.scene.msg is not None and len(w.scene.msg.objects) > 0, 90, g, f"no scene on {w.scene_topic}")
     # the task planner's own first scene: its discovery of the scene's publisher took longer than its scene_wait at a

@@ -5,11 +5,12 @@ from test_closed_loop import BOTTOM, SCENARIO, FakeShelf, executor, first_plan
 
 from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.replan import GeometryCache
-from qtree_task_planner.executive.resume import relocated_before, start_point
+from qtree_task_planner.executive.resume import WithGone, relocated_before, start_point
 from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
+from relocation_common.feasibility import FeasibilityAnswer, Label
 
 PARAMS = TrainingParams.defaults().replace(seed=1, max_episodes=50)
 
@@ -79,3 +80,33 @@ def test_the_first_training_s_checkpoint_is_not_reused_on_the_changed_scene_and_
     with pytest.raises(CheckpointError, match="other training parameters"):  # the same scene: still checked
         CheckpointKeeper(str(path)).resume_point(RelocationProblem.from_scenario(SCENARIO), PARAMS.replace(seed=2),
                                                  CachedOracle(FakeShelf()), changed="b was relocated")
+
+
+class Recorder:
+    """A planner that keeps a bottle it placed as an obstacle unless the question names it removed (as the motion
+    planner does): T is blocked by b unless b is removed."""
+
+    def __init__(self):
+        self.asked = []
+
+    def feasibility(self, object_id, removed):
+        self.asked.append((object_id, frozenset(removed)))
+        blocked = object_id == "T" and "b" not in removed
+        return FeasibilityAnswer(Label.UNFEASIBLE if blocked else Label.TARGET if object_id == "T" else Label.OBSTACLE)
+
+
+def test_the_resumed_goal_s_questions_name_the_bottles_relocated_before():
+    """The first plan of a goal after b was placed: asked plainly, T looks blocked by b (the resumed demo relocated
+    o1 and o5 for T, whose lane o4 had left); through WithGone, T is free, and the cache keeps the problem's keys."""
+    plain = CachedOracle(Recorder())
+    assert plain.feasibility("T", frozenset()).label == Label.UNFEASIBLE
+    inner = Recorder()
+    cache = CachedOracle(WithGone(inner, frozenset({"b"})))
+    assert cache.feasibility("T", frozenset()).label == Label.TARGET
+    assert inner.asked == [("T", frozenset({"b"}))] and set(cache.table) == {("T", frozenset())}
+    got = []
+    answers = WithGone(inner, frozenset({"b"})).feasibility_many([("a", frozenset()), ("T", frozenset({"a"}))],
+                                                                 lambda q, a: got.append(q))
+    assert [a.label for a in answers] == [Label.OBSTACLE, Label.TARGET]
+    assert got == [("a", frozenset()), ("T", frozenset({"a"}))]  # told back as asked of it
+    assert inner.asked[-2:] == [("a", frozenset({"b"})), ("T", frozenset({"a", "b"}))]

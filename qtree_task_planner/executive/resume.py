@@ -13,10 +13,19 @@ every bottle on the top shelf and nothing placed is a fresh start (None): the go
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Any, Mapping, Sequence
 
 from qtree_task_planner.executive.closed_loop import Scene, Tolerances, board_of, remaining_problem
+from qtree_task_planner.oracles import Lanes
 from qtree_task_planner.problem import ActionCosts, RelocationProblem
+from relocation_common.feasibility import (
+    FeasibilityAnswer,
+    OnAnswer,
+    Query,
+    ask_many,
+    certify_many,
+    in_flight,
+)
 from relocation_common.scenario import Scenario
 
 
@@ -58,3 +67,46 @@ def start_point(scenario: Scenario, scene: Scene, placed: Mapping[str, int], act
     return StartPoint(rp.problem, before, False, f"the world changed before this goal: {done}{elsewhere}; the "
                       f"retrieval re-planned from the scene as it is now: {len(rp.problem.obstacles)} obstacle(s) on "
                       f"the top shelf ({', '.join(rp.problem.obstacles) or 'none'}), target {rp.problem.target}")
+
+
+class WithGone:
+    """The feasibility oracle of a goal that starts after relocations (`gone`: StartPoint.before): every question
+    to the wrapped oracle (the planners) is asked with those bottles removed too, as the closed loop's re-plans ask
+    with RemainingProblem.gone (the motion planner keeps a bottle it placed as an obstacle of a question that does
+    not name it: the resumed goal's first plan took o1 and o5 for T, whose lane o4 had left). The questions and
+    answers the cache above it keeps are the problem's own (without `gone`)."""
+
+    def __init__(self, oracle: Any, gone: frozenset[str]) -> None:
+        self.oracle, self.gone = oracle, gone
+
+    @property
+    def in_flight(self) -> int:
+        """The wrapped oracle's (feasibility.in_flight)."""
+        return in_flight(self.oracle)
+
+    def feasibility(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """Eq. 11 for (object_id, removed | gone)."""
+        return self.oracle.feasibility(object_id, frozenset(removed) | self.gone)
+
+    def certify(self, object_id: str, removed: frozenset[str]) -> FeasibilityAnswer:
+        """The certification of (object_id, removed | gone) (a final answer from an oracle that does not certify)."""
+        return certify_many(self.oracle, [(object_id, frozenset(removed) | self.gone)])[0]
+
+    def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
+        """The lane blockers with removed | gone gone (None from an oracle without them)."""
+        ask = getattr(self.oracle, "lane_blockers", None)
+        return None if ask is None else ask(frozenset(removed) | self.gone)
+
+    def feasibility_many(self, queries: Sequence[Query], on_answer: OnAnswer | None = None) -> list[FeasibilityAnswer]:
+        """Every answer (feasibility.ask_many), asked with `gone` removed too."""
+        return ask_many(self.oracle, *self._mapped(queries, on_answer))
+
+    def certify_many(self, queries: Sequence[Query], on_answer: OnAnswer | None = None) -> list[FeasibilityAnswer]:
+        """Every certification (feasibility.certify_many), asked with `gone` removed too."""
+        return certify_many(self.oracle, *self._mapped(queries, on_answer))
+
+    def _mapped(self, queries: Sequence[Query], on_answer: OnAnswer | None) -> tuple[list[Query], OnAnswer | None]:
+        """The queries with `gone` removed too, and on_answer called with the query as it was asked of us."""
+        full = [(o, frozenset(r) | self.gone) for o, r in queries]
+        back = dict(zip(full, queries))
+        return full, None if on_answer is None else (lambda q, a: on_answer(back[q], a))

@@ -30,6 +30,7 @@ from qtree_task_planner.executive.closed_loop import (
 from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, PushRecord
 from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, free_first, pickable, relearn, replan
+from qtree_task_planner.executive.resume import WithGone
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
@@ -228,7 +229,8 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     sequence, a push out of its blocking cycle (executive.push; closed loop only: an open-loop run never pushes); an
     empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push."""
     if closed_loop:
-        cache = GeometryCache(oracle.oracle)
+        asked = oracle.oracle  # the re-plans ask with their own gone set (RemainingOracle), not a start point's
+        cache = GeometryCache(asked.oracle if isinstance(asked, WithGone) else asked)
         cache.adopt(oracle.table, remaining_problem(scenario, scene, ()).geometry(), oracle.certified)
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
