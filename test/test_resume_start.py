@@ -25,6 +25,8 @@ def shelf_after_b():
 def test_a_fresh_scene_is_no_start_point():
     shelf = FakeShelf()
     assert start_point(SCENARIO, shelf.perceive(), {}, None) is None
+    shelf.put("b", *SCENARIO.slots[0], BOTTOM)  # off the top shelf, but nobody placed it: the scene as given
+    assert start_point(SCENARIO, shelf.perceive(), {}, None) is None
 
 
 @pytest.mark.parametrize("bottom_seen", [True, False])

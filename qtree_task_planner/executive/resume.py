@@ -7,8 +7,9 @@ the new goal starts from: the retrieval problem of the top shelf as it is now (`
 closed loop's own rule: a bottle counts as relocated only when the scene does not show it on the top shelf), the
 relocations done before it (the executor sends them as removed, so the motion planner's slot numbering goes on), or
 that the target was already retrieved (seen on the bottom shelf; or, with a camera that does not see it, placed
-there by the motion planner and gone from the top shelf: the closed loop's rule after a relocation). A scene with
-every bottle on the top shelf and nothing placed is a fresh start (None): the goal trains as always.
+there by the motion planner and gone from the top shelf: the closed loop's rule after a relocation). Nothing
+placed by the motion planner (or every bottle it placed back on the top shelf) is a fresh start (None): the goal
+trains on the scene as always.
 """
 from __future__ import annotations
 
@@ -51,15 +52,14 @@ def relocated_before(scenario: Scenario, scene: Scene, placed: Mapping[str, int]
 
 def start_point(scenario: Scenario, scene: Scene, placed: Mapping[str, int], action_cost: ActionCosts | None,
                 tol: Tolerances = Tolerances()) -> StartPoint | None:
-    """What a goal starts from (module doc); None when nothing was relocated and every object of the scene rests on
-    the top shelf (a fresh start)."""
+    """What a goal starts from (module doc); None when the motion planner placed no bottle that the scene does not
+    show on the top shelf (a fresh start)."""
     before = relocated_before(scenario, scene, placed, tol)
-    off = sorted(o for o, seen in scene.items() if board_of(seen, scenario, tol) != "top")
-    if not before and not off:
+    if not before:  # the scene as given (a bottle off the top shelf that nobody placed: the first plan's business)
         return None
+    off = sorted(o for o, seen in scene.items() if board_of(seen, scenario, tol) != "top")
     rp = remaining_problem(scenario, scene, before, tol, action_cost)
-    done = (f"relocated before this goal: {', '.join(before)} (the motion planner placed them; not on the top shelf)"
-            if before else "nothing relocated before this goal")
+    done = f"relocated before this goal: {', '.join(before)} (the motion planner placed them; not on the top shelf)"
     elsewhere = f"; off the top shelf: {', '.join(off)}" if off else ""
     if rp.problem is None:
         return StartPoint(None, before, rp.target_retrieved, f"the world changed before this goal: {done}{elsewhere}; "
