@@ -19,7 +19,11 @@ on a lost planner; a matching goal resumes, a corrupt or mismatched one aborts w
 to `planner_wait` s, then the goal aborts saying what to do (re-plans during the execution too); a motion planner
 lost during a relocation is waited for as long and the goal sent again (ros_clients.Relocator); a scene source that
 goes silent after a relocation is waited for up to `scene_outage_wait` s; a stale or empty scene aborts the goal
-before training (scene_max_age); bad parameters at start: one line on stderr, exit status 2.
+before training (scene_max_age); bad parameters at start: one line on stderr, exit status 2. A goal sent again after
+this node was respawned during an execution (executive.resume): a relocate goal still running (the motion planner's
+action status) is waited for before the scene is read; the bottles the motion planner placed (`relocated_topic`,
+latched) and the scene does not show on the top shelf are relocated before the goal, left out of its problem and
+named removed in every question and relocation; a checkpoint of the earlier scene is not reused (said in the log).
 """
 from __future__ import annotations
 
