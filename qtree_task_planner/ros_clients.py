@@ -172,6 +172,8 @@ def through_outages(fn: Callable[[], T], goal_handle: ServerGoalHandle, fb: Trai
 
 SCENE_NONE = "none yet"  # goal_health's "scene" before the first scene came
 GOAL_STATUS = "task_planner: goal"  # the name of the task planner's DiagnosticStatus (goal_health)
+MOTION_WAIT = "waiting for the motion planner's relocation in flight"  # a goal's first phase while an earlier goal's
+# relocation still moves the arm (its task planner died: docs/reliability.md, "A node that dies")
 
 
 def goal_health(fb: TrainPlanner.Feedback | None, execution: dict[str, Any],

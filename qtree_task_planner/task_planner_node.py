@@ -19,7 +19,11 @@ on a lost planner; a matching goal resumes, a corrupt or mismatched one aborts w
 to `planner_wait` s, then the goal aborts saying what to do (re-plans during the execution too); a motion planner
 lost during a relocation is waited for as long and the goal sent again (ros_clients.Relocator); a scene source that
 goes silent after a relocation is waited for up to `scene_outage_wait` s; a stale or empty scene aborts the goal
-before training (scene_max_age); bad parameters at start: one line on stderr, exit status 2.
+before training (scene_max_age); bad parameters at start: one line on stderr, exit status 2. A goal sent again after
+this node was respawned during an execution (executive.resume): a relocate goal still running (the motion planner's
+action status) is waited for before the scene is read; the bottles the motion planner placed (`relocated_topic`,
+latched) and the scene does not show on the top shelf are relocated before the goal, left out of its problem and
+named removed in every question and relocation; a checkpoint of the earlier scene is not reused (said in the log).
 """
 from __future__ import annotations
 
@@ -30,6 +34,7 @@ import time
 from typing import Any, Sequence
 
 import rclpy
+from action_msgs.msg import GoalStatus, GoalStatusArray
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
@@ -47,6 +52,7 @@ from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PUSH, PushActions
 from qtree_task_planner.executive.replicas import ReplicaOracle
+from qtree_task_planner.executive.resume import StartPoint, WithGone, start_point
 from qtree_task_planner.executive.retrieval import (
     chosen_sequence,
     execute,
@@ -69,6 +75,7 @@ from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from qtree_task_planner.ros_clients import (
     GOAL_STATUS,
+    MOTION_WAIT,
     Relocator,
     SceneWatch,
     ServiceOracle,
@@ -90,6 +97,7 @@ from relocation_common.scenario import ScenarioError, load_scenario
 
 __all__ = ["TaskPlannerNode", "ServiceOracle", "train_goal", "main"]  # ServiceOracle, train_goal: ros_clients
 SCENE_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+ACTIVE = (GoalStatus.STATUS_ACCEPTED, GoalStatus.STATUS_EXECUTING, GoalStatus.STATUS_CANCELING)  # a goal running
 FEEDBACK_EVERY = 10  # episodes between training feedbacks (and after a slow planner answer: training.CALLBACK_S)
 
 
@@ -121,6 +129,11 @@ class TaskPlannerNode(Node):
             resume_wait=self.p("planner_wait"))
         self._scene_topic = SCENE_SOURCES.get(self.p("scene_source")) or self.p("scene_topic")
         self.create_subscription(ObjectArray, self._scene_topic, self._scenes.put, SCENE_QOS)
+        self._placed: dict[str, int] | None = None  # the motion planner's ~/relocated (None before the first)
+        self.create_subscription(String, self.p("relocated_topic"), self._on_placed, SCENE_QOS)
+        self._motions: list[int] = []  # the statuses of the motion planner's relocate goals (its action's status)
+        self.create_subscription(GoalStatusArray, self.p("relocate_action") + "/_action/status", self._on_motions,
+                                 SCENE_QOS)
         self._markers = self.create_publisher(MarkerArray, "~/markers", SCENE_QOS)
         self._relocating = self.create_publisher(String, "~/relocating", SCENE_QOS)
         self._execution = self.create_publisher(String, "~/execution", SCENE_QOS)  # ExecutionResult.to_dict() JSON
@@ -138,13 +151,58 @@ class TaskPlannerNode(Node):
         return self.get_parameter(name).value
 
     # -- inputs ---------------------------------------------------------------------------------------------
-    def _problem(self) -> tuple[RelocationProblem, ObjectArray]:
-        """The scene as a problem; ScenarioError when it is missing, stale, empty or invalid (retrieval.check_scene)."""
+    def _on_placed(self, msg: String) -> None:
+        try:
+            self._placed = {str(k): int(v) for k, v in dict(json.loads(msg.data)["relocated"]).items()}
+        except (ValueError, KeyError, TypeError) as e:
+            self.get_logger().error(f"{self.p('relocated_topic')}: not {{\"relocated\": {{id: slot}}}}: {e}")
+
+    def _on_motions(self, msg: GoalStatusArray) -> None:
+        self._motions = [st.status for st in msg.status_list]
+
+    def _motion_ended(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback) -> None:
+        """Before a goal reads its scene: a relocate goal of the motion planner still running (its client, an earlier
+        task planner, died) is waited for up to relocate_timeout, so no second motion starts while the arm moves and
+        the goal plans on a scene perceived after it (up to scene_after_wait s for one); said in the feedback."""
+        if not any(st in ACTIVE for st in self._motions):
+            return
+        fb.phase = MOTION_WAIT
+        self.get_logger().warning(f"{fb.phase} (an earlier goal's): no motion is started before it ends")
+        goal_handle.publish_feedback(fb)
+        deadline = time.monotonic() + self.p("relocate_timeout")
+        while any(st in ACTIVE for st in self._motions):
+            if time.monotonic() > deadline or goal_handle.is_cancel_requested or not rclpy.ok():
+                raise Cancelled(f"the motion planner's relocation in flight did not end within relocate_timeout "
+                                f"{self.p('relocate_timeout'):g} s" if time.monotonic() > deadline else "cancelled")
+            time.sleep(0.1)
+        try:
+            self._scenes.after(time.monotonic(), self.p("scene_after_wait"))
+        except TimeoutError as e:
+            self.get_logger().warning(f"after the relocation in flight: {e}")
+
+    def _problem(self) -> tuple[RelocationProblem | None, ObjectArray, StartPoint | None]:
+        """The scene as a problem, and where the goal starts when the world changed before it (executive.resume:
+        bottles the motion planner placed, objects off the top shelf; then the problem is the top shelf's, None
+        when the target was already retrieved or none is left); ScenarioError when the scene is missing, stale,
+        empty or invalid (retrieval.check_scene)."""
         msg, warning = self._scenes.checked(self._scene_topic, self.p("scene_max_age"), self.p("scene_wait"),
                                             self.get_clock().now)
         if warning:
             self.get_logger().warning(warning, throttle_duration_sec=60.0)
-        return RelocationProblem.from_bottles(msg_to_objects(msg), self._action_cost), msg
+        topic, deadline = self.p("relocated_topic"), time.monotonic() + self.p("scene_wait")
+        while self._placed is None and self.count_publishers(topic) and time.monotonic() < deadline:
+            time.sleep(0.05)  # the latched ~/relocated of a motion planner just discovered, as the first scene
+        if self._placed is None and self.count_publishers(topic):
+            self.get_logger().warning(f"nothing on {topic} within scene_wait: taken as no bottle placed by the motion "
+                                      "planner")
+        objects, scenario = msg_to_objects(msg, require_target=False), load_scenario(self.p("scenario") or None)
+        if any(o.is_target for o in objects):  # else (a relocated target out of view) the scenario's own objects
+            scenario = scenario.with_objects(objects)
+        start = start_point(scenario, seen_scene(msg), self._placed or {}, self._action_cost)
+        if start is None:
+            return RelocationProblem.from_bottles(msg_to_objects(msg), self._action_cost), msg, None
+        self.get_logger().info(start.line)
+        return start.problem, msg, start
 
     def _params(self, goal: TrainPlanner.Goal) -> TrainingParams:
         return goal_params(TrainingParams.from_dict({f: self.p(f) for f in TrainingParams.fields()}), goal)
@@ -177,10 +235,18 @@ class TaskPlannerNode(Node):
 
     def _train_and_execute(self, goal_handle: ServerGoalHandle, result: TrainPlanner.Result) -> str:
         params = self._params(goal_handle.request)
-        problem, scene = self._problem()
-        self._publish_scene(scene, ())
         fb = self._fb = TrainPlanner.Feedback(phase="exact optimum")
+        self._motion_ended(goal_handle, fb)
+        problem, scene, start = self._problem()
+        self._publish_scene(scene, ())
+        fb.phase = "exact optimum"
         self._progress = {}
+        before = start.before if start is not None else ()
+        if problem is None:  # the target retrieved before this goal, or no problem left (start.line says which)
+            assert start is not None
+            self._publish_start(start)
+            result.success, result.message = start.retrieved, start.line
+            return ""
         last = [0.0]
 
         def on_answer() -> None:  # progress of the exact solve (no episodes yet): planner calls, twice a second
@@ -192,12 +258,14 @@ class TaskPlannerNode(Node):
             ServiceOracle(c, self.p("feasibility_timeout"), self.p("feasibility_margin"), on_answer=on_answer,
                           stop=lambda: fb.phase == "exact optimum" and (goal_handle.is_cancel_requested
                                                                        or not rclpy.ok())) for c in self._feas])
-        oracle = CachedOracle(service, reuse=self.p("reuse_answers"))  # answers reused across questions
+        asked = service if not before else WithGone(service, frozenset(before))  # the planners, told what is gone
+        oracle = CachedOracle(asked, reuse=self.p("reuse_answers"))  # answers reused across questions
         missing = [c.srv_name for c in self._feas if not c.service_is_ready()]
         if missing:  # asked anyway (it may be starting); the others answer meanwhile
             self.get_logger().warning(f"feasibility service(s) not available at the start of the goal: "
                                       f"{', '.join(missing)} (replicas: {len(self._feas)})")
-        resume = self._keeper.resume_point(problem, params, oracle)
+        resume = self._keeper.resume_point(problem, params, oracle, changed="the relocations done before this goal"
+                                           if start is not None else "")
 
         until: UntilPlanner = lambda fn: through_outages(  # noqa: E731 (through planner outages: training, re-plans)
             fn, goal_handle, fb, service, self.get_logger(), self.p("planner_wait"), self._keeper.kept_where)
@@ -235,7 +303,7 @@ class TaskPlannerNode(Node):
                 result.message += planner_foreign_ids(service, problem.ids)
             return notes[0]
         fb.phase = "executing"  # then each check and re-plan (_run)
-        self._run(goal_handle, fb, result, scene, oracle, service, params, until, *chosen_sequence(
+        self._run(goal_handle, fb, result, scene, oracle, service, params, until, before, *chosen_sequence(
             r.sequence, r.total_weight, result.optimal_sequence, result.optimal_weight if result.optimal_sequence
             else None, execute_optimum=goal_handle.request.execute_optimum, execute_learned=self.p("execute_learned"),
             learned_cost=r.total_cost, optimal_cost=optimum.total_cost))
@@ -249,13 +317,16 @@ class TaskPlannerNode(Node):
 
     def _run(self, goal_handle: ServerGoalHandle, fb: TrainPlanner.Feedback, result: TrainPlanner.Result,
              scene: ObjectArray, oracle: CachedOracle, service: ReplicaOracle, params: TrainingParams,
-             until: UntilPlanner, sequence: list[str], note: str) -> None:
+             until: UntilPlanner, before: Sequence[str], sequence: list[str], note: str) -> None:
         """Execute (retrieval.execute, `closed_loop`; `replan_q_tree`: each re-plan also retrains the Q-Tree with the
         goal's params): checks, re-plans in the feedback; the outcome on ~/execution
         with `execution_s` (the whole execution) and `relocate_s` (the relocations' own part; the rest is the
         executor's: for the closed loop, its scene waits, checks and re-plans). Pushes (`max_pushes`, closed loop
-        only): asked of `service`, executed through the Relocator (action "push")."""
-        scenario = load_scenario(self.p("scenario") or None).with_objects(msg_to_objects(scene))
+        only): asked of `service`, executed through the Relocator (action "push"). `before`: the relocations done
+        before this goal (executive.resume), sent as removed."""
+        base, objects = load_scenario(self.p("scenario") or None), msg_to_objects(scene)
+        ids = {o.id for o in objects}  # and the listed bottles relocated before this goal that the scene leaves out
+        scenario = base.with_objects(objects + tuple(base.object(o) for o in before if o in base.ids and o not in ids))
         seen = self._scene_topic == SCENE_SOURCES["sim"]  # ground truth shows the bottom shelf, perception does not
         spent = {"relocate_s": 0.0}  # the relocations' own time: the rest of the execution is the executor's
 
@@ -297,9 +368,16 @@ class TaskPlannerNode(Node):
                       on_replan=lambda rr: phase(rr.line()), bottom_seen=seen,
                       retrain=params if self.p("replan_q_tree") else None, on_progress=publish, until_planner=until,
                       action_cost=self._action_cost, pushes=pushes, on_push=lambda record: phase(record.line()),
-                      tolerances=self._tolerances)
+                      tolerances=self._tolerances, before=before)
         result.success, result.message = out.success, out.message + (f" ({note})" if note else "")
         publish(out, running=False)
+
+    def _publish_start(self, start: StartPoint) -> None:
+        """~/execution for a goal that relocates nothing (its start point ended it): what was relocated before."""
+        out = ExecutionResult(start.retrieved, start.line, list(start.before))
+        self._progress = out.to_dict()
+        self._execution.publish(String(data=json.dumps({**self._progress, "sequence": [], "note": "", "running": False,
+                                                        "execution_s": 0.0, "relocate_s": 0.0})))
 
     def _keep(self, ck: Checkpoint) -> None:
         """The keeper's keep; a training cancelled because the node is stopping says so (stop_reason)."""

@@ -12,8 +12,10 @@ them (`disturbances`) with the re-plans (`replans`); `success` is true only with
 
 A node that dies is respawned as config/graph.yaml says (docs/reliability.md, "A node that dies"): perception and
 the motion planner come back and the run goes on; the task planner comes back and, during the training, the goal is
-sent again (the training resumes from its checkpoint); during the execution the run stops (the goal and the
-execution's state died with it), after the motion planner finished the relocation in flight. The driver is not
+sent again (the training resumes from its checkpoint); during the execution the demo waits until the motion
+planner's relocation in flight has ended (the arm home), then sends the goal again: the new task planner starts
+from the world as it is (qtree_task_planner.executive.resume: the relocations done before it, the top shelf's
+problem, trained afresh) and report.json's `resumed` says what was done before. The driver is not
 respawned: its death stops the run (the arm's state is unknown). However the run ends, report.json is written and
 the exit code says how it ended (relocation_app.run_report).
 """
@@ -31,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from qtree_task_planner.learning.params import POLICIES, SEARCHES, TrainingParams
-from qtree_task_planner.ros_clients import GOAL_STATUS, SCENE_NONE
+from qtree_task_planner.ros_clients import GOAL_STATUS, MOTION_WAIT, SCENE_NONE
 from relocation_app import run_report
 from relocation_app.client import ClientError, RelocationClient
 from relocation_app.final_state import final_state
@@ -41,7 +43,7 @@ from relocation_app.run_report import End
 from relocation_common.feasibility import default_replicas
 from relocation_common.paths import default_scenario, resolve_scenario
 
-TRAINING = ("exact optimum", "training", "waiting for planner")  # the feedback phases before the execution
+TRAINING = ("exact optimum", "training", "waiting for planner", MOTION_WAIT)  # the feedback phases before the execution
 SETTLE_WAIT = 200.0  # s the demo waits for the motion planner's relocation in flight when the task planner died
 RESTART_WAIT = 120.0  # s for a respawned task planner to say it is up (its /diagnostics status with its new pid)
 DISCOVERY_SETTLE = 3.0  # s after that before the goal is sent again
@@ -135,6 +137,7 @@ class _Watch:
         self.phase, self.executing = "", False
         self.planner_scene = SCENE_NONE  # the task planner's latest scene, as its /diagnostics say (goal_health)
         self.before: dict[str, Any] = {}  # the ground truth when the execution started
+        self.resumed: list[dict[str, Any]] = []  # each goal sent again after a task planner died in the execution
         node.create_subscription(String, "/task_planner/execution", self.execution, latched)
         node.create_subscription(String, "/sim/disturbances", lambda m: self.disturbances.append(json.loads(m.data)),
                                  QoSProfile(depth=100, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL))
@@ -243,15 +246,39 @@ def _watching(g: Graph, seen: int):
     return check
 
 
+def _lost_in_execution(g: Graph, w: _Watch, why: str, t: float) -> None:
+    """The task planner died during the execution: what it had done is noted (`w.resumed`, report.json's
+    `resumed`), the motion planner's relocation in flight is waited for (`_settle`: it goes on to its end, the arm
+    home, and no second motion may start meanwhile), then the goal is sent again as for a death in training; the new
+    task planner starts from the world as it is (executive.resume)."""
+    run, flight = w.run(), (w.relocating[-1] if w.relocation_in_flight() and w.relocating else None)
+    print(f"[demo] the task planner died during the execution ({why}; phase: {w.phase}; relocated so far: "
+          f"{' '.join(run.get('relocated', [])) or 'none'}) and is respawned"
+          + (f"; waiting for the motion planner to end the relocation of {flight} in flight" if flight else ""))
+    _settle(w, g)
+    left = w.relocation_in_flight()
+    w.resumed.append({"t": round(t, 1), "phase": w.phase, "relocated_before": list(run.get("relocated", [])),
+                      "in_flight": flight, "in_flight_ended": not left, "steps_before": run.get("steps", []),
+                      "replans_before": run.get("replans", []), "sequence_before": run.get("sequence", [])})
+    if left:
+        raise TimeoutError(f"the motion planner's relocation of {flight} did not end within {SETTLE_WAIT:g} s "
+                           "after the task planner died: not sending the goal again while the arm moves")
+    print("[demo] sending the goal again: the respawned task planner re-plans from the world as it is "
+          "(the relocations done, the top shelf as perceived now)")
+    w.executing = w.rec.active = False
+    w.planner_scene = SCENE_NONE  # the new process's first scene (its /diagnostics) before the goal
+
+
 def _restarted(g: Graph, w: _Watch) -> None:
-    """Wait until the respawned task planner is up: its /diagnostics status comes from its new process; then
+    """Wait until the respawned task planner is up: its /diagnostics status comes from its new process and says it
+    has a scene (after a death in the execution: `_lost_in_execution` forgot the old one); then
     DISCOVERY_SETTLE s more (its action's endpoints are matched after its diagnostics: a goal sent at once was
     lost, 'no goal response within 30 s')."""
     deadline = time.monotonic() + RESTART_WAIT
     while True:
         g.check_alive()
         p = g.procs.get("task_planner")
-        if p is not None and w.pids.get(GOAL_STATUS) == str(p.pid):
+        if p is not None and w.pids.get(GOAL_STATUS) == str(p.pid) and w.planner_scene != SCENE_NONE:
             time.sleep(DISCOVERY_SETTLE)
             return
         if time.monotonic() > deadline:
@@ -275,7 +302,8 @@ def _send(client, on_feedback, check, goal: dict, again: bool) -> None:
 def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[End | None, Any]:
     """Wait for the graph and a scene, train (and execute) through the client; (an End when the run ended
     otherwise than with the goal's result, the TrainPlanner result or None). A task planner that died during
-    the training is waited for and the goal sent again (its checkpoint); during the execution the run ends."""
+    the training is waited for and the goal sent again (its checkpoint); during the execution too, once the motion
+    planner's relocation in flight has ended (`_lost_in_execution`)."""
     client.wait_until_ready(120, check=g.check_alive)
     _wait_for(lambda: w.scene.msg is not None and len(w.scene.msg.objects) > 0, 90, g, f"no scene on {w.scene_topic}")
     # the task planner's own first scene: its discovery of the scene's publisher took longer than its scene_wait at a
@@ -296,12 +324,12 @@ def _train_and_watch(client, g: Graph, a, used, w: _Watch, t0: float) -> tuple[E
                 outcome = client.wait(max(1.0, deadline - time.monotonic()), check=check)
                 break
             except _TaskPlannerLost as e:
-                if w.executing:
-                    return End("node_died", f"the task planner died during the execution ({e}; phase: {w.phase}): "
-                                            "the goal and the execution's state died with it"), None
                 client.abandon()
-                print(f"[demo] the task planner died ({e}) and is respawned: sending the goal again (the training "
-                      "resumes from its checkpoint)")
+                if w.executing:
+                    _lost_in_execution(g, w, str(e), time.monotonic() - t0)
+                else:
+                    print(f"[demo] the task planner died ({e}) and is respawned: sending the goal again (the "
+                          "training resumes from its checkpoint)")
                 _restarted(g, w)
                 again = True
     except ClientError as e:
@@ -406,7 +434,7 @@ def run(argv=None) -> int:
                 end = End("error", str(e))
             finally:
                 with _signals_held():
-                    if w is not None and end is not None and "task planner died" in end.message:
+                    if w is not None and end is not None and "task_planner" in end.message:
                         _settle(w, g)
                     final = _final(w, end, a)
                     client.close()
@@ -432,7 +460,10 @@ def _report(out: Path, a, used, res, end: End | None, final: dict | None, w: _Wa
         ok = bool(res.success and (a.no_execute or fs["target_on_bottom_shelf"]))
         message = res.message if ok or not res.success else \
             f"{res.message}; but the simulator does not show the target on the bottom shelf"
-        end = End("success" if ok else "failed", message)
+        n = len(w.resumed) if w is not None else 0
+        again = f" (the task planner was respawned during the execution {n} time{'s' * (n > 1)}: the goal sent " \
+            "again and re-planned from the world as it was)" if n else ""
+        end = End("success" if ok else "failed", message + again)
     report = {"scenario": a.scenario, "policy": used.policy, "search": used.search, "seed": used.seed,
               "success": end.kind == "success", "message": end.message, "out": str(out),
               "end": {"kind": end.kind, "exit_code": end.exit_code},
@@ -443,6 +474,7 @@ def _report(out: Path, a, used, res, end: End | None, final: dict | None, w: _Wa
               "closed_loop": not a.open_loop, "done": {"relocated": run.get("relocated", []),
                                                        "running": bool(run.get("running"))},
               "interrupted": final["interrupted"], "respawns": list(events),
+              "resumed": list(w.resumed) if w is not None else [],
               "last_known": run_report.where(a.scenario, final["after"], final["age"], fs.get("at_hand", [])),
               "disturbances": list(w.disturbances) if w is not None else [], "replans": run.get("replans", []),
               "pushes": run.get("pushes", []), "steps": run.get("steps", []), "final_scene": fs, "recording": recording}

@@ -116,6 +116,11 @@ def summary(report: dict) -> list[str]:
     for e in report["respawns"]:
         lines.append(f"node {e['node']} {e['event']} at {e['t']:.0f} s" + (f" (exit {e['code']})" if e["code"]
                                                                           is not None else "") + f": {e['note']}")
+    for r in report.get("resumed", []):
+        flight = f"; {r['in_flight']} in flight, " + ("ended" if r["in_flight_ended"] else "still moving") \
+            if r.get("in_flight") else ""
+        lines.append(f"task planner died during the execution at {r['t']:.0f} s (phase: {r['phase'][:80]}); relocated "
+                     f"before: {' '.join(r['relocated_before']) or 'none'}{flight}; the goal sent again")
     if report.get("interrupted"):
         lines.append(f"interrupted: {report['interrupted']['what']}")
     end = report["end"]

@@ -501,10 +501,13 @@ class ClosedLoopExecutor:
         self.action_cost = action_cost
         self.pusher, self.on_push = pusher, on_push
 
-    def run(self, sequence: Iterable[str], scene: Scene | None = None) -> ExecutionResult:
+    def run(self, sequence: Iterable[str], scene: Scene | None = None, relocated: Iterable[str] = ()
+            ) -> ExecutionResult:
         """Relocate `sequence` (obstacles, then the target) starting from `scene` (default: perceive()); the
-        result says whether the target reached the bottom shelf and, if not, why in one line."""
-        out = ExecutionResult()
+        result says whether the target reached the bottom shelf and, if not, why in one line. `relocated`: the
+        relocations done before this run (a goal sent again to a respawned task planner: executive.resume), kept
+        as relocated while the scene does not show them on the top shelf, and sent as removed."""
+        out = ExecutionResult(relocated=list(relocated))
         self._banned: set[Option] = set()
         self._failures: dict[str, int] = {}
         self._retried: dict[tuple[str, frozenset[str]], int] = {}  # failures of time per option

@@ -11,7 +11,13 @@ import tempfile
 from pathlib import Path
 from typing import Callable
 
-from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_checkpoint
+from qtree_task_planner.learning.checkpoint import (
+    Checkpoint,
+    CheckpointError,
+    load_checkpoint,
+    problem_hash,
+    save_checkpoint,
+)
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
@@ -49,14 +55,22 @@ class CheckpointKeeper:
         self.written: tuple[int, str] | None = None  # (episode, "") of the last one on disk, or (episode, error)
 
     def resume_point(self, problem: RelocationProblem, params: TrainingParams,
-                     cache: CachedOracle) -> Checkpoint | None:
+                     cache: CachedOracle, changed: str = "") -> Checkpoint | None:
         """The checkpoint a goal resumes from, its answers put into `cache`: the file when it exists
         (CheckpointError if it is corrupt or for another scene/params), else an unfinished in-memory one of the
-        same goal; None: start afresh. It becomes the memory checkpoint."""
+        same goal; None: start afresh. It becomes the memory checkpoint. `changed` (why the world is no longer the
+        one the goal was first sent for: executive.resume): a file written for another scene is not reused, said in
+        the log, and the training starts afresh on `problem` (its checkpoints replace the file)."""
         path = self.path
         if path and Path(path).is_file():
             ck: Checkpoint | None = load_checkpoint(path)
             assert ck is not None
+            if changed and ck.problem_hash != problem_hash(problem):
+                self.info(f"checkpoint {path} (episode {ck.episode}, {ck.reason}) was written for the scene before "
+                          f"{changed}: not reused; the Q-Tree trains afresh on the scene as it is now "
+                          f"({len(problem.obstacles)} obstacles, target {problem.target})")
+                self.memory = None
+                return None
             ck.check_matches(problem, params, f"checkpoint {path}")
             where = path
         elif self.memory is not None and self.memory.reason.startswith("interrupted"):

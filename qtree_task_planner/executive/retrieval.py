@@ -31,6 +31,7 @@ from qtree_task_planner.executive.closed_loop import (
 from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, PushRecord
 from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, free_first, pickable, relearn, replan
+from qtree_task_planner.executive.resume import WithGone
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
@@ -164,11 +165,12 @@ def planner_foreign_ids(oracle: LaneOracle, ids: Iterable[str]) -> str:
 
 
 def execute_sequence(sequence: Sequence[str], relocate_one: Callable[[str, list[str]], tuple[bool, str]],
-                     cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None
-                     ) -> tuple[bool, str, list[str]]:
-    """Relocate the learned sequence in order (the target last): (success, message, relocated ids). Stops at the
-    first failure or on cancel, saying which object and why."""
-    removed: list[str] = []
+                     cancelled: Callable[[], bool], before_each: Callable[[], None] = lambda: None,
+                     before: Sequence[str] = ()) -> tuple[bool, str, list[str]]:
+    """Relocate the learned sequence in order (the target last): (success, message, relocated ids, after `before`:
+    those relocated before, sent as removed). Stops at the first failure or on cancel, saying which object and
+    why."""
+    removed: list[str] = list(before)
     for object_id in sequence:
         before_each()
         if cancelled():
@@ -213,9 +215,10 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             retrain: TrainingParams | None = None, until_planner: UntilPlanner | None = None,
             on_progress: Callable[[ExecutionResult], None] = lambda out: None,
             action_cost: ActionCosts | None = None, pushes: PushActions | None = None,
-            on_push: Callable[[PushRecord], None] = lambda p: None,
+            on_push: Callable[[PushRecord], None] = lambda p: None, before: Sequence[str] = (),
             tolerances: Tolerances | None = None) -> ExecutionResult:
-    """Execute `sequence` from `scene` (the scene it was planned on). closed_loop: closed_loop.ClosedLoopExecutor,
+    """Execute `sequence` from `scene` (the scene it was planned on), after the relocations `before` (done before
+    this goal: executive.resume; sent as removed). closed_loop: closed_loop.ClosedLoopExecutor,
     checking the world after every relocation and re-planning over the exact blocker A* (replan.replan, Eq. 8)
     with the answers `oracle` gathered kept for unchanged geometry (docs/closed_loop.md). Else the paper's
     open-loop execution (execute_sequence) after the same capacity check: a sequence needing more slots than
@@ -228,7 +231,8 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     sequence, a push out of its blocking cycle (executive.push; closed loop only: an open-loop run never pushes); an
     empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push."""
     if closed_loop:
-        cache = GeometryCache(oracle.oracle, tolerances)
+        asked = oracle.oracle  # the re-plans ask with their own gone set (RemainingOracle), not a start point's
+        cache = GeometryCache(asked.oracle if isinstance(asked, WithGone) else asked, tolerances)
         cache.adopt(oracle.table, remaining_problem(scenario, scene, (), tolerances).geometry(), oracle.certified)
 
         def relocate(object_id: str, removed: list[str]) -> tuple[bool, str]:
@@ -281,7 +285,7 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen, on_progress=on_progress,
                                   action_cost=action_cost, pusher=pusher, on_push=on_push,
-                                  tolerances=tolerances).run(sequence, scene)
+                                  tolerances=tolerances).run(sequence, scene, before)
     why = check_capacity(sequence, len(free_slots(scenario, scene, tolerances)))
     if why:
         return ExecutionResult(False, f"not executed: {why}")
@@ -293,7 +297,7 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             unverified.append(object_id)
         return ok, message
 
-    ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each)
+    ok, message, relocated = execute_sequence(sequence, relocate_noted, cancelled, before_each, before)
     return ExecutionResult(ok, message + (f" (unverified: {', '.join(unverified)})" if ok and unverified else ""),
                            relocated, unverified=unverified)
 
