@@ -198,7 +198,7 @@ class TaskPlannerNode(Node):
         objects, scenario = msg_to_objects(msg, require_target=False), load_scenario(self.p("scenario") or None)
         if any(o.is_target for o in objects):  # else (a relocated target out of view) the scenario's own objects
             scenario = scenario.with_objects(objects)
-        start = start_point(scenario, seen_scene(msg), self._placed or {}, self._action_cost)
+        start = start_point(scenario, seen_scene(msg), self._placed or {}, self._action_cost, self._tolerances)
         if start is None:
             return RelocationProblem.from_bottles(msg_to_objects(msg), self._action_cost), msg, None
         self.get_logger().info(start.line)

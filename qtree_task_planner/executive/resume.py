@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-from qtree_task_planner.executive.closed_loop import Scene, Tolerances, board_of, remaining_problem
+from qtree_task_planner.executive.closed_loop import Scene, Tolerances, board_of, configured, remaining_problem
 from qtree_task_planner.oracles import Lanes
 from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from relocation_common.feasibility import (
@@ -42,18 +42,20 @@ class StartPoint:
 
 
 def relocated_before(scenario: Scenario, scene: Scene, placed: Mapping[str, int],
-                     tol: Tolerances = Tolerances()) -> tuple[str, ...]:
+                     tol: Tolerances | None = None) -> tuple[str, ...]:
     """The bottles the motion planner placed on the bottom shelf (`placed`: id -> slot, its ~/relocated) that the
     scene does not show on the top shelf, in slot order (a placed bottle seen back on the top shelf is not
     relocated: the closed loop's rule)."""
+    tol = tol or configured()
     return tuple(o for o, _ in sorted(placed.items(), key=lambda kv: (kv[1], kv[0]))
                  if o not in scene or board_of(scene[o], scenario, tol) != "top")
 
 
 def start_point(scenario: Scenario, scene: Scene, placed: Mapping[str, int], action_cost: ActionCosts | None,
-                tol: Tolerances = Tolerances()) -> StartPoint | None:
+                tol: Tolerances | None = None) -> StartPoint | None:
     """What a goal starts from (module doc); None when the motion planner placed no bottle that the scene does not
     show on the top shelf (a fresh start)."""
+    tol = tol or configured()
     before = relocated_before(scenario, scene, placed, tol)
     if not before:  # the scene as given (a bottle off the top shelf that nobody placed: the first plan's business)
         return None

@@ -229,7 +229,8 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     so far, after each relocation and re-plan (closed loop). action_cost: the re-plans' costs (the factor of the pick
     each object's pose takes: closed_loop.remaining_problem), else their weights. pushes: when a re-plan proves no
     sequence, a push out of its blocking cycle (executive.push; closed loop only: an open-loop run never pushes); an
-    empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push."""
+    empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push.
+    tolerances: the closed loop's "as planned" (closed_loop.Tolerances; None: config/task_planner.yaml's)."""
     if closed_loop:
         asked = oracle.oracle  # the re-plans ask with their own gone set (RemainingOracle), not a start point's
         cache = GeometryCache(asked.oracle if isinstance(asked, WithGone) else asked, tolerances)
