@@ -27,11 +27,11 @@ from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.task import Future
 from rclpy.time import Time
 
-from qtree_task_planner.executive.closed_loop import SeenObject, seen_object
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, until_available
 from qtree_task_planner.executive.push import PUSH, PushAnswer
 from qtree_task_planner.executive.replicas import ReplicaOracle
 from qtree_task_planner.executive.retrieval import check_scene, relocation_stop
+from qtree_task_planner.executive.world import SeenObject, seen_object
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import TrainingResult
 from qtree_task_planner.oracles import Lanes
@@ -336,7 +336,7 @@ class Relocator:
 
 
 def seen_scene(msg: ObjectArray) -> dict[str, SeenObject]:
-    """An ObjectArray as closed_loop's scene (closed_loop.seen_object of each of msg_to_objects); ScenarioError (a
+    """An ObjectArray as closed_loop's scene (world.seen_object of each of msg_to_objects); ScenarioError (a
     ValueError: the closed loop gives up with it) for a message that is not a scene."""
     return {o.id: seen_object(o) for o in msg_to_objects(msg, require_target=False)}
 

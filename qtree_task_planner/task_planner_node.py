@@ -47,7 +47,7 @@ from rclpy.service_introspection import ServiceIntrospectionState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from qtree_task_planner.executive.closed_loop import ExecutionResult, Tolerances
+from qtree_task_planner.executive.closed_loop import ExecutionResult
 from qtree_task_planner.executive.keeper import CheckpointKeeper
 from qtree_task_planner.executive.outage import Cancelled, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PUSH, PushActions
@@ -66,6 +66,7 @@ from qtree_task_planner.executive.settings import (
     check_node_parameters,
     pushes_on,
 )
+from qtree_task_planner.executive.world import Tolerances
 from qtree_task_planner.learning.checkpoint import Checkpoint, CheckpointError
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.q_tree import QTree

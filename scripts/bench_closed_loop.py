@@ -37,13 +37,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
 from jaco2_sim_driver.disturbance import DisturbancePlan
-from qtree_task_planner.executive.closed_loop import (
-    SeenObject,
-    board_of,
-    configured,
-    remaining_problem,
-)
 from qtree_task_planner.executive.replan import GeometryCache, replan
+from qtree_task_planner.executive.world import SeenObject, board_of, configured, remaining_problem
 from relocation_app.client import RelocationClient
 from relocation_app.final_state import final_state
 from relocation_app.graph import Graph

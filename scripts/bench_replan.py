@@ -20,8 +20,8 @@ import math
 import statistics
 import time
 
-from qtree_task_planner.executive.closed_loop import SeenObject, remaining_problem, scene_from_scenario
 from qtree_task_planner.executive.replan import GeometryCache, replan
+from qtree_task_planner.executive.world import SeenObject, remaining_problem, scene_from_scenario
 from relocation_common.paths import scenarios_dir
 from relocation_common.scenario import load_scenario
 from stpik_motion_planner.planning.params import PlannerParams

@@ -107,9 +107,9 @@ def test_the_factors_come_from_the_shipped_file_and_bad_ones_are_refused():
 
 
 def test_a_re_plan_costs_a_bottle_lying_on_the_shelf_as_a_top_grasp():
-    """closed_loop.remaining_problem with the factors: headroom_lying_6's o1 lies (perceived tilted), so the re-plan's
+    """world.remaining_problem with the factors: headroom_lying_6's o1 lies (perceived tilted), so the re-plan's
     A* costs it as a grasp from above; without them (the paper's problem) it costs its weight."""
-    from qtree_task_planner.executive.closed_loop import remaining_problem, scene_of, seen_object
+    from qtree_task_planner.executive.world import remaining_problem, scene_of, seen_object
     from relocation_common.scenario import load_scenario
 
     sc = load_scenario("config/scenarios/headroom_lying_6.yaml")

@@ -10,9 +10,10 @@ import math
 
 import pytest
 
-from qtree_task_planner.executive.closed_loop import (
-    ClosedLoopExecutor,
-    Option,
+from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor, Option
+from qtree_task_planner.executive.replan import GeometryCache, RemainingOracle, relearn, replan
+from qtree_task_planner.executive.retrieval import execute, execute_sequence
+from qtree_task_planner.executive.world import (
     SeenObject,
     Tolerances,
     board_of,
@@ -23,8 +24,6 @@ from qtree_task_planner.executive.closed_loop import (
     scene_from_scenario,
     verify_relocation,
 )
-from qtree_task_planner.executive.replan import GeometryCache, RemainingOracle, relearn, replan
-from qtree_task_planner.executive.retrieval import execute, execute_sequence
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.search import astar

@@ -14,14 +14,9 @@ import jaco2_sim_driver  # noqa: F401  (MUJOCO_GL=egl before mujoco)
 from jaco2_sim_driver import disturbance as dist
 from jaco2_sim_driver.messages import ground_truth
 from jaco2_sim_driver.sim import Jaco2Sim
-from qtree_task_planner.executive.closed_loop import (
-    ClosedLoopExecutor,
-    SeenObject,
-    remaining_problem,
-    seen_object,
-    verify_relocation,
-)
+from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor
 from qtree_task_planner.executive.replan import GeometryCache, replan
+from qtree_task_planner.executive.world import SeenObject, remaining_problem, seen_object, verify_relocation
 from relocation_common.feasibility import NO_GRASP
 from relocation_common.paths import default_scenario
 from relocation_common.scenario import Scenario, load_scenario, parse_scenario

@@ -10,8 +10,8 @@ from geometry_msgs.msg import Quaternion
 from rclpy.clock_type import ClockType
 from rclpy.time import Time
 
-from qtree_task_planner.executive.closed_loop import free_slots, scene_from_scenario
 from qtree_task_planner.executive.retrieval import execute
+from qtree_task_planner.executive.world import free_slots, scene_from_scenario
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.ros_clients import SceneWatch, left_top, seen_scene, watched
 from relocation_common.paths import default_scenario

@@ -11,11 +11,12 @@ from types import SimpleNamespace
 import pytest
 from test_closed_loop import OBJECTS, SCENARIO, LyingBlocks
 
-from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor, remaining_problem, scene_from_scenario
+from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor
 from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, candidates, pick_order
 from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, replan
 from qtree_task_planner.executive.retrieval import execute, training_outcome
 from qtree_task_planner.executive.settings import pushes_on
+from qtree_task_planner.executive.world import remaining_problem, scene_from_scenario
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.search.exact import ExactResult, blocking_needs, can_leave
 from relocation_common.config import ParameterError

@@ -3,7 +3,7 @@
 A feasibility answer (relocate o with a set removed, from home) depends on the geometry of the objects still on
 the top shelf: o and every object not removed. `GeometryCache` keys each answer by those objects and the
 *version* of each one's pose; a version changes only when the object is perceived to have moved (more than
-`tol` m, by default the tolerance within which closed_loop.verify_relocation says a bottle stayed) or tipped (a
+`tol` m, by default the tolerance within which world.verify_relocation says a bottle stayed) or tipped (a
 tipped bottle's answers are asked again: the motion planner's grasp from above, or its reason why not).
 So after a disturbance only the answers in which a moved object was still present are asked again; those
 where it was already removed, and everything about undisturbed parts of the shelf, stay.
@@ -24,7 +24,8 @@ import dataclasses
 import math
 from typing import Callable, Iterable, Mapping, Sequence
 
-from qtree_task_planner.executive.closed_loop import Option, RemainingProblem, ReplanAnswer, Tolerances, configured
+from qtree_task_planner.executive.closed_loop import Option, ReplanAnswer
+from qtree_task_planner.executive.world import RemainingProblem, Tolerances, configured
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp

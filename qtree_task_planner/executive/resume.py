@@ -3,7 +3,7 @@
 A task planner respawned during an execution gets its goal again while the world is no longer the scenario's: the
 bottles relocated before its death stand on the bottom shelf (the motion planner placed them: its ~/relocated says
 which, in slot order), the relocation that was in flight ended as the motion planner left it. `start_point` says what
-the new goal starts from: the retrieval problem of the top shelf as it is now (`closed_loop.remaining_problem`, the
+the new goal starts from: the retrieval problem of the top shelf as it is now (`world.remaining_problem`, the
 closed loop's own rule: a bottle counts as relocated only when the scene does not show it on the top shelf), the
 relocations done before it (the executor sends them as removed, so the motion planner's slot numbering goes on), or
 that the target was already retrieved (seen on the bottom shelf; or, with a camera that does not see it, placed
@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-from qtree_task_planner.executive.closed_loop import Scene, Tolerances, board_of, configured, remaining_problem
+from qtree_task_planner.executive.world import Scene, Tolerances, board_of, configured, remaining_problem
 from qtree_task_planner.oracles import Lanes
 from qtree_task_planner.problem import ActionCosts, RelocationProblem
 from relocation_common.feasibility import (

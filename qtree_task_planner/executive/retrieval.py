@@ -18,20 +18,22 @@ from qtree_task_planner.executive.closed_loop import (
     ExecutionResult,
     GiveUp,
     Option,
-    RemainingProblem,
     ReplanAnswer,
     ReplanRecord,
-    Scene,
     Step,
-    Tolerances,
-    check_capacity,
-    free_slots,
-    remaining_problem,
 )
 from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, PushRecord
 from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, free_first, pickable, relearn, replan
 from qtree_task_planner.executive.resume import WithGone
+from qtree_task_planner.executive.world import (
+    RemainingProblem,
+    Scene,
+    Tolerances,
+    check_capacity,
+    free_slots,
+    remaining_problem,
+)
 from qtree_task_planner.learning.checkpoint import Checkpoint
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import EpisodeStats, TrainingResult, train
@@ -227,10 +229,10 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
     through feasibility outages as training does (outage.until_available: a motion planner that died is waited for,
     planner_wait), else a question without an answer is asked again REPLAN_TRIES times. on_progress: the execution
     so far, after each relocation and re-plan (closed loop). action_cost: the re-plans' costs (the factor of the pick
-    each object's pose takes: closed_loop.remaining_problem), else their weights. pushes: when a re-plan proves no
+    each object's pose takes: world.remaining_problem), else their weights. pushes: when a re-plan proves no
     sequence, a push out of its blocking cycle (executive.push; closed loop only: an open-loop run never pushes); an
     empty `sequence` (the first plan found none) then starts with that re-plan; on_push(record) after each push.
-    tolerances: the closed loop's "as planned" (closed_loop.Tolerances; None: config/task_planner.yaml's)."""
+    tolerances: the closed loop's "as planned" (world.Tolerances; None: config/task_planner.yaml's)."""
     if closed_loop:
         asked = oracle.oracle  # the re-plans ask with their own gone set (RemainingOracle), not a start point's
         cache = GeometryCache(asked.oracle if isinstance(asked, WithGone) else asked, tolerances)

@@ -8,8 +8,8 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-from qtree_task_planner.executive.closed_loop import Tolerances
 from qtree_task_planner.executive.keeper import check_checkpoint_path
+from qtree_task_planner.executive.world import Tolerances
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.problem import ActionCosts
 from relocation_common.config import ParameterError

@@ -15,7 +15,7 @@ with their weight estimated), so the check lists them (`planners_view`). `judge`
    retrieval must relocate one (and the planner must know it to avoid it).
 4. The exact blocker A* with the real motion planner (config/motion_planner.yaml, the evaluation's safety net):
    it proves the least-weight sequence (Eq. 8) or that there is none.
-5. The optimum fits the bottom shelf's slots (closed_loop.check_capacity: every relocated object takes one).
+5. The optimum fits the bottom shelf's slots (world.check_capacity: every relocated object takes one).
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from qtree_task_planner.executive.closed_loop import check_capacity
+from qtree_task_planner.executive.world import check_capacity
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
 from qtree_task_planner.search import astar
