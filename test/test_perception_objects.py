@@ -299,6 +299,38 @@ def test_a_listed_bottle_does_not_take_a_box_face_on_crowd_30():
     assert covering, (near, r.missing.get("o26"))
 
 
+def test_the_listed_boxes_of_shapes_box_10_are_themselves_under_the_realistic_camera():
+    """world/shapes_box_10 with the realistic camera (realsense_d435, seed 0): its three listed boxes (o7, o8, o9)
+    went out as unlisted conservative boxes, reported missing: the grazing points of their tops and the flying pixels
+    along their edges left the box fit above its rms bound. Their faces fit: each is itself within 15 mm, nothing
+    unlisted."""
+    s = load_scenario("config/scenarios/world/shapes_box_10.yaml")
+    f, vis = render_scene(s, sensor=SensorModel.named("realsense_d435"), seed=0)
+    r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    for i in ("o7", "o8", "o9"):
+        b = s.object(i)
+        assert vis[i] >= VISIBLE and i in r.objects, (i, vis[i], r.missing.get(i))
+        assert math.hypot(r.objects[i].x - b.x, r.objects[i].y - b.y) <= 0.015, (i, r.objects[i])
+    assert not r.unlisted, r.unlisted
+
+
+def test_a_listed_box_showing_one_face_on_crowd_30_is_itself_and_no_box_is_off():
+    """world/crowd_30 at home: o26 (the brown 50 mm box above) shows one whole face and no top: once an unlisted
+    conservative box in its place, it is itself (the one-face rule, objects/box_face.py). o29 (60 x 90 mm, its long
+    front face half hidden, its top seen: a box fitted with another footprint) is not placed by that rule: its
+    visible 45 mm of the 90 mm face were taken for its 60 mm face and it was published 27 mm off, turned a quarter.
+    Every listed box published is within 15 mm of its place."""
+    s = load_scenario("config/scenarios/world/crowd_30.yaml")
+    f, _ = render_scene(s)
+    r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    o26 = s.object("o26")
+    assert "o26" in r.objects and math.hypot(r.objects["o26"].x - o26.x, r.objects["o26"].y - o26.y) <= 0.015, \
+        r.missing.get("o26")
+    off = {b.id: round(math.hypot(r.objects[b.id].x - b.x, r.objects[b.id].y - b.y), 3) for b in s.objects
+           if b.shape == BOX and b.id in r.objects}
+    assert all(d <= 0.015 for d in off.values()), off
+
+
 def test_a_track_does_not_jump_44_cm_unless_the_arm_came_near():
     """The demo on world/crowd_30 during a relocation: o21 (cyan 25 mm bottle), out of view, took a teal bottle's
     cluster of its size 44 cm away (its track capped the position cost at 1) and was published there. A cyan bottle
