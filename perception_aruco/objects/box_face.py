@@ -4,16 +4,16 @@ Two ways, in this order:
 - fitted as a box (primitives.box: the top face shows the footprint): its size cost is half the differences of
   its footprint's shorter and longer sides and of its height over `size_tol`; the box at the fitted pose, its sides
   lined up with the listed ones (`box_yaw`);
-- seen by one face only (no box fitted: the top hidden under the ceiling board, or the top's grazing points and
-  the flying pixels at its edge too noisy for the box fit; a box fitted with another footprint is a box partly
-  hidden, not this rule's: a long face half hidden looks like a short one): the points of the cluster's lower half
-  lie on a straight line in x-y within the fit bound (max(`fit_rms`, `fit_noise` x the depth noise), the rms over
-  the `TRIM` of them nearest it; an arc of a bottle does not); the face's extent along that line and its height fit
-  one of the box's vertical faces (the extent's whole difference over `size_tol`: a face partly hidden is none, the
-  whole faces measured 0.3-1.8 mm short on the generated cases; half the height's, seen shorter no difference when
-  the top may be hidden); the box is then that face's owner: the face on its near side, its centre half the other side
-  behind the face (away from the camera), and all but `absorb_outside` of the cluster's points within `size_tol`
-  of it. The position cost is then the listed identity's (identity.listed_costs), at this pose.
+- seen by one face only (no box of its size fitted: the top hidden under the ceiling board, or the top's grazing
+  points and the flying pixels at its edge too noisy for the box fit, or the face and a sliver of its side fitted as a
+  thin box): the points of the cluster's lower half lie on a straight line in x-y within the fit bound (max(`fit_rms`,
+  `fit_noise` x the depth noise), the rms over the `TRIM` of them nearest it; an arc of a bottle does not); the face's
+  extent along that line and its height fit one of the box's vertical faces (the extent's whole difference over
+  `size_tol`: a face partly hidden is none, as a long face half hidden would pass for a short one; the whole faces
+  measured 0.3-1.8 mm short on the generated cases; half the height's, seen shorter no difference when the top may be
+  hidden); the box is then that face's owner: the face on its near side, its centre half the other side behind the
+  face (away from the camera), and all but `absorb_outside` of the cluster's points within `size_tol` of it. The
+  position cost is then the listed identity's (identity.listed_costs), at this pose.
 A listed cylinder never takes such a cluster (identity.flat_face: a flat face is no cylinder's arc).
 """
 from __future__ import annotations
@@ -97,8 +97,9 @@ def box_pose(b: ShelfObject, p: Primitive, points: np.ndarray, support: float, c
              params: ObjectParams, bound: float) -> BoxPose | None:
     """Listed box b's pose and size cost from a cluster (its primitive p, its points): fitted as a box of its size,
     else by the one face it shows (module docstring); None when neither."""
-    if p.shape == BOX and not p.conservative:   # its top seen: the footprint is the fitted one, no face rule
+    if p.shape == BOX and not p.conservative:
         sides = np.abs(np.sort(p.size[:2]) - np.sort(b.size[:2])) / 2
         cost = max(float(sides.max()), _height_cost(b, p)) / params.size_tol
-        return BoxPose(p.x, p.y, box_yaw(p, b.size), cost, "fitted") if cost <= 1 else None
+        if cost <= 1:
+            return BoxPose(p.x, p.y, box_yaw(p, b.size), cost, "fitted")
     return on_face(b, p, points, support, camera, params, bound)
