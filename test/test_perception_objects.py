@@ -317,7 +317,7 @@ def test_the_listed_boxes_of_shapes_box_10_are_themselves_under_the_realistic_ca
 def test_a_listed_box_showing_one_face_on_crowd_30_is_itself_and_no_box_is_off():
     """world/crowd_30 at home: o26 (the brown 50 mm box above) shows one whole face and no top: once an unlisted
     conservative box in its place, it is itself (the one-face rule, objects/box_face.py). o29 (60 x 90 mm, its long
-    front face half hidden, its top seen: a box fitted with another footprint) is not placed by that rule: its
+    front face half hidden) is not placed by that rule: with a face's extent allowed 2 x size_tol off a side, its
     visible 45 mm of the 90 mm face were taken for its 60 mm face and it was published 27 mm off, turned a quarter.
     Every listed box published is within 15 mm of its place."""
     s = load_scenario("config/scenarios/world/crowd_30.yaml")
