@@ -232,6 +232,55 @@ def test_a_listed_box_is_identified_as_itself_beside_a_listed_bottle():
     assert not r_.unlisted, r_.unlisted
 
 
+_box_spec = importlib.util.spec_from_file_location(
+    "bench_perception_box_face", Path(__file__).resolve().parent.parent / "scripts/bench_perception_box_face.py")
+assert _box_spec is not None and _box_spec.loader is not None
+box_bench = importlib.util.module_from_spec(_box_spec)
+sys.modules[_box_spec.name] = box_bench
+_box_spec.loader.exec_module(box_bench)
+
+
+@pytest.mark.parametrize("camera", ["ideal", "realsense_d435"])
+def test_a_listed_box_seen_by_one_face_is_itself(camera):
+    """scripts/bench_perception_box_face.py's cases 0-3: a listed box turned to face the camera among listed bottles.
+    The old rule named a listed box only when fitted as a box of its size: a box whose top the ceiling board hides,
+    or whose top's grazing points are too noisy for the box fit (the realistic camera), showed one face, went out as
+    an unlisted conservative box in its place and was reported missing (ideal 3 of 4, realsense_d435 0 of 4 itself).
+    The face's extent and height fit one of its faces and its colour and position match: it is itself, within 15 mm
+    (ideal 4 of 4; realsense_d435 3 of 4, case 2's face showing only its upper half above a bottle goes out unlisted
+    as before: never another id, off or dropped), and no bottle's id is off."""
+    outcomes = {seed: box_bench.run_case(seed, camera) for seed in range(4)}
+    assert all(o["box_px"] >= VISIBLE for o in outcomes.values()), outcomes
+    itself = [s for s, o in outcomes.items() if o["outcome"] == "itself"]
+    assert len(itself) >= (4 if camera == "ideal" else 3), outcomes
+    assert all(o["outcome"] in ("itself", "unlisted") for o in outcomes.values()), outcomes
+    assert all(o["bottles_found"] == o["bottles"] and not o["bottles_off"] for o in outcomes.values()), outcomes
+
+
+def test_a_box_face_is_no_listed_bottle_and_a_bottle_no_listed_box():
+    """The one-face rule never lets a cylinder and a box take each other's place: a listed bottle of a box's colour,
+    as wide as the face, expected where an unlisted box faces the camera, does not take that face (flat_margin); a
+    listed box expected where a listed bottle of its colour and of its face's width stands, the box absent, does not
+    take the bottle's arc (not one flat face): the bottle is itself, the box missing."""
+    s = box_bench.make_case(0)
+    b = s.object(box_bench.BOX_ID)
+    r = min(b.size[1] / 2, 0.04)
+    bottle = extra(BASE, "cy", CYLINDER, b.x, b.y, (2 * r, 2 * r, b.height), 0.0, False, b.rgb, listed=True)
+    others = [o for o in s.objects if o.id != b.id]
+    given = with_objects(BASE, [*others, bottle])
+    sim = with_objects(BASE, others, [replace(b, listed=False)])
+    f, _ = render_scene(sim)
+    res = Perception(given).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    assert "cy" not in res.objects, res.objects.get("cy")
+    assert any(not o.listed and math.hypot(o.x - b.x, o.y - b.y) <= o.reach for o in res.objects.values())
+    given = with_objects(BASE, [*others, bottle, b])
+    sim = with_objects(BASE, [*others, bottle])
+    f, _ = render_scene(sim)
+    res = Perception(given).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    assert "cy" in res.objects and math.hypot(res.objects["cy"].x - b.x, res.objects["cy"].y - b.y) <= 0.010
+    assert box_bench.BOX_ID not in res.objects, res.objects[box_bench.BOX_ID]
+
+
 def test_a_listed_bottle_does_not_take_a_box_face_on_crowd_30():
     """The demo on world/crowd_30 at home: o26 (a brown 50 mm box) shows one face (292 px, no primitive fits it);
     o9 (a black 56 mm bottle, 13 cm behind) took that cluster by the sliver rule (a circle of its radius holds the
@@ -248,6 +297,38 @@ def test_a_listed_bottle_does_not_take_a_box_face_on_crowd_30():
     assert "o9" not in r.objects or math.hypot(r.objects["o9"].x - 0.88, r.objects["o9"].y + 0.137) <= 0.015, near
     covering = [i for i in near if i == "o26" or not r.objects[i].listed]
     assert covering, (near, r.missing.get("o26"))
+
+
+def test_the_listed_boxes_of_shapes_box_10_are_themselves_under_the_realistic_camera():
+    """world/shapes_box_10 with the realistic camera (realsense_d435, seed 0): its three listed boxes (o7, o8, o9)
+    went out as unlisted conservative boxes, reported missing: the grazing points of their tops and the flying pixels
+    along their edges left the box fit above its rms bound. Their faces fit: each is itself within 15 mm, nothing
+    unlisted."""
+    s = load_scenario("config/scenarios/world/shapes_box_10.yaml")
+    f, vis = render_scene(s, sensor=SensorModel.named("realsense_d435"), seed=0)
+    r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    for i in ("o7", "o8", "o9"):
+        b = s.object(i)
+        assert vis[i] >= VISIBLE and i in r.objects, (i, vis[i], r.missing.get(i))
+        assert math.hypot(r.objects[i].x - b.x, r.objects[i].y - b.y) <= 0.015, (i, r.objects[i])
+    assert not r.unlisted, r.unlisted
+
+
+def test_a_listed_box_showing_one_face_on_crowd_30_is_itself_and_no_box_is_off():
+    """world/crowd_30 at home: o26 (the brown 50 mm box above) shows one whole face and no top: once an unlisted
+    conservative box in its place, it is itself (the one-face rule, objects/box_face.py). o29 (60 x 90 mm, its long
+    front face half hidden) is not placed by that rule: with a face's extent allowed 2 x size_tol off a side, its
+    visible 45 mm of the 90 mm face were taken for its 60 mm face and it was published 27 mm off, turned a quarter.
+    Every listed box published is within 15 mm of its place."""
+    s = load_scenario("config/scenarios/world/crowd_30.yaml")
+    f, _ = render_scene(s)
+    r = Perception(s).process(f.rgb, f.depth, f.K, q=Q_HOME)
+    o26 = s.object("o26")
+    assert "o26" in r.objects and math.hypot(r.objects["o26"].x - o26.x, r.objects["o26"].y - o26.y) <= 0.015, \
+        r.missing.get("o26")
+    off = {b.id: round(math.hypot(r.objects[b.id].x - b.x, r.objects[b.id].y - b.y), 3) for b in s.objects
+           if b.shape == BOX and b.id in r.objects}
+    assert all(d <= 0.015 for d in off.values()), off
 
 
 def test_a_track_does_not_jump_44_cm_unless_the_arm_came_near():

@@ -14,16 +14,15 @@ from typing import Callable, Iterable
 import numpy as np
 
 from relocation_common.scenario import Scenario, ShelfObject
-from relocation_common.shelf_object import half_turn
 
 from ..localize import FitError, LocalizeParams, circle_points, locate_cylinder
 from ..segmentation import SegmentationParams
 from .clusters import Cluster
 from .fragments import merge_fragments
-from .identity import NO_MATCH, Fitted, Memory, assign, colour_name, listed_costs, unlisted_ids
+from .identity import NO_MATCH, Fitted, Memory, assign, colour_name, listed_box, listed_costs, unlisted_ids
 from .model import BOX, CYLINDER, PerceivedObject, inside, weight_estimate
 from .params import ObjectParams
-from .primitives import Primitive, fit_primitive
+from .primitives import fit_primitive
 
 BOARD_APART = 0.05  # m: supports further apart than this are different boards
 KEPT = "; a cluster within its last pose: that object, kept there"
@@ -41,22 +40,20 @@ def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.n
     return merge_fragments([fit(c) for c in clusters], lambda c: fit(c, False), seg, params.merge_gap)
 
 
-def box_yaw(p: Primitive, size: tuple[float, float, float]) -> float:
-    """The yaw of fitted box p that lines its sides up with `size` (p's turned a quarter when its sides come in
-    the other order), in (-pi/2, pi/2]."""
-    swapped = (p.size[0] < p.size[1]) != (size[0] < size[1])
-    return half_turn(p.yaw + (math.pi / 2 if swapped else 0.0))
-
-
-def listed_object(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams) -> PerceivedObject:
-    """Listed object b as cluster f shows it: a box as its fitted box; a cylinder lying where its lying fit puts it
-    (a tipped bottle; one end cap hidden: its known length laid from the other), else standing on the circle of its
-    known radius (FitError when that fit is doubtful)."""
+def listed_object(b: ShelfObject, f: Fitted, camera: np.ndarray, params: ObjectParams,
+                  loc: LocalizeParams) -> PerceivedObject:
+    """Listed object b as cluster f shows it: a box where its fitted box or the one face it shows puts it
+    (identity.listed_box); a cylinder lying where its lying fit puts it (a tipped bottle; one end cap hidden: its
+    known length laid from the other), else standing on the circle of its known radius (FitError when that fit is
+    doubtful)."""
     p, c = f.prim, f.cluster
     rgb = tuple(float(v) for v in np.clip(c.colour / 255.0, 0, 1))
-    if b.shape == BOX:  # its fitted box (identity.listed_costs: a box of its size), at its known size
-        return PerceivedObject(b.id, b.label, (rgb[0], rgb[1], rgb[2]), b.weight, "", b.is_target, True, BOX, p.x,
-                               p.y, c.support, 0.0, b.height, b.size, box_yaw(p, b.size), False, False, p.rms,
+    if b.shape == BOX:  # at its known size (identity.listed_costs matched it: the pose exists)
+        pose = listed_box(b, f, camera, params, loc)
+        if pose is None:
+            raise FitError(f"{b.id!r}: its cluster shows no box of its size")
+        return PerceivedObject(b.id, b.label, (rgb[0], rgb[1], rgb[2]), b.weight, "", b.is_target, True, BOX,
+                               pose.x, pose.y, c.support, 0.0, b.height, b.size, pose.yaw, False, False, p.rms,
                                c.size, f.pixel)
     if p.shape == CYLINDER and p.lying:
         x, y, rms, n = p.x, p.y, p.rms, c.size
@@ -164,7 +161,7 @@ def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Sc
     for j, m in assign(cost, params.max_cost):
         b = scenario.objects[j]
         try:
-            found[b.id] = listed_object(b, fitted[m], camera, loc)
+            found[b.id] = listed_object(b, fitted[m], camera, params, loc)
             cluster_of[b.id] = m
         except FitError as e:
             missing[b.id] = f"{e}; its cluster published as an unlisted object"

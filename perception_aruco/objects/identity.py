@@ -4,9 +4,10 @@ Listed objects (the scenario's) are matched to clusters as an assignment problem
 on the cost  colour + size + position:
 - colour: the distance of the cluster's colour (normalised by the marker plate) to the object's colour shaded by
   the best gain (segmentation.colour_residuals), over `max_residual`; above 1: not that object;
-- size: the largest difference of radius and half the height (cylinders, standing or lying; a box: half its
-  footprint's shorter and longer sides and half its height, fitted as a box) over `size_tol` (seen shorter is no
-  difference when the top or a lying one's end may be hidden); above 1: not that object. A
+- size: the largest difference of radius and half the height (cylinders, standing or lying) over `size_tol` (seen
+  shorter is no difference when the top or a lying one's end may be hidden); above 1: not that object. A box:
+  fitted as a box of its size, or showing one face only, that face one of its faces (box_face.py), its position
+  then where the cluster puts the box. A
   cluster no free primitive fitted (a bottle mostly hidden) is that cylinder when a circle of its known radius fits
   its points (localize.locate_cylinder), unless its points lie on a straight line `flat_margin` times better than on
   that circle: a box's flat face, which no cylinder shows (a brown box's face taken by a black bottle 13 cm away);
@@ -33,6 +34,7 @@ from relocation_common.scenario import PALETTE, TARGET_COLOR, TARGET_RGB, ShelfO
 
 from ..localize import FitError, LocalizeParams, locate_cylinder
 from ..segmentation import SegmentationParams, colour_residuals
+from .box_face import BoxPose, box_pose
 from .clusters import Cluster
 from .model import BOX, CYLINDER, PerceivedObject
 from .params import ObjectParams
@@ -93,18 +95,25 @@ def flat_face(xy: np.ndarray, centre: np.ndarray, radius: float, margin: float, 
     return circle > margin * max(line, noise, NOISE_FLOOR)
 
 
+def fit_bound(params: ObjectParams, loc: LocalizeParams) -> float:
+    """The rms a primitive's fit may have in this frame (m): max(`fit_rms`, `fit_noise` x the depth noise)."""
+    return max(params.fit_rms, params.fit_noise * loc.depth_noise)
+
+
+def listed_box(b: ShelfObject, f: Fitted, camera: np.ndarray, params: ObjectParams,
+               loc: LocalizeParams) -> BoxPose | None:
+    """Listed box b's pose and size cost as cluster f shows it (box_face.box_pose: fitted as a box of its size, or
+    by the one face it shows), None when f cannot be b."""
+    return box_pose(b, f.prim, f.cluster.points, f.cluster.support, camera, params, fit_bound(params, loc))
+
+
 def _size_cost(b: ShelfObject, f: Fitted, camera: np.ndarray, loc: LocalizeParams, tol: float,
                flat_margin: float) -> float:
-    """Size cost of listed object b for cluster f (module docstring); NO_MATCH when it cannot be b."""
+    """Size cost of listed cylinder b for cluster f (module docstring); NO_MATCH when it cannot be b."""
     p = f.prim
     # seen shorter than it is: a lying one's end, a standing one's top may be hidden by what is nearer
     short = p.lying or not p.top_seen
     dh = max(p.height - b.height, 0.0 if short else b.height - p.height) / 2
-    if b.shape == BOX:  # a box fitted as a box: half its footprint's sides (the shorter, the longer) and height
-        if p.shape != BOX or p.conservative:
-            return NO_MATCH
-        sides = np.abs(np.sort(p.size[:2]) - np.sort(b.size[:2])) / 2
-        return max(float(sides.max()), dh) / tol
     if p.shape == CYLINDER and not p.conservative and (not p.lying or abs(p.radius - b.radius) <= tol):
         return max(abs(p.radius - b.radius), dh) / tol   # a standing cylinder of another radius is another object
     try:  # a sliver, whose free fit is no cylinder of its radius (a box, lying, none): one of the known radius?
@@ -136,11 +145,16 @@ def listed_costs(fitted: list[Fitted], objects: tuple[ShelfObject, ...], memory:
         for m, f in enumerate(fitted):
             if col[j, m] > 1:
                 continue
-            size = _size_cost(b, f, camera, loc, params.size_tol, params.flat_margin)
+            x, y = f.prim.x, f.prim.y
+            if b.shape == BOX:   # where the cluster puts the box (fitted, or behind the one face it shows)
+                pose = listed_box(b, f, camera, params, loc)
+                size, x, y = (NO_MATCH, x, y) if pose is None else (pose.size_cost, pose.x, pose.y)
+            else:
+                size = _size_cost(b, f, camera, loc, params.size_tol, params.flat_margin)
             if size > 1:
                 continue
             dz = 0.0 if ez is None else f.cluster.support - ez
-            d = math.sqrt((f.prim.x - ex) ** 2 + (f.prim.y - ey) ** 2 + dz ** 2) / params.position_scale
+            d = math.sqrt((x - ex) ** 2 + (y - ey) ** 2 + dz ** 2) / params.position_scale
             # in full: objects start where the scenario says and stay where last seen (two of one colour told apart
             # by it); from a track the arm came near at most 1: an object it moved while unseen is still that object
             near = was is not None and memory.arm_near(b.id)
