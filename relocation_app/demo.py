@@ -371,7 +371,9 @@ def _interrupted(signum: int) -> End:
 
 def _died(e: NodeDied, w: _Watch | None) -> End:
     """The End of a run whose node `e.name` died for good (the driver: the arm's state is unknown)."""
-    phase = f" (phase: {w.phase or 'starting'})" if w is not None else ""
+    flight = w.relocating[-1] if w is not None and w.relocation_in_flight() and w.relocating else None
+    phase = (f" (phase: {w.phase or 'starting'}" + (f"; the motion planner relocating {flight}" if flight else "")
+             + ")") if w is not None else ""
     if e.name == "jaco2_sim_driver":
         return End("node_died", f"the driver (jaco2_sim_driver) died with exit {e.code}{phase}: the arm's state is "
                                 "unknown, so the run stopped safely (the goal cancelled, the arm not moved again)")

@@ -62,3 +62,19 @@ def test_a_task_planner_that_died_during_the_execution_gets_its_own_step():
     step = _next_step(message, OUT, "node_died")
     assert "task planner died during the execution" in step and "kept dying" not in step, step
     assert "kept dying" in _next_step("perception died 4 times (max_respawns 3)", OUT, "node_died")
+
+
+def test_the_drivers_death_names_the_relocation_in_flight():
+    """The task planner's phase lags a relocation that has started ("check 1: ..." while the motion planner carries
+    the next object): the end's message names the relocation the motion planner was running (before: the phase
+    alone, so a driver killed during T's carry read "phase: check 1: o4 relocated as planned")."""
+    from types import SimpleNamespace
+
+    from relocation_app.demo import _died
+    from relocation_app.graph import NodeDied
+    w = SimpleNamespace(phase="check 1: o4 relocated as planned", relocating=["o4", "T"],
+                        relocation_in_flight=lambda: True)
+    end = _died(NodeDied("jaco2_sim_driver", -9, ""), w)
+    assert "the motion planner relocating T" in end.message and "check 1" in end.message
+    w.relocation_in_flight = lambda: False
+    assert "relocating" not in _died(NodeDied("jaco2_sim_driver", -9, ""), w).message
