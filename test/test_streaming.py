@@ -25,13 +25,15 @@ FAST = dict(gripper_settle=0.0, finger_stall_interval=0.1, state_timeout=0.5)
 
 class FakeLink:
     """An arm that moves exactly at the commanded velocity, fingers that move at `finger_speed` rad/s toward their
-    position command and stop at `block` (a bottle), joint states that go silent between `silent` (t0, t1)."""
+    position command and stop at `block` (a bottle), joint states that go silent between `silent` (t0, t1): seconds
+    after the first one asked for (counted from the link's creation, a test thread starved for 0.1 s before its first
+    look found the silence begun and no state at all: "no joint state from the driver for inf s")."""
 
     def __init__(self, kinova=False, block=None, finger_speed=4.0, silent=(0.0, 0.0), goal_result=None):
         self.kinova, self.block, self.finger_speed, self.silent = kinova, block, finger_speed, silent
         self.goal_result = goal_result
         self.q, self.v, self.t = np.array(rd.Q_HOME, float), np.zeros(rd.N_JOINTS), time.monotonic()
-        self.t0 = self.t
+        self.t0 = None  # the first joint state's time
         self.fingers, self.target = np.zeros(3), 0.0
         self.sent, self.paths, self.alive = [], [], True
 
@@ -52,6 +54,7 @@ class FakeLink:
 
     def joint_state(self):  # as the node keeps it: the last one received (None before the first)
         now = self._advance()
+        self.t0 = now if self.t0 is None else self.t0
         if not self.silent[0] <= now - self.t0 < self.silent[1]:
             self.last = self.q.copy(), now
         return getattr(self, "last", None)
