@@ -17,4 +17,6 @@ _spec.loader.exec_module(bench)
 def test_a_best_effort_subscriber_gets_most_camera_frames(tmp_path):
     d = bench.delivery(True, 8.0, tmp_path)
     print(f"\n{d}")
-    assert d["pairs"] >= 0.6 * d["expected"], d  # with Fast DDS's defaults: about 10 %
+    # of the frames published (on a loaded machine the camera renders fewer than camera_rate x seconds: at a load of
+    # 20 the window began before the driver's first frame and counted 0 of 16) with Fast DDS's defaults: about 10 %
+    assert d["published"] >= 3 and d["pairs"] >= 0.6 * d["published"], d

@@ -21,6 +21,9 @@ import numpy as np
 import pytest
 from ros_procs import REPO, RosGraph
 
+from jaco2_sim_driver.driver import MAX_BATCH
+from relocation_common.config import node_section
+
 pytest.importorskip("rclpy")
 from kinova_msgs.action import SetFingersPosition
 from kinova_msgs.msg import FingerPosition, JointAngles, JointVelocity
@@ -49,6 +52,10 @@ LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 # deg/s per joint for 1 s: about 10-15 deg, away from the joint limits from the driver's start pose
 V_DEG = np.array([10.0, 10.0, -10.0, -10.0, 15.0, 15.0, -15.0])
 WATCHDOG = 0.05  # s the last command still acts (the arm stops within 50 ms after the commands stop)
+# s of simulated time the driver leaves at most between two joint states: one every 1/joint_state_rate, one per loop
+# tick of at most MAX_BATCH steps of 1 ms when its loop is behind
+MAX_GAP = 1.0 / node_section(REPO / "config" / "jaco2_sim_driver.yaml", "jaco2_sim_driver")["joint_state_rate"] \
+    + MAX_BATCH * 0.001
 ALLOWED_IMPORTS = {"rclpy", "kinova_msgs", "sensor_msgs", "std_msgs", "tf2_msgs", "rosgraph_msgs", "numpy",
                    "__future__", "math", "os", "signal", "sys", "threading", "time", "typing"}
 
@@ -116,15 +123,17 @@ class Surface:
         seconds between consecutive states both moving at about the commanded speed, the displacement over those
         intervals, the number of stops in between: a command stream that falls more than 50 ms behind on a loaded
         machine lets the watchdog stop the arm, which goes on with the next command), the stamp of the last state
-        moving at speed)."""
+        moving at speed). Two states received one after the other but farther apart than MAX_GAP had states lost
+        in delivery between them, and maybe a stop: at a load of 20 such pairs made 0.857 of v x t."""
         msgs = sorted(self.states.snapshot()[0][since:], key=lambda m: _t(m.header.stamp))
         v = np.abs(np.radians(v_deg))
         moving = [bool(np.all(np.abs(self._arm(m, "velocity")) > 0.9 * v)) for m in msgs]
         assert any(moving), "the arm never moved at the commanded speed"
         duration, moved = 0.0, np.zeros(7)
         for k in range(len(msgs) - 1):
-            if moving[k] and moving[k + 1]:
-                duration += _t(msgs[k + 1].header.stamp) - _t(msgs[k].header.stamp)
+            gap = _t(msgs[k + 1].header.stamp) - _t(msgs[k].header.stamp)
+            if moving[k] and moving[k + 1] and gap <= MAX_GAP:
+                duration += gap
                 moved += self._arm(msgs[k + 1], "position") - self._arm(msgs[k], "position")
         stops = sum(1 for k in range(1, len(moving)) if moving[k] and not moving[k - 1]) - 1
         last = max(k for k, m in enumerate(moving) if m)
@@ -170,13 +179,13 @@ def _t(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
-def _stream_from_rest(s, duration: float, settle: float) -> tuple[int, float, float]:
-    """From home at rest, V_DEG for `duration` s, then `settle` s: (index of a joint state a few before the
+def _stream_from_rest(s, duration: float, settle: float, v_deg=V_DEG) -> tuple[int, float, float]:
+    """From home at rest, v_deg for `duration` s, then `settle` s: (index of a joint state a few before the
     motion, wall times of the first and last command)."""
     _home(s)
     s.q()
     n = len(s.states.msgs) - 5  # from a few states at rest
-    t0, t1 = s.c.stream(s.vel, s.command(V_DEG), duration)
+    t0, t1 = s.c.stream(s.vel, s.command(v_deg), duration)
     s.q(settle)
     return n, t0, t1
 
@@ -185,10 +194,14 @@ def test_joint_motion_is_velocity_times_simulated_time(surface):
     """1 s of constant joint velocities: each joint moves v x t, t the simulated time the motion lasted (joint
     state stamps, i.e. /clock time: delivery delays on a loaded machine do not enter), within 10 %."""
     s = surface
-    n, t0, t1 = _stream_from_rest(s, 1.0, 0.3)
-    duration, moved, stops, _ = s.motion(n, V_DEG)
+    for attempt in range(3):  # a loaded machine (a slow simulation, states lost): too little at speed, another window
+        v_deg = (-1) ** attempt * V_DEG  # back and forth: ros2_control's arm goes on from where it is
+        n, t0, t1 = _stream_from_rest(s, 1.0, 0.3, v_deg)
+        duration, moved, stops, _ = s.motion(n, v_deg)
+        if duration > 0.2:
+            break
     window = s.sim_time(t1) - s.sim_time(t0)  # the command window by /clock's receive times (coarse)
-    ratio = moved / (np.radians(V_DEG) * duration)
+    ratio = moved / (np.radians(v_deg) * duration)
     print(f"\n[{s.interface}] moved {duration:.3f} s of simulated time at speed ({stops} stops: commands late), "
           f"commands sent for {t1 - t0:.3f} s wall = {window:.3f} s by /clock: displacement / (v t) per joint = "
           f"{np.round(ratio, 3).tolist()}")
@@ -249,7 +262,10 @@ def test_stop_blocks_motion_until_start(surface):
         assert status == ABORTED  # kinova-ros: no finger goal while stopped
     finally:
         assert s.c.call(Start, f"{PRE}/in/start").start_result
-    s.c.stream(s.vel, s.command(V_DEG), 0.3)
+    for _ in range(10):  # at a load of 20 one 0.3 s window moved it 0: the simulation lags, states arrive late
+        s.c.stream(s.vel, s.command(V_DEG), 0.3)
+        if np.all(np.abs(s.q() - q0) > np.radians(1.0)):
+            break
     assert np.all(np.abs(s.q() - q0) > np.radians(1.0))
 
 

@@ -42,6 +42,20 @@ def _matrix(m) -> np.ndarray:
     return t
 
 
+START_WAIT = 120.0  # s for the node to start (imports, the scenario): at a load of 20, more than the 30 s for a scene
+
+
+def _started(g, pub) -> None:
+    """Until the perception node subscribes to `pub`'s topic: the waits for its answers start from there, not from
+    its process's start (at a load of 20 no scene came within 30 s of that)."""
+    deadline = time.monotonic() + START_WAIT
+    while pub.get_subscription_count() == 0:
+        g.check_alive()
+        assert time.monotonic() < deadline, f"no subscriber on {pub.topic_name} within {START_WAIT} s:\n" + \
+            g.log("perception")
+        time.sleep(0.1)
+
+
 def test_node_publishes_perceived_scene(tmp_path):
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -95,6 +109,7 @@ def test_node_publishes_perceived_scene(tmp_path):
                     time.sleep(0.25)
 
             # unsupported encoding first: logged, no scene, node alive
+            _started(g, color_pub)
             deadline = time.monotonic() + 40
             while "not supported" not in g.log("perception"):
                 g.check_alive()
@@ -191,6 +206,7 @@ def test_node_publishes_an_unlisted_object(tmp_path):
             threading.Thread(target=ex.spin, daemon=True).start()
             info = CameraInfo(width=frame.width, height=frame.height, distortion_model="plumb_bob",
                               k=frame.K.reshape(-1).tolist(), d=[0.0] * 5)
+            _started(g, pubs[0])
             deadline = time.monotonic() + 30
             after_first = 0   # frames sent after the first scene: a new unlisted object is published once confirmed
             while True:

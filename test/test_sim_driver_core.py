@@ -138,15 +138,23 @@ def test_finger_goals_cancel_preempt_and_refuse_nonsense(sim):
     assert core.fingers([float("nan"), 0.0, 0.0])[0] == "abort"
     with Loop(core):
         assert core.fingers([FINGER_MAX_TURN] * 3, cancelled=lambda: True)[0] == "canceled"
-        first: list = []
-        moving = threading.Event()
-        t = threading.Thread(target=lambda: first.append(core.fingers([FINGER_MAX_TURN] * 3,
-                                                                      feedback=lambda _: moving.set())))
-        t.start()
-        assert moving.wait(5.0)
-        second = core.fingers([0.0] * 3)  # a newer goal: the older one ends aborted
-        t.join(5.0)
-    assert first[0][0] == "abort" and second[0] == "succeed"
+    # the simulation stands still (no loop) until the newer goal is in: the first goal stays in motion however late
+    # its thread runs (with the loop on, a thread starved until the fingers had closed saw its goal reached at its
+    # first look, before any feedback, and nothing was left to preempt)
+    first: list = []
+    moving = threading.Event()
+    t = threading.Thread(target=lambda: first.append(core.fingers([FINGER_MAX_TURN] * 3,
+                                                                  feedback=lambda _: moving.set())))
+    t.start()
+    assert moving.wait(30.0)
+    second: list = []
+    t2 = threading.Thread(target=lambda: second.append(core.fingers([0.0] * 3)))  # a newer goal
+    t2.start()
+    t.join(30.0)
+    assert first and first[0][0] == "abort"  # the older one ends aborted
+    with Loop(core):
+        t2.join(30.0)
+    assert second and second[0][0] == "succeed"
 
 
 def test_reset_restarts_the_scenario_and_the_pacing(sim):

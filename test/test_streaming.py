@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
+from jaco2_sim_driver.params import DriverParams
 from relocation_common import robot_description as rd
 from relocation_common.kinova import joint_to_turns, turns_to_joint
 from relocation_common.paths import config_file, default_scenario
@@ -20,25 +21,33 @@ from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.trajectory import Trajectory
 from stpik_motion_planner.service import MotionPlannerService
 
+WATCHDOG = DriverParams.load().watchdog_timeout
 FAST = dict(gripper_settle=0.0, finger_stall_interval=0.1, state_timeout=0.5)
 
 
 class FakeLink:
-    """An arm that moves exactly at the commanded velocity, fingers that move at `finger_speed` rad/s toward their
-    position command and stop at `block` (a bottle), joint states that go silent between `silent` (t0, t1)."""
+    """An arm that moves exactly at the commanded velocity until the driver's watchdog stops it (`watchdog_timeout`
+    without a command, as the simulator and Kinova's driver do: without it, a test thread starved between two commands
+    at a load of 20 left the fake arm running, "tracking error 0.303 rad", a recovery 10 rad off), fingers that move
+    at `finger_speed` rad/s toward their position command and stop at `block` (a bottle), joint states that go silent
+    between `silent` (t0, t1): seconds after the first one asked for (counted from the link's creation, a test thread
+    starved for 0.1 s before its first look found the silence begun and no state at all: "no joint state from the
+    driver for inf s")."""
 
     def __init__(self, kinova=False, block=None, finger_speed=4.0, silent=(0.0, 0.0), goal_result=None):
         self.kinova, self.block, self.finger_speed, self.silent = kinova, block, finger_speed, silent
         self.goal_result = goal_result
         self.q, self.v, self.t = np.array(rd.Q_HOME, float), np.zeros(rd.N_JOINTS), time.monotonic()
-        self.t0 = self.t
+        self.commanded = self.t  # the last command's time
+        self.t0 = None  # the first joint state's time
         self.fingers, self.target = np.zeros(3), 0.0
         self.sent, self.paths, self.alive = [], [], True
 
     def _advance(self):
         now = time.monotonic()
-        dt, self.t = now - self.t, now
-        self.q = self.q + self.v * dt
+        dt, moving = now - self.t, max(0.0, min(now, self.commanded + WATCHDOG) - self.t)
+        self.t = now
+        self.q = self.q + self.v * moving
         step = np.clip(self.target - self.fingers, -self.finger_speed * dt, self.finger_speed * dt)
         self.fingers = self.fingers + step
         if self.block is not None:
@@ -46,12 +55,13 @@ class FakeLink:
         return now
 
     def send(self, qdot):
-        self._advance()
+        self.commanded = self._advance()
         self.v = np.asarray(qdot, float)
         self.sent.append(self.v.copy())
 
     def joint_state(self):  # as the node keeps it: the last one received (None before the first)
         now = self._advance()
+        self.t0 = now if self.t0 is None else self.t0
         if not self.silent[0] <= now - self.t0 < self.silent[1]:
             self.last = self.q.copy(), now
         return getattr(self, "last", None)
