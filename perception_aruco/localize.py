@@ -13,12 +13,13 @@ residual must stay within `max_rms` and its axis uncertainty within `max_uncerta
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
 from .aruco import PerceptionError
+from .objects.params import value
 
 
 class FitError(PerceptionError):
@@ -29,8 +30,8 @@ class FitError(PerceptionError):
 class LocalizeParams:
     """Bounds of the axis fit (module docstring)."""
 
-    min_pixels: int = 40          # fewer points: the object counts as not visible enough to place
-    inlier_tol: float = 0.004     # m, |distance to axis - r| of an inlier
+    min_pixels: int = field(default_factory=value("min_pixels"))  # fewer points: not visible enough to place
+    inlier_tol: float = field(default_factory=value("inlier_tol"))  # m, |distance to axis - r| of an inlier
     cap_margin: float = 0.006     # m below the top of the cylinder: points above are the cap, not the side
     min_inliers: int = 25
     min_inlier_fraction: float = 0.6  # of the side and rim points: less is not a cylinder of this radius

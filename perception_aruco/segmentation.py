@@ -25,7 +25,7 @@ No rclpy here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import cv2
@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike
 from relocation_common.scenario import Marker, Scenario
 
 from .aruco import ImageFormatError, marker_in_base
+from .objects.params import value
 
 UNASSIGNED = -1
 NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
@@ -44,9 +45,9 @@ NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
 class SegmentationParams:
     """Colour classes and the workspace gate (module docstring)."""
 
-    gain_min: float = 0.3        # darkest shading of a bottle's colour (self-shadowed side)
-    gain_max: float = 1.2        # brightest (lit side, before saturation)
-    max_residual: float = 40.0   # RGB units (0..255): farther from every class -> unassigned
+    gain_min: float = field(default_factory=value("gain_min"))  # darkest shading of a colour (its shadowed side)
+    gain_max: float = field(default_factory=value("gain_max"))  # brightest (lit side, before saturation)
+    max_residual: float = field(default_factory=value("max_residual"))  # RGB: farther from every class: unassigned
     wall_margin: float = 0.004   # m kept off the boards and panels by the workspace gate
     marker_margin: float = 0.01  # m around the marker plate excluded from the gate
     erode_px: int = 1            # erosion of each class mask (drops anti-aliased silhouette pixels)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any, Mapping
+from functools import lru_cache
+from typing import Any, Callable, Mapping
 
 from relocation_common.config import ParameterError, node_section
 from relocation_common.paths import config_file
@@ -64,3 +65,16 @@ class ObjectParams:
     def configured(cls) -> ObjectParams:
         """From config/perception.yaml (the node's file), for the ROS-free core, tests and benchmarks."""
         return cls.from_mapping(node_section(config_file("perception.yaml"), "perception"))
+
+
+@lru_cache(maxsize=1)
+def section() -> dict[str, Any]:
+    """The `perception` node's parameters in config/perception.yaml, read once: also the one place of the values the
+    core's other parameter dataclasses share with the node (segmentation.SegmentationParams, localize.LocalizeParams),
+    so a core built without the node (tests, benchmarks, the calibration) uses the node's values."""
+    return dict(node_section(config_file("perception.yaml"), "perception"))
+
+
+def value(name: str) -> Callable[[], Any]:
+    """A dataclass field's default_factory: the file's value of `name` (KeyError naming it when the file lacks it)."""
+    return lambda: section()[name]
