@@ -125,3 +125,43 @@ def lying_data(seed: int) -> dict:
     out["name"] = f"push_lying_s{seed}"
     out["objects"] = objs
     return out
+
+
+def diagonal_layout(seed: int) -> Scenario:
+    """The layout of `seed` (diagonal_data) as a scenario."""
+    data = diagonal_data(seed)
+    return parse_scenario(data, data["name"])
+
+
+def diagonal_data(seed: int) -> dict:
+    """"X lying diagonally in front of T" as scenario YAML data, on paper_experiment_10's shelf: T standing at x
+    0.82-0.88, y -0.10..0.10; X lying flat in front of it, its axis at yaw +-(0.5-1.0) rad (a side drawn from the
+    seed: both a slide along its axis and a roll across it then go towards the back), its centre up to 30 mm off T's
+    line and 5-15 mm from T; OTHERS bottles standing elsewhere, as lying_data."""
+    rng = random.Random(f"push-diagonal:{seed}")
+    with open(config_file("scenarios/paper_experiment_10.yaml")) as f:
+        data = yaml.safe_load(f)
+    s = parse_scenario(data, "base").shelf
+    tx, ty = rng.uniform(0.82, 0.88), rng.uniform(-0.10, 0.10)
+    yaw, gap, dy = rng.choice((-1.0, 1.0)) * rng.uniform(0.5, 1.0), rng.uniform(0.005, 0.015), rng.uniform(-0.03, 0.03)
+    c, sn, half = math.cos(yaw), math.sin(yaw), 0.08
+    d = 0.0
+    while True:  # X's centre moved towards the front until its rectangle is `gap` from T's circle
+        u, v = c * d - sn * dy, -sn * d - c * dy  # T's centre in X's frame (X at (tx - d, ty + dy))
+        if math.hypot(max(abs(u) - half, 0.0), max(abs(v) - RADIUS, 0.0)) >= RADIUS + gap:
+            break
+        d += 0.001
+    x = (tx - d, ty + dy)
+    objs = [{"id": "T", "xy": [round(tx, 4), round(ty, 4)]},
+            {"id": "X", "weight": 0.3, "xy": [round(x[0], 4), round(x[1], 4)], "lying": True, "yaw": round(yaw, 4)}]
+    pos = {"T": (tx, ty), "X": x}
+    while len(pos) < OTHERS + 2:
+        px, py = rng.uniform(s.x_front + 0.05, s.x_front + s.depth - 0.05), rng.uniform(-0.33, 0.33)
+        near = [RADIUS if k != "X" else half + RADIUS for k in pos]
+        if all(math.hypot(px - qx, py - qy) >= RADIUS + n + 0.03 for (qx, qy), n in zip(pos.values(), near)):
+            pos[f"o{len(pos) - 1}"] = (px, py)
+            objs.append({"id": f"o{len(pos) - 2}", "weight": 0.3, "xy": [round(px, 4), round(py, 4)]})
+    out = copy.deepcopy(data)
+    out["name"] = f"push_diagonal_s{seed}"
+    out["objects"] = objs
+    return out

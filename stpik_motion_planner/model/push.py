@@ -54,8 +54,9 @@ def tips(yaw: float, pitch: float) -> np.ndarray:
 def contact_pose(o: ShelfObject, top_z: float, yaw: float, pitch: float, height: float, gap: float
                  ) -> tuple[float, float, float, float, float]:
     """The tool pose (x, y, z, yaw, pitch) whose leading finger tip is `gap` short of the side of the cylinder `o`
-    (reach: a lying one's end cap or side) on the line through its axis (centre) along the push direction `yaw`, that tip `height` above the board
-    (`top_z`); a horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and below it."""
+    (reach: a lying one's end cap or side) on the line through its axis (centre) along the push direction `yaw`,
+    that tip `height` above the board (`top_z`); a horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and
+    below it."""
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     t = tips(yaw, pitch)
     lead = t[int(np.argmax(t @ u))]
@@ -75,10 +76,11 @@ def moved(scenario: Scenario, object_id: str, x: float, y: float) -> Scenario:
 
 def sweep_problem(scene: CollisionScene, o: ShelfObject, end: tuple[float, float], present: frozenset[str],
                   margin: float) -> str:
-    """Why the cylinder `o` (standing, or lying: its rectangle) cannot slide straight to `end` ('' if it can): its footprint, `margin` wider,
-    off the top shelf (or into a side or back panel) at the end, or coming closer than `margin` to one of the
-    `present` objects (ids of `scene`'s top-shelf objects) on the way, checked every SWEEP_STEP; an object already
-    nearer than `margin` (the one the push clears for, beside it) may not come nearer than it stands."""
+    """Why the cylinder `o` (standing, or lying: its rectangle) cannot slide straight to `end` ('' if it can): its
+    footprint, `margin` wider, off the top shelf (or into a side or back panel) at the end, or coming closer than
+    `margin` to one of the `present` objects (ids of `scene`'s top-shelf objects) on the way, checked every
+    SWEEP_STEP; an object already nearer than `margin` (the one the push clears for, beside it) may not come nearer
+    than it stands."""
     s = scene.scenario.shelf
     if not dataclasses.replace(o, x=end[0], y=end[1]).footprint(margin).inside(s.x_front, s.x_back, s.y_min, s.y_max):
         return f"{o.id} would leave the shelf ({end[0]:.3f}, {end[1]:.3f}; {margin * 1000:.0f} mm margin)"

@@ -72,6 +72,9 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0])  # a horizontal hand: (x, y, z, yaw) poses
     contact = np.array(contact_pose(o, ctx.scenario.shelf.top_z, yaw, 0.0, contact_height(ctx, object_id),
                                     pp.contact_gap)[:4])
+    # the palm's bound holds for the tool axis whichever tip leads (finger 2 or 3 leads a push turned to -y: 22 mm
+    # above the axis, which the leading tip's height alone would bring 22 mm lower, the palm into the board)
+    contact[2] = max(contact[2], ctx.scenario.shelf.top_z + PALM.radius + ctx.ceiling_clearance)
     pre, end = contact - u * p.pre_grasp_distance, contact + u * (pp.contact_gap + distance)
     try:
         for pose, where in ((pre, "pre-contact pose"), (contact, "contact pose"), (end, "end of the push")):

@@ -13,6 +13,8 @@ from stpik_motion_planner.model.collision import CollisionScene
 from stpik_motion_planner.model.push import ROLL, SLIDE, moved, sweep_problem
 from stpik_motion_planner.planning.context import PlanningContext
 
+LYING_OFF = ("in MuJoCo a slid one rolls on once the hand retreats, a rolled one wedges the hand "
+             "(docs/bench/push.md)")
 BACKWARD = 3 * math.pi / 4  # rad: the push directions of a lying cylinder tried, at most this far from straight back
 # (+x): the hand comes from the shelf's open front, and beside the object at most
 
@@ -53,8 +55,9 @@ def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: froze
         return f"no push: {object_id} is not a cylinder (the push slides a standing or a flat lying cylinder)"
     if o.lying and not lying_directions(ctx, o.yaw):
         p = ctx.params.push
-        return (f"no push: {object_id} lies (push.slide {str(p.slide).lower()}, push.roll {str(p.roll).lower()}: "
-                f"{'a roll does not end where predicted' if not p.roll else 'no direction from the front'})")
+        off = [k for k, on in (("push.slide", p.slide), ("push.roll", p.roll)) if not on]
+        return (f"no push: {object_id} lies ({', '.join(off) or 'no direction from the front'}"
+                f"{' off: ' + LYING_OFF if off else ''})")
     if not any(object_id in bl for _, bl in static_lanes(ctx, clear_for)):
         return f"no push: no grasp lane of {clear_for} is blocked by {object_id}"
     return ""
