@@ -1,11 +1,12 @@
 """The push of a cylinder lying flat (stpik_motion_planner/planning/push/: slid along its axis, or rolled across it)
-replayed in MuJoCo's physics as test_push.py replays the push of a standing one: on generated "X lying in T's lanes"
-layouts on paper_experiment_10's shelf (test/push_layouts.lying_layout; seeds fixed before any result: 0-7) the
-planner's push of X out of T's lanes is carried out by execution.push.push with the time-scaled follower on the
-simulator's core, every physics step watched. Asked of each push: no contact of the arm or hand with anything but X,
-X still lying flat at the end, its centre within END_TOL of the predicted one and its axis within YAW_TOL of its yaw
-(kept), nothing else moved. A roll (push.roll) is refused with its reason (docs/bench/push.md: it does not end where
-predicted)."""
+in MuJoCo's physics, as test_push.py checks the push of a standing one (docs/bench/push.md). `lying_pushed_in_mujoco`:
+the planner's push of X out of T's lanes on generated "X lying in T's lanes" layouts (push_layouts.lying_layout,
+diagonal_layout; paper_experiment_10's shelf), carried out by execution.push.push with the time-scaled follower on
+the simulator's core, every physics step watched; `kind_in_mujoco`: one kind's motion alone, whether or not it opens
+a lane. Asked: no contact of the arm or hand with anything but X, X still lying flat, its centre within END_TOL of
+the predicted one and its axis within YAW_TOL of its yaw (kept), nothing else moved. In the shipped simulator neither
+kind passes (a slid X rolls on once the hand retreats; a roll wedges the hand): both are off, and the push of a lying
+X is refused with that reason. Seeds fixed before any result."""
 from __future__ import annotations
 
 import dataclasses
