@@ -10,7 +10,7 @@ import random
 
 import yaml
 
-from relocation_common.paths import default_scenario
+from relocation_common.paths import config_file, default_scenario
 from relocation_common.scenario import Scenario, parse_scenario
 
 RADIUS = 0.033  # the default scene's bottles
@@ -82,4 +82,86 @@ def _layout(data: dict, name: str, pos: dict[str, tuple[float, float]]) -> dict:
     out["name"] = name
     out["objects"] = [{"id": i, "weight": 0.3, "xy": [round(x, 4), round(y, 4)]} if i != "T" else
                       {"id": i, "xy": [round(x, 4), round(y, 4)]} for i, (x, y) in pos.items()]
+    return out
+
+
+def lying_layout(seed: int) -> Scenario:
+    """The layout of `seed` (lying_data) as a scenario."""
+    data = lying_data(seed)
+    return parse_scenario(data, data["name"])
+
+
+def lying_data(seed: int) -> dict:
+    """"X lying in T's lanes" as scenario YAML data, on paper_experiment_10's shelf (0.26 m of headroom: no grasp
+    from above): T standing at x 0.80-0.88, y -0.12..0.12; X (a bottle of the default size) lying flat 5-15 mm from
+    it, on a side drawn from the seed: across the shelf in front of T (axis yaw pi/2 +- 0.3 rad, its centre up to
+    40 mm off T's line), or along it beside T (yaw +- 0.3 rad, its centre up to 60 mm nearer the front than T's);
+    OTHERS bottles standing elsewhere on the top shelf, at least 30 mm from every other footprint."""
+    rng = random.Random(f"push-lying:{seed}")
+    with open(config_file("scenarios/paper_experiment_10.yaml")) as f:
+        data = yaml.safe_load(f)
+    sc = parse_scenario(data, "base")
+    tx, ty = rng.uniform(0.80, 0.88), rng.uniform(-0.12, 0.12)
+    gap = rng.uniform(0.005, 0.015)
+    if rng.random() < 0.5:  # across, in front of T
+        yaw = math.pi / 2 + rng.uniform(-0.3, 0.3)
+        x = (tx - RADIUS - gap - RADIUS / abs(math.sin(yaw)) - 0.08 * abs(math.cos(yaw)), ty + rng.uniform(-0.04, 0.04))
+    else:  # along, beside T
+        yaw, side = rng.uniform(-0.3, 0.3), rng.choice((-1.0, 1.0))
+        dx = -rng.uniform(0.0, 0.06)
+        x = (tx + dx, ty + side * (RADIUS + gap + RADIUS / math.cos(yaw) + abs(dx * math.tan(yaw))))
+    objs = [{"id": "T", "xy": [round(tx, 4), round(ty, 4)]},
+            {"id": "X", "weight": 0.3, "xy": [round(x[0], 4), round(x[1], 4)], "lying": True,
+             "yaw": round(math.remainder(yaw, math.pi), 4)}]
+    s = sc.shelf
+    pos = {"T": (tx, ty), "X": x}
+    while len(pos) < OTHERS + 2:
+        px, py = rng.uniform(s.x_front + 0.05, s.x_front + s.depth - 0.05), rng.uniform(-0.33, 0.33)
+        near = [RADIUS if k != "X" else 0.08 + RADIUS for k in pos]
+        if all(math.hypot(px - qx, py - qy) >= RADIUS + n + 0.03 for (qx, qy), n in zip(pos.values(), near)):
+            pos[f"o{len(pos) - 1}"] = (px, py)
+            objs.append({"id": f"o{len(pos) - 2}", "weight": 0.3, "xy": [round(px, 4), round(py, 4)]})
+    out = copy.deepcopy(data)
+    out["name"] = f"push_lying_s{seed}"
+    out["objects"] = objs
+    return out
+
+
+def diagonal_layout(seed: int) -> Scenario:
+    """The layout of `seed` (diagonal_data) as a scenario."""
+    data = diagonal_data(seed)
+    return parse_scenario(data, data["name"])
+
+
+def diagonal_data(seed: int) -> dict:
+    """"X lying diagonally in front of T" as scenario YAML data, on paper_experiment_10's shelf: T standing at x
+    0.82-0.88, y -0.10..0.10; X lying flat in front of it, its axis at yaw +-(0.5-1.0) rad (a side drawn from the
+    seed: both a slide along its axis and a roll across it then go towards the back), its centre up to 30 mm off T's
+    line and 5-15 mm from T; OTHERS bottles standing elsewhere, as lying_data."""
+    rng = random.Random(f"push-diagonal:{seed}")
+    with open(config_file("scenarios/paper_experiment_10.yaml")) as f:
+        data = yaml.safe_load(f)
+    s = parse_scenario(data, "base").shelf
+    tx, ty = rng.uniform(0.82, 0.88), rng.uniform(-0.10, 0.10)
+    yaw, gap, dy = rng.choice((-1.0, 1.0)) * rng.uniform(0.5, 1.0), rng.uniform(0.005, 0.015), rng.uniform(-0.03, 0.03)
+    c, sn, half = math.cos(yaw), math.sin(yaw), 0.08
+    d = 0.0
+    while True:  # X's centre moved towards the front until its rectangle is `gap` from T's circle
+        u, v = c * d - sn * dy, -sn * d - c * dy  # T's centre in X's frame (X at (tx - d, ty + dy))
+        if math.hypot(max(abs(u) - half, 0.0), max(abs(v) - RADIUS, 0.0)) >= RADIUS + gap:
+            break
+        d += 0.001
+    x = (tx - d, ty + dy)
+    objs = [{"id": "T", "xy": [round(tx, 4), round(ty, 4)]},
+            {"id": "X", "weight": 0.3, "xy": [round(x[0], 4), round(x[1], 4)], "lying": True, "yaw": round(yaw, 4)}]
+    pos = {"T": (tx, ty), "X": x}
+    while len(pos) < OTHERS + 2:
+        px, py = rng.uniform(s.x_front + 0.05, s.x_front + s.depth - 0.05), rng.uniform(-0.33, 0.33)
+        near = [RADIUS if k != "X" else half + RADIUS for k in pos]
+        if all(math.hypot(px - qx, py - qy) >= RADIUS + n + 0.03 for (qx, qy), n in zip(pos.values(), near)):
+            pos[f"o{len(pos) - 1}"] = (px, py)
+            objs.append({"id": f"o{len(pos) - 2}", "weight": 0.3, "xy": [round(px, 4), round(py, 4)]})
+    out = copy.deepcopy(data)
+    out["name"] = f"push_diagonal_s{seed}"
+    out["objects"] = objs
     return out

@@ -6,10 +6,11 @@ screen) also answers the push question and executes a push: the pushed object sl
 lanes of the object it clears (that object's lanes lose it), unless `ineffective`. Its
 lanes make the proof's blocking cycle "b needs T moved": T's only lane holds b and b's only lane holds T (or also a,
 which the picks alone can take away first; `needs_gone`: a push the motion planner refuses until those are gone)."""
+import math
 from types import SimpleNamespace
 
 import pytest
-from test_closed_loop import OBJECTS, SCENARIO, LyingBlocks
+from test_closed_loop import OBJECTS, SCENARIO, TOP, LyingBlocks
 
 from qtree_task_planner.executive.closed_loop import ClosedLoopExecutor
 from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, candidates, pick_order
@@ -102,6 +103,23 @@ def test_no_sequence_at_the_start_leads_to_one_push_then_a_re_plan_that_succeeds
     assert out.replans[0].sequence is None and "b needs T moved" in out.replans[0].failure
     assert out.replans[1].sequence == ("T",)
     assert out.to_dict()["pushes"][0]["line"] == p.line()
+
+
+def test_a_lying_bottle_in_every_lane_of_t_is_pushed_out_of_them():
+    """e lies in T's only lane and has no lane of its own (the motion planner's screen: no grasp takes a bottle
+    lying under 0.26 m of headroom): the proof says "e has no lane", no pair "X needs T moved". Before, the Pusher
+    found no pair and the goal ended; now the proof's pairs name (e, T) and the closed loop asks the push of e out
+    of T's lanes, executes it and re-plans: T alone."""
+    shelf = PushShelf(lanes={"T": [{"e"}], "e": []})
+    shelf.put("e", 0.66, 0.08, TOP + 0.033, tilt=math.pi / 2)
+    cache = GeometryCache(shelf)
+    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
+    assert "cannot grasp it: e" in replan(rp, (), cache)
+    assert blocking_pairs(rp, cache) == (("e", "T"),)
+    out = run(shelf, [])
+    assert shelf.push_questions[0] == ("e", "T", frozenset()) and shelf.pushes == [("e", "T", ())], out.message
+    assert out.success, out.message
+    assert [o for o, _ in shelf.relocations] == ["T"]
 
 
 def test_no_sequence_in_a_re_plan_leads_to_a_push():

@@ -30,7 +30,7 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp
 from qtree_task_planner.search import astar
-from qtree_task_planner.search.exact import Claim, blocking_needs, can_leave, no_sequence
+from qtree_task_planner.search.exact import Claim, blocking_needs, can_leave, laneless_blockers, no_sequence
 from relocation_common.feasibility import (
     FeasibilityAnswer,
     FeasibilityOracle,
@@ -298,11 +298,15 @@ def replan(rp: RemainingProblem, banned: Iterable[Option], cache: GeometryCache)
 
 def blocking_pairs(rp: RemainingProblem, cache: GeometryCache) -> tuple[tuple[str, str], ...]:
     """The pairs (X, Y) "X needs Y moved" of the blocking cycle a failed re-plan's proof names (exact.blocking_needs
-    over the same certain claims at the problem's start: `start_claims`); () when the proof has no such cycle. What
-    a push can open (qtree_task_planner.executive.push)."""
+    over the same certain claims at the problem's start: `start_claims`), then (X, T) for each object X in a lane of
+    the target T that has no lane of its own (exact.laneless_blockers: "X has no lane", a bottle lying where no grasp
+    reaches it; the push of X out of T's lanes is asked first); () when the proof has no such cycle. What a push can
+    open (qtree_task_planner.executive.push)."""
     if rp.problem is None:
         return ()
-    return tuple((x, y) for x, stuck in blocking_needs(rp.problem.target, start_claims(rp, cache)) for y in stuck)
+    t, claims = rp.problem.target, start_claims(rp, cache)
+    return tuple((x, y) for x, stuck in blocking_needs(t, claims) for y in stuck) + tuple(
+        (x, t) for x in laneless_blockers(t, claims))
 
 
 def free_first(rp: RemainingProblem, cache: GeometryCache) -> tuple[str, ...]:

@@ -147,6 +147,18 @@ def blocking_needs(target: str, lanes: Mapping[str, Sequence[Claim]]) -> tuple[t
     return tuple((x, stuck) for x, stuck in out.items() if stuck)
 
 
+def laneless_blockers(target: str, lanes: Mapping[str, Sequence[Claim]]) -> tuple[str, ...]:
+    """The objects the blocking cycle `_cycle` names in a lane of the target that have no lane of their own ("x has
+    no lane": a bottle lying where no grasp reaches it), sorted; () when there is no cycle. No pick order moves
+    them: a push of such an object out of the target's lanes is what can open the cycle
+    (qtree_task_planner.executive.push)."""
+    walk = _cycle_walk(target, lanes)
+    if walk is None:
+        return ()
+    first, _, by_lane, _ = walk
+    return tuple(sorted({x for _, x in by_lane if not first[x]}))
+
+
 def _cycle_walk(target: str, lanes: Mapping[str, Sequence[Claim]]
                 ) -> tuple[dict[str, tuple[frozenset[str], ...]], set[str], list[tuple[frozenset[str], str]],
                            list[str]] | None:

@@ -127,7 +127,7 @@ def _from(d: dict[str, Any]) -> Trajectory:
 
 def _push(m: PushPlan) -> dict[str, Any]:
     return {"object_id": m.object_id, "clear_for": m.clear_for, "yaw": m.yaw, "distance": m.distance,
-            "end": list(m.end), "lane": m.lane,
+            "end": list(m.end), "lane": m.lane, "kind": m.kind,
             "segments": [[g.name, _trajectory(g.trajectory), g.gripper_after] for g in m.segments]}
 
 
@@ -135,4 +135,4 @@ def _push_from(d: dict[str, Any]) -> PushPlan:
     x, y, z = (float(v) for v in d["end"])
     return PushPlan(str(d["object_id"]), str(d["clear_for"]), float(d["yaw"]), float(d["distance"]), (x, y, z),
                     str(d["lane"]), [Segment(str(n), _from(t), None if g is None else str(g))
-                                     for n, t, g in d["segments"]])
+                                     for n, t, g in d["segments"]], str(d.get("kind", "standing")))

@@ -34,7 +34,7 @@ def node_parameters(path: str | Path | None = None) -> dict[str, Any]:
 
 @dataclass
 class PushParams:
-    """The push of a standing cylinder out of another object's grasp lanes (planning/push/; the push.* keys)."""
+    """The push of a cylinder out of another object's grasp lanes (planning/push/; the push.* keys)."""
 
     contact_height: float  # fraction of the pushed object's height at which the closed finger tips touch it
     distances: tuple[float, ...]  # m the object is pushed, the candidates tried least first
@@ -42,6 +42,9 @@ class PushParams:
     sweep_margin: float  # m the pushed object's swept footprint keeps from every other object and the shelf's panels
     contact_gap: float  # m between the finger tips and the object at the contact pose (the push starts there)
     speed: float  # m/s of the tool along the push (quasi-static: the object stops when the hand does)
+    lying_distances: tuple[float, ...]  # m a lying cylinder is pushed, the candidates tried least first
+    slide: bool  # a lying cylinder slid along its axis (the tips against its end cap) may be planned
+    roll: bool  # a lying cylinder rolled across its axis (the tips against its side) may be planned
 
     def __post_init__(self) -> None:
         """Every setting checked once, with its name in the error (ValueError)."""
@@ -54,10 +57,15 @@ class PushParams:
                     or (v == 0 and k == "speed"):
                 raise ValueError(f"motion planner parameter push.{k} must be a finite number "
                                  f"{'> 0' if k == 'speed' else '>= 0'}, got {v!r}")
-        d, a = np.asarray(self.distances, float), np.asarray(self.directions, float)
-        if d.ndim != 1 or not len(d) or not np.all(np.isfinite(d) & (d > 0)) or np.any(np.diff(d) <= 0):
-            raise ValueError(f"motion planner parameter push.distances must be positive metres, increasing, got "
-                             f"{self.distances!r}")
+        for k in ("slide", "roll"):
+            if not isinstance(getattr(self, k), bool):
+                raise ValueError(f"motion planner parameter push.{k} must be true or false, got {getattr(self, k)!r}")
+        for k in ("distances", "lying_distances"):
+            d = np.asarray(getattr(self, k), float)
+            if d.ndim != 1 or not len(d) or not np.all(np.isfinite(d) & (d > 0)) or np.any(np.diff(d) <= 0):
+                raise ValueError(f"motion planner parameter push.{k} must be positive metres, increasing, got "
+                                 f"{getattr(self, k)!r}")
+        a = np.asarray(self.directions, float)
         if a.ndim != 1 or not len(a) or not np.all(np.isfinite(a) & (a >= 0) & (a < math.pi / 2)):
             raise ValueError(f"motion planner parameter push.directions must be angles in [0, pi/2) rad, got "
                              f"{self.directions!r}")

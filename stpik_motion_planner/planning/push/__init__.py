@@ -1,5 +1,7 @@
 """The push (docs/motion_planner.md, "The push"): a standing cylinder X slid along the top shelf by the closed hand,
-out of the grasp lanes of another object C, when the side grasp of either needs the other gone.
+out of the grasp lanes of another object C, when the side grasp of either needs the other gone; a cylinder lying flat
+slid along its axis (push.slide) or rolled across it (push.roll), both off in the shipped settings (MuJoCo:
+docs/bench/push.md).
 
 1. Where to: for each distance of push.distances (least first) and each direction of push.directions (an angle from
    straight back, +x, turned away from C; both ways when C is straight in front or behind), X translated by d
@@ -17,8 +19,9 @@ out of the grasp lanes of another object C, when the side grasp of either needs 
    pre-contact pose on (the approach, the push, the retreat), and during the push X is no obstacle of the arm
    (it moves with the tips).
 The answer is g_O with the whole motion (home -> ... -> home; the gripper shut before it, opened after it), the end
-pose of X, and the lane it opens (then free, or still held by whom); or g_U with the reason: X lying, not a
-cylinder, blocking no lane of C, no direction and distance that opens one, or no motion for any that does.
+pose of X, and the lane it opens (then free, or still held by whom); or g_U with the reason: X leaning, or lying
+with both kinds off, not a cylinder, blocking no lane of C, no direction and distance that opens one, or no motion
+for any that does.
 """
 from stpik_motion_planner.planning.push.motion import PushPlan, plan_push, push_feasibility
 

@@ -16,11 +16,10 @@ from stpik_motion_planner.model.collision import (
     CollisionScene,
     HandProxy,
     ObstacleSet,
-    approach_skip,
     closed_fingers,
 )
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, pose_matrix
-from stpik_motion_planner.model.push import contact_pose, moved
+from stpik_motion_planner.model.push import contact_pose, kind, moved
 from stpik_motion_planner.planning.context import PlanningContext
 from stpik_motion_planner.planning.home import joint_motion_clear, joint_valid, plan_joint, time_joint_path
 from stpik_motion_planner.planning.pick import cartesian_path
@@ -34,9 +33,10 @@ PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 @dataclass
 class PushPlan:
     """A planned push of `object_id` out of the lanes of `clear_for`: direction `yaw` (rad), `distance` (m), X's
-    predicted end pose `end` (x, y, z of its base in the scene's frame, the robot base's, as ObjectState), the lane
-    of C it opens, and the motion's segments (approach, push, retreat, home; the gripper shut before the first,
-    opened after the last)."""
+    predicted end pose `end` (x, y, z of its base in the scene's frame, the robot base's, as ObjectState; a lying
+    one's: of its centre, its yaw kept), the lane of C it opens, the motion's segments (approach, push, retreat,
+    home; the gripper shut before the first, opened after the last), and its kind (model/push.kind: standing,
+    slide, roll)."""
 
     object_id: str
     clear_for: str
@@ -45,6 +45,7 @@ class PushPlan:
     end: tuple[float, float, float]
     lane: str
     segments: list[Segment]
+    kind: str
 
     def trajectory(self) -> Trajectory:
         """The whole motion, home to home."""
@@ -55,10 +56,12 @@ class PushPlan:
 
 
 def contact_height(ctx: PlanningContext, object_id: str) -> float:
-    """m above the board where the leading finger tip touches: push.contact_height of the object's height, no lower
-    than the palm (below the tool axis by its radius) keeps STPIK's clearance and activation band over the board."""
+    """m above the board where the leading finger tip touches: push.contact_height of a standing object's height (a
+    lying one's axis height), no lower than the palm (below the tool axis by its radius) keeps STPIK's clearance and
+    activation band over the board (the closed fingers' lowest point then stays higher above it)."""
     o = ctx.scenario.object(object_id)
-    return max(ctx.params.push.contact_height * o.height, PALM.radius + ctx.ceiling_clearance)
+    at = o.radius if o.lying else ctx.params.push.contact_height * o.height
+    return max(at, PALM.radius + ctx.ceiling_clearance)
 
 
 def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], yaw: float, distance: float,
@@ -69,6 +72,9 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0])  # a horizontal hand: (x, y, z, yaw) poses
     contact = np.array(contact_pose(o, ctx.scenario.shelf.top_z, yaw, 0.0, contact_height(ctx, object_id),
                                     pp.contact_gap)[:4])
+    # the palm's bound holds for the tool axis whichever tip leads (finger 2 or 3 leads a push turned to -y: 22 mm
+    # above the axis, which the leading tip's height alone would bring 22 mm lower, the palm into the board)
+    contact[2] = max(contact[2], ctx.scenario.shelf.top_z + PALM.radius + ctx.ceiling_clearance)
     pre, end = contact - u * p.pre_grasp_distance, contact + u * (pp.contact_gap + distance)
     try:
         for pose, where in ((pre, "pre-contact pose"), (contact, "contact pose"), (end, "end of the push")):
@@ -78,7 +84,7 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     fingers = closed_fingers()
     hand, arm = HandProxy(ctx.hand_margin, fingers=fingers), ArmGeometry(ctx.kin, fingers=fingers)
     obs = ctx.scene.obstacles(removed)
-    skip = approach_skip(o)
+    skip = {n: frozenset([object_id]) for n in ("palm", *fingers)}  # the hand may touch X, never the board
     if hand.collides(*pose_matrix(pre), obs) or not hand.path_clear([pre, contact], obs, p.resolution, skip):
         return [], "no approach: the closed hand meets an object or a board before the contact pose"
     without = ctx.scene.obstacles(removed | {object_id})
@@ -150,10 +156,11 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
         segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats)
         if segments:
             o = ctx.scenario.object(object_id)
-            end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z)
+            end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z + (o.radius if o.lying else 0.0))
             then = f"still held by {', '.join(sorted(held))}" if held else "then free"
-            return PushPlan(object_id, clear_for, yaw, d, end, lane, segments), n, (
-                f"push {object_id} {d * 1000:.0f} mm at yaw {yaw:+.2f}: opens {clear_for}'s lane {lane}, {then}")
+            how = f" ({kind(o, yaw)} of a lying cylinder)" if o.lying else ""
+            return PushPlan(object_id, clear_for, yaw, d, end, lane, segments, kind(o, yaw)), n, (
+                f"push {object_id} {d * 1000:.0f} mm at yaw {yaw:+.2f}: opens {clear_for}'s lane {lane}, {then}{how}")
         last = f"yaw {yaw:+.2f}, {d * 1000:.0f} mm: {why}"
     return None, n, f"no push of {object_id} plans ({n} candidates opening {clear_for}'s lanes); last: {last}"
 

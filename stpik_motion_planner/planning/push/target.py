@@ -10,8 +10,22 @@ import math
 from relocation_common.scenario import Scenario
 from stpik_motion_planner.model.blockers import static_lanes
 from stpik_motion_planner.model.collision import CollisionScene
-from stpik_motion_planner.model.push import moved, sweep_problem
+from stpik_motion_planner.model.push import ROLL, SLIDE, moved, sweep_problem
 from stpik_motion_planner.planning.context import PlanningContext
+
+LYING_OFF = ("in MuJoCo a slid one rolls on once the hand retreats, a rolled one wedges the hand "
+             "(docs/bench/push.md)")
+BACKWARD = 3 * math.pi / 4  # rad: the push directions of a lying cylinder tried, at most this far from straight back
+# (+x): the hand comes from the shelf's open front, and beside the object at most
+
+
+def lying_directions(ctx: PlanningContext, axis: float) -> list[tuple[float, str]]:
+    """[(push direction, kind)] of a cylinder lying flat with its axis at yaw `axis`: along the axis both ways (a
+    slide) when push.slide, across it both ways (a roll) when push.roll; those at most BACKWARD from +x."""
+    p = ctx.params.push
+    out = [(axis + k * math.pi / 2, ROLL if k % 2 else SLIDE) for k in range(4)]
+    out = [(math.remainder(a, 2 * math.pi), kd) for a, kd in out if (p.slide if kd == SLIDE else p.roll)]
+    return [(a, kd) for a, kd in out if abs(a) <= BACKWARD + 1e-9]
 
 
 def end_xy(x: float, y: float, yaw: float, distance: float) -> tuple[float, float]:
@@ -35,10 +49,15 @@ def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: froze
     o = ctx.scenario.object(object_id)
     if object_id in ctx.gone:
         return f"no push: {object_id} left the shelf"
-    if o.lying or object_id in ctx.lying:
-        return f"no push: {object_id} lies (the push slides a standing cylinder)"
+    if object_id in ctx.lying:
+        return f"no push: {object_id} leans (the push slides a standing or a flat lying cylinder)"
     if o.shape != "cylinder" or o.conservative:
-        return f"no push: {object_id} is not a cylinder (the push slides a standing cylinder)"
+        return f"no push: {object_id} is not a cylinder (the push slides a standing or a flat lying cylinder)"
+    if o.lying and not lying_directions(ctx, o.yaw):
+        p = ctx.params.push
+        off = [k for k, on in (("push.slide", p.slide), ("push.roll", p.roll)) if not on]
+        return (f"no push: {object_id} lies ({', '.join(off) or 'no direction from the front'}"
+                f"{' off: ' + LYING_OFF if off else ''})")
     if not any(object_id in bl for _, bl in static_lanes(ctx, clear_for)):
         return f"no push: no grasp lane of {clear_for} is blocked by {object_id}"
     return ""
@@ -73,22 +92,22 @@ def candidates(ctx: PlanningContext, object_id: str, clear_for: str, removed: fr
     side = o.y - c.y
     signs = [1.0 if side > 0 else -1.0] if abs(side) > 1e-3 else [1.0, -1.0]
     present = frozenset(b.id for b in ctx.scenario.objects) - removed - ctx.gone
+    yaws = [a for a, _ in lying_directions(ctx, o.yaw)] if o.lying else \
+        [sg * a for a in p.directions for sg in (signs if a else [1.0])]
     out, why = [], {}
-    for d in p.distances:
-        for a in p.directions:
-            for sg in signs if a else [1.0]:
-                yaw = sg * a
-                end = end_xy(o.x, o.y, yaw, d)
-                bad = sweep_problem(ctx.scene, o, end, present, p.sweep_margin)
-                if bad:
-                    why[(yaw, d)] = bad
-                    continue
-                lane, held = opened_lane(ctx, clear_for, removed, object_id,
-                                         _Moved(ctx, moved(ctx.scenario, object_id, *end)))
-                if not lane:
-                    why[(yaw, d)] = f"{clear_for}'s lanes still blocked by {object_id}"
-                    continue
-                out.append((yaw, d, lane, held))
+    for d in p.lying_distances if o.lying else p.distances:
+        for yaw in yaws:
+            end = end_xy(o.x, o.y, yaw, d)
+            bad = sweep_problem(ctx.scene, o, end, present, p.sweep_margin)
+            if bad:
+                why[(yaw, d)] = bad
+                continue
+            lane, held = opened_lane(ctx, clear_for, removed, object_id,
+                                     _Moved(ctx, moved(ctx.scenario, object_id, *end)))
+            if not lane:
+                why[(yaw, d)] = f"{clear_for}'s lanes still blocked by {object_id}"
+                continue
+            out.append((yaw, d, lane, held))
     if out:
         return sorted(out, key=lambda c: bool(c[3])), ""  # stable: the least distance next, then the direction
     kinds = sorted(set(why.values()))
