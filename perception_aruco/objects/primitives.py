@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -235,17 +236,33 @@ def conservative_box(points: np.ndarray, support: float, top: float, view: np.nd
                      True, why, False, (False, False))
 
 
-def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, camera: np.ndarray,
+def lying_rms_floor(points: np.ndarray, support: float, params: ObjectParams) -> float:
+    """A lower bound of every lying cylinder fit's rms (any axis, radius within its bounds): its surface lies at
+    most 2 radius_max above the board, and a point higher than that by dz is at least dz from it (_cross_section's
+    distances, on the same sampled points): a cluster taller than any lying cylinder."""
+    z = _sample(points)[:, 2] - support
+    return float(np.sqrt(np.mean(np.maximum(z - 2 * params.radius_max, 0.0) ** 2)))
+
+
+def _attempt(fit: Callable[[], Primitive], bound: float) -> Primitive | str:
+    """The fitted primitive when its rms is within bound, else why not."""
+    try:
+        f = fit()
+    except (FitError, np.linalg.LinAlgError, ValueError) as e:
+        return str(e)
+    return f if f.rms <= bound else f"rms {f.rms * 1000:.1f} mm"
+
+
+def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support: float, camera: np.ndarray,
                   params: ObjectParams, noise: float, tol: float, search: bool = True) -> Primitive:
     """The best primitive of a cluster (module docstring). points: its base-frame points; circle_xy: its side and
-    rim points for the standing cylinder; camera: the camera's position; noise: the frame's depth noise; tol: the
-    circle fit's inlier band. The lying cylinder's search over axis directions runs only when no primitive fits
-    otherwise and `search` (it costs as much as all other fits)."""
-    top = float(np.percentile(points[:, 2], 99.5))
+    rim points for the standing cylinder; top: the points' 99.5th height percentile; camera: the camera's position;
+    noise: the frame's depth noise; tol: the circle fit's inlier band. The lying cylinder is not fitted where it
+    cannot win (its rms floor, lying_rms_floor, LYING_MARGIN times over a standing cylinder's or box's rms within
+    the bound); its search over axis directions runs only when no primitive fits otherwise and `search` (it costs
+    as much as all other fits)."""
     view = points.mean(axis=0) - camera
     bound = max(params.fit_rms, params.fit_noise * noise)
-    fits: list[Primitive] = []
-    why: dict[str, str] = {}
     made: list[LyingStart] = []
 
     def lying() -> LyingStart:
@@ -253,24 +270,20 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, cam
         if not made:
             made.append(lying_start(points, support, view, params))
         return made[0]
-    for name, fit in (("standing cylinder", lambda: standing_cylinder(circle_xy, points, support, top, camera, params,
-                                                                      tol)),
-                      ("lying cylinder", lambda: lying_cylinder(points, support, view, params, None, lying())),
-                      ("box", lambda: box(points, support, top, params)),
-                      ("lying cylinder, axis searched", lambda: lying_cylinder(points, support, view, params, bound,
-                                                                               lying()))):
-        if name.endswith("searched") and (fits or not search):
-            continue   # the search: only when nothing fitted
-        try:
-            f = fit()
-        except (FitError, np.linalg.LinAlgError, ValueError) as e:
-            why[name] = str(e)
-            continue
-        if f.rms <= bound:
-            fits.append(f)
-        else:
-            why[name] = f"rms {f.rms * 1000:.1f} mm"
+    attempts: dict[str, Callable[[], Primitive]] = {
+        "standing cylinder": lambda: standing_cylinder(circle_xy, points, support, top, camera, params, tol),
+        "lying cylinder": lambda: lying_cylinder(points, support, view, params, None, lying()),
+        "box": lambda: box(points, support, top, params),
+        "lying cylinder, axis searched": lambda: lying_cylinder(points, support, view, params, bound, lying())}
+    got = {name: _attempt(attempts[name], bound) for name in ("standing cylinder", "box")}
+    others = [f.rms for f in got.values() if isinstance(f, Primitive)]
+    if not others or lying_rms_floor(points, support, params) * LYING_MARGIN <= min(others) + 1e-9:  # 1e-9: rounding
+        got["lying cylinder"] = _attempt(attempts["lying cylinder"], bound)
+    if search and not any(isinstance(f, Primitive) for f in got.values()):   # the search: only when nothing fitted
+        got["lying cylinder, axis searched"] = _attempt(attempts["lying cylinder, axis searched"], bound)
+    fits = [f for name in attempts if isinstance(f := got.get(name), Primitive)]
     if fits:  # a lying fit must be LYING_MARGIN times better: a narrow standing bottle seen in part fits both
         return min(fits, key=lambda f: f.rms * (LYING_MARGIN if f.lying else 1.0))
+    why = {name: got[name] for name in attempts if name in got}   # every one a reason here
     return conservative_box(points, support, top, view, params, f"no primitive within {bound * 1000:.1f} mm rms ("
                             + "; ".join(f"{k}: {v}" for k, v in why.items()) + ")")
