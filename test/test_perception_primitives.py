@@ -1,7 +1,7 @@
 """The shape fits' fast forms against the formulas they replace (docs/bench/perception.md, "Speed"), on generated
 points: the lying cylinder's axis search over all directions at once (primitives._search_rms) against one
 cross-section fit per direction (primitives._cross_section), the circle's Gauss-Newton (localize._gauss_newton)
-against its matrix form."""
+against its matrix form; the lying cylinder's rms floor (primitives.lying_rms_floor) under every lying fit."""
 from __future__ import annotations
 
 import math
@@ -9,8 +9,16 @@ import math
 import numpy as np
 import pytest
 
-from perception_aruco.localize import _gauss_newton
-from perception_aruco.objects.primitives import _cross_section, _search_rms, _section_start
+from perception_aruco.localize import FitError, _gauss_newton
+from perception_aruco.objects.params import ObjectParams
+from perception_aruco.objects.primitives import (
+    _cross_section,
+    _search_rms,
+    _section_start,
+    lying_cylinder,
+    lying_rms_floor,
+    lying_start,
+)
 
 
 def lying_points(rng: np.random.Generator, radius: float, length: float, yaw: float, noise: float,
@@ -79,3 +87,23 @@ def test_the_circle_gauss_newton_is_its_matrix_form_to_the_last_bit(seed, fitted
     radius = None if fitted else r
     got, want = _gauss_newton(pts, start, radius, 20), gauss_newton_matrix_form(pts, start, radius, 20)
     assert np.array_equal(got[0], want[0]) and got[1] == want[1]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_no_lying_fit_of_a_tall_standing_bottle_is_below_its_rms_floor(seed):
+    """lying_rms_floor bounds every lying fit's rms from below (fit_primitive leaves the lying fit out on it): the
+    principal-axis fit and the searched one, on the visible side of a standing bottle taller than 2 radius_max."""
+    params = ObjectParams.configured()
+    rng = np.random.default_rng(seed)
+    r, h = rng.uniform(0.02, 0.04), 2 * params.radius_max + rng.uniform(0.01, 0.05)
+    phi, z = rng.uniform(-1.3, 1.3, 1500) + math.pi, rng.uniform(0, h, 1500)   # the side facing the camera (-x)
+    pts = np.c_[0.6 + r * np.cos(phi), 0.1 + r * np.sin(phi), z] + rng.normal(0, 0.001, (1500, 3))
+    view = np.array([0.6, 0.0, -0.5])
+    floor = lying_rms_floor(pts, 0.0, params)
+    start = lying_start(pts, 0.0, view, params)
+    assert floor > 0.003 and start.fit[2] >= floor
+    try:
+        searched = lying_cylinder(pts, 0.0, view, params, 0.0, start).rms   # bound 0: the search always runs
+    except FitError:
+        return   # out of its bounds: no lying fit either
+    assert searched >= floor
