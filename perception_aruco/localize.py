@@ -47,19 +47,22 @@ def _gauss_newton(pts: np.ndarray, centre: np.ndarray, radius: float | None, ite
     """Least-squares circle through pts: (centre, radius); radius None: fitted too."""
     r = 0.0 if radius is None else radius
     x = np.r_[centre, r] if radius is None else centre.copy()
+    px, py = pts[:, 0], pts[:, 1]
+    jac = np.empty((len(pts), 2 if radius is not None else 3))
+    if radius is None:
+        jac[:, 2] = -1.0
     for _ in range(iterations):
-        d = pts - x[:2]
-        dist = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+        dx, dy = px - x[0], py - x[1]
+        dist = np.maximum(np.sqrt(dx * dx + dy * dy), 1e-9)   # np.linalg.norm's arithmetic, without its overhead
         res = dist - (x[2] if radius is None else r)
-        jac = -d / dist[:, None]
-        if radius is None:
-            jac = np.c_[jac, -np.ones(len(pts))]
+        np.divide(-dx, dist, out=jac[:, 0])
+        np.divide(-dy, dist, out=jac[:, 1])
         try:  # the normal equations (2 or 3 unknowns): as lstsq, a fraction of its cost
             step = np.linalg.solve(jac.T @ jac, -jac.T @ res)
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(jac, -res, rcond=None)[0]
         x = x + step
-        if np.linalg.norm(step) < 1e-7:
+        if math.sqrt(float(step @ step)) < 1e-7:   # np.linalg.norm(step)
             break
     return x[:2], float(x[2]) if radius is None else r
 

@@ -35,7 +35,7 @@ def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.n
     def fit(c: Cluster, search: bool = True) -> Fitted:
         top = float(np.percentile(c.points[:, 2], 99.5))
         xy = circle_points(c.rows, c.cols, image_points, top, camera, loc)
-        prim = fit_primitive(c.points, xy, c.support, camera, params, noise, loc.inlier_tol, search)
+        prim = fit_primitive(c.points, xy, top, c.support, camera, params, noise, loc.inlier_tol, search)
         return Fitted(c, prim, xy, (int(np.median(c.cols)), int(np.median(c.rows))))
     return merge_fragments([fit(c) for c in clusters], lambda c: fit(c, False), seg, params.merge_gap)
 

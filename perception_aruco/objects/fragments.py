@@ -40,20 +40,25 @@ def merge_fragments(fitted: list[Fitted], refit: Callable[[Cluster], Fitted], se
     """The clusters with the pieces of one object merged (module docstring); `refit` fits a cluster."""
     out = list(fitted)
     tried: set[tuple[int, int]] = set()
+    box_of = {id(f): _box(f.cluster) for f in out}   # each cluster's x-y box, made once
+    kept = list(out)   # every cluster tried stays alive: the ids in `tried` and `box_of` are never reused
     while True:
-        boxes = [_box(f.cluster) for f in out]
-        pairs = sorted((_gap(boxes[i], boxes[j]), i, j) for i, a in enumerate(out) for j, b in enumerate(out)
-                       if i < j and abs(a.cluster.support - b.cluster.support) < 1e-6
-                       and (id(a), id(b)) not in tried)
+        b = np.array([box_of[id(f)] for f in out]).reshape(-1, 4)
+        sup = np.array([f.cluster.support for f in out])
+        gaps = np.maximum(np.maximum(b[:, None, :2], b[None, :, :2]) - np.minimum(b[:, None, 2:], b[None, :, 2:]), 0.0)
+        gap = np.sqrt(gaps[..., 0] * gaps[..., 0] + gaps[..., 1] * gaps[..., 1])   # _gap of every pair
+        near = (np.abs(sup[:, None] - sup[None, :]) < 1e-6) & (gap <= merge_gap)
+        pairs = sorted((float(gap[i, j]), i, j) for i, j in zip(*np.nonzero(np.triu(near, 1)))
+                       if (id(out[i]), id(out[j])) not in tried)
         merged = False
-        for gap, i, j in pairs:
-            if gap > merge_gap:
-                break
+        for _, i, j in pairs:
             tried.add((id(out[i]), id(out[j])))
             if not _same_colour(out[i].cluster, out[j].cluster, seg):
                 continue
             u = refit(union(out[i].cluster, out[j].cluster))
+            kept.append(u)
             if not u.prim.conservative:
+                box_of[id(u)] = _box(u.cluster)
                 out = [f for k, f in enumerate(out) if k not in (i, j)] + [u]
                 merged = True
                 break

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -77,10 +78,10 @@ def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: fl
     """Gauss-Newton on (s_c, r) of the circle through (s, z) whose centre is one radius above the board, refitted
     twice on the points within CAP_BAND of the circle (an end cap's points lie inside it): (s_c, r, rms of the side
     and end-cap distances)."""
-    use = np.ones(len(s), bool)
+    su, zu = s, z
     for _ in range(3):
         for _ in range(iterations):
-            ds, dz = s[use] - sc, z[use] - r
+            ds, dz = su - sc, zu - r
             rho = np.maximum(np.hypot(ds, dz), 1e-9)
             ja, jb, res = -ds / rho, -dz / rho - 1.0, rho - r   # normal equations of the 2-parameter step
             aa, ab, bb = float(ja @ ja), float(ja @ jb), float(jb @ jb)
@@ -95,36 +96,100 @@ def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: fl
         use = np.abs(np.hypot(s - sc, z - r) - r) < CAP_BAND
         if use.sum() < 10:
             break
+        su, zu = s[use], z[use]
     lo, hi = np.percentile(t, [0.5, 99.5])
     rho = np.hypot(s - sc, z - r)
     d = np.minimum(np.abs(rho - r), np.abs(np.abs(t - (lo + hi) / 2) - (hi - lo) / 2) + np.maximum(rho - r, 0.0))
     return sc, r, float(np.sqrt(np.mean(d ** 2)))
 
 
-def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params: ObjectParams,
-                   bound: float | None) -> Primitive:
-    """A cylinder lying on the board (module docstring); FitError when its radius or length is out of bounds. The
-    axis: the points' principal direction in x-y; when that fit is not within `bound` (an end cap seen more than
-    the side), the best of the directions 10 deg apart (bound None: no search)."""
+def _search_rms(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: np.ndarray, r: np.ndarray,
+                iterations: int) -> np.ndarray:
+    """_cross_section's rms for many axis directions at once (row k of t, s: the points' coordinates along and
+    across direction k; sc, r: the starts): the same Gauss-Newton steps and refits on the points near the circle,
+    each row frozen where _cross_section stops it (steps under 1e-7, a singular step, fewer than 10 points near)."""
+    use = np.ones(s.shape, bool)
+    live = np.ones(len(s), bool)   # rows still refitting (_cross_section's outer loop not left)
+    for _ in range(3):
+        going = live.copy()        # rows in this round's Gauss-Newton loop
+        for _ in range(iterations):
+            if not going.any():
+                break
+            ds, dz = s - sc[:, None], z - r[:, None]
+            rho = np.maximum(np.hypot(ds, dz), 1e-9)
+            ja, jb, res = (-ds / rho) * use, (-dz / rho - 1.0) * use, (rho - r[:, None]) * use
+            aa, ab, bb = np.sum(ja * ja, 1), np.sum(ja * jb, 1), np.sum(jb * jb, 1)
+            det = aa * bb - ab * ab
+            going &= ~(det <= 1e-18)
+            ga, gb = -np.sum(ja * res, 1), -np.sum(jb * res, 1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step_s, step_r = (bb * ga - ab * gb) / det, (aa * gb - ab * ga) / det
+            sc, r = np.where(going, sc + step_s, sc), np.where(going, r + step_r, r)
+            going &= ~(np.hypot(step_s, step_r) < 1e-7)
+        near = np.abs(np.hypot(s - sc[:, None], z - r[:, None]) - r[:, None]) < CAP_BAND
+        live &= near.sum(axis=1) >= 10
+        use = np.where(live[:, None], near, use)
+    lo, hi = np.percentile(t, [0.5, 99.5], axis=1)
+    rho = np.hypot(s - sc[:, None], z - r[:, None])
+    d = np.minimum(np.abs(rho - r[:, None]), np.abs(np.abs(t - ((lo + hi) / 2)[:, None]) - ((hi - lo) / 2)[:, None])
+                   + np.maximum(rho - r[:, None], 0.0))
+    return np.sqrt(np.mean(d ** 2, axis=1))
+
+
+@dataclass(frozen=True)
+class LyingStart:
+    """The lying cylinder's fit on the points' principal direction (`lying_start`), shared by the fit and its axis
+    search: the sampled points (x-y, z above the board), their mean, the start radius, the axis and its fit."""
+
+    xy: np.ndarray
+    z: np.ndarray
+    mean: np.ndarray
+    r0: float
+    axis: np.ndarray
+    fit: tuple[float, float, float]   # (s_c, r, rms) of _cross_section
+
+
+def _section_start(xy: np.ndarray, mean: np.ndarray, normals: np.ndarray, r0: float,
+                   view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(s, s_c start) for each row of normals: the points across the axis; the circle's centre one radius behind
+    their median, seen from `view`."""
+    s = normals @ (xy - mean).T
+    side = normals @ view[:2]
+    return s, np.median(s, axis=1) + r0 * np.where(side == 0, 1.0, np.copysign(1.0, side))
+
+
+def lying_start(points: np.ndarray, support: float, view: np.ndarray, params: ObjectParams) -> LyingStart:
+    """The cross-section fit (_cross_section, 15 iterations) on the points' principal direction in x-y."""
     p = _sample(points)
     xy, z = p[:, :2], p[:, 2] - support
     mean = xy.mean(axis=0)
     r0 = max(float(np.percentile(z, 99)) / 2, params.radius_min)
-
-    def fit(axis: np.ndarray, iterations: int) -> tuple[float, float, float]:
-        normal = np.array([-axis[1], axis[0]])
-        s = (xy - mean) @ normal
-        sc0 = float(np.median(s)) + r0 * math.copysign(1.0, float(normal @ view[:2]) or 1.0)
-        return _cross_section((xy - mean) @ axis, s, z, sc0, r0, iterations)
     axis = np.linalg.eigh(np.cov((xy - mean).T))[1][:, 1]
-    sc, r, rms = fit(axis, 15)
+    normal = np.array([-axis[1], axis[0]])
+    s = (xy - mean) @ normal
+    sc0 = float(np.median(s)) + r0 * math.copysign(1.0, float(normal @ view[:2]) or 1.0)
+    return LyingStart(xy, z, mean, r0, axis, _cross_section((xy - mean) @ axis, s, z, sc0, r0, 15))
+
+
+def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params: ObjectParams,
+                   bound: float | None, start: LyingStart | None = None) -> Primitive:
+    """A cylinder lying on the board (module docstring); FitError when its radius or length is out of bounds. The
+    axis: the points' principal direction in x-y (`start`: that fit, lying_start, when already made); when that fit
+    is not within `bound` (an end cap seen more than the side), the best of the directions 10 deg apart, compared on
+    a subsample (bound None: no search)."""
+    st = start if start is not None else lying_start(points, support, view, params)
+    xy, z, mean, axis = st.xy, st.z, st.mean, st.axis
+    sc, r, rms = st.fit
     if bound is not None and rms > bound:
-        full = xy, z
-        xy, z = xy[::max(1, len(xy) // SEARCH_SAMPLE)], z[::max(1, len(z) // SEARCH_SAMPLE)]
-        dirs = [np.array([math.cos(a), math.sin(a)]) for a in np.radians(np.arange(0, 180, 10))]
-        axis = min(dirs, key=lambda d: fit(d, 6)[2])
-        xy, z = full
-        sc, r, rms = fit(axis, 15)
+        step = max(1, len(xy) // SEARCH_SAMPLE)
+        dirs = np.array([[math.cos(a), math.sin(a)] for a in np.radians(np.arange(0, 180, 10))])
+        s, sc0 = _section_start(xy[::step], mean, np.c_[-dirs[:, 1], dirs[:, 0]], st.r0, view)
+        rms_k = _search_rms(dirs @ (xy[::step] - mean).T, s, z[::step], sc0, np.full(len(dirs), st.r0), 6)
+        axis = dirs[int(np.argmin(rms_k))]
+        normal = np.array([-axis[1], axis[0]])
+        s1 = (xy - mean) @ normal
+        sc1 = float(np.median(s1)) + st.r0 * math.copysign(1.0, float(normal @ view[:2]) or 1.0)
+        sc, r, rms = _cross_section((xy - mean) @ axis, s1, z, sc1, st.r0, 15)
     normal = np.array([-axis[1], axis[0]])
     t = (xy - mean) @ axis
     lo, hi = np.percentile(t, [0.5, 99.5])
@@ -171,34 +236,54 @@ def conservative_box(points: np.ndarray, support: float, top: float, view: np.nd
                      True, why, False, (False, False))
 
 
-def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, support: float, camera: np.ndarray,
+def lying_rms_floor(points: np.ndarray, support: float, params: ObjectParams) -> float:
+    """A lower bound of every lying cylinder fit's rms (any axis, radius within its bounds): its surface lies at
+    most 2 radius_max above the board, and a point higher than that by dz is at least dz from it (_cross_section's
+    distances, on the same sampled points): a cluster taller than any lying cylinder."""
+    z = _sample(points)[:, 2] - support
+    return float(np.sqrt(np.mean(np.maximum(z - 2 * params.radius_max, 0.0) ** 2)))
+
+
+def _attempt(fit: Callable[[], Primitive], bound: float) -> Primitive | str:
+    """The fitted primitive when its rms is within bound, else why not."""
+    try:
+        f = fit()
+    except (FitError, np.linalg.LinAlgError, ValueError) as e:
+        return str(e)
+    return f if f.rms <= bound else f"rms {f.rms * 1000:.1f} mm"
+
+
+def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support: float, camera: np.ndarray,
                   params: ObjectParams, noise: float, tol: float, search: bool = True) -> Primitive:
     """The best primitive of a cluster (module docstring). points: its base-frame points; circle_xy: its side and
-    rim points for the standing cylinder; camera: the camera's position; noise: the frame's depth noise; tol: the
-    circle fit's inlier band. The lying cylinder's search over axis directions runs only when no primitive fits
-    otherwise and `search` (it costs as much as all other fits)."""
-    top = float(np.percentile(points[:, 2], 99.5))
+    rim points for the standing cylinder; top: the points' 99.5th height percentile; camera: the camera's position;
+    noise: the frame's depth noise; tol: the circle fit's inlier band. The lying cylinder is not fitted where it
+    cannot win (its rms floor, lying_rms_floor, LYING_MARGIN times over a standing cylinder's or box's rms within
+    the bound); its search over axis directions runs only when no primitive fits otherwise and `search` (it costs
+    as much as all other fits)."""
     view = points.mean(axis=0) - camera
     bound = max(params.fit_rms, params.fit_noise * noise)
-    fits: list[Primitive] = []
-    why: dict[str, str] = {}
-    for name, fit in (("standing cylinder", lambda: standing_cylinder(circle_xy, points, support, top, camera, params,
-                                                                      tol)),
-                      ("lying cylinder", lambda: lying_cylinder(points, support, view, params, None)),
-                      ("box", lambda: box(points, support, top, params)),
-                      ("lying cylinder, axis searched", lambda: lying_cylinder(points, support, view, params, bound))):
-        if name.endswith("searched") and (fits or not search):
-            continue   # the search: only when nothing fitted
-        try:
-            f = fit()
-        except (FitError, np.linalg.LinAlgError, ValueError) as e:
-            why[name] = str(e)
-            continue
-        if f.rms <= bound:
-            fits.append(f)
-        else:
-            why[name] = f"rms {f.rms * 1000:.1f} mm"
+    made: list[LyingStart] = []
+
+    def lying() -> LyingStart:
+        """The lying cylinder's principal-direction fit, made once for both lying fits."""
+        if not made:
+            made.append(lying_start(points, support, view, params))
+        return made[0]
+    attempts: dict[str, Callable[[], Primitive]] = {
+        "standing cylinder": lambda: standing_cylinder(circle_xy, points, support, top, camera, params, tol),
+        "lying cylinder": lambda: lying_cylinder(points, support, view, params, None, lying()),
+        "box": lambda: box(points, support, top, params),
+        "lying cylinder, axis searched": lambda: lying_cylinder(points, support, view, params, bound, lying())}
+    got = {name: _attempt(attempts[name], bound) for name in ("standing cylinder", "box")}
+    others = [f.rms for f in got.values() if isinstance(f, Primitive)]
+    if not others or lying_rms_floor(points, support, params) * LYING_MARGIN <= min(others) + 1e-9:  # 1e-9: rounding
+        got["lying cylinder"] = _attempt(attempts["lying cylinder"], bound)
+    if search and not any(isinstance(f, Primitive) for f in got.values()):   # the search: only when nothing fitted
+        got["lying cylinder, axis searched"] = _attempt(attempts["lying cylinder, axis searched"], bound)
+    fits = [f for name in attempts if isinstance(f := got.get(name), Primitive)]
     if fits:  # a lying fit must be LYING_MARGIN times better: a narrow standing bottle seen in part fits both
         return min(fits, key=lambda f: f.rms * (LYING_MARGIN if f.lying else 1.0))
+    why = {name: got[name] for name in attempts if name in got}   # every one a reason here
     return conservative_box(points, support, top, view, params, f"no primitive within {bound * 1000:.1f} mm rms ("
                             + "; ".join(f"{k}: {v}" for k, v in why.items()) + ")")
