@@ -111,7 +111,7 @@ def _search_rms(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: np.ndarray, r: 
     use = np.ones(s.shape, bool)
     live = np.ones(len(s), bool)   # rows still refitting (_cross_section's outer loop not left)
     for _ in range(3):
-        going = live.copy()        # rows in this round's Gauss-Newton loop
+        going = live.copy()        # rows still iterating in this Gauss-Newton loop
         for _ in range(iterations):
             if not going.any():
                 break
