@@ -113,18 +113,22 @@ def lying_data(seed: int) -> dict:
     objs = [{"id": "T", "xy": [round(tx, 4), round(ty, 4)]},
             {"id": "X", "weight": 0.3, "xy": [round(x[0], 4), round(x[1], 4)], "lying": True,
              "yaw": round(math.remainder(yaw, math.pi), 4)}]
-    s = sc.shelf
-    pos = {"T": (tx, ty), "X": x}
-    while len(pos) < OTHERS + 2:
-        px, py = rng.uniform(s.x_front + 0.05, s.x_front + s.depth - 0.05), rng.uniform(-0.33, 0.33)
-        near = [RADIUS if k != "X" else 0.08 + RADIUS for k in pos]
-        if all(math.hypot(px - qx, py - qy) >= RADIUS + n + 0.03 for (qx, qy), n in zip(pos.values(), near)):
-            pos[f"o{len(pos) - 1}"] = (px, py)
-            objs.append({"id": f"o{len(pos) - 2}", "weight": 0.3, "xy": [round(px, 4), round(py, 4)]})
+    _add_others(rng, sc.shelf, {"T": (tx, ty), "X": x}, objs, 0.08)
     out = copy.deepcopy(data)
     out["name"] = f"push_lying_s{seed}"
     out["objects"] = objs
     return out
+
+
+def _add_others(rng: random.Random, s, pos: dict, objs: list, half: float) -> None:
+    """OTHERS standing bottles drawn on the shelf `s`, each 3 cm clear of T, of every other one and of the lying X's
+    reach (`half` its half length), appended to `objs` (ids o1, o2, ...)."""
+    while len(pos) < OTHERS + 2:
+        px, py = rng.uniform(s.x_front + 0.05, s.x_front + s.depth - 0.05), rng.uniform(-0.33, 0.33)
+        near = [RADIUS if k != "X" else half + RADIUS for k in pos]
+        if all(math.hypot(px - qx, py - qy) >= RADIUS + n + 0.03 for (qx, qy), n in zip(pos.values(), near)):
+            pos[f"o{len(pos) - 1}"] = (px, py)
+            objs.append({"id": f"o{len(pos) - 2}", "weight": 0.3, "xy": [round(px, 4), round(py, 4)]})
 
 
 def diagonal_layout(seed: int) -> Scenario:
@@ -154,13 +158,7 @@ def diagonal_data(seed: int) -> dict:
     x = (tx - d, ty + dy)
     objs = [{"id": "T", "xy": [round(tx, 4), round(ty, 4)]},
             {"id": "X", "weight": 0.3, "xy": [round(x[0], 4), round(x[1], 4)], "lying": True, "yaw": round(yaw, 4)}]
-    pos = {"T": (tx, ty), "X": x}
-    while len(pos) < OTHERS + 2:
-        px, py = rng.uniform(s.x_front + 0.05, s.x_front + s.depth - 0.05), rng.uniform(-0.33, 0.33)
-        near = [RADIUS if k != "X" else half + RADIUS for k in pos]
-        if all(math.hypot(px - qx, py - qy) >= RADIUS + n + 0.03 for (qx, qy), n in zip(pos.values(), near)):
-            pos[f"o{len(pos) - 1}"] = (px, py)
-            objs.append({"id": f"o{len(pos) - 2}", "weight": 0.3, "xy": [round(px, 4), round(py, 4)]})
+    _add_others(rng, s, {"T": (tx, ty), "X": x}, objs, half)
     out = copy.deepcopy(data)
     out["name"] = f"push_diagonal_s{seed}"
     out["objects"] = objs
