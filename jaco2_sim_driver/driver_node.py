@@ -93,6 +93,7 @@ class Jaco2SimDriver(Node):
         self._sim_thread = threading.Thread(target=self._sim_loop, name="sim", daemon=True)
         self._sim_thread.start()
         self._cam_thread = None
+        self._camera_up = False
         if cam_rate > 0:
             self._cam_thread = threading.Thread(target=self.core.camera_loop, name="camera", daemon=True,
                                                 args=(1.0 / cam_rate, self.publish_camera_frame, self._stopping))
@@ -282,6 +283,9 @@ class Jaco2SimDriver(Node):
             if self.context.ok():
                 raise
             return False
+        if not self._camera_up:  # the camera's renderer made and its first frame out: the node is fully running
+            self._camera_up = True
+            self.get_logger().info("camera: first frame published")
         return self._running
 
     def close(self) -> None:
