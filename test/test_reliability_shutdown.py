@@ -4,8 +4,9 @@ and again.
 Each round starts the whole graph at once on a private domain with the real parameter files (so the nodes are
 busy: the driver steps and renders, perception processes the driver's frames), waits until every node has finished
 starting (its ready line in the log; the driver's: its first camera frame out, since its renderer is made in the
-camera thread after the node's start-up line, and a signal during that first render waited for it: 2.0 s once in six
-quiet full runs), then signals the nodes one at a time and times each exit. The default suite
+camera thread after the node's start-up line; a SIGTERM 0.3 s after that line once took more than 2.0 s in six quiet
+full runs, likely waiting for that first render: not reproduced), then signals the nodes one at a time and times each
+exit. The default suite
 runs 1 round per signal; `-m extended` runs 20 per signal (docs/reliability.md's figure)."""
 import signal
 import subprocess
