@@ -250,6 +250,20 @@ class RosGraph:
         self.close()
 
 
+def planner_has_scene(probe: "Probe", timeout: float = 60.0) -> None:
+    """Wait until the task planner's /diagnostics say it has a scene (ros_clients.goal_health's "scene" value), as
+    the demo does before its goal: the test's own subscription having a scene does not mean the planner's has one
+    (a goal sent then was refused "no scene received" after scene_wait). TimeoutError otherwise."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from qtree_task_planner.ros_clients import GOAL_STATUS, SCENE_NONE
+
+    def has_scene(msgs: list) -> bool:
+        return any(st.name == GOAL_STATUS and any(kv.key == "scene" and kv.value != SCENE_NONE for kv in st.values)
+                   for m in msgs for st in m.status)
+    probe.collect("/diagnostics", DiagnosticArray).wait(has_scene, timeout)
+
+
 def future_result(fut: Any, timeout: float, what: str = "no result") -> Any:
     """An rclpy future's result, waited for at most `timeout` s (AssertionError `what` when it does not come)."""
     done = threading.Event()

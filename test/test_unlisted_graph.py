@@ -18,7 +18,7 @@ from qtree_relocation_msgs.action import TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
-from ros_procs import REPO, RosGraph
+from ros_procs import REPO, RosGraph, planner_has_scene
 from std_msgs.msg import String
 
 from qtree_task_planner.ros_clients import train_goal
@@ -57,6 +57,7 @@ def test_a_scene_with_an_unlisted_bottle_is_trained_on_and_executed_without_touc
         while not client.wait_for_server(timeout_sec=0.5):
             assert tp.alive() and time.monotonic() < deadline, tp.log()[-3000:]
         first = {o.id: o for o in msg_to_objects(truth.wait(timeout=30)[-1])}
+        planner_has_scene(g.probe)
         t0 = time.monotonic()
         handle = _wait(client.send_goal_async(train_goal(seed=1, max_episodes=5, execute=True, execute_optimum=True)),
                        60)
