@@ -15,7 +15,7 @@ import pytest
 from qtree_relocation_msgs.action import TrainPlanner
 from qtree_relocation_msgs.msg import ObjectArray
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
-from ros_procs import REPO, RosGraph
+from ros_procs import REPO, RosGraph, planner_has_scene
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -55,6 +55,7 @@ def _run(tmp_path, closed_loop: bool):
         while not client.wait_for_server(timeout_sec=0.5):
             assert tp.alive() and time.monotonic() < deadline, tp.log()[-3000:]
         truth.wait(timeout=30)
+        planner_has_scene(g.probe)  # the test's scene is not the planner's: its goal would wait only scene_wait
         t0 = time.monotonic()
         handle = _wait(client.send_goal_async(train_goal(seed=1, max_episodes=5, execute=True, execute_optimum=True)),
                        60)  # the goal response: 30 s was once too short under load

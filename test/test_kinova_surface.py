@@ -51,6 +51,7 @@ PRE = "/j2s7s300_driver"
 LATCHED = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 # deg/s per joint for 1 s: about 10-15 deg, away from the joint limits from the driver's start pose
 V_DEG = np.array([10.0, 10.0, -10.0, -10.0, 15.0, 15.0, -15.0])
+LAST = 0.5  # the stop test's last command: this fraction of V_DEG, to find its arrival in the joint states
 WATCHDOG = 0.05  # s the last command still acts (the arm stops within 50 ms after the commands stop)
 # s of simulated time the driver leaves at most between two joint states: one every 1/joint_state_rate, one per loop
 # tick of at most MAX_BATCH steps of 1 ms when its loop is behind
@@ -139,6 +140,15 @@ class Surface:
         last = max(k for k, m in enumerate(moving) if m)
         return duration, moved, stops, _t(msgs[last].header.stamp)
 
+    def at_speed(self, since: int, v_deg) -> tuple[float, float, int]:
+        """The stamps (simulated time) of the first and the last joint state after index `since` whose arm joints
+        all move within 10 % of v_deg, and how many do."""
+        msgs = sorted(self.states.snapshot()[0][since:], key=lambda m: _t(m.header.stamp))
+        v = np.radians(v_deg)
+        stamps = [_t(m.header.stamp) for m in msgs if np.all(np.abs(self._arm(m, "velocity") - v) <= 0.1 * np.abs(v))]
+        assert stamps, "no joint state at the last command's speed"
+        return stamps[0], stamps[-1], len(stamps)
+
     @staticmethod
     def _arm(msg, field: str) -> np.ndarray:
         values = getattr(msg, field)
@@ -210,15 +220,25 @@ def test_joint_motion_is_velocity_times_simulated_time(surface):
 
 
 def test_the_arm_stops_within_50_ms_when_commands_stop(surface):
-    """The motion beyond v x (simulated time of the command window) is the run-on after the last command."""
+    """The run-on after the last command, in simulated time from the command's arrival at the driver: the stream
+    ends with one command at half the speed (LAST), so the first joint state moving at that speed marks its arrival
+    and the last one the watchdog's stop, both by their stamps (the simulated time, in which the watchdog counts).
+    Measured from the test's own last publish instead (interpolated from /clock's receive times), a loaded machine's
+    late /clock or command delivery was counted as run-on: 168 ms at a load of 4-5, 969-1037 ms at 19-36."""
     s = surface
-    n, t0, t1 = _stream_from_rest(s, 0.3, 0.4)
-    _, _, stops, last_moving = s.motion(n, V_DEG)
-    run_on = last_moving - s.sim_time(t1)
-    print(f"\n[{s.interface}] the arm still moved {run_on * 1000:.0f} ms of simulated time after the last command "
-          f"was sent (by /clock's receive times; {stops} stops in the stream)")
-    # 50 ms watchdog; the margin is for /clock's delivery delays on a loaded machine
-    assert -0.1 < run_on < WATCHDOG + 0.1, run_on
+    _home(s)
+    s.q()
+    n = len(s.states.msgs) - 5  # from a few states at rest
+    t0, t1 = s.c.stream(s.vel, s.command(V_DEG), 0.3)
+    s.vel.publish(s.command(LAST * V_DEG))
+    s.q(0.4)
+    first, last, states = s.at_speed(n, LAST * V_DEG)
+    run_on = last - first
+    print(f"\n[{s.interface}] the arm moved {run_on * 1000:.0f} ms of simulated time on its last command ({states} "
+          f"joint states at its speed); by /clock's receive times {(last - s.sim_time(t1)) * 1000:.0f} ms after the "
+          f"test's last publish")
+    # 50 ms watchdog; a joint state at most every MAX_GAP of simulated time: one gap either side
+    assert 0.0 <= run_on <= WATCHDOG + 2 * MAX_GAP, run_on
 
 
 def test_fingers_close_and_open(surface):

@@ -1,4 +1,8 @@
-"""`qtree` command line (subprocess): train/solve outputs, and one clear line + non-zero exit on bad input."""
+"""`qtree` command line: train/solve outputs (subprocess, the module as the installed `qtree` runs it), and one clear
+line + exit status 2 on bad input (in-process through the same `main`, one case also as a subprocess: a process per
+case cost about 1.5 s of imports each)."""
+import contextlib
+import io
 import json
 import re
 import subprocess
@@ -16,6 +20,19 @@ SC5 = ROOT / "config" / "scenarios" / "blocking_5.yaml"
 def qtree(*args, cwd=ROOT):
     return subprocess.run([sys.executable, "-m", "relocation_app.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, timeout=60)
+
+
+def qtree_main(*args) -> subprocess.CompletedProcess:
+    """`main(argv)` in this process, its exit status, stdout and stderr as a subprocess's would be."""
+    from relocation_app.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([*map(str, args)])
+        except SystemExit as e:  # argparse's own errors
+            code = e.code if isinstance(e.code, int) else 1
+    return subprocess.CompletedProcess(["qtree", *map(str, args)], code, out.getvalue(), err.getvalue())
 
 
 def test_train_writes_json_and_dot(tmp_path):
@@ -92,7 +109,7 @@ def _no_blocking(d):
     (_dup, "duplicate id"), (_unknown, "blocking[T]"), (_weight, "weight must be in (0, 1]"),
     (_no_target, "target: missing"), (_no_blocking, "no 'blocking:' section")])
 def test_bad_scenarios_get_one_line(tmp_path, mutate, expect):
-    p = qtree("train", "--scenario", write_scenario(tmp_path, mutate), "--oracle", "blocking", "--no-progress")
+    p = qtree_main("train", "--scenario", write_scenario(tmp_path, mutate), "--oracle", "blocking", "--no-progress")
     assert p.returncode == 2 and p.stdout == ""
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("qtree: error:") and expect in lines[0], p.stderr
@@ -109,7 +126,7 @@ def test_bad_scenarios_get_one_line(tmp_path, mutate, expect):
     (["--params", "/nonexistent.yaml"], "cannot read parameters file"),
 ])
 def test_bad_arguments_get_one_line(args, expect):
-    p = qtree("train", "--scenario", SC5, *args)
+    p = qtree_main("train", "--scenario", SC5, *args)
     lines = p.stderr.strip().splitlines()
     assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("qtree: error:")
     assert expect in lines[0], p.stderr
@@ -119,6 +136,16 @@ def test_malformed_yaml_and_missing_file(tmp_path):
     f = tmp_path / "m.yaml"
     f.write_text("objects: [\n  - {id: a\n")
     for path, expect in ((f, "malformed YAML"), (tmp_path / "none.yaml", "cannot read scenario file")):
-        p = qtree("solve", "--scenario", path)
+        p = qtree_main("solve", "--scenario", path)
         lines = p.stderr.strip().splitlines()
         assert p.returncode == 2 and len(lines) == 1 and expect in lines[0], p.stderr
+
+
+def test_bad_input_from_the_command_exits_2_with_one_line():
+    """The same checks as above through the process (the exit status is the interpreter's, not main's return)."""
+    for args, expect in ((["train", "--scenario", SC5, "--beta", "-1"], "beta must be in"),
+                         (["train", "--scenario", SC5, "--policy", "greedy"], "invalid choice")):
+        p = qtree(*args)
+        lines = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and p.stdout == "" and len(lines) == 1 and lines[0].startswith("qtree: error:"), p
+        assert expect in lines[0], p.stderr
