@@ -25,3 +25,30 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "extended" in item.keywords:
             item.add_marker(skip)
+
+
+def pytest_runtest_protocol(item, nextitem):
+    """QTREE_TEST_CPU=FILE: a JSON line per test appended to FILE with its wall time and the CPU seconds of this
+    process and of the processes it waited for (the node processes a test started and stopped), setup and teardown
+    included (a module's fixtures count to its first and last test). What `./run test`'s time is spent on:
+    docs/bench/test_time.md."""
+    path = os.environ.get("QTREE_TEST_CPU")
+    if not path:
+        return None
+    import json
+    import resource
+    import time
+
+    def cpu() -> float:
+        own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+    t0, c0 = time.monotonic(), cpu()
+    item.ihook.pytest_runtest_logstart(nodeid=item.nodeid, location=item.location)
+    from _pytest.runner import runtestprotocol
+
+    runtestprotocol(item, nextitem=nextitem)
+    item.ihook.pytest_runtest_logfinish(nodeid=item.nodeid, location=item.location)
+    with open(path, "a") as f:
+        f.write(json.dumps({"test": item.nodeid, "wall": time.monotonic() - t0, "cpu": cpu() - c0}) + "\n")
+    return True
