@@ -339,6 +339,10 @@ class ArmGeometry:
         self._hi = np.maximum(self.p0, self.p1) + rad
         self._dirty = [True] * self.n
 
+    def moving_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the axis-aligned boxes of the capsules near_pairs looks at, at the current pose."""
+        return self._lo[self.moving], self._hi[self.moving]
+
     def _fcl(self, i: int) -> fcl.CollisionObject:
         """The fcl object of capsule i at its current pose (transforms are set lazily)."""
         if self._dirty[i]:

@@ -18,6 +18,7 @@ answer). Joint velocities are scaled to Table 7; the reference slows down by the
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field, fields
 from typing import Any, Iterable, Sequence
@@ -31,6 +32,7 @@ from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, Obsta
 from stpik_motion_planner.model.grasp import pose_pitch, tool_rotation
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.budget import check_deadline
+from stpik_motion_planner.planning.track_memo import Checked, TrackMemo
 
 Level = tuple[np.ndarray | None, np.ndarray]  # one task of Eq. 10: (Jacobian, None for the identity; reference)
 Candidates = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # set-based tasks: group, sigma, rows, threshold
@@ -146,6 +148,17 @@ class _Run:
     min_self: float = math.inf
     yaw_tol: float = 0.0  # > 0: the goal's yaw tolerance once the settle time is spent (Stpik.track)
     from_rest: bool = False  # the accel limit holds from the first step (Stpik.track)
+    boxes: list[tuple[np.ndarray, np.ndarray]] | None = None  # the moving capsules' boxes at each step (TrackMemo)
+    q_eval: np.ndarray | None = None  # the configuration the last step evaluated
+
+    @staticmethod
+    def start(stpik: Stpik, q0: np.ndarray, yaw_tol: float, from_rest: bool,
+              boxes: list[tuple[np.ndarray, np.ndarray]] | None) -> _Run:
+        """A check's state at q0: each shape's clearance bound to obstacles (the planner's, or its own: a carried
+        bottle's) and the broad-phase distance (the largest bound + buffer)."""
+        p = stpik.p
+        bound = np.array([p.clearance if s.clearance is None else s.clearance for s in stpik.arm.specs])
+        return _Run(q0, bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol, from_rest=from_rest, boxes=boxes)
 
 
 class _Reject(Exception):
@@ -165,6 +178,7 @@ class Stpik:
         self.lower = rd.Q_LOWER + params.joint_margin
         self.upper = rd.Q_UPPER - params.joint_margin
         self.eye = np.eye(rd.N_JOINTS)
+        self.memo: TrackMemo | None = None  # checks reused across questions (track_memo.py), when given one
 
     def _reference(self, path: list[np.ndarray], speed: float | None = None) -> np.ndarray:
         """Piecewise-linear reference: cumulative times of the waypoints (at `speed`, default ee_speed)."""
@@ -192,14 +206,33 @@ class Stpik:
         entering changed the wrist's speed by 0.85 rad/s within one step: in the simulator the fingers then hit the
         bottle they held, 200-350 N, and it moved 18-25 mm in the hand for a few ms); the joint-limit tasks then
         enter early enough to stop within that acceleration. Both for a hand holding a bottle. `from_rest`: the arm
-        is at rest at q0, so `accel` holds from the first step too (without it the first step is free)."""
-        p = self.p
+        is at rest at q0, so `accel` holds from the first step too (without it the first step is free).
+        With a `memo` (track_memo.TrackMemo), a check already run with the same start, path and settings is reused
+        where the obstacles that differ stayed beyond its broad phase at every step: the same result, bit for bit."""
         waypoints = [np.asarray(w, float) for w in path]
-        times = self._reference(waypoints, speed)
+        q0 = np.array(q0, float)
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
-        # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
-        bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
-        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol, from_rest=from_rest)
+        if self.memo is None:
+            return self._track(_Run.start(self, q0, yaw_tol, from_rest, None), waypoints, obs, deadline, skip,
+                               posture, speed, ramp, accel)
+        key = self.memo.key(self.p, q0, waypoints, skip or {}, posture, speed, ramp, accel, yaw_tol, from_rest)
+        got = self.memo.get(key, obs)
+        if got is not None:  # the Kinematics and capsules left as the check left them
+            self.kin.update(got.q_last)
+            self.arm.pose()
+            return _copy(got.result)
+        run = _Run.start(self, q0, yaw_tol, from_rest, [])
+        r = self._track(run, waypoints, obs, deadline, skip, posture, speed, ramp, accel)
+        boxes = run.boxes or [(np.empty((0, 3)), np.empty((0, 3)))]
+        self.memo.put(key, Checked(obs.items, np.vstack([b[0] for b in boxes]), np.vstack([b[1] for b in boxes]),
+                                   run.d_act, _copy(r), run.q_eval))
+        return r
+
+    def _track(self, run: _Run, waypoints: list[np.ndarray], obs: ObstacleSet, deadline: float, skip: Skip | None,
+               posture: np.ndarray, speed: float | None, ramp: float, accel: float) -> StpikResult:
+        """Stpik.track's loop from `run`'s start."""
+        p = self.p
+        times = self._reference(waypoints, speed)
         run.qs.append(run.q.copy())
         nominal = times[-1] + ramp * (len(waypoints) - 1)  # a ramp adds about `ramp` s per segment
         max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
@@ -247,6 +280,9 @@ class Stpik:
         q = run.q
         kin.update(q)
         self.arm.pose()
+        run.q_eval = q
+        if run.boxes is not None:
+            run.boxes.append(self.arm.moving_boxes())
         rot, pos = kin.tool_pose()
         jt = kin.frame_jacobian(kin.tool_fid)
         e_p = ref[:3] - pos
@@ -360,3 +396,8 @@ class Stpik:
     def _result(self, ok: bool, reason: str, run: _Run) -> StpikResult:
         return StpikResult(ok, reason, np.array(run.qs), np.array(run.qdots).reshape(-1, rd.N_JOINTS), self.p.dt,
                            run.min_clear, run.min_self, len(run.qdots))
+
+
+def _copy(r: StpikResult) -> StpikResult:
+    """A result with its own arrays (one kept by TrackMemo is never handed out)."""
+    return dataclasses.replace(r, q=r.q.copy(), qdot=r.qdot.copy())
