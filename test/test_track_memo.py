@@ -1,5 +1,5 @@
-"""STPIK checks reused across questions (stpik_motion_planner/planning/track_memo.py) give the answers of checks run
-afresh: the same labels, attempts, messages, near sets and trajectories, bit for bit.
+"""STPIK checks reused across questions (stpik_motion_planner/planning/stpik.py, TrackMemo) give the answers of
+checks run afresh: the same labels, attempts, messages, near sets and trajectories, bit for bit.
 
 The questions are fixed before any answer: every object of scenario3_15 with removed sets drawn by a seeded
 generator, several per object (the reuse happens between questions about one object), and each object again with its
@@ -18,7 +18,7 @@ from relocation_common.scenario import load_scenario
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.pick import candidates, front_of_shelf
 from stpik_motion_planner.planning.planner import MotionPlanner
-from stpik_motion_planner.planning.track_memo import TrackMemo, same_near
+from stpik_motion_planner.planning.stpik import TrackMemo, same_near
 
 SCENE = "scenario3_15"
 

@@ -41,8 +41,7 @@ from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import QueryStats
 from stpik_motion_planner.planning.rrt import CartesianRRT, seed_ompl
-from stpik_motion_planner.planning.stpik import Stpik, StpikResult
-from stpik_motion_planner.planning.track_memo import TrackMemo
+from stpik_motion_planner.planning.stpik import Stpik, StpikResult, TrackMemo
 
 # left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
 # first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
@@ -72,7 +71,7 @@ class PlanningContext:
         self.arm = ArmGeometry(self.kin)
         p = self.params
         self.stpik = Stpik(self.kin, self.arm, p.stpik)
-        self.stpik.memo = TrackMemo()  # the picks' checks reused across questions (track_memo.py)
+        self.stpik.memo = TrackMemo()  # the picks' checks reused across questions (stpik.TrackMemo)
         # the screen (and the Cartesian planner) keep STPIK's own bound when screen_at_clearance: a lane reported
         # clear is then clear for the fingers STPIK drives to the grasp (docs/motion_planner.md, "Blockers")
         self.hand_margin = max(p.hand_margin, p.stpik.clearance) if p.screen_at_clearance else p.hand_margin
