@@ -433,6 +433,7 @@ class HandProxy:
         self.p0 = np.array([s.p0 for s in self.specs])
         self.p1 = np.array([s.p1 for s in self.specs])
         self._reach = np.hstack([self.reach[:, None].repeat(3, 1), self.reach[:, None].repeat(3, 1)])
+        self._box = np.empty_like(self._reach)  # hits' work array
         self.req = fcl.CollisionRequest()
 
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
@@ -446,11 +447,20 @@ class HandProxy:
         the first one."""
         out: set[int] = set()
         p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
-        a = self.p0 @ r_tool.T + p7
-        b = self.p1 @ r_tool.T + p7
+        rt = r_tool.T
+        a = self.p0 @ rt
+        a += p7
+        b = self.p1 @ rt
+        b += p7
         # (hi, -lo) of each shape's AABB against (lo, -hi) of each obstacle's: they overlap where all six hold
-        box = np.hstack([np.maximum(a, b), -np.minimum(a, b)]) + self._reach
-        ci, oi = np.nonzero(np.all(obs.lo_neg_hi[None] <= box[:, None], axis=2))
+        box = self._box
+        np.maximum(a, b, out=box[:, :3])
+        np.minimum(a, b, out=box[:, 3:])
+        np.negative(box[:, 3:], out=box[:, 3:])
+        box += self._reach
+        ci, oi = (obs.lo_neg_hi[None] <= box[:, None]).all(axis=2).nonzero()
+        if not len(ci):
+            return out
         posed = set()
         for c, k in zip(ci, oi):
             o = obs.items[k]

@@ -148,6 +148,7 @@ class MotionPlanner(PlanningContext):
         self.pick_near.clear()
         self.stage_refs.clear()
         self.certified.clear()
+        self.near_cache.clear()
         if self.stpik.memo is not None:
             self.stpik.memo.clear()
 
