@@ -43,13 +43,21 @@ def _answer(a) -> tuple:
             [(sorted(b.objects), b.certain, b.lane) for b in a.blockers], traj)
 
 
+class _Keeping(dict):
+    """A cache that keeps nothing."""
+
+    def __setitem__(self, key, value) -> None:
+        pass
+
+
 @pytest.fixture(scope="module")
 def planners():
     sc = load_scenario(SCENE)
     params = dataclasses.replace(PlannerParams.load(), certify_relocation=False)
     reusing = MotionPlanner(sc, params)
     fresh = MotionPlanner(sc, params)
-    fresh.stpik.memo = None
+    fresh.stpik.memo = None  # nothing kept: every check run, every near set computed
+    fresh.near_cache = _Keeping()
     return sc, reusing, fresh
 
 
@@ -134,3 +142,27 @@ def test_a_reused_result_is_a_copy(planners):
     b = stpik.track(rd.Q_HOME, path, obs, 1e18)
     assert stpik.memo.hits == hits + 1
     assert b.ok and np.any(b.q != 0.0)
+
+
+def test_the_seed_follows_a_changed_parameter_and_scene(planners):
+    """question_rng keeps the scene-and-parameters part of its seed (PlanningContext.seed_scene): a parameter
+    changed in place, or another scene, gives the seed a planner built with them gives."""
+    sc, reusing, _ = planners
+    draw = lambda mp: mp.question_rng("pick", sc.target_id, frozenset()).integers(1 << 62)  # noqa: E731
+    before = draw(reusing)
+    reusing.params.rrt_max_checks += 1
+    try:
+        changed = draw(reusing)
+        assert changed != before
+        assert changed == draw(MotionPlanner(sc, dataclasses.replace(reusing.params)))
+    finally:
+        reusing.params.rrt_max_checks -= 1
+    assert draw(reusing) == before
+    moved = dataclasses.replace(sc, objects=tuple(dataclasses.replace(o, x=o.x + 0.001) if o.id == sc.target_id
+                                                  else o for o in sc.objects), _by_id={})
+    fresh = MotionPlanner(moved, dataclasses.replace(reusing.params))
+    reusing.set_scenario(moved)
+    try:
+        assert draw(reusing) == draw(fresh) != before
+    finally:
+        reusing.set_scenario(sc)
