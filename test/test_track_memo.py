@@ -148,7 +148,11 @@ def test_the_seed_follows_a_changed_parameter_and_scene(planners):
     """question_rng keeps the scene-and-parameters part of its seed (PlanningContext.seed_scene): a parameter
     changed in place, or another scene, gives the seed a planner built with them gives."""
     sc, reusing, _ = planners
-    draw = lambda mp: mp.question_rng("pick", sc.target_id, frozenset()).integers(1 << 62)  # noqa: E731
+    def draw(mp: MotionPlanner) -> int:
+        rng = mp.question_rng("pick", sc.target_id, frozenset())
+        assert rng is not None
+        return int(rng.integers(1 << 62))
+
     before = draw(reusing)
     reusing.params.rrt_max_checks += 1
     try:

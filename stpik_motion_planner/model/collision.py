@@ -458,7 +458,7 @@ class HandProxy:
         np.minimum(a, b, out=box[:, 3:])
         np.negative(box[:, 3:], out=box[:, 3:])
         box += self._reach
-        ci, oi = (obs.lo_neg_hi[None] <= box[:, None]).all(axis=2).nonzero()
+        ci, oi = np.nonzero((obs.lo_neg_hi[None] <= box[:, None]).all(axis=2))
         if not len(ci):
             return out
         posed = set()
