@@ -250,8 +250,8 @@ def latency_baseline(name: str, rev: str, rounds: int) -> str:
             runs[key].append(json.loads(res.stdout.strip().splitlines()[-1]))
     ref = [(r[0], r[1], r[2], r[4]) for r in runs[rev][0]]
     same = all([(r[0], r[1], r[2], r[4]) for r in run] == ref for v in runs.values() for run in v)
-    lines, stats = [f"{name}: uniform-cost solve x {rounds} rounds, {len(ref)} questions each; same answers "
-                    f"(label, attempts, message, trajectory bit for bit): {same}"], {}
+    lines, stats = [f"{name}: uniform-cost solve, {rounds} runs of each planner alternated, {len(ref)} questions a "
+                    f"run; same answers (label, attempts, message, trajectory bit for bit): {same}"], {}
     for key, rs in runs.items():
         f = [r[3] for run in rs for r in run if r[2] != 0]
         u = [r[3] for run in rs for r in run if r[2] == 0]
