@@ -26,6 +26,11 @@ the scene of the question it answered (the removed objects on the bottom shelf),
 --latency SCENE: a feasible answer's in-process time (the planner's planning_time, p50 / p95) during a uniform-cost
 solve of the scene (qtree_task_planner.search.exact.solve, every question asked of the planner), old and new
 alternated `--rounds` times in one process, so that a change of the machine's load hits both.
+
+--latency SCENE --baseline REV: the same with the lazy planner of git revision REV (its stpik_motion_planner/,
+exported by bench_motion_planner.export_package) against the working tree's, each in a fresh process, alternated
+`--rounds` times; prints feasible and unfeasible p50 / p95 of each, their ratio, and whether both gave the same
+answers (label, attempts, message and trajectory bit for bit, question by question).
 """
 from __future__ import annotations
 
@@ -40,6 +45,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "test")]
+# BENCH_IMPL_DIR: a directory holding another stpik_motion_planner/ (--latency --baseline), found first
+sys.path[:0] = [os.environ["BENCH_IMPL_DIR"]] if os.environ.get("BENCH_IMPL_DIR") else []
 
 SAFETY_NET = 300.0  # s: the wall-clock safety nets, far above the work budgets on a loaded machine (no answer moves)
 MODES = ("old", "new")
@@ -197,6 +204,66 @@ def latency(name: str, rounds: int) -> str:
                      f"({len(unfeasible[mode])})" for mode in MODES)
 
 
+def answers_of(name: str) -> list[list]:
+    """The lazy planner's answers during a uniform-cost solve of `name`, in order: [object, removed, label,
+    planning time, digest of (attempts, message, trajectory)] (--baseline: one process per run)."""
+    import hashlib
+
+    from qtree_task_planner.search import exact
+    from relocation_common.scenario import load_scenario
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.planner import MotionPlanner
+
+    sc = load_scenario(name)
+    params = dataclasses.replace(PlannerParams.load(), certify_relocation=False, timeout=SAFETY_NET,
+                                 carry_timeout=SAFETY_NET)
+    planner, out = MotionPlanner(sc, params), []
+
+    class Recorder(Answers):
+        def feasibility(self, object_id: str, removed: frozenset[str]) -> Any:
+            a = self.planner.feasibility(object_id, removed)
+            t = a.trajectory
+            lanes = [(sorted(b.objects), b.certain, b.lane) for b in a.blockers]
+            h = hashlib.sha256(repr((a.attempts, a.message, lanes, sorted(a.near or ()))).encode())
+            if t is not None:
+                h.update(t.times.tobytes() + t.positions.tobytes() + t.velocities.tobytes() + repr(t.phases).encode())
+            out.append([object_id, sorted(removed), int(a.label), a.planning_time, h.hexdigest()[:16]])
+            return a
+
+    exact.solve(sc, Recorder(planner, certifying=False))
+    return out
+
+
+def latency_baseline(name: str, rev: str, rounds: int) -> str:
+    """REV's lazy planner against the working tree's, alternated in fresh processes (the module docstring)."""
+    import subprocess
+
+    from bench_motion_planner import export_package  # scripts/ is sys.path[0]: the sibling benchmark
+
+    impls = ((rev, export_package(rev)), ("working tree", ""))
+    runs: dict[str, list[list]] = {k: [] for k, _ in impls}
+    for _ in range(rounds):
+        for key, impl in impls:
+            env = dict(os.environ, BENCH_IMPL_DIR=impl)
+            res = subprocess.run([sys.executable, __file__, "--answers", name], env=env, capture_output=True,
+                                 text=True, check=True)
+            runs[key].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    ref = [(r[0], r[1], r[2], r[4]) for r in runs[rev][0]]
+    same = all([(r[0], r[1], r[2], r[4]) for r in run] == ref for v in runs.values() for run in v)
+    lines, stats = [f"{name}: uniform-cost solve, {rounds} runs of each planner alternated, {len(ref)} questions a "
+                    f"run; same answers (label, attempts, message, trajectory bit for bit): {same}"], {}
+    for key, rs in runs.items():
+        f = [r[3] for run in rs for r in run if r[2] != 0]
+        u = [r[3] for run in rs for r in run if r[2] == 0]
+        stats[key] = (_pct(f, 0.5), _pct(f, 0.95), _pct(u, 0.5), _pct(u, 0.95))
+        lines.append(f"  {key:14s} feasible p50 {stats[key][0]} ms, p95 {stats[key][1]} ms ({len(f)} answers); "
+                     f"unfeasible p50 {stats[key][2]} ms, p95 {stats[key][3]} ms ({len(u)})")
+    b, w = stats[rev], stats["working tree"]
+    lines.append(f"  ratio {rev} / working tree: feasible p50 {b[0] / w[0]:.2f}x, p95 {b[1] / w[1]:.2f}x; "
+                 f"unfeasible p50 {b[2] / w[2]:.2f}x, p95 {b[3] / w[3]:.2f}x")
+    return "\n".join(lines)
+
+
 def one(name: str, modes: tuple[str, ...]) -> list[dict]:
     """Both modes of a scene (a scene that does not load: one row saying why)."""
     rows = []
@@ -261,10 +328,15 @@ def main() -> None:
     ap.add_argument("--summary", help="print the table of a run's JSON lines and exit")
     ap.add_argument("--latency", metavar="SCENE", help="a feasible answer's time, old and new (module docstring)")
     ap.add_argument("--rounds", type=int, default=1, help="--latency: old and new alternated this many times")
+    ap.add_argument("--baseline", metavar="REV", help="--latency: REV's lazy planner against the working tree's")
+    ap.add_argument("--answers", metavar="SCENE", help=argparse.SUPPRESS)  # --baseline's one run, as JSON
     a = ap.parse_args()
+    if a.answers:
+        print(json.dumps(answers_of(a.answers)))
+        return
     if a.latency:
         print(f"# {time.strftime('%Y-%m-%d %H:%M')}, load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-        print(latency(a.latency, a.rounds))
+        print(latency_baseline(a.latency, a.baseline, a.rounds) if a.baseline else latency(a.latency, a.rounds))
         print(f"# {time.strftime('%Y-%m-%d %H:%M')}, load at the end {os.getloadavg()[0]:.1f}")
         return
     if a.summary:

@@ -339,6 +339,10 @@ class ArmGeometry:
         self._hi = np.maximum(self.p0, self.p1) + rad
         self._dirty = [True] * self.n
 
+    def moving_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the axis-aligned boxes of the capsules near_pairs looks at, at the current pose."""
+        return self._lo[self.moving], self._hi[self.moving]
+
     def _fcl(self, i: int) -> fcl.CollisionObject:
         """The fcl object of capsule i at its current pose (transforms are set lazily)."""
         if self._dirty[i]:
@@ -429,6 +433,7 @@ class HandProxy:
         self.p0 = np.array([s.p0 for s in self.specs])
         self.p1 = np.array([s.p1 for s in self.specs])
         self._reach = np.hstack([self.reach[:, None].repeat(3, 1), self.reach[:, None].repeat(3, 1)])
+        self._box = np.empty_like(self._reach)  # hits' work array
         self.req = fcl.CollisionRequest()
 
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
@@ -442,11 +447,20 @@ class HandProxy:
         the first one."""
         out: set[int] = set()
         p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
-        a = self.p0 @ r_tool.T + p7
-        b = self.p1 @ r_tool.T + p7
+        rt = r_tool.T
+        a = self.p0 @ rt
+        a += p7
+        b = self.p1 @ rt
+        b += p7
         # (hi, -lo) of each shape's AABB against (lo, -hi) of each obstacle's: they overlap where all six hold
-        box = np.hstack([np.maximum(a, b), -np.minimum(a, b)]) + self._reach
-        ci, oi = np.nonzero(np.all(obs.lo_neg_hi[None] <= box[:, None], axis=2))
+        box = self._box
+        np.maximum(a, b, out=box[:, :3])
+        np.minimum(a, b, out=box[:, 3:])
+        np.negative(box[:, 3:], out=box[:, 3:])
+        box += self._reach
+        ci, oi = np.nonzero((obs.lo_neg_hi[None] <= box[:, None]).all(axis=2))
+        if not len(ci):
+            return out
         posed = set()
         for c, k in zip(ci, oi):
             o = obs.items[k]

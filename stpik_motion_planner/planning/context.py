@@ -41,7 +41,7 @@ from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.results import QueryStats
 from stpik_motion_planner.planning.rrt import CartesianRRT, seed_ompl
-from stpik_motion_planner.planning.stpik import Stpik, StpikResult
+from stpik_motion_planner.planning.stpik import Stpik, StpikResult, TrackMemo
 
 # left out of question_rng's seed: the safety nets (wall clock), and the second yaw tier's settings, so that the
 # first tier's draws, and every answer it gives, are those of a planner without the second tier; the grasp's yaw
@@ -71,6 +71,7 @@ class PlanningContext:
         self.arm = ArmGeometry(self.kin)
         p = self.params
         self.stpik = Stpik(self.kin, self.arm, p.stpik)
+        self.stpik.memo = TrackMemo()  # the picks' checks reused across questions (stpik.TrackMemo)
         # the screen (and the Cartesian planner) keep STPIK's own bound when screen_at_clearance: a lane reported
         # clear is then clear for the fingers STPIK drives to the grasp (docs/motion_planner.md, "Blockers")
         self.hand_margin = max(p.hand_margin, p.stpik.clearance) if p.screen_at_clearance else p.hand_margin
@@ -83,6 +84,8 @@ class PlanningContext:
         self.pick_near: dict[tuple[str, frozenset[str]], frozenset[str] | None] = {}  # -> near_objects
         self.stage_refs: dict[tuple[object, ...], list[np.ndarray] | None] = {}  # home.stage_reference's tracks
         self.certified: dict[tuple[str, frozenset[str], bytes], str] = {}  # (object, removed, grasp) -> certify.certify
+        self.near_cache: dict[tuple, frozenset[str]] = {}  # near_objects' answers
+        self._seed_scene: tuple[Scenario, tuple[str, ...], tuple[str, ...]] | None = None  # seed_scene's
 
     # ---------------------------------------------------------------- the question
     def check_question(self, object_id: str, removed: Iterable[str]) -> frozenset[str]:
@@ -103,14 +106,7 @@ class PlanningContext:
         planner parameter but the wall-clock safety nets; None (OMPL's process-wide RNG) otherwise."""
         if not self.params.seed_per_query:
             return None
-        sc = self.scenario
-        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED} | SEEDED_AS
-        params["stpik"] = {k: v for k, v in params["stpik"].items() if k not in UNSEEDED_STPIK}
-        params["stpik"]["qdot_max"] = rd.QDOT_MAX.copy()  # Table 7, the robot's: in the seed as when it was a parameter
-        parts = [repr(sc.shelf), objects_key(sc.objects, sc.shelf.top_z), repr(sc.slots),  # objects_key: the seeds
-                 repr(sorted(params.items()))]  # of every shipped scene as they were before objects had shapes
-        if self.lying or self.gone:  # a standing scene's questions keep their seeds (the committed caches)
-            parts += [repr(sorted(self.lying.items())), repr(sorted(self.gone))]
+        parts = list(self.seed_scene())
         for x in question:
             if isinstance(x, np.ndarray):
                 parts.append(np.round(x, 9).tobytes().hex())
@@ -120,6 +116,24 @@ class PlanningContext:
                 parts.append(repr(x))
         digest = hashlib.sha256("\x1f".join(parts).encode()).digest()
         return np.random.default_rng(int.from_bytes(digest[:16], "little"))
+
+    def seed_scene(self) -> tuple[str, ...]:
+        """The part of question_rng's seed that is the same for every question: the scene (shelf, bottles, slots;
+        the lying and gone bottles if any) and the parameters; computed again when any of them changed."""
+        key = (repr(self.params), repr(sorted(self.lying.items())), repr(sorted(self.gone)))
+        got = self._seed_scene
+        if got is not None and got[0] is self.scenario and got[1] == key:
+            return got[2]
+        sc = self.scenario
+        params = {k: v for k, v in dataclasses.asdict(self.params).items() if k not in UNSEEDED} | SEEDED_AS
+        params["stpik"] = {k: v for k, v in params["stpik"].items() if k not in UNSEEDED_STPIK}
+        params["stpik"]["qdot_max"] = rd.QDOT_MAX.copy()  # Table 7, the robot's: in the seed as when it was a parameter
+        parts = [repr(sc.shelf), objects_key(sc.objects, sc.shelf.top_z), repr(sc.slots),  # objects_key: the seeds
+                 repr(sorted(params.items()))]  # of every shipped scene as they were before objects had shapes
+        if self.lying or self.gone:  # a standing scene's questions keep their seeds (the committed caches)
+            parts += [key[1], key[2]]
+        self._seed_scene = (sc, key, tuple(parts))
+        return self._seed_scene[2]
 
     # ---------------------------------------------------------------- the scene
     def collision_scene(self, placed: Sequence[tuple[str, tuple[float, float]]] = ()) -> CollisionScene:
@@ -234,7 +248,23 @@ class PlanningContext:
 def near_objects(ctx: PlanningContext, object_id: str, steps: Sequence[np.ndarray], tool_path: Sequence[np.ndarray]
                  ) -> frozenset[str]:
     """The bottles (other than `object_id`, removed or not) within reuse_distance of the arm at the IK `steps` or of
-    the hand proxy along `tool_path` ((x, y, z, yaw) poses)."""
+    the hand proxy along `tool_path` ((x, y, z, yaw) poses); kept by object, steps and path (the same for every
+    removed set: ctx.near_cache, emptied with the scene)."""
+    d = ctx.params.reuse_distance
+    h = hashlib.blake2b(digest_size=32)
+    for x in [*steps, None, *tool_path]:  # None: where the path starts
+        a = np.zeros(0) if x is None else np.asarray(x, float)
+        h.update(len(a).to_bytes(4, "little") + a.tobytes())
+    key = (object_id, d, ctx.params.resolution, h.digest())
+    got = ctx.near_cache.get(key)
+    if got is None:
+        got = ctx.near_cache[key] = _near_objects(ctx, object_id, steps, tool_path)
+    return got
+
+
+def _near_objects(ctx: PlanningContext, object_id: str, steps: Sequence[np.ndarray],
+                  tool_path: Sequence[np.ndarray]) -> frozenset[str]:
+    """near_objects computed."""
     d = ctx.params.reuse_distance
     bottles = [o for i, o in ctx.scene.bottles.items() if i != object_id]
     if not bottles:

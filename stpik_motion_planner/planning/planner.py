@@ -140,7 +140,7 @@ class MotionPlanner(PlanningContext):
         """Replace the scene (same shelf; e.g. bottles as perceived): `lying`, the bottles of the top shelf that lean,
         neither standing nor lying flat (scene_update.lying_pose: obstacles as the cylinders they are, never
         graspable); `gone`, those that left the shelf (no
-        obstacle, never graspable). Cached grasp ends are dropped."""
+        obstacle, never graspable). Cached grasp ends and STPIK checks are dropped."""
         self.scenario = scenario
         self.lying, self.gone = dict(lying or {}), frozenset(gone)
         self.scene = self.collision_scene()
@@ -148,6 +148,9 @@ class MotionPlanner(PlanningContext):
         self.pick_near.clear()
         self.stage_refs.clear()
         self.certified.clear()
+        self.near_cache.clear()
+        if self.stpik.memo is not None:
+            self.stpik.memo.clear()
 
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""

@@ -15,10 +15,23 @@ The path is rejected if any bound is violated (sigma < -tol), if tracking error 
 step budget is spent (step_budget times the reference's nominal steps, plus settle_time): IK steps, not seconds,
 so the answer is the same on a loaded machine. The wall-clock deadline is only a safety net (SafetyNetTimeout: no
 answer). Joint velocities are scaled to Table 7; the reference slows down by the same factor.
+
+TrackMemo: checks reused across questions (the planner's own arm: the picks' paths). A check (Eq. 9-10 along a path)
+is a function of its start, its path, its settings and of the obstacles its broad phase lets through
+(ArmGeometry.near_pairs: an obstacle enters a step only when the axis-aligned box of some moving capsule comes
+within the step's broad-phase distance d_act of its box). A check records, at every step it evaluated, the boxes of
+the moving capsules; asked again with the same start, path and settings but another obstacle set, its result is
+reused when every obstacle in one set and not in the other stays beyond d_act of the boxes of every evaluated step
+(the same test as near_pairs), and the obstacles the two sets share come in the same order. Then every step sees the
+same (capsule, obstacle) pairs in the same order, so it computes the same numbers: the reused result is the one the
+check would give, bit for bit (by induction over the steps: the same configuration, the same pairs, the same step).
+A change of the planner's parameters changes the key.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field, fields
 from typing import Any, Iterable, Sequence
 
@@ -27,7 +40,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
-from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, ObstacleSet, Skip
+from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, Obstacle, ObstacleSet, Skip
 from stpik_motion_planner.model.grasp import pose_pitch, tool_rotation
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.budget import check_deadline
@@ -146,6 +159,17 @@ class _Run:
     min_self: float = math.inf
     yaw_tol: float = 0.0  # > 0: the goal's yaw tolerance once the settle time is spent (Stpik.track)
     from_rest: bool = False  # the accel limit holds from the first step (Stpik.track)
+    boxes: list[tuple[np.ndarray, np.ndarray]] | None = None  # the moving capsules' boxes at each step (TrackMemo)
+    q_eval: np.ndarray | None = None  # the configuration the last step evaluated
+
+    @staticmethod
+    def start(stpik: Stpik, q0: np.ndarray, yaw_tol: float, from_rest: bool,
+              boxes: list[tuple[np.ndarray, np.ndarray]] | None) -> _Run:
+        """A check's state at q0: each shape's clearance bound to obstacles (the planner's, or its own: a carried
+        bottle's) and the broad-phase distance (the largest bound + buffer)."""
+        p = stpik.p
+        bound = np.array([p.clearance if s.clearance is None else s.clearance for s in stpik.arm.specs])
+        return _Run(q0, bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol, from_rest=from_rest, boxes=boxes)
 
 
 class _Reject(Exception):
@@ -165,6 +189,7 @@ class Stpik:
         self.lower = rd.Q_LOWER + params.joint_margin
         self.upper = rd.Q_UPPER - params.joint_margin
         self.eye = np.eye(rd.N_JOINTS)
+        self.memo: TrackMemo | None = None  # checks reused across questions (TrackMemo), when given one
 
     def _reference(self, path: list[np.ndarray], speed: float | None = None) -> np.ndarray:
         """Piecewise-linear reference: cumulative times of the waypoints (at `speed`, default ee_speed)."""
@@ -192,14 +217,34 @@ class Stpik:
         entering changed the wrist's speed by 0.85 rad/s within one step: in the simulator the fingers then hit the
         bottle they held, 200-350 N, and it moved 18-25 mm in the hand for a few ms); the joint-limit tasks then
         enter early enough to stop within that acceleration. Both for a hand holding a bottle. `from_rest`: the arm
-        is at rest at q0, so `accel` holds from the first step too (without it the first step is free)."""
-        p = self.p
+        is at rest at q0, so `accel` holds from the first step too (without it the first step is free).
+        With a `memo` (TrackMemo), a check already run with the same start, path and settings is reused
+        where the obstacles that differ stayed beyond its broad phase at every step: the same result, bit for bit."""
         waypoints = [np.asarray(w, float) for w in path]
-        times = self._reference(waypoints, speed)
+        q0 = np.array(q0, float)
         posture = rd.Q_HOME if posture is None else np.asarray(posture, float)
-        # each shape's clearance bound to obstacles: the planner's, or its own (a carried bottle's)
-        bound = np.array([p.clearance if s.clearance is None else s.clearance for s in self.arm.specs])
-        run = _Run(np.array(q0, float), bound, float(np.max(bound)) + p.buffer, yaw_tol=yaw_tol, from_rest=from_rest)
+        if self.memo is None:
+            return self._track(_Run.start(self, q0, yaw_tol, from_rest, None), waypoints, obs, deadline, skip,
+                               posture, speed, ramp, accel)
+        key = self.memo.key(self.p, q0, waypoints, skip or {}, posture, speed, ramp, accel, yaw_tol, from_rest)
+        check_deadline(deadline, "the STPIK check")
+        got = self.memo.get(key, obs)
+        if got is not None:  # the Kinematics and capsules left as the check left them
+            self.kin.update(got.q_last)
+            self.arm.pose()
+            return _copy(got.result)
+        run = _Run.start(self, q0, yaw_tol, from_rest, [])
+        r = self._track(run, waypoints, obs, deadline, skip, posture, speed, ramp, accel)
+        boxes = run.boxes or [(np.empty((0, 3)), np.empty((0, 3)))]
+        self.memo.put(key, Checked(obs.items, np.vstack([b[0] for b in boxes]), np.vstack([b[1] for b in boxes]),
+                                   run.d_act, _copy(r), run.q if run.q_eval is None else run.q_eval))
+        return r
+
+    def _track(self, run: _Run, waypoints: list[np.ndarray], obs: ObstacleSet, deadline: float, skip: Skip | None,
+               posture: np.ndarray, speed: float | None, ramp: float, accel: float) -> StpikResult:
+        """Stpik.track's loop from `run`'s start."""
+        p = self.p
+        times = self._reference(waypoints, speed)
         run.qs.append(run.q.copy())
         nominal = times[-1] + ramp * (len(waypoints) - 1)  # a ramp adds about `ramp` s per segment
         max_steps = int(math.ceil((p.step_budget * nominal + p.settle_time) / p.dt))
@@ -247,6 +292,9 @@ class Stpik:
         q = run.q
         kin.update(q)
         self.arm.pose()
+        run.q_eval = q
+        if run.boxes is not None:
+            run.boxes.append(self.arm.moving_boxes())
         rot, pos = kin.tool_pose()
         jt = kin.frame_jacobian(kin.tool_fid)
         e_p = ref[:3] - pos
@@ -360,3 +408,85 @@ class Stpik:
     def _result(self, ok: bool, reason: str, run: _Run) -> StpikResult:
         return StpikResult(ok, reason, np.array(run.qs), np.array(run.qdots).reshape(-1, rd.N_JOINTS), self.p.dt,
                            run.min_clear, run.min_self, len(run.qdots))
+
+
+def _copy(r: StpikResult) -> StpikResult:
+    """A result with its own arrays (one kept by TrackMemo is never handed out)."""
+    return dataclasses.replace(r, q=r.q.copy(), qdot=r.qdot.copy())
+
+
+# ---------------------------------------------------------------- checks reused across questions (module docstring)
+MAX_KEYS = 256  # (start, path, settings) kept, least recently used first out: a bound on memory, not on answers
+MAX_PER_KEY = 4  # checks kept per key (obstacle sets that differ near the path)
+
+
+@dataclasses.dataclass
+class Checked:
+    """One STPIK check as run: its obstacles, the moving capsules' boxes at each evaluated step, the broad-phase
+    distance, the result, and the configuration the last step evaluated (the Kinematics state it left)."""
+
+    items: list[Obstacle]
+    lo: np.ndarray  # (evaluated steps x moving capsules) x 3
+    hi: np.ndarray
+    d_act: float
+    result: StpikResult
+    q_last: np.ndarray
+
+
+class TrackMemo:
+    """Checks by (start, path, settings), each reused for an obstacle set as the module docstring says."""
+
+    def __init__(self) -> None:
+        self.checks: OrderedDict[tuple, list[Checked]] = OrderedDict()
+        self.hits = 0
+        self.misses = 0
+
+    def clear(self) -> None:
+        """Forget every check (a new scene)."""
+        self.checks.clear()
+
+    @staticmethod
+    def key(params: object, q0: np.ndarray, path: Sequence[np.ndarray], *settings: object) -> tuple:
+        """What a check is a function of besides its obstacles: the STPIK parameters, start, path and settings."""
+        parts: list[Any] = [dataclasses.astuple(params), q0.tobytes()]  # type: ignore[call-overload]
+        parts += [(len(w), w.tobytes()) for w in path]
+        for s in settings:
+            parts.append(s.tobytes() if isinstance(s, np.ndarray) else
+                         tuple(sorted((k, tuple(sorted(v))) for k, v in s.items())) if isinstance(s, dict) else s)
+        return tuple(parts)
+
+    def get(self, key: tuple, obs: ObstacleSet) -> Checked | None:
+        """A check of `key` valid for `obs` (the module docstring), or None."""
+        for c in self.checks.get(key, ()):
+            if c.items is obs.items or same_near(c, obs.items):
+                self.checks.move_to_end(key)
+                self.hits += 1
+                return c
+        self.misses += 1
+        return None
+
+    def put(self, key: tuple, check: Checked) -> None:
+        """Keep `check` (the oldest keys and checks dropped beyond MAX_KEYS and MAX_PER_KEY)."""
+        kept = self.checks.setdefault(key, [])
+        kept.insert(0, check)
+        del kept[MAX_PER_KEY:]
+        self.checks.move_to_end(key)
+        while len(self.checks) > MAX_KEYS:
+            self.checks.popitem(last=False)
+
+
+def same_near(c: Checked, items: list[Obstacle]) -> bool:
+    """Whether a check run with c.items sees the same pairs at every step with `items`: the shared obstacles in the
+    same order, and each obstacle of one set only beyond c.d_act of every evaluated step's capsule boxes."""
+    old = {id(o) for o in c.items}
+    new = {id(o) for o in items}
+    if [id(o) for o in c.items if id(o) in new] != [id(o) for o in items if id(o) in old]:
+        return False
+    diff = [o for o in items if id(o) not in old] + [o for o in c.items if id(o) not in new]
+    if not diff:
+        return True
+    lo = np.array([o.lo for o in diff])
+    hi = np.array([o.hi for o in diff])
+    gap = np.maximum(np.maximum(lo[None] - c.hi[:, None], c.lo[:, None] - hi[None]), 0.0)
+    # near_pairs' test (gap^2 < d_act^2), with a margin for rounding: a pair it could let through is never missed
+    return not bool((np.einsum("ijk,ijk->ij", gap, gap) < c.d_act * c.d_act * (1.0 + 1e-6) + 1e-12).any())
