@@ -100,14 +100,7 @@ build_msgs() {
 # Inputs of a package's build step: its files, its directories (a file added or removed) and the wheels.
 msgs_inputs() { echo msg_defs/$1 msg_defs/$1/* msg_defs/$1/*/* msg_defs/cmake/* requirements.txt requirements-build.txt; }
 
-# The three packages do not depend on each other: they are built side by side (each build's configure, generation
-# and install steps run one process at a time: side by side they fill both cores). QTREE_SETUP_SERIAL=1: one after the
-# other. BUILDS holds the background builds' process ids.
-BUILDS=()
-build_step() {
-  if [ "${QTREE_SETUP_SERIAL:-0}" = 1 ]; then step "$@"; else step "$@" & BUILDS+=($!); fi
-}
-build_step msgs-qtree_relocation_msgs $(msgs_inputs qtree_relocation_msgs) -- build_msgs qtree_relocation_msgs \
+step msgs-qtree_relocation_msgs $(msgs_inputs qtree_relocation_msgs) -- build_msgs qtree_relocation_msgs \
   "from qtree_relocation_msgs.msg import ObjectState, ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner"
@@ -127,10 +120,7 @@ if [ "${QTREE_SKIP_KINOVA_MSGS:-0}" = 1 ] || { [ -n "$kinova_at" ] && [[ "$kinov
       || { echo "error: the kinova_msgs at $kinova_at lacks types this project uses" >&2; exit 1; }
   fi
 else
-  build_step msgs-kinova_msgs $(msgs_inputs kinova_msgs) -- build_msgs kinova_msgs "$KINOVA_MSGS_IMPORTS"
+  step msgs-kinova_msgs $(msgs_inputs kinova_msgs) -- build_msgs kinova_msgs "$KINOVA_MSGS_IMPORTS"
 fi
 
-build_step msgs-tf2_msgs $(msgs_inputs tf2_msgs) -- build_msgs tf2_msgs "from tf2_msgs.msg import TFMessage"
-failed=0
-for job in "${BUILDS[@]}"; do wait "$job" || failed=1; done
-[ $failed = 0 ] || { echo "error: an interface package did not build (its lines above say which)" >&2; exit 1; }
+step msgs-tf2_msgs $(msgs_inputs tf2_msgs) -- build_msgs tf2_msgs "from tf2_msgs.msg import TFMessage"
