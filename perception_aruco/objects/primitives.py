@@ -33,6 +33,10 @@ SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best di
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
 LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
+INLIERS = 0.9  # a fit's rms is over this fraction of the points nearest its surface (trimmed_rms)
+BOX_ROUNDS = 3  # the box's faces refitted on the points nearest each (_refit_box)
+MIN_FACE_POINTS = 10  # side points that show a face of the box
+MIN_FACE_FRACTION = 0.1  # of the side points: fewer on a face, it is not seen (placed by the top face's extent)
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,14 @@ def _sample(points: np.ndarray) -> np.ndarray:
     return points[::step]
 
 
+def trimmed_rms(d: np.ndarray) -> float:
+    """The rms of the INLIERS fraction of distances `d` nearest the surface: a fit's quality on its inliers, the
+    rest (the realistic camera's flying pixels between an edge and what lies behind it, its stray edge points) at
+    most 1 - INLIERS of the points."""
+    k = max(1, int(INLIERS * len(d)))
+    return float(np.sqrt(np.mean(np.partition(d, k - 1)[:k] ** 2)))
+
+
 def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: float, camera: np.ndarray,
                       params: ObjectParams, tol: float) -> Primitive:
     """The standing cylinder through the circle points `xy` (side and rim); FitError when it does not fit."""
@@ -70,7 +82,7 @@ def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: f
     cap = points[points[:, 2] >= top - CAP_BAND, :2]
     seen = int(np.sum(np.linalg.norm(cap - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
     return Primitive(CYLINDER, False, float(centre[0]), float(centre[1]), r, h, (2 * r, 2 * r, h), 0.0,
-                     float(np.sqrt(np.mean(d ** 2))), False, "", seen, (False, False))
+                     trimmed_rms(d), False, "", seen, (False, False))
 
 
 def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: float,
@@ -100,7 +112,7 @@ def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: fl
     lo, hi = np.percentile(t, [0.5, 99.5])
     rho = np.hypot(s - sc, z - r)
     d = np.minimum(np.abs(rho - r), np.abs(np.abs(t - (lo + hi) / 2) - (hi - lo) / 2) + np.maximum(rho - r, 0.0))
-    return sc, r, float(np.sqrt(np.mean(d ** 2)))
+    return sc, r, trimmed_rms(d)
 
 
 def _search_rms(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: np.ndarray, r: np.ndarray,
@@ -133,7 +145,8 @@ def _search_rms(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: np.ndarray, r: 
     rho = np.hypot(s - sc[:, None], z - r[:, None])
     d = np.minimum(np.abs(rho - r[:, None]), np.abs(np.abs(t - ((lo + hi) / 2)[:, None]) - ((hi - lo) / 2)[:, None])
                    + np.maximum(rho - r[:, None], 0.0))
-    return np.sqrt(np.mean(d ** 2, axis=1))
+    k = max(1, int(INLIERS * d.shape[1]))   # trimmed_rms of each row
+    return np.sqrt(np.mean(np.partition(d, k - 1, axis=1)[:, :k] ** 2, axis=1))
 
 
 @dataclass(frozen=True)
@@ -205,22 +218,72 @@ def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params:
                      math.atan2(axis[1], axis[0]), rms, False, "", True, ends)
 
 
+def _box_distances(xy: np.ndarray, z: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float,
+                   top: float) -> tuple[np.ndarray, np.ndarray]:
+    """(the points' coordinates in the box's frame (N x 2), their distances to its side faces and top face)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    loc = (xy - centre) @ np.array([[c, -s], [s, c]])
+    d = np.minimum(np.minimum(np.abs(a / 2 - np.abs(loc[:, 0])), np.abs(b / 2 - np.abs(loc[:, 1]))), np.abs(top - z))
+    return loc, d
+
+
+def _face_yaw(xy: np.ndarray, faces: list[np.ndarray], yaw: float) -> float:
+    """The box's yaw from the side faces seen (each face's points' principal direction, weighted by their number,
+    averaged modulo a quarter turn); `yaw` when no face has MIN_FACE_POINTS."""
+    sx = sy = 0.0
+    for m in faces:
+        if m.sum() >= MIN_FACE_POINTS:
+            q = xy[m] - xy[m].mean(axis=0)
+            u = np.linalg.eigh(q.T @ q)[1][:, 1]
+            a4 = 4 * math.atan2(u[1], u[0])
+            sx, sy = sx + len(q) * math.cos(a4), sy + len(q) * math.sin(a4)
+    if sx == sy == 0.0:
+        return yaw
+    turn = math.atan2(sy, sx) / 4 - yaw
+    return yaw + (turn + math.pi / 4) % (math.pi / 2) - math.pi / 4   # the nearest of the quarter-turn copies
+
+
+def _refit_box(xy: np.ndarray, z: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float,
+               top: float) -> tuple[np.ndarray, float, float, float]:
+    """One refit of the box (centre, yaw, a, b): each side point to its nearest face; the yaw from the faces seen
+    (_face_yaw); a face seen (MIN_FACE_FRACTION of the side points) where its points' median puts it, a face not seen
+    at the 0.5th/99.5th percentile of the cap points (the top face, the seen faces' top edges: their extent), of all
+    points when the cap shows fewer than MIN_FACE_POINTS."""
+    loc, _ = _box_distances(xy, z, centre, yaw, a, b, top)
+    k = np.argmin(np.abs((a / 2, b / 2) - np.abs(loc)), axis=1)   # 0: a face across u (u = +-a/2), 1: across v
+    neg = loc[np.arange(len(loc)), k] < 0
+    faces = [side & (k == i) & (neg == n) for i in (0, 1) for n in (True, False)]
+    yaw = _face_yaw(xy, faces, yaw)
+    loc, _ = _box_distances(xy, z, centre, yaw, a, b, top)
+    cap = loc[~side] if int((~side).sum()) >= MIN_FACE_POINTS else loc   # the top face and the faces' top edges
+    lo, hi = np.percentile(cap, [0.5, 99.5], axis=0)
+    least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * int(side.sum()))
+    ends = [float(np.median(loc[m, f // 2])) if m.sum() >= least else float((lo, hi)[f % 2][f // 2])
+            for f, m in enumerate(faces)]
+    mid = np.array([(ends[0] + ends[1]) / 2, (ends[2] + ends[3]) / 2])
+    c, s = math.cos(yaw), math.sin(yaw)
+    return centre + np.array([[c, -s], [s, c]]) @ mid, yaw, ends[1] - ends[0], ends[3] - ends[2]
+
+
 def box(points: np.ndarray, support: float, top: float, params: ObjectParams) -> Primitive:
-    """The oriented box of the points' footprint (cv2.minAreaRect); FitError when a side is out of bounds."""
-    (cx, cy), (a, b), angle = cv2.minAreaRect(points[:, :2].astype(np.float32))
+    """The oriented box of the points (module docstring): started at cv2.minAreaRect of their footprint, refitted
+    BOX_ROUNDS times on the faces the points show (_refit_box: under depth noise and flying pixels the hull's
+    rectangle lies a few noise sigma outside every face); FitError when a side is out of bounds."""
+    p = _sample(points)
+    xy, z = p[:, :2], p[:, 2]
+    (cx, cy), (a, b), angle = cv2.minAreaRect(xy.astype(np.float32))
+    centre, yaw = np.array([cx, cy], float), math.radians(angle)
+    side = z < top - CAP_BAND
+    for _ in range(BOX_ROUNDS):
+        centre, yaw, a, b = _refit_box(xy, z, side, centre, yaw, a, b, top)
     h = top - support
     if min(a, b, h) < params.size_min or max(a, b, h) > params.size_max:
         raise FitError(f"box {a * 1000:.0f} x {b * 1000:.0f} x {h * 1000:.0f} mm out of bounds")
-    yaw = math.radians(angle)
-    c, s = math.cos(yaw), math.sin(yaw)
-    p = _sample(points)
-    loc = (p[:, :2] - (cx, cy)) @ np.array([[c, -s], [s, c]])
-    d = np.minimum(np.minimum(np.abs(a / 2 - np.abs(loc[:, 0])), np.abs(b / 2 - np.abs(loc[:, 1]))),
-                   np.abs(top - p[:, 2]))
+    loc, d = _box_distances(xy, z, centre, yaw, a, b, top)
     inner = 0.25 * min(a, b)
-    cap = (p[:, 2] >= top - CAP_BAND) & (np.abs(loc[:, 0]) < a / 2 - inner) & (np.abs(loc[:, 1]) < b / 2 - inner)
-    return Primitive(BOX, False, float(cx), float(cy), 0.0, h, (float(a), float(b), h), yaw,
-                     float(np.sqrt(np.mean(d ** 2))), False, "", int(cap.sum()) >= MIN_TOP_POINTS, (False, False))
+    cap = (z >= top - CAP_BAND) & (np.abs(loc[:, 0]) < a / 2 - inner) & (np.abs(loc[:, 1]) < b / 2 - inner)
+    return Primitive(BOX, False, float(centre[0]), float(centre[1]), 0.0, h, (float(a), float(b), h), yaw,
+                     trimmed_rms(d), False, "", int(cap.sum()) >= MIN_TOP_POINTS, (False, False))
 
 
 def conservative_box(points: np.ndarray, support: float, top: float, view: np.ndarray, params: ObjectParams,
@@ -239,9 +302,10 @@ def conservative_box(points: np.ndarray, support: float, top: float, view: np.nd
 def lying_rms_floor(points: np.ndarray, support: float, params: ObjectParams) -> float:
     """A lower bound of every lying cylinder fit's rms (any axis, radius within its bounds): its surface lies at
     most 2 radius_max above the board, and a point higher than that by dz is at least dz from it (_cross_section's
-    distances, on the same sampled points): a cluster taller than any lying cylinder."""
+    distances, on the same sampled points; each distance bounded from below, so is their trimmed_rms): a cluster
+    taller than any lying cylinder."""
     z = _sample(points)[:, 2] - support
-    return float(np.sqrt(np.mean(np.maximum(z - 2 * params.radius_max, 0.0) ** 2)))
+    return trimmed_rms(np.maximum(z - 2 * params.radius_max, 0.0))
 
 
 def _attempt(fit: Callable[[], Primitive], bound: float) -> Primitive | str:
