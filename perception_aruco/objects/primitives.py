@@ -112,7 +112,7 @@ def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: fl
     lo, hi = np.percentile(t, [0.5, 99.5])
     rho = np.hypot(s - sc, z - r)
     d = np.minimum(np.abs(rho - r), np.abs(np.abs(t - (lo + hi) / 2) - (hi - lo) / 2) + np.maximum(rho - r, 0.0))
-    return sc, r, trimmed_rms(d)
+    return sc, r, float(np.sqrt(np.mean(d ** 2)))
 
 
 def _search_rms(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: np.ndarray, r: np.ndarray,
@@ -145,8 +145,7 @@ def _search_rms(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: np.ndarray, r: 
     rho = np.hypot(s - sc[:, None], z - r[:, None])
     d = np.minimum(np.abs(rho - r[:, None]), np.abs(np.abs(t - ((lo + hi) / 2)[:, None]) - ((hi - lo) / 2)[:, None])
                    + np.maximum(rho - r[:, None], 0.0))
-    k = max(1, int(INLIERS * d.shape[1]))   # trimmed_rms of each row
-    return np.sqrt(np.mean(np.partition(d, k - 1, axis=1)[:, :k] ** 2, axis=1))
+    return np.sqrt(np.mean(d ** 2, axis=1))
 
 
 @dataclass(frozen=True)
@@ -302,10 +301,9 @@ def conservative_box(points: np.ndarray, support: float, top: float, view: np.nd
 def lying_rms_floor(points: np.ndarray, support: float, params: ObjectParams) -> float:
     """A lower bound of every lying cylinder fit's rms (any axis, radius within its bounds): its surface lies at
     most 2 radius_max above the board, and a point higher than that by dz is at least dz from it (_cross_section's
-    distances, on the same sampled points; each distance bounded from below, so is their trimmed_rms): a cluster
-    taller than any lying cylinder."""
+    distances, on the same sampled points): a cluster taller than any lying cylinder."""
     z = _sample(points)[:, 2] - support
-    return trimmed_rms(np.maximum(z - 2 * params.radius_max, 0.0))
+    return float(np.sqrt(np.mean(np.maximum(z - 2 * params.radius_max, 0.0) ** 2)))
 
 
 def _attempt(fit: Callable[[], Primitive], bound: float) -> Primitive | str:
