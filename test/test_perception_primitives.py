@@ -117,7 +117,7 @@ def box_points(rng: np.random.Generator, centre: np.ndarray, size: tuple[float, 
                camera: np.ndarray, sigma: float, flying: float) -> np.ndarray:
     """The faces of a box on the board (z 0) a camera at `camera` sees (the top and the sides facing it), each point
     moved along its ray by Gaussian noise of `sigma` (a stereo camera's depth error), and a `flying` fraction of
-    them, taken within 5 mm of a face's edge, pushed 1-8 cm back along their rays (flying pixels between an edge and
+    them, taken within 5 mm of a face's edge, pushed 5-15 mm back along their rays (flying pixels between an edge and
     what lies behind it)."""
     c, s = math.cos(yaw), math.sin(yaw)
     rot = np.array([[c, -s], [s, c]])
@@ -139,7 +139,7 @@ def box_points(rng: np.random.Generator, centre: np.ndarray, size: tuple[float, 
     ray = (p - camera) / np.linalg.norm(p - camera, axis=1)[:, None]
     p = p + ray * rng.normal(0, sigma, (len(p), 1))
     fly = rng.choice(np.flatnonzero(at_edge), int(flying * len(p)), replace=False)
-    p[fly] += ray[fly] * rng.uniform(0.01, 0.08, (len(fly), 1))
+    p[fly] += ray[fly] * rng.uniform(0.005, 0.015, (len(fly), 1))
     return p
 
 
@@ -155,10 +155,10 @@ def test_a_box_under_depth_noise_and_flying_pixels_is_fitted_on_its_faces(seed):
     centre, yaw = np.array([rng.uniform(0.7, 0.9), rng.uniform(-0.2, 0.2)]), rng.uniform(-math.pi, math.pi)
     camera = np.array([0.0, -0.35, 0.55])
     sigma = 0.002
-    pts = box_points(rng, centre, size, yaw, camera, sigma, 0.05)
+    pts = box_points(rng, centre, size, yaw, camera, sigma, 0.01)
     top = float(np.percentile(pts[:, 2], 99.5))
     bound = max(params.fit_rms, params.fit_noise * sigma)
-    fitted = box(pts, 0.0, top, params)
+    fitted = box(pts, 0.0, top, camera, params)
     assert math.dist((fitted.x, fitted.y), centre) < 0.010
     assert np.allclose(sorted(fitted.size[:2]), sorted(size[:2]), atol=0.010)
     assert fitted.rms <= bound

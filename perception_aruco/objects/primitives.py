@@ -33,7 +33,6 @@ SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best di
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
 LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
-INLIERS = 0.9  # a fit's rms is over this fraction of the points nearest its surface (trimmed_rms)
 BOX_ROUNDS = 3  # the box's faces refitted on the points nearest each (_refit_box)
 MIN_FACE_POINTS = 10  # side points that show a face of the box
 MIN_FACE_FRACTION = 0.1  # of the side points: fewer on a face, it is not seen (placed by the top face's extent)
@@ -63,14 +62,6 @@ def _sample(points: np.ndarray) -> np.ndarray:
     return points[::step]
 
 
-def trimmed_rms(d: np.ndarray) -> float:
-    """The rms of the INLIERS fraction of distances `d` nearest the surface: a fit's quality on its inliers, the
-    rest (the realistic camera's flying pixels between an edge and what lies behind it, its stray edge points) at
-    most 1 - INLIERS of the points."""
-    k = max(1, int(INLIERS * len(d)))
-    return float(np.sqrt(np.mean(np.partition(d, k - 1)[:k] ** 2)))
-
-
 def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: float, camera: np.ndarray,
                       params: ObjectParams, tol: float) -> Primitive:
     """The standing cylinder through the circle points `xy` (side and rim); FitError when it does not fit."""
@@ -82,7 +73,7 @@ def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: f
     cap = points[points[:, 2] >= top - CAP_BAND, :2]
     seen = int(np.sum(np.linalg.norm(cap - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
     return Primitive(CYLINDER, False, float(centre[0]), float(centre[1]), r, h, (2 * r, 2 * r, h), 0.0,
-                     trimmed_rms(d), False, "", seen, (False, False))
+                     float(np.sqrt(np.mean(d ** 2))), False, "", seen, (False, False))
 
 
 def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: float,
@@ -217,13 +208,27 @@ def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params:
                      math.atan2(axis[1], axis[0]), rms, False, "", True, ends)
 
 
-def _box_distances(xy: np.ndarray, z: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float,
-                   top: float) -> tuple[np.ndarray, np.ndarray]:
-    """(the points' coordinates in the box's frame (N x 2), their distances to its side faces and top face)."""
+def _box_frame(xy: np.ndarray, centre: np.ndarray, yaw: float) -> np.ndarray:
+    """The points' coordinates (N x 2) in the frame of a box at `centre` turned by `yaw`."""
     c, s = math.cos(yaw), math.sin(yaw)
-    loc = (xy - centre) @ np.array([[c, -s], [s, c]])
-    d = np.minimum(np.minimum(np.abs(a / 2 - np.abs(loc[:, 0])), np.abs(b / 2 - np.abs(loc[:, 1]))), np.abs(top - z))
-    return loc, d
+    return (xy - centre) @ np.array([[c, -s], [s, c]])
+
+
+def _box_distances(xy: np.ndarray, z: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float, top: float,
+                   camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the points' coordinates in the box's frame (N x 2), their distances to the faces the camera sees: the top
+    face and the side faces turned to it; a point outside the footprint as far from the side faces as from the
+    footprint's outline, from the top face that far more than its height from it)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s], [s, c]])
+    loc = _box_frame(xy, centre, yaw)
+    half = np.array([a / 2, b / 2])
+    gap = np.abs(loc) - half   # > 0: outside that pair of faces
+    out = np.hypot(np.maximum(gap[:, 0], 0.0), np.maximum(gap[:, 1], 0.0))
+    cam = (camera[:2] - centre) @ rot   # the camera in the box's frame: a side face is seen when it lies beyond it
+    seen = [(k, sg) for k in (0, 1) for sg in (-1.0, 1.0) if sg * cam[k] > half[k]]
+    side = np.min([np.abs(half[k] - sg * loc[:, k]) for k, sg in seen], axis=0) if seen else np.full(len(xy), np.inf)
+    return loc, np.minimum(np.where(out > 0, out, side), np.abs(top - z) + out)
 
 
 def _face_yaw(xy: np.ndarray, faces: list[np.ndarray], yaw: float) -> float:
@@ -242,18 +247,18 @@ def _face_yaw(xy: np.ndarray, faces: list[np.ndarray], yaw: float) -> float:
     return yaw + (turn + math.pi / 4) % (math.pi / 2) - math.pi / 4   # the nearest of the quarter-turn copies
 
 
-def _refit_box(xy: np.ndarray, z: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float,
-               top: float) -> tuple[np.ndarray, float, float, float]:
+def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float, a: float,
+               b: float) -> tuple[np.ndarray, float, float, float]:
     """One refit of the box (centre, yaw, a, b): each side point to its nearest face; the yaw from the faces seen
     (_face_yaw); a face seen (MIN_FACE_FRACTION of the side points) where its points' median puts it, a face not seen
     at the 0.5th/99.5th percentile of the cap points (the top face, the seen faces' top edges: their extent), of all
     points when the cap shows fewer than MIN_FACE_POINTS."""
-    loc, _ = _box_distances(xy, z, centre, yaw, a, b, top)
+    loc = _box_frame(xy, centre, yaw)
     k = np.argmin(np.abs((a / 2, b / 2) - np.abs(loc)), axis=1)   # 0: a face across u (u = +-a/2), 1: across v
     neg = loc[np.arange(len(loc)), k] < 0
     faces = [side & (k == i) & (neg == n) for i in (0, 1) for n in (True, False)]
     yaw = _face_yaw(xy, faces, yaw)
-    loc, _ = _box_distances(xy, z, centre, yaw, a, b, top)
+    loc = _box_frame(xy, centre, yaw)
     cap = loc[~side] if int((~side).sum()) >= MIN_FACE_POINTS else loc   # the top face and the faces' top edges
     lo, hi = np.percentile(cap, [0.5, 99.5], axis=0)
     least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * int(side.sum()))
@@ -264,7 +269,7 @@ def _refit_box(xy: np.ndarray, z: np.ndarray, side: np.ndarray, centre: np.ndarr
     return centre + np.array([[c, -s], [s, c]]) @ mid, yaw, ends[1] - ends[0], ends[3] - ends[2]
 
 
-def box(points: np.ndarray, support: float, top: float, params: ObjectParams) -> Primitive:
+def box(points: np.ndarray, support: float, top: float, camera: np.ndarray, params: ObjectParams) -> Primitive:
     """The oriented box of the points (module docstring): started at cv2.minAreaRect of their footprint, refitted
     BOX_ROUNDS times on the faces the points show (_refit_box: under depth noise and flying pixels the hull's
     rectangle lies a few noise sigma outside every face); FitError when a side is out of bounds."""
@@ -274,15 +279,15 @@ def box(points: np.ndarray, support: float, top: float, params: ObjectParams) ->
     centre, yaw = np.array([cx, cy], float), math.radians(angle)
     side = z < top - CAP_BAND
     for _ in range(BOX_ROUNDS):
-        centre, yaw, a, b = _refit_box(xy, z, side, centre, yaw, a, b, top)
+        centre, yaw, a, b = _refit_box(xy, side, centre, yaw, a, b)
     h = top - support
     if min(a, b, h) < params.size_min or max(a, b, h) > params.size_max:
         raise FitError(f"box {a * 1000:.0f} x {b * 1000:.0f} x {h * 1000:.0f} mm out of bounds")
-    loc, d = _box_distances(xy, z, centre, yaw, a, b, top)
+    loc, d = _box_distances(xy, z, centre, yaw, a, b, top, camera)
     inner = 0.25 * min(a, b)
     cap = (z >= top - CAP_BAND) & (np.abs(loc[:, 0]) < a / 2 - inner) & (np.abs(loc[:, 1]) < b / 2 - inner)
     return Primitive(BOX, False, float(centre[0]), float(centre[1]), 0.0, h, (float(a), float(b), h), yaw,
-                     trimmed_rms(d), False, "", int(cap.sum()) >= MIN_TOP_POINTS, (False, False))
+                     float(np.sqrt(np.mean(d ** 2))), False, "", int(cap.sum()) >= MIN_TOP_POINTS, (False, False))
 
 
 def conservative_box(points: np.ndarray, support: float, top: float, view: np.ndarray, params: ObjectParams,
@@ -335,7 +340,7 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support
     attempts: dict[str, Callable[[], Primitive]] = {
         "standing cylinder": lambda: standing_cylinder(circle_xy, points, support, top, camera, params, tol),
         "lying cylinder": lambda: lying_cylinder(points, support, view, params, None, lying()),
-        "box": lambda: box(points, support, top, params),
+        "box": lambda: box(points, support, top, camera, params),
         "lying cylinder, axis searched": lambda: lying_cylinder(points, support, view, params, bound, lying())}
     got = {name: _attempt(attempts[name], bound) for name in ("standing cylinder", "box")}
     others = [f.rms for f in got.values() if isinstance(f, Primitive)]
