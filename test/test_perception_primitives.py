@@ -158,7 +158,7 @@ def test_a_box_under_depth_noise_and_flying_pixels_is_fitted_on_its_faces(seed):
     pts = box_points(rng, centre, size, yaw, camera, sigma, 0.01)
     top = float(np.percentile(pts[:, 2], 99.5))
     bound = max(params.fit_rms, params.fit_noise * sigma)
-    fitted = box(pts, 0.0, top, camera, params)
+    fitted = box(pts, 0.0, top, camera, params, params.fit_noise * sigma)
     assert math.dist((fitted.x, fitted.y), centre) < 0.010
     assert np.allclose(sorted(fitted.size[:2]), sorted(size[:2]), atol=0.010)
     assert fitted.rms <= bound

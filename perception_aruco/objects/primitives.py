@@ -6,8 +6,10 @@ The camera sees one side of an object, and every fit uses only what it sees:
 - lying cylinder (axis horizontal, resting on the board): the axis direction is the principal direction of the
   points in x-y; in the cross-section the circle's centre is one radius above the board, radius and offset fitted;
   length = the points' extent along the axis;
-- box: cv2.minAreaRect of the points in x-y (the top face shows the whole footprint from above; the side faces seen,
-  1 to 3, lie on its edges); height = top - support.
+- box: started at cv2.minAreaRect of the points in x-y (the top face shows the whole footprint from above; the side
+  faces seen, 1 to 3, lie on its edges), refitted on the faces the side points show (their median: the hull's
+  rectangle lies a few noise sigma outside every face under depth noise), a face not seen at the cap's extent;
+  height = top - support.
 Each fit's quality is the rms distance of the cluster's points to the primitive's surface (the faces a camera can
 see); the smallest rms within `fit_rms` (or `fit_noise` x the depth noise) and within the size bounds wins. None
 fits: a conservative box, the visible points' bounding box in x-y reaching `hidden_extent` behind them.
@@ -247,12 +249,14 @@ def _face_yaw(xy: np.ndarray, faces: list[np.ndarray], yaw: float) -> float:
     return yaw + (turn + math.pi / 4) % (math.pi / 2) - math.pi / 4   # the nearest of the quarter-turn copies
 
 
-def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float, a: float,
-               b: float) -> tuple[np.ndarray, float, float, float]:
+def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float,
+               flat: float) -> tuple[np.ndarray, float, float, float]:
     """One refit of the box (centre, yaw, a, b): each side point to its nearest face; the yaw from the faces seen
-    (_face_yaw); a face seen (MIN_FACE_FRACTION of the side points) where its points' median puts it, a face not seen
-    at the 0.5th/99.5th percentile of the cap points (the top face, the seen faces' top edges: their extent), of all
-    points when the cap shows fewer than MIN_FACE_POINTS."""
+    (_face_yaw); a face seen (MIN_FACE_FRACTION of the side points) and flat (its points' rms about their median
+    within `flat`) where their median puts it, one seen but not flat (a curved surface: a cylinder's) at its points'
+    outermost (0.5th / 99.5th percentile, as the hull's rectangle), a face not seen at that percentile of the cap
+    points (the top face, the seen faces' top edges: their extent), of all points when the cap shows fewer than
+    MIN_FACE_POINTS."""
     loc = _box_frame(xy, centre, yaw)
     k = np.argmin(np.abs((a / 2, b / 2) - np.abs(loc)), axis=1)   # 0: a face across u (u = +-a/2), 1: across v
     neg = loc[np.arange(len(loc)), k] < 0
@@ -260,26 +264,33 @@ def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float,
     yaw = _face_yaw(xy, faces, yaw)
     loc = _box_frame(xy, centre, yaw)
     cap = loc[~side] if int((~side).sum()) >= MIN_FACE_POINTS else loc   # the top face and the faces' top edges
-    lo, hi = np.percentile(cap, [0.5, 99.5], axis=0)
     least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * int(side.sum()))
-    ends = [float(np.median(loc[m, f // 2])) if m.sum() >= least else float((lo, hi)[f % 2][f // 2])
-            for f, m in enumerate(faces)]
+    ends = []
+    for f, m in enumerate(faces):
+        seen = int(m.sum()) >= least
+        q = (loc[m] if seen else cap)[:, f // 2]
+        mid = float(np.median(q))
+        flat_face = seen and float(np.sqrt(np.mean((q - mid) ** 2))) <= flat
+        ends.append(mid if flat_face else float(np.percentile(q, 99.5 if f % 2 else 0.5)))
     mid = np.array([(ends[0] + ends[1]) / 2, (ends[2] + ends[3]) / 2])
     c, s = math.cos(yaw), math.sin(yaw)
     return centre + np.array([[c, -s], [s, c]]) @ mid, yaw, ends[1] - ends[0], ends[3] - ends[2]
 
 
-def box(points: np.ndarray, support: float, top: float, camera: np.ndarray, params: ObjectParams) -> Primitive:
+def box(points: np.ndarray, support: float, top: float, camera: np.ndarray, params: ObjectParams,
+        flat: float) -> Primitive:
     """The oriented box of the points (module docstring): started at cv2.minAreaRect of their footprint, refitted
-    BOX_ROUNDS times on the faces the points show (_refit_box: under depth noise and flying pixels the hull's
-    rectangle lies a few noise sigma outside every face); FitError when a side is out of bounds."""
+    BOX_ROUNDS times on the faces the points show (_refit_box: under depth noise the hull's rectangle lies a few
+    noise sigma outside every face; a face is flat when its points' rms about their median is within `flat`:
+    `fit_noise` x the depth noise, what the noise spreads a flat face's points by); FitError when a side is out of
+    bounds."""
     p = _sample(points)
     xy, z = p[:, :2], p[:, 2]
     (cx, cy), (a, b), angle = cv2.minAreaRect(xy.astype(np.float32))
     centre, yaw = np.array([cx, cy], float), math.radians(angle)
     side = z < top - CAP_BAND
     for _ in range(BOX_ROUNDS):
-        centre, yaw, a, b = _refit_box(xy, side, centre, yaw, a, b)
+        centre, yaw, a, b = _refit_box(xy, side, centre, yaw, a, b, flat)
     h = top - support
     if min(a, b, h) < params.size_min or max(a, b, h) > params.size_max:
         raise FitError(f"box {a * 1000:.0f} x {b * 1000:.0f} x {h * 1000:.0f} mm out of bounds")
@@ -340,7 +351,7 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support
     attempts: dict[str, Callable[[], Primitive]] = {
         "standing cylinder": lambda: standing_cylinder(circle_xy, points, support, top, camera, params, tol),
         "lying cylinder": lambda: lying_cylinder(points, support, view, params, None, lying()),
-        "box": lambda: box(points, support, top, camera, params),
+        "box": lambda: box(points, support, top, camera, params, params.fit_noise * noise),
         "lying cylinder, axis searched": lambda: lying_cylinder(points, support, view, params, bound, lying())}
     got = {name: _attempt(attempts[name], bound) for name in ("standing cylinder", "box")}
     others = [f.rms for f in got.values() if isinstance(f, Primitive)]
