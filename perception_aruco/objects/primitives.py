@@ -35,9 +35,10 @@ SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best di
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
 LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
-BOX_ROUNDS = 3  # the box's faces refitted on the points nearest each (_refit_box)
+BOX_ROUNDS = 2  # the box's faces refitted on the points nearest each (_refit_box)
 MIN_FACE_POINTS = 10  # side points that show a face of the box
 MIN_FACE_FRACTION = 0.1  # of the side points: fewer on a face, it is not seen (placed by the top face's extent)
+REFIT_SAMPLE = 400  # points the box's faces are refitted on (a fixed-step subsample; its rms on RMS_SAMPLE)
 
 
 @dataclass(frozen=True)
@@ -234,19 +235,31 @@ def _box_distances(xy: np.ndarray, z: np.ndarray, centre: np.ndarray, yaw: float
 
 
 def _face_yaw(xy: np.ndarray, faces: list[np.ndarray], yaw: float) -> float:
-    """The box's yaw from the side faces seen (each face's points' principal direction, weighted by their number,
-    averaged modulo a quarter turn); `yaw` when no face has MIN_FACE_POINTS."""
+    """The box's yaw from the side faces seen (each face's points' principal direction, from their second moments,
+    weighted by their number, averaged modulo a quarter turn); `yaw` when no face has MIN_FACE_POINTS."""
     sx = sy = 0.0
     for m in faces:
-        if m.sum() >= MIN_FACE_POINTS:
-            q = xy[m] - xy[m].mean(axis=0)
-            u = np.linalg.eigh(q.T @ q)[1][:, 1]
-            a4 = 4 * math.atan2(u[1], u[0])
-            sx, sy = sx + len(q) * math.cos(a4), sy + len(q) * math.sin(a4)
+        n = int(np.count_nonzero(m))
+        if n >= MIN_FACE_POINTS:
+            q = xy[m]
+            q = q - q.mean(axis=0)
+            sxx, syy, sxy = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
+            a4 = 2 * math.atan2(2 * sxy, sxx - syy)   # 4 x the principal direction's angle
+            sx, sy = sx + n * math.cos(a4), sy + n * math.sin(a4)
     if sx == sy == 0.0:
         return yaw
     turn = math.atan2(sy, sx) / 4 - yaw
     return yaw + (turn + math.pi / 4) % (math.pi / 2) - math.pi / 4   # the nearest of the quarter-turn copies
+
+
+def _face_end(q: np.ndarray, outer: bool, flat: float) -> float:
+    """Where a face goes through its points' coordinates q across it: their median when flat (rms about it within
+    `flat`), else their outermost (0.5th / 99.5th percentile; `outer`: the upper one)."""
+    q = np.sort(q)
+    mid = float(q[len(q) // 2])
+    if flat > 0 and float(np.sqrt(np.mean((q - mid) ** 2))) <= flat:
+        return mid
+    return float(q[min(len(q) - 1, int(0.995 * len(q)))] if outer else q[int(0.005 * len(q))])
 
 
 def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float,
@@ -261,17 +274,14 @@ def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float,
     k = np.argmin(np.abs((a / 2, b / 2) - np.abs(loc)), axis=1)   # 0: a face across u (u = +-a/2), 1: across v
     neg = loc[np.arange(len(loc)), k] < 0
     faces = [side & (k == i) & (neg == n) for i in (0, 1) for n in (True, False)]
-    yaw = _face_yaw(xy, faces, yaw)
-    loc = _box_frame(xy, centre, yaw)
-    cap = loc[~side] if int((~side).sum()) >= MIN_FACE_POINTS else loc   # the top face and the faces' top edges
-    least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * int(side.sum()))
-    ends = []
-    for f, m in enumerate(faces):
-        seen = int(m.sum()) >= least
-        q = (loc[m] if seen else cap)[:, f // 2]
-        mid = float(np.median(q))
-        flat_face = seen and float(np.sqrt(np.mean((q - mid) ** 2))) <= flat
-        ends.append(mid if flat_face else float(np.percentile(q, 99.5 if f % 2 else 0.5)))
+    turn = _face_yaw(xy, faces, yaw) - yaw
+    yaw, c, s = yaw + turn, math.cos(turn), math.sin(turn)
+    loc = loc @ np.array([[c, -s], [s, c]])   # the same points in the box's frame turned by `turn`
+    n_side = int(np.count_nonzero(side))
+    cap = loc[~side] if len(loc) - n_side >= MIN_FACE_POINTS else loc   # the top face and the faces' top edges
+    least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * n_side)
+    ends = [_face_end(loc[m, f // 2], f % 2 == 1, flat) if np.count_nonzero(m) >= least else
+            _face_end(cap[:, f // 2], f % 2 == 1, 0.0) for f, m in enumerate(faces)]
     mid = np.array([(ends[0] + ends[1]) / 2, (ends[2] + ends[3]) / 2])
     c, s = math.cos(yaw), math.sin(yaw)
     return centre + np.array([[c, -s], [s, c]]) @ mid, yaw, ends[1] - ends[0], ends[3] - ends[2]
@@ -288,9 +298,10 @@ def box(points: np.ndarray, support: float, top: float, camera: np.ndarray, para
     xy, z = p[:, :2], p[:, 2]
     (cx, cy), (a, b), angle = cv2.minAreaRect(xy.astype(np.float32))
     centre, yaw = np.array([cx, cy], float), math.radians(angle)
-    side = z < top - CAP_BAND
+    step = max(1, len(p) // REFIT_SAMPLE)
+    side = z[::step] < top - CAP_BAND
     for _ in range(BOX_ROUNDS):
-        centre, yaw, a, b = _refit_box(xy, side, centre, yaw, a, b, flat)
+        centre, yaw, a, b = _refit_box(xy[::step], side, centre, yaw, a, b, flat)
     h = top - support
     if min(a, b, h) < params.size_min or max(a, b, h) > params.size_max:
         raise FitError(f"box {a * 1000:.0f} x {b * 1000:.0f} x {h * 1000:.0f} mm out of bounds")
