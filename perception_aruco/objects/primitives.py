@@ -8,8 +8,8 @@ The camera sees one side of an object, and every fit uses only what it sees:
   length = the points' extent along the axis;
 - box: started at cv2.minAreaRect of the points in x-y (the top face shows the whole footprint from above; the side
   faces seen, 1 to 3, lie on its edges), refitted on the faces the side points show (their median: the hull's
-  rectangle lies a few noise sigma outside every face under depth noise), a face not seen at the cap's extent;
-  height = top - support.
+  rectangle lies a few noise sigma outside every face under depth noise), a face not seen at the other points'
+  extent; height = top - support.
 Each fit's quality is the rms distance of the cluster's points to the primitive's surface (the faces a camera can
 see); the smallest rms within `fit_rms` (or `fit_noise` x the depth noise) and within the size bounds wins. None
 fits: a conservative box, the visible points' bounding box in x-y reaching `hidden_extent` behind them.
@@ -267,9 +267,8 @@ def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float,
     """One refit of the box (centre, yaw, a, b): each side point to its nearest face; the yaw from the faces seen
     (_face_yaw); a face seen (MIN_FACE_FRACTION of the side points) and flat (its points' rms about their median
     within `flat`) where their median puts it, one seen but not flat (a curved surface: a cylinder's) at its points'
-    outermost (0.5th / 99.5th percentile, as the hull's rectangle), a face not seen at that percentile of the cap
-    points (the top face, the seen faces' top edges: their extent), of all points when the cap shows fewer than
-    MIN_FACE_POINTS."""
+    outermost (0.5th / 99.5th percentile, as the hull's rectangle), a face not seen at that percentile of the points
+    not on the face opposite it (the top face and the seen faces reaching it)."""
     loc = _box_frame(xy, centre, yaw)
     k = np.argmin(np.abs((a / 2, b / 2) - np.abs(loc)), axis=1)   # 0: a face across u (u = +-a/2), 1: across v
     neg = loc[np.arange(len(loc)), k] < 0
@@ -277,11 +276,9 @@ def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float,
     turn = _face_yaw(xy, faces, yaw) - yaw
     yaw, c, s = yaw + turn, math.cos(turn), math.sin(turn)
     loc = loc @ np.array([[c, -s], [s, c]])   # the same points in the box's frame turned by `turn`
-    n_side = int(np.count_nonzero(side))
-    cap = loc[~side] if len(loc) - n_side >= MIN_FACE_POINTS else loc   # the top face and the faces' top edges
-    least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * n_side)
+    least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * int(np.count_nonzero(side)))
     ends = [_face_end(loc[m, f // 2], f % 2 == 1, flat) if np.count_nonzero(m) >= least else
-            _face_end(cap[:, f // 2], f % 2 == 1, 0.0) for f, m in enumerate(faces)]
+            _face_end(loc[~faces[f ^ 1], f // 2], f % 2 == 1, 0.0) for f, m in enumerate(faces)]
     mid = np.array([(ends[0] + ends[1]) / 2, (ends[2] + ends[3]) / 2])
     c, s = math.cos(yaw), math.sin(yaw)
     return centre + np.array([[c, -s], [s, c]]) @ mid, yaw, ends[1] - ends[0], ends[3] - ends[2]
