@@ -1,7 +1,8 @@
 """The shape fits' fast forms against the formulas they replace (docs/bench/perception.md, "Speed"), on generated
 points: the lying cylinder's axis search over all directions at once (primitives._search_rms) against one
 cross-section fit per direction (primitives._cross_section), the circle's Gauss-Newton (localize._gauss_newton)
-against its matrix form; the lying cylinder's rms floor (primitives.lying_rms_floor) under every lying fit."""
+against its matrix form; the lying cylinder's rms floor (primitives.lying_rms_floor) under every lying fit; the box
+fitted on its faces under the realistic camera's noise and flying pixels (docs/perception.md, "Objects")."""
 from __future__ import annotations
 
 import math
@@ -10,11 +11,14 @@ import numpy as np
 import pytest
 
 from perception_aruco.localize import FitError, _gauss_newton
+from perception_aruco.objects.model import BOX
 from perception_aruco.objects.params import ObjectParams
 from perception_aruco.objects.primitives import (
     _cross_section,
     _search_rms,
     _section_start,
+    box,
+    fit_primitive,
     lying_cylinder,
     lying_rms_floor,
     lying_start,
@@ -107,3 +111,58 @@ def test_no_lying_fit_of_a_tall_standing_bottle_is_below_its_rms_floor(seed):
     except FitError:
         return   # out of its bounds: no lying fit either
     assert searched >= floor
+
+
+def box_points(rng: np.random.Generator, centre: np.ndarray, size: tuple[float, float, float], yaw: float,
+               camera: np.ndarray, sigma: float, flying: float) -> np.ndarray:
+    """The faces of a box on the board (z 0) a camera at `camera` sees (the top and the sides facing it), each point
+    moved along its ray by Gaussian noise of `sigma` (a stereo camera's depth error), and a `flying` fraction of
+    them, taken within 5 mm of a face's edge, pushed 5-15 mm back along their rays (flying pixels between an edge and
+    what lies behind it)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s], [s, c]])
+    half = np.array(size) / 2
+    faces = [(np.array([0.0, 0.0, 1.0]), 2)] + [(np.r_[sg * rot[:, k], 0.0], k) for k in (0, 1) for sg in (-1, 1)]
+    pts, edge = [], []
+    for normal, k in faces:
+        mid = np.r_[centre, size[2] / 2] + normal * (half[k] if k < 2 else size[2] / 2)
+        if normal @ (camera - mid) <= 0:
+            continue   # facing away: hidden
+        area = np.prod([size[i] for i in range(3) if i != k])
+        n = int(area / 4e-6)   # a point per 2 x 2 mm
+        loc = rng.uniform(-1, 1, (n, 3)) * half
+        loc[:, k] = np.sign(normal @ np.r_[rot[:, k], 0.0] if k < 2 else 1.0) * half[k]
+        free = [i for i in range(3) if i != k]
+        edge.append(np.any(np.abs(half[free] - np.abs(loc[:, free])) < 0.005, axis=1))
+        pts.append(np.c_[loc[:, :2] @ rot.T + centre, loc[:, 2] + size[2] / 2])
+    p, at_edge = np.concatenate(pts), np.concatenate(edge)
+    ray = (p - camera) / np.linalg.norm(p - camera, axis=1)[:, None]
+    p = p + ray * rng.normal(0, sigma, (len(p), 1))
+    fly = rng.choice(np.flatnonzero(at_edge), int(flying * len(p)), replace=False)
+    p[fly] += ray[fly] * rng.uniform(0.005, 0.015, (len(fly), 1))
+    return p
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_box_under_depth_noise_and_flying_pixels_is_fitted_on_its_faces(seed):
+    """A box seen by the realistic camera (depth noise 2 mm along the rays, 5 % flying pixels at its edges): the fit
+    (primitives.box, and fit_primitive's choice) is that box within 10 mm, its rms within the fit bound. The hull's
+    rectangle (cv2.minAreaRect of all points, the fit before) reaches the flying pixels: a rectangle tens of mm too
+    large, its rms over the bound."""
+    params = ObjectParams.configured()
+    rng = np.random.default_rng([seed, 36])
+    size = (rng.uniform(0.05, 0.12), rng.uniform(0.05, 0.12), rng.uniform(0.08, 0.2))
+    centre, yaw = np.array([rng.uniform(0.7, 0.9), rng.uniform(-0.2, 0.2)]), rng.uniform(-math.pi, math.pi)
+    camera = np.array([0.0, -0.35, 0.55])
+    sigma = 0.002
+    pts = box_points(rng, centre, size, yaw, camera, sigma, 0.01)
+    top = float(np.percentile(pts[:, 2], 99.5))
+    bound = max(params.fit_rms, params.fit_noise * sigma)
+    fitted = box(pts, 0.0, top, camera, params, params.fit_noise * sigma)
+    assert math.dist((fitted.x, fitted.y), centre) < 0.010
+    assert np.allclose(sorted(fitted.size[:2]), sorted(size[:2]), atol=0.010)
+    assert fitted.rms <= bound
+    side = pts[pts[:, 2] < top - 0.006, :2]
+    best = fit_primitive(pts, side, top, 0.0, camera, params, sigma, 2.5 * sigma)
+    assert best.shape == BOX and not best.conservative
+    assert math.dist((best.x, best.y), centre) < 0.010

@@ -6,8 +6,10 @@ The camera sees one side of an object, and every fit uses only what it sees:
 - lying cylinder (axis horizontal, resting on the board): the axis direction is the principal direction of the
   points in x-y; in the cross-section the circle's centre is one radius above the board, radius and offset fitted;
   length = the points' extent along the axis;
-- box: cv2.minAreaRect of the points in x-y (the top face shows the whole footprint from above; the side faces seen,
-  1 to 3, lie on its edges); height = top - support.
+- box: started at cv2.minAreaRect of the points in x-y (the top face shows the whole footprint from above; the side
+  faces seen, 1 to 3, lie on its edges), refitted on the faces the side points show (their median: the hull's
+  rectangle lies a few noise sigma outside every face under depth noise), a face not seen at the other points'
+  extent; height = top - support.
 Each fit's quality is the rms distance of the cluster's points to the primitive's surface (the faces a camera can
 see); the smallest rms within `fit_rms` (or `fit_noise` x the depth noise) and within the size bounds wins. None
 fits: a conservative box, the visible points' bounding box in x-y reaching `hidden_extent` behind them.
@@ -33,6 +35,10 @@ SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best di
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
 LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
+BOX_ROUNDS = 2  # the box's faces refitted on the points nearest each (_refit_box)
+MIN_FACE_POINTS = 10  # side points that show a face of the box
+MIN_FACE_FRACTION = 0.1  # of the side points: fewer on a face, it is not seen (placed by the top face's extent)
+REFIT_SAMPLE = 400  # points the box's faces are refitted on (a fixed-step subsample; its rms on RMS_SAMPLE)
 
 
 @dataclass(frozen=True)
@@ -205,21 +211,101 @@ def lying_cylinder(points: np.ndarray, support: float, view: np.ndarray, params:
                      math.atan2(axis[1], axis[0]), rms, False, "", True, ends)
 
 
-def box(points: np.ndarray, support: float, top: float, params: ObjectParams) -> Primitive:
-    """The oriented box of the points' footprint (cv2.minAreaRect); FitError when a side is out of bounds."""
-    (cx, cy), (a, b), angle = cv2.minAreaRect(points[:, :2].astype(np.float32))
+def _box_frame(xy: np.ndarray, centre: np.ndarray, yaw: float) -> np.ndarray:
+    """The points' coordinates (N x 2) in the frame of a box at `centre` turned by `yaw`."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return (xy - centre) @ np.array([[c, -s], [s, c]])
+
+
+def _box_distances(xy: np.ndarray, z: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float, top: float,
+                   camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the points' coordinates in the box's frame (N x 2), their distances to the faces the camera sees: the top
+    face and the side faces turned to it; a point outside the footprint as far from the side faces as from the
+    footprint's outline, from the top face that far more than its height from it)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s], [s, c]])
+    loc = _box_frame(xy, centre, yaw)
+    half = np.array([a / 2, b / 2])
+    gap = np.abs(loc) - half   # > 0: outside that pair of faces
+    out = np.hypot(np.maximum(gap[:, 0], 0.0), np.maximum(gap[:, 1], 0.0))
+    cam = (camera[:2] - centre) @ rot   # the camera in the box's frame: a side face is seen when it lies beyond it
+    seen = [(k, sg) for k in (0, 1) for sg in (-1.0, 1.0) if sg * cam[k] > half[k]]
+    side = np.min([np.abs(half[k] - sg * loc[:, k]) for k, sg in seen], axis=0) if seen else np.full(len(xy), np.inf)
+    return loc, np.minimum(np.where(out > 0, out, side), np.abs(top - z) + out)
+
+
+def _face_yaw(xy: np.ndarray, faces: list[np.ndarray], yaw: float) -> float:
+    """The box's yaw from the side faces seen (each face's points' principal direction, from their second moments,
+    weighted by their number, averaged modulo a quarter turn); `yaw` when no face has MIN_FACE_POINTS."""
+    sx = sy = 0.0
+    for m in faces:
+        n = int(np.count_nonzero(m))
+        if n >= MIN_FACE_POINTS:
+            q = xy[m]
+            q = q - q.mean(axis=0)
+            sxx, syy, sxy = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
+            a4 = 2 * math.atan2(2 * sxy, sxx - syy)   # 4 x the principal direction's angle
+            sx, sy = sx + n * math.cos(a4), sy + n * math.sin(a4)
+    if sx == sy == 0.0:
+        return yaw
+    turn = math.atan2(sy, sx) / 4 - yaw
+    return yaw + (turn + math.pi / 4) % (math.pi / 2) - math.pi / 4   # the nearest of the quarter-turn copies
+
+
+def _face_end(q: np.ndarray, outer: bool, flat: float) -> float:
+    """Where a face goes through its points' coordinates q across it: their median when flat (rms about it within
+    `flat`), else their outermost (0.5th / 99.5th percentile; `outer`: the upper one)."""
+    q = np.sort(q)
+    mid = float(q[len(q) // 2])
+    if flat > 0 and float(np.sqrt(np.mean((q - mid) ** 2))) <= flat:
+        return mid
+    return float(q[min(len(q) - 1, int(0.995 * len(q)))] if outer else q[int(0.005 * len(q))])
+
+
+def _refit_box(xy: np.ndarray, side: np.ndarray, centre: np.ndarray, yaw: float, a: float, b: float,
+               flat: float) -> tuple[np.ndarray, float, float, float]:
+    """One refit of the box (centre, yaw, a, b): each side point to its nearest face; the yaw from the faces seen
+    (_face_yaw); a face seen (MIN_FACE_FRACTION of the side points) and flat (its points' rms about their median
+    within `flat`) where their median puts it, one seen but not flat (a curved surface: a cylinder's) at its points'
+    outermost (0.5th / 99.5th percentile, as the hull's rectangle), a face not seen at that percentile of the points
+    not on the face opposite it (the top face and the seen faces reaching it)."""
+    loc = _box_frame(xy, centre, yaw)
+    k = np.argmin(np.abs((a / 2, b / 2) - np.abs(loc)), axis=1)   # 0: a face across u (u = +-a/2), 1: across v
+    neg = loc[np.arange(len(loc)), k] < 0
+    faces = [side & (k == i) & (neg == n) for i in (0, 1) for n in (True, False)]
+    turn = _face_yaw(xy, faces, yaw) - yaw
+    yaw, c, s = yaw + turn, math.cos(turn), math.sin(turn)
+    loc = loc @ np.array([[c, -s], [s, c]])   # the same points in the box's frame turned by `turn`
+    least = max(MIN_FACE_POINTS, MIN_FACE_FRACTION * int(np.count_nonzero(side)))
+    ends = [_face_end(loc[m, f // 2], f % 2 == 1, flat) if np.count_nonzero(m) >= least else
+            _face_end(loc[~faces[f ^ 1], f // 2], f % 2 == 1, 0.0) for f, m in enumerate(faces)]
+    mid = np.array([(ends[0] + ends[1]) / 2, (ends[2] + ends[3]) / 2])
+    c, s = math.cos(yaw), math.sin(yaw)
+    return centre + np.array([[c, -s], [s, c]]) @ mid, yaw, ends[1] - ends[0], ends[3] - ends[2]
+
+
+def box(points: np.ndarray, support: float, top: float, camera: np.ndarray, params: ObjectParams,
+        flat: float) -> Primitive:
+    """The oriented box of the points (module docstring): started at cv2.minAreaRect of their footprint, refitted
+    BOX_ROUNDS times on the faces the points show (_refit_box: under depth noise the hull's rectangle lies a few
+    noise sigma outside every face; a face is flat when its points' rms about their median is within `flat`:
+    `fit_noise` x the depth noise, what the noise spreads a flat face's points by); FitError when a side is out of
+    bounds."""
+    p = _sample(points)
+    xy, z = p[:, :2], p[:, 2]
+    (cx, cy), (a, b), angle = cv2.minAreaRect(xy.astype(np.float32))
+    centre, yaw = np.array([cx, cy], float), math.radians(angle)
+    step = max(1, len(p) // REFIT_SAMPLE)
+    side = z[::step] < top - CAP_BAND
+    for _ in range(BOX_ROUNDS):
+        centre, yaw, a, b = _refit_box(xy[::step], side, centre, yaw, a, b, flat)
     h = top - support
     if min(a, b, h) < params.size_min or max(a, b, h) > params.size_max:
         raise FitError(f"box {a * 1000:.0f} x {b * 1000:.0f} x {h * 1000:.0f} mm out of bounds")
-    yaw = math.radians(angle)
-    c, s = math.cos(yaw), math.sin(yaw)
-    p = _sample(points)
-    loc = (p[:, :2] - (cx, cy)) @ np.array([[c, -s], [s, c]])
-    d = np.minimum(np.minimum(np.abs(a / 2 - np.abs(loc[:, 0])), np.abs(b / 2 - np.abs(loc[:, 1]))),
-                   np.abs(top - p[:, 2]))
+    loc, d = _box_distances(xy, z, centre, yaw, a, b, top, camera)
     inner = 0.25 * min(a, b)
-    cap = (p[:, 2] >= top - CAP_BAND) & (np.abs(loc[:, 0]) < a / 2 - inner) & (np.abs(loc[:, 1]) < b / 2 - inner)
-    return Primitive(BOX, False, float(cx), float(cy), 0.0, h, (float(a), float(b), h), yaw,
+    cap = (z >= top - CAP_BAND) & (np.abs(loc[:, 0]) < a / 2 - inner) & (np.abs(loc[:, 1]) < b / 2 - inner)
+    return Primitive(BOX, False, float(centre[0]), float(centre[1]), 0.0, h, (float(a), float(b), h), yaw,
                      float(np.sqrt(np.mean(d ** 2))), False, "", int(cap.sum()) >= MIN_TOP_POINTS, (False, False))
 
 
@@ -273,7 +359,7 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support
     attempts: dict[str, Callable[[], Primitive]] = {
         "standing cylinder": lambda: standing_cylinder(circle_xy, points, support, top, camera, params, tol),
         "lying cylinder": lambda: lying_cylinder(points, support, view, params, None, lying()),
-        "box": lambda: box(points, support, top, params),
+        "box": lambda: box(points, support, top, camera, params, params.fit_noise * noise),
         "lying cylinder, axis searched": lambda: lying_cylinder(points, support, view, params, bound, lying())}
     got = {name: _attempt(attempts[name], bound) for name in ("standing cylinder", "box")}
     others = [f.rms for f in got.values() if isinstance(f, Primitive)]
