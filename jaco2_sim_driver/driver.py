@@ -126,6 +126,8 @@ class SimDriver:
         self._tf_period = 1.0 / params.tf_rate if params.tf_rate > 0 else float("inf")
         self._obj_period = 1.0 / params.objects_rate
         self._next_js = self._next_obj = self._next_tf = self._wall0 = self._sim0 = 0.0
+        self._states = 0  # joint states made since the start (each published by the node)
+        self._rate_mark = (0, 0.0)  # (states, simulated time) at the last health report
         self._disturb: queue.SimpleQueue = queue.SimpleQueue()  # commands (disturbance.command's arguments)
         self.disturbances(params.drop_probability, params.drop_seed, params.plan())
 
@@ -213,13 +215,19 @@ class SimDriver:
 
     def health(self) -> tuple[int, str, dict[str, str]]:
         """The driver's status for /diagnostics (relocation_common.node.Health): the command age (simulated s
-        since the last velocity command), the watchdog's stops of a moving arm, stopped (kinova in/stop: WARN)."""
+        since the last velocity command), the watchdog's stops of a moving arm, stopped (kinova in/stop: WARN), the
+        joint states made and their rate per simulated second since the last report (joint_state_rate when the loop
+        keeps up; fewer when its ticks come late, each then one state for up to MAX_BATCH steps), as
+        diagnostic_updater's frequency status gives a topic's rate."""
         with self.lock:
-            age, stops, t = self.sim.command_age, self.sim.watchdog_stops, self.sim.time
+            age, stops, t, states = self.sim.command_age, self.sim.watchdog_stops, self.sim.time, self._states
+            (states0, t0), self._rate_mark = self._rate_mark, (states, t)
+        rate = (states - states0) / (t - t0) if t > t0 else float("nan")
         state = "stopped (in/stop): commands ignored until in/start" if self.stopped else \
             "moving on commands" if age <= self.sim.watchdog_timeout else "holding still (no command)"
         values = {"command age (s)": f"{age:.3f}" if age < 1e9 else "no command yet",
-                  "watchdog stops": str(stops), "stopped": str(self.stopped), "sim time (s)": f"{t:.1f}"}
+                  "watchdog stops": str(stops), "stopped": str(self.stopped), "sim time (s)": f"{t:.3f}",
+                  "joint states": str(states), "joint state rate (per simulated s)": f"{rate:.1f}"}
         return (1 if self.stopped else 0), f"arm {state}; watchdog stops: {stops}", values
 
     def reset(self) -> str:
@@ -343,6 +351,7 @@ class SimDriver:
                 if t >= self._next_js:
                     self._next_js += self._js_period * max(1, int((t - self._next_js) / self._js_period) + 1)
                 state = self.snapshot()
+                self._states += 1
             if t >= self._next_tf:
                 self._next_tf += self._tf_period * max(1, int((t - self._next_tf) / self._tf_period) + 1)
                 tf = (t, s.q, s.finger_q, s.object_poses())

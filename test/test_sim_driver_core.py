@@ -72,6 +72,24 @@ def test_unpaced_loop_steps_once_per_tick_and_publishes_at_the_rates(sim):
     assert len(tf[3]) == len(SCENARIO.objects) and np.allclose(tf[1], Q_HOME, atol=1e-3)
 
 
+def test_health_reports_the_joint_states_and_their_rate_per_simulated_second(sim):
+    """The rate is over the simulated time since the last report: joint_state_rate when every step is its own tick
+    (one state every 10 ms), fewer when a late loop steps MAX_BATCH (20) at once (one state per tick)."""
+    from jaco2_sim_driver.driver import MAX_BATCH
+
+    core = driver(sim, joint_state_rate=100.0)
+    core.health()
+    for _ in range(1000):
+        core.tick()
+    values = core.health()[2]
+    assert values["joint states"] == "101" and float(values["joint state rate (per simulated s)"]) == \
+        pytest.approx(101.0)  # the first due at once, then every 10 ms of the 1 s
+    core._steps_due = lambda t: MAX_BATCH  # a loop behind: MAX_BATCH steps a tick
+    for _ in range(50):
+        core.tick()
+    assert float(core.health()[2]["joint state rate (per simulated s)"]) == pytest.approx(1 / (MAX_BATCH * 0.001))
+
+
 def test_state_on_command_publishes_after_the_step_that_applied_it(sim):
     core = driver(sim, joint_state_rate=10.0, state_on_command=True)
     core.tick()  # the first state is due at once
