@@ -160,10 +160,9 @@ class PlanningContext:
         return self.out_of_reach(object_id)
 
     def out_of_reach(self, object_id: str) -> str:
-        """"no grasp: " for an obstacle standing where the straight side grasp is out of the arm's workspace (a fact
-        of the shelf, answered g_U; the target out of reach stays an error: WorkspaceError, nothing to solve)."""
-        if object_id == self.scenario.target_id:
-            return ""
+        """"no grasp: " for an object standing where the straight side grasp is out of the arm's workspace: a fact
+        of the shelf, answered g_U, the target's too (a target knocked out of reach in the closed loop was a refused
+        question, and the re-plan ended "training aborted" instead of its proof that no retrieval is left)."""
         try:
             side_grasp(self.scenario, object_id, 0.0, self.params.pre_grasp_distance, self.ceiling_clearance)
         except WorkspaceError as e:
