@@ -65,18 +65,34 @@ def _sample(points: np.ndarray) -> np.ndarray:
     return points[::step]
 
 
-def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: float, camera: np.ndarray,
-                      params: ObjectParams, tol: float) -> Primitive:
-    """The standing cylinder through the circle points `xy` (side and rim); FitError when it does not fit."""
-    centre, r, _ = fit_circle(xy, camera, (params.radius_min, params.radius_max), tol)
+def standing_cylinder(xy: np.ndarray, clear: np.ndarray, points: np.ndarray, support: float, top: float,
+                      face: float, camera: np.ndarray, params: ObjectParams, tol: float) -> Primitive:
+    """The standing cylinder through the circle points `xy` (side and rim); FitError when it does not fit. Two
+    circles: through the points `clear` of the top face (below `cap`: under depth noise the cap's points reach below
+    its margin, inside the circle, and pull its radius down) and through all (a cluster that shows only its top
+    part: its side is all near the top); the one of the lower rms wins. The rms: to the side and to the top face at
+    height `face` (noise.top_face)."""
     p = _sample(points)
-    rho = np.linalg.norm(p[:, :2] - centre, axis=1)
-    d = np.minimum(np.abs(rho - r), np.abs(p[:, 2] - top) + np.maximum(rho - r, 0.0))
+    best: tuple[float, np.ndarray, float] | None = None
+    for use in (np.ones(len(xy), bool), clear) if not clear.all() else (clear,):
+        try:
+            centre, r, _ = fit_circle(xy[use], camera, (params.radius_min, params.radius_max), tol)
+        except FitError:
+            if best is None:   # all the circle points fit no circle: no cylinder (the clear ones are no rescue)
+                raise
+            continue
+        rho = np.linalg.norm(p[:, :2] - centre, axis=1)
+        d = np.minimum(np.abs(rho - r), np.abs(p[:, 2] - face) + np.maximum(rho - r, 0.0))
+        rms = float(np.sqrt(np.mean(d ** 2)))
+        if best is None or rms < best[0]:
+            best = (rms, centre, r)
+    assert best is not None
+    rms, centre, r = best
     h = top - support
-    cap = points[points[:, 2] >= top - CAP_BAND, :2]
-    seen = int(np.sum(np.linalg.norm(cap - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
+    cap_xy = points[points[:, 2] >= top - CAP_BAND, :2]
+    seen = int(np.sum(np.linalg.norm(cap_xy - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
     return Primitive(CYLINDER, False, float(centre[0]), float(centre[1]), r, h, (2 * r, 2 * r, h), 0.0,
-                     float(np.sqrt(np.mean(d ** 2))), False, "", seen, (False, False))
+                     rms, False, "", seen, (False, False))
 
 
 def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: float,
@@ -289,8 +305,8 @@ def box(points: np.ndarray, support: float, top: float, camera: np.ndarray, para
     """The oriented box of the points (module docstring): started at cv2.minAreaRect of their footprint, refitted
     BOX_ROUNDS times on the faces the points show (_refit_box: under depth noise the hull's rectangle lies a few
     noise sigma outside every face; a face is flat when its points' rms about their median is within `flat`:
-    `fit_noise` x the depth noise, what the noise spreads a flat face's points by); FitError when a side is out of
-    bounds."""
+    `fit_noise` x the depth noise, what the noise spreads a flat face's points by); its rms to the top face at height
+    `face` (top_face); FitError when a side is out of bounds."""
     p = _sample(points)
     xy, z = p[:, :2], p[:, 2]
     (cx, cy), (a, b), angle = cv2.minAreaRect(xy.astype(np.float32))
@@ -339,10 +355,12 @@ def _attempt(fit: Callable[[], Primitive], bound: float) -> Primitive | str:
     return f if f.rms <= bound else f"rms {f.rms * 1000:.1f} mm"
 
 
-def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support: float, camera: np.ndarray,
-                  params: ObjectParams, noise: float, tol: float, search: bool = True) -> Primitive:
+def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, clear: np.ndarray, top: float, face: float,
+                  support: float, camera: np.ndarray, params: ObjectParams, noise: float, tol: float,
+                  search: bool = True) -> Primitive:
     """The best primitive of a cluster (module docstring). points: its base-frame points; circle_xy: its side and
-    rim points for the standing cylinder; top: the points' 99.5th height percentile; camera: the camera's position;
+    rim points for the standing cylinder, `clear` the ones clear of its top face; top: the points' 99.5th height
+    percentile; face: the top face's height (noise.top_face); camera: the camera's position;
     noise: the frame's depth noise; tol: the circle fit's inlier band. The lying cylinder is not fitted where it
     cannot win (its rms floor, lying_rms_floor, LYING_MARGIN times over a standing cylinder's or box's rms within
     the bound); its search over axis directions runs only when no primitive fits otherwise and `search` (it costs
@@ -357,7 +375,8 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support
             made.append(lying_start(points, support, view, params))
         return made[0]
     attempts: dict[str, Callable[[], Primitive]] = {
-        "standing cylinder": lambda: standing_cylinder(circle_xy, points, support, top, camera, params, tol),
+        "standing cylinder": lambda: standing_cylinder(circle_xy, clear, points, support, top, face, camera, params,
+                                                       tol),
         "lying cylinder": lambda: lying_cylinder(points, support, view, params, None, lying()),
         "box": lambda: box(points, support, top, camera, params, params.fit_noise * noise),
         "lying cylinder, axis searched": lambda: lying_cylinder(points, support, view, params, bound, lying())}
