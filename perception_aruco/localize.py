@@ -5,8 +5,8 @@ c = (x, y). The axis is the least-squares solution of  min_c sum_i (|p_i,xy - c|
 one radius behind the visible surface along the horizontal viewing ray, with points farther than `inlier_tol` from
 the circle dropped and the fit repeated. `fit_axis` fits a circle of known radius (a listed object's, from the
 scenario), `fit_circle` one whose radius is fitted too, within bounds (an object the scenario does not describe).
-The cap (top face) is excluded from the fit (its points lie inside the circle) except its rim: cluster boundary
-pixels on the cap that are not occlusion edges lie on the circle too, which places a cylinder of which only the
+The cap (top face) is excluded from the fit (its points lie inside the circle) except its rim: the silhouette's
+outline pixels on the cap that are not occlusion edges lie on the circle too, which places a cylinder of which only the
 top is visible (`circle_points`). Checks (docs/perception.md, "Consistency checks"): the known-radius fit's rms
 residual must stay within `max_rms` and its axis uncertainty within `max_uncertainty` (`locate_cylinder`).
 """

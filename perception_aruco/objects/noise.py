@@ -1,8 +1,10 @@
-"""The depth noise a cluster's fits are judged by (docs/perception.md, "Objects"): a depth camera's noise grows as
-the depth squared (a stereo camera's error is z^2 / (focal length x baseline)), sigma(z) = sigma_1m * z^2, with
-sigma_1m measured on the shelf's planes at their depths (shelf.ShelfFit.noise_1m). A cluster farther than the
-shelf's planes is noisier than they are: its top face's points spread farther below its top (the cap band of a
-standing cylinder's circle points and of its fit's rms, `cap_below`)."""
+"""The depth noise at a cluster's depth (docs/perception.md, "Objects"): a depth camera's noise grows as the depth
+squared (a stereo camera's error is z^2 / (focal length x baseline)), sigma(z) = sigma_1m * z^2, with sigma_1m
+measured on the shelf's planes at their depths (shelf.ShelfFit.noise_1m). A cluster farther than the planes is
+noisier than they are: its top face's points spread farther below its top (`cap_below`) and its top, their 99.5th
+height percentile, lies farther above the face (`top_face`). The fit bound stays the noise measured on the planes
+(`shelf`): scaled to the cluster's depth it let wrong fits of far slivers and unions through (docs/bench/perception.md,
+"A standing cylinder's circle clear of its top face")."""
 from __future__ import annotations
 
 import math
@@ -13,7 +15,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class DepthNoise:
-    """sigma(z) = sigma_1m * z^2 of one frame; z: a point's depth along the camera's optical axis; shelf: the noise
+    """sigma(z) = sigma_1m * z^2 of one frame (z: a point's depth along the camera's optical axis) and the noise
     measured on the shelf's planes (the fit bound's, primitives.fit_primitive)."""
 
     shelf: float          # m: the noise at the shelf's planes (shelf.ShelfFit.noise)
@@ -32,9 +34,10 @@ CAP_SIGMAS = 5.2  # the cap band's width in noise sigmas beyond the cap margin: 
 
 
 def cap_below(top: float, margin: float, sigma: float) -> float:
-    """The height above which a standing object's points are its top face (m): `margin` (the rim's rounding) and
-    CAP_SIGMAS depth noise sigmas (at the object's depth) below its top. Left in the side points, a cap's points
-    lie inside the circle and pull its fitted radius down (a 90 mm jar 1 m away: to 34 mm)."""
+    """The height above which a standing object's points may be its top face (m): `margin` (the band without noise)
+    and CAP_SIGMAS depth noise sigmas (at the object's depth), two independent widths added in quadrature, below its
+    top. Left in the side points, a cap's points lie inside the circle and pull its fitted radius down (a 90 mm jar
+    1 m away: to 34 mm)."""
     return top - math.hypot(margin, CAP_SIGMAS * sigma)
 
 

@@ -2,7 +2,8 @@
 
 The camera sees one side of an object, and every fit uses only what it sees:
 - standing cylinder: a circle in x-y with its radius fitted (bounded), through the side points and the cap's rim
-  (`localize.circle_points`: the far side is hidden, the visible arc suffices); height = top - support;
+  (`localize.circle_points`: the far side is hidden, the visible arc suffices), and through those clear of the top
+  face under the depth noise at the cluster's depth (`noise.cap_below`), the lower rms kept; height = top - support;
 - lying cylinder (axis horizontal, resting on the board): the axis direction is the principal direction of the
   points in x-y; in the cross-section the circle's centre is one radius above the board, radius and offset fitted;
   length = the points' extent along the axis;
@@ -11,8 +12,9 @@ The camera sees one side of an object, and every fit uses only what it sees:
   rectangle lies a few noise sigma outside every face under depth noise), a face not seen at the other points'
   extent; height = top - support.
 Each fit's quality is the rms distance of the cluster's points to the primitive's surface (the faces a camera can
-see); the smallest rms within `fit_rms` (or `fit_noise` x the depth noise) and within the size bounds wins. None
-fits: a conservative box, the visible points' bounding box in x-y reaching `hidden_extent` behind them.
+see; a standing cylinder's top face at `noise.top_face`); the smallest rms within `fit_rms` (or `fit_noise` x the
+depth noise measured on the shelf's planes) and within the size bounds wins. None fits: a conservative box, the
+visible points' bounding box in x-y reaching `hidden_extent` behind them.
 `top_seen`: the top face is in view (cap points well inside the circle or the box's top face), else the height is
 only a lower bound (something nearer hides the top); `ends_seen`: a lying cylinder's end caps in view. A lying
 cylinder is longer than wide (else it is a standing one).
@@ -67,11 +69,10 @@ def _sample(points: np.ndarray) -> np.ndarray:
 
 def standing_cylinder(xy: np.ndarray, clear: np.ndarray, points: np.ndarray, support: float, top: float,
                       face: float, camera: np.ndarray, params: ObjectParams, tol: float) -> Primitive:
-    """The standing cylinder through the circle points `xy` (side and rim); FitError when it does not fit. Two
-    circles: through the points `clear` of the top face (below `cap`: under depth noise the cap's points reach below
-    its margin, inside the circle, and pull its radius down) and through all (a cluster that shows only its top
-    part: its side is all near the top); the one of the lower rms wins. The rms: to the side and to the top face at
-    height `face` (noise.top_face)."""
+    """The standing cylinder through the circle points `xy` (side and rim); FitError when they fit no circle. Also
+    the circle through the points `clear` of the top face (noise.cap_below: under depth noise the cap's points reach
+    below its margin, inside the circle, and pull the radius down); the one of the lower rms wins. The rms: to the
+    side and to the top face at height `face` (noise.top_face)."""
     p = _sample(points)
     best: tuple[float, np.ndarray, float] | None = None
     for use in (np.ones(len(xy), bool), clear) if not clear.all() else (clear,):
