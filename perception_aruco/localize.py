@@ -113,13 +113,14 @@ def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray,
 
 
 def fit_circle(xy: np.ndarray, view_from: np.ndarray, bounds: tuple[float, float], tol: float,
-               min_points: int = 12) -> tuple[np.ndarray, float, np.ndarray]:
-    """(centre, radius, inlier mask) of a circle whose radius is fitted too, started at the algebraic fit (or, when
-    that is far out of bounds, at the middle of `bounds` one radius behind the points); FitError when it is out of
-    bounds or most points are off it."""
+               min_points: int = 12, start: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, float,
+                                                                                              np.ndarray]:
+    """(centre, radius, inlier mask) of a circle whose radius is fitted too, started at `start` (centre, radius) or
+    the algebraic fit (or, when that is far out of bounds, at the middle of `bounds` one radius behind the points);
+    FitError when it is out of bounds or most points are off it."""
     if len(xy) < min_points:
         raise FitError(f"{len(xy)} side and rim points, need {min_points}")
-    kasa = algebraic_circle(xy)   # a start near the answer: from the middle of the bounds a short arc diverged
+    kasa = start or algebraic_circle(xy)   # a start near the answer: from the middle of the bounds a short arc diverged
     if kasa is not None and bounds[0] / 2 <= kasa[1] <= 2 * bounds[1]:
         centre, r, keep = _trimmed(xy, view_from, kasa[1], None, tol, min_points, 20, kasa[0])
     else:

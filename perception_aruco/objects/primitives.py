@@ -67,6 +67,13 @@ def _sample(points: np.ndarray) -> np.ndarray:
     return points[::step]
 
 
+def _standing_rms(p: np.ndarray, centre: np.ndarray, r: float, face: float) -> float:
+    """The rms distance of points p to a standing cylinder's side (circle centre, r) and its top face at `face`."""
+    rho = np.linalg.norm(p[:, :2] - centre, axis=1)
+    d = np.minimum(np.abs(rho - r), np.abs(p[:, 2] - face) + np.maximum(rho - r, 0.0))
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
 def standing_cylinder(xy: np.ndarray, clear: np.ndarray, points: np.ndarray, support: float, top: float,
                       face: float, camera: np.ndarray, params: ObjectParams, tol: float) -> Primitive:
     """The standing cylinder through the circle points `xy` (side and rim); FitError when they fit no circle. Also
@@ -74,20 +81,14 @@ def standing_cylinder(xy: np.ndarray, clear: np.ndarray, points: np.ndarray, sup
     below its margin, inside the circle, and pull the radius down); the one of the lower rms wins. The rms: to the
     side and to the top face at height `face` (noise.top_face)."""
     p = _sample(points)
-    best: tuple[float, np.ndarray, float] | None = None
-    for use in (np.ones(len(xy), bool), clear) if not clear.all() else (clear,):
-        try:
-            centre, r, _ = fit_circle(xy[use], camera, (params.radius_min, params.radius_max), tol)
+    centre, r, _ = fit_circle(xy, camera, (params.radius_min, params.radius_max), tol)
+    best = (_standing_rms(p, centre, r, face), centre, r)
+    if not clear.all():
+        try:   # started at the circle of all (the clear points are most of them)
+            centre, r, _ = fit_circle(xy[clear], camera, (params.radius_min, params.radius_max), tol, start=(centre, r))
+            best = min(best, (_standing_rms(p, centre, r, face), centre, r), key=lambda b: b[0])
         except FitError:
-            if best is None:   # all the circle points fit no circle: no cylinder (the clear ones are no rescue)
-                raise
-            continue
-        rho = np.linalg.norm(p[:, :2] - centre, axis=1)
-        d = np.minimum(np.abs(rho - r), np.abs(p[:, 2] - face) + np.maximum(rho - r, 0.0))
-        rms = float(np.sqrt(np.mean(d ** 2)))
-        if best is None or rms < best[0]:
-            best = (rms, centre, r)
-    assert best is not None
+            pass
     rms, centre, r = best
     h = top - support
     cap_xy = points[points[:, 2] >= top - CAP_BAND, :2]
