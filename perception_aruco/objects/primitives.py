@@ -3,7 +3,8 @@
 The camera sees one side of an object, and every fit uses only what it sees:
 - standing cylinder: a circle in x-y with its radius fitted (bounded), through the side points and the cap's rim
   (`localize.circle_points`: the far side is hidden, the visible arc suffices), and through those clear of the top
-  face under the depth noise at the cluster's depth (`noise.cap_below`), the lower rms kept; height = top - support;
+  face under the depth noise at the cluster's depth (`noise.cap_below`), kept when CLEAR_MARGIN times better;
+  height = top - support;
 - lying cylinder (axis horizontal, resting on the board): the axis direction is the principal direction of the
   points in x-y; in the cross-section the circle's centre is one radius above the board, radius and offset fitted;
   length = the points' extent along the axis;
@@ -36,6 +37,7 @@ RMS_SAMPLE = 3000  # points a fit's rms is evaluated on (a fixed-step subsample 
 SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best direction is refitted on all)
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
 LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
+CLEAR_MARGIN = 1.5  # the circle of the points clear of the top face (fewer) wins only with this times a lower rms
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
 BOX_ROUNDS = 2  # the box's faces refitted on the points nearest each (_refit_box)
 MIN_FACE_POINTS = 10  # side points that show a face of the box
@@ -78,15 +80,17 @@ def standing_cylinder(xy: np.ndarray, clear: np.ndarray, points: np.ndarray, sup
                       face: float, camera: np.ndarray, params: ObjectParams, tol: float) -> Primitive:
     """The standing cylinder through the circle points `xy` (side and rim); FitError when they fit no circle. Also
     the circle through the points `clear` of the top face (noise.cap_below: under depth noise the cap's points reach
-    below its margin, inside the circle, and pull the radius down); the one of the lower rms wins. The rms: to the
-    side and to the top face at height `face` (noise.top_face)."""
+    below its margin, inside the circle, and pull the radius down), started at the first; it wins with a CLEAR_MARGIN
+    times lower rms. The rms: to the side and to the top face at height `face` (noise.top_face)."""
     p = _sample(points)
     centre, r, _ = fit_circle(xy, camera, (params.radius_min, params.radius_max), tol)
     best = (_standing_rms(p, centre, r, face), centre, r)
     if not clear.all():
         try:   # started at the circle of all (the clear points are most of them)
             centre, r, _ = fit_circle(xy[clear], camera, (params.radius_min, params.radius_max), tol, start=(centre, r))
-            best = min(best, (_standing_rms(p, centre, r, face), centre, r), key=lambda b: b[0])
+            rms = _standing_rms(p, centre, r, face)
+            if rms * CLEAR_MARGIN < best[0]:
+                best = (rms, centre, r)
         except FitError:
             pass
     rms, centre, r = best
