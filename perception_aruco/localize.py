@@ -5,8 +5,8 @@ c = (x, y). The axis is the least-squares solution of  min_c sum_i (|p_i,xy - c|
 one radius behind the visible surface along the horizontal viewing ray, with points farther than `inlier_tol` from
 the circle dropped and the fit repeated. `fit_axis` fits a circle of known radius (a listed object's, from the
 scenario), `fit_circle` one whose radius is fitted too, within bounds (an object the scenario does not describe).
-The cap (top face) is excluded from the fit (its points lie inside the circle) except its rim: cluster boundary
-pixels on the cap that are not occlusion edges lie on the circle too, which places a cylinder of which only the
+The cap (top face) is excluded from the fit (its points lie inside the circle) except its rim: the silhouette's
+outline pixels on the cap that are not occlusion edges lie on the circle too, which places a cylinder of which only the
 top is visible (`circle_points`). Checks (docs/perception.md, "Consistency checks"): the known-radius fit's rms
 residual must stay within `max_rms` and its axis uncertainty within `max_uncertainty` (`locate_cylinder`).
 """
@@ -113,13 +113,14 @@ def fit_axis(xy: np.ndarray, radius: float, view_from: np.ndarray,
 
 
 def fit_circle(xy: np.ndarray, view_from: np.ndarray, bounds: tuple[float, float], tol: float,
-               min_points: int = 12) -> tuple[np.ndarray, float, np.ndarray]:
-    """(centre, radius, inlier mask) of a circle whose radius is fitted too, started at the algebraic fit (or, when
-    that is far out of bounds, at the middle of `bounds` one radius behind the points); FitError when it is out of
-    bounds or most points are off it."""
+               min_points: int = 12, start: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, float,
+                                                                                              np.ndarray]:
+    """(centre, radius, inlier mask) of a circle whose radius is fitted too, started at `start` (centre, radius) or
+    the algebraic fit (or, when that is far out of bounds, at the middle of `bounds` one radius behind the points);
+    FitError when it is out of bounds or most points are off it."""
     if len(xy) < min_points:
         raise FitError(f"{len(xy)} side and rim points, need {min_points}")
-    kasa = algebraic_circle(xy)   # a start near the answer: from the middle of the bounds a short arc diverged
+    kasa = start or algebraic_circle(xy)   # a start near the answer: from the middle of the bounds a short arc diverged
     if kasa is not None and bounds[0] / 2 <= kasa[1] <= 2 * bounds[1]:
         centre, r, keep = _trimmed(xy, view_from, kasa[1], None, tol, min_points, 20, kasa[0])
     else:
@@ -132,25 +133,31 @@ def fit_circle(xy: np.ndarray, view_from: np.ndarray, bounds: tuple[float, float
 
 
 def circle_points(rows: np.ndarray, cols: np.ndarray, image_points: np.ndarray, top: float,
-                  camera_position: np.ndarray, params: LocalizeParams) -> np.ndarray:
-    """N x 2 (x, y) points of a standing cylinder's circle: its side (below the cap) and the cap's rim (cluster
-    boundary pixels on the cap that are not an occlusion edge: nothing nearer next to them). rows, cols: the
-    cluster's pixels; image_points: HxWx3 base-frame points of the frame; top: the cylinder's top (m)."""
+                  camera_position: np.ndarray, params: LocalizeParams, clear: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N x 2 (x, y) points of a standing cylinder's circle, N bool: the ones clear of its top face) of its side
+    (below the cap: `cap_margin` under the top) and the cap's rim (the silhouette's outline on the cap where it is not
+    an occlusion edge: nothing nearer next to it; a hole in the depth inside the cap makes no rim). rows, cols: the
+    cluster's pixels; image_points: HxWx3 base-frame points of the frame; top: the cylinder's top (m); clear: the
+    height below which a side point is clear of the top face under the depth noise (objects.noise.cap_below): the
+    side points above it may be cap points, inside the circle (the rim is on it)."""
     h, w = image_points.shape[:2]
     r0, r1 = max(int(rows.min()) - 3, 0), min(int(rows.max()) + 4, h)
     c0, c1 = max(int(cols.min()) - 3, 0), min(int(cols.max()) + 4, w)
     mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
     mask[rows - r0, cols - c0] = 1
+    filled = np.zeros_like(mask)   # the silhouette, its holes filled: their edges are no rim
+    cv2.drawContours(filled, cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0], -1, 1, cv2.FILLED)
     pts = image_points[r0:r1, c0:c1]
-    z = pts[rows - r0, cols - c0, 2]
-    side = pts[rows - r0, cols - c0][z < top - params.cap_margin, :2]
+    own = pts[rows - r0, cols - c0]
+    side = own[own[:, 2] < top - params.cap_margin]
     dist = np.linalg.norm(pts - camera_position.astype(np.float32), axis=2)
     dist = np.where(np.isfinite(dist), dist, np.inf).astype(np.float32)
     nearest = cv2.erode(dist, np.ones((5, 5), np.uint8))  # min over a 5x5 neighbourhood
     with np.errstate(invalid="ignore"):
-        rim = (mask > 0) & (cv2.erode(mask, np.ones((3, 3), np.uint8)) == 0) & (nearest > dist - params.occluder_gap)
+        rim = (mask > 0) & (cv2.erode(filled, np.ones((3, 3), np.uint8)) == 0) & (nearest > dist - params.occluder_gap)
         rim &= pts[..., 2] >= top - params.cap_margin
-    return np.concatenate([side, pts[rim][:, :2]]).astype(float)
+    xy = np.concatenate([side[:, :2], pts[rim][:, :2]]).astype(float)
+    return xy, np.r_[side[:, 2] < clear, np.ones(int(rim.sum()), bool)]
 
 
 def locate_cylinder(xy: np.ndarray, radius: float, camera_position: np.ndarray, params: LocalizeParams,

@@ -35,6 +35,7 @@ from .localize import LocalizeParams
 from .objects.clusters import cluster_points, object_mask
 from .objects.find import find_objects
 from .objects.model import PerceivedObject, box_corners
+from .objects.noise import DepthNoise
 from .objects.params import ObjectParams
 from .objects.self_filter import arm_in_shelf, arm_in_view, on_arm
 from .segmentation import (
@@ -173,8 +174,9 @@ class Perception:
             """Points the arm may have made (its body, the object in its hand, a piece they cut out of another): the
             arm's pose unknown, or the arm in the shelf within arm_reach of them."""
             return arm_unknown or (in_shelf and bool(on_arm(pts, q, self.objects.arm_reach).any()))
+        noise = DepthNoise(fit.noise, fit.noise_1m, T[:3, 3], T[:3, 2])
         objects, missing, left_out = find_objects(clusters, points, self.scenario, memory, self.seg, self.objects,
-                                                  loc, T[:3, 3], fit.noise, new_unlisted=lambda pts: not near_arm(pts))
+                                                  loc, T[:3, 3], noise, new_unlisted=lambda pts: not near_arm(pts))
         if left_out and memory.frame == 0:  # nothing earlier explains that space: no scene yet, never a free one
             raise PerceptionError(f"{left_out} cluster(s) matching no listed object in the first frame, with the arm "
                                   "in the shelf (new objects are taken with the arm out of it): no scene until the "

@@ -87,6 +87,7 @@ class ShelfFit:
     intrinsics: np.ndarray = field(default_factory=lambda: np.zeros(4))  # kx, ky, px, py (see `_to_base`)
 
     centre: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the shelf's centre (base frame)
+    noise_1m: float = 0.0         # m: the depth noise at 1 m of depth: sigma(z) = noise_1m * z^2 (the same residuals)
 
     @property
     def shift(self) -> float:
@@ -192,10 +193,16 @@ def fit_shelf(points_cam: np.ndarray, exclude: np.ndarray, T_base_camera: np.nda
                               float(np.median(res[idx == k])), before.get(k, 0.0))
              for k in range(len(planes)) if np.sum(idx == k) * st * st >= params.min_points}
     on = idx >= 0
-    noise = float(1.4826 * np.median(np.abs(res[on] - np.median(res[on])))) if on.any() else 0.0
+    noise, noise_1m = _spread(res[on]), _spread(res[on] / c[on, 2] ** 2)   # a depth camera's noise grows as z^2
     sh = scenario.shelf
     centre = np.array([(sh.x_front + sh.x_back) / 2, sh.y_center, (sh.bottom_z + sh.ceiling_z) / 2])
-    return ShelfFit(corr, stats, tuple(pl.name for pl in planes if pl.name not in stats), noise, intr, centre)
+    return ShelfFit(corr, stats, tuple(pl.name for pl in planes if pl.name not in stats), noise, intr, centre,
+                    noise_1m)
+
+
+def _spread(r: np.ndarray) -> float:
+    """The robust sigma of residuals r (1.4826 x their median absolute deviation); 0 without any."""
+    return float(1.4826 * np.median(np.abs(r - np.median(r)))) if len(r) else 0.0
 
 
 def _to_base(c: np.ndarray, intr: np.ndarray, T: np.ndarray) -> np.ndarray:

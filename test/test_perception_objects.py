@@ -109,6 +109,28 @@ def test_an_unlisted_bottle_appears_as_u1_and_drops_nothing_listed():
     assert len(rates) >= 4
 
 
+def test_a_jar_at_the_back_under_the_realistic_cameras_noise_is_fitted_on_its_side():
+    """An unlisted 90 mm jar at the top board's back (about 1 m from the camera, where the realistic camera's depth
+    noise, growing as the distance squared, is 3-4 mm) with 3 listed bottles in front, over 4 sensor seeds and
+    positions fixed before any result: it is published as a fitted cylinder (not a conservative box) within 10 mm.
+    Its top face's points spread below the cap's margin and lie inside its circle: left in the circle fit, they pull
+    it to a smaller radius, off or out of the fit bound (docs/perception.md, "Objects")."""
+    sh = BASE.shelf
+    for seed in range(4):
+        y = sh.y_min + (0.2 + 0.2 * seed) * (sh.y_max - sh.y_min)
+        jar = extra(BASE, "jar", CYLINDER, sh.x_back - 0.075, y, (0.09, 0.09, 0.09), 0.0, False, PALETTE["teal"])
+        layout = generated_layout(BASE, seed, 3, taken=[(jar.x, jar.y, 0.08)])
+        f, vis = render_scene(with_objects(BASE, layout, [jar]), sensor=SensorModel.named("realsense_d435"),
+                              seed=seed)
+        assert vis["jar"] >= VISIBLE, (seed, vis["jar"])
+        r = Perception(with_objects(BASE, layout)).process(f.rgb, f.depth, f.K, q=Q_HOME)
+        near = [o for o in r.unlisted.values() if math.hypot(o.x - jar.x, o.y - jar.y) <= 0.05]
+        assert near, (seed, r.unlisted)
+        o = near[0]
+        assert o.shape == CYLINDER and not o.conservative, (seed, o.weight_note)
+        assert math.hypot(o.x - jar.x, o.y - jar.y) <= 0.010, (seed, o.x - jar.x, o.y - jar.y, o.radius)
+
+
 def test_more_than_16_objects():
     """20 bottles, colours repeated past the palette's 16 (seeds 0-2): every visible listed bottle found within
     10 mm (identities of repeated colours from the scenario's positions)."""

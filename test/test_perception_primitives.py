@@ -163,6 +163,7 @@ def test_a_box_under_depth_noise_and_flying_pixels_is_fitted_on_its_faces(seed):
     assert np.allclose(sorted(fitted.size[:2]), sorted(size[:2]), atol=0.010)
     assert fitted.rms <= bound
     side = pts[pts[:, 2] < top - 0.006, :2]
-    best = fit_primitive(pts, side, top, 0.0, camera, params, sigma, 2.5 * sigma)
+    best = fit_primitive(pts, side, np.ones(len(side), bool), top, top - 0.006, 0.0, camera, params, sigma,
+                         2.5 * sigma)
     assert best.shape == BOX and not best.conservative
     assert math.dist((best.x, best.y), centre) < 0.010

@@ -21,6 +21,7 @@ from .clusters import Cluster
 from .fragments import merge_fragments
 from .identity import NO_MATCH, Fitted, Memory, assign, colour_name, listed_box, listed_costs, unlisted_ids
 from .model import BOX, CYLINDER, PerceivedObject, inside, weight_estimate
+from .noise import DepthNoise, cap_below, top_face
 from .params import ObjectParams
 from .primitives import fit_primitive
 
@@ -29,13 +30,16 @@ KEPT = "; a cluster within its last pose: that object, kept there"
 
 
 def fit_clusters(clusters: list[Cluster], image_points: np.ndarray, camera: np.ndarray, seg: SegmentationParams,
-                 params: ObjectParams, loc: LocalizeParams, noise: float) -> list[Fitted]:
-    """Each cluster's best primitive (primitives.fit_primitive) and its circle points; the pieces of one object
-    merged (fragments.merge_fragments)."""
+                 params: ObjectParams, loc: LocalizeParams, noise: DepthNoise) -> list[Fitted]:
+    """Each cluster's best primitive (primitives.fit_primitive) and its circle points (its top face told apart by the
+    depth noise at the cluster's own depth, noise.cap_below); the pieces of one object merged
+    (fragments.merge_fragments)."""
     def fit(c: Cluster, search: bool = True) -> Fitted:
         top = float(np.percentile(c.points[:, 2], 99.5))
-        xy = circle_points(c.rows, c.cols, image_points, top, camera, loc)
-        prim = fit_primitive(c.points, xy, top, c.support, camera, params, noise, loc.inlier_tol, search)
+        sigma = noise.at(c.points)
+        xy, clear = circle_points(c.rows, c.cols, image_points, top, camera, loc, cap_below(top, loc.cap_margin, sigma))
+        prim = fit_primitive(c.points, xy, clear, top, top_face(top, sigma), c.support, camera, params, noise.shelf,
+                             loc.inlier_tol, search)
         return Fitted(c, prim, xy, (int(np.median(c.cols)), int(np.median(c.rows))))
     return merge_fragments([fit(c) for c in clusters], lambda c: fit(c, False), seg, params.merge_gap)
 
@@ -146,7 +150,7 @@ def _why_missing(j: int, b: ShelfObject, cost: np.ndarray, taken: dict[int, str]
 
 def find_objects(clusters: list[Cluster], image_points: np.ndarray, scenario: Scenario, memory: Memory,
                  seg: SegmentationParams, params: ObjectParams, loc: LocalizeParams, camera: np.ndarray,
-                 noise: float, new_unlisted: Callable[[np.ndarray], bool] = lambda points: True
+                 noise: DepthNoise, new_unlisted: Callable[[np.ndarray], bool] = lambda points: True
                  ) -> tuple[dict[str, PerceivedObject], dict[str, str], int]:
     """(objects by id: listed ones first in scenario order, then unlisted; missing listed id -> reason; clusters
     left out). new_unlisted(points) False (the arm in the shelf, near those points): a cluster that is no listed

@@ -2,7 +2,9 @@
 
 The camera sees one side of an object, and every fit uses only what it sees:
 - standing cylinder: a circle in x-y with its radius fitted (bounded), through the side points and the cap's rim
-  (`localize.circle_points`: the far side is hidden, the visible arc suffices); height = top - support;
+  (`localize.circle_points`: the far side is hidden, the visible arc suffices), and through those clear of the top
+  face under the depth noise at the cluster's depth (`noise.cap_below`), kept when CLEAR_MARGIN times better;
+  height = top - support;
 - lying cylinder (axis horizontal, resting on the board): the axis direction is the principal direction of the
   points in x-y; in the cross-section the circle's centre is one radius above the board, radius and offset fitted;
   length = the points' extent along the axis;
@@ -11,8 +13,9 @@ The camera sees one side of an object, and every fit uses only what it sees:
   rectangle lies a few noise sigma outside every face under depth noise), a face not seen at the other points'
   extent; height = top - support.
 Each fit's quality is the rms distance of the cluster's points to the primitive's surface (the faces a camera can
-see); the smallest rms within `fit_rms` (or `fit_noise` x the depth noise) and within the size bounds wins. None
-fits: a conservative box, the visible points' bounding box in x-y reaching `hidden_extent` behind them.
+see; a standing cylinder's top face at `noise.top_face`); the smallest rms within `fit_rms` (or `fit_noise` x the
+depth noise measured on the shelf's planes) and within the size bounds wins. None fits: a conservative box, the
+visible points' bounding box in x-y reaching `hidden_extent` behind them.
 `top_seen`: the top face is in view (cap points well inside the circle or the box's top face), else the height is
 only a lower bound (something nearer hides the top); `ends_seen`: a lying cylinder's end caps in view. A lying
 cylinder is longer than wide (else it is a standing one).
@@ -34,6 +37,7 @@ RMS_SAMPLE = 3000  # points a fit's rms is evaluated on (a fixed-step subsample 
 SEARCH_SAMPLE = 400  # points the lying cylinder's axis search fits (the best direction is refitted on all)
 CAP_BAND = 0.006  # m below the top: the cap (top face) of a standing object
 LYING_MARGIN = 1.5  # a lying cylinder wins over a standing one or a box only with this times their rms
+CLEAR_MARGIN = 1.5  # the circle of the points clear of the top face (fewer) wins only with this times a lower rms
 MIN_TOP_POINTS = 5  # cap points well inside the footprint that show the top face is in view
 BOX_ROUNDS = 2  # the box's faces refitted on the points nearest each (_refit_box)
 MIN_FACE_POINTS = 10  # side points that show a face of the box
@@ -65,18 +69,36 @@ def _sample(points: np.ndarray) -> np.ndarray:
     return points[::step]
 
 
-def standing_cylinder(xy: np.ndarray, points: np.ndarray, support: float, top: float, camera: np.ndarray,
-                      params: ObjectParams, tol: float) -> Primitive:
-    """The standing cylinder through the circle points `xy` (side and rim); FitError when it does not fit."""
-    centre, r, _ = fit_circle(xy, camera, (params.radius_min, params.radius_max), tol)
-    p = _sample(points)
+def _standing_rms(p: np.ndarray, centre: np.ndarray, r: float, face: float) -> float:
+    """The rms distance of points p to a standing cylinder's side (circle centre, r) and its top face at `face`."""
     rho = np.linalg.norm(p[:, :2] - centre, axis=1)
-    d = np.minimum(np.abs(rho - r), np.abs(p[:, 2] - top) + np.maximum(rho - r, 0.0))
+    d = np.minimum(np.abs(rho - r), np.abs(p[:, 2] - face) + np.maximum(rho - r, 0.0))
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
+def standing_cylinder(xy: np.ndarray, clear: np.ndarray, points: np.ndarray, support: float, top: float,
+                      face: float, camera: np.ndarray, params: ObjectParams, tol: float) -> Primitive:
+    """The standing cylinder through the circle points `xy` (side and rim); FitError when they fit no circle. Also
+    the circle through the points `clear` of the top face (noise.cap_below: under depth noise the cap's points reach
+    below its margin, inside the circle, and pull the radius down), started at the first; it wins with a CLEAR_MARGIN
+    times lower rms. The rms: to the side and to the top face at height `face` (noise.top_face)."""
+    p = _sample(points)
+    centre, r, _ = fit_circle(xy, camera, (params.radius_min, params.radius_max), tol)
+    best = (_standing_rms(p, centre, r, face), centre, r)
+    if not clear.all():
+        try:   # started at the circle of all (the clear points are most of them)
+            centre, r, _ = fit_circle(xy[clear], camera, (params.radius_min, params.radius_max), tol, start=(centre, r))
+            rms = _standing_rms(p, centre, r, face)
+            if rms * CLEAR_MARGIN < best[0]:
+                best = (rms, centre, r)
+        except FitError:
+            pass
+    rms, centre, r = best
     h = top - support
-    cap = points[points[:, 2] >= top - CAP_BAND, :2]
-    seen = int(np.sum(np.linalg.norm(cap - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
+    cap_xy = points[points[:, 2] >= top - CAP_BAND, :2]
+    seen = int(np.sum(np.linalg.norm(cap_xy - centre, axis=1) < 0.6 * r)) >= MIN_TOP_POINTS
     return Primitive(CYLINDER, False, float(centre[0]), float(centre[1]), r, h, (2 * r, 2 * r, h), 0.0,
-                     float(np.sqrt(np.mean(d ** 2))), False, "", seen, (False, False))
+                     rms, False, "", seen, (False, False))
 
 
 def _cross_section(t: np.ndarray, s: np.ndarray, z: np.ndarray, sc: float, r: float,
@@ -289,8 +311,8 @@ def box(points: np.ndarray, support: float, top: float, camera: np.ndarray, para
     """The oriented box of the points (module docstring): started at cv2.minAreaRect of their footprint, refitted
     BOX_ROUNDS times on the faces the points show (_refit_box: under depth noise the hull's rectangle lies a few
     noise sigma outside every face; a face is flat when its points' rms about their median is within `flat`:
-    `fit_noise` x the depth noise, what the noise spreads a flat face's points by); FitError when a side is out of
-    bounds."""
+    `fit_noise` x the depth noise, what the noise spreads a flat face's points by); its rms to the top face at height
+    `face` (top_face); FitError when a side is out of bounds."""
     p = _sample(points)
     xy, z = p[:, :2], p[:, 2]
     (cx, cy), (a, b), angle = cv2.minAreaRect(xy.astype(np.float32))
@@ -339,10 +361,12 @@ def _attempt(fit: Callable[[], Primitive], bound: float) -> Primitive | str:
     return f if f.rms <= bound else f"rms {f.rms * 1000:.1f} mm"
 
 
-def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support: float, camera: np.ndarray,
-                  params: ObjectParams, noise: float, tol: float, search: bool = True) -> Primitive:
+def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, clear: np.ndarray, top: float, face: float,
+                  support: float, camera: np.ndarray, params: ObjectParams, noise: float, tol: float,
+                  search: bool = True) -> Primitive:
     """The best primitive of a cluster (module docstring). points: its base-frame points; circle_xy: its side and
-    rim points for the standing cylinder; top: the points' 99.5th height percentile; camera: the camera's position;
+    rim points for the standing cylinder, `clear` the ones clear of its top face; top: the points' 99.5th height
+    percentile; face: the top face's height (noise.top_face); camera: the camera's position;
     noise: the frame's depth noise; tol: the circle fit's inlier band. The lying cylinder is not fitted where it
     cannot win (its rms floor, lying_rms_floor, LYING_MARGIN times over a standing cylinder's or box's rms within
     the bound); its search over axis directions runs only when no primitive fits otherwise and `search` (it costs
@@ -357,7 +381,8 @@ def fit_primitive(points: np.ndarray, circle_xy: np.ndarray, top: float, support
             made.append(lying_start(points, support, view, params))
         return made[0]
     attempts: dict[str, Callable[[], Primitive]] = {
-        "standing cylinder": lambda: standing_cylinder(circle_xy, points, support, top, camera, params, tol),
+        "standing cylinder": lambda: standing_cylinder(circle_xy, clear, points, support, top, face, camera, params,
+                                                       tol),
         "lying cylinder": lambda: lying_cylinder(points, support, view, params, None, lying()),
         "box": lambda: box(points, support, top, camera, params, params.fit_noise * noise),
         "lying cylinder, axis searched": lambda: lying_cylinder(points, support, view, params, bound, lying())}
