@@ -7,7 +7,6 @@ and the node closed: exit 0. Bad parameters or a bad scene: one line on stderr a
 """
 from __future__ import annotations
 
-import atexit
 import importlib
 import os
 import signal
@@ -230,20 +229,6 @@ def node_main(name: str, node_factory: Callable[[], Node], args: list[str] | Non
     except unusable as e:
         print(f"{name}: {type(e).__name__}: {e}", file=sys.stderr)
         raise SystemExit(2) from None
-    _exit_stopped()
-
-
-def _exit_stopped() -> None:
-    """Exit 0 after a clean stop without the interpreter's finalization: the node is destroyed, rclpy shut down
-    (its log files flushed), the atexit functions run here; what is left is tearing down every module and C
-    extension (MuJoCo, SciPy, rclpy), most of a node's exit time: 0.2-0.4 s after rclpy's shutdown on an idle
-    machine, 0.7-1.2 s with the CPU shared three ways, where the driver's whole exit took 1.3-2.6 s after its signal
-    (a test's 2 s bound failed at a load of about 10); with this, the stop itself is 0.05-0.2 s. Fast DDS's
-    shared-memory files are released by the shutdown, not the finalization (/dev/shm the same either way)."""
-    atexit._run_exitfuncs()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(0)
 
 
 class ActionClient(RclpyActionClient):
