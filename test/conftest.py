@@ -1,6 +1,8 @@
 """Test session set-up shared by every test module."""
 import os
 
+import pytest
+
 # MuJoCo picks its OpenGL platform when it is first imported; a test module that imports mujoco before
 # jaco2_sim_driver would leave the whole pytest process unable to render (headless: EGL).
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -27,6 +29,7 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+@pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     """QTREE_TEST_CPU=FILE: a JSON line per test appended to FILE with its wall time and the CPU seconds of this
     process and of the processes it waited for (the node processes a test started and stopped), setup and teardown
@@ -34,7 +37,8 @@ def pytest_runtest_protocol(item, nextitem):
     docs/bench/test_time.md."""
     path = os.environ.get("QTREE_TEST_CPU")
     if not path:
-        return None
+        yield
+        return
     import json
     import resource
     import time
@@ -44,11 +48,6 @@ def pytest_runtest_protocol(item, nextitem):
         return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
     t0, c0 = time.monotonic(), cpu()
-    item.ihook.pytest_runtest_logstart(nodeid=item.nodeid, location=item.location)
-    from _pytest.runner import runtestprotocol
-
-    runtestprotocol(item, nextitem=nextitem)
-    item.ihook.pytest_runtest_logfinish(nodeid=item.nodeid, location=item.location)
+    yield
     with open(path, "a") as f:
         f.write(json.dumps({"test": item.nodeid, "wall": time.monotonic() - t0, "cpu": cpu() - c0}) + "\n")
-    return True
