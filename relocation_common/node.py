@@ -7,6 +7,7 @@ and the node closed: exit 0. Bad parameters or a bad scene: one line on stderr a
 """
 from __future__ import annotations
 
+import gc
 import importlib
 import os
 import signal
@@ -229,6 +230,17 @@ def node_main(name: str, node_factory: Callable[[], Node], args: list[str] | Non
     except unusable as e:
         print(f"{name}: {type(e).__name__}: {e}", file=sys.stderr)
         raise SystemExit(2) from None
+    _freeze_for_exit()
+
+
+def _freeze_for_exit() -> None:
+    """The node has stopped and the process ends: move every object to the collector's permanent generation, which
+    the interpreter's finalization does not traverse. Its collections were most of a node's exit (the driver's main
+    thread in gc_collect_main for about 100 ms of CPU after SIGINT; 0.14-0.20 s of CPU from the signal to the end of
+    the process, 0.07-0.13 s frozen), and under load each CPU second is several of wall time against the 2 s a stop
+    may take. Objects are still freed by their reference counts and the C++ exit handlers still run (Fast DDS's
+    participants are destroyed, their removal announced: unlike ending with os._exit, which lost it)."""
+    gc.freeze()
 
 
 class ActionClient(RclpyActionClient):
