@@ -32,12 +32,14 @@ READY_TIMEOUT = 90.0  # s a node may take to start on a loaded machine
 
 
 def export_common(rev: str) -> str:
-    """relocation_common/ of git revision `rev` in a temporary directory."""
+    """relocation_common/ of git revision `rev` in a temporary directory, with this checkout's config/."""
     d = tempfile.mkdtemp(prefix="bench_exit_base_")
     tar = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "relocation_common"], capture_output=True,
                          check=True).stdout
     with tarfile.open(fileobj=io.BytesIO(tar)) as t:
         t.extractall(d, filter="data")
+    for f in ("config", "package.xml"):  # relocation_common takes the directory beside itself for the checkout
+        os.symlink(ROOT / f, Path(d) / f)
     return d
 
 
