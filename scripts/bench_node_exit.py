@@ -52,8 +52,9 @@ def cpu_seconds(pid: int) -> float:
 def one_exit(name: str, common_dir: str, run_dir: Path, domain: int) -> tuple[float, float]:
     """(wall s, CPU s) from SIGINT to the end of node `name` whose relocation_common comes from `common_dir` ("" =
     this checkout's)."""
-    from relocation_app.graph import ros_env
     from test_reliability_shutdown import NODES
+
+    from relocation_app.graph import ros_env
     module, params, _extra, ready = NODES[name]
     env = ros_env(domain, run_dir)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [common_dir, str(ROOT)]))

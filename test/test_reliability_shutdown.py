@@ -199,7 +199,11 @@ class IdleNode(Node):
         super().__init__("idle_node")
         print("ready", flush=True)
 
-atexit.register(lambda: print(f"frozen at exit: {gc.get_freeze_count()} of {len(gc.get_objects()) + gc.get_freeze_count()}", flush=True))
+def report():
+    frozen = gc.get_freeze_count()
+    print(f"frozen at exit: {frozen} of {len(gc.get_objects()) + frozen}", flush=True)
+
+atexit.register(report)
 node_main("idle_node", IdleNode, threads=1)
 """
 
