@@ -55,25 +55,23 @@ def _canonical(obj: Any) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
 
 
-_node_bytes: dict[int, tuple[dict, bytes]] = {}  # id -> (tree node entry, its canonical bytes) of the last payload
+_last_nodes: tuple[list[dict], list[bytes]] = ([], [])  # the last payload's tree node entries and their bytes
 
 
 def _canonical_payload(payload: dict) -> bytes:
     """_canonical(payload), each of the tree's node entries encoded once across checkpoints: an entry that is the same
-    object as one of the last payload's (KernelTree.to_state hands out the entries of unchanged nodes again; an entry
-    is never changed in place) reuses its bytes. The same bytes as _canonical(payload) (test_checkpoint_cost)."""
-    global _node_bytes
-    tree, memo, seen = payload["tree"], _node_bytes, {}
+    object as the last payload's at its place (KernelTree.to_state hands out the entries of unchanged nodes again; an
+    entry is never changed in place) reuses its bytes. The same bytes as _canonical(payload) (test_checkpoint_cost)."""
+    global _last_nodes
+    tree = payload["tree"]
     head = _canonical(dict(payload, tree=None))
     if not head.endswith(b'"tree":null}') or set(tree) != {"mp_q", "nodes", "q_sum"}:
         return _canonical(payload)  # not the layout of QTree.to_state: encoded whole
-    parts = []
-    for node in tree["nodes"]:
-        hit = memo.get(id(node))
-        data = hit[1] if hit is not None and hit[0] is node else _canonical(node)
-        seen[id(node)] = (node, data)
-        parts.append(data)
-    _node_bytes = seen
+    nodes, (before, encoded) = tree["nodes"], _last_nodes
+    m = min(len(nodes), len(before))
+    parts = [encoded[k] if before[k] is node else _canonical(node) for k, node in enumerate(nodes[:m])]
+    parts += [_canonical(node) for node in nodes[m:]]
+    _last_nodes = (list(nodes), parts)
     body = b'{"mp_q":%s,"nodes":[%s],"q_sum":%s}' % (_canonical(tree["mp_q"]), b",".join(parts),
                                                       _canonical(tree["q_sum"]))
     return head[:-len(b"null}")] + body + b"}"
