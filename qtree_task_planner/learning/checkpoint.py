@@ -55,6 +55,28 @@ def _canonical(obj: Any) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
 
 
+_last_nodes: tuple[list[dict], list[bytes]] = ([], [])  # the last payload's tree node entries and their bytes
+
+
+def _canonical_payload(payload: dict) -> bytes:
+    """_canonical(payload), each of the tree's node entries encoded once across checkpoints: an entry that is the same
+    object as the last payload's at its place (KernelTree.to_state hands out the entries of unchanged nodes again; an
+    entry is never changed in place) reuses its bytes. The same bytes as _canonical(payload) (test_checkpoint_cost)."""
+    global _last_nodes
+    tree = payload["tree"]
+    head = _canonical(dict(payload, tree=None))
+    if not head.endswith(b'"tree":null}') or set(tree) != {"mp_q", "nodes", "q_sum"}:
+        return _canonical(payload)  # not the layout of QTree.to_state: encoded whole
+    nodes, (before, encoded) = tree["nodes"], _last_nodes
+    m = min(len(nodes), len(before))
+    parts = [encoded[k] if before[k] is node else _canonical(node) for k, node in enumerate(nodes[:m])]
+    parts += [_canonical(node) for node in nodes[m:]]
+    _last_nodes = (list(nodes), parts)
+    body = b'{"mp_q":%s,"nodes":[%s],"q_sum":%s}' % (_canonical(tree["mp_q"]), b",".join(parts),
+                                                      _canonical(tree["q_sum"]))
+    return head[:-len(b"null}")] + body + b"}"
+
+
 def _canonical_body(payload: bytes) -> bytes:
     """_canonical of the file's body {format, version, sha256, payload} from the payload's canonical bytes, which are
     hashed and written as they are: the payload (the whole tree, every checkpoint) is encoded once, not twice."""
@@ -79,7 +101,7 @@ class Checkpoint:
     planner_calls: int  # real oracle calls of this training so far
     converged: bool
     cancelled: bool
-    tree: dict  # QTree.to_state()
+    tree: dict  # QTree.to_state(); never changed in place (save_checkpoint reuses the bytes of unchanged nodes)
     feasibility: list = field(default_factory=list)  # [[object_id, [removed ids], label(, blocker sets(, near))]]
     elapsed_s: float = 0.0
     reason: str = "periodic"  # periodic | final | cancelled | interrupted: <why>
@@ -184,7 +206,7 @@ def save_checkpoint(ck: Checkpoint, path: str | Path) -> Path:
     """Write atomically: temporary file next to `path`, fsync, os.replace (readers never see half a file)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    payload = _canonical(ck.to_payload())
+    payload = _canonical_payload(ck.to_payload())
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         with open(tmp, "wb") as f:

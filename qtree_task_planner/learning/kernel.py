@@ -29,6 +29,8 @@ import time
 from pathlib import Path
 from typing import Callable, NamedTuple
 
+import numpy as np
+
 from qtree_task_planner.learning.q_tree import R_TARGET, R_UNFEASIBLE, Node, QTree
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.problem import RelocationProblem
@@ -153,6 +155,8 @@ class KernelTree(QTree):
         self._n_nodes: int | None = 1
         self._n_edges = 0
         self._mt = (ctypes.c_uint32 * 624)()
+        self._state_rows: tuple[dict[str, np.ndarray], list[dict], list[list[int]]] = (
+            {k: np.empty(0, np.int32) for k in ("parent", "action")}, [], [])  # to_state's last arrays and entries
 
     def __del__(self) -> None:
         h = getattr(self, "_handle", None)
@@ -215,7 +219,10 @@ class KernelTree(QTree):
     def _arrays(self) -> dict[str, list]:
         """The kernel's tree as lists (n nodes): parent, action, n_edges, n_offer; per node rows of n1 actions:
         order (edges in creation order), label, q, child, offer."""
-        import numpy as np
+        return {k: v.tolist() for k, v in self._arrays_np().items()}
+
+    def _arrays_np(self) -> dict[str, np.ndarray]:
+        """_arrays as numpy arrays (one copy out of the kernel)."""
         lib, h, n1 = _lib(), self._handle, self.n_objects
         n = lib.kt_n_nodes(h)
         out = {name: np.empty(n, np.int32) for name in ("parent", "action", "n_edges", "n_offer")}
@@ -224,7 +231,7 @@ class KernelTree(QTree):
             out[name] = np.empty((n, n1), dtype)
         lib.kt_export(h, *(out[k].ctypes.data for k in ("parent", "action", "n_edges", "n_offer", "order", "label",
                                                          "q", "child", "offer")))
-        return {k: v.tolist() for k, v in out.items()}
+        return out
 
     def _export(self) -> list[Node]:
         """The Python nodes exactly as the reference loop builds them: ids in creation order, edges (label, q,
@@ -257,21 +264,45 @@ class KernelTree(QTree):
         return nodes
 
     def to_state(self) -> dict:
-        """QTree.to_state, read from the kernel's arrays without building Python nodes (a checkpoint every
-        `checkpoint_every` episodes stays cheap)."""
+        """QTree.to_state, read from the kernel's arrays without building Python nodes. A checkpoint every
+        `checkpoint_every` episodes stays cheap: the entries of the nodes unchanged since the last call are the
+        same objects (never changed in place; learning.checkpoint encodes each once), only the nodes new or
+        changed since are read again."""
         if self._py_nodes is not None:
             return super().to_state()
-        t = self._arrays()
-        parent, action, n_edges, order, label, q = (t[k] for k in ("parent", "action", "n_edges", "order", "label",
-                                                                     "q"))
-        seqs: list[list[int]] = []
-        nodes = []
-        for i in range(len(parent)):
-            seq = seqs[parent[i]] + [action[i]] if i else []
-            seqs.append(seq)
-            lab_row, q_row = label[i], q[i]
-            nodes.append({"seq": seq, "edges": [[a, lab_row[a], q_row[a]] for a in order[i][:n_edges[i]]]})
-        return {"nodes": nodes, "mp_q": self.mp_q, "q_sum": self.q_sum}
+        t = self._arrays_np()
+        keep, changed = self._unchanged(t)
+        nodes, seqs = self._state_rows[1][:keep], self._state_rows[2][:keep]
+        parent, action, n_edges = (t[k] for k in ("parent", "action", "n_edges"))
+        for i in changed:
+            nodes[i] = {"seq": seqs[i], "edges": self._edges(t, i, int(n_edges[i]))}
+        for i in range(keep, len(parent)):
+            seqs.append(seqs[parent[i]] + [int(action[i])] if i else [])
+            nodes.append({"seq": seqs[i], "edges": self._edges(t, i, int(n_edges[i]))})
+        self._state_rows = (t, nodes, seqs)
+        return {"nodes": list(nodes), "mp_q": self.mp_q, "q_sum": self.q_sum}
+
+    def _unchanged(self, t: dict[str, np.ndarray]) -> tuple[int, list[int]]:
+        """Against the arrays of the last to_state: (keep, changed) where nodes below `keep` have the same
+        sequence (parent and action of every node up to them), and `changed` are those of them whose edges differ
+        (count, order, labels or Q bit for bit)."""
+        before = self._state_rows[0]
+        m = min(len(t["parent"]), len(before["parent"]))
+        moved = np.flatnonzero((t["parent"][:m] != before["parent"][:m]) | (t["action"][:m] != before["action"][:m]))
+        keep = int(moved[0]) if moved.size else m
+        if keep == 0:
+            return 0, []
+        differ = t["n_edges"][:keep] != before["n_edges"][:keep]
+        for k in ("order", "label"):
+            differ |= (t[k][:keep] != before[k][:keep]).any(axis=1)
+        differ |= (t["q"][:keep].view(np.int64) != before["q"][:keep].view(np.int64)).any(axis=1)
+        return keep, np.flatnonzero(differ).tolist()
+
+    @staticmethod
+    def _edges(t: dict[str, np.ndarray], i: int, n_edges: int) -> list[list]:
+        """Node i's edges in creation order as [action, label (Eq. 11), Q]."""
+        lab_row, q_row = t["label"][i].tolist(), t["q"][i].tolist()
+        return [[a, lab_row[a], q_row[a]] for a in t["order"][i, :n_edges].tolist()]
 
     def load_state(self, state: dict) -> None:
         """QTree.load_state (validated into Python nodes), then the same tree into the kernel, node by node in
