@@ -253,12 +253,16 @@ def side_grasp(scenario: Scenario, object_id: str, yaw: float, pre_grasp_distanc
                ) -> Grasp:
     """Grasp and pre-grasp poses of a standing object on the top shelf for one approach yaw (at its mid-height,
     `grasp_standoff` short of its centre: the module docstring); of a lying cylinder, `grasp_from_above` (its
-    pitch and pre-grasp keeping `clearance` under the board above: `lying_pitch`)."""
+    pitch and pre-grasp keeping `clearance` under the board above: `lying_pitch`), or where the board above leaves
+    no room for it, `grasp_along_axis`."""
     b = scenario.object(object_id)
     if b.lying:
         pitch, pre_d, why = lying_pitch(scenario.shelf, b, pre_grasp_distance, clearance)
-        if why:
-            raise WorkspaceError(why)
+        if why:  # the grasp along its axis (the section "along the axis"), its reach and room checked
+            why_along = along_axis_refusal(scenario.shelf, b, math.pi, clearance)
+            if why_along:
+                raise WorkspaceError(both_refusals(why, why_along))
+            return grasp_along_axis(scenario.shelf, b, yaw, pre_grasp_distance, clearance)
         above = grasp_from_above(scenario.shelf, b, yaw, pitch, pre_d)
         check_pose(above.grasp, f"grasp of {object_id} from above")
         return above
@@ -427,6 +431,8 @@ def exit_pose(scenario: Scenario, object_id: str, pose: Pose, margin: float) -> 
     if b.shape == "box":
         ahead += width / 2 * abs(math.sin(yaw))
     reach = FINGER_REACH * c
+    if b.lying and len(pose) < 5:  # held along its axis (grasp_along_axis): its far end and its flank
+        ahead = (along_axis_standoff(b) + b.height / 2) * c + b.radius * abs(math.sin(yaw))
     if len(pose) > 4:  # straight out, until what the hand holds clears the shelf as it is stood up and turned
         ahead = stand_up_reach(b, yaw, float(pose[4]))
         return (min(x, scenario.shelf.x_front - margin - ahead), y, z, yaw, *(float(v) for v in pose[4:]))
@@ -478,8 +484,17 @@ def place_poses(scenario: Scenario, object_id: str, slot_xy: tuple[float, float]
     The tool is at the object's mid-height with its base `drop` above the bottom shelf (the release height of
     `carry_heights`) and its centre on the slot: `held_standoff` ahead, for the depth it was grasped by at
     `grasp_yaw` (a box is held square to the hand: `grasp_extent`). A bottle grasped from above at `grasp_pitch`
-    stands in the hand tilted up by `held_tilt` (`stand_up_pose`): its centre `held_standoff` along that tilt."""
+    stands in the hand tilted up by `held_tilt` (`stand_up_pose`): its centre `held_standoff` along that tilt. A
+    lying cylinder grasped along its axis (`grasp_pitch` 0) is placed lying along x, its centre on the slot and its
+    lowest point `drop` above the bottom shelf; its staging pose far enough back that it is out of the shelf."""
     b = scenario.object(object_id)
+    if b.lying and grasp_pitch == 0.0:  # held along its axis: placed lying along x, the bottle out of the shelf
+        s = along_axis_standoff(b)  # at the staging pose
+        z = scenario.shelf.bottom_z + drop + b.radius + along_axis_raise(b)
+        x = slot_xy[0] - s
+        stage = (min(x - stage_distance, scenario.shelf.x_front - 0.03 - s - b.height / 2), slot_xy[1], z, 0.0)
+        check_pose((x, slot_xy[1], z, 0.0), f"place of {object_id} at slot {slot_xy}")
+        return stage, (x, slot_xy[1], z, 0.0)
     z = scenario.shelf.bottom_z + drop + b.height / 2
     s = held_standoff(b, grasp_yaw)
     if b.lying:
@@ -493,3 +508,74 @@ def place_poses(scenario: Scenario, object_id: str, slot_xy: tuple[float, float]
     stage = (min(slot_xy[0] - stage_distance, scenario.shelf.x_front - 0.07), slot_xy[1], z, 0.0)
     check_pose(place, f"place of {object_id} at slot {slot_xy}")
     return stage, place
+
+
+# ---------------------------------------------------------------------------------------------- along the axis
+# Under a board too low for a hand from above (`lying_pitch` refuses it), a lying cylinder is grasped with the hand
+# horizontal (pitch 0: `side_rotation`), approaching along its axis from its end nearer to the open side (the approach
+# yaw `lying_axis_yaw`, within the tiers' range), the fingers closing horizontally across the axis around that
+# end: the palm PALM_GAP from the end cap, the grasp centre on the axis's vertical plane, raised above the axis only
+# as much as keeps the hand's lowest capsule (the palm, 45 mm round the tool axis) FINGER_FLOOR above the board; the
+# hand (wrist, palm, fingers) may come that near the board on the approach and the lift (context.grasp_skip). Held
+# along tool z, its centre `along_axis_standoff` beyond the tool and `along_axis_raise` below the tool axis; it is
+# carried and placed lying, along x (no hand turns a bottle held so upright under the bottom shelf's board).
+AXIS_GRASP_MAX_RAISE = 0.025  # m: the grasp centre at most this far from the axis (the fingers close on its upper
+# flank: at 25 mm over a 33 mm radius, 2 x 21 mm apart); the simulator attaches within the same (GRASP_RADIAL_TOL)
+
+
+def along_axis_raise(o: ShelfObject) -> float:
+    """How far (m) above the lying cylinder's axis the grasp along it puts the grasp centre: the hand's lowest
+    capsule (`hand_heights` at pitch 0) FINGER_FLOOR above the board, or on the axis if that is already so."""
+    return max(0.0, FINGER_FLOOR - hand_heights((0.0, 0.0, 0.0, 0.0))[0] - o.radius)
+
+
+def along_axis_standoff(o: ShelfObject) -> float:
+    """How far (m) beyond the grasp centre, along the approach, the centre of the lying cylinder grasped along its
+    axis is: half its length, less the near end cap's place (PALM_GAP in front of the palm, PALM_REACH behind the
+    grasp centre)."""
+    return o.height / 2 + PALM_GAP - PALM_REACH
+
+
+def grasp_along_axis(shelf: Shelf, o: ShelfObject, yaw: float, pre_grasp_distance: float, clearance: float) -> Grasp:
+    """Grasp and pre-grasp of the lying cylinder `o` along its axis at approach `yaw` (the section's comment): the
+    grasp centre `along_axis_standoff` short of its centre along the approach, `along_axis_raise` above its axis;
+    the pre-grasp `pre_grasp_distance` back and raised until the hand's lowest capsule keeps `clearance` over the
+    board (the Cartesian planner's and STPIK's bound: the approach comes down the rest). Not checked for reach."""
+    support = shelf.top_z if o.support_z is None else o.support_z
+    s, c, si = along_axis_standoff(o), math.cos(yaw), math.sin(yaw)
+    z = support + o.radius + along_axis_raise(o)
+    rise = max(0.0, clearance - FINGER_FLOOR)
+    g = (o.x - s * c, o.y - s * si, z, yaw)
+    pre = (o.x - (s + pre_grasp_distance) * c, o.y - (s + pre_grasp_distance) * si, z + rise, yaw)
+    return Grasp(o.id, yaw, tuple(float(v) for v in g), tuple(float(v) for v in pre))
+
+
+def along_axis_refusal(shelf: Shelf, o: ShelfObject, max_yaw: float, clearance: float) -> str:
+    """Why the grasp along the axis cannot take the lying cylinder `o` ("no grasp: ..."), or "": its approach yaw
+    (`lying_axis_yaw`) more than `max_yaw` from straight in, the grasp centre more than AXIS_GRASP_MAX_RAISE above the
+    axis, the hand not `clearance` under the board above at the pre-grasp, or the grasp out of the arm's reach."""
+    yaw = lying_axis_yaw(o)
+    if abs(yaw) > max_yaw + 1e-9:
+        return (f"{NO_GRASP}{o.id} lies with its axis {abs(yaw):.2f} rad from pointing into the shelf; a grasp along "
+                f"it approaches within {max_yaw:.2f} rad of straight in")
+    raise_ = along_axis_raise(o)
+    if raise_ > AXIS_GRASP_MAX_RAISE:
+        return (f"{NO_GRASP}{o.id} ({o.radius * 1000:.0f} mm radius) is too thin for a grasp along its axis: the "
+                f"hand's centre {raise_ * 1000:.0f} mm above it, at most {AXIS_GRASP_MAX_RAISE * 1000:.0f} mm")
+    support = shelf.top_z if o.support_z is None else o.support_z
+    g = grasp_along_axis(shelf, o, yaw, 0.0, clearance)
+    need = hand_heights(g.pre_grasp)[1] - support + clearance
+    if need > shelf.ceiling_z - support:
+        return (f"{NO_GRASP}{o.id} lies with {shelf.ceiling_z - support:.2f} m of headroom; a grasp along its axis "
+                f"needs {need:.2f} m")
+    try:
+        check_pose(g.grasp, f"grasp of {o.id} along its axis")
+    except WorkspaceError as e:
+        return f"{NO_GRASP}{o.id} lies out of the arm's reach for a grasp along its axis ({e})"
+    return ""
+
+
+def both_refusals(above: str, along: str) -> str:
+    """The reason a lying cylinder is not grasped: the grasp from above's (`lying_pitch`), then the grasp along its
+    axis's (`along_axis_refusal`), one "no grasp: "."""
+    return f"{above}; nor along its axis: {along.removeprefix(NO_GRASP)}"

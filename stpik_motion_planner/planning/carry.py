@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from relocation_common import robot_description as rd
 from relocation_common.scenario import ShelfObject
 from stpik_motion_planner.model.collision import (
     CARRIED,
@@ -24,13 +25,15 @@ from stpik_motion_planner.model.collision import (
     CapsuleSpec,
     HandProxy,
     ObstacleSet,
-    approach_skip,
+    capsule_spec,
     carried_bottle,
     carried_box,
 )
 from stpik_motion_planner.model.grasp import (
     Pose,
     WorkspaceError,
+    along_axis_raise,
+    along_axis_standoff,
     check_pose,
     exit_pose,
     face_yaws,
@@ -95,12 +98,15 @@ def plan_carry(ctx: PlanningContext, object_id: str, removed: frozenset[str], go
     placed = ctx.placed_default(removed, goal.slot_index) if placed is None else list(placed)
     obs = ctx.collision_scene(placed).obstacles(removed | {object_id})
     support = {CARRIED: frozenset(["board:top_shelf"])}  # the one board the bottle may touch: on the lift
-    if b.lying:  # and the fingers of a grasp from above, FINGER_FLOOR above it (collision.approach_skip)
-        support |= {n: frozenset(["board:top_shelf"]) for n, v in approach_skip(b).items() if "board:top_shelf" in v}
+    if b.lying:  # and the hand of a grasp of a lying one, FINGER_FLOOR above it (context.grasp_skip)
+        support |= {n: frozenset(["board:top_shelf"]) for n, v in ctx.grasp_skip(b.id).items()
+                    if "board:top_shelf" in v}
+    along = ctx.along_axis(object_id)  # held along its axis: carried and placed lying, as a side grasp's (x, y, z, yaw)
     carried, arm_start, arm_c = carried_models(ctx, b, q_start, obs, support)
     ctx.kin.update(q_start, jacobians=False)
     rot, pos = ctx.kin.tool_pose()
-    start = np.array([*pos, *tool_angles(rot)]) if b.lying else np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
+    start = np.array([*pos, *tool_angles(rot)]) if b.lying and not along else \
+        np.array([*pos, math.atan2(rot[1, 2], rot[0, 2])])
     lifted = start.copy()
     lifted[2] += goal.lift
     bound = arm_start.specs[-1].clearance
@@ -119,7 +125,8 @@ def plan_carry(ctx: PlanningContext, object_id: str, removed: frozenset[str], go
                              max(p.hand_margin, p.stpik.clearance + p.stpik.act) + 0.002))
     rng = ctx.question_rng("carry", object_id, removed, goal.slot_index, q_start, ctx.placed_key(placed))
     # a bottle grasped from above is stood up in front of the shelf (grasp.stand_up_pose), then carried as held
-    direct = [lifted, out, *map(np.array, stand_up_poses(out)), goal.stage] if b.lying else [lifted, out, goal.stage]
+    direct = [lifted, out, *map(np.array, stand_up_poses(out)), goal.stage] if b.lying and not along else \
+        [lifted, out, goal.stage]
     carry = carry_legs(ctx, up.q[-1], direct, goal.place, obs, (arm_start, arm_c, hand_c), deadline, stats,
                        goal.what, rng, rest)
     back = retreat(ctx, object_id, removed, placed, goal, carry[1].q[-1], stats)
@@ -190,11 +197,18 @@ def retreat(ctx: PlanningContext, object_id: str, removed: frozenset[str], place
     return back
 
 
-def carried_shape(b: ShelfObject, grasp_yaw: float, clearance: float, tilt: float) -> CapsuleSpec:
+def carried_shape(b: ShelfObject, grasp_yaw: float, clearance: float, tilt: float, along: bool = False
+                  ) -> CapsuleSpec:
     """The object held at its real size, with its clearance bound: collision.carried_bottle (a bottle grasped from
     above too: its axis along tool y, `held_standoff` beyond the tool), or carried_box for a
     box held by the face nearest to square to the tool's yaw `grasp_yaw` at the grasp (grasp.grasp_extent), turned
-    by the yaw error the grasp accepted (stpik.grasp_yaw_tol)."""
+    by the yaw error the grasp accepted (stpik.grasp_yaw_tol). `along`: a lying cylinder grasped along its axis
+    (grasp.grasp_along_axis): its axis along tool z, `along_axis_standoff` beyond the tool and `along_axis_raise`
+    below it (-tool y: the hand is horizontal)."""
+    if along:
+        z, half, low = rd.D67 + along_axis_standoff(b), b.height / 2, -along_axis_raise(b)
+        return capsule_spec(CARRIED, rd.LINK_NAMES[6], (0, low, z - half), (0, low, z + half), b.radius,
+                            cylinder=True, clearance=clearance)
     half_depth, width = grasp_extent(b, grasp_yaw)
     if b.shape == "box":
         face = min(face_yaws(b), key=lambda y: abs(math.remainder(y - grasp_yaw, 2 * math.pi)))
@@ -218,7 +232,8 @@ def carried_models(ctx: PlanningContext, b: ShelfObject, q_start: np.ndarray, ob
     p = ctx.params
     grasp_yaw = ctx.grasp_yaw(q_start)
     tilt = held_tilt(ctx.grasp_pitch(b.id)) if b.lying else 0.0
-    carried = carried_shape(b, grasp_yaw, p.carried_clearance, tilt)
+    along = ctx.along_axis(b.id)
+    carried = carried_shape(b, grasp_yaw, p.carried_clearance, tilt, along)
     arm_c = ArmGeometry(ctx.kin, [carried])
     ctx.kin.update(q_start, jacobians=False)
     arm_c.pose()
@@ -227,7 +242,7 @@ def carried_models(ctx: PlanningContext, b: ShelfObject, q_start: np.ndarray, ob
     gap = min(near, default=math.inf)
     if gap >= p.carried_clearance or gap == PENETRATION:
         return carried, arm_c, arm_c
-    start = carried_shape(b, grasp_yaw, gap - min(START_RELIEF, gap / 2), tilt)
+    start = carried_shape(b, grasp_yaw, gap - min(START_RELIEF, gap / 2), tilt, along)
     return carried, ArmGeometry(ctx.kin, [start]), arm_c
 
 

@@ -20,15 +20,19 @@ from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, UnknownObjectError
 from relocation_common.shelf_object import objects_key
 from stpik_motion_planner.model.collision import (
+    HAND_PARTS,
     ArmGeometry,
     CollisionScene,
     HandProxy,
     Lying,
     ObstacleSet,
+    approach_skip,
 )
 from stpik_motion_planner.model.grasp import (
     WorkspaceError,
+    along_axis_refusal,
     approach_yaw,
+    both_refusals,
     carry_heights,
     grasp_refusal,
     grasp_yaw_tiers,
@@ -146,8 +150,9 @@ class PlanningContext:
         """Why the grasps cannot take `object_id` whatever is removed ('' if they may): off the shelf, or
         "no grasp: " and why (grasp.grasp_refusal: a conservative object, a cylinder leaning as perceived, too wide
         for the open hand, a box too wide across every face the approach yaws of both tiers can take it by; a
-        cylinder lying flat, from the scenario or tipped over as perceived: grasp.lying_pitch, the headroom or the
-        reach of the grasp from above)."""
+        cylinder lying flat, from the scenario or tipped over as perceived, that neither the grasp from above
+        (grasp.lying_pitch: the headroom or its reach) nor the grasp along its axis (grasp.along_axis_refusal)
+        takes: both reasons)."""
         if object_id in self.gone:
             return f"{object_id} left the shelf: nothing to grasp"
         p = self.params
@@ -156,8 +161,15 @@ class PlanningContext:
         if why:
             return why
         if o.lying:
-            return lying_pitch(self.scenario.shelf, o, p.pre_grasp_distance, self.ceiling_clearance)[2]
+            above = lying_pitch(self.scenario.shelf, o, p.pre_grasp_distance, self.ceiling_clearance)[2]
+            along = along_axis_refusal(self.scenario.shelf, o, max_yaw, self.ceiling_clearance) if above else ""
+            return both_refusals(above, along) if along else ""
         return self.out_of_reach(object_id)
+
+    def along_axis(self, object_id: str) -> bool:
+        """`object_id` is a lying cylinder grasped along its axis (grasp.grasp_along_axis): the board above leaves no
+        room for a grasp from above (its pitch 0)."""
+        return self.scenario.object(object_id).lying and self.grasp_pitch(object_id) == 0.0
 
     def out_of_reach(self, object_id: str) -> str:
         """"no grasp: " for an object standing where the straight side grasp is out of the arm's workspace: a fact
@@ -175,6 +187,16 @@ class PlanningContext:
         if not o.lying:
             return 0.0
         return lying_pitch(self.scenario.shelf, o, self.params.pre_grasp_distance, self.ceiling_clearance)[0]
+
+    def grasp_skip(self, object_id: str) -> dict[str, frozenset[str]]:
+        """What the hand may touch on the straight approach to the grasp of `object_id` and on its lift
+        (collision.approach_skip); a lying cylinder grasped along its axis (grasp.grasp_along_axis): the whole hand
+        (wrist, palm, fingers) also the board it lies on, which its lowest capsule comes grasp.FINGER_FLOOR near."""
+        skip = approach_skip(self.scenario.object(object_id))
+        if not self.along_axis(object_id):
+            return skip
+        board = frozenset(["board:top_shelf"])
+        return {n: skip.get(n, frozenset([object_id])) | board for n in ("wrist", *HAND_PARTS)}
 
     @property
     def ceiling_clearance(self) -> float:

@@ -27,7 +27,7 @@ import numpy as np
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import FeasibilityAnswer, Label, pick_action
 from stpik_motion_planner.model.blockers import answer_blockers
-from stpik_motion_planner.model.collision import HandProxy, ObstacleSet, approach_skip
+from stpik_motion_planner.model.collision import HandProxy, ObstacleSet
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, pose_pitch, side_grasp
 from stpik_motion_planner.planning.certify import certify as certify_rest
 from stpik_motion_planner.planning.context import PlanningContext, draw_seed, near_objects
@@ -110,7 +110,7 @@ def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], ob
     (trajectory or None, attempts, the grasp used or the last failure). The grasp configuration goes to
     ctx.pick_end; uncertified, the objects the motion comes near to ctx.pick_near (context.near_objects)."""
     p = ctx.params
-    skip = approach_skip(ctx.scenario.object(object_id))
+    skip = ctx.grasp_skip(object_id)
     attempts, last = 0, ""
     while attempts < budget:
         g = cands[attempts % len(cands)]
@@ -148,7 +148,7 @@ def candidates(ctx: PlanningContext, object_id: str, obs: ObstacleSet, yaws: lis
                ) -> list[Grasp]:
     """Grasps (of `yaws`, default every tier's) whose pre-grasp and straight approach are clear for the hand
     (the target excluded for the palm and fingers on the approach only)."""
-    skip = approach_skip(ctx.scenario.object(object_id))
+    skip = ctx.grasp_skip(object_id)
     out = []
     for yaw in ctx.all_yaws(object_id) if yaws is None else yaws:
         try:
