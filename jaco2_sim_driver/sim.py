@@ -42,6 +42,7 @@ GRASP_RADIAL_TOL = 0.025    # m: bottle axis to grasp centre, across the hand (f
 RELEASE_DELAY = 0.15        # s from opening the fingers to letting the bottle go (they are clear of it by then)
 GRASP_TILT_COS = math.cos(math.radians(30))  # hand y axis (finger spread) vs bottle axis
 GRASP_CLOSURE = 0.5         # finger targets past this fraction of closed grasp, below it release
+GRASP_END = 0.2             # of a cylinder's length: an end grasp's centre at most this far inside an end cap
 
 
 class BadCommandError(ValueError):
@@ -251,18 +252,23 @@ class Jaco2Sim:
         centre (within GRASP_RADIAL_TOL across it), or a box whose footprint holds the grasp centre (the side grasp
         takes it by a face the hand fits: its centre may be farther than a bottle's axis); either with the grasp
         centre within its height and the hand's finger-spread axis along its own z (a cylinder's axis, a box's
-        vertical)."""
+        vertical). Or an end grasp (a lying cylinder grasped along its axis): a cylinder whose axis is along the
+        approach (tool z), the grasp centre within GRASP_RADIAL_TOL of that axis and inside its length, at most
+        GRASP_END of it from an end cap (the fingers reaching 42 mm beyond the grasp centre close across that end)."""
         c, r = self.data.site_xpos[self._site], self.data.site_xmat[self._site].reshape(3, 3)
         best, best_d = None, GRASP_RADIAL_TOL
         for oid, b in self._bodies.items():
             obj = self.scenario.world_object(oid)
             frame = self.data.xmat[b].reshape(3, 3)
             axis = frame[:, 2]
-            if abs(float(axis @ r[:, 1])) < GRASP_TILT_COS:
-                continue
             d = c - self.data.xpos[b]
             s = float(d @ axis)
-            if not 0.2 * obj.height <= s <= 0.9 * obj.height:
+            if abs(float(axis @ r[:, 1])) < GRASP_TILT_COS:
+                end = obj.shape != "box" and abs(float(axis @ r[:, 2])) >= GRASP_TILT_COS and \
+                    0.0 <= min(s, obj.height - s) <= GRASP_END * obj.height
+                if not end:
+                    continue
+            elif not 0.2 * obj.height <= s <= 0.9 * obj.height:
                 continue
             radial = float(np.linalg.norm(d - s * axis))
             if obj.shape == "box":

@@ -70,7 +70,8 @@ class Report:
     min_near: float = math.inf  # near pairs (m)
     min_near_at: str = ""
     support_depth: float = 0.0  # deepest entry of a held bottle into its support board while exempt (m)
-    min_floor: float = math.inf  # the fingers over the board a lying bottle lies on, picked from above (m; near pairs)
+    min_floor: float = math.inf  # the fingers over the board a lying bottle lies on, picked from above, or the hand,
+    # picked along its axis (m; near pairs)
     min_floor_at: str = ""
 
     @property
@@ -100,7 +101,7 @@ class Report:
                 f"carried bottle {self.min_carried * 1000:.1f} mm ({self.min_carried_at}),"
                 f" near pairs {self.min_near * 1000:.1f} mm ({self.min_near_at}), "
                 f"support entry {self.support_depth * 1000:.1f} mm" +
-                (f", fingers over the board under a lying bottle {self.min_floor * 1000:.1f} mm ({self.min_floor_at})"
+                (f", hand over the board under a lying bottle {self.min_floor * 1000:.1f} mm ({self.min_floor_at})"
                  if self.min_floor_at else ""))
 
 
@@ -134,6 +135,7 @@ class MotionChecker:
         self.arm = [gid(n) for n in ARM_GEOMS]
         self.world = [gid(n) for n in ("floor", "pedestal") + BOARDS]
         self._fingers = {gid(n) for n in FINGER_GEOMS}
+        self._hand_geoms = {gid(n) for n in HAND_GEOMS}
         self._lying = {b.id for b in scenario.world if b.lying}
         self.floor = gid("floor")
         self.held: str | None = None
@@ -238,6 +240,9 @@ class MotionChecker:
             # the fingers over the board a lying bottle lies on, picked from above and lifted: a near pair
             floor = self._board_below(self.bottle_pose(picking)[0]) if approaching and picking in self._lying else \
                 self._support[1] if support_ok and self.held in self._lying and self._support else None
+            # a lying bottle grasped along its axis (the hand horizontal): the whole hand comes FINGER_FLOOR near it
+            level = floor is not None and abs(d.xmat[self._hand][8]) < 0.5
+            over_floor = self._hand_geoms if level else self._fingers
             for k in np.nonzero(gap < self.distmax)[0]:
                 a, b, kind = pairs[k]
                 dist = mujoco.mj_geomDistance(m, d, int(a), int(b), self.distmax, fromto)
@@ -252,7 +257,7 @@ class MotionChecker:
                     key = (int(a), int(b))
                     if key not in deepest or dist < deepest[key].distance:
                         deepest[key] = Contact(segment, float(t), self.name(a), self.name(b), float(dist))
-                if b == floor and a in self._fingers:
+                if b == floor and a in over_floor:
                     if dist < rep.min_floor:
                         rep.min_floor, rep.min_floor_at = dist, where
                     continue

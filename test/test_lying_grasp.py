@@ -87,8 +87,9 @@ def test_a_lying_bottle_under_the_shipped_shelf_s_board_is_refused_with_the_head
     assert a.label == Label.UNFEASIBLE and a.attempts == 0 and a.blockers == (), a
     assert a.message == (f"{NO_GRASP}o7 lies on the top shelf with 0.26 m of headroom; a grasp from above needs "
                          "0.45 m (the hand straight down, its finger tips 19 mm over the bottle before it comes down "
-                         "and 19 mm under the board above); nor along its axis: o7 lies with its axis 1.24 rad from "
-                         "pointing into the shelf; a grasp along it approaches within 0.80 rad of straight in"), a.message
+                         "and 19 mm under the board above); nor along its axis: o7 lies with its axis 1.24 rad "
+                         "from pointing into the shelf; a grasp along it approaches within 0.80 rad of straight in"
+                         ), a.message
     assert planner.lane_blockers()["o7"] == ()
 
 
