@@ -18,6 +18,7 @@ import math
 import numpy as np
 import pytest
 from motion_checker import MotionChecker, Report, replay_relocation
+from test_along_axis_grasp import lying_on_slot
 from test_execution import carried_to_slot
 
 from qtree_task_planner.problem import ActionCosts, RelocationProblem
@@ -61,9 +62,10 @@ def drawn_bottle(seed: int) -> dict:
                                          round(float(rng.uniform(-0.15, 0.10)), 3)]}
 
 
-def relocated_cleanly(scenario: Scenario, plan: RelocationPlan, oid: str) -> str:
+def relocated_cleanly(scenario: Scenario, plan: RelocationPlan, oid: str, standing: bool = True) -> str:
     """Replay the relocation of `oid` in MuJoCo; assert no contact, the planner's clearances (the fingers FINGER_FLOOR
-    over the board it lay on), the bottle standing on its slot. Returns the summary."""
+    over the board it lay on), the bottle standing on its slot (not `standing`: grasped along its axis where the
+    hand from above is out of reach, lying on it: test_along_axis_grasp). Returns the summary."""
     checker = MotionChecker(scenario)
     rep = replay_relocation(checker, plan.pick, [plan.carry, plan.retreat], plan.home, oid)
     assert rep.contacts == [], "\n".join(map(str, rep.contacts))
@@ -71,6 +73,13 @@ def relocated_cleanly(scenario: Scenario, plan: RelocationPlan, oid: str) -> str
     assert rep.min_floor >= FINGER_CLEARANCE, rep.min_floor_at  # the fingers over the board it lay on
     assert rep.min_carried >= CARRIED_CLEARANCE, rep.min_carried_at
     assert rep.support_depth <= 0.001
+    if not standing:
+        p, r = checker.bottle_pose(oid)
+        p[2] += scenario.object(oid).radius  # checker.release drops the frame (a lying one's axis) to the board
+        o = scenario.object(oid)
+        why = lying_on_slot(p, r, scenario, scenario.slot(plan.slot_index), o.radius, o.height)
+        assert not why, why
+        return rep.summary()
     placed = checker.placed[oid]
     slot = scenario.slot(plan.slot_index)
     assert math.dist(placed[:2], slot) <= PLACE_TOL and placed[2] == pytest.approx(scenario.shelf.bottom_z), \
@@ -126,13 +135,14 @@ def test_generated_lying_bottles_are_relocated_standing_touching_nothing_in_mujo
             refused.append((seed, bottle, answer.message))
             continue
         plan = plan_relocation(planner, "L", [])
-        planned.append((seed, bottle, planner.grasp_pitch("L"), relocated_cleanly(scenario, plan, "L")))
+        pitch = planner.grasp_pitch("L")  # 0: along its axis, placed lying
+        planned.append((seed, bottle, pitch, relocated_cleanly(scenario, plan, "L", standing=pitch > 0.0)))
     for seed, bottle, pitch, summary in planned:
         print(f"seed {seed} {bottle} grasped at pitch {pitch:.2f}: {summary}")
     for seed, bottle, why in refused:
         print(f"seed {seed} {bottle}: refused: {why}")
     print(f"lying bottles relocated: {len(planned)} of {len(SEEDS)}")
-    assert len(planned) >= 4, refused
+    assert len([p for p in planned if p[2] > 0.0]) >= 4, refused  # from above
     assert all(why.startswith(NO_GRASP) for *_, why in refused), refused
 
 
@@ -178,7 +188,10 @@ def test_a_lying_bottle_is_carried_to_its_slot_in_mujoco_physics(limit):
         if limit is not None and carried >= limit:  # the default run: the first `limit`; -m extended: all
             break
         bottle = drawn_bottle(seed)
-        end = carried_to_slot(lying_scene(bottle, seed), "L", PARAMS, PLACE_TOL)
+        scenario = lying_scene(bottle, seed)
+        if MotionPlanner(scenario, PARAMS).grasp_pitch("L") == 0.0:
+            continue  # grasped along its axis, placed lying (test_along_axis_grasp)
+        end = carried_to_slot(scenario, "L", PARAMS, PLACE_TOL)
         if end is None:
             continue
         w, x, y, z = end[0].quat_wxyz
