@@ -100,8 +100,9 @@ def test_the_grasp_along_the_axis_fits_under_the_shipped_board_within_the_attach
 
 
 def replayed(seeds: tuple[int, ...]) -> None:
-    """Plan (certify) and replay in MuJoCo every generated bottle; print the rates; assert no contact, the
-    clearances, the bottle lying on its slot, the refused ones refused with both grasps' reasons."""
+    """Plan (certify) and replay in MuJoCo every generated bottle; print the rates; assert a clear lane in the
+    planner's lane screen (blockers.py: the hand near the board as the pick has it), no contact, the clearances,
+    the bottle lying on its slot, the refused ones refused with both grasps' reasons."""
     planned, refused = [], []
     for seed in seeds:
         bottle = drawn_bottle(seed)
@@ -111,6 +112,7 @@ def replayed(seeds: tuple[int, ...]) -> None:
         if answer.label != Label.OBSTACLE:
             refused.append((seed, bottle, answer.message))
             continue
+        assert any(not b.objects for b in planner.lane_blockers()["L"]), (seed, planner.lane_blockers()["L"])
         plan = plan_relocation(planner, "L", [])
         checker = MotionChecker(scenario)
         rep = replay_relocation(checker, plan.pick, [plan.carry, plan.retreat], plan.home, "L")

@@ -22,7 +22,7 @@ import numpy as np
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import BlockerSet
 from relocation_common.scenario import Scenario
-from stpik_motion_planner.model.collision import CollisionScene, HandProxy, ObstacleSet, approach_skip
+from stpik_motion_planner.model.collision import CollisionScene, HandProxy, ObstacleSet
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, side_grasp
 
 Lanes = tuple[tuple[Grasp, frozenset[str]], ...]  # (grasp, its blockers with every bottle present) per lane
@@ -104,6 +104,10 @@ class Screened(Protocol):
     def ceiling_clearance(self) -> float:
         """What the hand keeps under the board above at a grasp from above."""
 
+    def grasp_skip(self, object_id: str) -> dict[str, frozenset[str]]:
+        """What the hand may touch on the straight approach to the grasp of `object_id` (the object; the board a
+        lying one lies on: the fingers, or the whole hand for a grasp along its axis)."""
+
 
 def _lanes(planner: Screened, object_id: str) -> list[Grasp]:
     """The object's grasps for every yaw inside the arm's reach and the Cartesian planner's box."""
@@ -121,7 +125,7 @@ def _lanes(planner: Screened, object_id: str) -> list[Grasp]:
 
 def _blocked(planner: Screened, hand: HandProxy, g: Grasp, obs: ObstacleSet) -> bool:
     """The screen of one lane against `obs`: the proxy meets it at the pre-grasp or along the approach."""
-    skip = approach_skip(planner.scenario.object(g.object_id))
+    skip = planner.grasp_skip(g.object_id)
     return hand.collides(*pose_matrix(g.pre_grasp), obs) or not hand.path_clear([g.pre_grasp, g.grasp], obs,
                                                                                 planner.params.resolution, skip)
 
@@ -145,7 +149,7 @@ def _lane_blockers(planner: Screened, hand: HandProxy, g: Grasp) -> frozenset[st
     if not _blocked(planner, hand, g, everything):
         return frozenset()
     # the proxy's contact with a set of obstacles is the OR of its contacts with each: one pass collects them all
-    skip = approach_skip(planner.scenario.object(g.object_id))
+    skip = planner.grasp_skip(g.object_id)
     near = ObstacleSet([o for o in _near(hand, g, everything) if o.object_id in scene.bottles])
     met = hand.hits(*pose_matrix(g.pre_grasp), near) | hand.path_hits([g.pre_grasp, g.grasp], near,
                                                                        planner.params.resolution, skip)
