@@ -41,7 +41,7 @@ class _Moved:
         self.scenario = scenario
         self.scene = CollisionScene(scenario, (), ctx.lying, ctx.gone)
         self.all_yaws, self.not_graspable = ctx.all_yaws, ctx.not_graspable
-        self.ceiling_clearance = ctx.ceiling_clearance
+        self.ceiling_clearance, self.grasp_skip = ctx.ceiling_clearance, ctx.grasp_skip
 
 
 def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: frozenset[str]) -> str:
