@@ -217,6 +217,18 @@ def test_a_bottle_lying_on_the_bottom_shelf_takes_the_slots_it_covers(yaw):
     assert "already relocated" in gc.refusal(BOX10.shelf, "o1", [], seen, {})  # lying there, it is relocated
 
 
+def test_a_bottle_that_lay_before_is_placed_lying_on_its_slot_as_planned():
+    """o2 lay on the top shelf (its base centre a radius above the board) and was relocated by the grasp along its
+    axis, placed lying, its footprint centred on slot 1: as planned (before: "tipped over on the bottom shelf");
+    20 mm beyond slot_tolerance it lies off its slot."""
+    seen = _lying_scene(BOX10, "o2", *BOX10.slots[1], 0.0)
+    before = {b.id: (b.x, b.y, BOX10.shelf.top_z + (0.033 if b.id == "o2" else 0.0)) for b in BOX10.objects}
+    assert gc.outcome_problems(BOX10.shelf, before, seen, "o2", BOX10.slots[1], 0.015, 0.02) == []
+    off = _lying_scene(BOX10, "o2", BOX10.slots[1][0], BOX10.slots[1][1] + 0.04, 0.0)
+    assert gc.outcome_problems(BOX10.shelf, before, off, "o2", BOX10.slots[1], 0.015, 0.02) == [
+        "o2 lies 40 mm from its slot (0.760, 0.060)"]
+
+
 def test_a_bottle_that_tipped_over_at_its_slot_is_on_the_bottom_shelf_tipped():
     """o2 relocated to slot 1 and tipped over there (its axis along x, its footprint centred on the slot). Before,
     the outcome said 'o2 is 87 mm from its slot' and the next carry's destination was slot 1 again. Now: on the

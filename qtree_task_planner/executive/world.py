@@ -188,7 +188,8 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
                       ) -> Verification:
     """Check a scene perceived after relocating `planned_object` against the plan: that object upright on the bottom
     shelf at `slot_pose` (x, y, z of the board's surface) within tolerances.slot (one that tipped over there is
-    relocated, `board_of`, but not as planned: a difference that says so); every other object of
+    relocated, `board_of`, but not as planned: a difference that says so; one that lay before it was relocated may
+    lie there, its footprint's centre on the slot: the grasp along its axis places it so); every other object of
     `before_scene` where it was (tolerances.still in xy, board in z, still standing); the target present. Returns
     every difference found, one line each, and the new objects (`new_objects`: not a difference, a re-plan).
     `bottom_seen` False (a camera that does not see the bottom shelf): a bottle not seen there is no difference
@@ -201,7 +202,14 @@ def verify_relocation(planned_object: str, slot_pose: tuple[float, float, float]
             diffs.append(Difference("not_seen", planned_object, f"{planned_object} is not seen after its relocation"))
     else:
         off = math.hypot(moved.x - sx, moved.y - sy)
-        if abs(support_of(moved) - sz) <= tol.board and moved.tilt > tol.tilt:  # relocated, but lying: not as planned
+        was = before_scene.get(planned_object)
+        if abs(support_of(moved) - sz) <= tol.board and moved.tilt > tol.tilt and was is not None and \
+                was.tilt > tol.tilt:  # it lay before: placed lying (the grasp along its axis), its footprint's centre
+            at = moved.footprint().centre
+            if math.dist(at, (sx, sy)) > tol.slot:
+                diffs.append(Difference("not_at_slot", planned_object, f"{planned_object} lies on the bottom shelf "
+                                        f"{100 * math.dist(at, (sx, sy)):.1f} cm from its slot ({sx:.3f}, {sy:.3f})"))
+        elif abs(support_of(moved) - sz) <= tol.board and moved.tilt > tol.tilt:  # relocated, but lying: not as planned
             at = moved.footprint().centre
             diffs.append(Difference("not_at_slot", planned_object, f"{planned_object} tipped over on the bottom shelf "
                                     f"({math.degrees(moved.tilt):.0f} deg), lying {100 * math.dist(at, (sx, sy)):.1f} "

@@ -157,13 +157,19 @@ def outcome_problems(shelf: Shelf, before: Mapping[str, Point], after: Mapping[s
     """What is wrong after relocating object_id to `slot` (empty: the relocation did what it says). Objects in
     both scenes whose base centre (`before`: id -> it) moved more than `tolerance` (m, 3D); the moved bottle
     farther than `slot_tolerance` from the slot on the bottom shelf (when `after` shows it), tipped over there, or
-    still on the top shelf."""
+    still on the top shelf. One that lay before (its base centre above its board: a cylinder lying) is placed lying
+    by the grasp along its axis: on its slot when its footprint's centre is within `slot_tolerance` of it."""
     problems = []
     b = after.get(object_id)
+    lay = object_id in before and before[object_id][2] > shelf.top_z + ON_BOARD
     if b is not None:
         off = math.dist(b.point, (slot[0], slot[1], shelf.bottom_z))
         if on_top_shelf(shelf, b):
             problems.append(f"{object_id} is still on the top shelf")
+        elif on_bottom_shelf(shelf, b) and b.tilt > UPRIGHT_TILT and lay:
+            off = math.dist(b.footprint.centre, slot)
+            if off > slot_tolerance:
+                problems.append(f"{object_id} lies {off * 1000:.0f} mm from its slot ({slot[0]:.3f}, {slot[1]:.3f})")
         elif on_bottom_shelf(shelf, b) and b.tilt > UPRIGHT_TILT:
             off = math.dist(b.footprint.centre, slot)
             problems.append(f"{object_id} tipped over on the bottom shelf ({math.degrees(b.tilt):.0f} deg), lying "
