@@ -212,12 +212,21 @@ def _state_rates(reports: list) -> list[tuple[float, float]]:
     return out
 
 
+def _rates_while(reports, stream) -> list[float]:
+    """The driver's joint state rates of the report periods that began after `stream()` started (`_state_rates`)."""
+    start = _state_rates(reports.wait())[-1][0]
+    stream()
+    return [r for t, r in _state_rates(reports.wait()) if t > start + 1.0]
+
+
 def test_8_mb_commands_are_refused_unread(g):
     """150 commands of 1M values (8 MB) in 3 s (before the size check the driver went from 245 to 351 MiB and its
     joint-state rate halved): refused before deserialization, the arm holds still, memory and the state rate stay.
     The rate is the driver's own (its /diagnostics, per simulated second over each report's period): counted from
     the states this process received, it fell with this process's own starvation while it serialised 400 MB/s (25 of
-    100 a second received at a load of 1-2, 51 at 6)."""
+    100 a second received at a load of 1-2, 51 at 6). It is held against the rate while this process serialises the
+    same stream to a topic the driver does not read: against the rate before the stream, a fresh clone at a load of 8
+    failed with 65 of 94 a second, this process's own 400 MB/s on the 2 cores."""
     from diagnostic_msgs.msg import DiagnosticArray
 
     _only(g, "ros2_control")
@@ -225,16 +234,17 @@ def test_8_mb_commands_are_refused_unread(g):
     q0 = _settled_q(g)
     rss0 = _rss_mib(g.node.pid)
     reports.wait(lambda m: len(_state_rates(m)) >= 3, timeout=30)  # two full periods after the reset's
-    base = _state_rates(reports.wait())[-1]
     huge = Float64MultiArray(data=np.full(1_000_000, 0.3))
-    _stream(g.pub, huge, 3.0, rate=50.0)
-    during = [r for t, r in _state_rates(reports.wait()) if t > base[0] + 1.0]  # periods within the stream
+    control = _rates_while(reports, lambda: _stream(g.probe.publisher(Float64MultiArray, "/unread_by_the_driver"),
+                                                     huge, 3.0, rate=50.0))
+    during = _rates_while(reports, lambda: _stream(g.pub, huge, 3.0, rate=50.0))
     rss1 = _rss_mib(g.node.pid)
-    print(f"\njoint states per simulated s {base[1]:.0f} before, {[round(r) for r in during]} during (the driver's "
-          f"reports); driver RSS {rss0:.0f} -> {rss1:.0f} MiB")
+    print(f"\njoint states per simulated s {[round(r) for r in control]} while the same stream went to a topic the "
+          f"driver does not read, {[round(r) for r in during]} to its commands (the driver's reports); driver RSS "
+          f"{rss0:.0f} -> {rss1:.0f} MiB")
     assert np.allclose(_settled_q(g, 0.1), q0, atol=1e-4)
     assert "bytes serialized" in g.node.log() and g.node.alive()
-    assert during and min(during) > 0.7 * base[1], (base, during)
+    assert control and during and min(during) > 0.7 * min(control), (control, during)
     assert rss1 - rss0 < 55, (rss0, rss1)  # old: +84 MiB; new: +31 (DDS)
 
 
@@ -259,9 +269,12 @@ def test_home_arm_moves_the_arm_home(g):
     from jaco2_sim_driver.driver import HOME_SPEED
 
     _only(g, "kinova")
-    _stream(g.pub, _deg([0.3] * 7), 0.3)
-    q0 = _settled_q(g, 0.1)
-    e0 = np.max(np.abs(q0 - Q_HOME))
+    for _ in range(10):  # 0.09 rad a window when the commands come on time; late ones pause the arm (watchdog)
+        _stream(g.pub, _deg([0.3] * 7), 0.3)
+        q0 = _settled_q(g, 0.1)
+        e0 = np.max(np.abs(q0 - Q_HOME))
+        if e0 > 0.05:
+            break
     assert e0 > 0.05
     n = len(g.states.msgs)
     assert g.probe.call(HomeArm, f"{PRE}/in/home_arm", timeout=40).homearm_result == \
