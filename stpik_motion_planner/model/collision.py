@@ -410,7 +410,9 @@ def segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndar
 
 class HandProxy:
     """The hand (wrist, palm, fingers), an optional carried bottle and a stub of the forearm, rigidly placed at
-    a tool pose, inflated by `margin`: the validity check of the Cartesian RRT-Connect (no IK needed)."""
+    a tool pose, inflated by `margin`: the validity check of the Cartesian RRT-Connect (no IK needed). It keeps the
+    last CLEAR_POSES poses whose broad phase found no pair, with their gaps: a pose near one of them (as the next
+    state of a motion check is, 1 cm on) is clear without the broad phase (`_near_clear`), the same answer."""
 
     FOREARM_STUB = 0.12
     # the stub stands for the forearm near the hand; at a staging pose low in front of the bottom shelf it points
@@ -435,6 +437,12 @@ class HandProxy:
         self._reach = np.hstack([self.reach[:, None].repeat(3, 1), self.reach[:, None].repeat(3, 1)])
         self._box = np.empty_like(self._reach)  # hits' work array
         self.req = fcl.CollisionRequest()
+        # each shape's lever: its endpoints' farthest distance from the tool origin (hits' clear poses)
+        tool = np.array([0.0, 0.0, rd.D67])
+        self._lever = np.maximum(np.linalg.norm(self.p0 - tool, axis=1), np.linalg.norm(self.p1 - tool, axis=1)
+                                 ).tolist()
+        self._clear_obs: ObstacleSet | None = None  # the obstacle set of the clear poses
+        self._clear: list[tuple[list[float], list[float], list[float], float]] = []
 
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
                  skip: Skip | None = None) -> bool:
@@ -444,8 +452,10 @@ class HandProxy:
     def hits(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
              skip: Skip | None = None, first: bool = False) -> set[int]:
         """Indices (in obs.items) of the obstacles some shape is in contact with (not skipped); `first`: stop at
-        the first one."""
+        the first one. A pose near a clear one (`_near_clear`) has none, without the broad phase."""
         out: set[int] = set()
+        if obs is self._clear_obs and self._near_clear(r_tool, p_tool):
+            return out
         p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
         rt = r_tool.T
         a = self.p0 @ rt
@@ -458,8 +468,12 @@ class HandProxy:
         np.minimum(a, b, out=box[:, 3:])
         np.negative(box[:, 3:], out=box[:, 3:])
         box += self._reach
-        ci, oi = np.nonzero((obs.lo_neg_hi[None] <= box[:, None]).all(axis=2))
+        # a pair's gap: the largest of (lo - hi, lo' - hi') over the axes; its boxes overlap where it is <= 0 (for
+        # finite numbers x - y <= 0 exactly where x <= y: the comparison of each axis as it was)
+        gap = np.maximum.reduce(obs.lo_neg_hi[None] - box[:, None], axis=2)
+        ci, oi = np.nonzero(gap <= 0.0)
         if not len(ci):
+            self._keep_clear(r_tool, p_tool, obs, np.minimum.reduce(gap, axis=1, initial=math.inf).tolist())
             return out
         posed = set()
         for c, k in zip(ci, oi):
@@ -476,6 +490,33 @@ class HandProxy:
                 if first:
                     break
         return out
+
+    CLEAR_POSES = 32  # clear poses kept (the most recently used first)
+    CLEAR_EPS = 1e-9  # m: kept from every box by more than the rounding of its coordinates
+
+    def _keep_clear(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet, gaps: list[float]) -> None:
+        """Remember a pose whose shapes' boxes overlap no obstacle's box, with each shape's smallest gap."""
+        if obs is not self._clear_obs:
+            self._clear_obs, self._clear = obs, []
+        self._clear.insert(0, (r_tool.ravel().tolist(), p_tool.tolist(), gaps, min(gaps)))
+        del self._clear[self.CLEAR_POSES:]
+
+    def _near_clear(self, r_tool: np.ndarray, p_tool: np.ndarray) -> bool:
+        """Whether the pose is so near a kept clear pose (same obstacles) that no shape's box can reach an obstacle's
+        box: the broad phase would find no pair. A shape's endpoint y (tool frame) moves by R y + p - (R' y + p'),
+        at most |p - p'| + ||R - R'||_F |y| (the Frobenius norm bounds the spectral one, for any matrices), and
+        each coordinate of its box by no more; a box that moves less than its gap (less CLEAR_EPS) overlaps nothing."""
+        r, p = r_tool.ravel().tolist(), p_tool.tolist()
+        for k, (r0, p0, gaps, smallest) in enumerate(self._clear):
+            dp = math.dist(p, p0) + self.CLEAR_EPS
+            if dp >= smallest:
+                continue
+            dr = math.dist(r, r0)
+            if all(dp + dr * lever < gap for lever, gap in zip(self._lever, gaps)):
+                if k:
+                    self._clear.insert(0, self._clear.pop(k))
+                return True
+        return False
 
     def path_clear(self, poses: Sequence[ArrayLike], obs: ObstacleSet, resolution: float, skip: Skip | None = None
                    ) -> bool:
