@@ -318,22 +318,26 @@ class ArmGeometry:
         self._li = np.array([self._links.index(f) for f in self.fids])  # capsule -> row of the link arrays
         self._rot = np.zeros((len(self._links), 3, 3))
         self._pos = np.zeros((len(self._links), 3))
+        self._frames = np.zeros((len(self._links), 4, 4))  # pose's work array
+        self._li2 = np.concatenate([self._li, self._li])  # both endpoints' rows, p0's then p1's
+        self._ends = np.vstack([self._l0, self._l1])
         self._dirty = [True] * self.n
         self._names = names
+        self._distance_request = fcl.DistanceRequest(enable_nearest_points=True)  # read, never written, by fcl
         self.p0 = np.zeros((self.n, 3))
         self.p1 = np.zeros((self.n, 3))
 
     def pose(self) -> None:
-        """Place every capsule from the current Kinematics data (call after kin.update): all links at once."""
-        omf = self.kin.data.oMf
-        rot, pos = self._rot, self._pos
+        """Place every capsule from the current Kinematics data (call after kin.update): all links at once, both
+        endpoints of every capsule in one product (each row as its own product: the same numbers)."""
+        omf, frames = self.kin.data.oMf, self._frames
         for k, fid in enumerate(self._links):
-            m = omf[fid]
-            rot[k] = m.rotation
-            pos[k] = m.translation
-        r, p = rot[self._li], pos[self._li]
-        self.p0 = np.einsum("nij,nj->ni", r, self._l0) + p
-        self.p1 = np.einsum("nij,nj->ni", r, self._l1) + p
+            frames[k] = omf[fid].homogeneous
+        self._rot[:] = frames[:, :3, :3]
+        self._pos[:] = frames[:, :3, 3]
+        ends = np.einsum("nij,nj->ni", self._rot[self._li2], self._ends)
+        ends += self._pos[self._li2]
+        self.p0, self.p1 = ends[:self.n], ends[self.n:]
         rad = self.radius[:, None]
         self._lo = np.minimum(self.p0, self.p1) - rad  # AABBs for both broad phases
         self._hi = np.maximum(self.p0, self.p1) + rad
@@ -367,7 +371,7 @@ class ArmGeometry:
         (by AABB). Distance PENETRATION (-1) means intersecting. `skip`: capsule name -> object ids (bottles) or
         board names ("board:top_shelf") to ignore."""
         out = []
-        req = fcl.DistanceRequest(enable_nearest_points=True)
+        req = self._distance_request
         for ci, oi in zip(*self.near_pairs(obs, d_act)):
             o = obs.items[oi]
             if skip and _key(o) in skip.get(self._names[ci], ()):

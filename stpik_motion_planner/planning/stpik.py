@@ -30,6 +30,7 @@ A change of the planner's parameters changes the key.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, field, fields
@@ -113,9 +114,17 @@ def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if _SVD_S is not None:
         with np.errstate(invalid="ignore"):
             u, s, vt = _SVD_S(a, signature="d->ddd")
-        if np.isfinite(s).all():
+        if math.isfinite(s.dot(s)):  # no NaN (LAPACK did not converge) nor inf; an overflow only costs the call below
             return u, s, vt
     return np.linalg.svd(a, full_matrices=False)  # raises LinAlgError where it did not converge
+
+
+@functools.lru_cache(maxsize=None)
+def _eye(n: int) -> np.ndarray:
+    """The n x n identity, made once (read only)."""
+    eye = np.eye(n)
+    eye.flags.writeable = False
+    return eye
 
 
 def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
@@ -128,8 +137,8 @@ def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
         if jac is None:  # identity task (posture): its projection needs no decomposition
             return np.array(xd, float) if qdot is None else qdot + proj @ (xd - qdot)
         u, s, vt = _svd(jac if proj is None else jac @ proj)
-        keep = s > 1e-6
-        if not keep.all():
+        if not s[-1] > 1e-6:  # the singular values come in descending order: the last is the smallest
+            keep = s > 1e-6
             if not keep.any():
                 continue
             u, s, vt = u[:, keep], s[keep], vt[keep]
@@ -138,7 +147,7 @@ def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
         pinv = vt.T @ ((s / (s * s + lam2))[:, None] * u.T)
         qdot = pinv @ xd if qdot is None else qdot + pinv @ (xd - jac @ qdot)
         vv = vt.T @ vt
-        proj = np.eye(n) - vv if proj is None else proj - vv
+        proj = _eye(n) - vv if proj is None else proj - vv
     return np.zeros(n) if qdot is None else qdot
 
 
