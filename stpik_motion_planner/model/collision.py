@@ -341,11 +341,12 @@ class ArmGeometry:
         rad = self.radius[:, None]
         self._lo = np.minimum(self.p0, self.p1) - rad  # AABBs for both broad phases
         self._hi = np.maximum(self.p0, self.p1) + rad
+        self._moving_lo, self._moving_hi = self._lo[self.moving], self._hi[self.moving]
         self._dirty = [True] * self.n
 
     def moving_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) of the axis-aligned boxes of the capsules near_pairs looks at, at the current pose."""
-        return self._lo[self.moving], self._hi[self.moving]
+        return self._moving_lo, self._moving_hi
 
     def _fcl(self, i: int) -> fcl.CollisionObject:
         """The fcl object of capsule i at its current pose (transforms are set lazily)."""
@@ -360,7 +361,7 @@ class ArmGeometry:
     def near_pairs(self, obs: ObstacleSet, d_act: float) -> tuple[np.ndarray, np.ndarray]:
         """Broad phase: (capsule, obstacle) index pairs whose AABBs are closer than d_act."""
         idx = self.moving
-        lo, hi = self._lo[idx], self._hi[idx]
+        lo, hi = self._moving_lo, self._moving_hi
         gap = np.maximum(np.maximum(obs.lo[None] - hi[:, None], lo[:, None] - obs.hi[None]), 0.0)
         ci, oi = np.nonzero(np.einsum("ijk,ijk->ij", gap, gap) < d_act * d_act)
         return idx[ci], oi

@@ -111,9 +111,14 @@ except (ImportError, AttributeError):  # pragma: no cover - another numpy layout
 
 def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Thin SVD of a small matrix (bit-identical to np.linalg.svd(a, full_matrices=False), less overhead)."""
+    with np.errstate(invalid="ignore"):
+        return _svd_quiet(a)
+
+
+def _svd_quiet(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """_svd inside np.errstate(invalid="ignore") (the gufunc flags a failed decomposition so)."""
     if _SVD_S is not None:
-        with np.errstate(invalid="ignore"):
-            u, s, vt = _SVD_S(a, signature="d->ddd")
+        u, s, vt = _SVD_S(a, signature="d->ddd")
         if math.isfinite(s.dot(s)):  # no NaN (LAPACK did not converge) nor inf; an overflow only costs the call below
             return u, s, vt
     return np.linalg.svd(a, full_matrices=False)  # raises LinAlgError where it did not converge
@@ -131,12 +136,18 @@ def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
     """Recursive null-space projection (Eq. 10): qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
     damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last).
     The first level skips its products with N_0 = I and qdot_0 = 0 (exact in floating point)."""
+    with np.errstate(invalid="ignore"):  # once for every level's SVD (_svd)
+        return _hierarchy(levels, n, damping)
+
+
+def _hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
+    """hierarchy's recursion."""
     qdot: np.ndarray | None = None
     proj: np.ndarray | None = None
     for jac, xd in levels:
         if jac is None:  # identity task (posture): its projection needs no decomposition
             return np.array(xd, float) if qdot is None else qdot + proj @ (xd - qdot)
-        u, s, vt = _svd(jac if proj is None else jac @ proj)
+        u, s, vt = _svd_quiet(jac if proj is None else jac @ proj)
         if not s[-1] > 1e-6:  # the singular values come in descending order: the last is the smallest
             keep = s > 1e-6
             if not keep.any():
