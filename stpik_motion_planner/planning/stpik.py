@@ -340,7 +340,7 @@ class Stpik:
                      (None, p.k_posture * (posture - q))]
         prev = run.qdots[-1] if run.qdots else (np.zeros(rd.N_JOINTS) if run.from_rest else None)
         qdot = self._solve(cands, eq_levels, prev, accel)
-        ratio = float(np.max(np.abs(qdot) / rd.QDOT_MAX))  # Table 7: the robot's
+        ratio = float((np.abs(qdot) / rd.QDOT_MAX).max())  # Table 7: the robot's
         scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
         qdot = qdot * scale
         if accel > 0.0 and prev is not None and run.tau < t_end:  # not while settling on the goal (slow by then)
@@ -407,11 +407,10 @@ class Stpik:
         if cands is None:
             return hierarchy(eq_levels, rd.N_JOINTS, p.damping)
         grp, sig, jac, buf = cands
-        push = p.k_set * np.maximum(0.0, buf - sig)
         active = np.zeros(len(grp), bool)
         qdot = np.zeros(rd.N_JOINTS)
+        levels: list[Level] = []  # none active before the first pass
         for _ in range(6):
-            levels = [(jac[m], push[m]) for m in (active & (grp == g) for g in (0, 1, 2)) if m.any()]
             qdot = hierarchy(levels + eq_levels, rd.N_JOINTS, p.damping)
             v = jac @ qdot
             brake: float | np.ndarray = 0.0
@@ -423,6 +422,8 @@ class Stpik:
             if not new.any():
                 break
             active |= new
+            push = p.k_set * np.maximum(0.0, buf - sig)
+            levels = [(jac[m], push[m]) for m in (active & (grp == g) for g in (0, 1, 2)) if m.any()]
         return qdot
 
     def _result(self, ok: bool, reason: str, run: _Run) -> StpikResult:
