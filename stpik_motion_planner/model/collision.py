@@ -451,6 +451,7 @@ class HandProxy:
         tool = np.array([0.0, 0.0, rd.D67])
         self._lever = np.maximum(np.linalg.norm(self.p0 - tool, axis=1), np.linalg.norm(self.p1 - tool, axis=1)
                                  ).tolist()
+        self._lever_max = max(self._lever)
         self._clear_obs: ObstacleSet | None = None  # the obstacle set of the clear poses
         self._clear: list[tuple[list[float], list[float], list[float], float]] = []
 
@@ -522,7 +523,8 @@ class HandProxy:
             if dp >= smallest:
                 continue
             dr = math.dist(r, r0)
-            if all(dp + dr * lever < gap for lever, gap in zip(self._lever, gaps)):
+            if dp + dr * self._lever_max < smallest or \
+                    all(dp + dr * lever < gap for lever, gap in zip(self._lever, gaps)):
                 if k:
                     self._clear.insert(0, self._clear.pop(k))
                 return True
