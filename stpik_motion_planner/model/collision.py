@@ -319,8 +319,6 @@ class ArmGeometry:
         self._rot = np.zeros((len(self._links), 3, 3))
         self._pos = np.zeros((len(self._links), 3))
         self._frames = np.zeros((len(self._links), 4, 4))  # pose's work array
-        self._placed_data: object = None  # the pin.Data of self._placements
-        self._placements: list = []
         self._li2 = np.concatenate([self._li, self._li])  # both endpoints' rows, p0's then p1's
         self._ends = np.vstack([self._l0, self._l1])
         self._dirty = [True] * self.n
@@ -332,12 +330,9 @@ class ArmGeometry:
     def pose(self) -> None:
         """Place every capsule from the current Kinematics data (call after kin.update): all links at once, both
         endpoints of every capsule in one product (each row as its own product: the same numbers)."""
-        frames = self._frames
-        if self._placed_data is not self.kin.data:  # each link's placement, a view into the data pin updates
-            self._placed_data = self.kin.data
-            self._placements = [self.kin.data.oMf[fid] for fid in self._links]
-        for k, m in enumerate(self._placements):
-            frames[k] = m.homogeneous
+        frames, view = self._frames, self.kin.placement_view
+        for k, fid in enumerate(self._links):
+            frames[k] = view(fid).homogeneous
         self._rot[:] = frames[:, :3, :3]
         self._pos[:] = frames[:, :3, 3]
         ends = np.einsum("nij,nj->ni", self._rot[self._li2], self._ends)
