@@ -442,12 +442,10 @@ class HandProxy:
         self._reach = np.hstack([self.reach[:, None].repeat(3, 1), self.reach[:, None].repeat(3, 1)])
         self._box = np.empty_like(self._reach)  # hits' work array
         self.req = fcl.CollisionRequest()
-        # each shape's lever: its endpoints' farthest distance from the tool origin (hits' clear poses)
-        tool = np.array([0.0, 0.0, rd.D67])
-        self._lever = np.maximum(np.linalg.norm(self.p0 - tool, axis=1), np.linalg.norm(self.p1 - tool, axis=1)
-                                 ).tolist()
-        self._lever_max = max(self._lever)
+        self._lever: list[float] = []  # each shape's farthest endpoint from the tool origin (_keep_clear sets it)
+        self._lever_max = 0.0
         self._clear_obs: ObstacleSet | None = None  # the obstacle set of the clear poses
+        self._last_obs: ObstacleSet | None = None  # that of the last broad phase
         self._clear: list[tuple[list[float], list[float], list[float], float]] = []
 
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
@@ -462,6 +460,7 @@ class HandProxy:
         out: set[int] = set()
         if obs is self._clear_obs and self._near_clear(r_tool, p_tool):
             return out
+        again, self._last_obs = obs is self._last_obs, obs  # a clear pose is kept from a second check of obs on
         p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
         rt = r_tool.T
         a = self.p0 @ rt
@@ -474,12 +473,11 @@ class HandProxy:
         np.minimum(a, b, out=box[:, 3:])
         np.negative(box[:, 3:], out=box[:, 3:])
         box += self._reach
-        # a pair's gap: the largest of (lo - hi, lo' - hi') over the axes; its boxes overlap where it is <= 0 (for
-        # finite numbers x - y <= 0 exactly where x <= y: the comparison of each axis as it was)
-        gap = np.maximum.reduce(obs.lo_neg_hi[None] - box[:, None], axis=2)
-        ci, oi = np.nonzero(gap <= 0.0)
+        ci, oi = np.nonzero(np.logical_and.reduce(obs.lo_neg_hi[None] <= box[:, None], axis=2))
         if not len(ci):
-            self._keep_clear(r_tool, p_tool, obs, np.minimum.reduce(gap, axis=1, initial=math.inf).tolist())
+            if again:  # each shape's gap: the smallest over the obstacles of the largest of (lo - hi, lo' - hi')
+                gap = np.maximum.reduce(obs.lo_neg_hi[None] - box[:, None], axis=2)
+                self._keep_clear(r_tool, p_tool, obs, np.minimum.reduce(gap, axis=1, initial=math.inf).tolist())
             return out
         posed = set()
         for c, k in zip(ci, oi):
@@ -502,6 +500,11 @@ class HandProxy:
 
     def _keep_clear(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet, gaps: list[float]) -> None:
         """Remember a pose whose shapes' boxes overlap no obstacle's box, with each shape's smallest gap."""
+        if not self._lever:  # made on first use: many a proxy (blockers') checks a few poses only
+            tool = np.array([0.0, 0.0, rd.D67])
+            self._lever = np.maximum(np.linalg.norm(self.p0 - tool, axis=1), np.linalg.norm(self.p1 - tool, axis=1)
+                                     ).tolist()
+            self._lever_max = max(self._lever)
         if obs is not self._clear_obs:
             self._clear_obs, self._clear = obs, []
         self._clear.insert(0, (r_tool.ravel().tolist(), p_tool.tolist(), gaps, min(gaps)))
