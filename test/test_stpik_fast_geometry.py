@@ -46,6 +46,80 @@ def test_hand_proxy_broad_phase_drops_no_contact():
     assert 200 < hits < 1300  # both answers exercised
 
 
+def test_hand_proxy_near_clear_poses_drop_no_contact():
+    """Poses 1 cm apart (turning too), as RRT-Connect's motion checks visit them: a pose answered by the clear poses
+    kept (HandProxy._near_clear) has no pair in the broad phase, every answer is that of every pair checked with fcl,
+    and the clear poses kept answer many poses."""
+    sc = load_scenario(resolve_scenario("scenario3_15"))
+    scene = CollisionScene(sc)
+    hand = HandProxy(0.012)
+    near = hand._near_clear
+    answered = []
+
+    def checked_near(r, p):  # a pose answered so: no shape's box overlaps an obstacle's (the broad phase's pairs)
+        answered.append(near(r, p))
+        assert not (answered[-1] and _box_pairs(hand, r, p, hand._clear_obs))
+        return answered[-1]
+
+    hand._near_clear = checked_near
+    rng = np.random.default_rng(3)
+    s = sc.shelf
+    hits = poses = 0
+    for k in range(60):
+        obs = scene.obstacles(frozenset(rng.choice(sc.obstacle_ids, size=k % 4, replace=False)))
+        a, b = ([rng.uniform(s.x_front - 0.25, s.x_back), rng.uniform(s.y_min, s.y_max),
+                 rng.uniform(s.top_z - 0.05, s.ceiling_z + 0.05), rng.uniform(-0.9, 0.9)] for _ in range(2))
+        n = int(np.ceil(max(np.linalg.norm(np.subtract(b[:3], a[:3])), 0.25 * abs(b[3] - a[3])) / 0.01))
+        for t in np.linspace(0.0, 1.0, n + 1):
+            r, p = pose_matrix(np.add(a, t * np.subtract(b, a)))
+            got = hand.collides(r, p, obs)
+            assert got == _brute_collides(hand, r, p, obs, None), (k, t)
+            hits += got
+            poses += 1
+    print(f"{poses} poses, {hits} in contact, {sum(answered)} answered by a clear pose kept")
+    assert 0.1 * poses < hits < 0.9 * poses  # both answers exercised
+    assert sum(answered) > 0.3 * (poses - hits)  # many clear poses answered without the broad phase
+
+
+def _box_pairs(hand: HandProxy, r, p, obs) -> bool:
+    """Whether some shape's box (inflated by its reach) overlaps some obstacle's box: the broad phase has a pair."""
+    a, b = (e @ r.T + (p - r[:, 2] * rd.D67) for e in (hand.p0, hand.p1))
+    lo, hi = np.minimum(a, b) - hand.reach[:, None], np.maximum(a, b) + hand.reach[:, None]
+    return bool(((obs.lo[None] <= hi[:, None]) & (lo[:, None] <= obs.hi[None])).all(axis=2).any())
+
+
+def test_hand_proxy_near_clear_bound_holds_at_its_edge():
+    """Poses turned (about any axis, by up to 0.3 rad) or moved (along an axis, by about the smallest gap of its
+    boxes) from a clear pose, near the edge of what HandProxy._near_clear accepts: every pose it accepts has no pair
+    in the broad phase."""
+    from scipy.spatial.transform import Rotation
+
+    sc = load_scenario(resolve_scenario("scenario3_15"))
+    obs = CollisionScene(sc).obstacles()
+    hand = HandProxy(0.012)
+    rng = np.random.default_rng(4)
+    s = sc.shelf
+    accepted = with_pairs = 0
+    while accepted < 2000:
+        r, p = pose_matrix([rng.uniform(s.x_front - 0.25, s.x_back), rng.uniform(s.y_min, s.y_max),
+                            rng.uniform(s.top_z - 0.05, s.ceiling_z + 0.05), rng.uniform(-0.9, 0.9)])
+        hand._clear_obs = None
+        if hand.collides(r, p, obs) or hand._clear_obs is not obs:
+            continue  # not a clear pose (a pair in the broad phase)
+        smallest = hand._clear[0][3]  # the smallest gap of its shapes' boxes
+        for k in range(20):
+            if k % 2:  # turned about any axis
+                r2, p2 = Rotation.from_rotvec(rng.normal(size=3) * rng.uniform(0.0, 0.3) / 3).as_matrix() @ r, p
+            else:  # moved along an axis by about the smallest gap
+                r2, p2 = r, p + np.eye(3)[k % 3] * rng.choice([-1.0, 1.0]) * smallest * rng.uniform(0.9, 1.1)
+            pairs = _box_pairs(hand, r2, p2, obs)
+            with_pairs += pairs
+            if hand._near_clear(r2, p2):
+                accepted += 1
+                assert not pairs, (r2, p2)
+    assert with_pairs > 50  # poses tried reach beyond the gaps
+
+
 def test_capsules_posed_at_once_sit_on_their_links():
     kin = Kinematics()
     arm = ArmGeometry(kin)

@@ -318,30 +318,35 @@ class ArmGeometry:
         self._li = np.array([self._links.index(f) for f in self.fids])  # capsule -> row of the link arrays
         self._rot = np.zeros((len(self._links), 3, 3))
         self._pos = np.zeros((len(self._links), 3))
+        self._frames = np.zeros((len(self._links), 4, 4))  # pose's work array
+        self._li2 = np.concatenate([self._li, self._li])  # both endpoints' rows, p0's then p1's
+        self._ends = np.vstack([self._l0, self._l1])
         self._dirty = [True] * self.n
         self._names = names
+        self._distance_request = fcl.DistanceRequest(enable_nearest_points=True)  # read, never written, by fcl
         self.p0 = np.zeros((self.n, 3))
         self.p1 = np.zeros((self.n, 3))
 
     def pose(self) -> None:
-        """Place every capsule from the current Kinematics data (call after kin.update): all links at once."""
-        omf = self.kin.data.oMf
-        rot, pos = self._rot, self._pos
+        """Place every capsule from the current Kinematics data (call after kin.update): all links at once, both
+        endpoints of every capsule in one product (each row as its own product: the same numbers)."""
+        frames, view = self._frames, self.kin.placement_view
         for k, fid in enumerate(self._links):
-            m = omf[fid]
-            rot[k] = m.rotation
-            pos[k] = m.translation
-        r, p = rot[self._li], pos[self._li]
-        self.p0 = np.einsum("nij,nj->ni", r, self._l0) + p
-        self.p1 = np.einsum("nij,nj->ni", r, self._l1) + p
+            frames[k] = view(fid).homogeneous
+        self._rot[:] = frames[:, :3, :3]
+        self._pos[:] = frames[:, :3, 3]
+        ends = np.einsum("nij,nj->ni", self._rot[self._li2], self._ends)
+        ends += self._pos[self._li2]
+        self.p0, self.p1 = ends[:self.n], ends[self.n:]
         rad = self.radius[:, None]
         self._lo = np.minimum(self.p0, self.p1) - rad  # AABBs for both broad phases
         self._hi = np.maximum(self.p0, self.p1) + rad
+        self._moving_lo, self._moving_hi = self._lo[self.moving], self._hi[self.moving]
         self._dirty = [True] * self.n
 
     def moving_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) of the axis-aligned boxes of the capsules near_pairs looks at, at the current pose."""
-        return self._lo[self.moving], self._hi[self.moving]
+        return self._moving_lo, self._moving_hi
 
     def _fcl(self, i: int) -> fcl.CollisionObject:
         """The fcl object of capsule i at its current pose (transforms are set lazily)."""
@@ -356,7 +361,7 @@ class ArmGeometry:
     def near_pairs(self, obs: ObstacleSet, d_act: float) -> tuple[np.ndarray, np.ndarray]:
         """Broad phase: (capsule, obstacle) index pairs whose AABBs are closer than d_act."""
         idx = self.moving
-        lo, hi = self._lo[idx], self._hi[idx]
+        lo, hi = self._moving_lo, self._moving_hi
         gap = np.maximum(np.maximum(obs.lo[None] - hi[:, None], lo[:, None] - obs.hi[None]), 0.0)
         ci, oi = np.nonzero(np.einsum("ijk,ijk->ij", gap, gap) < d_act * d_act)
         return idx[ci], oi
@@ -367,7 +372,7 @@ class ArmGeometry:
         (by AABB). Distance PENETRATION (-1) means intersecting. `skip`: capsule name -> object ids (bottles) or
         board names ("board:top_shelf") to ignore."""
         out = []
-        req = fcl.DistanceRequest(enable_nearest_points=True)
+        req = self._distance_request
         for ci, oi in zip(*self.near_pairs(obs, d_act)):
             o = obs.items[oi]
             if skip and _key(o) in skip.get(self._names[ci], ()):
@@ -410,7 +415,9 @@ def segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndar
 
 class HandProxy:
     """The hand (wrist, palm, fingers), an optional carried bottle and a stub of the forearm, rigidly placed at
-    a tool pose, inflated by `margin`: the validity check of the Cartesian RRT-Connect (no IK needed)."""
+    a tool pose, inflated by `margin`: the validity check of the Cartesian RRT-Connect (no IK needed). It keeps the
+    last CLEAR_POSES poses whose broad phase found no pair, with their gaps: a pose near one of them (as the next
+    state of a motion check is, 1 cm on) is clear without the broad phase (`_near_clear`), the same answer."""
 
     FOREARM_STUB = 0.12
     # the stub stands for the forearm near the hand; at a staging pose low in front of the bottom shelf it points
@@ -435,6 +442,11 @@ class HandProxy:
         self._reach = np.hstack([self.reach[:, None].repeat(3, 1), self.reach[:, None].repeat(3, 1)])
         self._box = np.empty_like(self._reach)  # hits' work array
         self.req = fcl.CollisionRequest()
+        self._lever: list[float] = []  # each shape's farthest endpoint from the tool origin (_keep_clear sets it)
+        self._lever_max = 0.0
+        self._clear_obs: ObstacleSet | None = None  # the obstacle set of the clear poses
+        self._last_obs: ObstacleSet | None = None  # that of the last broad phase
+        self._clear: list[tuple[list[float], list[float], list[float], float]] = []
 
     def collides(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
                  skip: Skip | None = None) -> bool:
@@ -444,8 +456,11 @@ class HandProxy:
     def hits(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet,
              skip: Skip | None = None, first: bool = False) -> set[int]:
         """Indices (in obs.items) of the obstacles some shape is in contact with (not skipped); `first`: stop at
-        the first one."""
+        the first one. A pose near a clear one (`_near_clear`) has none, without the broad phase."""
         out: set[int] = set()
+        if obs is self._clear_obs and self._near_clear(r_tool, p_tool):
+            return out
+        again, self._last_obs = obs is self._last_obs, obs  # a clear pose is kept from a second check of obs on
         p7 = p_tool - r_tool[:, 2] * rd.D67  # link 7 frame = tool frame moved back by D67 along z
         rt = r_tool.T
         a = self.p0 @ rt
@@ -458,8 +473,11 @@ class HandProxy:
         np.minimum(a, b, out=box[:, 3:])
         np.negative(box[:, 3:], out=box[:, 3:])
         box += self._reach
-        ci, oi = np.nonzero((obs.lo_neg_hi[None] <= box[:, None]).all(axis=2))
+        ci, oi = np.nonzero(np.logical_and.reduce(obs.lo_neg_hi[None] <= box[:, None], axis=2))
         if not len(ci):
+            if again:  # each shape's gap: the smallest over the obstacles of the largest of (lo - hi, lo' - hi')
+                gap = np.maximum.reduce(obs.lo_neg_hi[None] - box[:, None], axis=2)
+                self._keep_clear(r_tool, p_tool, obs, np.minimum.reduce(gap, axis=1, initial=math.inf).tolist())
             return out
         posed = set()
         for c, k in zip(ci, oi):
@@ -476,6 +494,39 @@ class HandProxy:
                 if first:
                     break
         return out
+
+    CLEAR_POSES = 32  # clear poses kept (the most recently used first)
+    CLEAR_EPS = 1e-9  # m: kept from every box by more than the rounding of its coordinates
+
+    def _keep_clear(self, r_tool: np.ndarray, p_tool: np.ndarray, obs: ObstacleSet, gaps: list[float]) -> None:
+        """Remember a pose whose shapes' boxes overlap no obstacle's box, with each shape's smallest gap."""
+        if not self._lever:  # made on first use: many a proxy (blockers') checks a few poses only
+            tool = np.array([0.0, 0.0, rd.D67])
+            self._lever = np.maximum(np.linalg.norm(self.p0 - tool, axis=1), np.linalg.norm(self.p1 - tool, axis=1)
+                                     ).tolist()
+            self._lever_max = max(self._lever)
+        if obs is not self._clear_obs:
+            self._clear_obs, self._clear = obs, []
+        self._clear.insert(0, (r_tool.ravel().tolist(), p_tool.tolist(), gaps, min(gaps)))
+        del self._clear[self.CLEAR_POSES:]
+
+    def _near_clear(self, r_tool: np.ndarray, p_tool: np.ndarray) -> bool:
+        """Whether the pose is so near a kept clear pose (same obstacles) that no shape's box can reach an obstacle's
+        box: the broad phase would find no pair. A shape's endpoint y (tool frame) moves by R y + p - (R' y + p'),
+        at most |p - p'| + ||R - R'||_F |y| (the Frobenius norm bounds the spectral one, for any matrices), and
+        each coordinate of its box by no more; a box that moves less than its gap (less CLEAR_EPS) overlaps nothing."""
+        r, p = r_tool.ravel().tolist(), p_tool.tolist()
+        for k, (r0, p0, gaps, smallest) in enumerate(self._clear):
+            dp = math.dist(p, p0) + self.CLEAR_EPS
+            if dp >= smallest:
+                continue
+            dr = math.dist(r, r0)
+            if dp + dr * self._lever_max < smallest or \
+                    all(dp + dr * lever < gap for lever, gap in zip(self._lever, gaps)):
+                if k:
+                    self._clear.insert(0, self._clear.pop(k))
+                return True
+        return False
 
     def path_clear(self, poses: Sequence[ArrayLike], obs: ObstacleSet, resolution: float, skip: Skip | None = None
                    ) -> bool:

@@ -23,6 +23,8 @@ class Kinematics:
         self.tool_fid = self.fid[rd.EE_LINK]
         self._jac_cache: dict[int, np.ndarray] = {}
         self.q: np.ndarray | None = None
+        self._placed_data: object = None  # the pin.Data of _placements
+        self._placements: dict[int, pin.SE3] = {}  # frame id -> placement_view
 
     def update(self, q: ArrayLike, jacobians: bool = True) -> None:
         """Forward kinematics at `q` (rad), with the joint Jacobians unless `jacobians` is False."""
@@ -34,10 +36,19 @@ class Kinematics:
             pin.framesForwardKinematics(self.model, self.data, q)
         self._jac_cache.clear()
         self.q = q
+        if self._placed_data is not self.data:
+            self._placed_data, self._placements = self.data, {}
+
+    def placement_view(self, fid: int) -> pin.SE3:
+        """pin's view of frame `fid`'s placement in this Data: it follows every update (copy what you keep)."""
+        m = self._placements.get(fid)
+        if m is None:
+            m = self._placements[fid] = self.data.oMf[fid]
+        return m
 
     def placement(self, fid: int) -> tuple[np.ndarray, np.ndarray]:
         """Rotation and translation of frame `fid` in the base frame, after update(q)."""
-        m = self.data.oMf[fid]
+        m = self.placement_view(fid)
         return m.rotation.copy(), m.translation.copy()
 
     def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -55,7 +66,7 @@ class Kinematics:
     def point_jacobian(self, fid: int, p_world: np.ndarray) -> np.ndarray:
         """3 x 7 Jacobian of a point rigidly attached to frame `fid`, given in the base frame."""
         j = self.frame_jacobian(fid)
-        r = p_world - self.data.oMf[fid].translation
+        r = p_world - self.placement_view(fid).translation
         # v_p = v_o + w x r = v_o - r x w
         return j[:3] + _skew_t(r) @ j[3:]
 

@@ -330,11 +330,11 @@ def arm_boxes(ctx: PlanningContext, steps: Sequence[np.ndarray]) -> tuple[np.nda
     fids = sorted({ctx.kin.fid[c.link] for c in caps})
     row = np.array([fids.index(ctx.kin.fid[c.link]) for c in caps])
     frames = np.empty((len(steps), len(fids), 4, 4))
-    omf = ctx.kin.data.oMf
+    view = ctx.kin.placement_view
     for s, q in enumerate(steps):
         ctx.kin.update(q, jacobians=False)
         for k, fid in enumerate(fids):
-            frames[s, k] = omf[fid].homogeneous
+            frames[s, k] = view(fid).homogeneous
     m = frames[:, row]  # steps x capsules x 4 x 4
     p0 = np.einsum("scij,cj->sci", m[..., :3, :3], np.array([c.p0 for c in caps])) + m[..., :3, 3]
     p1 = np.einsum("scij,cj->sci", m[..., :3, :3], np.array([c.p1 for c in caps])) + m[..., :3, 3]

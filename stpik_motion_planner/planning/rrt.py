@@ -95,10 +95,11 @@ def _solve_locked(space: ob.RealVectorStateSpace, n: int, start: np.ndarray, goa
                   valid: Callable[[np.ndarray], bool], max_checks: int, deadline: float, resolution: float,
                   simplify_checks: int, planner_range: float) -> list[np.ndarray] | None:
     checks = [0]
+    coords = range(n)
 
     def check(s: ob.State) -> bool:
         checks[0] += 1
-        return valid(np.fromiter((s[i] for i in range(n)), float, n))
+        return valid(np.array([s[i] for i in coords]))
 
     ss = og.SimpleSetup(space)
     ss.setStateValidityChecker(check)

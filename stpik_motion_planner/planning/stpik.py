@@ -30,6 +30,7 @@ A change of the planner's parameters changes the key.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, field, fields
@@ -110,26 +111,45 @@ except (ImportError, AttributeError):  # pragma: no cover - another numpy layout
 
 def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Thin SVD of a small matrix (bit-identical to np.linalg.svd(a, full_matrices=False), less overhead)."""
+    with np.errstate(invalid="ignore"):
+        return _svd_quiet(a)
+
+
+def _svd_quiet(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """_svd inside np.errstate(invalid="ignore") (the gufunc flags a failed decomposition so)."""
     if _SVD_S is not None:
-        with np.errstate(invalid="ignore"):
-            u, s, vt = _SVD_S(a, signature="d->ddd")
-        if np.isfinite(s).all():
+        u, s, vt = _SVD_S(a, signature="d->ddd")
+        if math.isfinite(s.dot(s)):  # no NaN (LAPACK did not converge) nor inf; an overflow only costs the call below
             return u, s, vt
     return np.linalg.svd(a, full_matrices=False)  # raises LinAlgError where it did not converge
+
+
+@functools.lru_cache(maxsize=None)
+def _eye(n: int) -> np.ndarray:
+    """The n x n identity, made once (read only)."""
+    eye = np.eye(n)
+    eye.flags.writeable = False
+    return eye
 
 
 def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
     """Recursive null-space projection (Eq. 10): qdot_k = qdot_{k-1} + (J_k N_{k-1})# (xdot_k - J_k qdot_{k-1}), with a
     damped pseudo-inverse near singularities. A level with jac None is the identity (a posture task, last).
     The first level skips its products with N_0 = I and qdot_0 = 0 (exact in floating point)."""
+    with np.errstate(invalid="ignore"):  # once for every level's SVD (_svd)
+        return _hierarchy(levels, n, damping)
+
+
+def _hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
+    """hierarchy's recursion."""
     qdot: np.ndarray | None = None
     proj: np.ndarray | None = None
     for jac, xd in levels:
         if jac is None:  # identity task (posture): its projection needs no decomposition
             return np.array(xd, float) if qdot is None else qdot + proj @ (xd - qdot)
-        u, s, vt = _svd(jac if proj is None else jac @ proj)
-        keep = s > 1e-6
-        if not keep.all():
+        u, s, vt = _svd_quiet(jac if proj is None else jac @ proj)
+        if not s[-1] > 1e-6:  # the singular values come in descending order: the last is the smallest
+            keep = s > 1e-6
             if not keep.any():
                 continue
             u, s, vt = u[:, keep], s[keep], vt[keep]
@@ -138,7 +158,7 @@ def hierarchy(levels: Iterable[Level], n: int, damping: float) -> np.ndarray:
         pinv = vt.T @ ((s / (s * s + lam2))[:, None] * u.T)
         qdot = pinv @ xd if qdot is None else qdot + pinv @ (xd - jac @ qdot)
         vv = vt.T @ vt
-        proj = np.eye(n) - vv if proj is None else proj - vv
+        proj = _eye(n) - vv if proj is None else proj - vv
     return np.zeros(n) if qdot is None else qdot
 
 
@@ -320,7 +340,7 @@ class Stpik:
                      (None, p.k_posture * (posture - q))]
         prev = run.qdots[-1] if run.qdots else (np.zeros(rd.N_JOINTS) if run.from_rest else None)
         qdot = self._solve(cands, eq_levels, prev, accel)
-        ratio = float(np.max(np.abs(qdot) / rd.QDOT_MAX))  # Table 7: the robot's
+        ratio = float((np.abs(qdot) / rd.QDOT_MAX).max())  # Table 7: the robot's
         scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
         qdot = qdot * scale
         if accel > 0.0 and prev is not None and run.tau < t_end:  # not while settling on the goal (slow by then)
@@ -387,11 +407,10 @@ class Stpik:
         if cands is None:
             return hierarchy(eq_levels, rd.N_JOINTS, p.damping)
         grp, sig, jac, buf = cands
-        push = p.k_set * np.maximum(0.0, buf - sig)
         active = np.zeros(len(grp), bool)
         qdot = np.zeros(rd.N_JOINTS)
+        levels: list[Level] = []  # none active before the first pass
         for _ in range(6):
-            levels = [(jac[m], push[m]) for m in (active & (grp == g) for g in (0, 1, 2)) if m.any()]
             qdot = hierarchy(levels + eq_levels, rd.N_JOINTS, p.damping)
             v = jac @ qdot
             brake: float | np.ndarray = 0.0
@@ -403,6 +422,8 @@ class Stpik:
             if not new.any():
                 break
             active |= new
+            push = p.k_set * np.maximum(0.0, buf - sig)
+            levels = [(jac[m], push[m]) for m in (active & (grp == g) for g in (0, 1, 2)) if m.any()]
         return qdot
 
     def _result(self, ok: bool, reason: str, run: _Run) -> StpikResult:
