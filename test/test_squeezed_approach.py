@@ -1,5 +1,5 @@
 """A lane whose straight approach passes between obstacles nearer on both sides than STPIK's activation distance
-(stpik.clearance + stpik.act) is skipped before its path is planned (planning/approach.py): scenario3_15's o15 at yaw
+(stpik.clearance + stpik.act) is skipped before its path is planned (model/approach.py): scenario3_15's o15 at yaw
 +0.40 passes between the target T (15.6 mm from the hand: the screen's 15 mm lets it through) and o11, STPIK holds
 the fingers 19 mm from both and stops 31 mm short, on every attempt. A lane STPIK tracks is not skipped."""
 from __future__ import annotations
@@ -12,8 +12,8 @@ import pytest
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import Label
 from relocation_common.scenario import load_scenario
+from stpik_motion_planner.model.approach import squeezed_approach
 from stpik_motion_planner.model.collision import HandProxy, approach_skip
-from stpik_motion_planner.planning.approach import squeezed_approach
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.pick import candidates, cartesian_path
 from stpik_motion_planner.planning.planner import MotionPlanner
@@ -72,6 +72,7 @@ def test_a_lane_stpik_tracks_is_not_skipped(planner):
         hits = HandProxy(band).path_hits([lane.pre_grasp, lane.grasp], obs, planner.params.resolution,
                                          approach_skip(planner.scenario.object(object_id)))
         assert [obs.items[k].name for k in hits] == [near]  # within the band, on one side
-        assert squeezed_approach(planner, lane, obs, approach_skip(planner.scenario.object(object_id))) == ""
+        assert squeezed_approach(lane, obs, approach_skip(planner.scenario.object(object_id)), band,
+                                 planner.params.resolution) == ""
         answer = planner.feasibility(object_id, removed)
         assert answer.label == Label.OBSTACLE and answer.message.startswith(f"yaw {yaw:+.2f}"), answer.message

@@ -26,10 +26,10 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import FeasibilityAnswer, Label, pick_action
+from stpik_motion_planner.model.approach import squeezed_approach
 from stpik_motion_planner.model.blockers import answer_blockers
 from stpik_motion_planner.model.collision import HandProxy, ObstacleSet, approach_skip
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, pose_pitch, side_grasp
-from stpik_motion_planner.planning.approach import squeezed_approach
 from stpik_motion_planner.planning.certify import certify as certify_rest
 from stpik_motion_planner.planning.context import PlanningContext, draw_seed, near_objects
 from stpik_motion_planner.planning.results import PlanningError, QueryStats, Segment
@@ -117,8 +117,8 @@ def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], ob
         g = cands[attempts % len(cands)]
         first = attempts < len(cands)
         attempts += 1
-        why = squeezed_approach(ctx, g, obs, skip)
-        if why:  # the draws of its path taken all the same: every later attempt draws as before (approach.py)
+        why = squeezed_approach(g, obs, skip, p.stpik.clearance + p.stpik.act, p.resolution)
+        if why:  # the draws of its path taken all the same: every later attempt draws as before (model/approach.py)
             cartesian_path(ctx, ctx.home, g.pre_grasp, obs, ctx.hand, 0, deadline, stats, first, rng, plan=False)
             last = why
             continue

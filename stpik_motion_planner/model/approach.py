@@ -1,7 +1,7 @@
 """The straight approach of a grasp lane as STPIK drives it (Eq. 10, task 3): a lane whose hand is squeezed between
 obstacles nearer than STPIK's activation distance is skipped before its path is planned.
 
-The grasp screen (pick.candidates) lets a lane through when the hand proxy, inflated by STPIK's bound
+The grasp screen (planning/pick.py, candidates) lets a lane through when the hand proxy, inflated by STPIK's bound
 stpik.clearance, is clear along the straight approach pre-grasp -> grasp. STPIK itself activates an obstacle task when
 a step would bring an arm capsule closer than stpik.clearance + stpik.act to an obstacle, and then holds that
 distance. An obstacle within that band on one side only, the hand passes it shifted away (the tool may leave the path
@@ -19,7 +19,6 @@ import numpy as np
 
 from stpik_motion_planner.model.collision import HandProxy, ObstacleSet, Skip
 from stpik_motion_planner.model.grasp import Grasp
-from stpik_motion_planner.planning.context import PlanningContext
 
 
 @functools.lru_cache(maxsize=8)
@@ -36,13 +35,11 @@ def side(g: Grasp, lo: np.ndarray, hi: np.ndarray) -> int:
     return 1 if min(lateral) > 0 else -1 if max(lateral) < 0 else 0
 
 
-def squeezed_approach(ctx: PlanningContext, g: Grasp, obs: ObstacleSet, skip: Skip) -> str:
-    """'' unless the hand proxy inflated by STPIK's activation distance (stpik.clearance + stpik.act) meets obstacles
-    on both sides of the straight approach of `g` (what the hand may touch, `skip`, left out as in pick.candidates);
-    then why the lane is skipped, naming them."""
-    s = ctx.params.stpik
-    band = s.clearance + s.act
-    hits = [obs.items[k] for k in _proxy(band).path_hits([g.pre_grasp, g.grasp], obs, ctx.params.resolution, skip)]
+def squeezed_approach(g: Grasp, obs: ObstacleSet, skip: Skip, band: float, resolution: float) -> str:
+    """'' unless the hand proxy inflated by STPIK's activation distance `band` (stpik.clearance + stpik.act) meets
+    obstacles on both sides of the straight approach of `g`, sampled every `resolution` m (what the hand may touch,
+    `skip`, left out as in pick.candidates); then why the lane is skipped, naming them."""
+    hits = [obs.items[k] for k in _proxy(band).path_hits([g.pre_grasp, g.grasp], obs, resolution, skip)]
     sides = {side(g, o.lo, o.hi) for o in hits}
     if not {1, -1} <= sides:
         return ""
