@@ -5,10 +5,10 @@ The grasp screen (planning/pick.py, candidates) lets a lane through when the han
 stpik.clearance, is clear along the straight approach pre-grasp -> grasp. STPIK itself activates an obstacle task when
 a step would bring an arm capsule closer than stpik.clearance + stpik.act to an obstacle, and then holds that
 distance. An obstacle within that band on one side only, the hand passes it shifted away (the tool may leave the path
-by stpik.track_tol). Obstacles within it on both sides of the approach (left and right of its vertical plane) hold the
-hand from either side: STPIK stops on the approach, 30 mm short, on every attempt, after the path to the pre-grasp was
-planned (RRT-Connect) and tracked. `squeezed_approach` names them; those obstacles are not removed in the question, so
-the lane is as narrow whatever else is removed.
+by stpik.track_tol). Obstacles within it at once on both sides of the approach (left and right of its vertical plane,
+at one pose along it) hold the hand from either side: STPIK stops on the approach, 30 mm short, on every attempt,
+after the path to the pre-grasp was planned (RRT-Connect) and tracked. `squeezed_approach` names them; those
+obstacles are not removed in the question, so the lane is as narrow whatever else is removed.
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from stpik_motion_planner.model.collision import HandProxy, ObstacleSet, Skip
-from stpik_motion_planner.model.grasp import Grasp
+from stpik_motion_planner.model.grasp import Grasp, pose_matrix
 
 
 @functools.lru_cache(maxsize=8)
@@ -36,13 +36,16 @@ def side(g: Grasp, lo: np.ndarray, hi: np.ndarray) -> int:
 
 
 def squeezed_approach(g: Grasp, obs: ObstacleSet, skip: Skip, band: float, resolution: float) -> str:
-    """'' unless the hand proxy inflated by STPIK's activation distance `band` (stpik.clearance + stpik.act) meets
-    obstacles on both sides of the straight approach of `g`, sampled every `resolution` m (what the hand may touch,
-    `skip`, left out as in pick.candidates); then why the lane is skipped, naming them."""
-    hits = [obs.items[k] for k in _proxy(band).path_hits([g.pre_grasp, g.grasp], obs, resolution, skip)]
-    sides = {side(g, o.lo, o.hi) for o in hits}
-    if not {1, -1} <= sides:
-        return ""
-    names = ", ".join(sorted(o.name for o in hits))
-    return (f"the approach at yaw {g.yaw:+.2f} passes between {names}, nearer on both sides than STPIK's activation "
-            f"distance ({band * 1000:.0f} mm, stpik.clearance + stpik.act): lane skipped")
+    """'' unless the hand proxy inflated by STPIK's activation distance `band` (stpik.clearance + stpik.act) meets,
+    at one pose of the straight approach of `g` (sampled every `resolution` m), obstacles on both sides of it (what
+    the hand may touch, `skip`, left out as in pick.candidates); then why the lane is skipped, naming them."""
+    pre, grasp = np.asarray(g.pre_grasp, float), np.asarray(g.grasp, float)
+    n = max(1, math.ceil(float(np.linalg.norm(grasp[:3] - pre[:3])) / resolution))
+    proxy = _proxy(band)
+    for k in range(n + 1):
+        hits = [obs.items[i] for i in proxy.hits(*pose_matrix(pre + (grasp - pre) * k / n), obs, skip)]
+        if {1, -1} <= {side(g, o.lo, o.hi) for o in hits}:
+            names = ", ".join(sorted(o.name for o in hits))
+            return (f"the approach at yaw {g.yaw:+.2f} passes between {names}, nearer on both sides than STPIK's "
+                    f"activation distance ({band * 1000:.0f} mm, stpik.clearance + stpik.act): lane skipped")
+    return ""
