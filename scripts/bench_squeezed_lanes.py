@@ -82,7 +82,8 @@ def main() -> None:
                     obs = mp.scene.obstacles(removed)
                     for g in candidates(mp, o, obs):
                         lanes += 1
-                        why = squeezed_approach(g, obs, approach_skip(sc.object(o)), band, params.resolution)
+                        why = squeezed_approach(g, obs, approach_skip(sc.object(o)), band, params.resolution,
+                                                params.stpik.final_tol_pos)
                         if not why:
                             continue
                         squeezed += 1

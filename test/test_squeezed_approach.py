@@ -73,6 +73,6 @@ def test_a_lane_stpik_tracks_is_not_skipped(planner):
                                          approach_skip(planner.scenario.object(object_id)))
         assert [obs.items[k].name for k in hits] == [near]  # within the band, on one side
         assert squeezed_approach(lane, obs, approach_skip(planner.scenario.object(object_id)), band,
-                                 planner.params.resolution) == ""
+                                 planner.params.resolution, planner.params.stpik.final_tol_pos) == ""
         answer = planner.feasibility(object_id, removed)
         assert answer.label == Label.OBSTACLE and answer.message.startswith(f"yaw {yaw:+.2f}"), answer.message

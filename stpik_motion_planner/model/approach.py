@@ -35,15 +35,18 @@ def side(g: Grasp, lo: np.ndarray, hi: np.ndarray) -> int:
     return 1 if min(lateral) > 0 else -1 if max(lateral) < 0 else 0
 
 
-def squeezed_approach(g: Grasp, obs: ObstacleSet, skip: Skip, band: float, resolution: float) -> str:
+def squeezed_approach(g: Grasp, obs: ObstacleSet, skip: Skip, band: float, resolution: float, short: float) -> str:
     """'' unless the hand proxy inflated by STPIK's activation distance `band` (stpik.clearance + stpik.act) meets,
-    at one pose of the straight approach of `g` (sampled every `resolution` m), obstacles on both sides of it (what
-    the hand may touch, `skip`, left out as in pick.candidates); then why the lane is skipped, naming them."""
+    at one pose of the straight approach of `g` (sampled every `resolution` m from the pre-grasp to `short` m before
+    the grasp: STPIK accepts the grasp within stpik.final_tol_pos), obstacles on both sides of it (what the hand may
+    touch, `skip`, left out as in pick.candidates); then why the lane is skipped, naming them."""
     pre, grasp = np.asarray(g.pre_grasp, float), np.asarray(g.grasp, float)
-    n = max(1, math.ceil(float(np.linalg.norm(grasp[:3] - pre[:3])) / resolution))
+    length = float(np.linalg.norm(grasp[:3] - pre[:3]))
+    end = grasp + (pre - grasp) * min(1.0, short / length) if length > 0 else grasp
+    n = max(1, math.ceil(float(np.linalg.norm(end[:3] - pre[:3])) / resolution))
     proxy = _proxy(band)
     for k in range(n + 1):
-        hits = [obs.items[i] for i in proxy.hits(*pose_matrix(pre + (grasp - pre) * k / n), obs, skip)]
+        hits = [obs.items[i] for i in proxy.hits(*pose_matrix(pre + (end - pre) * k / n), obs, skip)]
         if {1, -1} <= {side(g, o.lo, o.hi) for o in hits}:
             names = ", ".join(sorted(o.name for o in hits))
             return (f"the approach at yaw {g.yaw:+.2f} passes between {names}, nearer on both sides than STPIK's "

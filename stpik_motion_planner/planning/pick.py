@@ -117,7 +117,7 @@ def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], ob
         g = cands[attempts % len(cands)]
         first = attempts < len(cands)
         attempts += 1
-        why = squeezed_approach(g, obs, skip, p.stpik.clearance + p.stpik.act, p.resolution)
+        why = squeezed_approach(g, obs, skip, p.stpik.clearance + p.stpik.act, p.resolution, p.stpik.final_tol_pos)
         if why:  # the draws of its path taken all the same: every later attempt draws as before (model/approach.py)
             cartesian_path(ctx, ctx.home, g.pre_grasp, obs, ctx.hand, 0, deadline, stats, first, rng, plan=False)
             last = why
