@@ -16,27 +16,23 @@ import random
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from relocation_app.evaluation.scenes.jitter import jitter_scene  # noqa: E402
-from relocation_common import robot_description as rd  # noqa: E402
-from relocation_common.paths import resolve_scenario  # noqa: E402
-from relocation_common.scenario import load_scenario, parse_scenario  # noqa: E402
-from stpik_motion_planner.model.approach import squeezed_approach  # noqa: E402
-from stpik_motion_planner.model.collision import approach_skip  # noqa: E402
-from stpik_motion_planner.planning.params import PlannerParams  # noqa: E402
-from stpik_motion_planner.planning.pick import candidates, cartesian_path  # noqa: E402
-from stpik_motion_planner.planning.planner import MotionPlanner  # noqa: E402
-from stpik_motion_planner.planning.results import QueryStats  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this tree's packages first
 
 
-def tracked(mp: MotionPlanner, object_id: str, removed: frozenset[str], g) -> bool:
+
+def tracked(mp: Any, object_id: str, removed: frozenset[str], g: Any) -> bool:
     """The pick's steps on lane `g` alone (its direct path first, then RRT-Connect), up to max_attempts paths: True
     if STPIK reached the grasp on one."""
+    from relocation_common import robot_description as rd
+    from stpik_motion_planner.model.collision import approach_skip
+    from stpik_motion_planner.planning.pick import cartesian_path
+    from stpik_motion_planner.planning.results import QueryStats
+
     obs, p = mp.scene.obstacles(removed), mp.params
     skip = approach_skip(mp.scenario.object(object_id))
     rng = mp.question_rng("squeezed", object_id, removed, g.yaw)
@@ -56,6 +52,15 @@ def tracked(mp: MotionPlanner, object_id: str, removed: frozenset[str], g) -> bo
 
 
 def main() -> None:
+    from relocation_app.evaluation.scenes.jitter import jitter_scene
+    from relocation_common.paths import resolve_scenario
+    from relocation_common.scenario import load_scenario, parse_scenario
+    from stpik_motion_planner.model.approach import squeezed_approach
+    from stpik_motion_planner.model.collision import approach_skip
+    from stpik_motion_planner.planning.params import PlannerParams
+    from stpik_motion_planner.planning.pick import candidates
+    from stpik_motion_planner.planning.planner import MotionPlanner
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", nargs="*", default=["scenario3_15", "paper_experiment_10"])
     ap.add_argument("--seeds", type=int, default=3, help="jittered copies per scene (and the scene itself)")
