@@ -225,9 +225,13 @@ def answers_of(name: str) -> list[list]:
             t = a.trajectory
             lanes = [(sorted(b.objects), b.certain, b.lane) for b in a.blockers]
             h = hashlib.sha256(repr((a.attempts, a.message, lanes, sorted(a.near or ()))).encode())
+            m = hashlib.sha256()  # the motion alone
             if t is not None:
-                h.update(t.times.tobytes() + t.positions.tobytes() + t.velocities.tobytes() + repr(t.phases).encode())
-            out.append([object_id, sorted(removed), int(a.label), a.planning_time, h.hexdigest()[:16]])
+                motion = t.times.tobytes() + t.positions.tobytes() + t.velocities.tobytes() + repr(t.phases).encode()
+                h.update(motion)
+                m.update(motion)
+            out.append([object_id, sorted(removed), int(a.label), a.planning_time, h.hexdigest()[:16],
+                        m.hexdigest()[:16], a.message])
             return a
 
     exact.solve(sc, Recorder(planner, certifying=False))
@@ -252,6 +256,8 @@ def latency_baseline(name: str, rev: str, rounds: int) -> str:
     same = all([(r[0], r[1], r[2], r[4]) for r in run] == ref for v in runs.values() for run in v)
     lines, stats = [f"{name}: uniform-cost solve, {rounds} runs of each planner alternated, {len(ref)} questions a "
                     f"run; same answers (label, attempts, message, trajectory bit for bit): {same}"], {}
+    if not same:
+        lines.append(answers_differ(runs[rev][0], runs["working tree"][0]))
     for key, rs in runs.items():
         f = [r[3] for run in rs for r in run if r[2] != 0]
         u = [r[3] for run in rs for r in run if r[2] == 0]
@@ -262,6 +268,19 @@ def latency_baseline(name: str, rev: str, rounds: int) -> str:
     lines.append(f"  ratio {rev} / working tree: feasible p50 {b[0] / w[0]:.2f}x, p95 {b[1] / w[1]:.2f}x; "
                  f"unfeasible p50 {b[2] / w[2]:.2f}x, p95 {b[3] / w[3]:.2f}x")
     return "\n".join(lines)
+
+
+def answers_differ(old: list[list], new: list[list]) -> str:
+    """How the working tree's answers differ from REV's, question by question: the questions asked, labels,
+    motions (the trajectory bit for bit), and the answers that differ in attempts, message or blockers only."""
+    if [r[:2] for r in old] != [r[:2] for r in new]:
+        return "  the questions asked differ (the solve took another course)"
+    labels = sum(o[2] != n[2] for o, n in zip(old, new))
+    motions = sum(o[2] == n[2] and o[5] != n[5] for o, n in zip(old, new))
+    rest = [(o, n) for o, n in zip(old, new) if o[2] == n[2] and o[5] == n[5] and o[4] != n[4]]
+    shown = f"; e.g. {rest[0][0][0]}: '{rest[0][0][6]}' -> '{rest[0][1][6]}'" if rest else ""
+    return (f"  labels changed: {labels}, motions changed: {motions}, answers changed in attempts, message or "
+            f"blockers only: {len(rest)}{shown}")
 
 
 def one(name: str, modes: tuple[str, ...]) -> list[dict]:

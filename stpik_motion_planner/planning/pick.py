@@ -26,6 +26,7 @@ import numpy as np
 
 from relocation_common import robot_description as rd
 from relocation_common.feasibility import FeasibilityAnswer, Label, pick_action
+from stpik_motion_planner.model.approach import squeezed_approach
 from stpik_motion_planner.model.blockers import answer_blockers
 from stpik_motion_planner.model.collision import HandProxy, ObstacleSet
 from stpik_motion_planner.model.grasp import Grasp, Pose, WorkspaceError, pose_matrix, pose_pitch, side_grasp
@@ -116,6 +117,11 @@ def pick_lanes(ctx: PlanningContext, object_id: str, removed: frozenset[str], ob
         g = cands[attempts % len(cands)]
         first = attempts < len(cands)
         attempts += 1
+        why = squeezed_approach(g, obs, skip, p.stpik.clearance + p.stpik.act, p.resolution, p.stpik.final_tol_pos)
+        if why:  # the draws of its path taken all the same: every later attempt draws as before (model/approach.py)
+            cartesian_path(ctx, ctx.home, g.pre_grasp, obs, ctx.hand, 0, deadline, stats, first, rng, plan=False)
+            last = why
+            continue
         path = cartesian_path(ctx, ctx.home, g.pre_grasp, obs, ctx.hand, p.rrt_max_checks, deadline, stats, first,
                               rng)
         if path is None:
@@ -177,23 +183,27 @@ def front_of_shelf(ctx: PlanningContext, pose: Pose) -> np.ndarray:
 
 def cartesian_path(ctx: PlanningContext, start: Pose, goal: Pose, obs: ObstacleSet,
                    hand: HandProxy, max_checks: int, deadline: float, stats: QueryStats, first: bool,
-                   rng: np.random.Generator | None = None) -> list[np.ndarray] | None:
+                   rng: np.random.Generator | None = None, plan: bool = True) -> list[np.ndarray] | None:
     """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on
     later attempts RRT-Connect. A goal from above (its pitch: grasp.tool_rotation) is reached tilted from the start
-    on: the hand tilts at the start, and RRT-Connect plans (x, y, z, yaw) at that pitch."""
+    on: the hand tilts at the start, and RRT-Connect plans (x, y, z, yaw) at that pitch. `plan` False: only the
+    draws from `rng` that planning would take (a skipped lane), None."""
     pitch = pose_pitch(goal)
     if pitch:
         start = np.array([*start[:4], 0.0]) if len(start) < 5 else np.asarray(start, float)
     if first and ctx.params.direct_first:
         direct = [np.asarray(start, float), front_of_shelf(ctx, goal), np.asarray(goal, float)]
         if hand.path_clear(direct, obs, ctx.params.resolution):
-            stats.direct_paths += 1
-            return direct
+            stats.direct_paths += plan
+            return direct if plan else None
     if not ctx.rrt.contains(goal[:4]):  # a grasp from above turned beyond the planner's yaws: the direct path only
+        return None
+    seed = draw_seed(rng)
+    if not plan:
         return None
     t = time.perf_counter()
     path = ctx.rrt.plan(start[:4], goal[:4], lambda s: not hand.collides(*pose_matrix((*s, pitch)), obs), max_checks,
-                        deadline, draw_seed(rng))
+                        deadline, seed)
     stats.rrt_time += time.perf_counter() - t
     stats.rrt_calls += 1
     if pitch and path is not None:
