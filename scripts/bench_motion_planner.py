@@ -70,11 +70,10 @@ def latencies(scenario: str, n: int, seed: int) -> list[tuple[str, str, float]]:
     return out
 
 
-def export_package(rev: str) -> str:
-    """stpik_motion_planner/ of git revision `rev` in a temporary directory."""
+def export_package(rev: str, package: str = "stpik_motion_planner") -> str:
+    """`package`/ of git revision `rev` in a temporary directory."""
     d = tempfile.mkdtemp(prefix="bench_mp_base_")
-    tar = subprocess.run(["git", "-C", str(REPO), "archive", rev, "stpik_motion_planner"], capture_output=True,
-                         check=True).stdout
+    tar = subprocess.run(["git", "-C", str(REPO), "archive", rev, package], capture_output=True, check=True).stdout
     with tarfile.open(fileobj=io.BytesIO(tar)) as t:
         t.extractall(d, filter="data")
     return d

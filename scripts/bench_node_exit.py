@@ -14,13 +14,11 @@ wait4's rusage). The two codes alternate round by round, so that a change of the
 from __future__ import annotations
 
 import argparse
-import io
 import os
 import signal
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
@@ -33,11 +31,8 @@ READY_TIMEOUT = 90.0  # s a node may take to start on a loaded machine
 
 def export_common(rev: str) -> str:
     """relocation_common/ of git revision `rev` in a temporary directory, with this checkout's config/."""
-    d = tempfile.mkdtemp(prefix="bench_exit_base_")
-    tar = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "relocation_common"], capture_output=True,
-                         check=True).stdout
-    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
-        t.extractall(d, filter="data")
+    from bench_motion_planner import export_package  # scripts/ is sys.path[0]: the sibling benchmark
+    d = export_package(rev, "relocation_common")
     for f in ("config", "package.xml"):  # relocation_common takes the directory beside itself for the checkout
         os.symlink(ROOT / f, Path(d) / f)
     return d

@@ -100,6 +100,16 @@ def test_motion_planner_exits_0_on_sigint_after_a_client_came_and_went(tmp_path,
     assert codes == [0] * rounds, codes
 
 
+def _start_script(g, script, name: str, line: str):
+    """Start `python script` in graph `g`; return its NodeProcess once its log shows `line` (30 s at most)."""
+    p = g.start_argv([sys.executable, str(script)], name=name, cwd=REPO)
+    deadline = time.monotonic() + 30
+    while line not in p.log():
+        assert p.alive() and time.monotonic() < deadline, p.log()[-2000:]
+        time.sleep(0.05)
+    return p
+
+
 STUCK_NODE = """
 import time
 from rclpy.node import Node
@@ -126,11 +136,7 @@ def test_a_node_whose_stop_hangs_is_gone_within_the_stop_grace(tmp_path):
     script = tmp_path / "stuck_node.py"
     script.write_text(STUCK_NODE)
     with RosGraph(tmp_path) as g:
-        p = g.start_argv([sys.executable, str(script)], name="stuck_node", cwd=REPO)
-        deadline = time.monotonic() + 30
-        while "ready" not in p.log():
-            assert p.alive() and time.monotonic() < deadline, p.log()[-2000:]
-            time.sleep(0.05)
+        p = _start_script(g, script, "stuck_node", "ready")
         t0 = time.monotonic()
         p.popen.send_signal(signal.SIGTERM)
         try:
@@ -172,11 +178,7 @@ def test_a_callback_still_running_at_the_stop_is_left_and_the_node_exits_0(tmp_p
     script = tmp_path / "busy_node.py"
     script.write_text(BUSY_NODE)
     with RosGraph(tmp_path) as g:
-        p = g.start_argv([sys.executable, str(script)], name="busy_node", cwd=REPO)
-        deadline = time.monotonic() + 30
-        while "working" not in p.log():
-            assert p.alive() and time.monotonic() < deadline, p.log()[-2000:]
-            time.sleep(0.05)
+        p = _start_script(g, script, "busy_node", "working")
         t0 = time.monotonic()
         p.popen.send_signal(signal.SIGINT)
         try:
@@ -216,11 +218,7 @@ def test_a_stopped_node_leaves_its_objects_out_of_the_finalization_collections(t
     script = tmp_path / "idle_node.py"
     script.write_text(FROZEN_NODE)
     with RosGraph(tmp_path) as g:
-        p = g.start_argv([sys.executable, str(script)], name="idle_node", cwd=REPO)
-        deadline = time.monotonic() + 30
-        while "ready" not in p.log():
-            assert p.alive() and time.monotonic() < deadline, p.log()[-2000:]
-            time.sleep(0.05)
+        p = _start_script(g, script, "idle_node", "ready")
         p.popen.send_signal(signal.SIGINT)
         assert p.popen.wait(30) == 0, p.log()[-2000:]
     line = next((ln for ln in p.log().splitlines() if ln.startswith("frozen at exit")), "")
