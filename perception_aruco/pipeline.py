@@ -120,8 +120,9 @@ class FrameInputs:
         """Whether `other`'s inputs equal these (byte for byte; the prior compared only when this frame read it).
         About 1 ms at 640x480: one comparison of each image buffer."""
         def equal(a: np.ndarray | None, b: np.ndarray | None) -> bool:
-            return (a is None) == (b is None) and (a is None or (a.shape == b.shape and a.dtype == b.dtype and
-                                                                  a.tobytes() == b.tobytes()))
+            if a is None or b is None:
+                return a is b
+            return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
         return (self.arm_unknown == other.arm_unknown and self.memory == other.memory and equal(self.K, other.K)
                 and equal(self.q, other.q) and (self.prior is None or equal(self.prior, other.prior))
                 and equal(self.rgb, other.rgb) and equal(self.depth, other.depth))
