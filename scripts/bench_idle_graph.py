@@ -3,7 +3,8 @@
 node (every frame) over `--seconds` of an idle scene, this checkout's code against an older checkout's (`--old`),
 alternated round after round; the real parameters (config/jaco2_sim_driver.yaml, config/perception.yaml), the arm
 at home with no command, as during the task planner's training. Prints each run's CPU (fraction of one core) and the
-ratio new / old; the new code's frames rendered / reused and processed / reused from its /diagnostics.
+ratio new / old; the new code's frames rendered / reused and processed / reused from its /diagnostics. First, in
+this process, the cost of one frame rendered and reused (CameraRenderer) and processed and reused (Perception).
 Paste the numbers into docs/bench/sim_driver.md.
 
 Usage: git worktree add --detach /tmp/old <commit before>; ln -s $PWD/.venv /tmp/old/.venv
@@ -20,6 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))  # ros_procs
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages
+os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering: before mujoco is imported (as jaco2_sim_driver does)
 
 from relocation_app.graph import Graph
 
@@ -73,6 +75,54 @@ def run(tree: Path, scenario: str, seconds: float, warmup: float, domain: int) -
         return {n: (c1[n] - c0[n]) / (t1 - t0) for n in NODES}, seen
 
 
+def per_frame(scenario: str, n: int = 5) -> None:
+    """ms per frame of the camera (render vs reuse) and of perception (process vs reuse), this checkout, median."""
+    import mujoco
+    import numpy as np
+
+    from jaco2_sim_driver.camera import CameraRenderer
+    from jaco2_sim_driver.params import CameraSpec
+    from jaco2_sim_driver.sim import Jaco2Sim
+    from perception_aruco.pipeline import Perception, SceneMemory
+    from relocation_common.robot_description import Q_HOME
+    from relocation_common.scenario import load_scenario
+
+    sc = load_scenario(scenario)
+    sim = Jaco2Sim(sc, camera=CameraSpec.configured())
+    sim.step(300)
+    r = CameraRenderer(sim.model, sim.camera.width, sim.camera.height)
+    data = mujoco.MjData(sim.model)
+    data.qpos[:] = sim.data.qpos
+    mujoco.mj_kinematics(sim.model, data)
+    mujoco.mj_camlight(sim.model, data)
+    p, memory, q = Perception(sc), SceneMemory(sc.ids, 3, 2), np.array([Q_HOME])
+
+    def ms(f) -> float:
+        out = []
+        for _ in range(n):
+            t = time.perf_counter()
+            f()
+            out.append(1e3 * (time.perf_counter() - t))
+        return float(np.median(out))
+
+    def render_anew():
+        r._last = None
+        return r.render(data)
+    f = r.render(data)
+
+    def process_anew():
+        p._last = None
+        return p.process(f.rgb, f.depth, f.K, None, memory, q)
+    try:
+        rendered, reused = ms(render_anew), ms(lambda: r.render(data))
+    finally:
+        r.close()
+    processed, again = ms(process_anew), ms(lambda: p.process(f.rgb, f.depth, f.K, None, memory, q))
+    print(f"per frame ({Path(scenario).name}, {sim.camera.width}x{sim.camera.height}, median of {n}): camera "
+          f"render {rendered:.1f} ms, reuse {reused:.1f} ms; perception process {processed:.0f} ms, reuse "
+          f"{again:.1f} ms", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--old", type=Path, required=True, help="a checkout of the code before (git worktree)")
@@ -83,6 +133,7 @@ def main() -> None:
     ap.add_argument("--domain", type=int, default=96)
     a = ap.parse_args()
     scenario = str((REPO / a.scenario).resolve())
+    per_frame(scenario)
     out: dict[str, list[dict[str, float]]] = {"old": [], "new": []}
     for r in range(a.rounds):
         for label, tree in (("old", a.old.resolve()), ("new", REPO)) if r % 2 == 0 else \
