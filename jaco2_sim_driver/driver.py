@@ -128,6 +128,7 @@ class SimDriver:
         self._next_js = self._next_obj = self._next_tf = self._wall0 = self._sim0 = 0.0
         self._states = 0  # joint states made since the start (each published by the node)
         self._rate_mark = (0, 0.0)  # (states, simulated time) at the last health report
+        self.camera: CameraRenderer | None = None  # the camera loop's renderer (its frames rendered and reused)
         self._disturb: queue.SimpleQueue = queue.SimpleQueue()  # commands (disturbance.command's arguments)
         self.disturbances(params.drop_probability, params.drop_seed, params.plan())
 
@@ -218,7 +219,8 @@ class SimDriver:
         since the last velocity command), the watchdog's stops of a moving arm, stopped (kinova in/stop: WARN), the
         joint states made and their rate per simulated second since the last report (joint_state_rate when the loop
         keeps up; fewer when its ticks come late, each then one state for up to MAX_BATCH steps), as
-        diagnostic_updater's frequency status gives a topic's rate."""
+        diagnostic_updater's frequency status gives a topic's rate; the camera's frames rendered and reused (the
+        scene unchanged since the last render: CameraRenderer)."""
         with self.lock:
             age, stops, t, states = self.sim.command_age, self.sim.watchdog_stops, self.sim.time, self._states
             (states0, t0), self._rate_mark = self._rate_mark, (states, t)
@@ -228,6 +230,9 @@ class SimDriver:
         values = {"command age (s)": f"{age:.3f}" if age < 1e9 else "no command yet",
                   "watchdog stops": str(stops), "stopped": str(self.stopped), "sim time (s)": f"{t:.3f}",
                   "joint states": str(states), "joint state rate (per simulated s)": f"{rate:.1f}"}
+        if self.camera is not None:
+            values.update({"camera frames rendered": str(self.camera.renders),
+                           "camera frames reused (scene unchanged)": str(self.camera.reused)})
         return (1 if self.stopped else 0), f"arm {state}; watchdog stops: {stops}", values
 
     def reset(self) -> str:
@@ -403,9 +408,10 @@ class SimDriver:
         its own renderer: call it in the thread that owns the GL context. Each frame's `wall` is the wall-clock time
         of that copy, not of the publishing: at a load average of 25 a render took far longer than its 75 ms, and a
         frame stamped when published showed the arm where it had been before its stamp (perception's self-filter
-        then took the joint states of the wrong instant and left pieces of the arm as unlisted objects)."""
+        then took the joint states of the wrong instant and left pieces of the arm as unlisted objects). A frame of
+        an unchanged scene is not rendered again (CameraRenderer): its images are the last render's."""
         model, spec = self.sim.model, self.sim.camera
-        renderer = CameraRenderer(model, spec.width, spec.height, sensor=self.sensor)
+        renderer = self.camera = CameraRenderer(model, spec.width, spec.height, sensor=self.sensor)
         data = mujoco.MjData(model)
         next_t = time.monotonic()
         try:

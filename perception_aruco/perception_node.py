@@ -94,6 +94,7 @@ class PerceptionNode(Node):
         self._previous: dict = {}                  # id -> PerceivedObject of the last published scene
         self._scene: ObjectArray | None = None
         self._scene_time = 0.0
+        self._debug: tuple[PerceptionResult, tuple] | None = None  # the last debug image (encoded) and its result
 
         sensors = ReentrantCallbackGroup()
         self.create_subscription(Image, g("color_topic"), self._on_color, qos_profile_sensor_data,
@@ -223,14 +224,18 @@ class PerceptionNode(Node):
                                       {**result.missing, **doubt}, result.T_base_camera, result.shelf, result.notes,
                                       result.uncounted, result.reached)
         self._report_health(result)
-        self._publish_debug(color, self.perception.annotate(rgb, result, K))
+        if self._debug is None or self._debug[0] is not result:   # a result reused: the same images, the same drawing
+            self._debug = (result, encode_color(self.perception.annotate(rgb, result, K)))
+        self._publish_encoded(color, self._debug[1])
         self._publish_tf(color, result)
         self._publish_scene(color, result)
 
     def _report_health(self, result: PerceptionResult) -> None:
         fit = result.shelf
         values = {"bottles found": str(len(result.detections)), "missing": ", ".join(sorted(result.missing)),
-                  "unlisted": ", ".join(sorted(result.unlisted)), "marker seen": str(result.marker is not None)}
+                  "unlisted": ", ".join(sorted(result.unlisted)), "marker seen": str(result.marker is not None),
+                  "frames processed": str(self.perception.processed),
+                  "frames reused (inputs unchanged)": str(self.perception.reused)}
         if fit is not None:
             values.update({"shelf vs marker (mm)": f"{fit.shift * 1000:.1f}",
                            "shelf vs marker (deg)": f"{fit.rotation_deg:.2f}",
@@ -294,7 +299,10 @@ class PerceptionNode(Node):
         self.pub.publish(self._scene)
 
     def _publish_debug(self, color: Image, img: np.ndarray) -> None:
-        enc, h, w, step, data = encode_color(img)
+        self._publish_encoded(color, encode_color(img))
+
+    def _publish_encoded(self, color: Image, encoded: tuple) -> None:
+        enc, h, w, step, data = encoded
         self.debug_pub.publish(Image(header=color.header, encoding=enc, height=h, width=w, step=step, data=data))
 
 

@@ -49,6 +49,13 @@ class SceneMemory:
         seen = self.last_seen.get(object_id)
         return None if seen is None else seen[0]
 
+    def view(self) -> tuple:
+        """All that Perception.process reads of the memory (the identity's objects.identity.Memory, the pending and
+        confirmed candidates, whether it is the first frame): two memories with equal views give a frame the same
+        result (pipeline.FrameInputs)."""
+        return (self.frame == 0, {i: o for i, (o, _) in self.last_seen.items()}, tuple(self.held()),
+                frozenset(self.reached), self.unlisted_count, tuple(self.streak), frozenset(self.confirmed))
+
     def arm_near(self, object_id: str) -> bool:
         """Whether the arm came near the object's last pose since it was seen there (`update`'s `reached`): only
         then may its track jump (identity.listed_costs)."""
