@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """CPU of the camera loop while nothing moves: the simulated driver (its camera at camera_rate) and the perception
 node (every frame) over `--seconds` of an idle scene, this checkout's code against an older checkout's (`--old`),
-alternated round after round; the real parameters (config/jaco2_sim_driver.yaml, config/perception.yaml), the arm
+alternated, one after the other; the real parameters (config/jaco2_sim_driver.yaml, config/perception.yaml), the arm
 at home with no command, as during the task planner's training. Prints each run's CPU (fraction of one core) and the
 ratio new / old; the new code's frames rendered / reused and processed / reused from its /diagnostics. First, in
 this process, the cost of one frame rendered and reused (CameraRenderer) and processed and reused (Perception).
@@ -140,7 +140,7 @@ def main() -> None:
                 (("new", REPO), ("old", a.old.resolve())):
             cpu, counts = run(tree, scenario, a.seconds, a.warmup, a.domain)
             out[label].append(cpu)
-            print(f"round {r + 1} {label}: " + ", ".join(f"{n} {cpu[n]:.3f} core" for n in NODES)
+            print(f"pass {r + 1} {label}: " + ", ".join(f"{n} {cpu[n]:.3f} core" for n in NODES)
                   + (f"; {counts}" if counts else ""), flush=True)
     print(f"\nmean over {a.rounds} rounds of {a.seconds:g} s (fraction of one core), {Path(a.scenario).name}:")
     for n in NODES + ("both",):
