@@ -46,7 +46,7 @@ OUTCOME_UNKNOWN = "outcome unknown"  # the end of a RelocateObject result whose 
 
 
 SIDE_GRASP = "side_grasp"  # PlanFeasibility's `action` of a feasible pick of a standing object
-TOP_GRASP = "top_grasp"  # ... of a cylinder lying flat (the grasp from above)
+TOP_GRASP = "top_grasp"  # ... of a cylinder lying flat (from above, or along its axis under a low board)
 PUSH = "push"  # ... of a push (PlanFeasibility request action "push")
 PICK_ACTIONS = (SIDE_GRASP, TOP_GRASP)  # the pick actions: an object's pose takes one of them (`pick_action`)
 ACTIONS = PICK_ACTIONS + (PUSH,)  # every action kind of the action model
