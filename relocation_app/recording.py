@@ -455,7 +455,7 @@ class RunRecorder:
 
     def stop(self) -> dict:
         """Stop recording; close the bag and the video. A summary: bag (files, bytes, messages per topic), video."""
-        t_end = time.monotonic()
+        t_end = time.time()  # the bag's clock (_stamps), as the video's frames
         self._stopping.set()
         self._thread.join(timeout=10.0)
         self._ros().destroy_node()
@@ -548,9 +548,9 @@ class RunRecorder:
             out = compressed_type(header=msg.header, format=f"{msg.encoding}; jpeg compressed bgr8")
             out.data = jpg.tobytes()
             self._bag().write(topic, serialize_message(out), *_stamps(info))
-        if self.video is not None and self._video_on:
-            now = time.monotonic()
-            self.video.add(bgr, now, self.status.lines(now - self._t0))
+        if self.video is not None and self._video_on:  # on the bag's clock: the frame's log time (its first
+            # frame's time was when this callback got to it, after cv2's import under load: a video 1.3 s short)
+            self.video.add(bgr, _stamps(info)[0] * 1e-9, self.status.lines(time.monotonic() - self._t0))
 
     # -- what the frames say ------------------------------------------------------------------------------------
     def _watcher(self, name: str, type_name: str):
