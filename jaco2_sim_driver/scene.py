@@ -169,12 +169,14 @@ def _header(root: ET.Element, camera: CameraSpec, markers: int = 1, gripper_mark
     _el(visual, "quality", shadowsize="1024")
     _el(visual, "map", znear="0.01", zfar="20")
     default = _el(root, "default")
+    # bottles: condim 6 applies the rolling friction their friction triple names (0.001 m; condim 4 left it out, and a
+    # bottle lying on a board rolled on at any speed a touch gave it: docs/bench/push.md)
     for cls, geom in (
             ("arm_collision", dict(contype="2", conaffinity="1", rgba="0.15 0.15 0.17 1", group="1")),
             ("finger", dict(contype="2", conaffinity="1", rgba="0.2 0.2 0.22 1", friction="1.2 0.01 0.001",
                             group="1")),
             ("shelf", dict(contype="1", conaffinity="3", rgba="0.72 0.58 0.40 1", friction="0.8 0.01 0.001")),
-            ("bottle", dict(contype="1", conaffinity="3", friction="0.8 0.01 0.001", condim="4", solref="0.004 1"))):
+            ("bottle", dict(contype="1", conaffinity="3", friction="0.8 0.01 0.001", condim="6", solref="0.004 1"))):
         _el(_el(default, "default", class_=cls), "geom", **geom)
     asset = _el(root, "asset")
     for k in range(markers):

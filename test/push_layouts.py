@@ -120,6 +120,43 @@ def lying_data(seed: int) -> dict:
     return out
 
 
+def across_layout(seed: int) -> Scenario:
+    """The layout of `seed` (across_data) as a scenario."""
+    data = across_data(seed)
+    return parse_scenario(data, data["name"])
+
+
+def across_data(seed: int) -> dict:
+    """"X lying across the shelf in front of T" as scenario YAML data, on paper_experiment_10's shelf (0.26 m of
+    headroom: no grasp from above, and an axis this far from pointing in has no grasp along it): T standing at x
+    0.82-0.90, y -0.15..0.15; X lying flat in front of it, its axis 0.85-1.55 rad from pointing into the shelf
+    (either sign), its centre up to 40 mm off T's line and 5-15 mm from T; OTHERS bottles standing elsewhere, as
+    lying_data (the closed-loop grid's remaining failures: a bottle tipped across every lane of T)."""
+    rng = random.Random(f"push-across:{seed}")
+    with open(config_file("scenarios/paper_experiment_10.yaml")) as f:
+        data = yaml.safe_load(f)
+    s = parse_scenario(data, "base").shelf
+    tx, ty = rng.uniform(0.82, 0.90), rng.uniform(-0.15, 0.15)
+    yaw = rng.choice((-1.0, 1.0)) * rng.uniform(0.85, 1.55)
+    gap, dy = rng.uniform(0.005, 0.015), rng.uniform(-0.04, 0.04)
+    c, sn, half = math.cos(yaw), math.sin(yaw), 0.08
+    d = 0.0
+    while True:  # X's centre moved towards the front until its rectangle is `gap` from T's circle
+        u, v = c * d - sn * dy, -sn * d - c * dy  # T's centre in X's frame (X at (tx - d, ty + dy))
+        if math.hypot(max(abs(u) - half, 0.0), max(abs(v) - RADIUS, 0.0)) >= RADIUS + gap:
+            break
+        d += 0.001
+    x = (tx - d, ty + dy)
+    objs = [{"id": "T", "xy": [round(tx, 4), round(ty, 4)]},
+            {"id": "X", "weight": 0.3, "xy": [round(x[0], 4), round(x[1], 4)], "lying": True,
+             "yaw": round(math.remainder(yaw, math.pi), 4)}]
+    _add_others(rng, s, {"T": (tx, ty), "X": x}, objs, half)
+    out = copy.deepcopy(data)
+    out["name"] = f"push_across_s{seed}"
+    out["objects"] = objs
+    return out
+
+
 def _add_others(rng: random.Random, s, pos: dict, objs: list, half: float) -> None:
     """OTHERS standing bottles drawn on the shelf `s`, each 3 cm clear of T, of every other one and of the lying X's
     reach (`half` its half length), appended to `objs` (ids o1, o2, ...)."""

@@ -23,6 +23,7 @@ from relocation_common.scenario import Shelf
 from stpik_motion_planner.execution.follower import joint_error
 from stpik_motion_planner.execution.goal_check import Point, SeenBottle, on_top_shelf
 from stpik_motion_planner.execution.relocation import Arm, Progress
+from stpik_motion_planner.model.push import ROLL, SLIDE
 from stpik_motion_planner.planning.params import node_parameters
 from stpik_motion_planner.planning.planner import MotionPlanner
 from stpik_motion_planner.planning.push import PushPlan
@@ -134,14 +135,16 @@ def after_push(progress: Progress, made: PushPlan, q: np.ndarray, near: float
 def push_problems(shelf: Shelf, before: Mapping[str, Point], after: Mapping[str, SeenBottle], made: PushPlan,
                   tolerance: float, end_tolerance: float) -> list[str]:
     """What is wrong after the push `made` (empty: it did what it predicted): the pushed object (when `after` shows
-    it) off the top shelf or farther than `end_tolerance` (m, on the board) from its predicted end pose; any other
-    object in both scenes (`before`: base centres) moved more than `tolerance` (m, 3D)."""
+    it) off the top shelf or farther than `end_tolerance` (m, on the board) from its predicted end pose (the centre
+    of its footprint: a standing one's base, a lying one's middle); any other object in both scenes (`before`: base
+    centres) moved more than `tolerance` (m, 3D)."""
     problems = []
     b = after.get(made.object_id)
     if b is not None:
-        off = math.dist((b.x, b.y), made.end[:2])
+        off = math.dist(b.footprint.centre, made.end[:2])
         if not on_top_shelf(shelf, b) or abs(b.z - made.end[2]) > tolerance:
-            problems.append(f"{made.object_id} is no longer standing on the top shelf")
+            how = "lying" if made.kind in (SLIDE, ROLL) else "standing"
+            problems.append(f"{made.object_id} is no longer {how} on the top shelf")
         elif off > end_tolerance:
             problems.append(f"{made.object_id} is {off * 1000:.0f} mm from its predicted end pose "
                             f"({made.end[0]:.3f}, {made.end[1]:.3f})")

@@ -23,6 +23,7 @@ from relocation_common.scenario import Scenario, ShelfObject
 from stpik_motion_planner.model.collision import CollisionScene, closed_fingers, cylinder, object_obstacle
 from stpik_motion_planner.model.grasp import tool_rotation
 
+PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 SWEEP_STEP = 0.005  # m between the poses of the pushed object checked along its sweep
 SLIDE, ROLL, STANDING = "slide", "roll", "standing"
 
@@ -51,21 +52,39 @@ def tips(yaw: float, pitch: float) -> np.ndarray:
     return np.array([rot @ (s.p1 - np.array([0.0, 0.0, rd.D67])) for s in closed_fingers().values()])
 
 
-def contact_pose(o: ShelfObject, top_z: float, yaw: float, pitch: float, height: float, gap: float
-                 ) -> tuple[float, float, float, float, float]:
-    """The tool pose (x, y, z, yaw, pitch) whose leading finger tip is `gap` short of the side of the cylinder `o`
-    (reach: a lying one's end cap or side) on the line through its axis (centre) along the push direction `yaw`,
-    that tip `height` above the board (`top_z`); a horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and
-    below it."""
+def contact_pose(o: ShelfObject, top_z: float, yaw: float, pitch: float, height: float, gap: float,
+                 hand_yaw: float | None = None) -> tuple[float, float, float, float, float]:
+    """The tool pose (x, y, z, hand yaw, pitch) whose leading finger tip is `gap` short of the side of the cylinder
+    `o` (reach: a lying one's end cap or side) on the line through its axis (centre) along the push direction `yaw`,
+    that tip `height` above the board (`top_z`); the hand points along `hand_yaw` (default: the push's); a
+    horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and below it."""
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    t = tips(yaw, pitch)
+    hand_yaw = yaw if hand_yaw is None else hand_yaw
+    t = tips(hand_yaw, pitch)
     lead = t[int(np.argmax(t @ u))]
     ahead = float(lead @ u) + rd.FINGER_RADIUS  # the tips' front beyond the tool origin along u
     side = lead - (lead @ u) * u  # the leading tip off the push line (across it and up): the tool is moved back by it
     across = side - side[2] * np.array([0.0, 0.0, 1.0])
     r = reach(o, yaw)
     x, y = o.x - u[0] * (r + gap + ahead) - across[0], o.y - u[1] * (r + gap + ahead) - across[1]
-    return (x, y, top_z + height - side[2], yaw, pitch)
+    return (x, y, top_z + height - side[2], hand_yaw, pitch)
+
+
+def leading(yaw: float, hand_yaw: float) -> tuple[np.ndarray, float]:
+    """(the leading finger tips' centres relative to the tool, one row each: those within 1 mm of the foremost along
+    the push direction `yaw`; how far the tips lead the rest of the closed hand along it, m: the fingers' hinges
+    and the palm, planner radii) for a horizontal hand pointing along `hand_yaw`. A push to the hand's right (yaw <
+    hand_yaw) leads with fingers 2 and 3, one above the other, to its left with finger 1 alone; turned more than
+    about 1 rad from the hand, the hinges lead."""
+    u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    rot = tool_rotation(hand_yaw, 0.0)
+    t = tips(hand_yaw, 0.0)
+    front = t @ u
+    fingers = closed_fingers().values()
+    tip_front = float(front.max()) + max(c.radius for c in fingers)
+    rest = [(c.p0, c.radius) for c in fingers] + [(np.asarray(p, float), PALM.radius) for p in (PALM.p0, PALM.p1)]
+    ahead = min(tip_front - (float(rot @ (p - np.array([0.0, 0.0, rd.D67])) @ u) + r) for p, r in rest)
+    return t[front >= front.max() - 0.001], ahead
 
 
 def moved(scenario: Scenario, object_id: str, x: float, y: float) -> Scenario:

@@ -45,6 +45,7 @@ class PushParams:
     lying_distances: tuple[float, ...]  # m a lying cylinder is pushed, the candidates tried least first
     slide: bool  # a lying cylinder slid along its axis (the tips against its end cap) may be planned
     roll: bool  # a lying cylinder rolled across its axis (the tips against its side) may be planned
+    hand_turns: tuple[float, ...]  # rad the hand of a slide points left of the push (the push to its right), tried in order
 
     def __post_init__(self) -> None:
         """Every setting checked once, with its name in the error (ValueError)."""
@@ -65,6 +66,10 @@ class PushParams:
             if d.ndim != 1 or not len(d) or not np.all(np.isfinite(d) & (d > 0)) or np.any(np.diff(d) <= 0):
                 raise ValueError(f"motion planner parameter push.{k} must be positive metres, increasing, got "
                                  f"{getattr(self, k)!r}")
+        t = np.asarray(self.hand_turns, float)
+        if t.ndim != 1 or not len(t) or not np.all(np.isfinite(t) & (t >= 0) & (t <= 1.0)):
+            raise ValueError(f"motion planner parameter push.hand_turns must be angles in [0, 1] rad, got "
+                             f"{self.hand_turns!r}")
         a = np.asarray(self.directions, float)
         if a.ndim != 1 or not len(a) or not np.all(np.isfinite(a) & (a >= 0) & (a < math.pi / 2)):
             raise ValueError(f"motion planner parameter push.directions must be angles in [0, pi/2) rad, got "

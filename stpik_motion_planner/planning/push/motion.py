@@ -19,7 +19,7 @@ from stpik_motion_planner.model.collision import (
     closed_fingers,
 )
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, pose_matrix
-from stpik_motion_planner.model.push import contact_pose, kind, moved
+from stpik_motion_planner.model.push import SLIDE, contact_pose, kind, leading, moved
 from stpik_motion_planner.planning.context import PlanningContext
 from stpik_motion_planner.planning.home import joint_motion_clear, joint_valid, plan_joint, time_joint_path
 from stpik_motion_planner.planning.pick import cartesian_path
@@ -28,6 +28,7 @@ from stpik_motion_planner.planning.results import QueryStats, Segment
 from stpik_motion_planner.planning.trajectory import Trajectory
 
 PALM = next(c for c in rd.CAPSULES if c.name == "palm")
+LEAD_MARGIN = 0.01  # m the finger tips lead the rest of the closed hand along a push, at least
 
 
 @dataclass
@@ -64,20 +65,54 @@ def contact_height(ctx: PlanningContext, object_id: str) -> float:
     return max(at, PALM.radius + ctx.ceiling_clearance)
 
 
+def hand_yaws(ctx: PlanningContext, object_id: str, yaw: float) -> list[float]:
+    """The hand's yaws tried for a push along `yaw`: the push's own; for the slide of a lying cylinder, turned left of
+    it by each of push.hand_turns (the push then goes to the hand's right: a sideways slide with the hand pointing
+    into the shelf)."""
+    o = ctx.scenario.object(object_id)
+    if kind(o, yaw) != SLIDE:
+        return [yaw]
+    return [math.remainder(yaw + t, 2 * math.pi) for t in ctx.params.push.hand_turns]
+
+
+def tip_problem(ctx: PlanningContext, object_id: str, contact: np.ndarray, yaw: float) -> str:
+    """Why the closed hand at `contact` (x, y, z, hand yaw) cannot push `object_id` along `yaw` with its finger tips
+    ('' if it can): the hinges or the palm would lead the tips (the hand turned too far from the push), or, for a
+    lying cylinder, every leading tip passes over its end cap or side (higher than its top less a tip's radius)."""
+    lead, ahead = leading(yaw, float(contact[3]))
+    if ahead < LEAD_MARGIN:
+        return f"the hand turned {abs(contact[3] - yaw):.2f} rad from the push leads with its side, not its tips"
+    o = ctx.scenario.object(object_id)
+    low = float(contact[2] + lead[:, 2].min()) - ctx.scenario.shelf.top_z
+    if o.lying and low > 2 * o.radius - rd.FINGER_RADIUS:
+        return (f"the leading finger tip, {low * 1000:.0f} mm over the board, would pass over {object_id} "
+                f"({2 * o.radius * 1000:.0f} mm high)")
+    return ""
+
+
 def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], yaw: float, distance: float,
-                deadline: float, stats: QueryStats) -> tuple[list[Segment], str]:
-    """The push's motion for one candidate (the package docstring, step 2): (segments, '') or ([], why not)."""
+                deadline: float, stats: QueryStats, hand_yaw: float | None = None) -> tuple[list[Segment], str]:
+    """The push's motion for one candidate (the package docstring, step 2), the hand pointing along `hand_yaw`
+    (default: the push's `yaw`): (segments, '') or ([], why not)."""
     p, pp = ctx.params, ctx.params.push
     o = ctx.scenario.object(object_id)
+    hand_yaw = yaw if hand_yaw is None else hand_yaw
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0])  # a horizontal hand: (x, y, z, yaw) poses
+    h = np.array([math.cos(hand_yaw), math.sin(hand_yaw), 0.0, 0.0])
     contact = np.array(contact_pose(o, ctx.scenario.shelf.top_z, yaw, 0.0, contact_height(ctx, object_id),
-                                    pp.contact_gap)[:4])
+                                    pp.contact_gap, hand_yaw)[:4])
     # the palm's bound holds for the tool axis whichever tip leads (finger 2 or 3 leads a push turned to -y: 22 mm
     # above the axis, which the leading tip's height alone would bring 22 mm lower, the palm into the board)
     contact[2] = max(contact[2], ctx.scenario.shelf.top_z + PALM.radius + ctx.ceiling_clearance)
-    pre, end = contact - u * p.pre_grasp_distance, contact + u * (pp.contact_gap + distance)
+    why = tip_problem(ctx, object_id, contact, yaw) if hand_yaw != yaw or o.lying else ""
+    if why:
+        return [], why
+    # in along the hand's axis, the push along `yaw`, out along the hand's axis (back to `pre` when they are one)
+    pre, end = contact - h * p.pre_grasp_distance, contact + u * (pp.contact_gap + distance)
+    back = pre if hand_yaw == yaw else end - h * p.pre_grasp_distance
     try:
-        for pose, where in ((pre, "pre-contact pose"), (contact, "contact pose"), (end, "end of the push")):
+        for pose, where in ((pre, "pre-contact pose"), (contact, "contact pose"), (end, "end of the push"),
+                            (back, "retreat")):
             check_pose(pose, f"push of {object_id}: {where}")
     except WorkspaceError as e:
         return [], str(e)
@@ -110,8 +145,8 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
         r3 = ctx.track(r2.q[-1], [contact, end], without, deadline, stats, arm=arm, speed=pp.speed, ramp=p.carry_ramp)
         if not r3.ok:
             return [], f"STPIK rejected the push: {r3.reason}"
-        r4 = ctx.track(r3.q[-1], [end, pre], after_obs, deadline, stats, skip, arm=arm, speed=p.stpik.approach_speed,
-                       ramp=p.carry_ramp)
+        r4 = ctx.track(r3.q[-1], [end, back], after_obs, deadline, stats, skip, arm=arm,
+                       speed=p.stpik.approach_speed, ramp=p.carry_ramp)
         if not r4.ok:
             return [], f"STPIK rejected the retreat: {r4.reason}"
         home = way_home(ctx, r4.q[-1], list(r1.q), after_obs, arm, deadline, rng)
@@ -153,12 +188,16 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
     last, n = "", 0
     for yaw, d, lane, held in cands:
         n += 1
-        segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats)
+        for hand_yaw in hand_yaws(ctx, object_id, yaw):
+            segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats, hand_yaw)
+            if segments:
+                break
         if segments:
             o = ctx.scenario.object(object_id)
             end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z + (o.radius if o.lying else 0.0))
             then = f"still held by {', '.join(sorted(held))}" if held else "then free"
-            how = f" ({kind(o, yaw)} of a lying cylinder)" if o.lying else ""
+            turned = f", the hand at yaw {hand_yaw:+.2f}" if hand_yaw != yaw else ""
+            how = f" ({kind(o, yaw)} of a lying cylinder{turned})" if o.lying else ""
             return PushPlan(object_id, clear_for, yaw, d, end, lane, segments, kind(o, yaw)), n, (
                 f"push {object_id} {d * 1000:.0f} mm at yaw {yaw:+.2f}: opens {clear_for}'s lane {lane}, {then}{how}")
         last = f"yaw {yaw:+.2f}, {d * 1000:.0f} mm: {why}"

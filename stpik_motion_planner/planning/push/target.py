@@ -13,8 +13,8 @@ from stpik_motion_planner.model.collision import CollisionScene
 from stpik_motion_planner.model.push import ROLL, SLIDE, moved, sweep_problem
 from stpik_motion_planner.planning.context import PlanningContext
 
-LYING_OFF = ("in MuJoCo a slid one rolls on once the hand retreats, a rolled one wedges the hand "
-             "(docs/bench/push.md)")
+LYING_OFF = {"push.slide": "a slid one rolls on once the hand retreats where the bottles have no rolling friction",
+             "push.roll": "a rolled one wedges the hand: the palm's bound puts the tips above its axis"}  # push.md
 BACKWARD = 3 * math.pi / 4  # rad: the push directions of a lying cylinder tried, at most this far from straight back
 # (+x): the hand comes from the shelf's open front, and beside the object at most
 
@@ -57,7 +57,7 @@ def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: froze
         p = ctx.params.push
         off = [k for k, on in (("push.slide", p.slide), ("push.roll", p.roll)) if not on]
         return (f"no push: {object_id} lies ({', '.join(off) or 'no direction from the front'}"
-                f"{' off: ' + LYING_OFF if off else ''})")
+                f"{' off: ' + '; '.join(LYING_OFF[k] for k in off) + ' (docs/bench/push.md)' if off else ''})")
     if not any(object_id in bl for _, bl in static_lanes(ctx, clear_for)):
         return f"no push: no grasp lane of {clear_for} is blocked by {object_id}"
     return ""
