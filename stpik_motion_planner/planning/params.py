@@ -45,7 +45,7 @@ class PushParams:
     lying_distances: tuple[float, ...]  # m a lying cylinder is pushed, the candidates tried least first
     slide: bool  # a lying cylinder slid along its axis (the tips against its end cap) may be planned
     roll: bool  # a lying cylinder rolled across its axis (the tips against its side) may be planned
-    hand_turns: tuple[float, ...]  # rad the hand of a slide points left of the push (the push to its right), tried in order
+    hand_turns: tuple[float, ...]  # rad the hand of a slide is turned from the push towards straight in, in order
 
     def __post_init__(self) -> None:
         """Every setting checked once, with its name in the error (ValueError)."""

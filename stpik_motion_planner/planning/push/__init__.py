@@ -1,7 +1,7 @@
 """The push (docs/motion_planner.md, "The push"): a standing cylinder X slid along the top shelf by the closed hand,
 out of the grasp lanes of another object C, when the side grasp of either needs the other gone; a cylinder lying flat
-slid along its axis (push.slide) or rolled across it (push.roll), both off in the shipped settings (MuJoCo:
-docs/bench/push.md).
+slid along its axis (push.slide: on; sideways with the hand pointing into the shelf, push.hand_turns) or rolled
+across it (push.roll: off, it wedges the hand; MuJoCo: docs/bench/push.md).
 
 1. Where to: for each distance of push.distances (least first) and each direction of push.directions (an angle from
    straight back, +x, turned away from C; both ways when C is straight in front or behind), X translated by d
@@ -14,7 +14,8 @@ docs/bench/push.md).
    path: the direct path first, then RRT-Connect, for the closed hand's proxy) -> contact pose (the finger tips
    push.contact_gap short of X, at push.contact_height of its height, no lower than the palm's clearance over the
    board allows) -> the straight push by the gap plus d at push.speed -> straight back to the pre-contact pose with X
-   at its end pose -> home back along the first leg. Every leg is tracked by STPIK (Eq. 9-10) with the closed
+   at its end pose -> home back along the first leg. A sideways slide's hand points into the shelf (motion.hand_yaws):
+   it comes in and backs out along its own axis, the push along X's. Every leg is tracked by STPIK (Eq. 9-10) with the closed
    hand's capsules (collision.closed_fingers) against every object present; the hand may touch X from the
    pre-contact pose on (the approach, the push, the retreat), and during the push X is no obstacle of the arm
    (it moves with the tips).

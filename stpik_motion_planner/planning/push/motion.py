@@ -66,13 +66,16 @@ def contact_height(ctx: PlanningContext, object_id: str) -> float:
 
 
 def hand_yaws(ctx: PlanningContext, object_id: str, yaw: float) -> list[float]:
-    """The hand's yaws tried for a push along `yaw`: the push's own; for the slide of a lying cylinder, turned left of
-    it by each of push.hand_turns (the push then goes to the hand's right: a sideways slide with the hand pointing
-    into the shelf)."""
+    """The hand's yaws tried for a push along `yaw`: the push's own; for the slide of a lying cylinder, turned from it
+    towards straight in (+x) by each of push.hand_turns: a sideways slide with the hand pointing into the shelf. A
+    push to the right of straight in then goes to the hand's right, fingers 2 and 3 leading; one to the left leads
+    with finger 1 alone, at the tool axis' height (`tip_problem` says why a lying bottle of the shipped size is not
+    pushed so)."""
     o = ctx.scenario.object(object_id)
     if kind(o, yaw) != SLIDE:
         return [yaw]
-    return [math.remainder(yaw + t, 2 * math.pi) for t in ctx.params.push.hand_turns]
+    towards = 1.0 if yaw <= 0 else -1.0
+    return [math.remainder(yaw + towards * t, 2 * math.pi) for t in ctx.params.push.hand_turns]
 
 
 def tip_problem(ctx: PlanningContext, object_id: str, contact: np.ndarray, yaw: float) -> str:
