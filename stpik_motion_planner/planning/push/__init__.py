@@ -15,8 +15,8 @@ across it (push.roll: off, it wedges the hand; MuJoCo: docs/bench/push.md).
    push.contact_gap short of X, at push.contact_height of its height, no lower than the palm's clearance over the
    board allows) -> the straight push by the gap plus d at push.speed -> straight back to the pre-contact pose with X
    at its end pose -> home back along the first leg. A sideways slide's hand points into the shelf (motion.hand_yaws):
-   it comes in and backs out along its own axis, the push along X's. Every leg is tracked by STPIK (Eq. 9-10) with the closed
-   hand's capsules (collision.closed_fingers) against every object present; the hand may touch X from the
+   it comes in and backs out along its own axis, the push along X's. Every leg is tracked by STPIK (Eq. 9-10) with
+   the closed hand's capsules (collision.closed_fingers) against every object present; the hand may touch X from the
    pre-contact pose on (the approach, the push, the retreat), and during the push X is no obstacle of the arm
    (it moves with the tips).
 The answer is g_O with the whole motion (home -> ... -> home; the gripper shut before it, opened after it), the end
