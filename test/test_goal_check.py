@@ -3,6 +3,7 @@ motion (stpik_motion_planner.execution.goal_check), and scene updates against th
 (relocation_common.scene_check)."""
 import math
 import threading
+import time
 from dataclasses import replace
 
 import pytest
@@ -18,6 +19,23 @@ from stpik_motion_planner.execution.relocation import plan_relocation
 SC = load_scenario(default_scenario())
 SHELF, SLOTS = SC.shelf, SC.slots
 RADIUS = SC.slot_radius
+
+
+def _stream(watch: gc.SceneWatch, objects, period: float = 0.05, duration: float = 3.0) -> threading.Event:
+    """A camera's stream of one scene: `objects` given to `watch` every `period` s for `duration` s from now, or until
+    the returned event is set. The outcome check takes the first scene received OUTCOME_SETTLE (0.3 s) after its
+    call; one scene given 0.4 s after the test started raced the test's own thread to that call (under load it came
+    first, and the outcome said "no scene")."""
+    stop = threading.Event()
+
+    def run() -> None:
+        end = time.monotonic() + duration
+        while not stop.is_set() and time.monotonic() < end:
+            watch.update(objects)
+            stop.wait(period)
+
+    threading.Thread(target=run, daemon=True).start()
+    return stop
 
 
 def _standing(**moved):
@@ -166,9 +184,8 @@ def test_the_outcome_waits_for_a_scene_after_the_motion():
     ok, msg = gc.outcome(watch, before, SC, "o2", 0, VALUES, "/sim/objects")
     assert not ok and msg.endswith("but no scene on /sim/objects within outcome_timeout after the motion: outcome "
                                    "unknown"), msg
-    import threading
     after = _standing(o2=(*SLOTS[0], SHELF.bottom_z), o1=(0.69 + 0.03, -0.21, SHELF.top_z))
-    threading.Timer(0.4, lambda: watch.update(after)).start()
+    _stream(watch, after)
     values = dict(VALUES, outcome_timeout=3.0)
     assert gc.outcome(watch, before, SC, "o2", 0, values, "t") == (False, "relocated o2 to slot 0, but the scene "
                                                                           "shows: o1 moved 30 mm")
@@ -177,14 +194,14 @@ def test_the_outcome_waits_for_a_scene_after_the_motion():
 def test_without_a_scene_before_the_motion_the_scene_after_decides():
     """A node that got its first scene only after the motion (perception restarting): the moved bottle is checked,
     the others cannot be. The old check answered success without waiting for any scene."""
-    import threading
     watch = gc.SceneWatch()
     still_there = _standing()  # o2 still standing on the top shelf: not a success
-    threading.Timer(0.4, lambda: watch.update(still_there)).start()
+    first = _stream(watch, still_there)
     ok, msg = gc.outcome(watch, {}, SC, "o2", 0, dict(VALUES, outcome_timeout=3.0), "t")
     assert (ok, msg) == (False, "relocated o2 to slot 0, but the scene shows: o2 is still on the top shelf")
     placed = _standing(o2=(*SLOTS[0], SHELF.bottom_z))
-    threading.Timer(0.4, lambda: watch.update(placed)).start()
+    first.set()  # that camera's stream ends before the next motion does
+    _stream(watch, placed)
     assert gc.outcome(watch, {}, SC, "o2", 0, dict(VALUES, outcome_timeout=3.0), "t") == (
         True, "relocated o2 to slot 0 (the other bottles not checked: no scene on t before the motion)")
 
@@ -243,6 +260,6 @@ def test_a_bottle_that_tipped_over_at_its_slot_is_on_the_bottom_shelf_tipped():
     tipped = replace(BOX10.object("o2"), x=BOX10.slots[1][0], y=BOX10.slots[1][1], lying=True,
                      support_z=BOX10.shelf.bottom_z)
     after = [tipped if b.id == "o2" else replace(b, support_z=BOX10.shelf.top_z) for b in BOX10.objects]
-    threading.Timer(0.4, lambda: watch.update(msg_to_objects(objects_to_msg(after)))).start()
+    _stream(watch, msg_to_objects(objects_to_msg(after)))
     assert gc.outcome(watch, before, BOX10, "o2", 1, dict(VALUES, outcome_timeout=3.0), "t") == (
         False, "relocated o2 to slot 1, but the scene shows: " + problems[0])

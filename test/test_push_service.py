@@ -96,13 +96,16 @@ def test_a_push_whose_object_ends_elsewhere_fails_its_outcome(service):
     assert out.status == "aborted" and "from its predicted end pose" in out.message, out.message
 
 
-def test_a_lying_object_is_not_pushed_and_says_why():
+def test_a_lying_object_whose_slide_opens_nothing_is_not_pushed_and_says_why():
+    """headroom_lying_6's o1 lies in T's lanes: each slide along its axis would bring it near o2 or o3 or leave T's
+    lanes blocked; the service answers g_U with those reasons (with push.slide off: "o1 lies (push.slide ...")."""
     from relocation_common.paths import config_file
     from relocation_common.scenario import load_scenario
 
     s = MotionPlannerService(load_scenario(config_file("scenarios/headroom_lying_6.yaml")), PARAMS)
     ans, plan = s.push_feasibility("o1", [], "T")
-    assert ans.label == Label.UNFEASIBLE and plan is None and "o1 lies" in ans.message, ans.message
+    assert ans.label == Label.UNFEASIBLE and plan is None, ans.message
+    assert ans.message.startswith("no push direction clears T's lanes: T's lanes still blocked by o1"), ans.message
 
 
 def test_a_push_cancelled_during_the_push_goes_back_and_opens_the_gripper(service):
