@@ -226,7 +226,11 @@ def test_8_mb_commands_are_refused_unread(g):
     the states this process received, it fell with this process's own starvation while it serialised 400 MB/s (25 of
     100 a second received at a load of 1-2, 51 at 6). It is held against the rate while this process serialises the
     same stream to a topic the driver does not read: against the rate before the stream, a fresh clone at a load of 8
-    failed with 65 of 94 a second, this process's own 400 MB/s on the 2 cores."""
+    failed with 65 of 94 a second, this process's own 400 MB/s on the 2 cores. The two streams alternate three times
+    and the medians of their reports are compared: one 3 s window of each, one after the other, compared by their
+    slowest second at a load of 10-12, failed with [78, 63, 67] against [92, 94] a second, while the driver's own
+    threads spent 0.1-0.2 CPU-s more in 3 s on the refused stream (its shared-memory transport and the raw take):
+    windows of the control stream alone ranged 56-88 a second there."""
     from diagnostic_msgs.msg import DiagnosticArray
 
     _only(g, "ros2_control")
@@ -235,16 +239,19 @@ def test_8_mb_commands_are_refused_unread(g):
     rss0 = _rss_mib(g.node.pid)
     reports.wait(lambda m: len(_state_rates(m)) >= 3, timeout=30)  # two full periods after the reset's
     huge = Float64MultiArray(data=np.full(1_000_000, 0.3))
-    control = _rates_while(reports, lambda: _stream(g.probe.publisher(Float64MultiArray, "/unread_by_the_driver"),
-                                                     huge, 3.0, rate=50.0))
-    during = _rates_while(reports, lambda: _stream(g.pub, huge, 3.0, rate=50.0))
+    unread = g.probe.publisher(Float64MultiArray, "/unread_by_the_driver")
+    control: list[float] = []
+    during: list[float] = []
+    for _ in range(3):
+        control += _rates_while(reports, lambda: _stream(unread, huge, 3.0, rate=50.0))
+        during += _rates_while(reports, lambda: _stream(g.pub, huge, 3.0, rate=50.0))
     rss1 = _rss_mib(g.node.pid)
     print(f"\njoint states per simulated s {[round(r) for r in control]} while the same stream went to a topic the "
           f"driver does not read, {[round(r) for r in during]} to its commands (the driver's reports); driver RSS "
           f"{rss0:.0f} -> {rss1:.0f} MiB")
     assert np.allclose(_settled_q(g, 0.1), q0, atol=1e-4)
     assert "bytes serialized" in g.node.log() and g.node.alive()
-    assert control and during and min(during) > 0.7 * min(control), (control, during)
+    assert control and during and np.median(during) > 0.7 * np.median(control), (control, during)
     assert rss1 - rss0 < 55, (rss0, rss1)  # old: +84 MiB; new: +31 (DDS)
 
 
