@@ -29,8 +29,9 @@ alternated `--rounds` times in one process, so that a change of the machine's lo
 
 --latency SCENE --baseline REV: the same with the lazy planner of git revision REV (its stpik_motion_planner/,
 exported by bench_motion_planner.export_package) against the working tree's, each in a fresh process, alternated
-`--rounds` times; prints feasible and unfeasible p50 / p95 of each, their ratio, and whether both gave the same
-answers (label, attempts, message and trajectory bit for bit, question by question).
+`--rounds` times; prints feasible and unfeasible p50 / p95 of each (wall time, and the feasible ones' process time),
+their ratio, and whether both gave the same answers (label, attempts, message and trajectory bit for bit, question
+by question).
 """
 from __future__ import annotations
 
@@ -221,7 +222,9 @@ def answers_of(name: str) -> list[list]:
 
     class Recorder(Answers):
         def feasibility(self, object_id: str, removed: frozenset[str]) -> Any:
+            c0 = time.process_time()
             a = self.planner.feasibility(object_id, removed)
+            cpu = time.process_time() - c0
             t = a.trajectory
             lanes = [(sorted(b.objects), b.certain, b.lane) for b in a.blockers]
             h = hashlib.sha256(repr((a.attempts, a.message, lanes, sorted(a.near or ()))).encode())
@@ -231,7 +234,7 @@ def answers_of(name: str) -> list[list]:
                 h.update(motion)
                 m.update(motion)
             out.append([object_id, sorted(removed), int(a.label), a.planning_time, h.hexdigest()[:16],
-                        m.hexdigest()[:16], a.message])
+                        m.hexdigest()[:16], a.message, cpu])
             return a
 
     exact.solve(sc, Recorder(planner, certifying=False))
@@ -264,6 +267,9 @@ def latency_baseline(name: str, rev: str, rounds: int) -> str:
         stats[key] = (_pct(f, 0.5), _pct(f, 0.95), _pct(u, 0.5), _pct(u, 0.95))
         lines.append(f"  {key:14s} feasible p50 {stats[key][0]} ms, p95 {stats[key][1]} ms ({len(f)} answers); "
                      f"unfeasible p50 {stats[key][2]} ms, p95 {stats[key][3]} ms ({len(u)})")
+        cf = [r[7] for run in rs for r in run if r[2] != 0]
+        lines.append(f"  {'':14s} process time: feasible p50 {_pct(cf, 0.5)} ms, p95 {_pct(cf, 0.95)} ms (the "
+                     f"question's CPU, which the machine's load moves less than its wall time)")
     b, w = stats[rev], stats["working tree"]
     lines.append(f"  ratio {rev} / working tree: feasible p50 {b[0] / w[0]:.2f}x, p95 {b[1] / w[1]:.2f}x; "
                  f"unfeasible p50 {b[2] / w[2]:.2f}x, p95 {b[3] / w[3]:.2f}x")
