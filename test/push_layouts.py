@@ -32,6 +32,32 @@ def beside_data(seed: int) -> dict:
     return _layout(data, f"push_beside_s{seed}", _others(rng, sc, pos, OTHERS + 2))
 
 
+def box_beside_layout(seed: int) -> Scenario:
+    """The layout of `seed` (box_beside_data) as a scenario."""
+    data = box_beside_data(seed)
+    return parse_scenario(data, data["name"])
+
+
+def box_beside_data(seed: int) -> dict:
+    """"A box X beside T" as scenario YAML data: T drawn as in beside_data; X a box (sides 0.05-0.08 m, 0.10-0.16 m
+    tall, turned by up to 45 deg) beside it on a random side, its rectangle 5-15 mm from T's circle along the line
+    between them; OTHERS bottles elsewhere, at least 30 mm from every other bottle."""
+    rng = random.Random(f"push-box-beside:{seed}")
+    data, sc = _base()
+    tx, ty = rng.uniform(0.68, 0.76), rng.uniform(-0.15, 0.15)
+    side, gap = rng.choice((-1.0, 1.0)), rng.uniform(0.005, 0.015)
+    sx, sy, sz = rng.uniform(0.05, 0.08), rng.uniform(0.05, 0.08), rng.uniform(0.10, 0.16)
+    yaw = rng.uniform(-math.pi / 4, math.pi / 4)
+    half_y = abs(math.sin(yaw)) * sx / 2 + abs(math.cos(yaw)) * sy / 2
+    x = (tx + rng.uniform(-0.01, 0.01), ty + side * (RADIUS + gap + half_y))
+    pos = _others(rng, sc, {"T": (tx, ty), "X": x}, OTHERS + 2)  # >= 6 mm from the box's corners
+    out = _layout(data, f"push_box_beside_s{seed}", pos)
+    for o in out["objects"]:
+        if o["id"] == "X":
+            o.update({"shape": "box", "size": [round(sx, 4), round(sy, 4), round(sz, 4)], "yaw": round(yaw, 4)})
+    return out
+
+
 def held_lane_layout(seed: int) -> Scenario:
     """The layout of `seed` (held_lane_data) as a scenario."""
     data = held_lane_data(seed)

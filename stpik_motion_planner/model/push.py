@@ -1,6 +1,6 @@
 """The geometry of a push (planning/push/): a cylinder slid along the top shelf by the closed finger tips, standing
 or lying flat (its kind: `kind`; a lying one slid along its axis, the tips against its end cap, or rolled across it,
-the tips against its side).
+the tips against its side), or a box slid on its face, the tips against the middle of a side face.
 
 The hand comes in horizontally (or tilted down by `pitch`, grasp.tool_rotation) along the push direction `u` (yaw
 `yaw`), its fingers closed on nothing (collision.closed_fingers): the three tips lead, about 2 mm from the tool axis
@@ -25,21 +25,25 @@ from stpik_motion_planner.model.grasp import tool_rotation
 
 PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 SWEEP_STEP = 0.005  # m between the poses of the pushed object checked along its sweep
-SLIDE, ROLL, STANDING = "slide", "roll", "standing"
+SLIDE, ROLL, STANDING, BOX = "slide", "roll", "standing", "box"
 
 
 def kind(o: ShelfObject, yaw: float) -> str:
     """The kind of a push of `o` along `yaw`: a standing cylinder's; a lying one's along its axis (within 45 deg) a
-    slide, across it a roll."""
+    slide, across it a roll; a box's (slid on its face, along a face's normal: target.box_directions)."""
+    if o.shape == "box":
+        return BOX
     if not o.lying:
         return STANDING
     return SLIDE if abs(math.cos(yaw - o.yaw)) >= math.cos(math.pi / 4) else ROLL
 
 
 def reach(o: ShelfObject, yaw: float) -> float:
-    """m from the object's axis (a lying one's centre) to its side along the push direction `yaw`: the radius of a
-    standing cylinder; of a lying one, the support of its rectangle footprint (half its length along its axis, the
-    radius across it)."""
+    """m from the object's axis (a lying one's or a box's centre) to its side along the push direction `yaw`: the
+    radius of a standing cylinder; of a lying one or a box, the support of its rectangle footprint (a lying one's:
+    half its length along its axis, the radius across it)."""
+    if o.shape == "box":
+        return abs(math.cos(yaw - o.yaw)) * o.size[0] / 2 + abs(math.sin(yaw - o.yaw)) * o.size[1] / 2
     if not o.lying:
         return o.radius
     return abs(math.cos(yaw - o.yaw)) * o.height / 2 + abs(math.sin(yaw - o.yaw)) * o.radius
@@ -110,7 +114,8 @@ def sweep_problem(scene: CollisionScene, o: ShelfObject, end: tuple[float, float
     bound: dict[str, float] = {}
     for k in range(n + 1):
         x, y = start + (np.asarray(end) - start) * (k / n)
-        c = object_obstacle(dataclasses.replace(o, x=float(x), y=float(y)), s.top_z) if o.lying else \
+        at = dataclasses.replace(o, x=float(x), y=float(y))
+        c = object_obstacle(at, s.top_z) if o.lying or o.shape == "box" else \
             cylinder("swept", o.id, float(x), float(y), s.top_z + 0.001, o.radius, o.height - 0.002)
         for other in others:
             d = fcl.distance(c.obj, other.obj, req, fcl.DistanceResult())

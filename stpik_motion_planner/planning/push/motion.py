@@ -81,15 +81,17 @@ def hand_yaws(ctx: PlanningContext, object_id: str, yaw: float) -> list[float]:
 def tip_problem(ctx: PlanningContext, object_id: str, contact: np.ndarray, yaw: float) -> str:
     """Why the closed hand at `contact` (x, y, z, hand yaw) cannot push `object_id` along `yaw` with its finger tips
     ('' if it can): the hinges or the palm would lead the tips (the hand turned too far from the push), or, for a
-    lying cylinder, every leading tip passes over its end cap or side (higher than its top less a tip's radius)."""
+    lying cylinder or a box, every leading tip passes over its end cap, side or face (higher than its top less a
+    tip's radius)."""
     lead, ahead = leading(yaw, float(contact[3]))
     if ahead < LEAD_MARGIN:
         return f"the hand turned {abs(contact[3] - yaw):.2f} rad from the push leads with its side, not its tips"
     o = ctx.scenario.object(object_id)
     low = float(contact[2] + lead[:, 2].min()) - ctx.scenario.shelf.top_z
-    if o.lying and low > 2 * o.radius - rd.FINGER_RADIUS:
+    top = 2 * o.radius if o.lying else o.height
+    if (o.lying or o.shape == "box") and low > top - rd.FINGER_RADIUS:
         return (f"the leading finger tip, {low * 1000:.0f} mm over the board, would pass over {object_id} "
-                f"({2 * o.radius * 1000:.0f} mm high)")
+                f"({top * 1000:.0f} mm high)")
     return ""
 
 
@@ -107,7 +109,7 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     # the palm's bound holds for the tool axis whichever tip leads (finger 2 or 3 leads a push turned to -y: 22 mm
     # above the axis, which the leading tip's height alone would bring 22 mm lower, the palm into the board)
     contact[2] = max(contact[2], ctx.scenario.shelf.top_z + PALM.radius + ctx.ceiling_clearance)
-    why = tip_problem(ctx, object_id, contact, yaw) if hand_yaw != yaw or o.lying else ""
+    why = tip_problem(ctx, object_id, contact, yaw) if hand_yaw != yaw or o.lying or o.shape == "box" else ""
     if why:
         return [], why
     # in along the hand's axis, the push along `yaw`, out along the hand's axis (back to `pre` when they are one)
@@ -200,7 +202,8 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
             end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z + (o.radius if o.lying else 0.0))
             then = f"still held by {', '.join(sorted(held))}" if held else "then free"
             turned = f", the hand at yaw {hand_yaw:+.2f}" if hand_yaw != yaw else ""
-            how = f" ({kind(o, yaw)} of a lying cylinder{turned})" if o.lying else ""
+            how = f" ({kind(o, yaw)} of a lying cylinder{turned})" if o.lying else \
+                " (a box slid on its face)" if o.shape == "box" else ""
             return PushPlan(object_id, clear_for, yaw, d, end, lane, segments, kind(o, yaw)), n, (
                 f"push {object_id} {d * 1000:.0f} mm at yaw {yaw:+.2f}: opens {clear_for}'s lane {lane}, {then}{how}")
         last = f"yaw {yaw:+.2f}, {d * 1000:.0f} mm: {why}"

@@ -28,6 +28,13 @@ def lying_directions(ctx: PlanningContext, axis: float) -> list[tuple[float, str
     return [(a, kd) for a, kd in out if abs(a) <= BACKWARD + 1e-9]
 
 
+def box_directions(o_yaw: float) -> list[float]:
+    """The push directions of a box: its faces' normals (a push through the middle of a face slides it without
+    turning it), those at most BACKWARD from +x."""
+    out = [math.remainder(o_yaw + k * math.pi / 2, 2 * math.pi) for k in range(4)]
+    return [a for a in out if abs(a) <= BACKWARD + 1e-9]
+
+
 def end_xy(x: float, y: float, yaw: float, distance: float) -> tuple[float, float]:
     """Where the pushed object's axis ends: (x, y) translated by `distance` along `yaw` (quasi-static)."""
     return x + distance * math.cos(yaw), y + distance * math.sin(yaw)
@@ -50,9 +57,10 @@ def refusal(ctx: PlanningContext, object_id: str, clear_for: str, removed: froze
     if object_id in ctx.gone:
         return f"no push: {object_id} left the shelf"
     if object_id in ctx.lying:
-        return f"no push: {object_id} leans (the push slides a standing or a flat lying cylinder)"
-    if o.shape != "cylinder" or o.conservative:
-        return f"no push: {object_id} is not a cylinder (the push slides a standing or a flat lying cylinder)"
+        return f"no push: {object_id} leans (the push slides a standing or a flat lying cylinder, or a box)"
+    if o.shape not in ("cylinder", "box") or o.conservative:
+        return (f"no push: {object_id} is not a cylinder or a box (the push slides a standing or a flat lying "
+                "cylinder, or a box)")
     if o.lying and not lying_directions(ctx, o.yaw):
         p = ctx.params.push
         off = [k for k, on in (("push.slide", p.slide), ("push.roll", p.roll)) if not on]
@@ -92,10 +100,14 @@ def candidates(ctx: PlanningContext, object_id: str, clear_for: str, removed: fr
     side = o.y - c.y
     signs = [1.0 if side > 0 else -1.0] if abs(side) > 1e-3 else [1.0, -1.0]
     present = frozenset(b.id for b in ctx.scenario.objects) - removed - ctx.gone
-    yaws = [a for a, _ in lying_directions(ctx, o.yaw)] if o.lying else \
-        [sg * a for a in p.directions for sg in (signs if a else [1.0])]
+    if o.shape == "box":
+        yaws, distances = box_directions(o.yaw), sorted(set(p.distances) | set(p.lying_distances))
+    elif o.lying:
+        yaws, distances = [a for a, _ in lying_directions(ctx, o.yaw)], list(p.lying_distances)
+    else:
+        yaws, distances = [sg * a for a in p.directions for sg in (signs if a else [1.0])], list(p.distances)
     out, why = [], {}
-    for d in p.lying_distances if o.lying else p.distances:
+    for d in distances:
         for yaw in yaws:
             end = end_xy(o.x, o.y, yaw, d)
             bad = sweep_problem(ctx.scene, o, end, present, p.sweep_margin)
