@@ -165,9 +165,18 @@ def across_data(seed: int) -> dict:
     tx, ty = rng.uniform(0.82, 0.90), rng.uniform(-0.15, 0.15)
     yaw = rng.choice((-1.0, 1.0)) * rng.uniform(0.85, 1.55)
     gap, dy = rng.uniform(0.005, 0.015), rng.uniform(-0.04, 0.04)
+    return _lying_in_front(rng, data, s, f"push_across_s{seed}", (tx, ty), yaw, gap, dy)
+
+
+def _lying_in_front(rng: random.Random, data: dict, s, name: str, t: tuple[float, float], yaw: float, gap: float,
+                    dy: float) -> dict:
+    """The scenario data `name`: T standing at `t`; X (a bottle of the default size) lying flat in front of it, its
+    axis at `yaw`, its centre `dy` off T's line and moved towards the front until its rectangle is `gap` from T's
+    circle; OTHERS bottles standing elsewhere (_add_others)."""
+    tx, ty = t
     c, sn, half = math.cos(yaw), math.sin(yaw), 0.08
     d = 0.0
-    while True:  # X's centre moved towards the front until its rectangle is `gap` from T's circle
+    while True:
         u, v = c * d - sn * dy, -sn * d - c * dy  # T's centre in X's frame (X at (tx - d, ty + dy))
         if math.hypot(max(abs(u) - half, 0.0), max(abs(v) - RADIUS, 0.0)) >= RADIUS + gap:
             break
@@ -178,7 +187,7 @@ def across_data(seed: int) -> dict:
              "yaw": round(math.remainder(yaw, math.pi), 4)}]
     _add_others(rng, s, {"T": (tx, ty), "X": x}, objs, half)
     out = copy.deepcopy(data)
-    out["name"] = f"push_across_s{seed}"
+    out["name"] = name
     out["objects"] = objs
     return out
 
@@ -211,18 +220,4 @@ def diagonal_data(seed: int) -> dict:
     s = parse_scenario(data, "base").shelf
     tx, ty = rng.uniform(0.82, 0.88), rng.uniform(-0.10, 0.10)
     yaw, gap, dy = rng.choice((-1.0, 1.0)) * rng.uniform(0.5, 1.0), rng.uniform(0.005, 0.015), rng.uniform(-0.03, 0.03)
-    c, sn, half = math.cos(yaw), math.sin(yaw), 0.08
-    d = 0.0
-    while True:  # X's centre moved towards the front until its rectangle is `gap` from T's circle
-        u, v = c * d - sn * dy, -sn * d - c * dy  # T's centre in X's frame (X at (tx - d, ty + dy))
-        if math.hypot(max(abs(u) - half, 0.0), max(abs(v) - RADIUS, 0.0)) >= RADIUS + gap:
-            break
-        d += 0.001
-    x = (tx - d, ty + dy)
-    objs = [{"id": "T", "xy": [round(tx, 4), round(ty, 4)]},
-            {"id": "X", "weight": 0.3, "xy": [round(x[0], 4), round(x[1], 4)], "lying": True, "yaw": round(yaw, 4)}]
-    _add_others(rng, s, {"T": (tx, ty), "X": x}, objs, half)
-    out = copy.deepcopy(data)
-    out["name"] = f"push_diagonal_s{seed}"
-    out["objects"] = objs
-    return out
+    return _lying_in_front(rng, data, s, f"push_diagonal_s{seed}", (tx, ty), yaw, gap, dy)
