@@ -2,7 +2,12 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import signal
+import threading
+import time
+from concurrent.futures.process import BrokenProcessPool
 from types import SimpleNamespace
 
 import pytest
@@ -123,6 +128,55 @@ def test_small_sweep_resume_and_report(tmp_path, params):
     beside = md.split("## Table 1 beside the paper: scenario1_5")[1].split("**MP_q**")[0]
     assert re.search(r"\| LRND_b \| 511 / \d+ \([\d.e+]+\) \|", beside)
     assert "| finding | the paper's numbers | ours: this project's geometry |" in md
+
+
+def _pool_workers() -> list[int]:
+    """The sweep's pool workers: the children of its forkserver (a child of this process), or, forked from this
+    process itself (multiprocessing.Pool's fork), this process's children but the resource tracker."""
+    kids: dict[int, list[int]] = {}
+    for d in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            kids.setdefault(int(open(f"/proc/{d}/stat").read().rsplit(")", 1)[1].split()[1]), []).append(int(d))
+        except OSError:
+            continue
+    mine = kids.get(os.getpid(), [])
+    server = [p for p in mine if "forkserver" in _cmdline(p)]
+    return kids.get(server[0], []) if server else [p for p in mine if "resource_tracker" not in _cmdline(p)]
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return open(f"/proc/{pid}/cmdline", "rb").read().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def test_a_sweep_worker_that_dies_fails_the_sweep_instead_of_holding_it(tmp_path, params):
+    """A pool worker killed while it runs a cell (it once crashed in its garbage collector, forked from a test
+    worker's rclpy and DDS objects): the sweep stops with BrokenProcessPool within a minute, and a rerun resumes it.
+    With multiprocessing.Pool the lost cell was waited for forever."""
+    sc = scenes([S1], params, SCEN_DIR.parent.parent / "data" / "feasibility", QUICK_GRID)
+    out, box = tmp_path / "sweep.jsonl", {}
+
+    def run() -> None:
+        try:
+            box["result"] = sweep(sc, 2, out, workers=1, progress=False)
+        except Exception as e:  # noqa: BLE001 - the test looks at what ended the sweep
+            box["error"] = e
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    killed, deadline = None, time.monotonic() + 60
+    while killed is None and time.monotonic() < deadline and t.is_alive():
+        for p in _pool_workers():
+            os.kill(p, signal.SIGKILL)
+            killed = p
+        time.sleep(0.05)
+    assert killed, "no pool worker seen"
+    t.join(60)
+    assert not t.is_alive(), "the sweep still waits for the killed worker's cell"
+    assert isinstance(box.get("error"), BrokenProcessPool), box
+    assert sweep(sc, 2, out, workers=1, progress=False)["records"] == 12  # resumed
 
 
 def test_report_puts_the_random_cases_of_the_paper_size_beside_table_4(tmp_path, params):

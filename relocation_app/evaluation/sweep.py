@@ -15,6 +15,7 @@ import math
 import os
 import signal
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -206,11 +207,15 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
         total = sum(len(s.grid) for s in scenes) * len(algorithms)
         bar = Progress("sweep", "cell", total=total,
                        initial=total - len(cells(1)) - _pending_eg(scenes, algorithms, done, runs))
-    ctx = mp.get_context("fork")
-    with ctx.Pool(workers, initializer=_default_signals) as pool, out.open("a") as f:
+    # Workers forked from a forkserver, not from this process: a pool worker forked from a test run's worker (its
+    # rclpy and DDS objects, its threads) crashed in its garbage collector, and multiprocessing.Pool waited forever
+    # for the lost cell; a worker that dies now fails the sweep (BrokenProcessPool) and a rerun resumes it.
+    ctx = mp.get_context("forkserver")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_default_signals) as pool, out.open("a") as f:
         for phase in (1, 2):
             todo = sorted(cells(phase), key=lambda c: -_cost_hint(c))
-            for rec in pool.imap_unordered(run_cell, todo):
+            for done_cell in as_completed([pool.submit(run_cell, c) for c in todo]):
+                rec = done_cell.result()
                 f.write(json.dumps(rec, separators=(",", ":")) + "\n")
                 f.flush()
                 records.append(rec)
@@ -219,8 +224,6 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
                 if bar is not None:
                     bar.update(advance=1, postfix=f"{rec['scenario']} {rec['algorithm']} a={rec['alpha']} "
                                                   f"g={rec['gamma']}")
-        pool.close()  # done: the workers end on their own (terminate, on an error only, kills them)
-        pool.join()
     if bar is not None:
         bar.close()
     new = [e for r in records for e in r.get("new_entries", [])]
@@ -229,9 +232,9 @@ def sweep(scenes: list[Scene], runs: int, out: str | Path, workers: int | None =
 
 
 def _default_signals() -> None:
-    """Pool workers die on SIGTERM and SIGINT whatever handlers the parent had when it forked (rclpy's, a node's):
-    Pool.terminate() sends SIGTERM, and a worker that survived it while holding the task queue's lock left the
-    sweep (and test_evaluation, after a test that ran a node in the same process) waiting forever."""
+    """Pool workers die on SIGTERM and SIGINT (a Ctrl-C of the sweep reaches its process group) whatever handlers
+    were set where they came from: a worker that survived a SIGTERM while holding the task queue's lock once left
+    the sweep waiting forever."""
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
