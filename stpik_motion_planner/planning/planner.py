@@ -6,7 +6,7 @@ the question's random generator) with the phases as its methods:
   certified (`certify`, the executed pick, every answer with certify_relocation) a pick counts only if the rest of
   its relocation plans (certify.py);
 - `plan_carry` (carry.py): lift, out of the shelf, in to the slot, release, retreat;
-- `push_feasibility` (push.py): a push of a standing cylinder out of another object's grasp lanes;
+- `push_feasibility` (push.py): a push of a standing or lying cylinder, or a box, out of another object's grasp lanes;
 - `plan_home` (home.py): back to the home configuration;
 - the scene: `set_scenario`, `update_object` (bottles as perceived), `slot_problems`, `lane_blockers`.
 """

@@ -21,8 +21,8 @@ across it (push.roll: off, it wedges the hand; MuJoCo: docs/bench/push.md).
    (it moves with the tips).
 The answer is g_O with the whole motion (home -> ... -> home; the gripper shut before it, opened after it), the end
 pose of X, and the lane it opens (then free, or still held by whom); or g_U with the reason: X leaning, or lying
-with both kinds off, not a cylinder, blocking no lane of C, no direction and distance that opens one, or no motion
-for any that does.
+with both kinds off, neither a cylinder nor a box, blocking no lane of C, no direction and distance that opens one,
+or no motion for any that does.
 """
 from stpik_motion_planner.planning.push.motion import PushPlan, plan_push, push_feasibility
 
