@@ -23,7 +23,7 @@ from relocation_common.scenario import Scenario, ShelfObject
 from stpik_motion_planner.model.collision import CollisionScene, closed_fingers, cylinder, object_obstacle
 from stpik_motion_planner.model.grasp import tool_rotation
 
-PALM = next(c for c in rd.CAPSULES if c.name == "palm")
+PALM = next(c for c in rd.CAPSULES if c.name == "palm")  # the push's hand: its palm (motion.py's bound over the board)
 SWEEP_STEP = 0.005  # m between the poses of the pushed object checked along its sweep
 SLIDE, ROLL, STANDING, BOX = "slide", "roll", "standing", "box"
 
@@ -58,10 +58,10 @@ def tips(yaw: float, pitch: float) -> np.ndarray:
 
 def contact_pose(o: ShelfObject, top_z: float, yaw: float, pitch: float, height: float, gap: float,
                  hand_yaw: float | None = None) -> tuple[float, float, float, float, float]:
-    """The tool pose (x, y, z, hand yaw, pitch) whose leading finger tip is `gap` short of the side of the cylinder
-    `o` (reach: a lying one's end cap or side) on the line through its axis (centre) along the push direction `yaw`,
-    that tip `height` above the board (`top_z`); the hand points along `hand_yaw` (default: the push's); a
-    horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and below it."""
+    """The tool pose (x, y, z, hand yaw, pitch) whose leading finger tip is `gap` short of the side of the object
+    `o` (reach: a lying cylinder's end cap or side, a box's face) on the line through its axis (centre) along the
+    push direction `yaw`, that tip `height` above the board (`top_z`); the hand points along `hand_yaw` (default:
+    the push's); a horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and below it."""
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     hand_yaw = yaw if hand_yaw is None else hand_yaw
     t = tips(hand_yaw, pitch)

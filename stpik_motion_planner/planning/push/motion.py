@@ -19,7 +19,7 @@ from stpik_motion_planner.model.collision import (
     closed_fingers,
 )
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, pose_matrix
-from stpik_motion_planner.model.push import SLIDE, contact_pose, kind, leading, moved
+from stpik_motion_planner.model.push import PALM, SLIDE, contact_pose, kind, leading, moved
 from stpik_motion_planner.planning.context import PlanningContext
 from stpik_motion_planner.planning.home import joint_motion_clear, joint_valid, plan_joint, time_joint_path
 from stpik_motion_planner.planning.pick import cartesian_path
@@ -27,7 +27,6 @@ from stpik_motion_planner.planning.push.target import candidates, end_xy, refusa
 from stpik_motion_planner.planning.results import QueryStats, Segment
 from stpik_motion_planner.planning.trajectory import Trajectory
 
-PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 LEAD_MARGIN = 0.01  # m the finger tips lead the rest of the closed hand along a push, at least
 
 
