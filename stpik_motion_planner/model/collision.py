@@ -547,12 +547,12 @@ class HandProxy:
 
 def _path_poses(poses: Sequence[ArrayLike], resolution: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """(rotation, position) of the tool every `resolution` m along a polyline of (x, y, z, yaw) poses, or (x, y, z,
-    yaw, pitch) ones (a yaw or pitch change counts 0.25 m per rad), both ends of each segment included."""
+    yaw, pitch[, roll]) ones (a change of an angle counts 0.25 m per rad), both ends of each segment included."""
     from stpik_motion_planner.model.grasp import pose_matrix
 
     for a, b in zip(poses[:-1], poses[1:]):
         a, b = np.asarray(a, float), np.asarray(b, float)
-        turn = abs(b[3] - a[3]) if len(a) < 5 else max(abs(b[3] - a[3]), abs(b[4] - a[4]))
-        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * turn) / resolution)))
+        turn = float(abs(b[3] - a[3])) if len(a) < 5 else float(np.abs(b[3:] - a[3:]).max())
+        n = max(1, int(math.ceil(max(float(np.linalg.norm(b[:3] - a[:3])), 0.25 * turn) / resolution)))
         for k in range(n + 1):
             yield pose_matrix(a + (b - a) * k / n)

@@ -9,7 +9,9 @@ radius, a box's half-size along the approach), so that the palm stops PALM_GAP f
 is PALM_REACH behind the grasp centre; the open fingers still surround the object).
 A Cartesian pose here is (x, y, z, yaw): position of the tool and yaw of the approach direction; or
 (x, y, z, yaw, pitch), the approach tilted `pitch` below the horizontal about tool x (`tool_rotation`; pi/2:
-straight down), tool x still horizontal. The robot's home pose (Q_HOME) is such a pose with yaw 0.
+straight down), tool x still horizontal; or (x, y, z, yaw, pitch, roll), the hand also turned `roll` about its
+approach (a push's hand rolled half a turn, so that fingers 2 and 3 lead to its left: planning/push/motion.py). The
+robot's home pose (Q_HOME) is such a pose with yaw 0.
 
 What the grasps take (`grasp_refusal`): a standing cylinder, approached at any yaw of the tiers (`yaw_tiers`),
 or a standing box, approached square to one of its vertical faces (`face_yaws`: its yaw + k pi/2 within the tiers'
@@ -36,7 +38,7 @@ from relocation_common.feasibility import NO_GRASP
 from relocation_common.scenario import Scenario, Shelf, ShelfObject
 from relocation_common.shelf_object import UPRIGHT_TILT
 
-Pose = Union[Sequence[float], np.ndarray]  # (x, y, z, yaw) of the tool, or (x, y, z, yaw, pitch): `tool_rotation`
+Pose = Union[Sequence[float], np.ndarray]  # (x, y, z, yaw) of the tool, or (x, y, z, yaw, pitch[, roll])
 _PALM = next(c for c in rd.CAPSULES if c.name == "palm")
 PALM_REACH = rd.D67 - _PALM.p1[2] - _PALM.radius  # m from the grasp centre back to the palm's front (0.025)
 PALM_GAP = 0.008  # m between the palm and a grasped bottle: 4 mm plus the 4 mm final tolerance of STPIK
@@ -143,15 +145,21 @@ def side_rotation(yaw: float) -> np.ndarray:
     return np.array([[-s, 0.0, c], [c, 0.0, s], [0.0, 1.0, 0.0]])
 
 
-def tool_rotation(yaw: float, pitch: float) -> np.ndarray:
+def tool_rotation(yaw: float, pitch: float, roll: float = 0.0) -> np.ndarray:
     """Rotation of a grasp whose approach direction (tool z) has the given yaw and is tilted `pitch` rad below the
     horizontal (pi/2: straight down), the closing direction (tool x) horizontal: `side_rotation` turned about tool
-    x; pitch 0 is `side_rotation` itself."""
+    x; pitch 0 is `side_rotation` itself. `roll` turns the hand about its approach (tool z) after that: pi swaps
+    tool x and y for their opposites (joint 7 half a turn)."""
     if pitch == 0.0:
-        return side_rotation(yaw)
-    c, s, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
-    x, z = np.array([-s, c, 0.0]), np.array([cp * c, cp * s, -sp])
-    return np.column_stack([x, np.cross(z, x), z])
+        rot = side_rotation(yaw)
+    else:
+        c, s, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
+        x, z = np.array([-s, c, 0.0]), np.array([cp * c, cp * s, -sp])
+        rot = np.column_stack([x, np.cross(z, x), z])
+    if roll == 0.0:
+        return rot
+    cr, sr = math.cos(roll), math.sin(roll)
+    return rot @ np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
 
 
 def tool_angles(rot: np.ndarray) -> tuple[float, float]:
@@ -165,21 +173,28 @@ def pose_pitch(pose: Pose) -> float:
     return float(pose[4]) if len(pose) > 4 else 0.0
 
 
+def pose_roll(pose: Pose) -> float:
+    """The hand's roll about its approach of a pose: its sixth number, 0 for a shorter pose."""
+    return float(pose[5]) if len(pose) > 5 else 0.0
+
+
 def approach_yaw(rot: np.ndarray) -> float:
     """Yaw (rad) of the approach direction (the tool's z axis) of a tool rotation: the inverse of side_rotation."""
     return float(math.atan2(rot[1, 2], rot[0, 2]))
 
 
 def pose_matrix(pose4: Pose) -> tuple[np.ndarray, np.ndarray]:
-    """(rotation, position) of an (x, y, z, yaw) side-grasp pose or an (x, y, z, yaw, pitch) one."""
-    return tool_rotation(float(pose4[3]), pose_pitch(pose4)), np.array(pose4[:3], dtype=float)
+    """(rotation, position) of an (x, y, z, yaw) side-grasp pose, an (x, y, z, yaw, pitch) one or an (x, y, z, yaw,
+    pitch, roll) one."""
+    return tool_rotation(float(pose4[3]), pose_pitch(pose4), pose_roll(pose4)), np.array(pose4[:3], dtype=float)
 
 
 def check_pose(pose4: Pose, where: str = "pose") -> np.ndarray:
     """Raise WorkspaceError unless pose4 is finite and the wrist centre is within the arm's reach."""
     p = np.asarray(pose4, dtype=float)
-    if p.shape not in ((4,), (5,)) or not np.all(np.isfinite(p)):
-        raise WorkspaceError(f"{where}: need 4 finite numbers (x, y, z, yaw) or 5 (and pitch), got {pose4!r}")
+    if p.shape not in ((4,), (5,), (6,)) or not np.all(np.isfinite(p)):
+        raise WorkspaceError(f"{where}: need 4 finite numbers (x, y, z, yaw), 5 (and pitch) or 6 (and roll), got "
+                             f"{pose4!r}")
     r, t = pose_matrix(p)
     wrist = t - r[:, 2] * rd.D67
     reach = float(np.linalg.norm(wrist - np.array([0.0, 0.0, rd.D1])))

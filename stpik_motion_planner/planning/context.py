@@ -38,8 +38,8 @@ from stpik_motion_planner.model.grasp import (
     grasp_yaw_tiers,
     home_pose,
     lying_pitch,
+    pose_matrix,
     side_grasp,
-    tool_rotation,
 )
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.params import PlannerParams
@@ -306,12 +306,12 @@ def proxy_boxes(ctx: PlanningContext, tool_path: Sequence[np.ndarray]) -> tuple[
     poses = []
     for a, b in zip(tool_path[:-1], tool_path[1:]):
         a, b = np.asarray(a, float), np.asarray(b, float)
-        turn = abs(b[3] - a[3]) if len(a) < 5 else max(abs(b[3] - a[3]), abs(b[4] - a[4]))
-        n = max(1, int(math.ceil(max(np.linalg.norm(b[:3] - a[:3]), 0.25 * turn) / res)))
+        turn = float(abs(b[3] - a[3])) if len(a) < 5 else float(np.abs(b[3:] - a[3:]).max())
+        n = max(1, int(math.ceil(max(float(np.linalg.norm(b[:3] - a[:3])), 0.25 * turn) / res)))
         poses.append(a + (b - a) * (np.arange(n + 1) / n)[:, None])
     pose = np.vstack(poses)
-    if pose.shape[1] > 4:  # a grasp from above: grasp.tool_rotation of each yaw and pitch
-        rot = np.array([tool_rotation(y, pitch) for y, pitch in pose[:, 3:5]])
+    if pose.shape[1] > 4:  # a grasp from above (or a push's rolled hand): grasp.tool_rotation of each pose
+        rot = np.array([pose_matrix(p)[0] for p in pose])
     else:
         c, s = np.cos(pose[:, 3]), np.sin(pose[:, 3])
         rot = np.zeros((len(pose), 3, 3))  # grasp.side_rotation of each yaw

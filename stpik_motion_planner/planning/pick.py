@@ -176,9 +176,9 @@ def front_of_shelf(ctx: PlanningContext, pose: Pose) -> np.ndarray:
     """In front of the shelf at the height and lateral position of `pose` (the start of a direct entry): on the
     line of its approach, or straight in (along x) for a grasp from above, whose approach comes down."""
     x = min(pose[0], ctx.scenario.shelf.x_front - 0.06)
-    if len(pose) > 4:
+    if len(pose) == 5 or len(pose) > 5 and pose[4]:
         return np.array([x, *pose[1:]])
-    return np.array([x, pose[1] - (pose[0] - x) * math.tan(pose[3]), pose[2], pose[3]])
+    return np.array([x, pose[1] - (pose[0] - x) * math.tan(pose[3]), pose[2], *pose[3:]])
 
 
 def cartesian_path(ctx: PlanningContext, start: Pose, goal: Pose, obs: ObstacleSet,
@@ -186,7 +186,8 @@ def cartesian_path(ctx: PlanningContext, start: Pose, goal: Pose, obs: ObstacleS
                    rng: np.random.Generator | None = None, plan: bool = True) -> list[np.ndarray] | None:
     """First attempt: the direct path start -> stage in front of the shelf -> goal, if clear; otherwise and on
     later attempts RRT-Connect. A goal from above (its pitch: grasp.tool_rotation) is reached tilted from the start
-    on: the hand tilts at the start, and RRT-Connect plans (x, y, z, yaw) at that pitch. `plan` False: only the
+    on: the hand tilts at the start, and RRT-Connect plans (x, y, z, yaw) at that pitch. A goal with a roll (a push's
+    rolled hand) is planned at that roll, from a start with the same roll. `plan` False: only the
     draws from `rng` that planning would take (a skipped lane), None."""
     pitch = pose_pitch(goal)
     if pitch:
@@ -202,10 +203,13 @@ def cartesian_path(ctx: PlanningContext, start: Pose, goal: Pose, obs: ObstacleS
     if not plan:
         return None
     t = time.perf_counter()
-    path = ctx.rrt.plan(start[:4], goal[:4], lambda s: not hand.collides(*pose_matrix((*s, pitch)), obs), max_checks,
+    rest = tuple(float(a) for a in goal[4:]) or (pitch,)  # (pitch[, roll]) kept along the path
+    path = ctx.rrt.plan(start[:4], goal[:4], lambda s: not hand.collides(*pose_matrix((*s, *rest)), obs), max_checks,
                         deadline, seed)
     stats.rrt_time += time.perf_counter() - t
     stats.rrt_calls += 1
     if pitch and path is not None:
-        path = [np.asarray(start, float)] + [np.array([*s, pitch]) for s in path]
+        path = [np.asarray(start, float)] + [np.array([*s, *rest]) for s in path]
+    elif len(goal) > 5 and path is not None:
+        path = [np.array([*s, *rest]) for s in path]
     return path

@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike
 
 from relocation_common import robot_description as rd
 from stpik_motion_planner.model.collision import PENETRATION, ArmGeometry, Obstacle, ObstacleSet, Skip
-from stpik_motion_planner.model.grasp import pose_pitch, tool_rotation
+from stpik_motion_planner.model.grasp import pose_pitch, pose_roll, tool_rotation
 from stpik_motion_planner.model.kinematics import Kinematics
 from stpik_motion_planner.planning.budget import check_deadline
 
@@ -318,7 +318,7 @@ class Stpik:
         rot, pos = kin.tool_pose()
         jt = kin.frame_jacobian(kin.tool_fid)
         e_p = ref[:3] - pos
-        e_o = pin.log3(tool_rotation(ref[3], pose_pitch(ref)) @ rot.T)
+        e_o = pin.log3(tool_rotation(ref[3], pose_pitch(ref), pose_roll(ref)) @ rot.T)
         ep_n, eo_n = math.sqrt(e_p.dot(e_p)), math.sqrt(e_o.dot(e_o))  # np.linalg.norm's own formula
         if run.tau >= t_end and ep_n < p.final_tol_pos and eo_n < p.final_tol_ori:
             raise _Reject("reached")
@@ -336,6 +336,8 @@ class Stpik:
         w_d = np.array([0.0, 0.0, vel[3]])
         if len(vel) > 4:  # the pitch turns about tool x, horizontal: (-sin yaw, cos yaw, 0)
             w_d += vel[4] * np.array([-math.sin(ref[3]), math.cos(ref[3]), 0.0])
+        if len(vel) > 5 and vel[5]:  # the roll turns about tool z (a push's hand keeps its roll: vel[5] 0)
+            w_d += vel[5] * tool_rotation(ref[3], pose_pitch(ref), pose_roll(ref))[:, 2]
         eq_levels = [(jt[:3], vel[:3] + p.k_pos * e_p), (jt[3:], w_d + p.k_ori * e_o),
                      (None, p.k_posture * (posture - q))]
         prev = run.qdots[-1] if run.qdots else (np.zeros(rd.N_JOINTS) if run.from_rest else None)

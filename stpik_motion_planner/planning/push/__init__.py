@@ -14,11 +14,11 @@ across it (push.roll: off, it wedges the hand; MuJoCo: docs/bench/push.md).
    path: the direct path first, then RRT-Connect, for the closed hand's proxy) -> contact pose (the finger tips
    push.contact_gap short of X, at push.contact_height of its height, no lower than the palm's clearance over the
    board allows) -> the straight push by the gap plus d at push.speed -> straight back to the pre-contact pose with X
-   at its end pose -> home back along the first leg. A sideways slide's hand points into the shelf (motion.hand_yaws):
-   it comes in and backs out along its own axis, the push along X's. Every leg is tracked by STPIK (Eq. 9-10) with
-   the closed hand's capsules (collision.closed_fingers) against every object present; the hand may touch X from the
-   pre-contact pose on (the approach, the push, the retreat), and during the push X is no obstacle of the arm
-   (it moves with the tips).
+   at its end pose -> home back along the first leg. A sideways slide's hand points into the shelf (motion.hand_yaws;
+   rolled half a turn for a push to its left): it comes in and backs out along its own axis, the push along X's.
+   Every leg is tracked by STPIK (Eq. 9-10) with the closed hand's capsules (collision.closed_fingers) against every
+   object present; the hand may touch X from the pre-contact pose on (the approach, the push, the retreat), and
+   during the push X is no obstacle of the arm (it moves with the tips).
 The answer is g_O with the whole motion (home -> ... -> home; the gripper shut before it, opened after it), the end
 pose of X, and the lane it opens (then free, or still held by whom); or g_U with the reason: X leaning, or lying
 with both kinds off, neither a cylinder nor a box, blocking no lane of C, no direction and distance that opens one,

@@ -18,7 +18,7 @@ from stpik_motion_planner.model.collision import (
     ObstacleSet,
     closed_fingers,
 )
-from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, pose_matrix
+from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, pose_matrix, pose_roll
 from stpik_motion_planner.model.push import PALM, SLIDE, contact_pose, kind, leading, moved
 from stpik_motion_planner.planning.context import PlanningContext
 from stpik_motion_planner.planning.home import joint_motion_clear, joint_valid, plan_joint, time_joint_path
@@ -64,17 +64,23 @@ def contact_height(ctx: PlanningContext, object_id: str) -> float:
     return max(at, PALM.radius + ctx.ceiling_clearance)
 
 
-def hand_yaws(ctx: PlanningContext, object_id: str, yaw: float) -> list[float]:
-    """The hand's yaws tried for a push along `yaw`: the push's own; for the slide of a lying cylinder, turned from it
-    towards straight in (+x) by each of push.hand_turns: a sideways slide with the hand pointing into the shelf. A
-    push to the right of straight in then goes to the hand's right, fingers 2 and 3 leading; one to the left leads
-    with finger 1 alone, at the tool axis' height (`tip_problem` says why a lying bottle of the shipped size is not
-    pushed so)."""
+def hand_yaws(ctx: PlanningContext, object_id: str, yaw: float) -> list[tuple[float, float]]:
+    """The hands tried for a push along `yaw`, (yaw, roll) each: the push's own yaw; for the slide of a lying
+    cylinder, turned from it towards straight in (+x) by each of push.hand_turns: a sideways slide with the hand
+    pointing into the shelf. A push to the right of straight in then goes to the hand's right, fingers 2 and 3
+    leading. One to the left leads with finger 1 alone, at the tool axis' height (`tip_problem` says why a lying
+    bottle of the shipped size is not pushed so), so it is tried again with the hand rolled half a turn about its
+    axis (joint 7), fingers 2 and 3 leading to its left."""
     o = ctx.scenario.object(object_id)
     if kind(o, yaw) != SLIDE:
-        return [yaw]
+        return [(yaw, 0.0)]
     towards = 1.0 if yaw <= 0 else -1.0
-    return [math.remainder(yaw + towards * t, 2 * math.pi) for t in ctx.params.push.hand_turns]
+    out = []
+    for t in ctx.params.push.hand_turns:
+        out.append((math.remainder(yaw + towards * t, 2 * math.pi), 0.0))
+        if towards < 0 and t > 0:
+            out.append((out[-1][0], math.pi))
+    return out
 
 
 def tip_problem(ctx: PlanningContext, object_id: str, contact: np.ndarray, yaw: float) -> str:
@@ -82,7 +88,7 @@ def tip_problem(ctx: PlanningContext, object_id: str, contact: np.ndarray, yaw: 
     ('' if it can): the hinges or the palm would lead the tips (the hand turned too far from the push), or, for a
     lying cylinder or a box, every leading tip passes over its end cap, side or face (higher than its top less a
     tip's radius)."""
-    lead, ahead = leading(yaw, float(contact[3]))
+    lead, ahead = leading(yaw, float(contact[3]), pose_roll(contact))
     if ahead < LEAD_MARGIN:
         return f"the hand turned {abs(contact[3] - yaw):.2f} rad from the push leads with its side, not its tips"
     o = ctx.scenario.object(object_id)
@@ -95,20 +101,22 @@ def tip_problem(ctx: PlanningContext, object_id: str, contact: np.ndarray, yaw: 
 
 
 def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], yaw: float, distance: float,
-                deadline: float, stats: QueryStats, hand_yaw: float | None = None) -> tuple[list[Segment], str]:
+                deadline: float, stats: QueryStats, hand_yaw: float | None = None, roll: float = 0.0
+                ) -> tuple[list[Segment], str]:
     """The push's motion for one candidate (the package docstring, step 2), the hand pointing along `hand_yaw`
-    (default: the push's `yaw`): (segments, '') or ([], why not)."""
+    (default: the push's `yaw`), rolled `roll` about its axis (`rolled_home`): (segments, '') or ([], why not)."""
     p, pp = ctx.params, ctx.params.push
     o = ctx.scenario.object(object_id)
     hand_yaw = yaw if hand_yaw is None else hand_yaw
-    u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0])  # a horizontal hand: (x, y, z, yaw) poses
-    h = np.array([math.cos(hand_yaw), math.sin(hand_yaw), 0.0, 0.0])
+    n = 6 if roll else 4  # a horizontal hand: (x, y, z, yaw) poses, or (x, y, z, yaw, 0, roll) rolled
+    u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0, 0.0, 0.0])[:n]
+    h = np.array([math.cos(hand_yaw), math.sin(hand_yaw), 0.0, 0.0, 0.0, 0.0])[:n]
     contact = np.array(contact_pose(o, ctx.scenario.shelf.top_z, yaw, 0.0, contact_height(ctx, object_id),
-                                    pp.contact_gap, hand_yaw)[:4])
+                                    pp.contact_gap, hand_yaw, roll)[:n])
     # the palm's bound holds for the tool axis whichever tip leads (finger 2 or 3 leads a push turned to -y: 22 mm
     # above the axis, which the leading tip's height alone would bring 22 mm lower, the palm into the board)
     contact[2] = max(contact[2], ctx.scenario.shelf.top_z + PALM.radius + ctx.ceiling_clearance)
-    why = tip_problem(ctx, object_id, contact, yaw) if hand_yaw != yaw or o.lying or o.shape == "box" else ""
+    why = tip_problem(ctx, object_id, contact, yaw) if hand_yaw != yaw or roll or o.lying or o.shape == "box" else ""
     if why:
         return [], why
     # in along the hand's axis, the push along `yaw`, out along the hand's axis (back to `pre` when they are one)
@@ -132,14 +140,17 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     ex, ey = end_xy(o.x, o.y, yaw, distance)
     after = CollisionScene(moved(ctx.scenario, object_id, ex, ey), (), ctx.lying, ctx.gone)
     after_obs = after.obstacles(removed)
-    rng = ctx.question_rng("push", object_id, removed, yaw, distance, repr(pp))
+    rng = ctx.question_rng("push", object_id, removed, yaw, distance, repr(pp), *((roll,) if roll else ()))
+    q0, start, turn = rolled_home(ctx, roll, obs, arm)
+    if roll and turn is None:
+        return [], "the hand cannot be rolled at home: the turning hand meets something"
     last = "no approach"
     for attempt in range(p.max_attempts):
-        path = cartesian_path(ctx, ctx.home, pre, obs, hand, p.rrt_max_checks, deadline, stats, attempt == 0, rng)
+        path = cartesian_path(ctx, start, pre, obs, hand, p.rrt_max_checks, deadline, stats, attempt == 0, rng)
         if path is None:
             last = "no approach: no Cartesian path to the pre-contact pose"
             continue
-        r1 = ctx.track(rd.Q_HOME, path, obs, deadline, stats, arm=arm)
+        r1 = ctx.track(q0, path, obs, deadline, stats, arm=arm)
         if not r1.ok:
             last = f"no approach: STPIK rejected the path to the pre-contact pose: {r1.reason}"
             continue
@@ -153,10 +164,11 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
                        speed=p.stpik.approach_speed, ramp=p.carry_ramp)
         if not r4.ok:
             return [], f"STPIK rejected the retreat: {r4.reason}"
-        home = way_home(ctx, r4.q[-1], list(r1.q), after_obs, arm, deadline, rng)
+        home = way_home(ctx, r4.q[-1], ([rd.Q_HOME] if roll else []) + list(r1.q), after_obs, arm, deadline, rng)
         if home is None:
             return [], "no way home after the push"
-        return [Segment("approach", Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_contact").then(
+        approach = Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_contact")
+        return [Segment("approach", (approach if turn is None else turn.then(approach)).then(
                     Trajectory.from_steps(r2.q, r2.qdot, r2.dt, "approach")).resample(), None),
                 Segment("push", Trajectory.from_steps(r3.q, r3.qdot, r3.dt, "push").resample(), None),
                 Segment("retreat", Trajectory.from_steps(r4.q, r4.qdot, r4.dt, "retreat").resample(), None),
@@ -164,11 +176,26 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     return [], last
 
 
+def rolled_home(ctx: PlanningContext, roll: float, obs: ObstacleSet, arm: ArmGeometry
+                ) -> tuple[np.ndarray, np.ndarray, Trajectory | None]:
+    """(the configuration the approach starts from, its tool pose, the motion there from home): home itself (no
+    motion: None) for an unrolled hand; for a hand rolled half a turn, home with joint 7 turned by pi (the tool
+    turns about its own axis: the arm's other links stay still), checked clear at home (None when it is not)."""
+    if not roll:
+        return rd.Q_HOME, np.asarray(ctx.home, float), None
+    q = rd.Q_HOME.copy()
+    q[6] += roll
+    start = np.array([*ctx.home[:4], 0.0, roll])
+    if not joint_motion_clear(ctx, rd.Q_HOME, q, obs, 0.0, arm):
+        return q, start, None
+    return q, start, time_joint_path([rd.Q_HOME, q], 0.9 * rd.QDOT_MAX, ctx.params.stpik.dt)
+
+
 def way_home(ctx: PlanningContext, q: np.ndarray, out: list[np.ndarray], obs: ObstacleSet, arm: ArmGeometry,
              deadline: float, rng: np.random.Generator | None) -> Trajectory | None:
     """From the pre-contact pose home, the closed hand's capsules checked at STPIK's clearance: back along the tracked
-    way there (`out`, home first) when that is still clear with the object at its end pose (every other IK step),
-    else joint-space RRT-Connect."""
+    way there (`out`, home first; a rolled hand turns back at home last) when that is still clear with the object at
+    its end pose (every other IK step), else joint-space RRT-Connect."""
     # no margin over STPIK's clearance: the palm ends the push at that bound over the board (the contact height)
     if joint_motion_clear(ctx, q, out[-1], obs, 0.0, arm) and all(joint_valid(ctx, x, obs, arm) for x in out[::2]):
         return time_joint_path([q] + out[::-1], 0.9 * rd.QDOT_MAX, ctx.params.stpik.dt).resample()
@@ -192,8 +219,8 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
     last, n = "", 0
     for yaw, d, lane, held in cands:
         n += 1
-        for hand_yaw in hand_yaws(ctx, object_id, yaw):
-            segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats, hand_yaw)
+        for hand_yaw, roll in hand_yaws(ctx, object_id, yaw):
+            segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats, hand_yaw, roll)
             if segments:
                 break
         if segments:
@@ -201,6 +228,7 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
             end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z + (o.radius if o.lying else 0.0))
             then = f"still held by {', '.join(sorted(held))}" if held else "then free"
             turned = f", the hand at yaw {hand_yaw:+.2f}" if hand_yaw != yaw else ""
+            turned += ", rolled half a turn" if roll else ""
             how = f" ({kind(o, yaw)} of a lying cylinder{turned})" if o.lying else \
                 " (a box slid on its face)" if o.shape == "box" else ""
             return PushPlan(object_id, clear_for, yaw, d, end, lane, segments, kind(o, yaw)), n, (
