@@ -21,6 +21,7 @@ from qtree_task_planner.executive.world import remaining_problem, scene_from_sce
 from qtree_task_planner.oracles import CachedOracle
 from qtree_task_planner.search.exact import ExactResult, blocking_needs, can_leave
 from relocation_common.config import ParameterError
+from relocation_common.feasibility import FeasibilityAnswer, Label
 
 CYCLE = {"T": [{"b"}], "b": [{"T"}]}  # "b needs T moved"
 WEIGHTS = {o["id"]: o.get("weight", 1.0) for o in OBJECTS}
@@ -118,6 +119,42 @@ def test_a_lying_bottle_in_every_lane_of_t_is_pushed_out_of_them():
     assert blocking_pairs(rp, cache) == (("e", "T"),)
     out = run(shelf, [])
     assert shelf.push_questions[0] == ("e", "T", frozenset()) and shelf.pushes == [("e", "T", ())], out.message
+    assert out.success, out.message
+    assert [o for o, _ in shelf.relocations] == ["T"]
+
+
+class FailedLane(PushShelf):
+    """T's lanes hold the laneless e, or a (free); T's pick along a's lane fails in the motion planner (unfeasible,
+    no blocker: STPIK did not converge, as on the grid's paper_random5_09) until e was pushed out of T's lanes."""
+
+    def __init__(self):
+        super().__init__(lanes={"T": [{"e"}, {"a"}], "e": []})
+        self.pushed = set()
+
+    def feasibility(self, obj, removed):
+        if obj == "T" and "e" not in self.pushed:
+            self.questions.append((obj, frozenset(removed)))
+            return FeasibilityAnswer(Label.UNFEASIBLE, message="STPIK rejected the approach: did not converge")
+        return super().feasibility(obj, removed)
+
+    def do_push(self, obj, clear_for, removed):
+        self.pushed.add(obj)
+        return super().do_push(obj, clear_for, removed)
+
+
+def test_a_laneless_bottle_in_t_s_lanes_is_pushed_when_t_s_free_lane_fails():
+    """No blocking cycle: a can leave, but T is unfeasible from every set reached (its lane through a fails in the
+    motion planner), and e, which no grasp takes, is in T's other lane. The old proof named no pair, so no push was
+    asked ("the proof names no pair"); now (e, T) is a pair (exact.laneless_in_lanes), the push of e out of T's
+    lanes is asked and executed, and the re-plan retrieves T."""
+    shelf = FailedLane()
+    cache = GeometryCache(shelf)
+    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
+    why = replan(rp, (), cache)
+    assert isinstance(why, str) and "T unfeasible from every set reached" in why, why
+    assert blocking_pairs(rp, cache) == (("e", "T"),)
+    out = run(shelf, [])
+    assert shelf.pushes == [("e", "T", ())], out.message
     assert out.success, out.message
     assert [o for o, _ in shelf.relocations] == ["T"]
 

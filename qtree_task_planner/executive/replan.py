@@ -30,7 +30,14 @@ from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
 from qtree_task_planner.oracles import Lanes, no_grasp
 from qtree_task_planner.search import astar
-from qtree_task_planner.search.exact import Claim, blocking_needs, can_leave, laneless_blockers, no_sequence
+from qtree_task_planner.search.exact import (
+    Claim,
+    blocking_needs,
+    can_leave,
+    laneless_blockers,
+    laneless_in_lanes,
+    no_sequence,
+)
 from relocation_common.feasibility import (
     FeasibilityAnswer,
     FeasibilityOracle,
@@ -300,13 +307,15 @@ def blocking_pairs(rp: RemainingProblem, cache: GeometryCache) -> tuple[tuple[st
     """The pairs (X, Y) "X needs Y moved" of the blocking cycle a failed re-plan's proof names (exact.blocking_needs
     over the same certain claims at the problem's start: `start_claims`), then (X, T) for each object X in a lane of
     the target T that has no lane of its own (exact.laneless_blockers: "X has no lane", a bottle lying where no grasp
-    reaches it; the push of X out of T's lanes is asked first); () when the proof has no such cycle. What a push can
-    open (qtree_task_planner.executive.push)."""
+    reaches it; the push of X out of T's lanes is asked first), then (X, T) for each such X in a lane of T when the
+    proof is no cycle (exact.laneless_in_lanes: T unfeasible from every set reached, its other lanes failed in the
+    motion planner); () when there is none. What a push can open (qtree_task_planner.executive.push)."""
     if rp.problem is None:
         return ()
     t, claims = rp.problem.target, start_claims(rp, cache)
-    return tuple((x, y) for x, stuck in blocking_needs(t, claims) for y in stuck) + tuple(
+    pairs = tuple((x, y) for x, stuck in blocking_needs(t, claims) for y in stuck) + tuple(
         (x, t) for x in laneless_blockers(t, claims))
+    return pairs + tuple((x, t) for x in laneless_in_lanes(t, claims) if (x, t) not in pairs)
 
 
 def free_first(rp: RemainingProblem, cache: GeometryCache) -> tuple[str, ...]:

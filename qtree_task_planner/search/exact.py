@@ -159,6 +159,15 @@ def laneless_blockers(target: str, lanes: Mapping[str, Sequence[Claim]]) -> tupl
     return tuple(sorted({x for _, x in by_lane if not first[x]}))
 
 
+def laneless_in_lanes(target: str, lanes: Mapping[str, Sequence[Claim]]) -> tuple[str, ...]:
+    """The objects with no lane of their own (claimed at the empty set: a bottle lying where no grasp reaches it) in
+    a lane of the target, sorted, whether or not the proof is a blocking cycle. Where the target is unfeasible from
+    every set the search reached (its lanes free of such objects failed in the motion planner), a push of one of
+    them out of the target's lanes still opens a lane the screen holds shut (qtree_task_planner.executive.push)."""
+    first = _first_lanes(lanes)
+    return tuple(sorted({m for lane in first.get(target, ()) for m in lane if m in first and not first[m]}))
+
+
 def _cycle_walk(target: str, lanes: Mapping[str, Sequence[Claim]]
                 ) -> tuple[dict[str, tuple[frozenset[str], ...]], set[str], list[tuple[frozenset[str], str]],
                            list[str]] | None:
