@@ -9,7 +9,9 @@ sequence. This bounds what choosing pushes by what follows them (a search over p
 loop's cheapest push out of the proof's blocking cycle) could add on the grid: it tries no prep relocation before the
 push and no second push.
 
-    nice -n 10 .venv/bin/python scripts/bench_push_lookahead.py docs/bench/closed_loop_27scenes_k13_seeds100_651189f.jsonl
+    nice -n 10 .venv/bin/python scripts/bench_push_lookahead.py GRID.jsonl [--verbose]
+
+(GRID: e.g. docs/bench/closed_loop_27scenes_k13_seeds100_651189f.jsonl)
 """
 from __future__ import annotations
 

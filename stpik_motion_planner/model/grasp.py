@@ -145,10 +145,10 @@ def side_rotation(yaw: float) -> np.ndarray:
     return np.array([[-s, 0.0, c], [c, 0.0, s], [0.0, 1.0, 0.0]])
 
 
-def tool_rotation(yaw: float, pitch: float, roll: float = 0.0) -> np.ndarray:
+def tool_rotation(yaw: float, pitch: float, hand_roll: float = 0.0) -> np.ndarray:
     """Rotation of a grasp whose approach direction (tool z) has the given yaw and is tilted `pitch` rad below the
     horizontal (pi/2: straight down), the closing direction (tool x) horizontal: `side_rotation` turned about tool
-    x; pitch 0 is `side_rotation` itself. `roll` turns the hand about its approach (tool z) after that: pi swaps
+    x; pitch 0 is `side_rotation` itself. `hand_roll` turns the hand about its approach (tool z) after that: pi swaps
     tool x and y for their opposites (joint 7 half a turn)."""
     if pitch == 0.0:
         rot = side_rotation(yaw)
@@ -156,9 +156,9 @@ def tool_rotation(yaw: float, pitch: float, roll: float = 0.0) -> np.ndarray:
         c, s, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
         x, z = np.array([-s, c, 0.0]), np.array([cp * c, cp * s, -sp])
         rot = np.column_stack([x, np.cross(z, x), z])
-    if roll == 0.0:
+    if hand_roll == 0.0:
         return rot
-    cr, sr = math.cos(roll), math.sin(roll)
+    cr, sr = math.cos(hand_roll), math.sin(hand_roll)
     return rot @ np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
 
 

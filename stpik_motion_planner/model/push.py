@@ -49,42 +49,42 @@ def reach(o: ShelfObject, yaw: float) -> float:
     return abs(math.cos(yaw - o.yaw)) * o.height / 2 + abs(math.sin(yaw - o.yaw)) * o.radius
 
 
-def tips(yaw: float, pitch: float, roll: float = 0.0) -> np.ndarray:
+def tips(yaw: float, pitch: float, hand_roll: float = 0.0) -> np.ndarray:
     """The closed finger tips (their end centres), one row per finger, relative to the tool origin in the base frame
-    for a tool at (yaw, pitch, roll)."""
-    rot = tool_rotation(yaw, pitch, roll)
+    for a tool at (yaw, pitch, hand_roll)."""
+    rot = tool_rotation(yaw, pitch, hand_roll)
     return np.array([rot @ (s.p1 - np.array([0.0, 0.0, rd.D67])) for s in closed_fingers().values()])
 
 
 def contact_pose(o: ShelfObject, top_z: float, yaw: float, pitch: float, height: float, gap: float,
-                 hand_yaw: float | None = None, roll: float = 0.0) -> tuple[float, ...]:
-    """The tool pose (x, y, z, hand yaw, pitch, roll) whose leading finger tip is `gap` short of the side of the
+                 hand_yaw: float | None = None, hand_roll: float = 0.0) -> tuple[float, ...]:
+    """The tool pose (x, y, z, hand yaw, pitch, hand roll) whose leading finger tip is `gap` short of the side of the
     object `o` (reach: a lying cylinder's end cap or side, a box's face) on the line through its axis (centre) along
     the push direction `yaw`, that tip `height` above the board (`top_z`); the hand points along `hand_yaw` (default:
-    the push's), turned `roll` about its axis; a horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and below
-    it (rolled half a turn: below and above)."""
+    the push's), turned `hand_roll` about its axis; a horizontal hand (pitch 0) has fingers 2 and 3 22 mm above and
+    below it (rolled half a turn: below and above)."""
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     hand_yaw = yaw if hand_yaw is None else hand_yaw
-    t = tips(hand_yaw, pitch, roll)
+    t = tips(hand_yaw, pitch, hand_roll)
     lead = t[int(np.argmax(t @ u))]
     ahead = float(lead @ u) + rd.FINGER_RADIUS  # the tips' front beyond the tool origin along u
     side = lead - (lead @ u) * u  # the leading tip off the push line (across it and up): the tool is moved back by it
     across = side - side[2] * np.array([0.0, 0.0, 1.0])
     r = reach(o, yaw)
     x, y = o.x - u[0] * (r + gap + ahead) - across[0], o.y - u[1] * (r + gap + ahead) - across[1]
-    return (x, y, top_z + height - side[2], hand_yaw, pitch, roll)
+    return (x, y, top_z + height - side[2], hand_yaw, pitch, hand_roll)
 
 
-def leading(yaw: float, hand_yaw: float, roll: float = 0.0) -> tuple[np.ndarray, float]:
+def leading(yaw: float, hand_yaw: float, hand_roll: float = 0.0) -> tuple[np.ndarray, float]:
     """(the leading finger tips' centres relative to the tool, one row each: those within 1 mm of the foremost along
     the push direction `yaw`; how far the tips lead the rest of the closed hand along it, m: the fingers' hinges
-    and the palm, planner radii) for a horizontal hand pointing along `hand_yaw`, turned `roll` about its axis. A
+    and the palm, planner radii) for a horizontal hand pointing along `hand_yaw`, turned `hand_roll` about its axis. A
     push to the hand's right (yaw < hand_yaw) leads with fingers 2 and 3, one above the other, to its left with
     finger 1 alone (rolled half a turn: the other way round); turned more than about 1 rad from the hand, the hinges
     lead."""
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    rot = tool_rotation(hand_yaw, 0.0, roll)
-    t = tips(hand_yaw, 0.0, roll)
+    rot = tool_rotation(hand_yaw, 0.0, hand_roll)
+    t = tips(hand_yaw, 0.0, hand_roll)
     front = t @ u
     fingers = closed_fingers().values()
     tip_front = float(front.max()) + max(c.radius for c in fingers)

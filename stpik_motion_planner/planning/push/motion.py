@@ -101,22 +101,23 @@ def tip_problem(ctx: PlanningContext, object_id: str, contact: np.ndarray, yaw: 
 
 
 def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], yaw: float, distance: float,
-                deadline: float, stats: QueryStats, hand_yaw: float | None = None, roll: float = 0.0
+                deadline: float, stats: QueryStats, hand_yaw: float | None = None, hand_roll: float = 0.0
                 ) -> tuple[list[Segment], str]:
     """The push's motion for one candidate (the package docstring, step 2), the hand pointing along `hand_yaw`
-    (default: the push's `yaw`), rolled `roll` about its axis (`rolled_home`): (segments, '') or ([], why not)."""
+    (default: the push's `yaw`), rolled `hand_roll` about its axis (`rolled_home`): (segments, '') or ([], why not)."""
     p, pp = ctx.params, ctx.params.push
     o = ctx.scenario.object(object_id)
     hand_yaw = yaw if hand_yaw is None else hand_yaw
-    n = 6 if roll else 4  # a horizontal hand: (x, y, z, yaw) poses, or (x, y, z, yaw, 0, roll) rolled
+    n = 6 if hand_roll else 4  # a horizontal hand: (x, y, z, yaw) poses, or (x, y, z, yaw, 0, hand_roll) rolled
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0, 0.0, 0.0, 0.0])[:n]
     h = np.array([math.cos(hand_yaw), math.sin(hand_yaw), 0.0, 0.0, 0.0, 0.0])[:n]
     contact = np.array(contact_pose(o, ctx.scenario.shelf.top_z, yaw, 0.0, contact_height(ctx, object_id),
-                                    pp.contact_gap, hand_yaw, roll)[:n])
+                                    pp.contact_gap, hand_yaw, hand_roll)[:n])
     # the palm's bound holds for the tool axis whichever tip leads (finger 2 or 3 leads a push turned to -y: 22 mm
     # above the axis, which the leading tip's height alone would bring 22 mm lower, the palm into the board)
     contact[2] = max(contact[2], ctx.scenario.shelf.top_z + PALM.radius + ctx.ceiling_clearance)
-    why = tip_problem(ctx, object_id, contact, yaw) if hand_yaw != yaw or roll or o.lying or o.shape == "box" else ""
+    turned = hand_yaw != yaw or hand_roll
+    why = tip_problem(ctx, object_id, contact, yaw) if turned or o.lying or o.shape == "box" else ""
     if why:
         return [], why
     # in along the hand's axis, the push along `yaw`, out along the hand's axis (back to `pre` when they are one)
@@ -140,9 +141,9 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     ex, ey = end_xy(o.x, o.y, yaw, distance)
     after = CollisionScene(moved(ctx.scenario, object_id, ex, ey), (), ctx.lying, ctx.gone)
     after_obs = after.obstacles(removed)
-    rng = ctx.question_rng("push", object_id, removed, yaw, distance, repr(pp), *((roll,) if roll else ()))
-    q0, start, turn = rolled_home(ctx, roll, obs, arm)
-    if roll and turn is None:
+    rng = ctx.question_rng("push", object_id, removed, yaw, distance, repr(pp), *((hand_roll,) if hand_roll else ()))
+    q0, start, turn = rolled_home(ctx, hand_roll, obs, arm)
+    if hand_roll and turn is None:
         return [], "the hand cannot be rolled at home: the turning hand meets something"
     last = "no approach"
     for attempt in range(p.max_attempts):
@@ -164,7 +165,7 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
                        speed=p.stpik.approach_speed, ramp=p.carry_ramp)
         if not r4.ok:
             return [], f"STPIK rejected the retreat: {r4.reason}"
-        home = way_home(ctx, r4.q[-1], ([rd.Q_HOME] if roll else []) + list(r1.q), after_obs, arm, deadline, rng)
+        home = way_home(ctx, r4.q[-1], ([rd.Q_HOME] if hand_roll else []) + list(r1.q), after_obs, arm, deadline, rng)
         if home is None:
             return [], "no way home after the push"
         approach = Trajectory.from_steps(r1.q, r1.qdot, r1.dt, "to_pre_contact")
@@ -176,16 +177,16 @@ def plan_motion(ctx: PlanningContext, object_id: str, removed: frozenset[str], y
     return [], last
 
 
-def rolled_home(ctx: PlanningContext, roll: float, obs: ObstacleSet, arm: ArmGeometry
+def rolled_home(ctx: PlanningContext, hand_roll: float, obs: ObstacleSet, arm: ArmGeometry
                 ) -> tuple[np.ndarray, np.ndarray, Trajectory | None]:
     """(the configuration the approach starts from, its tool pose, the motion there from home): home itself (no
     motion: None) for an unrolled hand; for a hand rolled half a turn, home with joint 7 turned by pi (the tool
     turns about its own axis: the arm's other links stay still), checked clear at home (None when it is not)."""
-    if not roll:
+    if not hand_roll:
         return rd.Q_HOME, np.asarray(ctx.home, float), None
     q = rd.Q_HOME.copy()
-    q[6] += roll
-    start = np.array([*ctx.home[:4], 0.0, roll])
+    q[6] += hand_roll
+    start = np.array([*ctx.home[:4], 0.0, hand_roll])
     if not joint_motion_clear(ctx, rd.Q_HOME, q, obs, 0.0, arm):
         return q, start, None
     return q, start, time_joint_path([rd.Q_HOME, q], 0.9 * rd.QDOT_MAX, ctx.params.stpik.dt)
@@ -219,8 +220,8 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
     last, n = "", 0
     for yaw, d, lane, held in cands:
         n += 1
-        for hand_yaw, roll in hand_yaws(ctx, object_id, yaw):
-            segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats, hand_yaw, roll)
+        for hand_yaw, hand_roll in hand_yaws(ctx, object_id, yaw):
+            segments, why = plan_motion(ctx, object_id, removed, yaw, d, deadline, stats, hand_yaw, hand_roll)
             if segments:
                 break
         if segments:
@@ -228,7 +229,7 @@ def plan_push(ctx: PlanningContext, object_id: str, clear_for: str, removed: Ite
             end = (*end_xy(o.x, o.y, yaw, d), ctx.scenario.shelf.top_z + (o.radius if o.lying else 0.0))
             then = f"still held by {', '.join(sorted(held))}" if held else "then free"
             turned = f", the hand at yaw {hand_yaw:+.2f}" if hand_yaw != yaw else ""
-            turned += ", rolled half a turn" if roll else ""
+            turned += ", rolled half a turn" if hand_roll else ""
             how = f" ({kind(o, yaw)} of a lying cylinder{turned})" if o.lying else \
                 " (a box slid on its face)" if o.shape == "box" else ""
             return PushPlan(object_id, clear_for, yaw, d, end, lane, segments, kind(o, yaw)), n, (
