@@ -256,6 +256,7 @@ def one_run(spec: Spec, scenario: str, out_dir: Path, timeout: float, extra: lis
     if report is not None:
         rec.update(end=report["end"]["kind"], report_exit=report["end"]["exit_code"], success=report["success"],
                    message=report["message"][:300], respawns=sum(e["event"] == "respawned" for e in report["respawns"]),
+                   deaths=[e["code"] for e in report["respawns"] if e["event"] == "died"],
                    next_step=report.get("next_step", "")[:200])
     rec["false_success"] = bool(report and report["success"] and not final["target_on_bottom"])
     rec["truthful"] = bool(report and report["end"]["exit_code"] == demo.returncode and

@@ -20,11 +20,12 @@
 - `journal_path`: the relocation (and push) journal; started after a process that died mid-relocation or mid-push,
   the node first brings the arm back from it (service.py), goals waiting meanwhile.
 - /diagnostics: "motion_planner: ..." (relocation_common.node.Health): feasibility questions in flight and answered,
-  the last answer, the relocation running, the recovery after a restart.
+  the last answer, the relocation running, the recovery after a restart, the age of the last joint state.
 """
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 
@@ -59,12 +60,13 @@ from stpik_motion_planner.execution.streaming import StreamedArm, StreamParams
 from stpik_motion_planner.planning.budget import SafetyNetTimeout
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.ros_interface import RosArmLink, trajectory_to_msg
-from stpik_motion_planner.service import MotionPlannerService, Outcome
+from stpik_motion_planner.service import RESTART_STATE_WAIT, MotionPlannerService, Outcome
 
 SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 # Requests queue here while one is planned: the default depth 10 dropped all but 11 of 50 concurrent requests
 # silently (their clients waited forever); 1000 answers a burst of a whole tree level.
 SERVICE_QOS = QoSProfile(depth=1000)
+EXIT_NO_STATE = 75  # EX_TEMPFAIL: the process heard no joint state although the driver publishes them; start it again
 
 
 class MotionPlannerNode(Node):
@@ -93,6 +95,11 @@ class MotionPlannerNode(Node):
             self._relocated = self.create_publisher(String, "~/relocated", SCENE_QOS)
             self.core.on_relocated = self._publish_relocated
             self._publish_relocated(self.core.relocated)
+            first_wait = float(params["first_state_wait"])
+            if not 0.0 < first_wait < RESTART_STATE_WAIT:
+                raise ParameterError(f"parameter first_state_wait must be > 0 s and below the {RESTART_STATE_WAIT:g} s "
+                                     f"a restart's recovery waits for joint states, got {params['first_state_wait']}")
+            self._first_state = self.create_timer(first_wait, self._check_first_state)
             if self.core.interrupted is not None:  # a previous process died mid-relocation: the arm back first
                 run = self.core.interrupted
                 self.relocation = (f"recovering the {'relocation' if run.push is None else 'push'} of "
@@ -130,9 +137,33 @@ class MotionPlannerNode(Node):
                   "feasibility answers": str(self.answered),
                   "last answer": f"{what} ({time.monotonic() - at:.0f} s ago)" if at else what,
                   "relocation": self.relocation, "relocated": json.dumps(self.core.relocated)}
+        if self.link is not None:
+            state = self.link.joint_state_age()
+            values["joint state"] = "none yet" if state is None else f"{state:.1f} s ago"
         level = 1 if self.relocation.startswith("recovering") else 0
         return level, f"relocation: {self.relocation}; {self.asked - self.answered} feasibility questions in flight", \
             values
+
+    def _check_first_state(self) -> None:
+        """One look, first_state_wait s after start-up: no joint state came, and the driver's joint-state publisher
+        is in the graph or the journal has a relocation to recover. This process's DDS transport then receives
+        nothing (its discovery may be as deaf: the publisher need not be seen). Seen once in ten full test runs: a
+        motion planner respawned after a SIGKILL, with Fast DDS's shared-memory errors "Failed init_port ...:
+        open_and_lock_file failed" in its log (eProsima/Fast-DDS#1144, Fast-DDS#6117), heard no joint state for
+        30 s and its recovery failed. The process exits EXIT_NO_STATE at once, its journal kept, so that its
+        launcher starts it again (config/graph.yaml) and the new process, with new transport ports, recovers the
+        arm. A hard exit: a shutdown would end the recovery waiting meanwhile, and that clears the journal."""
+        self._first_state.cancel()
+        assert self.link is not None
+        needed = ("an interrupted relocation to recover" if self.core.interrupted is not None else
+                  "the driver publishes them" if self.link.driver_present() else "")
+        if self.link.joint_state_age() is not None or not needed:
+            return  # states come, or none is expected: a planner without a driver answers feasibility questions
+        self.get_logger().fatal(
+            f"no joint state on {self.link.state_topic} within first_state_wait and {needed}: this process hears "
+            f"nothing over DDS; exiting {EXIT_NO_STATE} for the launcher to start it again (docs/reliability.md, "
+            "\"A node that hears nothing\")")
+        os._exit(EXIT_NO_STATE)
 
     def _publish_relocated(self, relocated: dict[str, int]) -> None:
         self._relocated.publish(String(data=json.dumps({"relocated": relocated})))

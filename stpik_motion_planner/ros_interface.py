@@ -97,7 +97,7 @@ class RosArmLink:
             self._gripper_cmd = node.create_publisher(Float64MultiArray, GRIPPER_TOPIC, 10)
         self._state = SideNode("motion_planner_joint_state", context=node.context)  # 100 Hz, never late
         self._state.node.create_subscription(JointState, arm.state_topic, self._on_joint_state, 10)
-        self._state_topic = node.resolve_topic_name(arm.state_topic)
+        self.state_topic = node.resolve_topic_name(arm.state_topic)
         self.watch = MismatchWatch(self._state.node, arm, "planner", node.resolve_topic_name(arm.state_topic),
                                    period=1.0, log=node.get_logger().error)
 
@@ -122,6 +122,10 @@ class RosArmLink:
         if self._q is None and self.watch.found is not None:
             raise Aborted(self.watch.found)
         return self._q
+
+    def joint_state_age(self) -> float | None:
+        """Seconds since the latest joint state came (None: none yet), for the node's health."""
+        return None if self._q is None else time.monotonic() - self._q[1]
 
     def finger_state(self) -> tuple[np.ndarray, float] | None:
         """(finger joint angles, time received) of the latest joint state."""
@@ -149,7 +153,7 @@ class RosArmLink:
 
     def driver_present(self) -> bool:
         """A publisher of the joint states is in the graph (a SIGKILLed driver's stays until its DDS lease ends)."""
-        return self._state.node.count_publishers(self._state_topic) > 0
+        return self._state.node.count_publishers(self.state_topic) > 0
 
     def finger_goal(self, turns: float, deadline: float, cancelled: Callable[[], bool]) -> np.ndarray:
         """kinova surface: a SetFingersPosition goal (Kinova turns) -> the finger positions of its result (kinova-ros
