@@ -38,7 +38,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout
 
 from jaco2_sim_driver.disturbance import DisturbancePlan
 from qtree_task_planner.executive.replan import GeometryCache, replan
-from qtree_task_planner.executive.world import SeenObject, board_of, configured, remaining_problem
+from qtree_task_planner.executive.world import (
+    RemainingProblem,
+    SeenObject,
+    board_of,
+    configured,
+    remaining_problem,
+)
 from qtree_task_planner.ros_clients import GOAL_STATUS, SCENE_NONE
 from relocation_app.client import RelocationClient
 from relocation_app.final_state import final_state
@@ -46,9 +52,9 @@ from relocation_app.graph import Graph
 from relocation_common.geometry import quat_xyzw, wxyz_matrix
 from relocation_common.paths import resolve_scenario
 from relocation_common.ros_conversions import msg_to_objects
-from relocation_common.scenario import load_scenario
+from relocation_common.scenario import Scenario, load_scenario
 from relocation_common.shelf_object import at_pose, tilt_of_quaternion
-from stpik_motion_planner.model.scene_update import merge_perceived
+from stpik_motion_planner.model.scene_update import Merged, merge_perceived
 from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 
@@ -172,6 +178,32 @@ def _object(sc, o: dict):
     return at_pose(sc.world_object(o["id"]), np.asarray(o["position"], float) + rot[:, 2] * o["height"] / 2, rot)
 
 
+@dataclasses.dataclass
+class FinalScene:
+    """A run's final simulator scene as the planner reads it: the scenario, the problem left (remaining_problem), the
+    planner's parameters and the scene update's reading (merge_perceived: bottles lying flat, leaning, gone)."""
+
+    scenario: Scenario
+    problem: RemainingProblem
+    params: PlannerParams
+    merged: Merged
+
+
+def final_scene(row: dict) -> FinalScene | None:
+    """The run's final scene (None: none recorded): the bottles where the simulator left them (ground truth),
+    those on the bottom shelf relocated."""
+    sc = load_scenario(resolve_scenario(row["scene"]))
+    scene = {o["id"]: _seen(o) for o in row.get("final_scene", [])}
+    if not scene:
+        return None
+    tol = configured()
+    rp = remaining_problem(sc, scene, [i for i, o in scene.items() if board_of(o, sc, tol) == "bottom"], tol)
+    base = PlannerParams.load()
+    m = merge_perceived(sc.shelf, {b.id: b for b in sc.objects}, [_object(sc, o) for o in row["final_scene"]],
+                        base.flat_tilt)
+    return FinalScene(sc, rp, base, m)
+
+
 def prove(row: dict, draws: int = 1) -> str:
     """Does a retrieval exist in the run's final simulator scene? The exact blocker A* (Eq. 8, replan over a fresh
     GeometryCache) on the in-process motion planner with the bottles where the simulator left them, as its scene
@@ -181,20 +213,14 @@ def prove(row: dict, draws: int = 1) -> str:
     'no retrieval exists (proven: <why>)' when no draw finds one, else 'a retrieval existed: <sequence> (weight w)',
     with 'in k/N planner draws' for N > 1: a retrieval that few draws find is a question at the planner's limit,
     not the executor's."""
-    sc = load_scenario(resolve_scenario(row["scene"]))
-    scene = {o["id"]: _seen(o) for o in row.get("final_scene", [])}
-    if not scene:
+    final = final_scene(row)
+    if final is None:
         return "not proven: no final scene recorded"
-    tol = configured()
-    relocated = [i for i, o in scene.items() if board_of(o, sc, tol) == "bottom"]
-    rp = remaining_problem(sc, scene, relocated, tol)
+    sc, rp, base, m = final.scenario, final.problem, final.params, final.merged
     if rp.target_retrieved:
         return "a retrieval existed: the target is on the bottom shelf"
     if rp.problem is None:
         return f"no retrieval exists (proven: {rp.reason})"
-    base = PlannerParams.load()
-    m = merge_perceived(sc.shelf, {b.id: b for b in sc.objects}, [_object(sc, o) for o in row["final_scene"]],
-                        base.flat_tilt)
     found, why = [], ""
     for k in range(draws):
         mp = MotionPlanner(sc.with_objects(m.bottles.values()), dataclasses.replace(base, seed=base.seed + k))
@@ -215,7 +241,8 @@ def _key(r: dict) -> str:
     return f"{r['scene']}|{r['k']}|{r['seed']}|{'closed' if r['closed'] else 'open'}"
 
 
-def _ok(r: dict) -> bool:
+def retrieved(r: dict) -> bool:
+    """The run retrieved its target: the demo said so and the simulator shows it on the bottom shelf."""
     return bool(r["success"] and r["on_bottom"])
 
 
@@ -224,7 +251,7 @@ def prove_failures(runs: list[dict], proofs_file: Path, draws: int = 1) -> dict[
     -> line)."""
     proofs = json.loads(proofs_file.read_text()) if proofs_file.exists() else {}
     for r in runs:
-        if not _ok(r) and _key(r) not in proofs and "final_scene" in r:
+        if not retrieved(r) and _key(r) not in proofs and "final_scene" in r:
             proofs[_key(r)] = prove(r, draws)
             print(f"  proof {_key(r)}: {proofs[_key(r)]}", flush=True)
             proofs_file.write_text(json.dumps(proofs, indent=1))
@@ -232,7 +259,7 @@ def prove_failures(runs: list[dict], proofs_file: Path, draws: int = 1) -> dict[
 
 
 def _proven(r: dict, proofs: dict[str, str]) -> bool:
-    return not _ok(r) and proofs.get(_key(r), "").startswith("no retrieval exists")
+    return not retrieved(r) and proofs.get(_key(r), "").startswith("no retrieval exists")
 
 
 def table(runs: list[dict], proofs: dict[str, str]) -> None:
@@ -248,7 +275,7 @@ def table(runs: list[dict], proofs: dict[str, str]) -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     scenes = list(dict.fromkeys(r["scene"] for r in runs)) + ["all scenes"]
     for (name, k, closed), rs in sorted(groups.items(), key=lambda g: (scenes.index(g[0][0]), g[0][1], not g[0][2])):
-        ok, none = sum(map(_ok, rs)), sum(_proven(r, proofs) for r in rs)
+        ok, none = sum(map(retrieved, rs)), sum(_proven(r, proofs) for r in rs)
         false = sum(r["success"] and not r["on_bottom"] for r in rs)
         safe = sum(r["home"] and r["empty"] for r in rs)
         extra = statistics.fmean(max(0, r["relocations"] - r["optimum"]) for r in rs)
@@ -258,7 +285,7 @@ def table(runs: list[dict], proofs: dict[str, str]) -> None:
               f"{statistics.fmean(r['wall'] for r in rs):.0f} |")
     for name in scenes[:-1]:  # the loop's cost undisturbed (target: at most 5 % more wall time)
         pairs = [(c["wall"], o["wall"]) for c in groups.get((name, 0, True), []) for o in groups.get((name, 0, False),
-                 []) if c["seed"] == o["seed"] and _ok(c) and _ok(o)]
+                 []) if c["seed"] == o["seed"] and retrieved(c) and retrieved(o)]
         if pairs:
             c, o = statistics.fmean(p[0] for p in pairs), statistics.fmean(p[1] for p in pairs)
             print(f"\n{name} undisturbed, same seed both successful: closed {c:.1f} s, open {o:.1f} s (n={len(pairs)}):"
@@ -266,14 +293,14 @@ def table(runs: list[dict], proofs: dict[str, str]) -> None:
     for name in scenes[:-1]:  # the executor's own seconds: the execution less its relocations (node's ~/execution)
         for closed in (True, False):
             own = [r["execution_s"] - r["relocate_s"] for r in groups.get((name, 0, closed), [])
-                   if r.get("execution_s") is not None and _ok(r)]
+                   if r.get("execution_s") is not None and retrieved(r)]
             if own:
                 run = statistics.fmean(r["execution_s"] for r in groups[(name, 0, closed)] if r.get("execution_s"))
                 print(f"{name} undisturbed, {'closed' if closed else 'open'}: execution {run:.1f} s, of which the "
                       f"executor's own (scene waits, checks, re-plans) {statistics.fmean(own):.2f} s (n={len(own)})")
     print("\nfailures:")
     for r in runs:
-        if not (_ok(r) and r["home"] and r["empty"]):
+        if not (retrieved(r) and r["home"] and r["empty"]):
             proof = proofs.get(_key(r), "not proven")
             print(f"- {r['scene']} K={r['k']} {'closed' if r['closed'] else 'open'} seed {r['seed']} "
                   f"({', '.join(r['disturbances']) or 'undisturbed'}): home {r['home']}, empty {r['empty']}: "

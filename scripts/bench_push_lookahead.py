@@ -23,15 +23,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's packages first
 
-from bench_closed_loop import Patient, _object, _ok, _seen  # scripts/ is sys.path[0]: the grid's own readers
+from bench_closed_loop import Patient, final_scene, retrieved  # scripts/ is sys.path[0]: the grid's own readers
 
 from qtree_task_planner.executive.replan import GeometryCache, replan
-from qtree_task_planner.executive.world import board_of, configured, remaining_problem
-from relocation_common.paths import resolve_scenario
-from relocation_common.scenario import load_scenario
 from stpik_motion_planner.model.push import moved
-from stpik_motion_planner.model.scene_update import merge_perceived
-from stpik_motion_planner.planning.params import PlannerParams
 from stpik_motion_planner.planning.planner import MotionPlanner
 
 
@@ -39,17 +34,12 @@ def one_push(row: dict) -> tuple[str, list[str]]:
     """(the verdict on the run's final scene, one line per push tried): 'picks alone: ...' when a pick sequence
     exists there already, 'opened by one push: ...', 'no single push opens one (n feasible of m asked)', or why
     nothing was asked."""
-    sc = load_scenario(resolve_scenario(row["scene"]))
-    scene = {o["id"]: _seen(o) for o in row.get("final_scene", [])}
-    if not scene:
+    final = final_scene(row)
+    if final is None:
         return "no final scene recorded", []
-    tol = configured()
-    rp = remaining_problem(sc, scene, [i for i, o in scene.items() if board_of(o, sc, tol) == "bottom"], tol)
+    sc, rp, base, m = final.scenario, final.problem, final.params, final.merged
     if rp.target_retrieved or rp.problem is None:
         return f"nothing to open: {rp.reason or 'the target is on the bottom shelf'}", []
-    base = PlannerParams.load()
-    m = merge_perceived(sc.shelf, {b.id: b for b in sc.objects}, [_object(sc, o) for o in row["final_scene"]],
-                        base.flat_tilt)
     world = sc.with_objects(m.bottles.values())
 
     def proof(scenario) -> tuple[str, ...] | str:
@@ -94,7 +84,7 @@ def main() -> None:
     runs = [json.loads(line) for line in a.grid.read_text().splitlines() if line.strip()]
     verdicts = []
     for r in runs:
-        if _ok(r):
+        if retrieved(r):
             continue
         verdict, lines = one_push(r)
         verdicts.append(verdict)
