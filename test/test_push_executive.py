@@ -66,6 +66,13 @@ def run(shelf, sequence, max_pushes=2, closed_loop=True):
                    pushes=actions(shelf, max_pushes))
 
 
+def proof(shelf) -> tuple:
+    """(the re-plan's answer on the fake shelf as it is now, the blocking pairs its proof names)."""
+    cache = GeometryCache(shelf)
+    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
+    return replan(rp, (), cache), blocking_pairs(rp, cache)
+
+
 def test_the_proof_names_its_blocking_pairs_as_data():
     """exact.blocking_needs is the cycle the "no sequence" line names ("b needs T moved"), and replan.blocking_pairs
     finds it over the re-plan's cache."""
@@ -74,12 +81,9 @@ def test_the_proof_names_its_blocking_pairs_as_data():
     assert blocking_needs("T", {"T": [(frozenset(), (frozenset({"b"}),))]}) == ()  # b can leave: no cycle
     with_a = dict(lanes, T=[(frozenset(), (frozenset({"a", "b"}),))], a=[(frozenset(), (frozenset({"c"}),))])
     assert can_leave("T", with_a) == ("a", "c") and can_leave("T", lanes) == () and can_leave("x", lanes) == ()
-    shelf = PushShelf()
-    cache = GeometryCache(shelf)
-    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
-    answer = replan(rp, (), cache)
+    answer, pairs = proof(PushShelf())
     assert isinstance(answer, str) and "b needs T moved" in answer, answer
-    assert blocking_pairs(rp, cache) == (("b", "T"),)
+    assert pairs == (("b", "T"),)
 
 
 def test_candidates_are_both_directions_cheapest_first():
@@ -113,10 +117,8 @@ def test_a_lying_bottle_in_every_lane_of_t_is_pushed_out_of_them():
     of T's lanes, executes it and re-plans: T alone."""
     shelf = PushShelf(lanes={"T": [{"e"}], "e": []})
     shelf.put("e", 0.66, 0.08, TOP + 0.033, tilt=math.pi / 2)
-    cache = GeometryCache(shelf)
-    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
-    assert "cannot grasp it: e" in replan(rp, (), cache)
-    assert blocking_pairs(rp, cache) == (("e", "T"),)
+    answer, pairs = proof(shelf)
+    assert "cannot grasp it: e" in answer and pairs == (("e", "T"),), answer
     out = run(shelf, [])
     assert shelf.push_questions[0] == ("e", "T", frozenset()) and shelf.pushes == [("e", "T", ())], out.message
     assert out.success, out.message
@@ -148,11 +150,9 @@ def test_a_laneless_bottle_in_t_s_lanes_is_pushed_when_t_s_free_lane_fails():
     asked ("the proof names no pair"); now (e, T) is a pair (exact.laneless_in_lanes), the push of e out of T's
     lanes is asked and executed, and the re-plan retrieves T."""
     shelf = FailedLane()
-    cache = GeometryCache(shelf)
-    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
-    why = replan(rp, (), cache)
+    why, pairs = proof(shelf)
     assert isinstance(why, str) and "T unfeasible from every set reached" in why, why
-    assert blocking_pairs(rp, cache) == (("e", "T"),)
+    assert pairs == (("e", "T"),)
     out = run(shelf, [])
     assert shelf.pushes == [("e", "T", ())], out.message
     assert out.success, out.message
