@@ -29,6 +29,15 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+def pytest_sessionfinish(session, exitstatus):
+    """The node processes the tests SIGKILLed (chaos, respawn, stop timeouts) left their Fast DDS shared-memory files
+    in /dev/shm: removed once the whole run is over, by the controller (graph.clean_shared_memory: only the files
+    whose owner is gone)."""
+    if not hasattr(session.config, "workerinput"):
+        from relocation_app.graph import clean_shared_memory
+        print(f"\n[shared memory] {clean_shared_memory()}")
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     """QTREE_TEST_CPU=FILE: a JSON line per test appended to FILE with its wall time and the CPU seconds of this
