@@ -66,7 +66,7 @@ SCENE_QOS = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 # Requests queue here while one is planned: the default depth 10 dropped all but 11 of 50 concurrent requests
 # silently (their clients waited forever); 1000 answers a burst of a whole tree level.
 SERVICE_QOS = QoSProfile(depth=1000)
-EXIT_NO_STATE = 75  # EX_TEMPFAIL: the process heard no joint state although the driver publishes them; start it again
+EXIT_NO_STATE = 75  # EX_TEMPFAIL: no joint state heard while one was needed (_check_first_state): start it again
 
 
 class MotionPlannerNode(Node):
