@@ -108,6 +108,11 @@ class Collector:
                 self._cond.wait(left)
             return list(self.msgs)
 
+    def timed(self) -> list[tuple[float, Any]]:
+        """(receive time, message) of every message so far."""
+        with self._cond:
+            return list(zip(self.times, self.msgs))
+
     def clear(self) -> None:
         with self._cond:
             self.msgs.clear()

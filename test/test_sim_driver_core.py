@@ -253,3 +253,23 @@ def test_a_frame_carries_the_wall_time_of_the_state_it_shows_not_of_its_publishi
     lags = []
     core.camera_loop(0.01, lambda f: lags.append(time.time() - f.wall) or False, threading.Event())
     assert len(lags) == 1 and lags[0] >= 0.3, lags
+
+
+@pytest.mark.parametrize("factor", [1.0, 2.0])
+def test_the_simulation_never_runs_ahead_of_the_wall(sim, monkeypatch, factor):
+    """The pacing (SimDriver._steps_due) on a wall clock the test moves: late ticks of 1-700 ms (a loaded machine).
+    Simulated time since the pacing's origin stays at most `factor` times the wall's (a late loop drops its backlog
+    beyond MAX_LAG instead of racing, which only moves the origin later)."""
+    import jaco2_sim_driver.driver as driver_module
+
+    wall = [1000.0]
+    monkeypatch.setattr(driver_module.time, "monotonic", lambda: wall[0])
+    core = driver(sim, real_time_factor=factor)
+    core.tick()  # the pacing's origin
+    wall0, sim0 = wall[0], sim.time
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        wall[0] += float(rng.choice([0.001, 0.003, 0.02, 0.1, 0.7], p=[0.5, 0.3, 0.1, 0.07, 0.03]))
+        core.tick()
+        assert sim.time - sim0 <= factor * (wall[0] - wall0) + 1e-9
+    assert sim.time - sim0 > 0.1 * factor * (wall[0] - wall0)  # it did run
