@@ -2,6 +2,8 @@
 commands, Kinova's stop/start and home, the fingers protocol of kinova_fingers_action.cpp, the surfaces' joint
 states, the parameter check, the camera loop. The node over DDS: test_driver_node.py, test_kinova_surface.py."""
 import threading
+import time
+import types
 
 import numpy as np
 import pytest
@@ -263,7 +265,10 @@ def test_the_simulation_never_runs_ahead_of_the_wall(sim, monkeypatch, factor):
     import jaco2_sim_driver.driver as driver_module
 
     wall = [1000.0]
-    monkeypatch.setattr(driver_module.time, "monotonic", lambda: wall[0])
+    # the driver module's own clock only (not time.monotonic of every thread in this worker)
+    clock = types.SimpleNamespace(**{k: getattr(time, k) for k in dir(time) if not k.startswith("_")})
+    clock.monotonic = lambda: wall[0]
+    monkeypatch.setattr(driver_module, "time", clock)
     core = driver(sim, real_time_factor=factor)
     core.tick()  # the pacing's origin
     wall0, sim0 = wall[0], sim.time
