@@ -84,13 +84,14 @@ for _obj in list(globals().values()):
 
 # build_msgs PKG PYTHON_IMPORTS. CMAKE_BUILD_TYPE=None: no optimisation flags. The generated type support only
 # (de)serializes this project's small messages; compiled with Release's -O3 it took 36 s instead of 24 s to build.
+# QTREE_PYTHON_ONLY=ON: the C and Python generators only, for rclpy (msg_defs/cmake/python_only_generators.cmake).
 build_msgs() {
   local pkg=$1 build=$ROOT/build/$1
   rm -rf "$build"; mkdir -p "$build"
   ( source "$VENV/bin/activate"
     export CMAKE_PREFIX_PATH=$VENV AMENT_PREFIX_PATH=$VENV
     cmake -S "$ROOT/msg_defs/$pkg" -B "$build" -DCMAKE_INSTALL_PREFIX="$VENV" -DBUILD_TESTING=OFF \
-      -DPython3_EXECUTABLE="$VENV/bin/python" -DCMAKE_BUILD_TYPE=None > "$build/cmake.log" 2>&1 \
+      -DPython3_EXECUTABLE="$VENV/bin/python" -DCMAKE_BUILD_TYPE=None -DQTREE_PYTHON_ONLY=ON > "$build/cmake.log" 2>&1 \
       || { tail -30 "$build/cmake.log"; exit 1; }
     cmake --build "$build" -j2 >> "$build/cmake.log" 2>&1 || { tail -30 "$build/cmake.log"; exit 1; }
     cmake --install "$build" >> "$build/cmake.log" 2>&1 || { tail -30 "$build/cmake.log"; exit 1; } )
@@ -100,10 +101,14 @@ build_msgs() {
 # Inputs of a package's build step: its files, its directories (a file added or removed) and the wheels.
 msgs_inputs() { echo msg_defs/$1 msg_defs/$1/* msg_defs/$1/*/* msg_defs/cmake/* requirements.txt requirements-build.txt; }
 
+# The three packages are independent: their builds run side by side (each configure is one core's work), and a
+# failure of any stops the set-up once all have ended.
+build_pids=()
 step msgs-qtree_relocation_msgs $(msgs_inputs qtree_relocation_msgs) -- build_msgs qtree_relocation_msgs \
   "from qtree_relocation_msgs.msg import ObjectState, ObjectArray
 from qtree_relocation_msgs.srv import PlanFeasibility
-from qtree_relocation_msgs.action import RelocateObject, TrainPlanner"
+from qtree_relocation_msgs.action import RelocateObject, TrainPlanner" &
+build_pids+=($!)
 
 KINOVA_MSGS_IMPORTS="from kinova_msgs.msg import JointVelocity, JointAngles, FingerPosition
 from kinova_msgs.srv import HomeArm, Start, Stop
@@ -120,7 +125,12 @@ if [ "${QTREE_SKIP_KINOVA_MSGS:-0}" = 1 ] || { [ -n "$kinova_at" ] && [[ "$kinov
       || { echo "error: the kinova_msgs at $kinova_at lacks types this project uses" >&2; exit 1; }
   fi
 else
-  step msgs-kinova_msgs $(msgs_inputs kinova_msgs) -- build_msgs kinova_msgs "$KINOVA_MSGS_IMPORTS"
+  step msgs-kinova_msgs $(msgs_inputs kinova_msgs) -- build_msgs kinova_msgs "$KINOVA_MSGS_IMPORTS" &
+  build_pids+=($!)
 fi
 
-step msgs-tf2_msgs $(msgs_inputs tf2_msgs) -- build_msgs tf2_msgs "from tf2_msgs.msg import TFMessage"
+step msgs-tf2_msgs $(msgs_inputs tf2_msgs) -- build_msgs tf2_msgs "from tf2_msgs.msg import TFMessage" &
+build_pids+=($!)
+failed=0
+for pid in "${build_pids[@]}"; do wait "$pid" || failed=1; done
+[ $failed = 0 ] || { echo "error: an interface package failed to build (its log: build/<package>/cmake.log)" >&2; exit 1; }
