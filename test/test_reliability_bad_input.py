@@ -7,13 +7,14 @@ field, malformed YAML, missing file, NaN in scene messages), NaN/Inf and wrong-l
 driver (test_driver_node.py::test_bad_command_changes_nothing_and_node_keeps_running and
 ::test_nan_on_the_kinova_topic_is_rejected), training goals out of range and bad scenes
 (test_reliability_task_planner.py)."""
+import importlib
 import sys
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_procs import REPO, RosGraph
+from ros_procs import REPO, RosGraph, main_in_process
 
 from stpik_motion_planner.planning.params import PlannerParams
 
@@ -52,24 +53,51 @@ CASES = [  # (node, ros args, words of the one line)
 ]
 
 
-def test_driver_perception_and_planner_refuse_bad_files_and_parameters_with_one_line(tmp_path):
-    files = _files(tmp_path)
+def _args(case: tuple, files: dict) -> tuple[str | None, list[str]]:
+    """(the params file to add, or None; the case's ros args with the placeholders replaced by the files)."""
+    (_, params_file, _), args, _ = case
 
     def subst(a):
         return next((files[k.lower()] for k in files if a.endswith(k.upper())), a)
+    args = [a.split(":=")[0] + ":=" + subst(a.split(":=")[1]) if ":=" in a else subst(a) for a in args]
+    return (None if "--params-file" in args else str(params_file)), args
 
+
+# the first case of each node runs as a process; the others call its main() in the test's process (ros_procs.
+# main_in_process: the same code after the imports, 1.5-1.9 s less CPU each)
+PROCESS_CASES = [next(c for c in CASES if c[0] is node) for node in (DRIVER, PERCEPTION, PLANNER)]
+
+
+def test_driver_perception_and_planner_refuse_bad_files_and_parameters_with_one_line(tmp_path):
+    files = _files(tmp_path)
     with RosGraph(tmp_path) as g:
         procs = []
-        for k, ((module, params_file, _), args, _) in enumerate(CASES):
-            args = [a.split(":=")[0] + ":=" + subst(a.split(":=")[1]) if ":=" in a else subst(a) for a in args]
-            pf = None if "--params-file" in args else params_file
+        for k, case in enumerate(PROCESS_CASES):
+            pf, args = _args(case, files)
+            module = case[0][0]
             procs.append(g.start(module, params_file=pf, params={"camera_rate": 0.0} if module == DRIVER[0] else {},
                                  ros_args=tuple(args), name=f"case{k}"))
-        for p, ((_, _, prefix), args, words) in zip(procs, CASES):
+        for p, ((_, _, prefix), args, words) in zip(procs, PROCESS_CASES):
             p.popen.wait(90)
             lines = [ln for ln in p.log().splitlines() if ln.strip()]
             assert p.popen.returncode == 2, (args, p.log()[-2000:])
             assert len(lines) == 1 and lines[0].startswith(prefix) and words in lines[0], (args, lines)
+
+
+MAINS = {DRIVER: "jaco2_sim_driver.driver_node", PERCEPTION: "perception_aruco.perception_node",
+         PLANNER: "stpik_motion_planner.motion_planner_node"}
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c not in PROCESS_CASES], ids=lambda c: f"{c[0][2][:-2]}-{c[2]}")
+def test_the_other_bad_files_and_parameters_exit_2_with_one_line(case, tmp_path, capfd):
+    files = _files(tmp_path)
+    pf, args = _args(case, files)
+    extra = ["-p", "camera_rate:=0.0"] if case[0] is DRIVER else []
+    main = importlib.import_module(MAINS[case[0]]).main
+    status, lines = main_in_process(main, (["--params-file", pf] if pf else []) + extra + args, capfd, tmp_path)
+    prefix, words = case[0][2], case[2]
+    assert status == 2, (args, lines)
+    assert len(lines) == 1 and lines[0].startswith(prefix) and words in lines[0], (args, lines)
 
 
 # -- the motion planner's parameters (core) ------------------------------------------------------------------------

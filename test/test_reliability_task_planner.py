@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from ros_procs import REPO, NodeProcess, RosGraph
+from ros_procs import REPO, NodeProcess, RosGraph, main_in_process
 
 from qtree_task_planner.learning.params import TrainingParams
 from qtree_task_planner.learning.training import train
@@ -362,19 +362,32 @@ BAD_STARTS = [
 ]
 
 
-def test_bad_parameters_exit_2_with_one_line(tmp_path):
-    """All cases started at once (they exit before talking to anyone): status 2 and one line naming the problem."""
+def _bad_files(tmp_path) -> dict:
     (tmp_path / "malformed.yaml").write_text("task_planner:\n  ros__parameters:\n    alpha: [0.5\n")
     (tmp_path / "partial.yaml").write_text("task_planner:\n  alpha: 0.5\n")
-    subst = {"MALFORMED": str(tmp_path / "malformed.yaml"), "PARTIAL": str(tmp_path / "partial.yaml")}
+    return {"MALFORMED": str(tmp_path / "malformed.yaml"), "PARTIAL": str(tmp_path / "partial.yaml")}
+
+
+def test_bad_parameters_exit_2_with_one_line(tmp_path):
+    """The first case as a process: status 2 and one line naming the problem, nothing else from its imports or rcl."""
+    args, words = BAD_STARTS[0]
     with RosGraph(tmp_path) as g:
-        procs = [g.start(MODULE, params_file=PARAMS_FILE, ros_args=tuple(subst.get(a, a) for a in args),
-                         name=f"bad{k}") for k, (args, _) in enumerate(BAD_STARTS)]
-        for p, (args, words) in zip(procs, BAD_STARTS):
-            p.popen.wait(60)
-            lines = [ln for ln in p.log().splitlines() if ln.strip()]
-            assert p.popen.returncode == 2, (args, p.log())
-            assert len(lines) == 1 and lines[0].startswith("task_planner: ") and words in lines[0], (args, lines)
+        p = g.start(MODULE, params_file=PARAMS_FILE, ros_args=tuple(args), name="bad")
+        p.popen.wait(60)
+        lines = [ln for ln in p.log().splitlines() if ln.strip()]
+        assert p.popen.returncode == 2, (args, p.log())
+        assert len(lines) == 1 and lines[0].startswith("task_planner: ") and words in lines[0], (args, lines)
+
+
+@pytest.mark.parametrize("args, words", BAD_STARTS[1:], ids=[w for _, w in BAD_STARTS[1:]])
+def test_the_other_bad_parameters_exit_2_with_one_line(args, words, tmp_path, capfd):
+    """The node's main() in the test's process (ros_procs.main_in_process: the code after the imports)."""
+    from qtree_task_planner.task_planner_node import main  # not at the top: this file is the fake planner's script
+    subst = _bad_files(tmp_path)
+    status, lines = main_in_process(main, ["--params-file", str(PARAMS_FILE), *(subst.get(a, a) for a in args)],
+                                    capfd, tmp_path)
+    assert status == 2, (args, lines)
+    assert len(lines) == 1 and lines[0].startswith("task_planner: ") and words in lines[0], (args, lines)
 
 
 # -- lifecycle (docs/reliability.md, section 9): nothing hangs ----------------------------------------------------
