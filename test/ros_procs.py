@@ -255,24 +255,31 @@ class RosGraph:
         self.close()
 
 
-def main_in_process(main: Callable[[list[str]], None], ros_args: list[str], capfd: Any,
-                    tmp: Path) -> tuple[Any, list[str]]:
+def main_in_process(main: Callable[[list[str]], None], ros_args: list[str], capfd: Any, tmp: Path,
+                    timeout: float = 60.0) -> tuple[Any, list[str]]:
     """Call a node's `main` with `--ros-args ros_args` in this process, for a start that must fail before the node
     serves: (its exit status, the non-empty lines it wrote to stdout and stderr, read from the file descriptors).
     That is the code `python -m <node> --ros-args ...` runs after its imports, in a domain of its own; a process
     costs 1.5-1.9 s of CPU in imports, this 0.02-0.16 s. One start per node stays a process (the tests that use
-    this), for what only a process shows: its imports' and rcl's own output, its exit."""
+    this), for what only a process shows: its imports' and rcl's own output, its exit. A start that does not fail
+    is shut down after `timeout` s (rclpy's context, from a timer thread): status 0, the test's assertion then says
+    so instead of waiting for pytest's own timeout."""
+    import rclpy
+
     domain, lock = reserve_domain_id()
     saved = {k: os.environ.get(k) for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_HOME",
                                             "ROS_LOG_DIR")}
     os.environ.update({k: v for k, v in ros_env(domain, tmp).items() if k in saved})
     capfd.readouterr()
+    guard = threading.Timer(timeout, rclpy.try_shutdown)
+    guard.start()
     try:
         main(["main_in_process", "--ros-args", *ros_args])
         status: Any = 0
     except SystemExit as e:
         status = e.code
     finally:
+        guard.cancel()
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)

@@ -84,16 +84,12 @@ def test_driver_perception_and_planner_refuse_bad_files_and_parameters_with_one_
             assert len(lines) == 1 and lines[0].startswith(prefix) and words in lines[0], (args, lines)
 
 
-MAINS = {DRIVER: "jaco2_sim_driver.driver_node", PERCEPTION: "perception_aruco.perception_node",
-         PLANNER: "stpik_motion_planner.motion_planner_node"}
-
-
 @pytest.mark.parametrize("case", [c for c in CASES if c not in PROCESS_CASES], ids=lambda c: f"{c[0][2][:-2]}-{c[2]}")
 def test_the_other_bad_files_and_parameters_exit_2_with_one_line(case, tmp_path, capfd):
     files = _files(tmp_path)
     pf, args = _args(case, files)
     extra = ["-p", "camera_rate:=0.0"] if case[0] is DRIVER else []
-    main = importlib.import_module(MAINS[case[0]]).main
+    main = importlib.import_module(case[0][0]).main
     status, lines = main_in_process(main, (["--params-file", pf] if pf else []) + extra + args, capfd, tmp_path)
     prefix, words = case[0][2], case[2]
     assert status == 2, (args, lines)
