@@ -13,9 +13,10 @@
 """
 from __future__ import annotations
 
+import copy
 import threading
 import time
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, Mapping, TypeVar
 
 import rclpy
 from qtree_relocation_msgs.action import RelocateObject, TrainPlanner
@@ -42,6 +43,7 @@ from relocation_common.ros_conversions import (
     NO_ANSWER,
     blockers_from_msgs,
     lanes_from_msgs,
+    moved_to_fields,
     msg_to_objects,
     near_from_fields,
 )
@@ -62,6 +64,18 @@ class ServiceOracle:
         self.stop, self.on_answer = stop, on_answer
         self.last_ok = time.monotonic()
         self.name: str = client.srv_name
+        self.moved: dict[str, tuple[float, float]] = {}  # `what_if`: the questions' objects elsewhere
+
+    def what_if(self, moved: Mapping[str, tuple[float, float]]) -> ServiceOracle:
+        """This oracle asking on the scene with the objects of `moved` at those (x, y) on the top shelf
+        (PlanFeasibility's moved_ids and moved_to: what would follow a push); this one is unchanged."""
+        other = copy.copy(self)
+        other.moved = dict(moved)
+        return other
+
+    def _request(self, **fields: Any) -> PlanFeasibility.Request:
+        ids, points = moved_to_fields(self.moved)
+        return PlanFeasibility.Request(timeout=self.timeout, moved_ids=ids, moved_to=points, **fields)
 
     def ready(self, timeout: float) -> bool:
         """Whether the service is up, waiting up to `timeout` s for it."""
@@ -79,8 +93,7 @@ class ServiceOracle:
 
     def _ask(self, object_id: str, removed: frozenset[str], certify: bool) -> FeasibilityAnswer:
         # the label only: training never uses the trajectory (about 5 ms of a feasible answer's round trip)
-        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout,
-                                      label_only=True, certify=certify)
+        req = self._request(object_id=object_id, removed_ids=sorted(removed), label_only=True, certify=certify)
         resp = self._call(req, f"the certification of {object_id!r}" if certify else repr(object_id))
         return FeasibilityAnswer(Label(resp.label), resp.planning_time, resp.attempts, resp.message,
                                  blockers=blockers_from_msgs(resp.blockers),
@@ -90,8 +103,8 @@ class ServiceOracle:
         """Can `object_id` be pushed out of the grasp lanes of `clear_for` (PlanFeasibility, action "push")? A
         planner that refuses the question, or answers it as a pick (one that does not plan pushes: its answer's
         action is not "push"), says no, with why."""
-        req = PlanFeasibility.Request(object_id=object_id, removed_ids=sorted(removed), timeout=self.timeout,
-                                      label_only=True, action=PUSH, clear_for=clear_for)
+        req = self._request(object_id=object_id, removed_ids=sorted(removed), label_only=True, action=PUSH,
+                            clear_for=clear_for)
         try:
             resp = self._call(req, f"the push of {object_id!r}")
         except ValueError as e:
@@ -101,7 +114,7 @@ class ServiceOracle:
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers at once (the planner's screen, no planning: all_lanes); None
         from a planner that refuses the question (one without lane blockers: the A* then learns from answers)."""
-        req = PlanFeasibility.Request(object_id="", removed_ids=sorted(removed), timeout=self.timeout, all_lanes=True)
+        req = self._request(object_id="", removed_ids=sorted(removed), all_lanes=True)
         try:
             return lanes_from_msgs(self._call(req, "the lane blockers").lanes)
         except ValueError:

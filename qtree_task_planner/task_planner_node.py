@@ -347,8 +347,8 @@ class TaskPlannerNode(Node):
 
         w = Watched(relocate_timed, self._scenes, self.p("scene_after_wait"), scenario.shelf.top_z,
                     perception=not seen, outage=self.p("scene_outage_wait"), push_one=push_timed)
-        pushes = PushActions(service.push, w.push, lambda: self._action_cost.push, self.p("max_pushes")) \
-            if self._pushes() else None
+        pushes = PushActions(service.push, w.push, lambda: self._action_cost.push, self.p("max_pushes"),
+                             service.what_if) if self._pushes() else None
 
         def phase(text: str) -> None:
             fb.phase = text

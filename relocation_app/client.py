@@ -151,7 +151,9 @@ class RelocationClient:
     def feasibility_oracle(self, replicas: int = 1, timeout: float = 5.0, margin: float = 2.0) -> ReplicaOracle:
         """The task planner's view of feasibility, for your own search: a FeasibilityOracle and BatchOracle
         (relocation_common.feasibility) over the motion planner and its replicas (/replica_<k>), label only, one
-        question in flight per replica, failover when one dies (qtree_task_planner.executive.replicas)."""
+        question in flight per replica, failover when one dies (qtree_task_planner.executive.replicas); its
+        `what_if({id: (x, y)})` asks the same questions on the scene with those objects elsewhere on the top shelf
+        (what would follow a push)."""
         return ReplicaOracle([ServiceOracle(self.node.create_client(PlanFeasibility, name,
                                                                     qos_profile=QoSProfile(depth=1000)),
                                             timeout, margin, connect_wait=timeout)

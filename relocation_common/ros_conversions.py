@@ -13,7 +13,7 @@ from typing import Collection, Iterable, Mapping, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import Point, TransformStamped
 from numpy.typing import ArrayLike
 from qtree_relocation_msgs.msg import BlockerSet as BlockerSetMsg
 from qtree_relocation_msgs.msg import LaneBlockers, ObjectArray, ObjectState
@@ -167,3 +167,19 @@ def lanes_to_msgs(lanes: Mapping[str, Iterable[BlockerSet]]) -> list[LaneBlocker
 def lanes_from_msgs(msgs: Iterable[LaneBlockers]) -> dict[str, tuple[BlockerSet, ...]]:
     """PlanFeasibility's `lanes` -> object -> its lanes' BlockerSets."""
     return {m.object_id: blockers_from_msgs(m.lanes) for m in msgs}
+
+
+def moved_to_fields(moved: Mapping[str, tuple[float, float]]) -> tuple[list[str], list[Point]]:
+    """object -> (x, y) on the top shelf -> PlanFeasibility's (moved_ids, moved_to) (ids sorted; z 0)."""
+    ids = sorted(moved)
+    return ids, [Point(x=float(moved[i][0]), y=float(moved[i][1]), z=0.0) for i in ids]
+
+
+def moved_from_fields(ids: Sequence[str], points: Sequence[Point]) -> dict[str, tuple[float, float]]:
+    """PlanFeasibility's (moved_ids, moved_to) -> object -> (x, y); ValueError when they do not pair up (lengths
+    differ, an id twice)."""
+    if len(ids) != len(points):
+        raise ValueError(f"moved_ids ({len(ids)}) and moved_to ({len(points)}) must pair up, one position per id")
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"moved_ids names an object twice: {sorted(ids)}")
+    return {str(i): (float(p.x), float(p.y)) for i, p in zip(ids, points)}

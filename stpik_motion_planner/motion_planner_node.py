@@ -50,6 +50,7 @@ from relocation_common.ros_conversions import (
     NO_ANSWER,
     blockers_to_msgs,
     lanes_to_msgs,
+    moved_from_fields,
     msg_to_objects,
     near_to_fields,
 )
@@ -216,19 +217,22 @@ class MotionPlannerNode(Node):
 
     def _feasibility(self, req: PlanFeasibility.Request) -> tuple:
         """core.feasibility of the request ((lanes, answer, the push's plan or None)), or core.push_feasibility for
-        action "push". A question naming an object the planner does not know, asked before any scene came (a client
-        that discovered the scene's publisher sooner: an unlisted object it saw), waits up to scene_wait for that
-        scene and is asked again."""
+        action "push", on the scene with the objects of moved_ids at moved_to when given (what would follow a
+        push). A question naming an object the planner does not know, asked before any scene came (a client that
+        discovered the scene's publisher sooner: an unlisted object it saw), waits up to scene_wait for that scene
+        and is asked again."""
         if req.action not in ("", PUSH):
             raise ValueError(f"action must be '' (a pick) or 'push', got {req.action!r}")
+        moved = moved_from_fields(req.moved_ids, req.moved_to)
 
         def ask() -> tuple:
             if req.action == PUSH:
-                lanes = self.core.feasibility("", list(req.removed_ids), None, True)[0] if req.all_lanes else {}
+                lanes = self.core.feasibility("", list(req.removed_ids), None, True, moved=moved)[0] \
+                    if req.all_lanes else {}
                 return (lanes, *self.core.push_feasibility(req.object_id, list(req.removed_ids), req.clear_for,
-                                                           req.timeout))
+                                                           req.timeout, moved))
             return (*self.core.feasibility(req.object_id, list(req.removed_ids), req.timeout, req.all_lanes,
-                                           req.certify), None)
+                                           req.certify, moved), None)
 
         try:
             return ask()

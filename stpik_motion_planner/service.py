@@ -28,7 +28,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -150,34 +150,39 @@ class MotionPlannerService:
 
     # -- feasibility (Eq. 11) -------------------------------------------------------------------------------
     def feasibility(self, object_id: str, removed: Iterable[str], timeout: float | None = None,
-                    all_lanes: bool = False, certify: bool = False
-                    ) -> tuple[dict[str, tuple[BlockerSet, ...]], FeasibilityAnswer | None]:
+                    all_lanes: bool = False, certify: bool = False, moved: Mapping[str, tuple[float, float]] | None
+                    = None) -> tuple[dict[str, tuple[BlockerSet, ...]], FeasibilityAnswer | None]:
         """(every lane's blockers with `removed` gone if `all_lanes`, else {}; the answer for `object_id`, None when
-        all_lanes and no object is asked): the pick, or with `certify` the certification (MotionPlanner.certify).
+        all_lanes and no object is asked): the pick, or with `certify` the certification (MotionPlanner.certify);
+        on the scene with the objects of `moved` at those (x, y) (MotionPlanner.what_if: what would follow a push).
         `timeout` None or <= 0: the planner's. UnknownObjectError, ScenarioError, ValueError, TypeError for a bad
         question; SafetyNetTimeout when the wall-clock safety net ran out."""
         if timeout is not None and not math.isfinite(timeout):
             raise ValueError(f"timeout must be a finite number of seconds (<= 0: the default), got {timeout}")
         removed = list(removed)
         with self.plan_lock:
-            lanes = lane_blockers(self.planner, removed) if all_lanes else {}
-            ask = self.planner.certify if certify else self.planner.feasibility
+            planner = self.planner.what_if(moved or {}, removed)
+            lanes = lane_blockers(planner, removed) if all_lanes else {}
+            ask = planner.certify if certify else planner.feasibility
             answer = None if all_lanes and not object_id else ask(
                 object_id, removed, float(timeout) if timeout is not None and timeout > 0 else None)
         return lanes, answer
 
-    def push_feasibility(self, object_id: str, removed: Iterable[str], clear_for: str, timeout: float | None = None
+    def push_feasibility(self, object_id: str, removed: Iterable[str], clear_for: str, timeout: float | None = None,
+                         moved: Mapping[str, tuple[float, float]] | None = None
                          ) -> tuple[FeasibilityAnswer, PushPlan | None]:
         """The answer for a push of `object_id` out of the grasp lanes of `clear_for` with `removed` gone
         (MotionPlanner.push_feasibility: g_O with the whole motion and the plan, whose `end` is the predicted pose;
-        g_U with the reason and None). Errors as `feasibility`."""
+        g_U with the reason and None), on the scene with the objects of `moved` elsewhere as `feasibility`. Errors
+        as `feasibility`."""
         if timeout is not None and not math.isfinite(timeout):
             raise ValueError(f"timeout must be a finite number of seconds (<= 0: the default), got {timeout}")
         if not isinstance(clear_for, str) or not clear_for:
             raise ValueError("a push question names the object whose lanes it clears (clear_for)")
         with self.plan_lock:
-            return self.planner.push_feasibility(object_id, clear_for, list(removed),
-                                                 float(timeout) if timeout is not None and timeout > 0 else None)
+            removed = list(removed)
+            return self.planner.what_if(moved or {}, removed).push_feasibility(
+                object_id, clear_for, removed, float(timeout) if timeout is not None and timeout > 0 else None)
 
     # -- relocation -----------------------------------------------------------------------------------------
     def busy(self) -> bool:

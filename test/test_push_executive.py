@@ -295,7 +295,128 @@ def test_a_missing_push_factor_is_said():
     assert not out.success and "no push: no push factor: action_cost.push is not a parameter" in out.message
 
 
+# ---------------------------------------------------------------------------------- what would follow a push
+class Lookahead(PushShelf):
+    """PushShelf whose pushes of the objects in `slip` slide without leaving the lanes they were to clear (the
+    executed push, and the motion planner's what-if scene: `what_if`, a copy of this shelf with the moved objects at
+    their predicted end and, unless they slip, out of every lane)."""
+
+    def __init__(self, slip=(), **kw):
+        super().__init__(**kw)
+        self.slip, self.what_ifs = set(slip), []
+
+    def do_push(self, obj, clear_for, removed):
+        self.pushes.append((obj, clear_for, tuple(removed)))
+        o = self.scene[obj]
+        self.put(obj, o.x, o.y + SLIDE, o.z, o.tilt)
+        if obj not in self.slip:
+            self.lanes[clear_for] = [b - {obj} for b in self.lanes.get(clear_for, [set()])]
+        return True, "pushed"
+
+    def what_if(self, moved):
+        self.what_ifs.append(dict(moved))
+        other = Lookahead(self.slip, lanes={k: [set(b) for b in v] for k, v in self.lanes.items()})
+        other.scene = dict(self.scene)
+        for obj, (x, y) in moved.items():
+            o = self.scene[obj]
+            other.put(obj, x, y, o.z, o.tilt)
+            if obj not in self.slip:
+                other.lanes = {k: [b - {obj} for b in v] for k, v in other.lanes.items()}
+        return other
+
+
+def looking(shelf, max_pushes=1):
+    return execute(SCENARIO, [], scene_from_scenario(SCENARIO), shelf.relocate, shelf.perceive, CachedOracle(shelf),
+                   closed_loop=True, cancelled=lambda: False,
+                   pushes=PushActions(shelf.push, shelf.do_push, lambda: 2.0, max_pushes, shelf.what_if))
+
+
+def test_a_push_is_chosen_by_what_would_follow_it():
+    """b's push (cost 1.0) is the cheapest, but b would slip along T's lane: on the what-if scene (b at its
+    predicted end) no pick sequence follows. T's push (2.0) out of b's lanes is followed by b, T. Before, the Pusher
+    executed the cheapest feasible push (b's), which opened nothing, and with max_pushes 1 the goal ended; now it
+    asks what would follow each push and executes T's: b, then T retrieved."""
+    shelf = Lookahead(slip={"b"})
+    out = looking(shelf)
+    assert out.success, out.message
+    assert shelf.pushes == [("T", "b", ())] and [o for o, _ in shelf.relocations] == ["b", "T"]
+    assert shelf.what_ifs == [{"b": pytest.approx((0.55, 0.10))}, {"T": pytest.approx((0.77, 0.10))}]
+    (p,) = out.pushes
+    assert p.refused == ("b out of T's lanes (no pick sequence after it: T cannot be reached: no feasible relocation "
+                         "sequence with the actions side_grasp, top_grasp over the 5 obstacles on the top shelf (0 "
+                         "planner calls); blocking cycle: every lane of T needs an object that cannot leave first "
+                         "(lane {b}: b needs T moved))",), p.refused
+
+
+def test_the_push_whose_retrieval_costs_least_is_chosen_and_the_asking_stops_there():
+    """Both pushes open a retrieval: b's (1.0, then T: 1.0 in all) is chosen; T's push (2.0) is never asked, since it
+    alone costs more than b's whole retrieval. The choice carries the picks that would follow."""
+    shelf = Lookahead()
+    cache = GeometryCache(shelf)
+    rp = remaining_problem(SCENARIO, shelf.perceive(), ())
+    assert isinstance(replan(rp, (), cache), str)
+    follow = []
+
+    def after(rp, banned, pushed, end, prep):
+        follow.append(pushed)
+        from qtree_task_planner.executive.replan import after_push
+        return after_push(rp, banned, pushed, end, prep, shelf.what_if)
+    pusher = Pusher(PushActions(shelf.push, shelf.do_push, lambda: 2.0, 1),
+                    PushProof(lambda rp: blocking_pairs(rp, cache), lambda rp: (), lambda *a: True, after))
+    choice = pusher.choose(rp, WEIGHTS, {o: WEIGHTS[o] for o in rp.problem.obstacles}, rp.gone, frozenset())
+    assert (choice.object_id, choice.then, choice.total) == ("b", ("T",), pytest.approx(1.0))
+    assert follow == ["b"] and [q[:2] for q in shelf.push_questions] == [("b", "T")]
+
+
+def test_a_push_followed_by_no_sequence_is_executed_only_while_a_further_push_is_left():
+    """Every push slips (nothing follows any): with max_pushes 1 none is executed, and the end says why; with 2 the
+    cheapest is executed as before (a second push may open what the first does not)."""
+    one = Lookahead(slip={"b", "T"})
+    out = looking(one, max_pushes=1)
+    assert not out.success and not one.pushes
+    assert "no push: every push refused: b out of T's lanes (no pick sequence after it: " in out.message, out.message
+    two = Lookahead(slip={"b", "T"})
+    out = looking(two, max_pushes=2)
+    assert not out.success and [p[:2] for p in two.pushes] == [("b", "T")], two.pushes
+
+
+def test_pushed_problem_takes_the_prep_away_and_moves_the_pushed_object():
+    from qtree_task_planner.executive.replan import pushed_problem
+    rp = remaining_problem(SCENARIO, PushShelf().perceive(), ())
+    after = pushed_problem(rp, "b", (0.55, 0.2), ("a",))
+    assert "a" not in after.problem.obstacles and "a" in after.gone and after.relocated == ("a",)
+    assert len(after.free_slots) == len(rp.free_slots) - 1
+    assert after.geometry()["b"][:2] == (0.55, 0.2) and after.moved["b"] == (0.55, 0.2)
+    assert after.problem.costs == {o: c for o, c in rp.problem.costs.items() if o != "a"}
+
+
 # ------------------------------------------------------------------------------------------------ ROS clients
+def test_service_oracle_what_if_asks_on_the_moved_scene(monkeypatch):
+    """ServiceOracle.what_if: every question it asks carries the moved objects (PlanFeasibility moved_ids,
+    moved_to); the oracle it came from asks as before. ReplicaOracle.what_if: each replica's."""
+    from qtree_relocation_msgs.srv import PlanFeasibility
+
+    from qtree_task_planner.executive.replicas import ReplicaOracle
+    from qtree_task_planner.ros_clients import ServiceOracle
+    asked = []
+
+    def call(self, req, what):
+        asked.append(req)
+        return PlanFeasibility.Response(ok=True, label=1, message="ok", action="side_grasp")
+    monkeypatch.setattr(ServiceOracle, "_call", call)
+    plain = ServiceOracle(SimpleNamespace(srv_name="/mp/plan_feasibility"), 5.0, 1.0)
+    moved = plain.what_if({"b": (0.55, 0.2)})
+    moved.feasibility("T", frozenset({"a"}))
+    moved.push("a", "T", frozenset())
+    moved.lane_blockers(frozenset())
+    plain.feasibility("T", frozenset())
+    assert [(list(r.moved_ids), [(p.x, p.y) for p in r.moved_to]) for r in asked] == \
+        [(["b"], [(0.55, 0.2)])] * 3 + [([], [])]
+    replicas = ReplicaOracle([plain, ServiceOracle(SimpleNamespace(srv_name="/replica_1/x"), 5.0, 1.0)])
+    assert [r.moved for r in replicas.what_if({"b": (0.5, 0.1)}).replicas] == [{"b": (0.5, 0.1)}] * 2
+    assert [r.moved for r in replicas.replicas] == [{}, {}]
+
+
 def test_service_oracle_asks_a_push_and_refuses_an_answer_that_is_not_one(monkeypatch):
     from geometry_msgs.msg import Pose
     from qtree_relocation_msgs.srv import PlanFeasibility

@@ -1,7 +1,9 @@
 """The push through the motion_planner node as a real process with the MuJoCo driver over DDS, on a generated "X
 beside T" layout (test/push_layouts.py, seed 0): PlanFeasibility action "push" answers with the action, the predicted
-end pose and the trajectory; RelocateObject action "push" carries it out (succeeded only if the simulator's scene
-shows X at that pose); afterwards T's side grasp, unfeasible before, is feasible; a bad action is refused."""
+end pose and the trajectory; asked before the push on the scene with X at that end (moved_ids, moved_to: what would
+follow it), T's side grasp is feasible; RelocateObject action "push" carries it out (succeeded only if the
+simulator's scene shows X at that pose); afterwards T's side grasp, unfeasible before, is feasible, as the what-if
+answer said; a bad action or a bad what-if scene is refused."""
 
 import pytest
 import yaml
@@ -15,7 +17,7 @@ from qtree_relocation_msgs.srv import PlanFeasibility
 from rclpy.qos import QoSDurabilityPolicy, QoSProfile
 
 from relocation_common.feasibility import Label
-from relocation_common.ros_conversions import msg_to_objects
+from relocation_common.ros_conversions import moved_to_fields, msg_to_objects
 
 pytestmark = pytest.mark.graph
 
@@ -44,8 +46,10 @@ def graph(tmp_path_factory):
         g.close()
 
 
-def _ask(g, object_id, action="", clear_for=""):
-    req = PlanFeasibility.Request(object_id=object_id, timeout=60.0, action=action, clear_for=clear_for)
+def _ask(g, object_id, action="", clear_for="", moved=None):
+    ids, points = moved_to_fields(moved or {})
+    req = PlanFeasibility.Request(object_id=object_id, timeout=60.0, action=action, clear_for=clear_for,
+                                  moved_ids=ids, moved_to=points)
     return g.probe.call(PlanFeasibility, SRV, req, timeout=90)
 
 
@@ -64,6 +68,9 @@ def test_a_push_is_answered_carried_out_and_opens_the_targets_lane(graph):
     x = beside_layout(SEED).object("X")
     end = res.end_pose.position
     assert end.x > x.x + 0.015 and res.end_pose.orientation.w == 1.0
+    what_if = _ask(graph, "T", moved={"X": (end.x, end.y)})  # what would follow the push, asked before it
+    assert what_if.ok and Label(what_if.label) == Label.TARGET, what_if.message
+    assert Label(_ask(graph, "T").label) == Label.UNFEASIBLE  # the planner's own scene: unchanged
     out = _push(graph, "X", "T")
     assert out.status == 4, out.result.message  # succeeded: the scene shows X within slot_tolerance of end_pose
     graph.objects.clear()
@@ -78,6 +85,12 @@ def test_a_bad_action_is_refused_and_the_node_keeps_serving(graph):
     assert not res.ok and "action must be" in res.message
     res = _ask(graph, "X", "push", "")
     assert not res.ok and "clear_for" in res.message
+    req = PlanFeasibility.Request(object_id="T", moved_ids=["X"])  # no position for X
+    res = graph.probe.call(PlanFeasibility, SRV, req, timeout=90)
+    assert not res.ok and "must pair up" in res.message, res.message
+    t = beside_layout(SEED).object("T")
+    res = _ask(graph, "T", moved={"X": (t.x, t.y + 0.01)})
+    assert not res.ok and "overlaps T" in res.message, res.message
     out = _push(graph, "X", "T", action="shove", timeout=30)
     assert out.status == 6 and "action must be" in out.result.message  # aborted with the reason
     assert _ask(graph, "X").ok

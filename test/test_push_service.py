@@ -48,6 +48,32 @@ def test_a_push_answer_names_the_end_pose_and_a_refusal_its_reason(service):
         service.push_feasibility("X", [], "")
 
 
+def test_what_would_follow_a_push_is_asked_on_the_moved_scene_and_the_scene_is_kept(service):
+    """The feasibility question with `moved` (PlanFeasibility moved_ids, moved_to) is answered on the scene with X
+    at the push's predicted end, as a planner given that scene answers it; the planner's own scene, and its answers,
+    are unchanged; a bad what-if scene is refused with the reason."""
+    from stpik_motion_planner.model.push import moved
+    from stpik_motion_planner.planning.planner import MotionPlanner
+    _, plan = service.push_feasibility("X", [], "T")
+    end = {"X": plan.end[:2]}
+    before = service.feasibility("T", [])[1]
+    _, after = service.feasibility("T", [], moved=end)
+    fresh = MotionPlanner(moved(service.planner.scenario, "X", *plan.end[:2]), PARAMS).feasibility("T", [])
+    assert before.label == Label.UNFEASIBLE and after.label == Label.TARGET == fresh.label, after.message
+    lanes, _ = service.feasibility("", [], all_lanes=True, moved=end)
+    opened = [b for b in lanes["T"] if b.lane == plan.lane]
+    assert opened and not any("X" in b.objects for b in opened), lanes["T"]  # the lane the push opens, open
+    again = service.feasibility("T", [])[1]
+    assert (again.label, again.blockers) == (before.label, before.blockers)
+    assert service.planner.scenario.object("X").x != pytest.approx(plan.end[0])
+    t = service.planner.scenario.object("T")
+    for bad, why in [({"nope": (0.7, 0.0)}, "unknown object"), ({"X": (math.nan, 0.0)}, "finite"),
+                     ({"X": (3.0, 0.0)}, "not on the top shelf"), ({"X": (t.x, t.y + 0.01)}, "overlaps T")]:
+        with pytest.raises((KeyError, ValueError), match=why):
+            service.feasibility("T", [], moved=bad)
+    assert service.feasibility("T", [], moved=end)[1].label == Label.TARGET  # the planner keeps serving
+
+
 def test_a_push_goal_moves_the_object_in_the_planners_scene_and_checks_the_outcome(service):
     _, plan = service.push_feasibility("X", [], "T")
     start = {b.id: b for b in service.bottles.values()}

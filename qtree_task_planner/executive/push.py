@@ -20,7 +20,7 @@ Nothing here talks to ROS: the node supplies `ask` (ros_clients.ServiceOracle.pu
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 PUSH = "push"  # the action's name in PlanFeasibility and RelocateObject
@@ -97,17 +97,24 @@ def candidates(needs: Sequence[tuple[str, str]], weights: Mapping[str, float], f
 class PushActions:
     """What the node gives for pushes: ask(object, clear_for, removed) -> PushAnswer (the push question),
     execute(object, clear_for, removed) -> (ok, message) (the push executed), factor() -> the push factor of the
-    action costs (read when a push is first weighed), max_pushes (pushes executed per goal at most)."""
+    action costs (read when a push is first weighed), max_pushes (pushes executed per goal at most), what_if(moved)
+    -> the feasibility oracle asking on the scene with `moved`'s objects at those (x, y) (what would follow a push:
+    replan.after_push)."""
 
     ask: Callable[[str, str, frozenset[str]], PushAnswer]
     execute: Callable[[str, str, list[str]], tuple[bool, str]]
     factor: Callable[[], float]
     max_pushes: int
+    what_if: Callable[[Mapping[str, tuple[float, float]]], Any] | None = None  # the feasibility oracle on the scene
+    # with these objects elsewhere (ros_clients.ServiceOracle.what_if): what would follow a push; None: not looked at
 
     def __post_init__(self) -> None:
         if isinstance(self.max_pushes, bool) or not isinstance(self.max_pushes, int) or self.max_pushes < 0:
             raise ValueError(f"max_pushes must be an integer >= 0, got {self.max_pushes!r}")
 
+
+
+After = tuple[tuple[str, ...], float] | str  # what would follow a push: (the pick sequence, its cost) or why none
 
 
 @dataclass(frozen=True)
@@ -116,11 +123,14 @@ class PushProof:
     with no sequence (replan.blocking_pairs); free(rp) -> the objects the picks alone can take away first, from the
     same proof (replan.free_first); pickable(rp, banned, object, removed) -> whether relocating `object` with
     `removed` gone (beyond rp.gone) is feasible, as the re-plan's oracle answers it (failed options `banned` and the
-    free slots counted)."""
+    free slots counted); follow(rp, banned, pushed, end, prep) -> what would follow the push of `pushed` to its
+    predicted `end` after the relocations `prep` (replan.after_push: the A* over the picks on that scene); None:
+    not looked at (a push is then chosen by its own cost)."""
 
     needs: Callable[[Any], Sequence[tuple[str, str]]]
     free: Callable[[Any], Sequence[str]]
     pickable: Callable[[Any, frozenset[Any], str, frozenset[str]], bool]
+    follow: Callable[[Any, frozenset[Any], str, tuple[float, float], tuple[str, ...]], After] | None = None
 
 
 @dataclass(frozen=True)
@@ -135,6 +145,13 @@ class PushChoice:
     end: tuple[float, float]
     prep: tuple[str, ...]
     refused: tuple[str, ...]
+    then: tuple[str, ...] = ()  # the pick sequence that would follow it (PushProof.follow), () when not known
+    then_cost: float = 0.0  # its cost
+
+    @property
+    def total(self) -> float:
+        """What the retrieval would cost through this push: its prep relocations, the push, the picks after it."""
+        return self.cost + self.then_cost
 
 
 def pick_order(objects: Sequence[str], pickable: Callable[[str, frozenset[str]], bool]) -> tuple[str, ...]:
@@ -158,16 +175,19 @@ class Pusher:
         self.max_pushes, self.proof = actions.max_pushes, proof
         self.executed = 0
         self._failed: set[tuple[str, str]] = set()  # executed, the object left where it was
+        self._free: tuple[Any, tuple[str, ...]] | None = None  # (problem, the objects the picks alone take first)
 
     def choose(self, rp: Any, weights: Mapping[str, float], costs: Mapping[str, float], removed: frozenset[str],
                banned: frozenset[Any]) -> PushChoice | str:
-        """The cheapest feasible push of the remaining problem `rp` (`weights`: each object's weight, the push's
-        cost is its weight x the push factor; `costs`: each object's pick cost; `removed`: the objects gone), or
-        why there is none (one line). Candidates in the order of their push's cost; each asked with `removed`
-        gone, and when refused, with the objects the picks alone can take away first gone too (`prep`); then, a
-        feasible one, again without each of those, heaviest first, keeping only those the push needs gone. A
-        candidate's cost is its prep relocations' costs + its push's; the asking stops when no later candidate can
-        cost less than the best found."""
+        """The push through which the retrieval costs least (`weights`: each object's weight, the push's cost is
+        its weight x the push factor; `costs`: each object's pick cost; `removed`: the objects gone), or why there
+        is none (one line). Candidates in the order of their push's cost; each asked with `removed` gone, and when
+        refused, with the objects the picks alone can take away first gone too (`prep`); then, a feasible one, again
+        without each of those, heaviest first, keeping only those the push needs gone. A candidate costs its prep
+        relocations' costs + its push's + the pick sequence that would follow it (`PushProof.follow`); one after
+        which no pick sequence exists is refused, and chosen (the cheapest such) only when a further push is left
+        (`max_pushes`): a second push may open what the first does not. The asking stops when no later candidate
+        can cost less than the best found."""
         if self.executed >= self.max_pushes:
             return f"max_pushes ({self.max_pushes}) spent" if self.max_pushes else "pushes are off (max_pushes 0)"
         pairs = self.proof.needs(rp)
@@ -177,33 +197,53 @@ class Pusher:
             factor = self.factor()
         except ValueError as e:  # relocation_common.config.ParameterError
             return f"no push factor: {e}"
+        self._free = None
+        refused: list[str] = []
+        best: PushChoice | None = None  # followed by a pick sequence (or not looked at)
+        blind: PushChoice | None = None  # feasible, followed by none: a further push may open it
+        for cost, pushed, clear_for in candidates(pairs, weights, factor):
+            if best is not None and cost >= best.total:
+                break
+            got = self._candidate(rp, banned, pushed, clear_for, cost, removed, costs)
+            if isinstance(got, str):
+                refused.append(f"{pushed} out of {clear_for}'s lanes ({got})")
+                continue
+            choice = replace(got, refused=tuple(refused))
+            after = None if self.proof.follow is None else self.proof.follow(rp, banned, pushed, got.end, got.prep)
+            if isinstance(after, str):
+                refused.append(f"{pushed} out of {clear_for}'s lanes (no pick sequence after it: {after})")
+                blind = choice if blind is None or choice.cost < blind.cost else blind
+                continue
+            if after is not None:
+                choice = replace(choice, then=after[0], then_cost=after[1])
+            if best is None or choice.total < best.total:
+                best = choice
+        if best is not None:
+            return best
+        if blind is not None and self.executed + 1 < self.max_pushes:
+            return replace(blind, refused=tuple(refused))
+        return "every push refused: " + "; ".join(refused)
+
+    def _candidate(self, rp: Any, banned: frozenset[Any], pushed: str, clear_for: str, cost: float,
+                   removed: frozenset[str], costs: Mapping[str, float]) -> PushChoice | str:
+        """The push of `pushed` out of `clear_for`'s lanes with `removed` gone, else with the prep relocations it
+        needs (`_prepared`), its cost the push's `cost` + theirs; or why not ('failed before', the planner's)."""
+        if (pushed, clear_for) in self._failed:
+            return "failed before"
+        answer = self.ask(pushed, clear_for, removed)
+        if answer.feasible and answer.end is not None:
+            return PushChoice(pushed, clear_for, cost, answer.end, (), ())
 
         def pickable(o: str, s: frozenset[str]) -> bool:
             return self.proof.pickable(rp, banned, o, s)
-        free: tuple[str, ...] | None = None  # asked when a push needs it
-        refused: list[str] = []
-        best: PushChoice | None = None
-        for cost, pushed, clear_for in candidates(pairs, weights, factor):
-            if best is not None and cost >= best.cost:
-                break
-            if (pushed, clear_for) in self._failed:
-                refused.append(f"{pushed} out of {clear_for}'s lanes (failed before)")
-                continue
-            answer = self.ask(pushed, clear_for, removed)
-            if answer.feasible and answer.end is not None:
-                return PushChoice(pushed, clear_for, cost, answer.end, (), tuple(refused))
-            if free is None:
-                free = pick_order(tuple(self.proof.free(rp)), pickable)
-            got = self._prepared(pushed, clear_for, removed, tuple(o for o in free if o not in (pushed, clear_for)),
-                                 costs, pickable)
-            if isinstance(got, str):
-                refused.append(f"{pushed} out of {clear_for}'s lanes ({answer.message or 'unfeasible'}{got})")
-                continue
-            prep, end = got
-            total = cost + sum(costs[o] for o in prep)
-            if best is None or total < best.cost:
-                best = PushChoice(pushed, clear_for, total, end, prep, tuple(refused))
-        return best if best is not None else "every push refused: " + "; ".join(refused)
+        if self._free is None or self._free[0] is not rp:
+            self._free = (rp, pick_order(tuple(self.proof.free(rp)), pickable))
+        free = tuple(o for o in self._free[1] if o not in (pushed, clear_for))
+        got = self._prepared(pushed, clear_for, removed, free, costs, pickable)
+        if isinstance(got, str):
+            return f"{answer.message or 'unfeasible'}{got}"
+        prep, end = got
+        return PushChoice(pushed, clear_for, cost + sum(costs[o] for o in prep), end, prep, ())
 
     def _prepared(self, pushed: str, clear_for: str, removed: frozenset[str], free: tuple[str, ...],
                   costs: Mapping[str, float], pickable: Callable[[str, frozenset[str]], bool]

@@ -435,3 +435,36 @@ def pickable(rp: RemainingProblem, cache: GeometryCache, banned: Iterable[Option
     of unchanged geometry reused) answers relocating `object_id` with `removed` gone (beyond rp.gone) feasible: an
     order in which a push's prep relocations can go (qtree_task_planner.executive.push.pick_order)."""
     return Label(RemainingOracle(rp, cache, banned).feasibility(object_id, removed).label) != Label.UNFEASIBLE
+
+
+def after_push(rp: RemainingProblem, banned: Iterable[Option], pushed: str, end: tuple[float, float],
+               prep: Sequence[str], what_if: Callable[[Mapping[str, tuple[float, float]]], FeasibilityOracle],
+               tolerances: Tolerances | None = None) -> tuple[tuple[str, ...], float] | str:
+    """What would follow a push (docs/closed_loop.md, "Pushes"): the least-cost pick sequence of the remaining
+    problem once its prep relocations `prep` are done and `pushed` is at its predicted `end` (x, y), the A* over the
+    picks (`replan`) asking `what_if({pushed: end})` (the motion planner on that scene: PlanFeasibility's moved_ids,
+    moved_to) through a cache of its own; (the sequence, its cost) or the reason there is none, in one line."""
+    after = pushed_problem(rp, pushed, end, prep)
+    got = replan(after, banned, GeometryCache(what_if({pushed: end}), tolerances))
+    if isinstance(got, str):
+        return got
+    assert after.problem is not None
+    return tuple(got[0]), after.problem.cost(got[0])
+
+
+def pushed_problem(rp: RemainingProblem, pushed: str, end: tuple[float, float], prep: Sequence[str]
+                   ) -> RemainingProblem:
+    """The remaining problem `rp` once the objects of `prep` are relocated (gone, each in a free slot) and `pushed`
+    is at `end` on the top shelf (as it was turned and resting)."""
+    if rp.problem is None:
+        raise ValueError(f"no problem to push in: {rp.reason}")
+    p, gone = rp.problem, frozenset(prep)
+    keep = tuple(o for o in p.obstacles if o not in gone)
+    problem = dataclasses.replace(p, obstacles=keep, weights={o: p.weights[o] for o in keep},
+                                  estimated={o: w for o, w in p.estimated.items() if o in keep},
+                                  costs={o: p.costs[o] for o in keep})
+    bottles = tuple(dataclasses.replace(b, x=end[0], y=end[1]) if b.id == pushed else b
+                    for b in rp.bottles if b.id not in gone)
+    return dataclasses.replace(rp, problem=problem, bottles=bottles, relocated=rp.relocated + tuple(prep),
+                               gone=rp.gone | gone, moved={**rp.moved, pushed: end},
+                               free_slots=rp.free_slots[len(gone):])

@@ -18,7 +18,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from typing import Callable, Protocol, Sequence, TypeVar
+from typing import Callable, Mapping, Protocol, Sequence, TypeVar
 
 from qtree_task_planner.executive.outage import PlannerUnavailable
 from qtree_task_planner.executive.push import PushAnswer
@@ -48,6 +48,10 @@ class Replica(FeasibilityOracle, CertifyingOracle, LaneOracle, Protocol):
 
     def push(self, object_id: str, clear_for: str, removed: frozenset[str]) -> PushAnswer:
         """The push question (qtree_task_planner.executive.push)."""
+        ...
+
+    def what_if(self, moved: Mapping[str, tuple[float, float]]) -> Replica:
+        """This replica asking on the scene with `moved`'s objects at those (x, y) (what would follow a push)."""
         ...
 
 
@@ -144,6 +148,14 @@ class ReplicaOracle:
     def push(self, object_id: str, clear_for: str, removed: frozenset[str]) -> PushAnswer:
         """The push question (qtree_task_planner.executive.push) of the first replica that is up."""
         return self._one(lambda r: r.push(object_id, clear_for, removed), f"the push of {object_id!r}")
+
+    def what_if(self, moved: Mapping[str, tuple[float, float]]) -> ReplicaOracle:
+        """These replicas asking on the scene with `moved`'s objects at those (x, y) (Replica.what_if: what would
+        follow a push), with the rests of those that are down now."""
+        other = ReplicaOracle([r.what_if(moved) for r in self.replicas], self.retry_after, self.max_rest, self.clock)
+        with self._lock:
+            other.down, other.failures = dict(self.down), dict(self.failures)
+        return other
 
     def lane_blockers(self, removed: frozenset[str]) -> Lanes | None:
         """Every remaining object's lane blockers, from the first replica that is up."""

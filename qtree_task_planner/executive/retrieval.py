@@ -24,7 +24,15 @@ from qtree_task_planner.executive.closed_loop import (
 )
 from qtree_task_planner.executive.outage import Cancelled, PlannerGone, PlannerUnavailable, UntilPlanner
 from qtree_task_planner.executive.push import PushActions, PushAnswer, Pusher, PushProof, PushRecord
-from qtree_task_planner.executive.replan import GeometryCache, blocking_pairs, free_first, pickable, relearn, replan
+from qtree_task_planner.executive.replan import (
+    GeometryCache,
+    after_push,
+    blocking_pairs,
+    free_first,
+    pickable,
+    relearn,
+    replan,
+)
 from qtree_task_planner.executive.resume import WithGone
 from qtree_task_planner.executive.world import (
     RemainingProblem,
@@ -281,9 +289,20 @@ def execute(scenario: Scenario, sequence: Sequence[str], scene: Scene,
             except (PlannerGone, PlannerUnavailable) as e:
                 raise GiveUp(f"feasibility question about {object_id!r} for a push stopped: {e}") from None
 
+        def follow(rp: RemainingProblem, banned: frozenset[Option], pushed: str, end: tuple[float, float],
+                   prep: tuple[str, ...]) -> tuple[tuple[str, ...], float] | str:
+            def once() -> tuple[tuple[str, ...], float] | str:
+                assert pushes is not None and pushes.what_if is not None
+                return after_push(rp, banned, pushed, end, prep, pushes.what_if, tolerances)
+            try:
+                return once() if until_planner is None else until_planner(once)
+            except (PlannerGone, PlannerUnavailable) as e:
+                raise GiveUp(f"feasibility question after a push of {pushed!r} stopped: {e}") from None
+
         pusher = None if pushes is None else Pusher(
             dataclasses.replace(pushes, ask=through(pushes.ask, until_planner), execute=push),
-            PushProof(lambda rp: blocking_pairs(rp, cache), lambda rp: free_first(rp, cache), can_pick))
+            PushProof(lambda rp: blocking_pairs(rp, cache), lambda rp: free_first(rp, cache), can_pick,
+                      follow if pushes.what_if is not None else None))
         return ClosedLoopExecutor(scenario, relocate, perceive, replan_through,
                                   cancelled=cancelled, on_step=on_step, on_replan=on_replan,
                                   bottom_seen=bottom_seen, on_progress=on_progress,

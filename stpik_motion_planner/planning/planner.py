@@ -8,7 +8,8 @@ the question's random generator) with the phases as its methods:
 - `plan_carry` (carry.py): lift, out of the shelf, in to the slot, release, retreat;
 - `push_feasibility` (push.py): a push of a standing or lying cylinder, or a box, out of another object's grasp lanes;
 - `plan_home` (home.py): back to the home configuration;
-- the scene: `set_scenario`, `update_object` (bottles as perceived), `slot_problems`, `lane_blockers`.
+- the scene: `set_scenario`, `update_object` (bottles as perceived), `slot_problems`, `lane_blockers`; `what_if`, a
+  planner on this scene with some objects elsewhere (what would follow a push).
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from relocation_common.scenario import Scenario
 from stpik_motion_planner.model.blockers import lane_blockers
 from stpik_motion_planner.model.collision import Lying, ObstacleSet
 from stpik_motion_planner.model.grasp import WorkspaceError, check_pose, place_poses
+from stpik_motion_planner.model.push import moved as moved_to
 from stpik_motion_planner.planning import carry, home, pick, push
 from stpik_motion_planner.planning.context import Placed, PlanningContext
 from stpik_motion_planner.planning.params import PlannerParams
@@ -37,6 +39,7 @@ class MotionPlanner(PlanningContext):
 
     def __init__(self, scenario: Scenario, params: PlannerParams | None = None) -> None:
         super().__init__(scenario, params)
+        self._what_if: tuple[tuple[tuple[str, float, float], ...], MotionPlanner] | None = None  # `what_if`'s last
         if scenario.auto_slots:  # `slots: auto` must give slots the arm reaches (explicit ones: per relocation)
             bad = self.slot_problems()
             if bad:
@@ -149,8 +152,41 @@ class MotionPlanner(PlanningContext):
         self.stage_refs.clear()
         self.certified.clear()
         self.near_cache.clear()
+        self._what_if = None
         if self.stpik.memo is not None:
             self.stpik.memo.clear()
+
+    def what_if(self, moved: Mapping[str, tuple[float, float]], removed: Iterable[str] = ()) -> "MotionPlanner":
+        """A planner on this scene with each object of `moved` at the given (x, y) on the top shelf, turned and
+        standing or lying as it is (a push slides it: its predicted end, docs/motion_planner.md "What would follow a
+        push"); this one for an empty `moved`. This planner and its caches are unchanged; the last what-if planner
+        is kept (its own caches) until this scene or `moved` changes. UnknownObjectError for an id the scene does
+        not have; WorkspaceError for a position not finite, an object gone, or an outline off the top shelf or
+        overlapping that of an object not in `removed` (the question's removed set)."""
+        key = tuple(sorted((str(i), float(x), float(y)) for i, (x, y) in moved.items()))
+        if not key:
+            return self
+        if self._what_if is None or self._what_if[0] != key:
+            sc, s = self.scenario, self.scenario.shelf
+            for oid, x, y in key:
+                o = sc.object(oid)
+                if not (math.isfinite(x) and math.isfinite(y)):
+                    raise WorkspaceError(f"moved position of {oid!r} must be finite, got {(x, y)}")
+                if oid in self.gone or not dataclasses.replace(o, x=x, y=y).footprint().inside(
+                        s.x_front, s.x_back, s.y_min, s.y_max):
+                    raise WorkspaceError(f"{oid!r} moved to ({x:.3f}, {y:.3f}) is not on the top shelf")
+                sc = moved_to(sc, oid, x, y)
+            planner = MotionPlanner(sc, self.params)
+            planner.set_scenario(sc, self.lying, self.gone)
+            self._what_if = (key, planner)
+        planner = self._what_if[1]
+        present = [o for o in planner.scenario.objects if o.id not in self.gone and o.id not in set(removed)]
+        for oid, x, y in key:
+            outline = planner.scenario.object(oid).footprint()
+            hit = [o.id for o in present if o.id != oid and outline.overlaps(o.footprint())]
+            if hit:
+                raise WorkspaceError(f"{oid!r} moved to ({x:.3f}, {y:.3f}) overlaps {', '.join(hit)}")
+        return planner
 
     def update_object(self, object_id: str, x: float, y: float) -> None:
         """Move a bottle (e.g. from perception); NaN, off-shelf or unknown ids raise."""
