@@ -342,6 +342,7 @@ def test_a_push_is_chosen_by_what_would_follow_it():
     assert shelf.pushes == [("T", "b", ())] and [o for o, _ in shelf.relocations] == ["b", "T"]
     assert shelf.what_ifs == [{"b": pytest.approx((0.55, 0.10))}, {"T": pytest.approx((0.77, 0.10))}]
     (p,) = out.pushes
+    assert p.then == ("b", "T") and out.to_dict()["pushes"][0]["then"] == ["b", "T"]
     assert p.refused == ("b out of T's lanes (no pick sequence after it: T cannot be reached: no feasible relocation "
                          "sequence with the actions side_grasp, top_grasp over the 5 obstacles on the top shelf (0 "
                          "planner calls); blocking cycle: every lane of T needs an object that cannot leave first "

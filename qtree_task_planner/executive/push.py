@@ -48,8 +48,9 @@ class PushOracle(Protocol):
 class PushRecord:
     """One push executed: the object, the one whose lanes it clears, its cost (weight x push factor, plus its prep
     relocations' costs), the predicted end, the motion planner's outcome, where the next scene showed the object
-    (None: not seen on the top shelf), the candidates refused before it (one line each) and the objects relocated
-    first to free it (`prep`)."""
+    (None: not seen on the top shelf), the candidates refused before it (one line each), the objects relocated
+    first to free it (`prep`) and the pick sequence expected after it (`then`, PushChoice.then: () when not looked
+    at or none; the closed loop re-plans from what it sees)."""
 
     object_id: str
     clear_for: str
@@ -60,6 +61,7 @@ class PushRecord:
     seen: tuple[float, float] | None
     refused: tuple[str, ...]
     prep: tuple[str, ...]
+    then: tuple[str, ...] = ()
 
     def what(self) -> str:
         """'pushed X out of T's lanes (predicted end (x, y))', or 'push of X out of T's lanes failed: why'; after
@@ -79,7 +81,7 @@ class PushRecord:
         return {"object": self.object_id, "clear_for": self.clear_for, "cost": self.cost,
                 "predicted_end": list(self.end), "ok": self.ok, "message": self.message,
                 "seen_end": list(self.seen) if self.seen is not None else None, "refused": list(self.refused),
-                "prep": list(self.prep), "line": self.line()}
+                "prep": list(self.prep), "then": list(self.then), "line": self.line()}
 
 
 def candidates(needs: Sequence[tuple[str, str]], weights: Mapping[str, float], factor: float
@@ -271,7 +273,7 @@ class Pusher:
         self.executed += 1
         ok, message = self.execute(choice.object_id, choice.clear_for, sorted(removed))
         return PushRecord(choice.object_id, choice.clear_for, choice.cost, choice.end, ok, message, None,
-                          choice.refused, choice.prep)
+                          choice.refused, choice.prep, choice.then)
 
     def failed(self, pushed: str, clear_for: str) -> None:
         """A push executed without effect (the object where it was, failed or not): not asked again in this goal."""
