@@ -371,14 +371,18 @@ def test_the_push_whose_retrieval_costs_least_is_chosen_and_the_asking_stops_the
 
 def test_a_push_followed_by_no_sequence_is_executed_only_while_a_further_push_is_left():
     """Every push slips (nothing follows any): with max_pushes 1 none is executed, and the end says why; with 2 the
-    cheapest is executed as before (a second push may open what the first does not)."""
+    cheapest is executed as before (a second push may open what the first does not), its record listing the other
+    candidate as refused, and no second one (after it, too, nothing would follow)."""
     one = Lookahead(slip={"b", "T"})
     out = looking(one, max_pushes=1)
     assert not out.success and not one.pushes
     assert "no push: every push refused: b out of T's lanes (no pick sequence after it: " in out.message, out.message
     two = Lookahead(slip={"b", "T"})
     out = looking(two, max_pushes=2)
-    assert not out.success and [p[:2] for p in two.pushes] == [("b", "T")], two.pushes
+    assert not out.success and [p[:2] for p in two.pushes] == [("b", "T")], two.pushes  # the last push must open
+    (first,) = out.pushes
+    assert first.then == () and len(first.refused) == 1  # T's, not its own
+    assert first.refused[0].startswith("T out of b's lanes (no pick sequence after it: "), first.refused
 
 
 def test_pushed_problem_takes_the_prep_away_and_moves_the_pushed_object():

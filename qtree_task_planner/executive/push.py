@@ -202,7 +202,7 @@ class Pusher:
         self._free = None
         refused: list[str] = []
         best: PushChoice | None = None  # followed by a pick sequence (or not looked at)
-        blind: PushChoice | None = None  # feasible, followed by none: a further push may open it
+        blind: tuple[PushChoice, str] | None = None  # feasible, followed by none (a further push may open it), why
         for cost, pushed, clear_for in candidates(pairs, weights, factor):
             if best is not None and cost >= best.total:
                 break
@@ -214,7 +214,8 @@ class Pusher:
             after = None if self.proof.follow is None else self.proof.follow(rp, banned, pushed, got.end, got.prep)
             if isinstance(after, str):
                 refused.append(f"{pushed} out of {clear_for}'s lanes (no pick sequence after it: {after})")
-                blind = choice if blind is None or choice.cost < blind.cost else blind
+                if blind is None or choice.cost < blind[0].cost:
+                    blind = (choice, refused[-1])
                 continue
             if after is not None:
                 choice = replace(choice, then=after[0], then_cost=after[1])
@@ -223,7 +224,7 @@ class Pusher:
         if best is not None:
             return best
         if blind is not None and self.executed + 1 < self.max_pushes:
-            return replace(blind, refused=tuple(refused))
+            return replace(blind[0], refused=tuple(r for r in refused if r != blind[1]))
         return "every push refused: " + "; ".join(refused)
 
     def _candidate(self, rp: Any, banned: frozenset[Any], pushed: str, clear_for: str, cost: float,
