@@ -180,7 +180,8 @@ class MotionPlanner(PlanningContext):
             planner.set_scenario(sc, self.lying, self.gone)
             self._what_if = (key, planner)
         planner = self._what_if[1]
-        present = [o for o in planner.scenario.objects if o.id not in self.gone and o.id not in set(removed)]
+        absent = self.gone | set(removed)
+        present = [o for o in planner.scenario.objects if o.id not in absent]
         for oid, x, y in key:
             outline = planner.scenario.object(oid).footprint()
             hit = [o.id for o in present if o.id != oid and outline.overlaps(o.footprint())]
