@@ -347,13 +347,14 @@ class TaskPlannerNode(Node):
 
         w = Watched(relocate_timed, self._scenes, self.p("scene_after_wait"), scenario.shelf.top_z,
                     perception=not seen, outage=self.p("scene_outage_wait"), push_one=push_timed)
-        pushes = PushActions(service.push, w.push, lambda: self._action_cost.push, self.p("max_pushes"),
-                             service.what_if) if self._pushes() else None
 
         def phase(text: str) -> None:
             fb.phase = text
             self.get_logger().info(text)
             goal_handle.publish_feedback(fb)
+
+        pushes = PushActions(service.push, w.push, lambda: self._action_cost.push, self.p("max_pushes"),
+                             service.what_if, phase) if self._pushes() else None
 
         def publish(out: ExecutionResult, running: bool = True) -> None:
             self._progress = out.to_dict()

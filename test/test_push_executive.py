@@ -362,11 +362,13 @@ def test_the_push_whose_retrieval_costs_least_is_chosen_and_the_asking_stops_the
         follow.append(pushed)
         from qtree_task_planner.executive.replan import after_push
         return after_push(rp, banned, pushed, end, prep, shelf.what_if)
-    pusher = Pusher(PushActions(shelf.push, shelf.do_push, lambda: 2.0, 1),
+    lines = []
+    pusher = Pusher(PushActions(shelf.push, shelf.do_push, lambda: 2.0, 1, progress=lines.append),
                     PushProof(lambda rp: blocking_pairs(rp, cache), lambda rp: (), lambda *a: True, after))
     choice = pusher.choose(rp, WEIGHTS, {o: WEIGHTS[o] for o in rp.problem.obstacles}, rp.gone, frozenset())
     assert (choice.object_id, choice.then, choice.total) == ("b", ("T",), pytest.approx(1.0))
     assert follow == ["b"] and [q[:2] for q in shelf.push_questions] == [("b", "T")]
+    assert lines == ["weighing push 1 of 2: b out of T's lanes (cost 1.00)"]  # the goal's feedback, per candidate
 
 
 def test_a_push_followed_by_no_sequence_is_executed_only_while_a_further_push_is_left():

@@ -101,7 +101,7 @@ class PushActions:
     execute(object, clear_for, removed) -> (ok, message) (the push executed), factor() -> the push factor of the
     action costs (read when a push is first weighed), max_pushes (pushes executed per goal at most), what_if(moved)
     -> the feasibility oracle asking on the scene with `moved`'s objects at those (x, y) (what would follow a push:
-    replan.after_push)."""
+    replan.after_push), progress(line) -> told each candidate as it is weighed ("weighing push 2 of 6: ...")."""
 
     ask: Callable[[str, str, frozenset[str]], PushAnswer]
     execute: Callable[[str, str, list[str]], tuple[bool, str]]
@@ -109,6 +109,7 @@ class PushActions:
     max_pushes: int
     what_if: Callable[[Mapping[str, tuple[float, float]]], Any] | None = None  # the feasibility oracle on the scene
     # with these objects elsewhere (ros_clients.ServiceOracle.what_if): what would follow a push; None: not looked at
+    progress: Callable[[str], None] = lambda line: None  # each candidate weighed, one line (the goal's feedback)
 
     def __post_init__(self) -> None:
         if isinstance(self.max_pushes, bool) or not isinstance(self.max_pushes, int) or self.max_pushes < 0:
@@ -173,7 +174,8 @@ class Pusher:
     """Pushes for the closed loop (module doc) through `actions`, from the re-plan's proof (`proof`)."""
 
     def __init__(self, actions: PushActions, proof: PushProof) -> None:
-        self.ask, self.execute, self.factor = actions.ask, actions.execute, actions.factor
+        self.ask, self.execute, self.factor, self.progress = actions.ask, actions.execute, actions.factor, \
+            actions.progress
         self.max_pushes, self.proof = actions.max_pushes, proof
         self.executed = 0
         self._failed: set[tuple[str, str]] = set()  # executed, the object left where it was
@@ -203,9 +205,11 @@ class Pusher:
         refused: list[str] = []
         best: PushChoice | None = None  # followed by a pick sequence (or not looked at)
         blind: tuple[PushChoice, str] | None = None  # feasible, followed by none (a further push may open it), why
-        for cost, pushed, clear_for in candidates(pairs, weights, factor):
+        weighed = candidates(pairs, weights, factor)
+        for i, (cost, pushed, clear_for) in enumerate(weighed, 1):
             if best is not None and cost >= best.total:
                 break
+            self.progress(f"weighing push {i} of {len(weighed)}: {pushed} out of {clear_for}'s lanes (cost {cost:.2f})")
             got = self._candidate(rp, banned, pushed, clear_for, cost, removed, costs)
             if isinstance(got, str):
                 refused.append(f"{pushed} out of {clear_for}'s lanes ({got})")
