@@ -179,7 +179,6 @@ class Pusher:
         self.max_pushes, self.proof = actions.max_pushes, proof
         self.executed = 0
         self._failed: set[tuple[str, str]] = set()  # executed, the object left where it was
-        self._free: tuple[Any, tuple[str, ...]] | None = None  # (problem, the objects the picks alone take first)
 
     def choose(self, rp: Any, weights: Mapping[str, float], costs: Mapping[str, float], removed: frozenset[str],
                banned: frozenset[Any]) -> PushChoice | str:
@@ -201,7 +200,14 @@ class Pusher:
             factor = self.factor()
         except ValueError as e:  # relocation_common.config.ParameterError
             return f"no push factor: {e}"
-        self._free = None
+        def pickable(o: str, s: frozenset[str]) -> bool:
+            return self.proof.pickable(rp, banned, o, s)
+        free: list[tuple[str, ...]] = []  # the objects the picks alone take away first, asked when a push needs it
+
+        def free_first() -> tuple[str, ...]:
+            if not free:
+                free.append(pick_order(tuple(self.proof.free(rp)), pickable))
+            return free[0]
         refused: list[str] = []
         best: PushChoice | None = None  # followed by a pick sequence (or not looked at)
         blind: tuple[PushChoice, str] | None = None  # feasible, followed by none (a further push may open it), why
@@ -210,7 +216,7 @@ class Pusher:
             if best is not None and cost >= best.total:
                 break
             self.progress(f"weighing push {i} of {len(weighed)}: {pushed} out of {clear_for}'s lanes (cost {cost:.2f})")
-            got = self._candidate(rp, banned, pushed, clear_for, cost, removed, costs)
+            got = self._candidate(pushed, clear_for, cost, removed, costs, pickable, free_first)
             if isinstance(got, str):
                 refused.append(f"{pushed} out of {clear_for}'s lanes ({got})")
                 continue
@@ -231,21 +237,18 @@ class Pusher:
             return replace(blind[0], refused=tuple(r for r in refused if r != blind[1]))
         return "every push refused: " + "; ".join(refused)
 
-    def _candidate(self, rp: Any, banned: frozenset[Any], pushed: str, clear_for: str, cost: float,
-                   removed: frozenset[str], costs: Mapping[str, float]) -> PushChoice | str:
+    def _candidate(self, pushed: str, clear_for: str, cost: float, removed: frozenset[str],
+                   costs: Mapping[str, float], pickable: Callable[[str, frozenset[str]], bool],
+                   free_first: Callable[[], tuple[str, ...]]) -> PushChoice | str:
         """The push of `pushed` out of `clear_for`'s lanes with `removed` gone, else with the prep relocations it
-        needs (`_prepared`), its cost the push's `cost` + theirs; or why not ('failed before', the planner's)."""
+        needs of `free_first()` (`_prepared`), its cost the push's `cost` + theirs; or why not ('failed before', the
+        planner's)."""
         if (pushed, clear_for) in self._failed:
             return "failed before"
         answer = self.ask(pushed, clear_for, removed)
         if answer.feasible and answer.end is not None:
             return PushChoice(pushed, clear_for, cost, answer.end, (), ())
-
-        def pickable(o: str, s: frozenset[str]) -> bool:
-            return self.proof.pickable(rp, banned, o, s)
-        if self._free is None or self._free[0] is not rp:
-            self._free = (rp, pick_order(tuple(self.proof.free(rp)), pickable))
-        free = tuple(o for o in self._free[1] if o not in (pushed, clear_for))
+        free = tuple(o for o in free_first() if o not in (pushed, clear_for))
         got = self._prepared(pushed, clear_for, removed, free, costs, pickable)
         if isinstance(got, str):
             return f"{answer.message or 'unfeasible'}{got}"
